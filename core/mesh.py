@@ -1,0 +1,125 @@
+"""Input checking and small whole-mesh measures shared by every algorithm.
+
+A mesh is ``V`` (n,3) float64 coordinates and ``F`` (m,3) int64 vertex
+indices. Core functions call :func:`check_mesh` first: it returns fresh,
+contiguous float64/int64 arrays (so the caller's arrays are never modified)
+or raises :class:`~.errors.InvalidMeshError` naming the problem and an example.
+"""
+
+import numpy as np
+
+from .errors import InvalidMeshError
+
+
+def check_mesh(V, F, *, where, allow_empty=True):
+    """Validate and copy a triangle mesh.
+
+    Parameters
+    ----------
+    V : array_like, (n, 3) float
+        Vertex positions. Must be finite.
+    F : array_like, (m, 3) int
+        Triangle vertex indices, each in ``[0, n)``.
+    where : str
+        Name of the calling function, used as the message prefix.
+    allow_empty : bool
+        If False, a mesh with no faces raises.
+
+    Returns
+    -------
+    V : (n, 3) float64 ndarray, a new C-contiguous copy.
+    F : (m, 3) int64 ndarray, a new C-contiguous copy.
+
+    Raises
+    ------
+    InvalidMeshError
+        Wrong shapes or dtypes, NaN/inf coordinates, out-of-range indices.
+
+    Examples
+    --------
+    >>> V, F = check_mesh([[0, 0, 0], [1, 0, 0], [0, 1, 0]], [[0, 1, 2]], where="demo")
+    >>> V.dtype, F.dtype
+    (dtype('float64'), dtype('int64'))
+    """
+    V_in = np.asarray(V)
+    F_in = np.asarray(F)
+    if V_in.size == 0 and V_in.ndim <= 1:
+        V_in = V_in.reshape(0, 3)
+    if F_in.size == 0 and F_in.ndim <= 1:
+        F_in = F_in.reshape(0, 3).astype(np.int64)
+    if V_in.ndim != 2 or V_in.shape[1] != 3:
+        raise InvalidMeshError(f"{where}: V must be (n,3) floats, got {V_in.shape} {V_in.dtype}")
+    if not (np.issubdtype(V_in.dtype, np.floating) or np.issubdtype(V_in.dtype, np.integer)):
+        raise InvalidMeshError(f"{where}: V must be (n,3) floats, got {V_in.shape} {V_in.dtype}")
+    if F_in.ndim != 2 or F_in.shape[1] != 3 or not np.issubdtype(F_in.dtype, np.integer):
+        raise InvalidMeshError(f"{where}: F must be (m,3) integers, got {F_in.shape} {F_in.dtype}")
+    V_out = np.array(V_in, dtype=np.float64, order="C", copy=True)
+    F_out = np.array(F_in, dtype=np.int64, order="C", copy=True)
+    bad = ~np.isfinite(V_out).all(axis=1)
+    if bad.any():
+        rows = np.flatnonzero(bad)
+        raise InvalidMeshError(
+            f"{where}: {rows.size} vertices have NaN or infinite coordinates, "
+            f"e.g. vertex {rows[0]} = {V_out[rows[0]].tolist()}"
+        )
+    n = V_out.shape[0]
+    if F_out.size:
+        out = (F_out < 0) | (F_out >= n)
+        if out.any():
+            f, c = np.argwhere(out)[0]
+            raise InvalidMeshError(
+                f"{where}: {int(out.any(axis=1).sum())} faces index vertices outside [0, {n}), "
+                f"e.g. face {f} = {F_out[f].tolist()}"
+            )
+    elif not allow_empty:
+        raise InvalidMeshError(f"{where}: the mesh has no faces")
+    return V_out, F_out
+
+
+def bbox_diagonal(V):
+    """Length of the axis-aligned bounding-box diagonal of ``V`` (0 if empty).
+
+    Every tolerance in ``core`` is expressed relative to this length, so that
+    results do not depend on the mesh's units.
+    """
+    V = np.asarray(V, dtype=np.float64)
+    if V.shape[0] == 0:
+        return 0.0
+    return float(np.linalg.norm(V.max(axis=0) - V.min(axis=0)))
+
+
+def face_normals(V, F, *, normalize=True):
+    """Per-face normals, (m,3) float64; unnormalised normals have length
+    twice the face area. Degenerate faces get a zero normal."""
+    N = np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]])
+    if normalize:
+        length = np.linalg.norm(N, axis=1)
+        N = np.divide(N, length[:, None], out=np.zeros_like(N), where=length[:, None] > 0)
+    return N
+
+
+def face_areas(V, F):
+    """Per-face areas, (m,) float64."""
+    return 0.5 * np.linalg.norm(face_normals(V, F, normalize=False), axis=1)
+
+
+def vertex_normals(V, F):
+    """Area-weighted, normalised per-vertex normals, (n,3) float64.
+
+    Vertices in no face (or only degenerate faces) get a zero normal.
+    """
+    n = V.shape[0]
+    N = face_normals(V, F, normalize=False)
+    out = np.empty((n, 3))
+    for k in range(3):
+        out[:, k] = (np.bincount(F[:, 0], N[:, k], n) + np.bincount(F[:, 1], N[:, k], n)
+                     + np.bincount(F[:, 2], N[:, k], n))
+    length = np.linalg.norm(out, axis=1)
+    return np.divide(out, length[:, None], out=np.zeros_like(out), where=length[:, None] > 0)
+
+
+def enclosed_volume(V, F):
+    """Signed volume enclosed by a closed, consistently oriented mesh
+    (divergence theorem; positive for outward-facing normals)."""
+    a, b, c = V[F[:, 0]], V[F[:, 1]], V[F[:, 2]]
+    return float(np.einsum("ij,ij->i", a, np.cross(b, c)).sum() / 6.0)

@@ -1,0 +1,198 @@
+"""Meshes the tests build themselves, and access to ``../shared/meshes``.
+
+Every builder returns ``(V, F)`` as float64 / int64 arrays with outward,
+consistent orientation.
+"""
+
+import os
+
+import numpy as np
+import pytest
+
+SHARED_MESHES = os.path.normpath(
+    os.path.join(os.path.dirname(__file__), "..", "..", "shared", "meshes"))
+
+
+def shared_mesh_path(name):
+    """Path of a real mesh in ``../shared/meshes``; skips the test when absent."""
+    path = os.path.join(SHARED_MESHES, name)
+    if not os.path.exists(path):
+        pytest.skip(f"real mesh {name} not found in {SHARED_MESHES} (shared/ is not checked out)")
+    return path
+
+
+def load_shared(name):
+    """``(V, F)`` of a real mesh in ``../shared/meshes`` (skips when absent)."""
+    from core.io_obj import read_obj
+    return read_obj(shared_mesh_path(name))
+
+
+def shared_mesh_names():
+    """Names of the real OBJ meshes available (empty when shared/ is absent)."""
+    if not os.path.isdir(SHARED_MESHES):
+        return []
+    return sorted(f for f in os.listdir(SHARED_MESHES) if f.endswith(".obj"))
+
+
+def tetrahedron():
+    V = np.array([[1, 1, 1], [1, -1, -1], [-1, 1, -1], [-1, -1, 1]], dtype=np.float64)
+    F = np.array([[0, 1, 2], [0, 3, 1], [0, 2, 3], [1, 3, 2]], dtype=np.int64)
+    return V, F
+
+
+def octahedron():
+    V = np.array([[1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0], [0, 0, 1], [0, 0, -1]], dtype=np.float64)
+    F = np.array([[0, 2, 4], [2, 1, 4], [1, 3, 4], [3, 0, 4],
+                  [2, 0, 5], [1, 2, 5], [3, 1, 5], [0, 3, 5]], dtype=np.int64)
+    return V, F
+
+
+def icosahedron():
+    t = (1 + 5 ** 0.5) / 2
+    V = np.array([[-1, t, 0], [1, t, 0], [-1, -t, 0], [1, -t, 0], [0, -1, t], [0, 1, t],
+                  [0, -1, -t], [0, 1, -t], [t, 0, -1], [t, 0, 1], [-t, 0, -1], [-t, 0, 1]],
+                 dtype=np.float64)
+    V /= np.linalg.norm(V, axis=1)[:, None]
+    F = np.array([[0, 11, 5], [0, 5, 1], [0, 1, 7], [0, 7, 10], [0, 10, 11], [1, 5, 9], [5, 11, 4],
+                  [11, 10, 2], [10, 7, 6], [7, 1, 8], [3, 9, 4], [3, 4, 2], [3, 2, 6], [3, 6, 8],
+                  [3, 8, 9], [4, 9, 5], [2, 4, 11], [6, 2, 10], [8, 6, 7], [9, 8, 1]], dtype=np.int64)
+    return V, F
+
+
+def _midpoint_split(V, F):
+    """One 1-to-4 midpoint split (used to build spheres without core code)."""
+    n = V.shape[0]
+    half = F[:, [1, 2, 2, 0, 0, 1]].reshape(-1, 2)
+    key = np.minimum(half[:, 0], half[:, 1]) * n + np.maximum(half[:, 0], half[:, 1])
+    uniq, inv = np.unique(key, return_inverse=True)
+    E = np.stack([uniq // n, uniq % n], axis=1)
+    mid = n + inv.reshape(-1, 3)  # mid[f, c]: midpoint of edge opposite corner c
+    V2 = np.vstack([V, 0.5 * (V[E[:, 0]] + V[E[:, 1]])])
+    a, b, c = F[:, 0], F[:, 1], F[:, 2]
+    ma, mb, mc = mid[:, 0], mid[:, 1], mid[:, 2]
+    F2 = np.concatenate([np.stack([a, mc, mb], 1), np.stack([b, ma, mc], 1),
+                         np.stack([c, mb, ma], 1), np.stack([ma, mb, mc], 1)])
+    return V2, F2
+
+
+def icosphere(subdivisions=2, radius=1.0):
+    V, F = icosahedron()
+    for _ in range(subdivisions):
+        V, F = _midpoint_split(V, F)
+        V /= np.linalg.norm(V, axis=1)[:, None]
+    return V * radius, F
+
+
+def grid(nx=10, ny=10, size=1.0, z=None):
+    """Open (nx+1)x(ny+1)-vertex grid on [0,size]^2, triangulated with
+    alternating diagonals (regular valence 6 inside needs a fixed diagonal:
+    see ``regular_grid``). ``z`` may be a function of (x, y)."""
+    return regular_grid(nx, ny, size=size, z=z)
+
+
+def regular_grid(nx=10, ny=10, size=1.0, z=None):
+    """Open grid with every interior vertex of valence 6 (all diagonals the
+    same way), outward normal +z."""
+    xs = np.linspace(0, size, nx + 1)
+    ys = np.linspace(0, size, ny + 1)
+    X, Y = np.meshgrid(xs, ys, indexing="xy")
+    Z = np.zeros_like(X) if z is None else z(X, Y)
+    V = np.stack([X.ravel(), Y.ravel(), Z.ravel()], axis=1).astype(np.float64)
+    i, j = np.meshgrid(np.arange(nx), np.arange(ny), indexing="xy")
+    v00 = (j * (nx + 1) + i).ravel()
+    v10, v01, v11 = v00 + 1, v00 + nx + 1, v00 + nx + 2
+    F = np.concatenate([np.stack([v00, v10, v11], 1), np.stack([v00, v11, v01], 1)]).astype(np.int64)
+    return V, F
+
+
+def torus(n_major=24, n_minor=12, R=1.0, r=0.35):
+    """Closed genus-1 torus, regular valence 6."""
+    u = np.arange(n_major) * 2 * np.pi / n_major
+    v = np.arange(n_minor) * 2 * np.pi / n_minor
+    U, W = np.meshgrid(u, v, indexing="ij")
+    V = np.stack([(R + r * np.cos(W)) * np.cos(U), (R + r * np.cos(W)) * np.sin(U), r * np.sin(W)],
+                 axis=-1).reshape(-1, 3)
+    i, j = np.meshgrid(np.arange(n_major), np.arange(n_minor), indexing="ij")
+    a = (i * n_minor + j).ravel()
+    b = (((i + 1) % n_major) * n_minor + j).ravel()
+    c = (((i + 1) % n_major) * n_minor + (j + 1) % n_minor).ravel()
+    d = (i * n_minor + (j + 1) % n_minor).ravel()
+    F = np.concatenate([np.stack([a, b, c], 1), np.stack([a, c, d], 1)]).astype(np.int64)
+    return V, F
+
+
+def cube(n=1, size=1.0):
+    """Closed axis-aligned cube [-size/2, size/2]^3, each side an n x n grid
+    of quads split into triangles; vertices shared along the cube edges."""
+    s = np.linspace(-0.5, 0.5, n + 1) * size
+    pts = {}
+    faces = []
+    verts = []
+
+    def vid(p):
+        key = tuple(np.round(p, 12))
+        if key not in pts:
+            pts[key] = len(verts)
+            verts.append(p)
+        return pts[key]
+
+    # six sides: (normal axis, sign); a right-handed (u, v) frame so u x v = normal
+    for axis in range(3):
+        for sign in (-1.0, 1.0):
+            u_ax, v_ax = (axis + 1) % 3, (axis + 2) % 3
+            if sign < 0:
+                u_ax, v_ax = v_ax, u_ax
+            for i in range(n):
+                for j in range(n):
+                    quad = []
+                    for di, dj in ((0, 0), (1, 0), (1, 1), (0, 1)):
+                        p = np.zeros(3)
+                        p[axis] = sign * size / 2
+                        p[u_ax] = s[i + di]
+                        p[v_ax] = s[j + dj]
+                        quad.append(vid(p))
+                    faces.append([quad[0], quad[1], quad[2]])
+                    faces.append([quad[0], quad[2], quad[3]])
+    return np.array(verts, dtype=np.float64), np.array(faces, dtype=np.int64)
+
+
+def double_torus(resolution=40):
+    """A closed genus-2 surface: two tori fused (marching-free construction:
+    two regular tori with a hole cut in each and the holes bridged)."""
+    V1, F1 = torus(resolution, resolution // 3, R=1.0, r=0.4)
+    V2, F2 = torus(resolution, resolution // 3, R=1.0, r=0.4)
+    V2 = V2 + np.array([2.8, 0.0, 0.0])
+    nm = resolution // 3
+    # the quad facing the other torus: major index 0 (x max) on torus 1,
+    # major index resolution//2 (x min) on torus 2, minor index 0 (outer equator)
+    def quad_faces(i, j, n_major):
+        a = i * nm + j
+        b = ((i + 1) % n_major) * nm + j
+        c = ((i + 1) % n_major) * nm + (j + 1) % nm
+        d = i * nm + (j + 1) % nm
+        return a, b, c, d
+
+    a1, b1, c1, d1 = quad_faces(resolution - 1, nm - 1, resolution)
+    a1, b1, c1, d1 = quad_faces(resolution - 1, 0, resolution)
+    i2 = resolution // 2
+    a2, b2, c2, d2 = quad_faces(i2 - 1, 0, resolution)
+
+    def drop_quad(F, a, b, c, d):
+        keep = ~(np.all(np.isin(F, [a, b, c, d]), axis=1))
+        return F[keep]
+
+    F1 = drop_quad(F1, a1, b1, c1, d1)
+    F2 = drop_quad(F2, a2, b2, c2, d2)
+    off = V1.shape[0]
+    # torus-1 hole loop a1-b1-c1-d1, torus-2 hole loop a2-b2-c2-d2 (faces mirror in x)
+    loop1 = [a1, b1, c1, d1]
+    loop2 = [b2 + off, a2 + off, d2 + off, c2 + off]
+    bridge = []
+    for k in range(4):
+        p, q = loop1[k], loop1[(k + 1) % 4]
+        r, s_ = loop2[k], loop2[(k + 1) % 4]
+        bridge.append([p, q, r])
+        bridge.append([r, q, s_])
+    V = np.vstack([V1, V2])
+    F = np.vstack([F1, F2 + off, np.array(bridge, dtype=np.int64)])
+    return V, F
