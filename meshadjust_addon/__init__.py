@@ -1,0 +1,31 @@
+"""MeshAdjust's Blender layer: properties, operators, the N-panel, live mode.
+
+Thin by design: geometry happens in ``core`` (pure NumPy); this package moves
+mesh data in and out (``mesh_io``), keeps state (``properties``, ``store``),
+and exposes the workflow as operators, a panel and a context-free API
+(``api``) for scripts and the batch CLI.
+"""
+
+import bpy
+
+from . import live, operators, panel, properties
+
+
+def _menu_subdivide(self, context):
+    self.layout.operator("meshadjust.subdivide")
+
+
+def register():
+    properties.register()
+    for cls in operators.CLASSES + panel.CLASSES:
+        bpy.utils.register_class(cls)
+    bpy.types.VIEW3D_MT_object.append(_menu_subdivide)
+    live.register()
+
+
+def unregister():
+    live.unregister()
+    bpy.types.VIEW3D_MT_object.remove(_menu_subdivide)
+    for cls in reversed(operators.CLASSES + panel.CLASSES):
+        bpy.utils.unregister_class(cls)
+    properties.unregister()

@@ -1,0 +1,76 @@
+"""Live refine: keep a cage's results updated while it is edited.
+
+A ``depsgraph_update_post`` handler notices geometry updates of cages whose
+``live`` toggle is on and schedules one refine through ``bpy.app.timers``,
+at most every ``live_interval`` seconds (add-on preferences), so the viewport
+stays responsive on dense meshes. Errors turn live mode off for that cage and
+are kept in its ``last_report`` rather than raised inside the handler.
+"""
+
+import time
+
+import bpy
+
+from .. import core
+from . import api
+from .properties import preferences
+
+_pending = set()
+_last_run = {}
+
+
+def _interval():
+    prefs = preferences()
+    return prefs.live_interval if prefs is not None else 0.15
+
+
+def refine_pending():
+    """Run the scheduled live refines (the timer callback; also callable
+    directly, e.g. in tests). Returns None so the timer does not repeat."""
+    names = list(_pending)
+    _pending.clear()
+    output = 'EDITED'
+    scene = bpy.context.scene
+    if scene is not None and hasattr(scene, "meshadjust"):
+        output = scene.meshadjust.output
+    for name in names:
+        cage = bpy.data.objects.get(name)
+        if cage is None or not cage.meshadjust.live or cage.meshadjust.edited is None:
+            continue
+        try:
+            api.refine_object(cage, output=output)
+        except core.MeshAdjustError as exc:
+            cage.meshadjust.live = False
+            cage.meshadjust.last_report = f"live refine stopped: {exc}"
+        _last_run[name] = time.monotonic()
+    return None
+
+
+def on_depsgraph_update(scene, depsgraph):
+    """Schedule a throttled refine for every live cage whose geometry changed."""
+    for update in depsgraph.updates:
+        obj = update.id
+        if not isinstance(obj, bpy.types.Object) or not update.is_updated_geometry:
+            continue
+        obj = obj.original
+        if obj.type != 'MESH' or obj.meshadjust.role != 'CAGE' or not obj.meshadjust.live:
+            continue
+        if obj.name in _pending:
+            continue
+        _pending.add(obj.name)
+        wait = max(0.0, _interval() - (time.monotonic() - _last_run.get(obj.name, 0.0)))
+        if not bpy.app.timers.is_registered(refine_pending):
+            bpy.app.timers.register(refine_pending, first_interval=wait)
+
+
+def register():
+    if on_depsgraph_update not in bpy.app.handlers.depsgraph_update_post:
+        bpy.app.handlers.depsgraph_update_post.append(on_depsgraph_update)
+
+
+def unregister():
+    if on_depsgraph_update in bpy.app.handlers.depsgraph_update_post:
+        bpy.app.handlers.depsgraph_update_post.remove(on_depsgraph_update)
+    if bpy.app.timers.is_registered(refine_pending):
+        bpy.app.timers.unregister(refine_pending)
+    _pending.clear()

@@ -1,0 +1,131 @@
+"""Where a binding lives in a .blend: mesh attributes, not custom properties.
+
+* On the **edited original** (a copy of the source that nobody edits by
+  hand): per dense vertex, point attributes ``meshadjust_face`` (INT, the fine
+  face), ``meshadjust_bary`` and ``meshadjust_offset`` (FLOAT_VECTOR).
+* On a small data-only mesh ``<edited>.detail`` (fake user, pointed to from the
+  edited object's state): the per-fine-vertex detail as vertex positions, used
+  by the *refined mesh* output.
+* On the **cage**: its own topology, and the crease edges as the boolean edge
+  attribute ``meshadjust_crease``.
+* On the edited object's :class:`MeshAdjustObjectState`: levels, scheme and the
+  cage fingerprint.
+
+All of it survives save and reload; a :class:`core.binding.Binding` is rebuilt
+from it (and cached for the session, so live edits do not rebuild the
+subdivision operator).
+"""
+
+import bpy
+import numpy as np
+
+from .. import core
+from . import mesh_io
+
+FACE = "meshadjust_face"
+BARY = "meshadjust_bary"
+OFFSET = "meshadjust_offset"
+CREASE = "meshadjust_crease"
+
+_cache = {}
+
+
+def _set_point_attr(mesh, name, kind, values):
+    attr = mesh.attributes.get(name)
+    if attr is not None:
+        mesh.attributes.remove(attr)
+    attr = mesh.attributes.new(name, kind, 'POINT')
+    if kind == 'INT':
+        attr.data.foreach_set("value", np.ascontiguousarray(values, dtype=np.int32).ravel())
+    else:
+        attr.data.foreach_set("vector", np.ascontiguousarray(values, dtype=np.float32).ravel())
+
+
+def _get_point_attr(mesh, name, kind):
+    attr = mesh.attributes.get(name)
+    if attr is None:
+        raise core.MeshAdjustError(f"'{mesh.name}' has no binding attribute '{name}': bind it again")
+    n = len(mesh.vertices)
+    if kind == 'INT':
+        buf = np.empty(n, dtype=np.int32)
+        attr.data.foreach_get("value", buf)
+        return buf.astype(np.int64)
+    buf = np.empty(3 * n, dtype=np.float32)
+    attr.data.foreach_get("vector", buf)
+    return buf.reshape(n, 3).astype(np.float64)
+
+
+def cage_topology(cage):
+    """(F_cage, n_cage, creases) of a cage object, read from its mesh."""
+    F, _ = mesh_io.read_triangles(cage.data)
+    creases = mesh_io.get_edge_flags(cage.data, CREASE)
+    return F, len(cage.data.vertices), (creases if creases.shape[0] else None)
+
+
+def save_binding(edited, binding):
+    """Write ``binding`` onto the edited-original object ``edited``."""
+    mesh = edited.data
+    if len(mesh.vertices) != binding.n_dense:
+        raise core.MeshAdjustError(
+            f"save_binding: '{edited.name}' has {len(mesh.vertices)} vertices, the binding "
+            f"{binding.n_dense}")
+    _set_point_attr(mesh, FACE, 'INT', binding.fine_face)
+    _set_point_attr(mesh, BARY, 'FLOAT_VECTOR', binding.bary)
+    _set_point_attr(mesh, OFFSET, 'FLOAT_VECTOR', binding.offset)
+    state = edited.meshadjust
+    old = state.detail_mesh
+    detail = mesh_io.new_mesh(f"{edited.name}.detail", binding.fine_detail,
+                              np.zeros((0, 3), np.int64))
+    detail.use_fake_user = True
+    state.detail_mesh = detail
+    if old is not None:
+        bpy.data.meshes.remove(old)
+    state.fingerprint = binding.fingerprint
+    state.levels = binding.levels
+    state.scheme = binding.scheme
+    _cache[edited.session_uid] = binding
+
+
+def load_binding(edited, cage):
+    """The :class:`core.binding.Binding` stored on ``edited`` for ``cage``.
+
+    Raises
+    ------
+    core.TopologyMismatchError
+        The cage's topology changed since the binding was made.
+    core.MeshAdjustError
+        The binding data is missing.
+    """
+    state = edited.meshadjust
+    F_cage, n_cage, creases = cage_topology(cage)
+    cached = _cache.get(edited.session_uid)
+    if (cached is not None and cached.n_cage == n_cage and cached.F_cage.shape == F_cage.shape
+            and np.array_equal(cached.F_cage, F_cage) and cached.fingerprint == state.fingerprint
+            and cached.n_dense == len(edited.data.vertices)):
+        return cached
+    detail = state.detail_mesh
+    if detail is None:
+        raise core.MeshAdjustError(f"the detail data of '{edited.name}' is missing: bind again")
+    arrays = {
+        "fine_face": _get_point_attr(edited.data, FACE, 'INT'),
+        "bary": _get_point_attr(edited.data, BARY, 'FLOAT_VECTOR'),
+        "offset": _get_point_attr(edited.data, OFFSET, 'FLOAT_VECTOR'),
+        "fine_detail": mesh_io.read_positions(detail),
+        "F_cage": F_cage, "n_cage": n_cage, "levels": state.levels, "scheme": state.scheme,
+        "creases": creases if creases is not None else np.zeros((0, 2), np.int64),
+        "fingerprint": state.fingerprint,
+    }
+    try:
+        binding = core.Binding.from_arrays(arrays)
+    except core.TopologyMismatchError as exc:
+        raise core.TopologyMismatchError(
+            f"the cage '{cage.name}' no longer has the topology '{edited.name}' was bound to "
+            f"(vertices or faces were added or removed): re-bind to use it as the new rest "
+            f"shape") from exc
+    _cache[edited.session_uid] = binding
+    return binding
+
+
+def forget(edited):
+    """Drop the session cache entry of ``edited``."""
+    _cache.pop(getattr(edited, "session_uid", None), None)
