@@ -87,3 +87,20 @@ def make_object(name, V, F, *, scene=None):
     obj.select_set(True)
     bpy.context.view_layer.objects.active = obj
     return obj
+
+
+_exit_status = 0
+
+
+def pytest_sessionfinish(session, exitstatus):
+    global _exit_status
+    _exit_status = int(exitstatus)
+
+
+@pytest.hookimpl(trylast=True)
+def pytest_unconfigure(config):
+    """bpy as a module (4.2 in particular) can crash while the interpreter
+    shuts down, after every result is written: leave with pytest's own status."""
+    sys.stdout.flush()
+    sys.stderr.flush()
+    os._exit(_exit_status)
