@@ -23,12 +23,17 @@ def ensure_core_modules():
     Returns the set of stand-in module names installed (empty when both are real).
     """
     installed = set()
-    for name, build in (("core.subdivide", _subdivide_module), ("core.spatial", _spatial_module)):
+    for name, build, needed in (
+            ("core.subdivide", _subdivide_module, ("subdivision_operator", "subdivide")),
+            ("core.spatial", _spatial_module, ("TriangleIndex", "closest_points", "sample_surface"))):
         try:
-            importlib.import_module(name)
+            mod = importlib.import_module(name)
         except ModuleNotFoundError as exc:
             if exc.name != name:
                 raise
+            mod = None
+        if mod is None or not all(hasattr(mod, k) for k in needed):
+            # absent or still being written: use the stand-in
             sys.modules[name] = build()
             installed.add(name)
     return installed

@@ -1,0 +1,181 @@
+"""Tests of core.cg (conjugate gradients) and core.fit (fit_cage)."""
+
+import numpy as np
+import pytest
+
+from tests.core._standins_adjust import ensure_core_modules
+
+ensure_core_modules()
+
+from core.adjust import fit_cage  # noqa: E402
+from core.cg import conjugate_gradient  # noqa: E402
+from core.errors import InvalidArgumentError, InvalidMeshError  # noqa: E402
+from core.mesh import bbox_diagonal, enclosed_volume  # noqa: E402
+from core.spatial import closest_points  # noqa: E402
+from core.subdivide import subdivision_operator  # noqa: E402
+from tests.mesh_factory import icosphere, load_shared, torus  # noqa: E402
+
+
+# ------------------------------------------------------------------ conjugate gradients
+def _spd(n, seed, cond=100.0):
+    rng = np.random.default_rng(seed)
+    Q, _ = np.linalg.qr(rng.standard_normal((n, n)))
+    return Q @ np.diag(np.geomspace(1.0, cond, n)) @ Q.T
+
+
+def test_cg_solves_several_right_hand_sides():
+    M = _spd(40, 0)
+    B = np.random.default_rng(1).standard_normal((40, 3))
+    r = conjugate_gradient(lambda X: M @ X, B, rtol=1e-12, max_iterations=200)
+    assert r.converged and r.X.shape == (40, 3) and r.residual.shape == (3,)
+    assert np.allclose(r.X, np.linalg.solve(M, B), rtol=1e-9, atol=1e-10)
+    assert r.iterations <= 80  # exact arithmetic would need <= 40
+
+
+def test_cg_vector_warm_start_and_preconditioner():
+    M = _spd(30, 2, cond=1e4)
+    b = np.random.default_rng(3).standard_normal(30)
+    x = np.linalg.solve(M, b)
+    r = conjugate_gradient(lambda v: M @ v, b, X0=x, rtol=1e-10)
+    assert r.iterations == 0 and r.X.shape == (30,)
+    d = np.diag(M)
+    r = conjugate_gradient(lambda v: M @ v, b, rtol=1e-10, max_iterations=500,
+                           preconditioner=lambda v: v / d)
+    assert r.converged and np.allclose(r.X, x, rtol=1e-7, atol=1e-9)
+
+
+def test_cg_zero_rhs_and_iteration_cap():
+    M = _spd(10, 4)
+    r = conjugate_gradient(lambda v: M @ v, np.zeros((10, 2)))
+    assert r.iterations == 0 and np.array_equal(r.X, np.zeros((10, 2))) and r.converged
+    r = conjugate_gradient(lambda v: M @ v, np.ones(10), max_iterations=2, rtol=1e-14)
+    assert r.iterations == 2 and not r.converged
+
+
+def test_cg_bad_arguments():
+    with pytest.raises(InvalidArgumentError, match="rtol"):
+        conjugate_gradient(lambda v: v, np.ones(3), rtol=0)
+    with pytest.raises(InvalidArgumentError, match="X0"):
+        conjugate_gradient(lambda v: v, np.ones(3), X0=np.ones(4))
+    with pytest.raises(InvalidArgumentError, match="max_iterations"):
+        conjugate_gradient(lambda v: v, np.ones(3), max_iterations=-1)
+
+
+# ------------------------------------------------------------------ fit on built meshes
+@pytest.fixture(scope="module")
+def sphere_case():
+    Vd, Fd = icosphere(4)           # the dense "scan": the unit sphere
+    Vc, Fc = icosphere(1)           # a cage with vertices on the sphere, faces inside it
+    return Vd, Fd, Vc, Fc
+
+
+def _fine_distance(Vd, Fd, Vc, Fc, levels=2):
+    op = subdivision_operator(Fc, Vc.shape[0], levels=levels)
+    Vf = op.apply(Vc)
+    return (closest_points(Vd, Fd, Vf).distance.mean(),
+            enclosed_volume(Vf, op.F_fine))
+
+
+def test_fit_moves_an_inscribed_cage_onto_the_sphere(sphere_case):
+    Vd, Fd, Vc, Fc = sphere_case
+    r = fit_cage(Vd, Fd, Vc, Fc, levels=2, iterations=6)
+    assert r.V.shape == Vc.shape and r.V.dtype == np.float64
+    assert r.mean_distance.shape == (7,) and r.cg_iterations.shape == (6,)
+    assert r.diagonal == pytest.approx(bbox_diagonal(Vd))
+    d0, vol0 = _fine_distance(Vd, Fd, Vc, Fc)
+    d1, vol1 = _fine_distance(Vd, Fd, r.V, Fc)
+    vol = enclosed_volume(Vd, Fd)
+    assert d1 * 1.5 <= d0
+    assert abs(vol1 - vol) < 0.5 * abs(vol0 - vol)
+    assert r.mean_distance[-1] < 0.7 * r.mean_distance[0]
+    # the cage moved outward everywhere, and stays a round cage
+    radius = np.linalg.norm(r.V, axis=1)
+    assert (radius > 1.0).all() and radius.std() < 0.02 * radius.mean()
+
+
+def test_fit_recovers_a_cage_whose_subdivision_is_the_dense_mesh():
+    Vc, Fc = torus(10, 6)
+    op = subdivision_operator(Fc, Vc.shape[0], levels=2)
+    Vd, Fd = op.apply(Vc), op.F_fine
+    rng = np.random.default_rng(0)
+    start = Vc + 0.01 * rng.standard_normal(Vc.shape)
+    r = fit_cage(Vd, Fd, start, Fc, levels=2, iterations=10, smoothness=0.0)
+    assert r.mean_distance[-1] < 0.2 * r.mean_distance[0]
+    assert np.abs(r.V - Vc).mean() < 0.25 * np.abs(start - Vc).mean()
+
+
+def test_fit_is_equivariant_under_similarity(sphere_case):
+    Vd, Fd, Vc, Fc = sphere_case
+    Vc = 0.95 * Vc
+    r = fit_cage(Vd, Fd, Vc, Fc, levels=1, iterations=2)
+    s, t = 250.0, np.array([10.0, -3.0, 7.0])
+    r2 = fit_cage(s * Vd + t, Fd, s * Vc + t, Fc, levels=1, iterations=2)
+    assert np.abs(r2.V - (s * r.V + t)).max() <= 1e-6 * s
+    assert np.allclose(r2.mean_distance, s * r.mean_distance, rtol=1e-6)
+
+
+def test_fit_with_zero_iterations_returns_the_input(sphere_case):
+    Vd, Fd, Vc, Fc = sphere_case
+    r = fit_cage(Vd, Fd, Vc, Fc, levels=1, iterations=0)
+    assert np.array_equal(r.V, Vc) and r.mean_distance.shape == (1,)
+    assert r.cg_iterations.shape == (0,)
+
+
+def test_strong_smoothness_keeps_the_cage_shape(sphere_case):
+    # the smoothness term acts on the cage's displacement: a huge weight only
+    # allows displacements with zero Laplacian (a translation), so the shape stays
+    Vd, Fd, Vc, Fc = sphere_case
+    Vc = 0.9 * Vc
+    r = fit_cage(Vd, Fd, Vc, Fc, levels=1, iterations=2, smoothness=1e8, laplacian="cotangent")
+    d = r.V - Vc
+    assert np.abs(d - d.mean(axis=0)).max() < 1e-3
+
+
+def test_fit_does_not_modify_inputs(sphere_case):
+    Vd, Fd, Vc, Fc = (a.copy() for a in sphere_case)
+    fit_cage(Vd, Fd, Vc, Fc, levels=1, iterations=1)
+    for a, b in zip((Vd, Fd, Vc, Fc), sphere_case):
+        assert np.array_equal(a, b)
+
+
+def test_fit_bad_arguments(sphere_case):
+    Vd, Fd, Vc, Fc = sphere_case
+    with pytest.raises(InvalidArgumentError, match="fit_cage: smoothness"):
+        fit_cage(Vd, Fd, Vc, Fc, smoothness=-1)
+    with pytest.raises(InvalidArgumentError, match="fit_cage: iterations"):
+        fit_cage(Vd, Fd, Vc, Fc, iterations=-2)
+    with pytest.raises(InvalidArgumentError, match="laplacian"):
+        fit_cage(Vd, Fd, Vc, Fc, laplacian="harmonic")
+    with pytest.raises(InvalidMeshError, match="fit_cage: F must be"):
+        fit_cage(Vd, Fd.astype(float), Vc, Fc)
+
+
+# ------------------------------------------------------------------ real meshes
+def _qem_cage(V, F, faces):
+    from core.simplify import simplify
+    r = simplify(V, F, target_faces=faces)
+    creases = getattr(r, "feature_edges", None)
+    return r.V, r.F, creases
+
+
+@pytest.mark.slow
+def test_fit_undoes_qem_shrinkage_on_the_bunny():
+    from core.metrics import surface_distance
+    Vd, Fd = load_shared("stanford-bunny.obj")
+    Vc, Fc, creases = _qem_cage(Vd, Fd, 2000)
+    r = fit_cage(Vd, Fd, Vc, Fc, levels=2, scheme="butterfly", creases=creases)
+    op = subdivision_operator(Fc, Vc.shape[0], levels=2, scheme="butterfly", creases=creases)
+    before = surface_distance(Vd, Fd, op.apply(Vc), op.F_fine)
+    after = surface_distance(Vd, Fd, op.apply(r.V), op.F_fine)
+    assert after.mean * 1.5 <= before.mean
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", ["homer.obj", "rocker-arm.obj", "spot.obj"])
+def test_fit_restores_the_enclosed_volume(name):
+    Vd, Fd = load_shared(name)
+    Vc, Fc, creases = _qem_cage(Vd, Fd, 2000)
+    r = fit_cage(Vd, Fd, Vc, Fc, levels=2, scheme="butterfly", creases=creases)
+    op = subdivision_operator(Fc, Vc.shape[0], levels=2, scheme="butterfly", creases=creases)
+    vol = enclosed_volume(Vd, Fd)
+    assert abs(enclosed_volume(op.apply(r.V), op.F_fine) - vol) <= 0.002 * abs(vol)
