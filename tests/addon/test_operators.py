@@ -1,0 +1,283 @@
+"""Every operator on real objects, headless: counts, links, in-place
+updates, errors reported, the source never touched."""
+
+import os
+import sys
+
+import bmesh
+import bpy
+import numpy as np
+import pytest
+
+from tests.addon.conftest import MODULE, make_object
+from tests.mesh_factory import icosphere, load_shared, regular_grid, torus
+
+
+def mio():
+    return sys.modules[MODULE + ".meshadjust_addon.mesh_io"]
+
+
+def bumpy_sphere(level=4):
+    V, F = icosphere(level)
+    r = 1.0 + 0.03 * np.sin(9 * V[:, 0]) * np.sin(7 * V[:, 1]) * np.sin(8 * V[:, 2])
+    return V * r[:, None], F
+
+
+def snapshot(obj):
+    return mio().read_positions(obj.data), mio().read_triangles(obj.data)[0]
+
+
+@pytest.fixture()
+def dense(scene):
+    V, F = bumpy_sphere(4)
+    return make_object("dense", V, F)
+
+
+def simplify(faces=300, **kw):
+    kw.setdefault("fit", True)
+    kw.setdefault("bind", True)
+    kw.setdefault("levels", 2)
+    return bpy.ops.meshadjust.simplify(target_mode='FACES', target_faces=faces, **kw)
+
+
+def test_simplify_creates_linked_cage_and_keeps_source(dense):
+    V0, F0 = snapshot(dense)
+    assert simplify(300) == {'FINISHED'}
+    cage = dense.meshadjust.cage
+    assert cage is not None and cage is not dense
+    assert cage.meshadjust.role == 'CAGE' and cage.meshadjust.source == dense
+    assert len(cage.data.polygons) == 300
+    V1, F1 = snapshot(dense)
+    assert np.array_equal(V0, V1) and np.array_equal(F0, F1)
+    assert "->" in cage.meshadjust.last_report and "% of size" in cage.meshadjust.last_report
+    # the cage is a closed manifold of the sphere's topology
+    core = sys.modules[MODULE + ".core"]
+    Fc = mio().read_triangles(cage.data)[0]
+    s = core.topology_summary(Fc, len(cage.data.vertices))
+    assert (s.euler, s.components, s.boundary_edges, s.non_manifold_edges) == (2, 1, 0, 0)
+    # bound copy exists, with the binding attributes
+    edited = cage.meshadjust.edited
+    assert edited is not None and len(edited.data.vertices) == len(dense.data.vertices)
+    for name in ("meshadjust_face", "meshadjust_bary", "meshadjust_offset"):
+        assert name in edited.data.attributes
+
+
+def test_simplify_ratio_and_error_targets(dense):
+    m = len(dense.data.polygons)
+    assert bpy.ops.meshadjust.simplify(target_mode='RATIO', ratio=0.1, fit=False,
+                                       bind=False) == {'FINISHED'}
+    assert len(dense.meshadjust.cage.data.polygons) == round(0.1 * m)
+    bpy.context.view_layer.objects.active = dense
+    dense.hide_set(False)
+    assert bpy.ops.meshadjust.simplify(target_mode='ERROR', max_error_pct=1.0, fit=False,
+                                       bind=False) == {'FINISHED'}
+    assert len(dense.meshadjust.cage.data.polygons) < m
+
+
+def test_refine_without_edit_gives_the_original_back(dense):
+    simplify(300)
+    cage = dense.meshadjust.cage
+    assert bpy.ops.meshadjust.refine(output='EDITED') == {'FINISHED'}
+    edited = cage.meshadjust.edited
+    V0 = mio().read_positions(dense.data)
+    V1 = mio().read_positions(edited.data)
+    assert np.abs(V1 - V0).max() < 1e-5   # float32 storage of positions and binding
+
+
+def test_edit_moves_result_smoothly_and_in_place(dense):
+    simplify(300)
+    cage = dense.meshadjust.cage
+    edited = cage.meshadjust.edited
+    Vc = mio().read_positions(cage.data)
+    top = int(np.argmax(Vc[:, 2]))
+    Vc[top] += [0.0, 0.0, 0.3]
+    mio().write_positions(cage.data, Vc)
+    assert bpy.ops.meshadjust.refine(output='BOTH') == {'FINISHED'}
+    refined = cage.meshadjust.refined
+    V0 = mio().read_positions(dense.data)
+    V1 = mio().read_positions(edited.data)
+    moved = np.linalg.norm(V1 - V0, axis=1) > 1e-6
+    assert 0 < moved.sum() < 0.5 * len(V0)           # local
+    assert V1[:, 2].max() > V0[:, 2].max() + 0.05    # the top went up
+    n_faces = len(refined.data.polygons)
+    assert n_faces == 300 * 16
+    # a second refine updates the same objects
+    Vc[top] += [0.0, 0.0, 0.1]
+    mio().write_positions(cage.data, Vc)
+    names = set(o.name for o in bpy.data.objects)
+    assert bpy.ops.meshadjust.refine(output='BOTH') == {'FINISHED'}
+    assert set(o.name for o in bpy.data.objects) == names
+    assert cage.meshadjust.refined == refined and cage.meshadjust.edited == edited
+    assert mio().read_positions(edited.data)[:, 2].max() > V1[:, 2].max()
+
+
+def test_refine_syncs_edit_mode(dense):
+    simplify(300)
+    cage = dense.meshadjust.cage
+    edited = cage.meshadjust.edited
+    bpy.context.view_layer.objects.active = cage
+    bpy.ops.object.mode_set(mode='EDIT')
+    bm = bmesh.from_edit_mesh(cage.data)
+    for v in bm.verts:
+        v.co.z += 0.1
+    bmesh.update_edit_mesh(cage.data)
+    assert bpy.ops.meshadjust.refine(output='EDITED') == {'FINISHED'}
+    assert cage.mode == 'EDIT'
+    dz = mio().read_positions(edited.data)[:, 2] - mio().read_positions(dense.data)[:, 2]
+    assert np.allclose(dz, 0.1, atol=1e-4)   # a translated cage translates the result
+
+
+def test_cage_object_transform_is_respected(dense):
+    simplify(300)
+    cage = dense.meshadjust.cage
+    cage.location = (0.5, 0.0, 0.0)
+    bpy.context.view_layer.update()
+    bpy.ops.meshadjust.refine(output='EDITED')
+    dx = mio().read_positions(cage.meshadjust.edited.data)[:, 0] - \
+        mio().read_positions(dense.data)[:, 0]
+    assert np.allclose(dx, 0.5, atol=1e-4)
+
+
+def test_topology_changed_cage_is_refused_then_rebound(dense):
+    simplify(300)
+    cage = dense.meshadjust.cage
+    bpy.context.view_layer.objects.active = cage
+    bpy.ops.object.mode_set(mode='EDIT')
+    bm = bmesh.from_edit_mesh(cage.data)
+    bm.verts.ensure_lookup_table()
+    bmesh.ops.delete(bm, geom=[bm.verts[0]], context='VERTS')
+    bmesh.update_edit_mesh(cage.data)
+    bpy.ops.object.mode_set(mode='OBJECT')
+    with pytest.raises(RuntimeError, match="re-bind"):
+        bpy.ops.meshadjust.refine(output='EDITED')
+
+
+def test_binding_survives_save_and_reload(dense, tmp_path):
+    simplify(300)
+    cage = dense.meshadjust.cage
+    Vc = mio().read_positions(cage.data)
+    Vc[np.argmax(Vc[:, 2])] += [0, 0, 0.2]
+    mio().write_positions(cage.data, Vc)
+    bpy.ops.meshadjust.refine(output='EDITED')
+    expected = mio().read_positions(cage.meshadjust.edited.data)
+    path = str(tmp_path / "bound.blend")
+    bpy.ops.wm.save_as_mainfile(filepath=path)
+    bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)
+    bpy.ops.wm.open_mainfile(filepath=path)
+    cage = bpy.data.objects["dense_cage"]
+    edited = cage.meshadjust.edited
+    sys.modules[MODULE + ".meshadjust_addon.store"]._cache.clear()   # force a reload from attributes
+    mio().write_positions(edited.data, mio().read_positions(cage.meshadjust.source.data))
+    bpy.context.view_layer.objects.active = cage
+    assert bpy.ops.meshadjust.refine(output='EDITED') == {'FINISHED'}
+    assert np.abs(mio().read_positions(edited.data) - expected).max() < 1e-5
+
+
+def test_subdivide_operator_counts_and_interpolation(scene):
+    V, F = icosphere(1)
+    obj = make_object("ico", V, F)
+    assert bpy.ops.meshadjust.subdivide(levels=2, scheme='butterfly') == {'FINISHED'}
+    out = [o for o in bpy.data.objects if o is not obj][0]
+    assert len(out.data.polygons) == 16 * len(F)
+    Vf = mio().read_positions(out.data)
+    assert np.array_equal(Vf[:len(V)], V.astype(np.float32).astype(np.float64))
+    bpy.context.view_layer.objects.active = obj
+    for o in bpy.data.objects:
+        o.select_set(o is obj)
+    assert bpy.ops.meshadjust.subdivide(levels=1, scheme='loop', in_place=True) == {'FINISHED'}
+    assert len(obj.data.polygons) == 4 * len(F)
+
+
+def test_subdivide_triangulates_quads_and_handles_several_objects(scene):
+    bpy.ops.mesh.primitive_cube_add()
+    a = bpy.context.active_object
+    bpy.ops.mesh.primitive_cube_add(location=(3, 0, 0))
+    b = bpy.context.active_object
+    a.select_set(True)
+    assert bpy.ops.meshadjust.subdivide(levels=1, scheme='loop') == {'FINISHED'}
+    outs = [o for o in bpy.data.objects if o not in (a, b)]
+    assert sorted(len(o.data.polygons) for o in outs) == [48, 48]
+
+
+def test_errors_are_reported(scene):
+    bpy.ops.object.camera_add()
+    with pytest.raises(RuntimeError, match="not a mesh"):
+        bpy.ops.meshadjust.simplify()
+    empty = make_object("empty", np.zeros((0, 3)), np.zeros((0, 3), np.int64))
+    with pytest.raises(RuntimeError, match="no faces"):
+        bpy.ops.meshadjust.simplify()
+    with pytest.raises(RuntimeError, match="not a cage"):
+        bpy.ops.meshadjust.refine()
+    V, F = regular_grid(3, 3)
+    make_object("grid", V, F)
+    with pytest.raises(RuntimeError, match="Error"):
+        bpy.ops.meshadjust.simplify(target_mode='FACES', target_faces=4, weight_group="nope")
+    assert len(bpy.data.objects) == 3   # nothing was created by the failed runs
+    assert empty.name in bpy.data.objects
+
+
+def test_modifiers_use_the_evaluated_mesh_and_say_so(scene):
+    bpy.ops.mesh.primitive_ico_sphere_add(subdivisions=3)
+    obj = bpy.context.active_object
+    obj.modifiers.new("sub", 'SUBSURF').levels = 1
+    assert bpy.ops.meshadjust.simplify(target_mode='FACES', target_faces=200, fit=False,
+                                       bind=False) == {'FINISHED'}
+    cage = obj.meshadjust.cage
+    assert "evaluated mesh" in cage.meshadjust.last_report
+    assert len(obj.modifiers) == 1   # the source is untouched
+
+
+def test_locked_group_and_weights(scene):
+    V, F = bumpy_sphere(3)
+    obj = make_object("dense", V, F)
+    locked = np.flatnonzero(V[:, 2] > 0.8)
+    vg = obj.vertex_groups.new(name="lock")
+    vg.add(locked.tolist(), 1.0, 'REPLACE')
+    assert bpy.ops.meshadjust.simplify(target_mode='FACES', target_faces=400, lock_group="lock",
+                                       fit=False, bind=False) == {'FINISHED'}
+    Vc = mio().read_positions(obj.meshadjust.cage.data)
+    Vl = V[locked].astype(np.float32).astype(np.float64)
+    # every locked vertex is still a cage vertex, unmoved
+    d = np.linalg.norm(Vl[:, None, :] - Vc[None, :, :], axis=2).min(axis=1)
+    assert d.max() < 1e-6
+
+
+def test_panel_state_reasons(scene):
+    panel = sys.modules[MODULE + ".meshadjust_addon.panel"]
+    st = panel.panel_state(bpy.context)
+    assert st["simplify"] == (False, "Select a mesh object")
+    V, F = bumpy_sphere(3)
+    obj = make_object("dense", V, F)
+    st = panel.panel_state(bpy.context)
+    assert st["simplify"][0] and not st["refine"][0] and "Simplify" in st["refine"][1]
+    simplify(200)
+    st = panel.panel_state(bpy.context)
+    assert st["refine"] == (True, None) and st["edit"] == (True, None)
+    assert not st["simplify"][0] and "already a cage" in st["simplify"][1]
+
+
+def test_live_refine_updates_result(dense):
+    live = sys.modules[MODULE + ".meshadjust_addon.live"]
+    simplify(300)
+    cage = dense.meshadjust.cage
+    cage.meshadjust.live = True
+    Vc = mio().read_positions(cage.data)
+    mio().write_positions(cage.data, Vc + [0.0, 0.0, 0.05])
+    bpy.context.view_layer.update()     # fires the depsgraph handler: schedules a refine
+    assert cage.name in live._pending
+    live.refine_pending()               # the timer's callback (timers never fire headless)
+    dz = mio().read_positions(cage.meshadjust.edited.data)[:, 2] - \
+        mio().read_positions(dense.data)[:, 2]
+    assert np.allclose(dz, 0.05, atol=1e-4)
+
+
+def test_real_scan_simplify_and_refine(scene):
+    V, F = load_shared("spot.obj")
+    obj = make_object("spot", V, F)
+    assert simplify(500) == {'FINISHED'}
+    cage = obj.meshadjust.cage
+    assert len(cage.data.polygons) == 500
+    assert bpy.ops.meshadjust.refine(output='EDITED') == {'FINISHED'}
+    diag = np.linalg.norm(np.ptp(V, axis=0))
+    err = np.abs(mio().read_positions(cage.meshadjust.edited.data) - V).max() / diag
+    assert err < 1e-5
