@@ -37,7 +37,7 @@ import numpy as np
 
 from .errors import InvalidArgumentError, InvalidMeshError, TopologyMismatchError
 from .mesh import check_mesh, vertex_normals
-from .spatial import TriangleIndex
+from .spatial import TriangleIndex, point_triangle_closest
 from .subdivide import subdivision_operator
 
 #: relative length under which a normal or tangent counts as degenerate
@@ -91,9 +91,7 @@ class Binding:
     creases: object          #: None or (k,2) int64 coarse vertex pairs
     fingerprint: str
     _operator: object = field(default=None, repr=False, compare=False)
-    _corners: np.ndarray = field(default=None, repr=False, compare=False)
-    _detail_face: np.ndarray = field(default=None, repr=False, compare=False)
-    _detail_bary: np.ndarray = field(default=None, repr=False, compare=False)
+    _cache: dict = field(default=None, repr=False, compare=False)
 
     def __post_init__(self):
         op = self._operator
@@ -113,12 +111,18 @@ class Binding:
         if self.fine_detail.shape != (op.n_fine, 3):
             raise InvalidArgumentError(
                 f"Binding: fine_detail must be ({op.n_fine}, 3), got {self.fine_detail.shape}")
-        if self._corners is None:
-            object.__setattr__(self, "_corners", np.ascontiguousarray(op.F_fine[self.fine_face]))
-        if self._detail_face is None:
-            face, bary = _vertex_corners(op.F_fine, op.n_fine)
-            object.__setattr__(self, "_detail_face", face)
-            object.__setattr__(self, "_detail_bary", bary)
+        if self._cache is None:
+            # everything deform / refine need that does not depend on positions,
+            # transposed to (3, q) so every operation runs on contiguous rows
+            d_face, d_bary = _vertex_corners(op.F_fine, op.n_fine)
+            object.__setattr__(self, "_cache", {
+                "corners_t": np.ascontiguousarray(op.F_fine[self.fine_face].T),
+                "bary_t": np.ascontiguousarray(self.bary.T),
+                "offset_t": np.ascontiguousarray(self.offset.T),
+                "detail_corners_t": np.ascontiguousarray(op.F_fine[d_face].T),
+                "detail_bary_t": np.ascontiguousarray(d_bary.T),
+                "detail_offset_t": np.ascontiguousarray(self.fine_detail.T),
+            })
 
     @property
     def operator(self):
@@ -195,7 +199,7 @@ class Binding:
         touched = moved[op.F_fine].any(axis=1)
         normal_changed = np.zeros(op.n_fine, dtype=bool)
         normal_changed[op.F_fine[touched].ravel()] = True
-        return normal_changed[self._corners].any(axis=1)
+        return normal_changed[self._cache["corners_t"]].any(axis=0)
 
 
 def bind(V_dense, F_dense, V_cage, F_cage, *, levels=2, scheme="butterfly", creases=None):
@@ -248,12 +252,12 @@ def bind(V_dense, F_dense, V_cage, F_cage, *, levels=2, scheme="butterfly", crea
     fine_detail = np.zeros((op.n_fine, 3))
     if F_dense.shape[0]:
         vfr = frames(Vf, Nf, op.F_fine[d_face], d_bary)
-        q = TriangleIndex(V_dense, F_dense).closest(vfr.point).point
+        q = _dense_points_near(V_dense, F_dense, fine_face, op.F_fine, vfr.point)
         fine_detail = _to_frame(q - vfr.point, vfr)
     return Binding(fine_face=fine_face, bary=bary, offset=offset, fine_detail=fine_detail,
                    F_cage=F_cage, n_cage=int(V_cage.shape[0]), levels=int(levels),
                    scheme=str(scheme), creases=creases, fingerprint=op.fingerprint,
-                   _operator=op, _corners=corners, _detail_face=d_face, _detail_bary=d_bary)
+                   _operator=op)
 
 
 def deform(binding, V_cage_edited, *, F_cage=None):
@@ -279,8 +283,8 @@ def deform(binding, V_cage_edited, *, F_cage=None):
         Positions are not (n,3) finite numbers.
     """
     Vf, Nf = _fine_geometry(binding, V_cage_edited, F_cage, "deform")
-    fr = frames(Vf, Nf, binding._corners, binding.bary)
-    return _from_frame(binding.offset, fr)
+    c = binding._cache
+    return _from_frame_t(c["offset_t"], *_frames_t(Vf, Nf, c["corners_t"], c["bary_t"]))
 
 
 def refine(binding, V_cage_edited, *, F_cage=None):
@@ -302,9 +306,10 @@ def refine(binding, V_cage_edited, *, F_cage=None):
         As :func:`deform`.
     """
     Vf, Nf = _fine_geometry(binding, V_cage_edited, F_cage, "refine")
-    op = binding._operator
-    fr = frames(Vf, Nf, op.F_fine[binding._detail_face], binding._detail_bary)
-    return RefineResult(_from_frame(binding.fine_detail, fr), op.F_fine.copy())
+    c = binding._cache
+    V = _from_frame_t(c["detail_offset_t"],
+                      *_frames_t(Vf, Nf, c["detail_corners_t"], c["detail_bary_t"]))
+    return RefineResult(V, binding._operator.F_fine.copy())
 
 
 def frames(Vf, Nf, corners, bary):
@@ -329,35 +334,48 @@ def frames(Vf, Nf, corners, bary):
         ``bitangent = normal x tangent``. Each row is computed on its own, so
         rows with identical inputs give bit-identical outputs.
     """
-    b0, b1, b2 = bary[:, 0:1], bary[:, 1:2], bary[:, 2:3]
-    i0, i1, i2 = corners[:, 0], corners[:, 1], corners[:, 2]
-    a, b, c = Vf[i0], Vf[i1], Vf[i2]
-    point = b0 * a + b1 * b + b2 * c
-    e1 = b - a
-    normal = b0 * Nf[i0] + b1 * Nf[i1] + b2 * Nf[i2]
-    normal, bad = _normalise(normal, 1.0)
+    p, t, b, n = _frames_t(np.ascontiguousarray(np.asarray(Vf, dtype=np.float64).T),
+                           np.ascontiguousarray(np.asarray(Nf, dtype=np.float64).T),
+                           np.ascontiguousarray(np.asarray(corners, dtype=np.int64).T),
+                           np.ascontiguousarray(np.asarray(bary, dtype=np.float64).T))
+    return Frames(p.T.copy(), t.T.copy(), b.T.copy(), n.T.copy())
+
+
+def _frames_t(VfT, NfT, cornersT, baryT):
+    """:func:`frames` on transposed, contiguous (3, .) arrays (the fast layout:
+    every operation runs on contiguous rows). Returns (point, tangent,
+    bitangent, normal), each (3, q)."""
+    b0, b1, b2 = baryT[0], baryT[1], baryT[2]
+    i0, i1, i2 = cornersT[0], cornersT[1], cornersT[2]
+    a = VfT[:, i0]
+    e1 = VfT[:, i1] - a
+    e2 = VfT[:, i2] - a
+    point = a + b1 * e1 + b2 * e2
+    normal = b0 * NfT[:, i0] + b1 * NfT[:, i1] + b2 * NfT[:, i2]
+    normal, bad = _normalise_t(normal, 1.0)
     if bad.any():
-        e2 = c[bad] - a[bad]
-        fn, fbad = _normalise(_cross(e1[bad], e2), _length(e1[bad]) * _length(e2))
-        fn[fbad] = (0.0, 0.0, 1.0)
-        normal[bad] = fn
-    tangent, bad = _normalise(e1 - _dot(e1, normal)[:, None] * normal, _length(e1))
+        fn, fbad = _normalise_t(_cross_t(e1[:, bad], e2[:, bad]),
+                                _length_t(e1[:, bad]) * _length_t(e2[:, bad]))
+        fn[:, fbad] = np.array([[0.0], [0.0], [1.0]])
+        normal[:, bad] = fn
+    tangent, bad = _normalise_t(e1 - _dot_t(e1, normal) * normal, _length_t(e1))
     if bad.any():
-        nb = normal[bad]
-        e2 = c[bad] - a[bad]
-        t2, bad2 = _normalise(e2 - _dot(e2, nb)[:, None] * nb, _length(e2))
+        nb = normal[:, bad]
+        e2b = e2[:, bad]
+        t2, bad2 = _normalise_t(e2b - _dot_t(e2b, nb) * nb, _length_t(e2b))
         if bad2.any():
             # any unit vector perpendicular to the normal
-            nn = nb[bad2]
+            nn = nb[:, bad2]
             axis = np.zeros_like(nn)
-            axis[np.arange(nn.shape[0]), np.argmin(np.abs(nn), axis=1)] = 1.0
-            t2[bad2] = _normalise(axis - _dot(axis, nn)[:, None] * nn, 1.0)[0]
-        tangent[bad] = t2
-    return Frames(point, tangent, _cross(normal, tangent), normal)
+            axis[np.argmin(np.abs(nn), axis=0), np.arange(nn.shape[1])] = 1.0
+            t2[:, bad2] = _normalise_t(axis - _dot_t(axis, nn) * nn, 1.0)[0]
+        tangent[:, bad] = t2
+    return point, tangent, _cross_t(normal, tangent), normal
 
 
 def _fine_geometry(binding, V_cage_edited, F_cage, where):
-    """Check an edited cage against the binding; return fine positions and normals."""
+    """Check an edited cage against the binding; return fine positions and
+    normals, transposed (3, n_fine)."""
     if not isinstance(binding, Binding):
         raise InvalidArgumentError(f"{where}: expected a Binding, got {type(binding).__name__}")
     Vc = np.asarray(V_cage_edited)
@@ -380,7 +398,80 @@ def _fine_geometry(binding, V_cage_edited, F_cage, where):
         raise InvalidMeshError(f"{where}: V_cage_edited has NaN or infinite coordinates")
     op = binding._operator
     Vf = op.apply(Vc)
-    return Vf, vertex_normals(Vf, op.F_fine)
+    Nf = vertex_normals(Vf, op.F_fine)
+    return np.ascontiguousarray(Vf.T), np.ascontiguousarray(Nf.T)
+
+
+def _dense_points_near(V_dense, F_dense, fine_face, F_fine, P):
+    """A point of the dense surface near each fine vertex position ``P[j]``.
+
+    Searched without a spatial index over the dense mesh, using the binding:
+    take the dense vertex nearest to ``P[j]`` among those bound to the fine
+    faces around ``j``, and return the closest point of ``P[j]`` on the
+    triangles of that vertex's two-ring. Fine vertices with no bound dense vertex around
+    them (a dense mesh coarser than the cage there) use an exact
+    :class:`~.spatial.TriangleIndex` query. Every returned point lies on the
+    dense surface; it is the closest one whenever the closest triangle
+    lies in the two-ring of the nearest bound vertex (the usual case for a
+    cage near the surface).
+    """
+    n_d, m_f, n_f = V_dense.shape[0], F_fine.shape[0], P.shape[0]
+    q = np.empty((n_f, 3))
+    degree = np.bincount(F_dense.ravel(), minlength=n_d)
+    # dense vertices grouped by fine face; (fine vertex, incident fine face) sorted by vertex
+    by_face = np.argsort(fine_face, kind="stable")
+    cnt_f = np.bincount(fine_face, minlength=m_f)
+    inc = np.argsort(F_fine.ravel(), kind="stable")
+    inc_j, inc_f = F_fine.ravel()[inc], inc // 3
+    idx, owner = _ragged(np.cumsum(cnt_f)[inc_f] - cnt_f[inc_f], cnt_f[inc_f])
+    pj, pk = inc_j[owner], by_face[idx]
+    keep = degree[pk] > 0
+    pj, pk = pj[keep], pk[keep]
+    d = V_dense[pk] - P[pj]
+    cnt_j = np.bincount(pj, minlength=n_f)
+    has = np.flatnonzero(cnt_j)
+    nearest = pk[_group_argmin(_dot(d, d), cnt_j[has])]
+    # triangles of the two-ring of the nearest vertices: fans of the fan's vertices
+    flat = F_dense.ravel()
+    by_vertex = np.argsort(flat, kind="stable") // 3
+    start_v = np.cumsum(degree) - degree
+    idx, owner = _ragged(start_v[nearest], degree[nearest])
+    ring_j, ring_v = _unique_pairs(np.repeat(has[owner], 3), F_dense[by_vertex[idx]].ravel(), n_d)
+    idx, owner = _ragged(start_v[ring_v], degree[ring_v])
+    cand_j, cand_f = _unique_pairs(ring_j[owner], by_vertex[idx], F_dense.shape[0])
+    T = F_dense[cand_f]
+    hit = point_triangle_closest(P[cand_j], V_dense[T[:, 0]], V_dense[T[:, 1]], V_dense[T[:, 2]])
+    best = _group_argmin(hit.distance, np.bincount(cand_j, minlength=n_f)[has])
+    q[has] = hit.point[best]
+    missing = np.flatnonzero(cnt_j == 0)
+    if missing.size:
+        q[missing] = TriangleIndex(V_dense, F_dense).closest(P[missing]).point
+    return q
+
+
+def _unique_pairs(a, b, n_b):
+    """Distinct pairs ``(a[k], b[k])`` sorted by ``a`` then ``b``."""
+    key = np.unique(a * np.int64(n_b) + b)
+    return key // n_b, key % n_b
+
+
+def _ragged(starts, counts):
+    """Concatenated ``arange(starts[i], starts[i] + counts[i])`` and the group of each entry."""
+    owner = np.repeat(np.arange(counts.shape[0], dtype=np.int64), counts)
+    offsets = np.cumsum(counts) - counts
+    idx = np.arange(int(counts.sum()), dtype=np.int64) + np.repeat(starts - offsets, counts)
+    return idx, owner
+
+
+def _group_argmin(values, counts):
+    """Index of the first minimum of each contiguous group (every count > 0)."""
+    starts = np.cumsum(counts) - counts
+    mins = np.minimum.reduceat(values, starts)
+    pos = np.flatnonzero(values == np.repeat(mins, counts))
+    group = np.searchsorted(starts, pos, side="right") - 1
+    first = np.ones(pos.shape[0], dtype=bool)
+    first[1:] = group[1:] != group[:-1]
+    return pos[first]
 
 
 def _vertex_corners(F, n):
@@ -413,29 +504,32 @@ def _to_frame(d, fr):
     return np.stack([_dot(d, fr.tangent), _dot(d, fr.bitangent), _dot(d, fr.normal)], axis=1)
 
 
-def _from_frame(o, fr):
-    """Points ``point + o0 tangent + o1 bitangent + o2 normal``, (q,3)."""
-    return fr.point + o[:, 0:1] * fr.tangent + o[:, 1:2] * fr.bitangent + o[:, 2:3] * fr.normal
+def _from_frame_t(oT, point, tangent, bitangent, normal):
+    """Points ``point + o0 tangent + o1 bitangent + o2 normal`` as (q,3), from (3,q) inputs."""
+    out = point + oT[0] * tangent + oT[1] * bitangent + oT[2] * normal
+    return np.ascontiguousarray(out.T)
 
 
 def _dot(a, b):
     return a[:, 0] * b[:, 0] + a[:, 1] * b[:, 1] + a[:, 2] * b[:, 2]
 
 
-def _cross(a, b):
-    return np.stack([a[:, 1] * b[:, 2] - a[:, 2] * b[:, 1],
-                     a[:, 2] * b[:, 0] - a[:, 0] * b[:, 2],
-                     a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]], axis=1)
+def _dot_t(a, b):
+    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
 
 
-def _length(v):
-    return np.sqrt(_dot(v, v))
+def _length_t(v):
+    return np.sqrt(_dot_t(v, v))
 
 
-def _normalise(v, reference):
-    """Unit rows of ``v`` and a mask of rows shorter than ``_DEGENERATE``
-    times ``reference`` (a scalar or per-row length), left unnormalised."""
-    length = _length(v)
+def _cross_t(a, b):
+    return np.stack([a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2],
+                     a[0] * b[1] - a[1] * b[0]])
+
+
+def _normalise_t(v, reference):
+    """Unit columns of the (3,q) ``v`` and a mask of columns shorter than
+    ``_DEGENERATE`` times ``reference`` (scalar or per column), left as is."""
+    length = _length_t(v)
     bad = ~(length > _DEGENERATE * reference)
-    out = v / np.where(bad, 1.0, length)[:, None]
-    return out, bad
+    return v / np.where(bad, 1.0, length), bad

@@ -12,9 +12,13 @@ surfaces", 2000, and Hoppe et al., "Piecewise smooth surface reconstruction",
         q_i      = closest point of fine vertex i on the dense surface    (fine -> dense)
         (f_s, b_s) = closest point of dense sample s on the fine surface  (dense -> fine, so
                                                                            thin parts are seen)
-        minimise   sum_i a_i |(S X)_i - q_i|^2                a_i: fine vertex areas, sum 1
-                 + sum_s 1/n_s |(B S X)_s - p_s|^2            B: barycentric rows (f_s, b_s)
-                 + smoothness / n_cage |L (X - V_cage)|^2     L: cage Laplacian (rows sum 0)
+        minimise   sum_i a_i    |(S X)_i - q_i|^2_{M_i}        a_i: fine vertex areas, sum 1
+                 + sum_s 1/n_s  |(B S X)_s - p_s|^2_{M_s}      B: barycentric rows (f_s, b_s)
+                 + smoothness / n_cage |L (X - V_cage)|^2      L: cage Laplacian (rows sum 0)
+                   with |d|^2_M = (d.n)^2 + point_to_point |d|^2, n the dense surface's
+                   (interpolated vertex) normal at q_i / p_s (point-to-plane, Chen & Medioni 1992, which
+                   converges in a few steps, plus a little point-to-point to hold the
+                   tangential drift)
         by conjugate gradients on the normal equations, the matrix applied with
         S.apply / S.apply_transpose (never formed).
 
@@ -31,8 +35,9 @@ import numpy as np
 
 from .cg import conjugate_gradient
 from .errors import InvalidArgumentError
-from .mesh import check_mesh, face_areas
-from .spatial import TriangleIndex, sample_surface
+from .mesh import check_mesh, face_areas, vertex_normals
+from .metrics import sample_surface
+from .spatial import TriangleIndex
 from .subdivide import subdivision_operator
 from .topology import edge_map
 
@@ -51,7 +56,8 @@ class FitResult(NamedTuple):
 
 
 def fit_cage(V_dense, F_dense, V_cage, F_cage, *, levels=2, scheme="butterfly", creases=None,
-             iterations=8, smoothness=0.05, laplacian="uniform", samples=None, seed=0,
+             iterations=8, smoothness=0.05, point_to_point=0.1, laplacian="uniform",
+             samples=None, seed=0,
              cg_rtol=1e-6, cg_max_iterations=300):
     """Cage positions whose subdivision surface best matches a dense surface.
 
@@ -69,6 +75,9 @@ def fit_cage(V_dense, F_dense, V_cage, F_cage, *, levels=2, scheme="butterfly", 
     smoothness : float
         Weight (>= 0, unit-free) of the Laplacian of the cage's displacement,
         relative to the mean-squared-distance data terms.
+    point_to_point : float
+        Weight (>= 0) of the full point-to-point distance added to the
+        point-to-plane one in both data terms.
     laplacian : {"uniform", "cotangent"}
         Laplacian weights on the cage (cotangent weights from the input cage).
     samples : int, optional
@@ -103,9 +112,16 @@ def fit_cage(V_dense, F_dense, V_cage, F_cage, *, levels=2, scheme="butterfly", 
         raise InvalidArgumentError(f"fit_cage: iterations must be an integer >= 0, got {iterations}")
     if not smoothness >= 0:
         raise InvalidArgumentError(f"fit_cage: smoothness must be >= 0, got {smoothness}")
+    if not point_to_point >= 0:
+        raise InvalidArgumentError(f"fit_cage: point_to_point must be >= 0, got {point_to_point}")
     if laplacian not in _LAPLACIANS:
         raise InvalidArgumentError(
             f"fit_cage: laplacian must be one of {_LAPLACIANS}, got {laplacian!r}")
+    # work around the dense bounding-box centre: the result then does not
+    # depend on where the mesh sits (the CG stopping rule is relative)
+    centre = 0.5 * (V_dense.max(axis=0) + V_dense.min(axis=0))
+    V_dense = V_dense - centre
+    V_cage = V_cage - centre
     n_c = V_cage.shape[0]
     op = subdivision_operator(F_cage, n_c, levels=levels, scheme=scheme, creases=creases)
     Ff = op.F_fine
@@ -113,7 +129,8 @@ def fit_cage(V_dense, F_dense, V_cage, F_cage, *, levels=2, scheme="butterfly", 
         samples = int(np.clip(2 * op.n_fine, 5000, 200000))
     if int(samples) < 1:
         raise InvalidArgumentError(f"fit_cage: samples must be >= 1, got {samples}")
-    P = np.asarray(sample_surface(V_dense, F_dense, int(samples), seed=seed).points, dtype=np.float64)
+    sampled = sample_surface(V_dense, F_dense, int(samples), seed=seed)
+    P = np.asarray(sampled.points, dtype=np.float64)
     n_s = P.shape[0]
     dense_index = TriangleIndex(V_dense, F_dense)
     L_rows, L_cols, L_w = _laplacian(V_cage, F_cage, laplacian)
@@ -122,6 +139,10 @@ def fit_cage(V_dense, F_dense, V_cage, F_cage, *, levels=2, scheme="butterfly", 
     L_diag = _lt_l_diagonal(L_rows, L_cols, L_w, n_c)
 
     X = V_cage.copy()
+    mu = float(point_to_point)
+    N_dense = vertex_normals(V_dense, F_dense)
+    N_samples = _interpolate(N_dense, F_dense, sampled.face, sampled.bary)
+    ws = 1.0 / n_s
     f2d, d2f, cg_its = [], [], []
     for it in range(int(iterations) + 1):
         Vf = op.apply(X)
@@ -133,9 +154,9 @@ def fit_cage(V_dense, F_dense, V_cage, F_cage, *, levels=2, scheme="butterfly", 
         d2f.append(float(np.mean(hit.distance)))
         if it == int(iterations):
             break
+        N_near = _interpolate(N_dense, F_dense, near.face, near.bary)
         corners = Ff[np.asarray(hit.face, dtype=np.int64)]
         bary = np.asarray(hit.bary, dtype=np.float64)
-        ws = 1.0 / n_s
 
         def B(Y):
             return (bary[:, 0:1] * Y[corners[:, 0]] + bary[:, 1:2] * Y[corners[:, 1]]
@@ -150,23 +171,45 @@ def fit_cage(V_dense, F_dense, V_cage, F_cage, *, levels=2, scheme="butterfly", 
                              + np.bincount(corners[:, 2], bary[:, 2] * col, op.n_fine))
             return out
 
-        def A(Xc):
-            Y = op.apply(Xc)
-            G = a[:, None] * Y + Bt(ws * B(Y))
-            return op.apply_transpose(G) + lam * _lt_l(L_rows, L_cols, L_w, n_c, Xc)
+        def metric(N, Y):
+            # (mu I + n n^T) y per row: point-to-plane plus a little point-to-point
+            return mu * Y + N * np.einsum("ij,ij->i", N, Y)[:, None]
 
-        rhs = op.apply_transpose(a[:, None] * near.point + Bt(ws * P)) + lam * LtL_X0
-        # lumped (row-sum) diagonal: A 1 = S^T (a + B^T ws) since S 1 = 1 and B 1 = 1
-        lumped = op.apply_transpose(a + Bt(np.full((n_s, 1), ws))[:, 0]) + lam * L_diag
+        def A(x):
+            Xc = x.reshape(n_c, 3)
+            Y = op.apply(Xc)
+            G = a[:, None] * metric(N_near, Y) + Bt(ws * metric(N_samples, B(Y)))
+            out = op.apply_transpose(G) + lam * _lt_l(L_rows, L_cols, L_w, n_c, Xc)
+            return out.ravel()
+
+        rhs = (op.apply_transpose(a[:, None] * metric(N_near, near.point)
+                                  + Bt(ws * metric(N_samples, P)))
+               + lam * LtL_X0)
+        # lumped (row-sum) diagonal of the isotropic part: S 1 = 1 and B 1 = 1
+        lumped = (1.0 + mu) * op.apply_transpose(a + Bt(np.full((n_s, 1), ws))[:, 0]) \
+            + lam * L_diag
         lumped = np.maximum(lumped, 1e-3 * max(float(lumped.max()), 1e-300))
-        sol = conjugate_gradient(A, rhs, X0=X, rtol=cg_rtol, max_iterations=cg_max_iterations,
-                                 preconditioner=lambda R: R / lumped[:, None])
-        X = sol.X
+        inv = np.repeat(1.0 / lumped, 3)
+        sol = conjugate_gradient(A, rhs.ravel(), X0=X.ravel(), rtol=cg_rtol,
+                                 max_iterations=cg_max_iterations, preconditioner=lambda r: r * inv)
+        X = sol.X.reshape(n_c, 3)
         cg_its.append(sol.iterations)
     f2d = np.array(f2d)
     d2f = np.array(d2f)
     diag = float(np.linalg.norm(V_dense.max(axis=0) - V_dense.min(axis=0)))
-    return FitResult(X, 0.5 * (f2d + d2f), f2d, d2f, np.array(cg_its, dtype=np.int64), diag)
+    return FitResult(X + centre, 0.5 * (f2d + d2f), f2d, d2f, np.array(cg_its, dtype=np.int64), diag)
+
+
+def _interpolate(N, F, face, bary):
+    """Unit normals blended from vertex normals ``N`` at barycentric points
+    (continuous across edges and vertices, unlike face normals); a zero blend
+    stays zero (that point then only has the point-to-point term)."""
+    corners = F[np.asarray(face, dtype=np.int64)]
+    bary = np.asarray(bary, dtype=np.float64)
+    out = (bary[:, 0:1] * N[corners[:, 0]] + bary[:, 1:2] * N[corners[:, 1]]
+           + bary[:, 2:3] * N[corners[:, 2]])
+    length = np.linalg.norm(out, axis=1)
+    return np.divide(out, length[:, None], out=np.zeros_like(out), where=length[:, None] > 1e-12)
 
 
 def _vertex_areas(V, F, n):

@@ -25,7 +25,8 @@ def ensure_core_modules():
     installed = set()
     for name, build, needed in (
             ("core.subdivide", _subdivide_module, ("subdivision_operator", "subdivide")),
-            ("core.spatial", _spatial_module, ("TriangleIndex", "closest_points", "sample_surface"))):
+            ("core.spatial", _spatial_module, ("TriangleIndex", "closest_points")),
+            ("core.metrics", _metrics_module, ("sample_surface", "surface_distance"))):
         try:
             mod = importlib.import_module(name)
         except ModuleNotFoundError as exc:
@@ -233,6 +234,14 @@ def _spatial_module():
     mod.TriangleIndex = TriangleIndex
     mod.ClosestPoints = ClosestPoints
     mod.closest_points = closest_points
+    mod.sample_surface = sample_surface
+    mod.SurfaceSamples = SurfaceSamples
+    mod.STANDIN = True
+    return mod
+
+
+def _metrics_module():
+    mod = types.ModuleType("core.metrics")
     mod.sample_surface = sample_surface
     mod.SurfaceSamples = SurfaceSamples
     mod.STANDIN = True

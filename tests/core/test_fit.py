@@ -100,13 +100,20 @@ def test_fit_recovers_a_cage_whose_subdivision_is_the_dense_mesh():
     rng = np.random.default_rng(0)
     start = Vc + 0.01 * rng.standard_normal(Vc.shape)
     r = fit_cage(Vd, Fd, start, Fc, levels=2, iterations=10, smoothness=0.0)
-    assert r.mean_distance[-1] < 0.2 * r.mean_distance[0]
-    assert np.abs(r.V - Vc).mean() < 0.25 * np.abs(start - Vc).mean()
+    # the surface is recovered (the cage may slide along it: only the
+    # surface is determined by the data)
+    assert r.mean_distance[-1] < 0.1 * r.mean_distance[0]
+    assert r.mean_distance[-1] < 1e-4 * bbox_diagonal(Vd)
 
 
 def test_fit_is_equivariant_under_similarity(sphere_case):
+    # (a noisy sphere and a randomly turned cage: on symmetric inputs the
+    # closest points have exact ties, which rounding may break either way)
     Vd, Fd, Vc, Fc = sphere_case
-    Vc = 0.95 * Vc
+    rng = np.random.default_rng(7)
+    Vd = Vd * (1 + 0.01 * rng.standard_normal((Vd.shape[0], 1)))
+    Q, _ = np.linalg.qr(rng.standard_normal((3, 3)))
+    Vc = 0.95 * Vc @ Q.T
     r = fit_cage(Vd, Fd, Vc, Fc, levels=1, iterations=2)
     s, t = 250.0, np.array([10.0, -3.0, 7.0])
     r2 = fit_cage(s * Vd + t, Fd, s * Vc + t, Fc, levels=1, iterations=2)

@@ -1,0 +1,239 @@
+#!/usr/bin/env python3
+"""Benchmark: bind / deform / refine against Blender's Surface Deform modifier.
+
+Run with Blender as a Python module (the bpy venv)::
+
+    python scripts/bench_adjust.py            # full run, writes bench_results/adjust.md
+    python scripts/bench_adjust.py --quick    # smaller meshes, no file written
+
+Part 1, the analytic bend (same dense mesh, same cage, same edit for both):
+a 3 x 1 plate with bumps of amplitude h (wavelength 1/12) is simplified to a
+cage with ``core.simplify``; the cage is bent a quarter turn with an
+isometric analytic bend; the dense mesh is deformed by (a) ``core.deform``
+after ``core.bind`` on the subdivided cage (two butterfly levels) and (b)
+Blender's Surface Deform bound to the same cage. Both are compared with the
+same bend applied to the dense vertices (the ground truth); errors are in
+units of h. "plain cage" is the distance of the bent dense surface to the
+subdivided bent cage (what the edit gives without the detail).
+
+Part 2, scale: a bumpy torus of 1M vertices bound to a 10k-face cage at two
+levels (targets: bind <= 15 s, re-deform <= 0.3 s); Surface Deform on the
+same pair for reference.
+
+Fixed seeds; both tools run in the same process on the same arrays.
+"""
+
+import argparse
+import os
+import sys
+import time
+
+import numpy as np
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+sys.path.insert(0, ROOT)
+
+from core.adjust import bind, deform, fit_cage, refine  # noqa: E402
+from core.simplify import simplify  # noqa: E402
+from core.spatial import closest_points  # noqa: E402
+
+BUMP = 0.01
+
+
+def bumpy_plate(nx, ny):
+    """3 x 1 plate, bumps of amplitude BUMP and wavelength 1/12 (as in the tests)."""
+    xs, ys = np.linspace(0, 3, nx + 1), np.linspace(0, 1, ny + 1)
+    X, Y = np.meshgrid(xs, ys, indexing="xy")
+    Z = BUMP * np.sin(24 * np.pi * X) * np.sin(24 * np.pi * Y)
+    V = np.stack([X.ravel(), Y.ravel(), Z.ravel()], axis=1)
+    i, j = np.meshgrid(np.arange(nx), np.arange(ny), indexing="xy")
+    v00 = (j * (nx + 1) + i).ravel()
+    v10, v01, v11 = v00 + 1, v00 + nx + 1, v00 + nx + 2
+    F = np.concatenate([np.stack([v00, v10, v11], 1), np.stack([v00, v11, v01], 1)])
+    return V, F.astype(np.int64)
+
+
+def bend(V, radius=3.0 / (np.pi / 2)):
+    th = V[:, 0] / radius
+    r = radius + V[:, 2]
+    return np.stack([r * np.sin(th), V[:, 1], r * np.cos(th) - radius], axis=1)
+
+
+def bumpy_torus(n_major, n_minor, R=1.0, r=0.35, bump=0.01):
+    u = np.arange(n_major) * 2 * np.pi / n_major
+    v = np.arange(n_minor) * 2 * np.pi / n_minor
+    U, W = np.meshgrid(u, v, indexing="ij")
+    rr = r + bump * np.sin(40 * U) * np.sin(20 * W)
+    V = np.stack([(R + rr * np.cos(W)) * np.cos(U), (R + rr * np.cos(W)) * np.sin(U),
+                  rr * np.sin(W)], axis=-1).reshape(-1, 3)
+    i, j = np.meshgrid(np.arange(n_major), np.arange(n_minor), indexing="ij")
+    a = (i * n_minor + j).ravel()
+    b = (((i + 1) % n_major) * n_minor + j).ravel()
+    c = (((i + 1) % n_major) * n_minor + (j + 1) % n_minor).ravel()
+    d = (i * n_minor + (j + 1) % n_minor).ravel()
+    F = np.concatenate([np.stack([a, b, c], 1), np.stack([a, c, d], 1)]).astype(np.int64)
+    return V, F
+
+
+# ------------------------------------------------------------------ Blender side
+def _bpy():
+    import bpy
+    bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)
+    return bpy
+
+
+def _mesh_object(bpy, name, V, F):
+    me = bpy.data.meshes.new(name)
+    me.vertices.add(V.shape[0])
+    me.loops.add(F.size)
+    me.polygons.add(F.shape[0])
+    me.attributes["position"].data.foreach_set("vector", V.astype(np.float32).ravel())
+    me.attributes[".corner_vert"].data.foreach_set("value", F.astype(np.int32).ravel())
+    me.polygons.foreach_set("loop_start", np.arange(0, F.size, 3, dtype=np.int32))
+    me.update(calc_edges=True)
+    ob = bpy.data.objects.new(name, me)
+    bpy.context.scene.collection.objects.link(ob)
+    return ob
+
+
+def _evaluated_positions(bpy, ob):
+    dg = bpy.context.evaluated_depsgraph_get()
+    ev = ob.evaluated_get(dg)
+    me = ev.data
+    out = np.empty(len(me.vertices) * 3, dtype=np.float32)
+    me.attributes["position"].data.foreach_get("vector", out)
+    return out.reshape(-1, 3).astype(np.float64)
+
+
+def surface_deform(V_dense, F_dense, V_cage, F_cage, V_cage_edited):
+    """Blender's Surface Deform: (bind seconds, deform seconds, deformed positions)."""
+    bpy = _bpy()
+    dense = _mesh_object(bpy, "dense", V_dense, F_dense)
+    cage = _mesh_object(bpy, "cage", V_cage, F_cage)
+    mod = dense.modifiers.new("SurfaceDeform", "SURFACE_DEFORM")
+    mod.target = cage
+    bpy.context.view_layer.objects.active = dense
+    dense.select_set(True)
+    t = time.perf_counter()
+    with bpy.context.temp_override(object=dense, active_object=dense):
+        bpy.ops.object.surfacedeform_bind(modifier=mod.name)
+    _evaluated_positions(bpy, dense)  # the bind happens on the next evaluation
+    t_bind = time.perf_counter() - t
+    if not mod.is_bound:
+        raise RuntimeError("Surface Deform did not bind")
+    cage.data.attributes["position"].data.foreach_set(
+        "vector", V_cage_edited.astype(np.float32).ravel())
+    cage.data.update()
+    t = time.perf_counter()
+    out = _evaluated_positions(bpy, dense)
+    t_def = time.perf_counter() - t
+    return t_bind, t_def, out
+
+
+# ------------------------------------------------------------------ runs
+def run_bend(quick):
+    nx, ny = (150, 50) if quick else (300, 100)
+    Vd, Fd = bumpy_plate(nx, ny)
+    cage = simplify(Vd, Fd, target_faces=200)
+    Vc, Fc = cage.V, cage.F
+    creases = cage.feature_edges if len(cage.feature_edges) else None
+    G = bend(Vd)
+    Ve = bend(Vc)
+    rows = []
+
+    t = time.perf_counter()
+    b = bind(Vd, Fd, Vc, Fc, levels=2, creases=creases)
+    t_bind = time.perf_counter() - t
+    deform(b, Ve)
+    t = time.perf_counter()
+    D = deform(b, Ve)
+    t_def = time.perf_counter() - t
+    err = np.linalg.norm(D - G, axis=1) / BUMP
+    rows.append(("MeshAdjust bind/deform (butterfly x2)", t_bind, t_def, err.max(), err.mean()))
+
+    t = time.perf_counter()
+    fit = fit_cage(Vd, Fd, Vc, Fc, levels=2, creases=creases)
+    t_fit = time.perf_counter() - t
+    t = time.perf_counter()
+    bf = bind(Vd, Fd, fit.V, Fc, levels=2, creases=creases)
+    t_bind_f = time.perf_counter() - t
+    t = time.perf_counter()
+    Df = deform(bf, bend(fit.V))
+    t_def_f = time.perf_counter() - t
+    err_f = np.linalg.norm(Df - G, axis=1) / BUMP
+    rows.append((f"MeshAdjust fit ({t_fit:.2f} s) + bind/deform", t_bind_f, t_def_f,
+                 err_f.max(), err_f.mean()))
+
+    op = b.operator
+    plain = closest_points(op.apply(Ve), op.F_fine, G).distance / BUMP
+    rows.append(("plain subdivided bent cage (no detail)", float("nan"), float("nan"),
+                 plain.max(), plain.mean()))
+
+    Vr, Fr = refine(b, Ve)
+    ref = closest_points(G, Fd, Vr).distance / BUMP
+    rows.append(("MeshAdjust refine (regular mesh, fine vertices to truth)", float("nan"),
+                 float("nan"), ref.max(), ref.mean()))
+
+    sd_bind, sd_def, S = surface_deform(Vd, Fd, Vc, Fc, Ve)
+    err_s = np.linalg.norm(S - G, axis=1) / BUMP
+    rows.append(("Blender Surface Deform (same cage)", sd_bind, sd_def, err_s.max(), err_s.mean()))
+    info = (f"dense plate {Vd.shape[0]:,} vertices / {Fd.shape[0]:,} faces, cage "
+            f"{Fc.shape[0]} faces ({Vc.shape[0]} vertices), bump h = {BUMP}, bend a quarter turn")
+    return info, rows, err.mean() / max(err_s.mean(), 1e-300)
+
+
+def run_scale(quick):
+    n_major, n_minor = (400, 250) if quick else (1000, 1000)
+    Vd, Fd = bumpy_torus(n_major, n_minor)
+    Vc, Fc = bumpy_torus(100, 50, bump=0.0)
+    Ve = Vc.copy()
+    Ve[:, 2] += 0.2 * np.exp(-((Vc[:, 0] - 1.0) ** 2 + Vc[:, 1] ** 2) / 0.1)
+    rows = []
+    t = time.perf_counter()
+    b = bind(Vd, Fd, Vc, Fc, levels=2)
+    t_bind = time.perf_counter() - t
+    times = []
+    for _ in range(3):
+        t = time.perf_counter()
+        deform(b, Ve)
+        times.append(time.perf_counter() - t)
+    t = time.perf_counter()
+    refine(b, Ve)
+    t_ref = time.perf_counter() - t
+    rows.append(("MeshAdjust bind (2 levels) / deform (best of 3)", t_bind, min(times), t_ref))
+    sd_bind, sd_def, _ = surface_deform(Vd, Fd, Vc, Fc, Ve)
+    rows.append(("Blender Surface Deform (cage itself)", sd_bind, sd_def, float("nan")))
+    info = f"dense torus {Vd.shape[0]:,} vertices / {Fd.shape[0]:,} faces, cage {Fc.shape[0]:,} faces"
+    return info, rows
+
+
+def _fmt(x, digits=3):
+    return "-" if x != x else f"{x:.{digits}f}"
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--quick", action="store_true", help="smaller meshes, no results file")
+    args = ap.parse_args(argv)
+    lines = []
+    info, rows, ratio = run_bend(args.quick)
+    lines += ["## Analytic bend of a bumpy plate", "", info, "",
+              "| method | bind s | deform s | max error / h | mean error / h |",
+              "| --- | ---: | ---: | ---: | ---: |"]
+    lines += [f"| {r[0]} | {_fmt(r[1])} | {_fmt(r[2])} | {_fmt(r[3])} | {_fmt(r[4])} |" for r in rows]
+    lines += ["", f"mean error ratio MeshAdjust / Surface Deform: {ratio:.3f}", ""]
+    info, rows = run_scale(args.quick)
+    lines += ["## Scale", "", info, "",
+              "| method | bind s | deform s | refine s |", "| --- | ---: | ---: | ---: |"]
+    lines += [f"| {r[0]} | {_fmt(r[1], 2)} | {_fmt(r[2], 3)} | {_fmt(r[3], 3)} |" for r in rows]
+    lines += ["", "targets: bind <= 15 s, deform <= 0.3 s", ""]
+    text = "\n".join(lines)
+    print(text)
+    if not args.quick:
+        os.makedirs(os.path.join(ROOT, "bench_results"), exist_ok=True)
+        with open(os.path.join(ROOT, "bench_results", "adjust.md"), "w") as fh:
+            fh.write("# bench_adjust\n\n" + text)
+
+
+if __name__ == "__main__":
+    main()
