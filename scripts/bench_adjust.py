@@ -7,9 +7,9 @@ Run with Blender as a Python module (the bpy venv)::
     python scripts/bench_adjust.py --quick    # smaller meshes, no file written
 
 Part 1, the analytic bend (same dense mesh, same cage, same edit for both):
-a 3 x 1 plate with bumps of amplitude h (wavelength 1/12) is simplified to a
-cage with ``core.simplify``; the cage is bent a quarter turn with an
-isometric analytic bend; the dense mesh is deformed by (a) ``core.deform``
+an open tube (length 3, radius 0.3) with bumps of amplitude h is simplified
+to an 800-face cage with ``core.simplify``; the cage is bent a quarter turn
+with an analytic bend; the dense mesh is deformed by (a) ``core.deform``
 after ``core.bind`` on the subdivided cage (two butterfly levels) and (b)
 Blender's Surface Deform bound to the same cage. Both are compared with the
 same bend applied to the dense vertices (the ground truth); errors are in
@@ -40,23 +40,32 @@ from core.spatial import closest_points  # noqa: E402
 BUMP = 0.01
 
 
-def bumpy_plate(nx, ny):
-    """3 x 1 plate, bumps of amplitude BUMP and wavelength 1/12 (as in the tests)."""
-    xs, ys = np.linspace(0, 3, nx + 1), np.linspace(0, 1, ny + 1)
-    X, Y = np.meshgrid(xs, ys, indexing="xy")
-    Z = BUMP * np.sin(24 * np.pi * X) * np.sin(24 * np.pi * Y)
-    V = np.stack([X.ravel(), Y.ravel(), Z.ravel()], axis=1)
-    i, j = np.meshgrid(np.arange(nx), np.arange(ny), indexing="xy")
-    v00 = (j * (nx + 1) + i).ravel()
-    v10, v01, v11 = v00 + 1, v00 + nx + 1, v00 + nx + 2
-    F = np.concatenate([np.stack([v00, v10, v11], 1), np.stack([v00, v11, v01], 1)])
-    return V, F.astype(np.int64)
+TUBE_LENGTH, TUBE_RADIUS = 3.0, 0.3
+BEND_RADIUS = TUBE_LENGTH / (np.pi / 2)
 
 
-def bend(V, radius=3.0 / (np.pi / 2)):
-    th = V[:, 0] / radius
-    r = radius + V[:, 2]
-    return np.stack([r * np.sin(th), V[:, 1], r * np.cos(th) - radius], axis=1)
+def bumpy_tube(nu, nv):
+    """Open tube along x (length 3, radius 0.3), bumps of amplitude BUMP
+    (wavelength 0.125 along the axis, 16 around); as in tests/core/test_adjust.py."""
+    u = np.linspace(0.0, TUBE_LENGTH, nu + 1)
+    v = np.arange(nv) * 2 * np.pi / nv
+    U, W = np.meshgrid(u, v, indexing="ij")
+    r = TUBE_RADIUS + BUMP * np.sin(2 * np.pi * U / 0.125) * np.sin(16 * W)
+    V = np.stack([U, r * np.cos(W), r * np.sin(W)], axis=-1).reshape(-1, 3)
+    i, j = np.meshgrid(np.arange(nu), np.arange(nv), indexing="ij")
+    a = (i * nv + j).ravel()
+    b = ((i + 1) * nv + j).ravel()
+    c = ((i + 1) * nv + (j + 1) % nv).ravel()
+    d = (i * nv + (j + 1) % nv).ravel()
+    F = np.concatenate([np.stack([a, c, b], 1), np.stack([a, d, c], 1)]).astype(np.int64)
+    return V, F
+
+
+def bend(V):
+    """Quarter-turn bend of the tube's axis around (x=0, z=-R) || y."""
+    th = V[:, 0] / BEND_RADIUS
+    r = BEND_RADIUS + V[:, 2]
+    return np.stack([r * np.sin(th), V[:, 1], r * np.cos(th) - BEND_RADIUS], axis=1)
 
 
 def bumpy_torus(n_major, n_minor, R=1.0, r=0.35, bump=0.01):
@@ -132,9 +141,8 @@ def surface_deform(V_dense, F_dense, V_cage, F_cage, V_cage_edited):
 
 # ------------------------------------------------------------------ runs
 def run_bend(quick):
-    nx, ny = (150, 50) if quick else (300, 100)
-    Vd, Fd = bumpy_plate(nx, ny)
-    cage = simplify(Vd, Fd, target_faces=200)
+    Vd, Fd = bumpy_tube(240, 96) if quick else bumpy_tube(480, 192)
+    cage = simplify(Vd, Fd, target_faces=800)
     Vc, Fc = cage.V, cage.F
     creases = cage.feature_edges if len(cage.feature_edges) else None
     G = bend(Vd)
@@ -177,8 +185,9 @@ def run_bend(quick):
     sd_bind, sd_def, S = surface_deform(Vd, Fd, Vc, Fc, Ve)
     err_s = np.linalg.norm(S - G, axis=1) / BUMP
     rows.append(("Blender Surface Deform (same cage)", sd_bind, sd_def, err_s.max(), err_s.mean()))
-    info = (f"dense plate {Vd.shape[0]:,} vertices / {Fd.shape[0]:,} faces, cage "
-            f"{Fc.shape[0]} faces ({Vc.shape[0]} vertices), bump h = {BUMP}, bend a quarter turn")
+    info = (f"dense bumpy tube {Vd.shape[0]:,} vertices / {Fd.shape[0]:,} faces (length 3, "
+            f"radius 0.3, bump h = {BUMP}), QEM cage {Fc.shape[0]} faces ({Vc.shape[0]} "
+            f"vertices), axis bent a quarter turn")
     return info, rows, err.mean() / max(err_s.mean(), 1e-300)
 
 
@@ -217,7 +226,7 @@ def main(argv=None):
     args = ap.parse_args(argv)
     lines = []
     info, rows, ratio = run_bend(args.quick)
-    lines += ["## Analytic bend of a bumpy plate", "", info, "",
+    lines += ["## Analytic bend of a bumpy tube", "", info, "",
               "| method | bind s | deform s | max error / h | mean error / h |",
               "| --- | ---: | ---: | ---: | ---: |"]
     lines += [f"| {r[0]} | {_fmt(r[1])} | {_fmt(r[2])} | {_fmt(r[3])} | {_fmt(r[4])} |" for r in rows]
