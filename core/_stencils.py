@@ -49,21 +49,33 @@ class Stencil(NamedTuple):
         """Row of each entry, (nnz,) int64."""
         return np.repeat(np.arange(self.n_out, dtype=np.int64), np.diff(self.indptr))
 
+    def apply_t(self, Xt):
+        """Column-major apply: ``Xt`` (k, n_in) C-contiguous -> (k, n_out)."""
+        out = np.empty((Xt.shape[0], self.n_out))
+        if self.n_out == 0:
+            return out
+        starts = self.indptr[:-1]
+        for d in range(Xt.shape[0]):
+            g = Xt[d][self.cols]
+            g *= self.weights
+            out[d] = np.add.reduceat(g, starts)
+        return out
+
+    def apply_transpose_t(self, Gt, rows=None):
+        """Column-major adjoint: ``Gt`` (k, n_out) -> (k, n_in)."""
+        rows = self.rows() if rows is None else rows
+        out = np.empty((Gt.shape[0], self.n_in))
+        for d in range(Gt.shape[0]):
+            out[d] = np.bincount(self.cols, weights=self.weights * Gt[d][rows], minlength=self.n_in)
+        return out
+
     def apply(self, X):
         """``X`` (n_in, k) float64 -> (n_out, k)."""
-        if self.n_out == 0:
-            return np.zeros((0, X.shape[1]))
-        tmp = X[self.cols]
-        tmp *= self.weights[:, None]
-        return np.add.reduceat(tmp, self.indptr[:-1], axis=0)
+        return self.apply_t(np.ascontiguousarray(X.T)).T
 
     def apply_transpose(self, G):
         """``G`` (n_out, k) float64 -> (n_in, k), the exact adjoint of :meth:`apply`."""
-        rows = self.rows()
-        out = np.empty((self.n_in, G.shape[1]))
-        for d in range(G.shape[1]):
-            out[:, d] = np.bincount(self.cols, weights=self.weights * G[rows, d], minlength=self.n_in)
-        return out
+        return self.apply_transpose_t(np.ascontiguousarray(G.T)).T
 
 
 class Topology(NamedTuple):
@@ -525,12 +537,13 @@ def butterfly_level(T):
         # slot A: apex P0, edge (Q0, c); B: apex Q0, edge (c, P0);
         # C: apex Q0 (=P1), edge (P0, d); D: apex P0 (=Q1), edge (d, Q0)
         Ff = F.ravel()
+        # the corner across each half-edge, -1 where that edge is sharp (never read across)
+        wing_opp = np.where(T.sharp[T.face_edge.ravel()], -1, T.opp)
         wings, miss = [], []
         for f, j in ((f0, n0), (f0, nn0), (f1, n1), (f1, nn1)):
-            h = 3 * f + j
-            t = T.opp[h]
-            ok = (t >= 0) & ~T.sharp[T.face_edge[f, j]]
-            wings.append(np.where(ok, Ff[t], c))
+            t = wing_opp[3 * f + j]
+            ok = t >= 0
+            wings.append(Ff[t])
             miss.append(~ok)
         any_miss = miss[0] | miss[1] | miss[2] | miss[3]
         full = ~any_miss
@@ -541,6 +554,7 @@ def butterfly_level(T):
             tables.append(_Table(n + kr[sel], [P0[sel], Q0[sel], c[sel], d[sel]] + [w[sel] for w in wings],
                                  [0.5, 0.5, 0.125, 0.125] + [-1 / 16] * 4))
             sel = np.flatnonzero(any_miss)
+            wings = [np.where(mk[sel], c[sel], w[sel]) for w, mk in zip(wings, miss)]
             mA, mB, mC, mD = (mk[sel].astype(np.float64) for mk in miss)
             s16 = 1 / 16
             wP = 0.5 + s16 * (mA - mB + mD - mC)
@@ -548,7 +562,7 @@ def butterfly_level(T):
             wc = 0.125 - s16 * (mA + mB)
             wd = 0.125 - s16 * (mC + mD)
             ww = [np.where(mk[sel], 0.0, -s16) for mk in miss]
-            tables.append(_Table(n + kr[sel], [P0[sel], Q0[sel], c[sel], d[sel]] + [w[sel] for w in wings],
+            tables.append(_Table(n + kr[sel], [P0[sel], Q0[sel], c[sel], d[sel]] + wings,
                                  [wP, wQ, wc, wd] + ww))
 
     # --- extraordinary ends: their own ring stencil (halved when both ends are)

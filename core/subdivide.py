@@ -201,10 +201,10 @@ class SubdivisionOperator:
         (n_fine, k) or (n_fine,) float64, a new array.
         """
         X, one_d = self._as_2d(Vc, self.n_coarse, "apply")
-        X = np.array(X, dtype=np.float64, order="C")
+        Xt = np.ascontiguousarray(X.T)          # column-major: each gather reads one column
         for S in self.stencils:
-            X = S.apply(X)
-        return X[:, 0] if one_d else X
+            Xt = S.apply_t(Xt)
+        return Xt[0].copy() if one_d else np.ascontiguousarray(Xt.T)
 
     def apply_transpose(self, G):
         """The exact adjoint: ``<apply(x), g> == <x, apply_transpose(g)>``.
@@ -218,10 +218,10 @@ class SubdivisionOperator:
         (n_coarse, k) or (n_coarse,) float64
         """
         X, one_d = self._as_2d(G, self.n_fine, "apply_transpose")
-        X = np.array(X, dtype=np.float64, order="C")
+        Xt = np.ascontiguousarray(X.T)
         for S in reversed(self.stencils):
-            X = S.apply_transpose(X)
-        return X[:, 0] if one_d else X
+            Xt = S.apply_transpose_t(Xt)
+        return Xt[0].copy() if one_d else np.ascontiguousarray(Xt.T)
 
     def triplets(self):
         """The composed coarse-to-fine matrix as triplets.
