@@ -1,0 +1,703 @@
+"""Exact closest points on a triangle mesh, in pure NumPy.
+
+Point to triangle: Ericson, *Real-Time Collision Detection* (2005), 5.1.5
+("ClosestPtPointTriangle"), batched over arrays of (point, triangle) pairs.
+With ``ab = B - A``, ``ac = C - A``, ``ap = P - A`` and the six dot products
+``d1 = ab.ap, d2 = ac.ap, d3 = ab.bp, d4 = ac.bp, d5 = ab.cp, d6 = ac.cp``
+the point's Voronoi region of the triangle is, in this order of precedence::
+
+            C
+           / \\          A:  d1 <= 0 and d2 <= 0
+      AC  /   \\  BC     B:  d3 >= 0 and d4 <= d3
+         /  F  \\        AB: vc <= 0, d1 >= 0, d3 <= 0   (vc = d1 d4 - d3 d2)
+        A-------B       C:  d6 >= 0 and d5 <= d6
+            AB          AC: vb <= 0, d2 >= 0, d6 <= 0   (vb = d5 d2 - d1 d6)
+                        BC: va <= 0, d4 >= d3, d5 >= d6  (va = d3 d6 - d5 d4)
+                        F (inside): v = vb / (va+vb+vc), w = vc / (va+vb+vc)
+
+and the closest point is ``A + v ab + w ac`` (barycentric ``(1-v-w, v, w)``).
+The determinants lose accuracy on slivers (``sin^2`` of a corner angle
+below ``_THIN_SIN2``) and are undefined on zero-area triangles, so those
+triangles use a robust path instead: the best of the three clamped segment
+projections and, when it falls inside, the orthogonal projection onto the
+plane computed with the directly evaluated normal (skipped when even that
+normal is rounding noise, ``sin^2 < _FLAT_SIN2``). Other triangles are first
+projected onto their plane, so far-away points keep their in-plane accuracy.
+
+The index (:class:`TriangleIndex`) answers "nearest triangle" exactly:
+
+1. Triangles are put in Morton order (spatial locality for every gather) and
+   referenced in each cell of a uniform grid that their bounding box and their
+   plane both touch (cell size about the mean triangle extent).
+2. Queries are sorted by cell and processed in chunks. Phase 1: the triangles
+   of the query's own cell give an upper bound ``u`` (an exact distance to a
+   real triangle). Phase 2: every other cell within ``u`` of the query (box
+   distance) is examined; since any triangle closer than ``u`` has a point in
+   one of those cells and is referenced there, the minimum is exact.
+3. Queries whose own cell is empty or whose ball spans more than a few cells
+   (far from the surface, outside the grid) go to a bounding-volume hierarchy
+   built over the same Morton order (a balanced binary tree of leaves of
+   ``_LEAF`` triangles) and traversed breadth-first in lockstep with pruning
+   against the per-query bound; large frontiers are split and processed depth
+   first, so memory stays bounded.
+
+Every (query, candidate) set is a ragged expansion (``np.repeat`` + ``cumsum``)
+evaluated in one vectorised kernel call; the per-query minimum comes from
+``np.minimum.reduceat`` over contiguous groups.
+"""
+
+from typing import NamedTuple
+
+import numpy as np
+
+from .errors import InvalidArgumentError
+from .mesh import check_mesh
+
+__all__ = ["ClosestPoints", "TriangleClosest", "TriangleIndex", "closest_points",
+           "point_triangle_closest"]
+
+# --- tolerances and tuning, in one place -------------------------------------------------------
+_THIN_SIN2 = 1e-4          # |ab x ac|^2 < this * |ab|^2 |ac|^2 (and same at B): robust path
+_FLAT_SIN2 = 1e-16         # below this sin^2 at A a triangle is treated as its three edges
+_CELL_FACTOR = 1.0         # grid cell size = this * mean triangle bounding-box extent
+_MAX_CELLS = 1 << 23       # dense grid cap (int64 offsets: 64 MiB)
+_MAX_REFS_PER_FACE = 12    # grow the cells if triangles would be referenced more often
+_MAX_PHASE2_CELLS = 64     # queries whose ball spans more cells go to the BVH
+_LEAF = 8                  # BVH leaf size (triangles)
+_PAIR_CHUNK = 1 << 18      # target own-cell (query, triangle) pairs per chunk
+_QUERY_CHUNK = 1 << 16     # at most this many queries per chunk
+_FRONTIER_CAP = 1 << 21    # BVH frontier pairs before it is split and processed depth first
+_SLACK = 1e-9              # relative slack on pruning tests (keeps rounding conservative)
+
+
+class ClosestPoints(NamedTuple):
+    """Nearest point on a triangle mesh for each query point.
+
+    face : (q,) int64, index into F of the nearest triangle.
+    point : (q,3) float64, the nearest point on that triangle.
+    bary : (q,3) float64, barycentric coordinates of ``point`` in ``F[face]``
+        (each in [0,1], summing to 1: ``point == bary @ V[F[face]]``).
+    distance : (q,) float64, Euclidean distance from the query to ``point``.
+    """
+    face: np.ndarray
+    point: np.ndarray
+    bary: np.ndarray
+    distance: np.ndarray
+
+
+class TriangleClosest(NamedTuple):
+    """Closest point of each point on its paired triangle (see :func:`point_triangle_closest`)."""
+    point: np.ndarray
+    bary: np.ndarray
+    distance: np.ndarray
+
+
+# --- the pair kernel -----------------------------------------------------------------------------
+
+def _triangle_rows(A, B, C):
+    """(16, m) float64 rows: A (3), ab (3), ac (3), |ab|^2, |ac|^2, ab.ac, unit normal (3)
+    (zero for zero-area triangles), thin flag (0/1)."""
+    ab = B - A
+    ac = C - A
+    s_ab = np.einsum("ij,ij->i", ab, ab)
+    s_ac = np.einsum("ij,ij->i", ac, ac)
+    s_abac = np.einsum("ij,ij->i", ab, ac)
+    bc = C - B
+    s_bc = np.einsum("ij,ij->i", bc, bc)
+    n = np.cross(ab, ac)
+    nn = np.einsum("ij,ij->i", n, n)
+    length = np.sqrt(nn)
+    unit = np.divide(n, length[:, None], out=np.zeros_like(n), where=length[:, None] > 0)
+    # sin^2 of the angles at A, B and C; thin (robust path) if any is tiny. The plane of
+    # a thin triangle is ill-conditioned: no projection onto it (unit normal set to 0)
+    thin = (nn <= _THIN_SIN2 * s_ab * s_ac) | (nn <= _THIN_SIN2 * s_ab * s_bc) \
+        | (nn <= _THIN_SIN2 * s_ac * s_bc)
+    unit[thin] = 0.0
+    return np.ascontiguousarray(np.vstack([A.T, ab.T, ac.T, s_ab, s_ac, s_abac, unit.T,
+                                           thin.astype(np.float64)]))
+
+
+def _kernel(px, py, pz, D):
+    """Closest point of (px,py,pz)[k] on triangle D[:, k] (rows from :func:`_triangle_rows`).
+
+    Returns ``v, w, d2``: the point is ``A + v ab + w ac`` at squared distance ``d2``.
+    """
+    ax, ay, az, abx, aby, abz, acx, acy, acz, s_ab, s_ac, s_abac, nx, ny, nz, thin = D
+    # work in the triangle's plane (removes the normal component before the
+    # determinants, so far-away points do not lose the in-plane accuracy)
+    apx = px - ax
+    apy = py - ay
+    apz = pz - az
+    hgt = apx * nx + apy * ny + apz * nz
+    apx -= hgt * nx
+    apy -= hgt * ny
+    apz -= hgt * nz
+    d1 = abx * apx + aby * apy + abz * apz
+    d2 = acx * apx + acy * apy + acz * apz
+    d3 = d1 - s_ab
+    d4 = d2 - s_abac
+    d5 = d1 - s_abac
+    d6 = d2 - s_ac
+    vc = d1 * d4 - d3 * d2
+    vb = d5 * d2 - d1 * d6
+    va = d3 * d6 - d5 * d4
+    with np.errstate(divide="ignore", invalid="ignore"):
+        denom = va + vb + vc
+        v = vb / denom
+        w = vc / denom
+        d43 = d4 - d3
+        d56 = d5 - d6
+        m = (va <= 0) & (d43 >= 0) & (d56 >= 0)                       # edge BC
+        t = d43 / (d43 + d56)
+        v = np.where(m, 1.0 - t, v)
+        w = np.where(m, t, w)
+        m = (vb <= 0) & (d2 >= 0) & (d6 <= 0)                         # edge AC
+        v = np.where(m, 0.0, v)
+        w = np.where(m, d2 / (d2 - d6), w)
+        m = (d6 >= 0) & (d5 <= d6)                                    # vertex C
+        v = np.where(m, 0.0, v)
+        w = np.where(m, 1.0, w)
+        m = (vc <= 0) & (d1 >= 0) & (d3 <= 0)                         # edge AB
+        v = np.where(m, d1 / (d1 - d3), v)
+        w = np.where(m, 0.0, w)
+        m = (d3 >= 0) & (d4 <= d3)                                    # vertex B
+        v = np.where(m, 1.0, v)
+        w = np.where(m, 0.0, w)
+        m = (d1 <= 0) & (d2 <= 0)                                     # vertex A
+        v = np.where(m, 0.0, v)
+        w = np.where(m, 0.0, w)
+    ex = apx - v * abx - w * acx
+    ey = apy - v * aby - w * acy
+    ez = apz - v * abz - w * acz
+    dist2 = ex * ex + ey * ey + ez * ez
+    bad = np.flatnonzero(thin != 0)
+    if bad.size:
+        rv, rw, rd = _robust_kernel(apx[bad], apy[bad], apz[bad], D[:, bad])
+        v[bad] = rv
+        w[bad] = rw
+        dist2[bad] = rd
+    dist2 += hgt * hgt
+    return v, w, dist2
+
+
+def _segment(apx, apy, apz, ox, oy, oz, ex, ey, ez):
+    """Clamped projection of ap onto the segment o + t e, t in [0,1]: (t, squared distance)."""
+    ee = ex * ex + ey * ey + ez * ez
+    qx, qy, qz = apx - ox, apy - oy, apz - oz
+    num = qx * ex + qy * ey + qz * ez
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = np.where(ee > 0, num / ee, 0.0)
+    t = np.clip(t, 0.0, 1.0)
+    rx, ry, rz = qx - t * ex, qy - t * ey, qz - t * ez
+    return t, rx * rx + ry * ry + rz * rz
+
+
+def _robust_kernel(apx, apy, apz, D):
+    """Slivers and zero-area triangles: best of the three edges and, when the plane is
+    well enough defined and the projection falls inside, the projection."""
+    _, _, _, abx, aby, abz, acx, acy, acz = D[:9]
+    zero = np.zeros_like(apx)
+    t1, e1 = _segment(apx, apy, apz, zero, zero, zero, abx, aby, abz)          # AB: (t, 0)
+    t2, e2 = _segment(apx, apy, apz, zero, zero, zero, acx, acy, acz)          # AC: (0, t)
+    t3, e3 = _segment(apx, apy, apz, abx, aby, abz, acx - abx, acy - aby, acz - abz)  # BC
+    v = np.where(e2 < e1, 0.0, t1)
+    w = np.where(e2 < e1, t2, 0.0)
+    d = np.minimum(e1, e2)
+    v = np.where(e3 < d, 1.0 - t3, v)
+    w = np.where(e3 < d, t3, w)
+    d = np.minimum(d, e3)
+    # inside projection, with the normal evaluated directly (accurate for slivers)
+    nx = aby * acz - abz * acy
+    ny = abz * acx - abx * acz
+    nz = abx * acy - aby * acx
+    nn = nx * nx + ny * ny + nz * nz
+    # the computed normal's direction is good to eps / sin(A): below sin(A) = 1e-8 the
+    # triangle is treated as its three edges (then off by at most 1e-8 of its size)
+    ok = (nn > 0) & (nn > _FLAT_SIN2 * D[9] * D[10])
+    with np.errstate(divide="ignore", invalid="ignore"):
+        inv = np.where(ok, 1.0 / nn, 0.0)
+        # w = ((ab x ap) . n) / nn, v = ((ap x ac) . n) / nn
+        wi = ((aby * apz - abz * apy) * nx + (abz * apx - abx * apz) * ny
+              + (abx * apy - aby * apx) * nz) * inv
+        vi = ((apy * acz - apz * acy) * nx + (apz * acx - apx * acz) * ny
+              + (apx * acy - apy * acx) * nz) * inv
+        h = apx * nx + apy * ny + apz * nz
+        di = h * h * inv
+    inside = ok & (vi >= 0) & (wi >= 0) & (vi + wi <= 1) & (di < d)
+    v = np.where(inside, vi, v)
+    w = np.where(inside, wi, w)
+    d = np.where(inside, di, d)
+    return v, w, d
+
+
+def point_triangle_closest(P, A, B, C):
+    """Closest point of each point ``P[k]`` on the triangle ``(A[k], B[k], C[k])``.
+
+    Exact region classification (Ericson 2005); slivers and zero-area
+    triangles (segments or points) are handled by a robust path.
+
+    Parameters
+    ----------
+    P, A, B, C : (k, 3) array_like of float
+        Query points and triangle corners, paired row by row.
+
+    Returns
+    -------
+    TriangleClosest
+        ``point`` (k,3), ``bary`` (k,3) barycentric coordinates in (A, B, C),
+        each in [0,1] summing to 1, ``distance`` (k,) Euclidean.
+
+    Raises
+    ------
+    InvalidArgumentError
+        Arrays not (k,3), of different lengths, or not finite.
+
+    Examples
+    --------
+    >>> r = point_triangle_closest([[0.2, 0.2, 1.0]], [[0, 0, 0]], [[1, 0, 0]], [[0, 1, 0]])
+    >>> r.point.tolist(), float(r.distance[0])
+    ([[0.2, 0.2, 0.0]], 1.0)
+    """
+    arrs = []
+    for name, X in (("P", P), ("A", A), ("B", B), ("C", C)):
+        X = np.asarray(X, dtype=np.float64)
+        if X.ndim != 2 or X.shape[1] != 3:
+            raise InvalidArgumentError(
+                f"point_triangle_closest: {name} must be (k,3) floats, got {X.shape}")
+        if not np.isfinite(X).all():
+            raise InvalidArgumentError(
+                f"point_triangle_closest: {name} has NaN or infinite coordinates, "
+                f"e.g. row {int(np.flatnonzero(~np.isfinite(X).all(axis=1))[0])}")
+        arrs.append(X)
+    P, A, B, C = arrs
+    if not (P.shape[0] == A.shape[0] == B.shape[0] == C.shape[0]):
+        raise InvalidArgumentError(
+            "point_triangle_closest: P, A, B, C must have the same number of rows, got "
+            f"{P.shape[0]}, {A.shape[0]}, {B.shape[0]}, {C.shape[0]}")
+    D = _triangle_rows(A, B, C)
+    v, w, _ = _kernel(P[:, 0].copy(), P[:, 1].copy(), P[:, 2].copy(), D)
+    bary = _bary(v, w)
+    point = A + v[:, None] * (B - A) + w[:, None] * (C - A)
+    return TriangleClosest(point, bary, np.linalg.norm(P - point, axis=1))
+
+
+def _bary(v, w):
+    bary = np.stack([1.0 - v - w, v, w], axis=1)
+    return np.clip(bary, 0.0, 1.0, out=bary)
+
+
+# --- small vectorised helpers --------------------------------------------------------------------
+
+def _ragged(starts, counts):
+    """Concatenation of ``arange(starts[i], starts[i] + counts[i])`` and the owner of each entry."""
+    total = int(counts.sum())
+    owner = np.repeat(np.arange(counts.shape[0]), counts)
+    offs = np.cumsum(counts) - counts
+    idx = np.arange(total, dtype=np.int64) + np.repeat(starts - offs, counts)
+    return idx, owner
+
+
+def _group_argmin(d2, counts):
+    """Index of the (first) minimum of each contiguous group; every count must be > 0."""
+    starts = np.cumsum(counts) - counts
+    mins = np.minimum.reduceat(d2, starts)
+    pos = np.flatnonzero(d2 == np.repeat(mins, counts))
+    grp = np.searchsorted(starts, pos, side="right") - 1
+    first = np.ones(pos.shape[0], dtype=bool)
+    first[1:] = grp[1:] != grp[:-1]
+    return pos[first]
+
+
+def _spread_bits(x):
+    """Spread the low 21 bits of uint64 ``x`` to every third bit (for Morton codes)."""
+    x = x & np.uint64(0x1FFFFF)
+    x = (x | (x << np.uint64(32))) & np.uint64(0x1F00000000FFFF)
+    x = (x | (x << np.uint64(16))) & np.uint64(0x1F0000FF0000FF)
+    x = (x | (x << np.uint64(8))) & np.uint64(0x100F00F00F00F00F)
+    x = (x | (x << np.uint64(4))) & np.uint64(0x10C30C30C30C30C3)
+    x = (x | (x << np.uint64(2))) & np.uint64(0x1249249249249249)
+    return x
+
+
+def _morton(X, lo, extent):
+    """63-bit Morton codes of points X (clamped to the box ``lo + [0, extent]``)."""
+    scale = np.where(extent > 0, ((1 << 21) - 1) / np.where(extent > 0, extent, 1.0), 0.0)
+    q = np.clip((X - lo) * scale, 0, (1 << 21) - 1).astype(np.uint64)
+    return (_spread_bits(q[:, 0]) | (_spread_bits(q[:, 1]) << np.uint64(1))
+            | (_spread_bits(q[:, 2]) << np.uint64(2)))
+
+
+# --- the index -------------------------------------------------------------------------------------
+
+class TriangleIndex:
+    """Exact nearest-triangle queries on a triangle mesh (pure NumPy).
+
+    Build once, query many times; see the module docstring for the method.
+
+    Parameters
+    ----------
+    V : (n, 3) array_like of float
+    F : (m, 3) array_like of int, m >= 1. Degenerate triangles are allowed.
+
+    Raises
+    ------
+    InvalidMeshError
+        Bad shapes, NaN coordinates, out-of-range indices, or no faces.
+
+    Examples
+    --------
+    >>> index = TriangleIndex([[0, 0, 0], [1, 0, 0], [0, 1, 0]], [[0, 1, 2]])
+    >>> r = index.closest([[1.0, 1.0, 0.0], [0.25, 0.25, -2.0]])
+    >>> r.face.tolist(), r.distance.round(6).tolist()
+    ([0, 0], [0.707107, 2.0])
+    """
+
+    def __init__(self, V, F):
+        V, F = check_mesh(V, F, where="TriangleIndex", allow_empty=False)
+        self.V = V
+        self.F = F
+        m = F.shape[0]
+        A, B, C = V[F[:, 0]], V[F[:, 1]], V[F[:, 2]]
+        tlo = np.minimum(np.minimum(A, B), C)
+        thi = np.maximum(np.maximum(A, B), C)
+        lo = tlo.min(axis=0)
+        hi = thi.max(axis=0)
+        extent = hi - lo
+        self._lo, self._hi = lo, hi
+        # Morton order of the triangles (by bounding-box centre)
+        codes = _morton(0.5 * (tlo + thi), lo, extent)
+        order = np.argsort(codes, kind="stable")
+        self._order = order                       # internal id -> face id
+        A, B, C, tlo, thi = A[order], B[order], C[order], tlo[order], thi[order]
+        self._D = _triangle_rows(A, B, C)
+        self._any_thin = bool(self._D[15].any())
+        self._build_grid(tlo, thi, A, B, C, extent)
+        self._build_bvh(tlo, thi)
+        # bounding disks: centroid, radius (slightly inflated so that rounding never makes
+        # the lower bound exceed the true distance) and unit normal, for the cheap test
+        centre = (A + B + C) / 3.0
+        r = np.sqrt(np.max([np.einsum("ij,ij->i", X - centre, X - centre) for X in (A, B, C)],
+                           axis=0))
+        r = r * (1 + 1e-9) + 1e-12 * (np.abs(centre).max(axis=1) + r)
+        self._disk = np.ascontiguousarray(np.vstack([centre.T, r, self._D[12:15]]))
+        self.n_faces = m
+
+    # -- grid ---------------------------------------------------------------------------------
+    def _build_grid(self, tlo, thi, A, B, C, extent):
+        m = tlo.shape[0]
+        ext = (thi - tlo).max(axis=1)
+        h = _CELL_FACTOR * float(ext.mean())
+        span = float(extent.max())
+        if not h > 0:
+            h = span / 64 if span > 0 else 1.0
+        # grow the cells until the dense grid and the references fit their caps
+        for _ in range(200):
+            dims_f = np.floor(extent / h) + 1
+            if float(np.prod(dims_f)) > _MAX_CELLS:
+                h *= 1.25
+                continue
+            dims = dims_f.astype(np.int64)
+            ncell = int(np.prod(dims))
+            c0 = np.floor((tlo - self._lo) / h).astype(np.int64)
+            c1 = np.floor((thi - self._lo) / h).astype(np.int64)
+            c0 = np.clip(c0, 0, dims - 1)
+            c1 = np.clip(c1, 0, dims - 1)
+            nr = c1 - c0 + 1
+            nrefs = int(np.prod(nr, axis=1).sum())
+            if ncell <= _MAX_CELLS and nrefs <= _MAX_REFS_PER_FACE * m + 1024:
+                break
+            h *= 1.25
+        self._h = h
+        self._dims = dims
+        cnt = np.prod(nr, axis=1)
+        idx, tri = _ragged(np.zeros(m, dtype=np.int64), cnt)
+        local = idx                                   # 0..cnt-1 within each triangle
+        nx = nr[tri, 0]
+        ny = nr[tri, 1]
+        cx = c0[tri, 0] + local % nx
+        cy = c0[tri, 1] + (local // nx) % ny
+        cz = c0[tri, 2] + local // (nx * ny)
+        # keep only the cells the triangle's plane passes through (conservatively)
+        multi = cnt[tri] > 1
+        if multi.any():
+            sel = np.flatnonzero(multi)
+            t = tri[sel]
+            nrm = np.cross(B[t] - A[t], C[t] - A[t])
+            centre = self._lo + (np.stack([cx[sel], cy[sel], cz[sel]], axis=1) + 0.5) * h
+            dist = np.abs(np.einsum("ij,ij->i", nrm, centre - A[t]))
+            reach = 0.5 * h * np.abs(nrm).sum(axis=1)
+            scale = np.abs(nrm).sum(axis=1) * (np.abs(centre).max(axis=1) + h)
+            drop = dist > reach + _SLACK * scale
+            keep = np.ones(tri.shape[0], dtype=bool)
+            keep[sel[drop]] = False
+            tri, cx, cy, cz = tri[keep], cx[keep], cy[keep], cz[keep]
+        cell = cx + dims[0] * (cy + dims[1] * cz)
+        o = np.argsort(cell, kind="stable")
+        self._cell_tri = tri[o].astype(np.int32 if m < 2**31 else np.int64)
+        self._cell_start = np.zeros(ncell + 1, dtype=np.int64)
+        np.cumsum(np.bincount(cell, minlength=ncell), out=self._cell_start[1:])
+
+    # -- BVH ----------------------------------------------------------------------------------
+    def _build_bvh(self, tlo, thi):
+        m = tlo.shape[0]
+        n_leaves = -(-m // _LEAF)
+        depth = max(0, int(np.ceil(np.log2(n_leaves)))) if n_leaves > 1 else 0
+        n_pad = 1 << depth
+        pad = n_pad * _LEAF - m
+        blo = np.vstack([tlo, np.full((pad, 3), np.inf)]).reshape(n_pad, _LEAF, 3).min(axis=1)
+        bhi = np.vstack([thi, np.full((pad, 3), -np.inf)]).reshape(n_pad, _LEAF, 3).max(axis=1)
+        los, his = [blo], [bhi]
+        while los[-1].shape[0] > 1:
+            los.append(np.minimum(los[-1][0::2], los[-1][1::2]))
+            his.append(np.maximum(his[-1][0::2], his[-1][1::2]))
+        self._bvh_lo = los[::-1]                     # level k has 2**k nodes
+        self._bvh_hi = his[::-1]
+        self._depth = depth
+
+    # -- queries -------------------------------------------------------------------------------
+    def closest(self, P):
+        """Nearest point on the mesh for every query point.
+
+        Parameters
+        ----------
+        P : (q, 3) array_like of float, finite.
+
+        Returns
+        -------
+        ClosestPoints
+            ``face`` (q,) int64, ``point`` (q,3), ``bary`` (q,3), ``distance`` (q,).
+            Exact (the true nearest triangle; among equidistant triangles any one).
+
+        Raises
+        ------
+        InvalidArgumentError
+            P not (q,3) or not finite.
+        """
+        P = np.asarray(P, dtype=np.float64)
+        if P.ndim != 2 or P.shape[1] != 3:
+            raise InvalidArgumentError(
+                f"TriangleIndex.closest: P must be (q,3) floats, got {P.shape} {P.dtype}")
+        bad = ~np.isfinite(P).all(axis=1)
+        if bad.any():
+            k = int(np.flatnonzero(bad)[0])
+            raise InvalidArgumentError(
+                f"TriangleIndex.closest: {int(bad.sum())} query points have NaN or infinite "
+                f"coordinates, e.g. point {k} = {P[k].tolist()}")
+        nq = P.shape[0]
+        best = _Best(nq)
+        if nq:
+            PT = np.ascontiguousarray(P.T)
+            h, dims, lo = self._h, self._dims, self._lo
+            cc = np.clip(np.floor((P - lo) / h), 0, dims - 1).astype(np.int64)
+            cid = cc[:, 0] + dims[0] * (cc[:, 1] + dims[1] * cc[:, 2])
+            order = np.argsort(cid, kind="stable")
+            cnt = self._cell_start[cid + 1] - self._cell_start[cid]
+            csum = np.cumsum(cnt[order])
+            # chunks of about _PAIR_CHUNK own-cell pairs and at most _QUERY_CHUNK queries
+            cuts = np.searchsorted(csum, np.arange(1, int(csum[-1]) // _PAIR_CHUNK + 1)
+                                   * _PAIR_CHUNK)
+            bounds = np.unique(np.concatenate([[0, nq], cuts, np.arange(0, nq, _QUERY_CHUNK)]))
+            far = [self._grid_chunk(PT, order[s:e], cc, cid, best)
+                   for s, e in zip(bounds[:-1], bounds[1:]) if e > s]
+            far = np.concatenate(far)
+            if far.size:
+                self._bvh_query(PT, far, best)
+        bary = _bary(best.v, best.w)
+        D, t = self._D, best.t
+        point = (D[0:3, t] + best.v * D[3:6, t] + best.w * D[6:9, t]).T
+        return ClosestPoints(self._order[t].astype(np.int64), np.ascontiguousarray(point),
+                             bary, np.sqrt(best.d2))
+
+    def _fold(self, q, t, v, w, d2, counts, best):
+        """Fold pair results (contiguous groups, one per query) into ``best``."""
+        nz = counts[counts > 0]
+        if nz.size == 0:
+            return
+        win = _group_argmin(d2, nz)
+        qq = q[win]
+        better = d2[win] < best.d2[qq]
+        qq, win = qq[better], win[better]
+        best.d2[qq] = d2[win]
+        best.t[qq] = t[win]
+        best.v[qq] = v[win]
+        best.w[qq] = w[win]
+
+    def _scan(self, PT, q, t, best):
+        """Exact minimum over candidate pairs (q, t), grouped contiguously by query.
+
+        A cheap lower bound discards most pairs: squared height above the triangle's plane
+        plus the squared lateral excess beyond its bounding disk (centroid, radius). First
+        the pair with the smallest bound is evaluated exactly (a tight upper bound), then
+        only the pairs whose lower bound is within it.
+        """
+        if q.size == 0:
+            return
+        # lower bound: height above the triangle's plane and lateral excess beyond its disk
+        S = np.take(self._disk, t, axis=1)
+        X = np.take(PT, q, axis=1)
+        dx = X[0] - S[0]
+        dy = X[1] - S[1]
+        dz = X[2] - S[2]
+        dc2 = dx * dx + dy * dy + dz * dz
+        hh = dx * S[4] + dy * S[5] + dz * S[6]
+        hh *= hh
+        lat = np.sqrt(np.maximum(dc2 - hh, 0.0)) - S[3]
+        # the cancellation in dc2 - hh costs a few ulps of dc2: subtract a margin
+        lb = hh + np.square(np.maximum(lat, 0.0)) - 1e-14 * dc2
+        bound = best.d2[q]
+        keep = np.flatnonzero(lb <= bound * (1 + _SLACK))
+        if keep.size == 0:
+            return
+        q, t, lb = q[keep], t[keep], lb[keep]
+        counts = _run_lengths(q)
+        first = _group_argmin(lb, counts)
+        qa, ta = q[first], t[first]
+        v, w, d2 = self._eval(PT, qa, ta)
+        self._fold(qa, ta, v, w, d2, np.ones(qa.size, dtype=np.int64), best)
+        bound = best.d2[q]
+        rest = lb <= bound * (1 + _SLACK)
+        rest[first] = False
+        rest = np.flatnonzero(rest)
+        if rest.size:
+            q, t = q[rest], t[rest]
+            v, w, d2 = self._eval(PT, q, t)
+            self._fold(q, t, v, w, d2, _run_lengths(q), best)
+
+    def _eval(self, PT, q, t):
+        """The exact kernel on the pairs (query columns q of PT, internal triangles t)."""
+        X = np.take(PT, q, axis=1)
+        return _kernel(X[0], X[1], X[2], np.take(self._D, t, axis=1))
+
+    def _cell_pairs(self, qi, g):
+        """Pairs (query, triangle) for the (query, cell) list (qi, g), grouped by query."""
+        start = self._cell_start
+        ref, own = _ragged(start[g], start[g + 1] - start[g])
+        return qi[own], self._cell_tri[ref]
+
+    def _grid_chunk(self, PT, qi, cc, cid, best):
+        """Grid search of the queries ``qi``; returns those left for the BVH."""
+        h, dims, lo = self._h, self._dims, self._lo
+        start = self._cell_start
+        # phase 1: the query's own cell; for an empty cell its 26 neighbours
+        c0 = cid[qi]
+        self._scan(PT, *self._cell_pairs(qi, c0), best)
+        reach = np.zeros(qi.size, dtype=np.int64)      # Chebyshev radius already scanned
+        empty = np.flatnonzero(~np.isfinite(best.d2[qi]))
+        if empty.size:
+            k, own = _ragged(np.zeros(empty.size, dtype=np.int64),
+                             np.full(empty.size, 27, dtype=np.int64))
+            g3 = cc[qi[empty]][own] + np.stack([k % 3, (k // 3) % 3, k // 9], axis=1) - 1
+            ok = ((g3 >= 0) & (g3 < dims)).all(axis=1)
+            own, g3 = own[ok], g3[ok]
+            g = g3[:, 0] + dims[0] * (g3[:, 1] + dims[1] * g3[:, 2])
+            ok = (g != c0[empty][own]) & (start[g + 1] > start[g])
+            self._scan(PT, *self._cell_pairs(qi[empty][own[ok]], g[ok]), best)
+            reach[empty] = 1
+        # phase 2: every other cell within the bound
+        u2 = best.d2[qi]
+        finite = np.isfinite(u2)
+        u = np.sqrt(np.where(finite, u2, 0.0)) * (1 + _SLACK)
+        p = PT[:, qi].T
+        c_lo = np.clip(np.floor((p - u[:, None] - lo) / h), 0, dims - 1).astype(np.int64)
+        c_hi = np.clip(np.floor((p + u[:, None] - lo) / h), 0, dims - 1).astype(np.int64)
+        span = c_hi - c_lo + 1
+        ncell = np.prod(span, axis=1)
+        far = ~finite | (ncell > _MAX_PHASE2_CELLS)
+        sel = np.flatnonzero(~far & (ncell > 1))
+        if sel.size:
+            k, own = _ragged(np.zeros(sel.size, dtype=np.int64), ncell[sel])
+            sp = span[sel][own]
+            g3 = c_lo[sel][own] + np.stack(
+                [k % sp[:, 0], (k // sp[:, 0]) % sp[:, 1], k // (sp[:, 0] * sp[:, 1])], axis=1)
+            g = g3[:, 0] + dims[0] * (g3[:, 1] + dims[1] * g3[:, 2])
+            pq = p[sel][own]
+            cell_lo = lo + g3 * h
+            dd = np.maximum(np.maximum(cell_lo - pq, pq - (cell_lo + h)), 0.0)
+            dd2 = np.einsum("ij,ij->i", dd, dd)
+            cheb = np.abs(g3 - cc[qi[sel]][own]).max(axis=1)
+            keep = (cheb > reach[sel][own]) & (dd2 <= u2[sel][own] * (1 + 4 * _SLACK))
+            keep &= start[g + 1] > start[g]
+            self._scan(PT, *self._cell_pairs(qi[sel][own[keep]], g[keep]), best)
+        return qi[far]
+
+    def _bvh_query(self, PT, far, best):
+        """Exact search of the queries ``far`` through the BVH.
+
+        Breadth-first in lockstep. Each query keeps an upper bound ``ub``: its best exact
+        distance so far, tightened at every level by the smallest *farthest-point* distance
+        to a child box (every triangle in a box lies within that distance). Children
+        whose nearest-point distance exceeds ``ub`` are pruned, so the frontier stays
+        near the surface patch closest to the query without any initial guess.
+        """
+        m = self.n_faces
+        ub = np.full(PT.shape[1], np.inf)
+        for s in range(0, far.size, _QUERY_CHUNK // 4):
+            qs = far[s:s + _QUERY_CHUNK // 4]
+            ub[qs] = best.d2[qs]
+            stack = [(0, qs, np.zeros(qs.size, dtype=np.int64))]
+            while stack:
+                level, q, node = stack.pop()
+                if level == self._depth:
+                    t, own = _ragged(node * _LEAF, np.full(q.size, _LEAF, dtype=np.int64))
+                    ok = t < m
+                    self._scan(PT, q[own[ok]], t[ok], best)
+                    continue
+                child = (2 * node[:, None] + np.array([0, 1])).ravel()
+                q = np.repeat(q, 2)
+                blo = self._bvh_lo[level + 1][child]
+                bhi = self._bvh_hi[level + 1][child]
+                p = PT[:, q].T
+                near = np.maximum(np.maximum(blo - p, p - bhi), 0.0)
+                near2 = np.einsum("ij,ij->i", near, near)
+                farv = np.maximum(np.abs(p - blo), np.abs(p - bhi))
+                far2 = np.einsum("ij,ij->i", farv, farv) * (1 + 4 * _SLACK)
+                counts = _run_lengths(q)
+                starts = np.cumsum(counts) - counts
+                uq = q[starts]
+                ub[uq] = np.minimum(ub[uq], np.minimum.reduceat(far2, starts))
+                keep = near2 <= ub[q] * (1 + 4 * _SLACK)
+                q, child = q[keep], child[keep]
+                if q.size > _FRONTIER_CAP:
+                    pieces = -(-q.size // _FRONTIER_CAP)
+                    for qq, cn in reversed(list(zip(np.array_split(q, pieces),
+                                                    np.array_split(child, pieces)))):
+                        stack.append((level + 1, qq, cn))
+                elif q.size:
+                    stack.append((level + 1, q, child))
+
+
+class _Best:
+    """Running per-query best: squared distance, internal triangle id, (v, w)."""
+
+    def __init__(self, n):
+        self.d2 = np.full(n, np.inf)
+        self.t = np.zeros(n, dtype=np.int64)
+        self.v = np.zeros(n)
+        self.w = np.zeros(n)
+
+
+def _run_lengths(q):
+    """Lengths of the runs of equal consecutive values of ``q``."""
+    if q.size == 0:
+        return np.zeros(0, dtype=np.int64)
+    brk = np.flatnonzero(q[1:] != q[:-1]) + 1
+    return np.diff(np.concatenate([[0], brk, [q.size]]))
+
+
+def closest_points(V, F, P):
+    """Nearest point on the mesh ``(V, F)`` for every row of ``P`` (builds a
+    :class:`TriangleIndex` and queries it once; build the index yourself to
+    query the same mesh several times).
+
+    Returns
+    -------
+    ClosestPoints
+        ``face`` (q,) int64, ``point`` (q,3), ``bary`` (q,3), ``distance`` (q,).
+
+    Examples
+    --------
+    >>> r = closest_points([[0, 0, 0], [1, 0, 0], [0, 1, 0]], [[0, 1, 2]], [[0.2, 0.2, 1.0]])
+    >>> r.point.tolist()
+    [[0.2, 0.2, 0.0]]
+    """
+    return TriangleIndex(V, F).closest(P)

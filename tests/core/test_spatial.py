@@ -1,0 +1,316 @@
+"""Tests of core/spatial.py: the point-triangle kernel and the exact nearest-triangle index."""
+
+import warnings
+
+import numpy as np
+import pytest
+from hypothesis import given, settings, strategies as st, HealthCheck
+
+import core.spatial as spatial
+from core.errors import InvalidArgumentError, InvalidMeshError
+from core.spatial import ClosestPoints, TriangleIndex, closest_points, point_triangle_closest
+from tests.mesh_factory import cube, icosphere, load_shared, regular_grid, torus
+
+
+# --- references written independently of the module ---------------------------------------------
+
+def _ref_segment(P, X, Y):
+    e = Y - X
+    ee = np.einsum("ij,ij->i", e, e)
+    t = np.where(ee > 0, np.einsum("ij,ij->i", P - X, e) / np.where(ee > 0, ee, 1), 0.0)
+    t = np.clip(t, 0, 1)
+    return np.linalg.norm(P - (X + t[:, None] * e), axis=1)
+
+
+def _ref_distance(P, A, B, C):
+    """Distance by enumeration: the three edges and, if inside, the plane projection
+    (solved with lstsq, a different route from the module's formulas)."""
+    d = np.minimum(np.minimum(_ref_segment(P, A, B), _ref_segment(P, B, C)), _ref_segment(P, C, A))
+    for k in range(P.shape[0]):
+        M = np.stack([B[k] - A[k], C[k] - A[k]], axis=1)
+        if np.linalg.matrix_rank(M, tol=1e-12 * max(np.abs(M).max(), 1e-300)) < 2:
+            continue
+        (v, w), *_ = np.linalg.lstsq(M, P[k] - A[k], rcond=None)
+        if v >= 0 and w >= 0 and v + w <= 1:
+            d[k] = min(d[k], np.linalg.norm(P[k] - (A[k] + M @ [v, w])))
+    return d
+
+
+def _brute(V, F, P):
+    """Nearest distance over all triangles, with the module's own pair kernel."""
+    q, m = P.shape[0], F.shape[0]
+    qq = np.repeat(np.arange(q), m)
+    tt = np.tile(np.arange(m), q)
+    r = point_triangle_closest(P[qq], V[F[tt, 0]], V[F[tt, 1]], V[F[tt, 2]])
+    return r.distance.reshape(q, m).min(axis=1)
+
+
+def _check_result(V, F, P, r, rtol=1e-12):
+    """Exact distance, consistent point / bary / distance."""
+    assert isinstance(r, ClosestPoints)
+    assert r.face.dtype == np.int64 and r.face.shape == (P.shape[0],)
+    scale = max(float(np.abs(V).max()), 1.0)
+    ref = _brute(V, F, P)
+    np.testing.assert_allclose(r.distance, ref, rtol=rtol, atol=1e-14 * scale)
+    assert (r.bary >= 0).all() and (r.bary <= 1).all()
+    np.testing.assert_allclose(r.bary.sum(axis=1), 1.0, atol=1e-12)
+    rec = np.einsum("ij,ijk->ik", r.bary, V[F[r.face]])
+    np.testing.assert_allclose(rec, r.point, atol=1e-12 * scale)
+    np.testing.assert_allclose(np.linalg.norm(P - r.point, axis=1), r.distance,
+                               rtol=1e-12, atol=1e-14 * scale)
+
+
+def _random_queries(V, rng, n=400):
+    lo, hi = V.min(axis=0), V.max(axis=0)
+    diag = np.linalg.norm(hi - lo)
+    near = lo + rng.random((n, 3)) * (hi - lo)
+    far = (lo + hi) / 2 + rng.normal(size=(n // 4, 3)) * 50 * diag
+    return np.vstack([near, far])
+
+
+# --- the pair kernel -----------------------------------------------------------------------------
+
+def test_kernel_every_voronoi_region():
+    A, B, C = np.array([0.0, 0, 0]), np.array([2.0, 0, 0]), np.array([0.0, 2, 0])
+    cases = [  # point, expected closest point
+        ([0.5, 0.5, 3.0], [0.5, 0.5, 0.0]),      # face
+        ([-1.0, -1.0, 1.0], [0.0, 0.0, 0.0]),    # vertex A
+        ([3.0, -1.0, 0.0], [2.0, 0.0, 0.0]),     # vertex B
+        ([-1.0, 3.0, -2.0], [0.0, 2.0, 0.0]),    # vertex C
+        ([1.0, -5.0, 0.0], [1.0, 0.0, 0.0]),     # edge AB
+        ([-4.0, 1.5, 1.0], [0.0, 1.5, 0.0]),     # edge AC
+        ([2.0, 2.0, 0.0], [1.0, 1.0, 0.0]),      # edge BC
+    ]
+    P = np.array([c[0] for c in cases])
+    expect = np.array([c[1] for c in cases])
+    k = len(cases)
+    r = point_triangle_closest(P, np.tile(A, (k, 1)), np.tile(B, (k, 1)), np.tile(C, (k, 1)))
+    np.testing.assert_allclose(r.point, expect, atol=1e-15)
+    np.testing.assert_allclose(r.distance, np.linalg.norm(P - expect, axis=1), rtol=1e-15)
+    np.testing.assert_allclose(r.bary @ np.stack([A, B, C]), expect, atol=1e-15)
+
+
+def test_kernel_matches_independent_reference_on_random_triangles():
+    rng = np.random.default_rng(7)
+    k = 3000
+    A, B, C = rng.normal(size=(3, k, 3))
+    P = rng.normal(size=(k, 3)) * rng.choice([0.1, 1.0, 10.0, 1e4], size=(k, 1))
+    r = point_triangle_closest(P, A, B, C)
+    np.testing.assert_allclose(r.distance, _ref_distance(P, A, B, C), rtol=1e-10, atol=1e-13)
+    assert (r.bary >= 0).all() and (r.bary <= 1).all()
+    np.testing.assert_allclose(r.bary.sum(axis=1), 1.0, atol=1e-14)
+    rec = r.bary[:, :1] * A + r.bary[:, 1:2] * B + r.bary[:, 2:] * C
+    np.testing.assert_allclose(rec, r.point, atol=1e-12)
+
+
+def test_kernel_ericson_and_robust_paths_agree():
+    """The region classification and the robust (edges + projection) path are two exact
+    methods; on well-shaped triangles they must give the same distances."""
+    rng = np.random.default_rng(3)
+    k = 20000
+    A, B, C = rng.normal(size=(3, k, 3))
+    P = rng.normal(size=(k, 3)) * 3
+    D = spatial._triangle_rows(A, B, C)
+    v, w, d2 = spatial._kernel(P[:, 0].copy(), P[:, 1].copy(), P[:, 2].copy(), D)
+    ap = P - A
+    n = D[12:15].T
+    h = np.einsum("ij,ij->i", ap, n)
+    ap_in = ap - h[:, None] * n
+    rv, rw, rd = spatial._robust_kernel(ap_in[:, 0], ap_in[:, 1], ap_in[:, 2], D)
+    ok = D[15] == 0
+    assert ok.mean() > 0.99
+    np.testing.assert_allclose(np.sqrt(d2[ok]), np.sqrt(rd[ok] + h[ok] ** 2), rtol=1e-12)
+
+
+@pytest.mark.parametrize("shape", ["point", "segment", "repeated_vertex", "needle", "flat_sliver"])
+def test_kernel_degenerate_triangles(shape):
+    rng = np.random.default_rng(11)
+    k = 500
+    X = rng.normal(size=(k, 3))
+    Y = rng.normal(size=(k, 3))
+    if shape == "point":
+        A, B, C = X, X.copy(), X.copy()
+    elif shape == "segment":       # three collinear points, the middle one inside
+        A, B, C = X, Y, 0.3 * X + 0.7 * Y
+    elif shape == "repeated_vertex":
+        A, B, C = X, Y, Y.copy()
+    elif shape == "needle":        # one tiny angle
+        A, B, C = X, Y, Y + 1e-9 * rng.normal(size=(k, 3))
+    else:                          # a long flat sliver: third vertex 1e-7 off the segment
+        A, B, C = X, Y, 0.5 * (X + Y) + 1e-7 * rng.normal(size=(k, 3))
+    P = rng.normal(size=(k, 3)) * 2
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        r = point_triangle_closest(P, A, B, C)
+    assert np.isfinite(r.distance).all() and np.isfinite(r.bary).all()
+    # slivers have an ill-conditioned plane: exact up to ~1e-8 of their size
+    atol = 1e-8 if shape in ("needle", "flat_sliver") else 1e-12
+    np.testing.assert_allclose(r.distance, _ref_distance(P, A, B, C), rtol=1e-12, atol=atol)
+    np.testing.assert_allclose(r.bary.sum(axis=1), 1.0, atol=1e-12)
+    rec = r.bary[:, :1] * A + r.bary[:, 1:2] * B + r.bary[:, 2:] * C
+    np.testing.assert_allclose(rec, r.point, atol=1e-12)
+
+
+def test_kernel_bad_input():
+    z = np.zeros((2, 3))
+    with pytest.raises(InvalidArgumentError, match=r"point_triangle_closest: P must be \(k,3\)"):
+        point_triangle_closest(np.zeros((2, 2)), z, z, z)
+    with pytest.raises(InvalidArgumentError, match="same number of rows"):
+        point_triangle_closest(np.zeros((3, 3)), z, z, z)
+    bad = z.copy()
+    bad[1, 2] = np.nan
+    with pytest.raises(InvalidArgumentError, match="B has NaN"):
+        point_triangle_closest(z, z, bad, z)
+
+
+# --- the index -----------------------------------------------------------------------------------
+
+def _meshes():
+    rng = np.random.default_rng(5)
+    V, F = icosphere(2)
+    yield "icosphere", V, F
+    V, F = torus(24, 12)
+    yield "torus", V + 0.01 * rng.normal(size=V.shape), F
+    yield "grid", *regular_grid(12, 9, z=lambda x, y: 0.2 * np.sin(4 * x) * y)
+    yield "cube", *cube(3)
+    # a random triangle soup with very different sizes
+    Vs = rng.normal(size=(300, 3)) * rng.choice([0.01, 0.1, 1.0], size=(300, 1))
+    yield "soup", Vs, rng.integers(0, 300, size=(100, 3))
+
+
+@pytest.mark.parametrize("name,V,F", list(_meshes()), ids=[m[0] for m in _meshes()])
+def test_index_matches_brute_force(name, V, F):
+    rng = np.random.default_rng(1)
+    P = _random_queries(V, rng)
+    edge_pts = 0.37 * V[F[:50, 0]] + 0.63 * V[F[:50, 1]]
+    P = np.vstack([P, V[F[:60].ravel()], edge_pts])
+    r = TriangleIndex(V, F).closest(P)
+    _check_result(V, F, P, r)
+    # points on vertices and edges of the mesh are at distance zero
+    on = r.distance[-(180 + edge_pts.shape[0]):]
+    scale = float(np.abs(V).max())
+    assert (on <= 1e-15 * scale).all()
+
+
+def test_index_far_queries_and_equidistant_centre():
+    V, F = icosphere(3)
+    rng = np.random.default_rng(2)
+    dirs = rng.normal(size=(200, 3))
+    dirs /= np.linalg.norm(dirs, axis=1)[:, None]
+    P = np.vstack([dirs * 1e3, dirs * 7.0, np.zeros((1, 3))])   # the centre: every face ties
+    r = TriangleIndex(V, F).closest(P)
+    _check_result(V, F, P, r)
+
+
+def test_index_small_chunks_and_frontier_splits(monkeypatch):
+    """Force every chunking / splitting / fallback path with tiny limits."""
+    monkeypatch.setattr(spatial, "_PAIR_CHUNK", 64)
+    monkeypatch.setattr(spatial, "_QUERY_CHUNK", 32)
+    monkeypatch.setattr(spatial, "_FRONTIER_CAP", 16)
+    monkeypatch.setattr(spatial, "_MAX_PHASE2_CELLS", 2)
+    V, F = torus(20, 10)
+    rng = np.random.default_rng(4)
+    P = _random_queries(V, rng, 300)
+    _check_result(V, F, P, TriangleIndex(V, F).closest(P))
+
+
+def test_index_degenerate_meshes():
+    rng = np.random.default_rng(8)
+    # every triangle degenerate (points and segments), plus one normal triangle
+    V = rng.normal(size=(30, 3))
+    F = np.array([[0, 0, 0], [1, 2, 2], [3, 4, 5], [6, 6, 7]] + [[8, 9, 10]], dtype=np.int64)
+    V[5] = 0.5 * (V[3] + V[4])                       # collinear
+    P = _random_queries(V, rng, 200)
+    _check_result(V, F, P, TriangleIndex(V, F).closest(P))
+    # all the vertices at one point
+    V1 = np.zeros((3, 3)) + 2.0
+    r = TriangleIndex(V1, [[0, 1, 2]]).closest([[2.0, 2.0, 3.0]])
+    assert r.distance[0] == 1.0 and r.point.tolist() == [[2.0, 2.0, 2.0]]
+
+
+def test_index_single_triangle_and_duplicates():
+    V = np.array([[0.0, 0, 0], [1, 0, 0], [0, 1, 0]])
+    F = np.array([[0, 1, 2], [0, 1, 2], [2, 1, 0]])
+    P = np.random.default_rng(0).normal(size=(100, 3))
+    _check_result(V, F, P, TriangleIndex(V, F).closest(P))
+
+
+def test_index_far_from_origin_and_unit_invariance():
+    V, F = torus(16, 8)
+    rng = np.random.default_rng(9)
+    P = _random_queries(V, rng, 200)
+    base = TriangleIndex(V, F).closest(P).distance
+    for scale, shift in ((1e-3, 0.0), (1e4, 0.0), (1.0, 1e6)):
+        r = TriangleIndex(V * scale + shift, F).closest(P * scale + shift)
+        np.testing.assert_allclose(r.distance, base * scale, rtol=1e-9,
+                                   atol=1e-15 * (scale + shift))
+    _check_result(V * 1e-3, F, P * 1e-3, TriangleIndex(V * 1e-3, F).closest(P * 1e-3))
+
+
+def test_index_exact_on_sphere_analytic():
+    V, F = icosphere(4)
+    rng = np.random.default_rng(12)
+    d = rng.normal(size=(2000, 3))
+    d /= np.linalg.norm(d, axis=1)[:, None]
+    P = d * rng.uniform(0.2, 3.0, size=(2000, 1))
+    r = closest_points(V, F, P)
+    # an inscribed polyhedron: distance within the sagitta of the analytic |1 - |p||
+    sag = 1 - np.cos(0.5 * np.max(np.linalg.norm(V[F[:, 0]] - V[F[:, 1]], axis=1)))
+    assert np.all(np.abs(r.distance - np.abs(1 - np.linalg.norm(P, axis=1))) <= 2 * sag)
+
+
+def test_index_does_not_modify_inputs():
+    V, F = icosphere(1)
+    P = np.random.default_rng(0).normal(size=(50, 3))
+    V0, F0, P0 = V.copy(), F.copy(), P.copy()
+    index = TriangleIndex(V, F)
+    index.closest(P)
+    V[:] = 0.0                                # the index keeps its own copy
+    assert (index.closest(P0).distance > 0).any()
+    assert (F == F0).all() and (P == P0).all()
+    V = V0
+
+
+def test_index_empty_and_bad_input():
+    with pytest.raises(InvalidMeshError, match="TriangleIndex: the mesh has no faces"):
+        TriangleIndex(np.zeros((0, 3)), np.zeros((0, 3), dtype=np.int64))
+    with pytest.raises(InvalidMeshError, match="TriangleIndex: the mesh has no faces"):
+        TriangleIndex(np.eye(3), np.zeros((0, 3), dtype=np.int64))
+    with pytest.raises(InvalidMeshError, match=r"F must be \(m,3\) integers"):
+        TriangleIndex(np.eye(3), np.zeros((1, 3)))
+    index = TriangleIndex(np.eye(3), [[0, 1, 2]])
+    with pytest.raises(InvalidArgumentError, match=r"TriangleIndex.closest: P must be \(q,3\)"):
+        index.closest(np.zeros((4, 2)))
+    with pytest.raises(InvalidArgumentError, match="NaN or infinite"):
+        index.closest([[0.0, np.inf, 0.0]])
+    r = index.closest(np.zeros((0, 3)))
+    assert r.face.shape == (0,) and r.point.shape == (0, 3) and r.bary.shape == (0, 3)
+
+
+@settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(st.integers(0, 2**32 - 1), st.integers(1, 40), st.sampled_from([1e-3, 1.0, 1e3]))
+def test_index_property_random_soups(seed, m, scale):
+    rng = np.random.default_rng(seed)
+    n = rng.integers(3, 3 * m + 3)
+    V = rng.normal(size=(n, 3)) * scale
+    if rng.random() < 0.3:                     # snap to a coarse lattice: ties, degeneracies
+        V = np.round(V / scale * 2) * scale / 2
+    F = rng.integers(0, n, size=(m, 3))
+    P = np.vstack([rng.normal(size=(60, 3)) * scale * rng.choice([0.5, 2, 100]),
+                   V[F[:5].ravel()]])
+    _check_result(V, F, P, TriangleIndex(V, F).closest(P))
+
+
+def test_index_real_mesh_bunny():
+    V, F = load_shared("stanford-bunny.obj")
+    rng = np.random.default_rng(0)
+    used = np.unique(F)
+    diag = np.linalg.norm(V[used].max(0) - V[used].min(0))
+    P = V[used[rng.choice(used.size, 300, replace=False)]] + rng.normal(size=(300, 3)) * 0.01 * diag
+    r = TriangleIndex(V, F).closest(P)
+    # brute force on a few (all 69k triangles per query)
+    ref = _brute(V, F, P[:12])
+    np.testing.assert_allclose(r.distance[:12], ref, rtol=1e-12, atol=1e-15 * diag)
+    assert (r.bary >= 0).all()
+    np.testing.assert_allclose(np.einsum("ij,ijk->ik", r.bary, V[F[r.face]]), r.point,
+                               atol=1e-12 * diag)
