@@ -64,6 +64,7 @@ _MAX_CELLS = 1 << 23       # dense grid cap (int64 offsets: 64 MiB)
 _MAX_REFS_PER_FACE = 12    # grow the cells if triangles would be referenced more often
 _MAX_PHASE2_CELLS = 64     # queries whose ball spans more cells go to the BVH
 _LEAF = 8                  # BVH leaf size (triangles)
+_BVH_STEP = 2              # BVH levels descended per traversal step (8 children per node)
 _PAIR_CHUNK = 1 << 18      # target own-cell (query, triangle) pairs per chunk
 _QUERY_CHUNK = 1 << 16     # at most this many queries per chunk
 _FRONTIER_CAP = 1 << 21    # BVH frontier pairs before it is split and processed depth first
@@ -450,8 +451,9 @@ class TriangleIndex:
         while los[-1].shape[0] > 1:
             los.append(np.minimum(los[-1][0::2], los[-1][1::2]))
             his.append(np.maximum(his[-1][0::2], his[-1][1::2]))
-        self._bvh_lo = los[::-1]                     # level k has 2**k nodes
-        self._bvh_hi = his[::-1]
+        # level k has 2**k nodes: rows lo x, y, z, hi x, y, z
+        self._bvh = [np.ascontiguousarray(np.vstack([lo_.T, hi_.T]))
+                     for lo_, hi_ in zip(los[::-1], his[::-1])]
         self._depth = depth
 
     # -- queries -------------------------------------------------------------------------------
@@ -634,36 +636,53 @@ class TriangleIndex:
         for s in range(0, far.size, _QUERY_CHUNK // 4):
             qs = far[s:s + _QUERY_CHUNK // 4]
             ub[qs] = best.d2[qs]
-            stack = [(0, qs, np.zeros(qs.size, dtype=np.int64))]
+            stack = [(0, qs, np.zeros(qs.size, dtype=np.int64), np.zeros(qs.size))]
             while stack:
-                level, q, node = stack.pop()
+                level, q, node, near2 = stack.pop()
                 if level == self._depth:
-                    t, own = _ragged(node * _LEAF, np.full(q.size, _LEAF, dtype=np.int64))
-                    ok = t < m
-                    self._scan(PT, q[own[ok]], t[ok], best)
+                    # the nearest leaf first (a tight exact bound), then the leaves within it
+                    first = _group_argmin(near2, _run_lengths(q))
+                    self._scan_leaves(PT, q[first], node[first], best)
+                    rest = near2 <= best.d2[q] * (1 + 4 * _SLACK)
+                    rest[first] = False
+                    self._scan_leaves(PT, q[rest], node[rest], best)
                     continue
-                child = (2 * node[:, None] + np.array([0, 1])).ravel()
-                q = np.repeat(q, 2)
-                blo = self._bvh_lo[level + 1][child]
-                bhi = self._bvh_hi[level + 1][child]
-                p = PT[:, q].T
-                near = np.maximum(np.maximum(blo - p, p - bhi), 0.0)
-                near2 = np.einsum("ij,ij->i", near, near)
-                farv = np.maximum(np.abs(p - blo), np.abs(p - bhi))
-                far2 = np.einsum("ij,ij->i", farv, farv) * (1 + 4 * _SLACK)
+                # descend _BVH_STEP levels at once (a 2**_BVH_STEP-ary tree)
+                step = min(_BVH_STEP, self._depth - level)
+                child = ((node[:, None] << step) + np.arange(1 << step)).ravel()
+                q = np.repeat(q, 1 << step)
+                level += step - 1
+                box = np.take(self._bvh[level + 1], child, axis=1)
+                p = np.take(PT, q, axis=1)
+                near2 = np.zeros(q.size)
+                far2 = np.zeros(q.size)
+                for k in range(3):
+                    a = box[k] - p[k]                    # lo - p
+                    b = p[k] - box[k + 3]                # p - hi
+                    near = np.maximum(np.maximum(a, b), 0.0)
+                    near2 += near * near
+                    fa = np.maximum(np.abs(a), np.abs(b))
+                    far2 += fa * fa
+                far2 *= 1 + 4 * _SLACK
                 counts = _run_lengths(q)
                 starts = np.cumsum(counts) - counts
                 uq = q[starts]
                 ub[uq] = np.minimum(ub[uq], np.minimum.reduceat(far2, starts))
                 keep = near2 <= ub[q] * (1 + 4 * _SLACK)
-                q, child = q[keep], child[keep]
+                q, child, near2 = q[keep], child[keep], near2[keep]
                 if q.size > _FRONTIER_CAP:
                     pieces = -(-q.size // _FRONTIER_CAP)
-                    for qq, cn in reversed(list(zip(np.array_split(q, pieces),
-                                                    np.array_split(child, pieces)))):
-                        stack.append((level + 1, qq, cn))
+                    for qq, cn, nn in reversed(list(zip(np.array_split(q, pieces),
+                                                        np.array_split(child, pieces),
+                                                        np.array_split(near2, pieces)))):
+                        stack.append((level + 1, qq, cn, nn))
                 elif q.size:
-                    stack.append((level + 1, q, child))
+                    stack.append((level + 1, q, child, near2))
+
+    def _scan_leaves(self, PT, q, leaf, best):
+        t, own = _ragged(leaf * _LEAF, np.full(q.size, _LEAF, dtype=np.int64))
+        ok = t < self.n_faces
+        self._scan(PT, q[own[ok]], t[ok], best)
 
 
 class _Best:

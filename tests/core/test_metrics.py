@@ -1,0 +1,163 @@
+"""Tests of core/metrics.py: surface sampling and the Metro surface distance."""
+
+import numpy as np
+import pytest
+from hypothesis import given, settings, strategies as st
+
+from core.errors import InvalidArgumentError, InvalidMeshError
+from core.mesh import face_areas
+from core.metrics import SurfaceDistance, sample_surface, surface_distance
+from core.spatial import TriangleIndex
+from tests.mesh_factory import cube, icosphere, load_shared, regular_grid, torus
+
+
+# --- sampling ------------------------------------------------------------------------------------
+
+def test_samples_lie_on_their_faces_and_are_seeded():
+    V, F = torus(16, 8)
+    s = sample_surface(V, F, 5000, seed=3)
+    assert s.points.shape == (5000, 3) and s.face.dtype == np.int64 and s.bary.shape == (5000, 3)
+    assert (s.bary >= 0).all() and (s.bary <= 1).all()
+    np.testing.assert_allclose(s.bary.sum(axis=1), 1.0, atol=1e-15)
+    np.testing.assert_allclose(np.einsum("ij,ijk->ik", s.bary, V[F[s.face]]), s.points, atol=1e-15)
+    again = sample_surface(V, F, 5000, seed=3)
+    assert (again.points == s.points).all()
+    assert not (sample_surface(V, F, 5000, seed=4).points == s.points).all()
+    d = TriangleIndex(V, F).closest(s.points).distance
+    assert d.max() <= 1e-15 * 10
+
+
+def test_samples_are_area_weighted():
+    """Two triangles, areas 1 : 9: the share of samples follows the areas."""
+    V = np.array([[0, 0, 0], [1, 0, 0], [0, 2, 0], [10, 0, 0], [13, 0, 0], [10, 6, 0.0]])
+    F = np.array([[0, 1, 2], [3, 4, 5]])
+    s = sample_surface(V, F, 200_000, seed=0)
+    share = np.mean(s.face == 0)
+    assert abs(share - 0.1) < 4 * np.sqrt(0.1 * 0.9 / 200_000)
+
+
+def test_samples_are_uniform_inside_a_triangle():
+    """sqrt trick: the fraction of samples in the sub-triangle near A, scaled by 1/2
+    (area 1/4), is 1/4; and the centroid of the samples is the triangle's centroid."""
+    V = np.array([[0.0, 0, 0], [1, 0, 0], [0, 1, 0]])
+    s = sample_surface(V, [[0, 1, 2]], 400_000, seed=1)
+    n = s.points.shape[0]
+    corner = np.mean(s.points.sum(axis=1) <= 0.5)
+    assert abs(corner - 0.25) < 4 * np.sqrt(0.25 * 0.75 / n)
+    np.testing.assert_allclose(s.points.mean(axis=0), [1 / 3, 1 / 3, 0], atol=4 / np.sqrt(18 * n))
+
+
+def test_sampling_zero_area_mesh_and_bad_input():
+    V = np.array([[0.0, 0, 0], [1, 0, 0], [2, 0, 0]])
+    s = sample_surface(V, [[0, 1, 2], [0, 0, 0]], 100)
+    assert np.isfinite(s.points).all() and (s.points[:, 1:] == 0).all()
+    with pytest.raises(InvalidArgumentError, match="sample_surface: n_samples must be an integer"):
+        sample_surface(V, [[0, 1, 2]], -1)
+    with pytest.raises(InvalidArgumentError, match="n_samples must be an integer"):
+        sample_surface(V, [[0, 1, 2]], 2.5)
+    with pytest.raises(InvalidMeshError, match="sample_surface: the mesh has no faces"):
+        sample_surface(V, np.zeros((0, 3), dtype=np.int64), 10)
+    assert sample_surface(V, [[0, 1, 2]], 0).points.shape == (0, 3)
+
+
+# --- surface distance ----------------------------------------------------------------------------
+
+def test_distance_to_itself_is_zero():
+    V, F = torus(20, 10)
+    d = surface_distance(V, F, V, F, samples=5000)
+    assert isinstance(d, SurfaceDistance)
+    diag = np.linalg.norm(V.max(0) - V.min(0))
+    assert d.hausdorff <= 1e-14 * diag and d.mean <= 1e-14 * diag
+    assert d.diagonal == pytest.approx(diag, rel=1e-15)
+    assert d.hausdorff_pct <= 1e-12 and d.n_samples == 5000
+
+
+def test_sphere_vs_scaled_sphere_matches_radius_difference():
+    V, F = icosphere(4)                    # 5,120 faces, inscribed in the unit sphere
+    d = surface_distance(V, F, 1.1 * V, F, samples=5_000)
+    # the polyhedra deviate from the spheres by at most the sagitta of their edges
+    edge = np.linalg.norm(V[F[:, 0]] - V[F[:, 1]], axis=1).max()
+    sag = 1.1 * (1 - np.cos(edge / 2))
+    assert abs(d.hausdorff - 0.1) <= sag
+    assert abs(d.mean - 0.1) <= sag and abs(d.rms - 0.1) <= sag
+    assert abs(d.a_to_b_mean - 0.1) <= sag and abs(d.b_to_a_mean - 0.1) <= sag
+    diag = np.linalg.norm(V.max(0) - V.min(0))
+    assert d.diagonal == pytest.approx(diag, rel=1e-15)
+    assert d.hausdorff_pct == pytest.approx(100 * d.hausdorff / diag, rel=1e-12)
+
+
+def test_translated_cube_gives_the_translation_length():
+    V, F = cube(2)
+    t = 0.1
+    d = surface_distance(V, F, V + [t, 0, 0], F, samples=4000)
+    # every point of A's -x side is exactly t from B's -x side; nothing is farther
+    assert d.hausdorff == pytest.approx(t, rel=1e-12)
+    assert d.a_to_b_max == pytest.approx(t, rel=1e-12) and d.b_to_a_max == pytest.approx(t, rel=1e-12)
+    assert d.mean < t and d.mean > 0
+
+
+def test_symmetry_and_scaling():
+    V, F = icosphere(3)
+    rng = np.random.default_rng(0)
+    W = V * (1 + 0.05 * rng.random((V.shape[0], 1)))
+    ab = surface_distance(V, F, W, F, samples=3000, seed=5)
+    ba = surface_distance(W, F, V, F, samples=3000, seed=5)
+    assert ab.hausdorff == ba.hausdorff and ab.mean == ba.mean and ab.rms == ba.rms
+    assert ab.a_to_b_max == ba.b_to_a_max and ab.a_to_b_mean == ba.b_to_a_mean
+    assert ab.hausdorff >= max(ab.a_to_b_max, ab.b_to_a_max) and ab.rms >= ab.mean
+    big = surface_distance(1e3 * V, F, 1e3 * W, F, samples=3000, seed=5)
+    assert big.hausdorff == pytest.approx(1e3 * ab.hausdorff, rel=1e-9)
+    assert big.mean_pct == pytest.approx(ab.mean_pct, rel=1e-9)
+
+
+def test_one_sided_distances_of_a_patch_on_a_surface():
+    """A patch lying on a larger plane: patch -> plane is 0, plane -> patch is not."""
+    Vb, Fb = regular_grid(10, 10, size=2.0)
+    Va, Fa = regular_grid(4, 4, size=1.0)
+    d = surface_distance(Va, Fa, Vb, Fb, samples=2000)
+    assert d.a_to_b_max <= 1e-15 and d.a_to_b_mean <= 1e-15
+    assert d.b_to_a_max == pytest.approx(np.sqrt(2.0), rel=1e-12)   # corner (2,2) to (1,1)
+    assert d.hausdorff == d.b_to_a_max
+
+
+def test_default_sample_count_and_bad_input():
+    V, F = icosphere(1)
+    assert surface_distance(V, F, V, F).n_samples == 10_000
+    with pytest.raises(InvalidArgumentError, match="surface_distance: samples must be an integer"):
+        surface_distance(V, F, V, F, samples=-5)
+    with pytest.raises(InvalidMeshError, match=r"surface_distance \(mesh b\): the mesh has no faces"):
+        surface_distance(V, F, V, np.zeros((0, 3), dtype=np.int64))
+    with pytest.raises(InvalidMeshError, match=r"surface_distance \(mesh a\)"):
+        surface_distance(V + np.nan, F, V, F)
+    d = surface_distance(V, F, 2 * V, F, samples=0)          # vertices only
+    assert d.hausdorff == pytest.approx(1.0, rel=1e-12)
+
+
+@settings(max_examples=25, deadline=None)
+@given(st.integers(0, 2**32 - 1))
+def test_property_bounds_and_triangle_inequality(seed):
+    """0 <= mean <= rms <= hausdorff; a rigid translation by t gives hausdorff <= |t|."""
+    rng = np.random.default_rng(seed)
+    V, F = torus(10, 6)
+    W = V + rng.normal(size=V.shape) * 0.02
+    t = rng.normal(size=3) * 0.1
+    d = surface_distance(V, F, W, F, samples=500, seed=seed)
+    assert 0 <= d.a_to_b_mean <= d.a_to_b_rms <= d.a_to_b_max + 1e-15
+    assert 0 <= d.mean <= d.rms <= d.hausdorff + 1e-15
+    moved = surface_distance(W, F, W + t, F, samples=500, seed=seed)
+    assert moved.hausdorff <= np.linalg.norm(t) * (1 + 1e-12)
+
+
+def test_real_mesh_bunny_vs_perturbed_copy():
+    V, F = load_shared("stanford-bunny.obj")
+    used = np.unique(F)
+    diag = np.linalg.norm(V[used].max(0) - V[used].min(0))
+    rng = np.random.default_rng(0)
+    eps = 1e-3 * diag
+    W = V + rng.uniform(-1, 1, size=V.shape) * eps        # each coordinate moved by <= eps
+    d = surface_distance(V, F, W, F, samples=50_000)
+    assert d.hausdorff <= np.sqrt(3) * eps * (1 + 1e-9)  # no point moved farther than that
+    assert 0.05 * eps < d.mean < eps
+    assert d.hausdorff_pct == pytest.approx(100 * d.hausdorff / diag, rel=1e-12)
+    # the unperturbed copy is at distance 0
+    assert surface_distance(V, F, V, F, samples=20_000).hausdorff <= 1e-12 * diag
