@@ -343,13 +343,16 @@ def refine_topology(T):
 
     # face_edge: child j < 3 keeps corner j = F[f, j]; its edge opposite corner c != j
     # is the half of FE[f, c] at F[f, j]; its edge opposite j is inner[f, j]
-    FEc = FE[:, None, :]                          # (m,1,3) coarse edge opposite c
-    Vj = F[:, :, None]                            # (m,3,1) vertex at child corner j
-    half = np.where(E[FEc, 0] == Vj, child_lo[FEc], child_hi[FEc])  # (m,3,3)
+    # the half of edge FE[f, c] at F[f, c+1] (A) and at F[f, c+2] (B)
+    first_is_lo = E[FE, 0] == F[:, [1, 2, 0]]
+    cl, ch = child_lo[FE], child_hi[FE]
+    half_a = np.where(first_is_lo, cl, ch)
+    half_b = np.where(first_is_lo, ch, cl)
     FE2 = np.empty((m, 4, 3), dtype=np.int64)
-    FE2[:, :3, :] = half
-    jj = np.arange(3)
-    FE2[:, jj, jj] = inner
+    for c in range(3):
+        FE2[:, (c + 1) % 3, c] = half_a[:, c]
+        FE2[:, (c + 2) % 3, c] = half_b[:, c]
+        FE2[:, c, c] = inner[:, c]
     FE2[:, 3, :] = inner
     FE2 = FE2.reshape(4 * m, 3)
 
@@ -364,6 +367,7 @@ def refine_topology(T):
             faces2[fid[ok], slot] = 4 * fs[ok] + j[ok]
             corners2[fid[ok], slot] = cs[ok]
     fm = np.arange(m, dtype=np.int64)[:, None]
+    jj = np.arange(3)
     faces2[inner, 0] = 4 * fm + jj
     faces2[inner, 1] = 4 * fm + 3
     corners2[inner, 0] = jj
@@ -417,50 +421,49 @@ def child_crease_ids(T, crease_ids, E_next, n_next):
 
 class _Table(NamedTuple):
     """Entries of some rows: ``rows`` (r,) unique, and for each slot j a column
-    array ``cols[j]`` (r,) and a weight (a float, or an (r,) array that may hold
-    zeros, which are dropped)."""
+    array ``cols[j]`` (r,) and a weight (a float or an (r,) array)."""
 
     rows: np.ndarray
     cols: list
     weights: list
 
 
-def _assemble(n_out, n_in, tables):
+def _assemble(n_out, n_in, tables, patches=()):
     """CSR from :class:`_Table` s (several tables may fill the same row).
 
     A counting scatter (no sort) puts every entry at its row's next free slot.
+    ``patches`` are tables overwriting rows that one table filled on its own
+    (same width, entries in the same slots). Zero weights are dropped at the end.
     """
     counts = np.zeros(n_out, dtype=np.int64)
-    keeps = []
     for t in tables:
-        keep = [None if np.isscalar(w) else (w != 0) for w in t.weights]
-        keeps.append(keep)
-        c = np.zeros(t.rows.shape[0], dtype=np.int64)
-        n_full = 0
-        for k in keep:
-            if k is None:
-                n_full += 1
-            else:
-                c += k
-        counts[t.rows] += c + n_full
+        counts[t.rows] += len(t.cols)
     indptr = np.zeros(n_out + 1, dtype=np.int64)
     np.cumsum(counts, out=indptr[1:])
     nnz = int(indptr[-1])
     out_c = np.empty(nnz, dtype=np.int64)
     out_w = np.empty(nnz, dtype=np.float64)
     cursor = indptr[:-1].copy()
-    for t, keep in zip(tables, keeps):
+    for t in tables:
         pos = cursor[t.rows]
-        for col, w, k in zip(t.cols, t.weights, keep):
-            if k is None:
-                out_c[pos] = col
-                out_w[pos] = w
-                pos += 1
-            else:
-                out_c[pos[k]] = col[k]
-                out_w[pos[k]] = w[k]
-                pos += k
+        for col, w in zip(t.cols, t.weights):
+            out_c[pos] = col
+            out_w[pos] = w
+            pos += 1
         cursor[t.rows] = pos
+    for t in patches:
+        pos = indptr[t.rows]
+        for col, w in zip(t.cols, t.weights):
+            out_c[pos] = col
+            out_w[pos] = w
+            pos += 1
+    nonzero = out_w != 0
+    if not nonzero.all():
+        zero = np.flatnonzero(~nonzero)
+        row_of_zero = np.searchsorted(indptr, zero, side="right") - 1
+        indptr[1:] -= np.cumsum(np.bincount(row_of_zero, minlength=n_out))
+        out_c = out_c[nonzero]
+        out_w = out_w[nonzero]
     return Stencil(indptr, out_c, out_w, n_in)
 
 
@@ -505,6 +508,7 @@ def butterfly_level(T):
     F = T.F
     ar_n = np.arange(n, dtype=np.int64)
     tables = [_Table(ar_n, [ar_n], [1.0])]
+    patches = []
     a_all, b_all = E[:, 0], E[:, 1]
 
     # --- sharp edges: 4-point rule along the curve, reflected at corners
@@ -545,25 +549,21 @@ def butterfly_level(T):
             ok = t >= 0
             wings.append(Ff[t])
             miss.append(~ok)
-        any_miss = miss[0] | miss[1] | miss[2] | miss[3]
-        full = ~any_miss
-        if full.all():
-            tables.append(_Table(n + kr, [P0, Q0, c, d] + wings, [0.5, 0.5, 0.125, 0.125] + [-1 / 16] * 4))
-        else:
-            sel = np.flatnonzero(full)
-            tables.append(_Table(n + kr[sel], [P0[sel], Q0[sel], c[sel], d[sel]] + [w[sel] for w in wings],
-                                 [0.5, 0.5, 0.125, 0.125] + [-1 / 16] * 4))
-            sel = np.flatnonzero(any_miss)
-            wings = [np.where(mk[sel], c[sel], w[sel]) for w, mk in zip(wings, miss)]
+        tables.append(_Table(n + kr, [P0, Q0, c, d] + wings, [0.5, 0.5, 0.125, 0.125] + [-1 / 16] * 4))
+        sel = np.flatnonzero(miss[0] | miss[1] | miss[2] | miss[3])
+        if sel.size:
+            # rows with reflected wings: same slots, the wing's weight moves to P0, Q0, c, d
+            c_s = c[sel]
             mA, mB, mC, mD = (mk[sel].astype(np.float64) for mk in miss)
             s16 = 1 / 16
             wP = 0.5 + s16 * (mA - mB + mD - mC)
             wQ = 0.5 + s16 * (mB - mA + mC - mD)
             wc = 0.125 - s16 * (mA + mB)
             wd = 0.125 - s16 * (mC + mD)
-            ww = [np.where(mk[sel], 0.0, -s16) for mk in miss]
-            tables.append(_Table(n + kr[sel], [P0[sel], Q0[sel], c[sel], d[sel]] + wings,
-                                 [wP, wQ, wc, wd] + ww))
+            wing_c = [np.where(mk[sel], c_s, w[sel]) for w, mk in zip(wings, miss)]
+            wing_w = [np.where(mk[sel], 0.0, -s16) for mk in miss]
+            patches.append(_Table(n + kr[sel], [P0[sel], Q0[sel], c_s, d[sel]] + wing_c,
+                                  [wP, wQ, wc, wd] + wing_w))
 
     # --- extraordinary ends: their own ring stencil (halved when both ends are)
     kx = np.flatnonzero(xa | xb)
@@ -592,7 +592,7 @@ def butterfly_level(T):
                 cols = [vs] + [ring[base + (r + j) % k] for j in range(k)]
                 ws = [0.75 * f] + [wj * f for wj in butterfly_weights(k)]
                 tables.append(_Table(n + kx[sel], cols, ws))
-    return _assemble(n + e, n, tables)
+    return _assemble(n + e, n, tables, patches)
 
 
 def loop_beta(k):

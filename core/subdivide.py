@@ -93,17 +93,25 @@ does not reach across it: ``a'`` is replaced by its reflection ``2a - b``
 
 Interior (non-sharp) edge touching a sharp vertex, with no smooth
 extraordinary end: the 8-point stencil, except that a wing point that does not
-exist or lies across a sharp edge is never read: it is replaced by the
-*reflected wing* (as OpenMesh does), the parallelogram point
-``P + Q - R`` of the wing triangle's edge ``(P, Q)`` and the apex ``R``
-opposite it in our face::
+exist, or lies across a sharp edge, is never read. It is replaced by the
+*reflected wing* (the idea OpenMesh uses): the wing across edge ``(x, y)`` of
+face ``(x, y, z)`` becomes the parallelogram point ``x + y - z``, which is
+where the wing sits on a regular planar grid::
 
-           (P+Q-R)  ....  Q = c
-                    .   /   \
-                      P ---- R        (R and P are the edge's ends)
+              c ------- w'        edge (a, c) is on the boundary or a crease:
+             / \       /          its wing w' = a + c - b is never read, its
+            /   \     /           -1/16 goes to a (-1/16), c (-1/16) and
+           /     \   /            b (+1/16)
+          b --*-- a
+           \     /                * = the new vertex on edge (a, b)
+            \   /
+              d
 
-Reflected wings keep the weights summing to 1, reproduce linear fields (so a
-planar region stays planar) and keep the two sides of a crease independent.
+So the row still sums to 1, linear fields are reproduced (a planar region
+stays planar, a flat side of a creased cube stays flat) and the two sides of
+a crease never see each other. With smooth extraordinary ends the ring
+stencil is used instead (those vertices have no sharp edge, so their ring is
+complete).
 
 Loop (approximating)
 --------------------
