@@ -8,6 +8,8 @@ edit, compared with the plain subdivided cage).
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from tests.core._standins_adjust import ensure_core_modules
 
@@ -17,7 +19,7 @@ from core.adjust import Binding, bind, deform, frames, refine  # noqa: E402
 from core.errors import InvalidArgumentError, InvalidMeshError, TopologyMismatchError  # noqa: E402
 from core.mesh import bbox_diagonal, vertex_normals  # noqa: E402
 from core.spatial import closest_points  # noqa: E402
-from tests.mesh_factory import icosphere, load_shared, regular_grid, torus  # noqa: E402
+from tests.mesh_factory import cube, icosphere, load_shared, torus  # noqa: E402
 
 
 def _bumpy_sphere(k=3, amp=0.03, seed=0):
@@ -99,6 +101,39 @@ def test_rigid_motion_of_cage_moves_dense_rigidly(name, seed, request):
     Q, t = _random_rigid(seed)
     D = deform(b, Vc @ Q.T + t)
     assert np.abs(D - (Vd @ Q.T + t)).max() <= 1e-7 * bbox_diagonal(Vd)
+
+
+@settings(max_examples=12, deadline=None)
+@given(seed=st.integers(0, 2**31 - 1), scale=st.floats(0.01, 100.0))
+def test_rigid_motion_property(sphere_binding, seed, scale):
+    # a rigid motion of a scaled problem: bind and deform commute with it
+    Vd, Fd, Vc, Fc, b = sphere_binding
+    Q, t = _random_rigid(seed)
+    D = deform(b, Vc @ Q.T + t)
+    assert np.abs(D - (Vd @ Q.T + t)).max() <= 1e-7 * bbox_diagonal(Vd)
+    b2 = bind(scale * Vd, Fd, scale * Vc, Fc, levels=2)
+    D2 = deform(b2, scale * (Vc @ Q.T + t))
+    assert np.abs(D2 - scale * (Vd @ Q.T + t)).max() <= 1e-7 * scale * bbox_diagonal(Vd)
+
+
+def test_creases_are_kept_through_the_round_trip():
+    # a cube cage with its 12 edges as creases, a noisy finer cube as the dense mesh
+    Vc, Fc = cube(1, size=2.0)
+    Vd, Fd = cube(8, size=2.1)
+    Vd = Vd + 0.01 * np.random.default_rng(2).standard_normal(Vd.shape)
+    E = np.sort(Fc[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
+    E = np.unique(E, axis=0)
+    # cube edges: both endpoints share two coordinates' signs pattern -> length 2
+    creases = E[np.isclose(np.linalg.norm(Vc[E[:, 0]] - Vc[E[:, 1]], axis=1), 2.0)]
+    assert creases.shape == (12, 2)
+    b = bind(Vd, Fd, Vc, Fc, levels=2, creases=creases)
+    assert np.abs(deform(b, Vc) - Vd).max() <= 1e-9 * bbox_diagonal(Vd)
+    b2 = Binding.from_arrays(b.to_arrays())
+    assert np.array_equal(b2.creases, b.creases) and b2.fingerprint == b.fingerprint
+    plain = bind(Vd, Fd, Vc, Fc, levels=2)
+    assert plain.fingerprint != b.fingerprint
+    Ve = Vc * np.array([1.5, 1.0, 1.0])
+    assert np.array_equal(deform(b2, Ve), deform(b, Ve))
 
 
 def test_uniform_scale_of_cage_scales_frames_not_offsets(sphere_binding):
