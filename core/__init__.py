@@ -17,47 +17,28 @@ The public API (one module per algorithm family):
 ``TriangleIndex``           exact closest points on a triangle mesh
 ``surface_distance``        two-sided Hausdorff / mean / RMS (Metro)
 ==========================  ==============================================
-
-Algorithm modules are imported on first use of their names, so ``import
-core`` stays cheap and a caller pays only for what it uses.
 """
-
-import importlib
 
 from .errors import InvalidArgumentError, InvalidMeshError, MeshAdjustError, TopologyMismatchError
 from .mesh import (bbox_diagonal, check_mesh, enclosed_volume, face_areas, face_normals,
                    vertex_normals)
 from .topology import EdgeMap, edge_map, euler_characteristic, manifold_report, topology_summary
-
-#: public name -> module that defines it
-_LAZY = {
-    "simplify": ".simplify", "SimplifyResult": ".simplify",
-    "subdivide": ".subdivide", "subdivision_operator": ".subdivide",
-    "SubdivisionOperator": ".subdivide", "SubdivisionResult": ".subdivide",
-    "fit_cage": ".fit", "FitResult": ".fit",
-    "bind": ".binding", "deform": ".binding", "refine": ".binding", "Binding": ".binding",
-    "RefineResult": ".binding",
-    "TriangleIndex": ".spatial", "closest_points": ".spatial", "ClosestPoints": ".spatial",
-    "surface_distance": ".metrics", "SurfaceDistance": ".metrics", "sample_surface": ".metrics",
-    "read_obj": ".io_obj", "write_obj": ".io_obj",
-}
+from .io_obj import read_obj, write_obj
+from .spatial import ClosestPoints, TriangleIndex, closest_points
+from .metrics import SurfaceDistance, sample_surface, surface_distance
+from .subdivide import SubdivisionOperator, SubdivisionResult, subdivide, subdivision_operator
+from .simplify import SimplifyResult, simplify
+from .fit import FitResult, fit_cage
+from .binding import Binding, RefineResult, bind, deform, refine
 
 __all__ = [
     "MeshAdjustError", "InvalidMeshError", "InvalidArgumentError", "TopologyMismatchError",
     "check_mesh", "bbox_diagonal", "enclosed_volume", "face_areas", "face_normals",
     "vertex_normals", "EdgeMap", "edge_map", "manifold_report", "topology_summary",
-    "euler_characteristic", *_LAZY,
+    "euler_characteristic", "read_obj", "write_obj",
+    "TriangleIndex", "ClosestPoints", "closest_points",
+    "surface_distance", "SurfaceDistance", "sample_surface",
+    "subdivide", "subdivision_operator", "SubdivisionOperator", "SubdivisionResult",
+    "simplify", "SimplifyResult", "fit_cage", "FitResult",
+    "bind", "deform", "refine", "Binding", "RefineResult",
 ]
-
-
-def __getattr__(name):
-    module = _LAZY.get(name)
-    if module is None:
-        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-    value = getattr(importlib.import_module(module, __name__), name)
-    globals()[name] = value
-    return value
-
-
-def __dir__():
-    return sorted(set(globals()) | set(_LAZY))

@@ -46,6 +46,7 @@ def refine_pending():
     return None
 
 
+@bpy.app.handlers.persistent   # stays registered when a .blend is loaded
 def on_depsgraph_update(scene, depsgraph):
     """Schedule a throttled refine for every live cage whose geometry changed."""
     for update in depsgraph.updates:

@@ -26,7 +26,11 @@ def read_positions(mesh):
     """(n,3) float64 vertex positions of a ``bpy.types.Mesh``."""
     n = len(mesh.vertices)
     buf = np.empty(n * 3, dtype=np.float32)
-    if n:
+    if n and mesh.is_editmode:
+        # in Edit Mode ``attributes`` lists the BMesh layers; the synced mesh
+        # arrays are reached through the element collections
+        mesh.vertices.foreach_get("co", buf)
+    elif n:
         mesh.attributes["position"].data.foreach_get("vector", buf)
     return buf.reshape(n, 3).astype(np.float64)
 
@@ -55,7 +59,10 @@ def read_triangles(mesh):
         return np.zeros((0, 3), dtype=np.int64), False
     if n_loops == 3 * n_polys:
         buf = np.empty(n_loops, dtype=np.int32)
-        mesh.attributes[".corner_vert"].data.foreach_get("value", buf)
+        if mesh.is_editmode:   # see read_positions
+            mesh.loops.foreach_get("vertex_index", buf)
+        else:
+            mesh.attributes[".corner_vert"].data.foreach_get("value", buf)
         return buf.reshape(-1, 3).astype(np.int64), False
     mesh.calc_loop_triangles()
     buf = np.empty(3 * len(mesh.loop_triangles), dtype=np.int32)

@@ -56,10 +56,30 @@ def _get_point_attr(mesh, name, kind):
 
 
 def cage_topology(cage):
-    """(F_cage, n_cage, creases) of a cage object, read from its mesh."""
+    """(F_cage, n_cage, creases) of a cage object, read from its mesh (an
+    Edit Mode cage is synced first)."""
+    if cage.mode == 'EDIT':
+        cage.update_from_editmode()
     F, _ = mesh_io.read_triangles(cage.data)
-    creases = mesh_io.get_edge_flags(cage.data, CREASE)
-    return F, len(cage.data.vertices), (creases if creases.shape[0] else None)
+    n = len(cage.data.vertices)
+    if cage.data.is_editmode:
+        # Edit Mode hides the mesh's own attributes behind the BMesh layers:
+        # read the edge flags from the evaluated copy (same topology without
+        # modifiers)
+        depsgraph = bpy.context.evaluated_depsgraph_get()
+        ob_eval = cage.evaluated_get(depsgraph)
+        mesh = ob_eval.to_mesh()
+        try:
+            same = len(mesh.vertices) == n and len(mesh.edges) == len(cage.data.edges)
+            creases = mesh_io.get_edge_flags(mesh, CREASE) if same else None
+        finally:
+            ob_eval.to_mesh_clear()
+        if creases is None:
+            raise core.MeshAdjustError(f"'{cage.name}' has modifiers that change its topology: "
+                                       "leave Edit Mode to refine")
+    else:
+        creases = mesh_io.get_edge_flags(cage.data, CREASE)
+    return F, n, (creases if creases.shape[0] else None)
 
 
 def save_binding(edited, binding):

@@ -85,6 +85,9 @@ def test_demo_writes_its_files(tmp_path):
                  "edited_cage.obj", "edited_original.obj", "refined.obj"):
         assert (out / name).stat().st_size > 0, name
     report = (out / "report.txt").read_text()
-    assert "refine with no edit" in report and "-> 600 faces" in report
+    assert "refine with no edit" in report
+    # Suzanne has open borders: a border collapse removes one face, so 599 is possible
+    faces = int(report.split(" faces, ")[0].split("-> ")[-1].replace(",", ""))
+    assert 599 <= faces <= 600
     with open(out / "demo.png", "rb") as fh:
         assert fh.read(8) == b"\x89PNG\r\n\x1a\n"
