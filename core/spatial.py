@@ -64,7 +64,8 @@ _MAX_CELLS = 1 << 23       # dense grid cap (int64 offsets: 64 MiB)
 _MAX_REFS_PER_FACE = 12    # grow the cells if triangles would be referenced more often
 _MAX_PHASE2_CELLS = 64     # queries whose ball spans more cells go to the BVH
 _LEAF = 8                  # BVH leaf size (triangles)
-_BVH_STEP = 2              # BVH levels descended per traversal step (8 children per node)
+_BVH_STEP = 2              # BVH levels descended per traversal step (4 children per node)
+_SLAB_LEVELS = 3           # lowest BVH levels that also get cylinder bounds
 _PAIR_CHUNK = 1 << 18      # target own-cell (query, triangle) pairs per chunk
 _QUERY_CHUNK = 1 << 16     # at most this many queries per chunk
 _FRONTIER_CAP = 1 << 21    # BVH frontier pairs before it is split and processed depth first
@@ -309,6 +310,12 @@ def _group_argmin(d2, counts):
     return pos[first]
 
 
+def _unit(X):
+    """Rows of X normalised (zero rows stay zero)."""
+    length = np.linalg.norm(X, axis=1)
+    return np.divide(X, length[:, None], out=np.zeros_like(X), where=length[:, None] > 0)
+
+
 def _spread_bits(x):
     """Spread the low 21 bits of uint64 ``x`` to every third bit (for Morton codes)."""
     x = x & np.uint64(0x1FFFFF)
@@ -374,6 +381,7 @@ class TriangleIndex:
         self._any_thin = bool(self._D[15].any())
         self._build_grid(tlo, thi, A, B, C, extent)
         self._build_bvh(tlo, thi)
+        self._build_slabs(A, B, C)
         # bounding disks: centroid, radius (slightly inflated so that rounding never makes
         # the lower bound exceed the true distance) and unit normal, for the cheap test
         centre = (A + B + C) / 3.0
@@ -455,6 +463,78 @@ class TriangleIndex:
         self._bvh = [np.ascontiguousarray(np.vstack([lo_.T, hi_.T]))
                      for lo_, hi_ in zip(los[::-1], his[::-1])]
         self._depth = depth
+
+    def _build_slabs(self, A, B, C):
+        """Cylinder bounds of every BVH node: centre c, unit axis n (the summed face normal,
+        0 if it cancels), lateral radius r and half height t such that every point x of the
+        node's triangles has |x - c|_lateral <= r and |(x - c).n| <= t. Tilted, nearly flat
+        patches get a thin cylinder where their axis-aligned box is fat.
+
+        The lowest _SLAB_LEVELS levels are computed from the vertices; the levels above
+        from the two children's cylinders (a child's point is c_i + a + b n_i with a _|_ n_i,
+        |a| <= r_i, |b| <= t_i, so its height is within |h(c_i)| + r_i |n_i x n| + t_i |n_i.n|
+        and its lateral offset within lat(c_i) + r_i + t_i).
+        """
+        m = A.shape[0]
+        n_pad = 1 << self._depth
+        pad = n_pad * _LEAF - m
+        X = np.concatenate([np.stack([A, B, C], axis=1), np.full((pad, 3, 3), np.nan)])
+        N = np.concatenate([np.cross(B - A, C - A), np.zeros((pad, 3))])
+        self._slab = {}
+        low = min(_SLAB_LEVELS, self._depth + 1)
+        for j in range(low):
+            g = n_pad >> j
+            Xg = X.reshape(g, -1, 3)                                   # (g, 3 * group, 3)
+            cnt = np.sum(~np.isnan(Xg[:, :, 0]), axis=1)
+            c = np.nansum(Xg, axis=1) / np.maximum(cnt, 1)[:, None]
+            nsum = N.reshape(g, -1, 3).sum(axis=1)
+            n = _unit(nsum)
+            rel = Xg - c[:, None, :]
+            h = np.einsum("gkj,gj->gk", rel, n)
+            lat2 = np.einsum("gkj,gkj->gk", rel, rel) - h * h
+            r = np.sqrt(np.maximum(np.fmax.reduce(lat2, axis=1, initial=0.0), 0.0))
+            t = np.fmax.reduce(np.abs(h), axis=1, initial=0.0)
+            size = np.fmax.reduce(np.abs(rel).max(axis=2), axis=1, initial=0.0)
+            self._store_slab(self._depth - j, c, n, r, t, size, cnt, nsum)
+        for level in range(self._depth - low, -1, -1):
+            cc, nn, rr, tt, cnt, ns = self._slab_parts[level + 1]
+            cnt2 = cnt[0::2] + cnt[1::2]
+            w0 = (cnt[0::2] / np.maximum(cnt2, 1))[:, None]
+            c = w0 * cc[0::2] + (1 - w0) * cc[1::2]
+            nsum = ns[0::2] + ns[1::2]
+            n = _unit(nsum)
+            r = np.full(c.shape[0], -np.inf)
+            t = np.full(c.shape[0], -np.inf)
+            size = np.zeros(c.shape[0])
+            for k in (0, 1):
+                ci, ni, ri, ti, ok = cc[k::2], nn[k::2], rr[k::2], tt[k::2], cnt[k::2] > 0
+                d = ci - c
+                hc = np.einsum("ij,ij->i", d, n)
+                latc = np.sqrt(np.maximum(np.einsum("ij,ij->i", d, d) - hc * hc, 0.0))
+                cos = np.abs(np.einsum("ij,ij->i", ni, n))
+                sin = np.linalg.norm(np.cross(ni, n), axis=1)
+                hk = np.abs(hc) + ri * sin + ti * cos
+                lk = latc + ri + ti
+                r = np.where(ok, np.maximum(r, lk), r)
+                t = np.where(ok, np.maximum(t, hk), t)
+                size = np.where(ok, np.maximum(size, np.abs(d).max(axis=1) + ri + ti), size)
+            self._store_slab(level, c, n, r, t, size, cnt2, nsum)
+        del self._slab_parts
+
+    def _store_slab(self, level, c, n, r, t, size, cnt, nsum):
+        scale = np.abs(c).max(axis=1) + size
+        r = r * (1 + 1e-9) + 1e-9 * size + 1e-12 * scale     # rounding margins (lat2 cancels)
+        t = t * (1 + 1e-9) + 1e-9 * size + 1e-12 * scale
+        empty = cnt == 0                  # padding: bounds that prune and never bind
+        c = np.where(empty[:, None], 0.0, c)
+        r = np.where(empty, np.inf, r)
+        t = np.where(empty, np.inf, t)
+        if not hasattr(self, "_slab_parts"):
+            self._slab_parts = {}
+        self._slab_parts[level] = (c, n, np.where(empty, 0.0, r), np.where(empty, 0.0, t),
+                                   cnt, nsum)
+        self._slab[level] = np.ascontiguousarray(np.vstack([c.T, n.T, r, t]))
+
 
     # -- queries -------------------------------------------------------------------------------
     def closest(self, P):
@@ -663,6 +743,20 @@ class TriangleIndex:
                     near2 += near * near
                     fa = np.maximum(np.abs(a), np.abs(b))
                     far2 += fa * fa
+                slab = self._slab[level + 1]
+                if True:
+                    # the node's cylinder: lower and upper bounds (max / min with the box's)
+                    S = np.take(slab, child, axis=1)
+                    dx, dy, dz = p[0] - S[0], p[1] - S[1], p[2] - S[2]
+                    dc2 = dx * dx + dy * dy + dz * dz
+                    hh = np.abs(dx * S[3] + dy * S[4] + dz * S[5])
+                    lat = np.sqrt(np.maximum(dc2 - hh * hh, 0.0))
+                    el = np.maximum(lat - S[6], 0.0)
+                    eh = np.maximum(hh - S[7], 0.0)
+                    near2 = np.maximum(near2, el * el + eh * eh - 1e-14 * dc2)
+                    fl = lat + S[6]
+                    fh = hh + S[7]
+                    far2 = np.minimum(far2, fl * fl + fh * fh + 1e-14 * dc2)
                 far2 *= 1 + 4 * _SLACK
                 counts = _run_lengths(q)
                 starts = np.cumsum(counts) - counts
