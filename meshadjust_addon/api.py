@@ -25,6 +25,9 @@ from .. import core
 from . import mesh_io, store
 
 CREASE = store.CREASE
+#: samples per surface for the deviation shown after a simplify (enough for a
+#: stable Hausdorff estimate in about a second on 250k triangles)
+MEASURE_SAMPLES = 60_000
 
 
 @dataclass(frozen=True)
@@ -60,7 +63,8 @@ class SimplifyJob:
     notes: list = field(default_factory=list)
     result: object = None            #: core.SimplifyResult
     V_cage: np.ndarray = None        #: fitted (or plain) cage positions
-    distance: object = None          #: core.SurfaceDistance of the cage's surface
+    distance: object = None          #: core.SurfaceDistance of QEM's cage to the source
+    fit: object = None               #: core.FitResult when the cage was fitted
     seconds: float = 0.0
     cancelled: bool = False
 
@@ -135,19 +139,21 @@ def compute_simplify(job, *, progress=None):
         job.cancelled = True
         return job
     job.V_cage = res.V
+    if p.measure:
+        # the deviation of the cage QEM produced (the classic measure of a
+        # simplification), before any fitting moves it
+        if progress is not None and progress(0.72) is False:
+            job.cancelled = True
+            return job
+        job.distance = core.surface_distance(job.V, job.F, res.V, res.F, samples=MEASURE_SAMPLES)
     creases = res.feature_edges if len(res.feature_edges) else None
     if p.fit and res.F.shape[0] >= 4:
-        if progress is not None and progress(0.75) is False:
+        if progress is not None and progress(0.8) is False:
             job.cancelled = True
             return job
-        fit = core.fit_cage(job.V, job.F, res.V, res.F, levels=p.levels, scheme=p.scheme,
-                            creases=creases)
-        job.V_cage = fit.V
-    if p.measure:
-        if progress is not None and progress(0.9) is False:
-            job.cancelled = True
-            return job
-        job.distance = core.surface_distance(job.V, job.F, job.V_cage, res.F)
+        job.fit = core.fit_cage(job.V, job.F, res.V, res.F, levels=p.levels, scheme=p.scheme,
+                                creases=creases)
+        job.V_cage = job.fit.V
     job.seconds = time.perf_counter() - t0
     if progress is not None:
         progress(1.0)
@@ -195,8 +201,10 @@ def commit_simplify(source, job):
         msg += (f", max deviation {dev:.2f}% of size (mean "
                 f"{100.0 * job.distance.mean / max(_diag(job.V), 1e-300):.3f}%)")
     msg += f", {job.seconds:.1f} s"
-    if p.fit:
-        msg += ", fitted"
+    if job.fit is not None:
+        d = job.fit.mean_distance
+        msg += (f"; fitted: mean distance of the refined cage {100 * d[0] / job.fit.diagonal:.3f}%"
+                f" -> {100 * d[-1] / job.fit.diagonal:.3f}%")
     if job.notes:
         msg += "; " + "; ".join(job.notes)
     if p.bind:

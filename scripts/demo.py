@@ -85,9 +85,19 @@ def render_panel(objects, labels, path, spacing):
         inst.matrix_world = obj.matrix_world.copy()
         inst.location.x += k * spacing
         inst.color = colours[k % len(colours)]
-        inst.show_wire = obj.meshadjust.role == 'CAGE'
         scene.collection.objects.link(inst)
         shown.append(inst)
+        if obj.meshadjust.role == 'CAGE':
+            # Workbench renders no overlays: draw the cage's edges as thin tubes
+            wire = bpy.data.objects.new(f"wire_{label}", obj.data)
+            wire.matrix_world = obj.matrix_world.copy()
+            wire.location.x += k * spacing
+            mod = wire.modifiers.new("wire", 'WIREFRAME')
+            mod.thickness = 0.004 * spacing
+            mod.use_replace = True
+            wire.color = (0.15, 0.1, 0.08, 1)
+            scene.collection.objects.link(wire)
+            shown.append(wire)
         curve = bpy.data.curves.new(f"label_{label}", 'FONT')
         curve.body = label
         curve.align_x = 'CENTER'
