@@ -163,6 +163,15 @@ def mixed_valence_patch():
     return V, F
 
 
+def bipyramid(k=10):
+    """Closed: two apexes of valence k (rows longer than 8 entries), a ring of valence 4."""
+    ang = np.arange(k) * 2 * np.pi / k
+    V = np.vstack([np.stack([np.cos(ang), np.sin(ang), 0.1 * np.cos(3 * ang)], 1), [[0, 0, 1.2], [0, 0, -0.8]]])
+    top = [[i, (i + 1) % k, k] for i in range(k)]
+    bottom = [[(i + 1) % k, i, k + 1] for i in range(k)]
+    return V, np.array(top + bottom, dtype=np.int64)
+
+
 def cube_creases(V, F):
     """Edges of the triangulated cube that lie on the 12 cube edges."""
     E = edge_map(F, len(V)).E
@@ -182,6 +191,8 @@ MESHES = {
     "fan3": lambda: fan_disk(3),
     "patch": mixed_valence_patch,
     "cube": lambda: cube(2),
+    "bipyramid": bipyramid,
+    "fan9": lambda: fan_disk(9),
 }
 
 
