@@ -270,6 +270,17 @@ def test_inputs_are_not_modified(sphere_binding):
     assert np.array_equal(Vc, Vc0) and np.array_equal(Fc, Fc0) and np.array_equal(Ve, Ve0)
 
 
+def test_points_without_faces_and_empty_dense_mesh():
+    # a point cloud binds and deforms (refine then has no detail to carry)
+    Vc, Fc = icosphere(1)
+    P = np.random.default_rng(0).standard_normal((50, 3))
+    b = bind(P, np.zeros((0, 3), np.int64), Vc, Fc, levels=1)
+    assert np.abs(deform(b, Vc) - P).max() <= 1e-9 * bbox_diagonal(P)
+    assert np.abs(refine(b, Vc).V - b.operator.apply(Vc)).max() <= 1e-14
+    e = bind(np.zeros((0, 3)), np.zeros((0, 3), np.int64), Vc, Fc, levels=1)
+    assert deform(e, Vc).shape == (0, 3) and not e.affected([0]).any()
+
+
 def test_levels_zero_binds_to_the_cage_itself():
     Vd, Fd = _bumpy_sphere(2)
     Vc, Fc = icosphere(1)
