@@ -355,10 +355,15 @@ def bend_errors(Vd, Fd, Vc, Fc, levels=2, creases=None):
     return err.max() / BUMP, err.mean() / BUMP, plain.max() / BUMP, plain.mean() / BUMP
 
 
-def test_bend_of_simplified_bumpy_tube_keeps_the_detail():
+@pytest.fixture(scope="module")
+def tube_case():
     from core.simplify import simplify
     Vd, Fd = bumpy_tube()
-    cage = simplify(Vd, Fd, target_faces=800)
+    return Vd, Fd, simplify(Vd, Fd, target_faces=800)
+
+
+def test_bend_of_simplified_bumpy_tube_keeps_the_detail(tube_case):
+    Vd, Fd, cage = tube_case
     creases = cage.feature_edges if len(cage.feature_edges) else None
     e_max, e_mean, p_max, p_mean = bend_errors(Vd, Fd, cage.V, cage.F, creases=creases)
     # measured (bench_results/adjust.md): mean 0.038 h, max 0.25 h; plain cage mean 0.49 h.
@@ -368,10 +373,8 @@ def test_bend_of_simplified_bumpy_tube_keeps_the_detail():
     assert p_mean >= 5 * e_mean and p_max >= 3 * e_max
 
 
-def test_refine_of_bent_cage_lies_on_the_bent_dense_surface():
-    from core.simplify import simplify
-    Vd, Fd = bumpy_tube()
-    cage = simplify(Vd, Fd, target_faces=800)
+def test_refine_of_bent_cage_lies_on_the_bent_dense_surface(tube_case):
+    Vd, Fd, cage = tube_case
     b = bind(Vd, Fd, cage.V, cage.F, levels=2)
     Vr, Fr = refine(b, analytic_bend(cage.V))
     d = closest_points(analytic_bend(Vd), Fd, Vr).distance / BUMP
