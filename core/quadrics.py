@@ -70,17 +70,25 @@ def plane_quadrics(normals, offsets, weights):
     return Q
 
 
-def face_quadrics(V, F):
+def face_quadrics(V, F, *, area_power=1.0):
     """Area-weighted plane quadric of every face, ``(m, 11)``.
 
-    Degenerate faces (zero area) get a zero quadric.
+    The weight of face ``f`` is ``A_f^p * mean(A)^(1-p)`` with
+    ``p = area_power``: 1 is Garland & Heckbert's area weighting, 0 weighs
+    every plane the same (as Blender's Decimate does); any ``p`` keeps the
+    weight an area, so the error stays unit-independent. Degenerate faces
+    (zero area) get a zero quadric.
     """
     p0 = V[F[:, 0]]
     N = np.cross(V[F[:, 1]] - p0, V[F[:, 2]] - p0)
     length = np.linalg.norm(N, axis=1)
     unit = np.divide(N, length[:, None], out=np.zeros_like(N), where=length[:, None] > 0)
     d = -np.einsum("ij,ij->i", unit, p0)
-    return plane_quadrics(unit, d, 0.5 * length)
+    area = 0.5 * length
+    if area_power != 1.0 and area.size:
+        mean = float(area.mean())
+        area = np.where(area > 0, area ** area_power * mean ** (1.0 - area_power), 0.0) if mean > 0 else area
+    return plane_quadrics(unit, d, area)
 
 
 def edge_constraint_quadrics(V, E, face_normals, weights):
@@ -110,22 +118,26 @@ def edge_constraint_quadrics(V, E, face_normals, weights):
     return plane_quadrics(unit, d, np.where(length > 0, weights, 0.0))
 
 
-def accumulate(Q_items, index, n):
-    """Sum quadrics into ``n`` bins: ``out[index[i]] += Q_items[i]``.
+def accumulate(Q_items, index, n, *, repeat=1):
+    """Sum quadrics into ``n`` bins: ``out[index[i]] += Q_items[i % k]``.
 
     Parameters
     ----------
     Q_items : (k,11) float64
-    index : (k,) int64 in ``[0, n)``
+    index : (repeat*k,) int64 in ``[0, n)``; with ``repeat > 1`` item ``i``
+        goes to ``index[i], index[k+i], ...`` (e.g. ``F.T.ravel()`` with
+        ``repeat=3`` sends each face quadric to its three corners).
     n : int
 
     Returns
     -------
     (n,11) float64
     """
+    QT = np.ascontiguousarray(Q_items.T)
     out = np.empty((n, N_COEFFS))
     for j in range(N_COEFFS):  # loop over the 11 coefficients, not over items
-        out[:, j] = np.bincount(index, weights=Q_items[:, j], minlength=n)
+        w = np.tile(QT[j], repeat) if repeat > 1 else QT[j]
+        out[:, j] = np.bincount(index, weights=w, minlength=n)
     return out
 
 

@@ -1,0 +1,369 @@
+"""The batched edge-collapse engine behind :func:`core.simplify.simplify`.
+
+State: faces ``F`` plus per half-edge arrays (``h = 3 f + c`` is the edge of
+face ``f`` opposite corner ``c``, see ``core._clean``): the twin table, the
+crease flag, the cached collapse cost / position / error of the edge (kept on
+its representative half-edge: the one with ``twin < 0`` or ``h < twin``),
+and the "rejected until the neighbourhood changes" memory. Compaction keeps
+the order of faces, so a representative stays a representative.
+
+One pass::
+
+    recost the edges that touch a vertex moved by the previous pass
+    pool = cheapest candidates (bounded share; bounded by the collapses needed)
+    rounds:  chosen = pool edges whose rank is the smallest over every face
+             around both endpoints  -> the stars of chosen edges are disjoint
+             check chosen edges on the current mesh (link condition, flips,
+             compactness); accept those within the pool's cost bound;
+             their closed one-rings become untouchable for later rounds
+    apply all accepted collapses at once, glue twins, compact
+"""
+
+import numpy as np
+
+from ._clean import BOUNDARY, NON_MANIFOLD
+from .quadrics import optimal_placement, quadric_distance, quadric_error
+
+_BIG = np.iinfo(np.int64).max
+_NEXT = np.array([1, 2, 0], dtype=np.int64)
+_PREV = np.array([2, 0, 1], dtype=np.int64)
+_SQRT3x2 = 2.0 * np.sqrt(3.0)
+_SNAP2 = 1e-12  # (distance / edge length)^2 below which a position is an endpoint
+
+# columns of State.hcache
+_COST, _X, _DIST, _BLK = 0, 1, 4, 5
+
+
+class State:
+    """Mutable working mesh of one simplification (private)."""
+
+    def __init__(self, V, F, twin, Q, locked, feat):
+        n, h3 = V.shape[0], twin.size
+        self.V, self.Q, self.locked = V, Q, locked
+        self.moved = np.zeros(n, dtype=bool)
+        self.orig = np.arange(n, dtype=np.int64)       # clean index of each current vertex
+        self.vver = np.full(n, -1, dtype=np.int64)     # pass in which the one-ring last changed
+        self.fresh = np.ones(n, dtype=bool)            # quadric / position changed: recost edges
+        self.F, self.twin, self.feat = F, twin, feat
+        self.blk_pass = np.full(h3, -1, dtype=np.int64)
+        self.swap = np.zeros(h3, dtype=bool)           # survivor is the half-edge's second end
+        self.hcache = np.zeros((h3, 6))                # cost, X (3), dist, blocked value
+        self.hcache[:, _BLK] = -1.0
+        self.cur_of_clean = np.arange(n, dtype=np.int64)
+        self.worst = 0.0
+
+
+def _ends(F, h):
+    """Endpoints (U, W) of half-edges ``h``."""
+    Fr = F.ravel()
+    base, c = h - h % 3, h % 3
+    return Fr[base + _NEXT[c]], Fr[base + _PREV[c]]
+
+
+def _recost(st, rep, U, W, stale, preserve_boundary):
+    """Placement and cost of the stale edges, written into the cache."""
+    hs = rep[stale]
+    a, b = U[stale], W[stale]
+    interior = st.twin[hs] >= 0
+    tw = st.twin
+    hb = np.flatnonzero(tw == BOUNDARY)
+    is_bnd = np.zeros(st.V.shape[0], dtype=bool)
+    if hb.size:
+        ub, wb = _ends(st.F, hb)
+        is_bnd[ub] = True
+        is_bnd[wb] = True
+    lock = st.locked
+    valid = ~(lock[a] & lock[b]) & ~(interior & is_bnd[a] & is_bnd[b])
+    if preserve_boundary:  # a boundary vertex never merges into a locked interior one
+        valid &= ~(interior & ((lock[a] & is_bnd[b]) | (lock[b] & is_bnd[a])))
+    # survivor: a locked endpoint, else the boundary endpoint of an interior edge
+    swap = lock[b] | (~lock[a] & preserve_boundary & interior & is_bnd[b])
+    a, b = np.where(swap, b, a), np.where(swap, a, b)
+    Qe = st.Q[a] + st.Q[b]
+    X, err = optimal_placement(Qe, st.V[a], st.V[b])
+    # a position within round-off of an endpoint is that endpoint (it stays exact)
+    E = st.V[b] - st.V[a]
+    tol2 = _SNAP2 * np.einsum("ij,ij->i", E, E)
+    for P in (st.V[b], st.V[a]):
+        D = X - P
+        near = np.einsum("ij,ij->i", D, D) <= tol2
+        X[near] = P[near]
+    pin = lock[a] | (preserve_boundary & interior & is_bnd[a])
+    if pin.any():
+        X[pin] = st.V[a[pin]]
+        err[pin] = quadric_error(Qe[pin], X[pin])
+    c = st.hcache
+    c[hs, _COST] = np.where(valid, err, np.inf)
+    c[hs, _X:_X + 3] = X
+    c[hs, _DIST] = quadric_distance(Qe, err)
+    st.swap[hs] = swap
+
+
+def _check(st, A, B, X, interior, faces, tun):
+    """Validity and compactness penalty of independent collapses B[k] -> A[k]
+    at X[k], judged on the current mesh.
+
+    ``faces`` must contain every face around the endpoints. Returns
+    ``ok`` (k,) bool, ``penalty`` (k,), and the star: face ids, their
+    collapse index, and whether each face is removed by the collapse.
+    """
+    F, V = st.F, st.V
+    n, k = V.shape[0], A.size
+    eov = np.full(n, -1, dtype=np.int64)
+    kk = np.arange(k, dtype=np.int64)
+    eov[A] = kk
+    eov[B] = kk
+    fe = eov[F[faces]]
+    inside = (fe >= 0).any(axis=1)
+    star = faces[inside]
+    fe = fe[inside]
+    kf = fe.max(axis=1)
+    Fs = F[star]
+    isA = Fs == A[kf][:, None]
+    isB = Fs == B[kf][:, None]
+    coll = isA.any(axis=1) & isB.any(axis=1)
+    ok = np.ones(k, dtype=bool)
+
+    # --- link condition (Dey et al.): the common neighbours of A and B are
+    # exactly the opposite vertices of the removed faces
+    other = ~(isA | isB)
+    opp = np.full((k, 2), -1, dtype=np.int64)
+    cidx = np.flatnonzero(coll)
+    ck = kf[cidx]
+    cv = Fs[cidx][other[cidx]]                  # one opposite vertex per removed face
+    order = np.argsort(ck, kind="stable")
+    ck, cv = ck[order], cv[order]
+    first = np.ones(ck.size, dtype=bool)
+    first[1:] = ck[1:] != ck[:-1]
+    opp[ck[first], 0] = cv[first]
+    opp[ck[~first], 1] = cv[~first]
+    n_removed = np.bincount(ck, minlength=k)
+    ok &= n_removed == np.where(interior, 2, 1)
+    nn = np.int64(max(n, 1))
+    rowsA = isA.any(axis=1)
+    keysA = (kf[:, None] * nn + Fs)[rowsA[:, None] & other].ravel()
+    keysA.sort()
+    rowsB = isB.any(axis=1)
+    selB = rowsB[:, None] & other
+    qk = np.broadcast_to(kf[:, None], Fs.shape)[selB]
+    qx = Fs[selB]
+    q = qk * nn + qx
+    not_opp = (qx != opp[qk, 0]) & (qx != opp[qk, 1])
+    if keysA.size and q.size:
+        pos = np.minimum(np.searchsorted(keysA, q), keysA.size - 1)
+        extra = (keysA[pos] == q) & not_opp
+        ok[qk[extra]] = False
+    # not the last tetrahedron (both endpoints of valence 3)
+    valA = np.bincount(kf[rowsA], minlength=k)
+    valB = np.bincount(kf[rowsB], minlength=k)
+    ok &= ~(interior & (valA == 3) & (valB == 3))
+    # not an isolated triangle; never touch a non-manifold edge
+    cF = Fs[cidx]
+    hA = 3 * star[cidx] + np.argmax(isA[cidx], axis=1)   # edge (B, c)
+    hB = 3 * star[cidx] + np.argmax(isB[cidx], axis=1)   # edge (c, A)
+    tA, tB = st.twin[hA], st.twin[hB]
+    bad = (tA == NON_MANIFOLD) | (tB == NON_MANIFOLD) | ((tA == BOUNDARY) & (tB == BOUNDARY))
+    ok[kf[cidx][bad]] = False
+    del cF
+
+    # --- geometry of the faces that move
+    mv = ~coll
+    mk = kf[mv]
+    P = V[Fs[mv]]                                   # (s,3,3)
+    N0 = np.cross(P[:, 1] - P[:, 0], P[:, 2] - P[:, 0])
+    Pn = P.copy()
+    mc = (isA[mv] | isB[mv])
+    Pn[mc] = X[mk]
+    e0, e1, e2 = Pn[:, 1] - Pn[:, 0], Pn[:, 2] - Pn[:, 1], Pn[:, 0] - Pn[:, 2]
+    N1 = np.cross(e0, -e2)
+    l0 = np.sqrt(np.einsum("ij,ij->i", N0, N0))
+    l1 = np.sqrt(np.einsum("ij,ij->i", N1, N1))
+    flip = (l0 > 0) & (np.einsum("ij,ij->i", N0, N1) <= tun.flip_cos * l0 * l1)
+    ok[mk[flip]] = False
+    sumsq = (np.einsum("ij,ij->i", e0, e0) + np.einsum("ij,ij->i", e1, e1)
+             + np.einsum("ij,ij->i", e2, e2))
+    g_new = _SQRT3x2 * l1 / np.where(sumsq > 0, sumsq, 1.0)
+    o0, o1, o2 = P[:, 1] - P[:, 0], P[:, 2] - P[:, 1], P[:, 0] - P[:, 2]
+    osq = (np.einsum("ij,ij->i", o0, o0) + np.einsum("ij,ij->i", o1, o1)
+           + np.einsum("ij,ij->i", o2, o2))
+    g_old = _SQRT3x2 * l0 / np.where(osq > 0, osq, 1.0)
+    gmin_new = np.ones(k)
+    np.minimum.at(gmin_new, mk, g_new)
+    gmin_old = np.ones(k)
+    np.minimum.at(gmin_old, mk, g_old)
+    ok &= ~((gmin_new < tun.gamma_hard) & (gmin_new < 0.5 * gmin_old))
+    area = np.bincount(mk, weights=0.5 * l1, minlength=k)
+    D = V[B] - V[A]
+    L2 = np.einsum("ij,ij->i", D, D)
+    # only collapses that make the neighbourhood less compact than it was pay
+    short = np.maximum(0.0, np.minimum(gmin_old, tun.gamma_soft) - gmin_new) / tun.gamma_soft
+    penalty = tun.compact_weight * area * L2 * short * short
+    return ok, penalty, star, kf, coll
+
+
+def run(st, target, max_err_n, preserve_boundary, progress, m0, tun):
+    """The batched collapse loop. Returns (stopped_because, passes)."""
+    passes = 0
+    while passes < tun.max_passes:
+        F, twin = st.F, st.twin
+        m, n = F.shape[0], st.V.shape[0]
+        if target is not None and m <= target:
+            return "target", passes
+        if progress is not None and passes > 0:
+            if target is not None and m0 > target:
+                frac = (m0 - m) / (m0 - target)
+            else:
+                frac = (m0 - m) / max(m0, 1)
+            if progress(float(min(max(frac, 0.0), 1.0))) is False:
+                return "cancelled", passes
+        passes += 1
+        h = np.arange(3 * m, dtype=np.int64)
+        rep = np.flatnonzero((twin == BOUNDARY) | (twin > h))
+        U, W = _ends(F, rep)
+        stale = st.fresh[U] | st.fresh[W]
+        if stale.any():
+            _recost(st, rep, U, W, stale, preserve_boundary)
+        st.fresh[:] = False
+        hc = st.hcache[rep]
+        cost = hc[:, _COST]
+        bv = hc[:, _BLK]
+        blocked = (bv >= 0) & (st.blk_pass[rep] > np.maximum(st.vver[U], st.vver[W]))
+        cost = np.where(blocked, np.maximum(cost, bv), cost)
+        cand = np.isfinite(cost)
+        if max_err_n is not None:
+            within = hc[:, _DIST] <= max_err_n
+            if not (cand & within).any():
+                return ("max_error" if cand.any() else "no_valid_collapse"), passes
+            cand &= within
+        ci = np.flatnonzero(cand)
+        if ci.size == 0:
+            return "no_valid_collapse", passes
+        # pool: the cheapest share of the candidates
+        ne = ci.size
+        P = int(np.ceil(tun.pool_share * ne))
+        if target is not None:
+            P = min(P, int(np.ceil(tun.pool_goal_factor * (m - target) / 2.0)) + 1)
+        P = max(1, min(P, ne))
+        cc = cost[ci]
+        # the pool: every candidate no costlier than the P-th cheapest (ties included)
+        limit = np.partition(cc, P - 1)[P - 1] if P < ne else cc.max()
+        pool = np.flatnonzero(cc <= limit)
+        pool = ci[pool[np.argsort(cc[pool], kind="stable")]]
+        P = pool.size
+        # per pool edge (position = rank)
+        ph = rep[pool]
+        sw = st.swap[ph]
+        pa = np.where(sw, W[pool], U[pool])
+        pb = np.where(sw, U[pool], W[pool])
+        pX = hc[pool, _X:_X + 3]
+        pint = twin[ph] >= 0
+        pcost = cost[pool]
+        praw = hc[pool, _COST]
+        # priority: cheaper cost band first; inside a band a fixed pseudo-random
+        # order (a hash of the endpoints), so the local minima are dense
+        band = (np.arange(P, dtype=np.int64) * tun.bands) // P
+        mix = ((pa * np.int64(0x9E3779B1)) ^ (pb * np.int64(0x85EBCA77))) & np.int64(0x7FFFFFFF)
+        order = np.lexsort((np.arange(P), mix, band))
+        pool, ph, sw, pa, pb, pX, pint, pcost, praw = (x[order] for x in (pool, ph, sw, pa, pb, pX, pint, pcost, praw))
+        rank_all = np.arange(P, dtype=np.int64)
+
+        touched = np.zeros(n, dtype=bool)
+        acc_edges, acc_star, acc_kf, acc_coll = [], [], [], []
+        active = rank_all
+        for _ in range(tun.max_rounds):
+            active = active[~touched[pa[active]] & ~touched[pb[active]]]
+            if active.size == 0:
+                break
+            vmin = np.full(n, _BIG, dtype=np.int64)
+            np.minimum.at(vmin, pa[active], active)
+            np.minimum.at(vmin, pb[active], active)
+            fmin = vmin[F].min(axis=1)
+            hit = np.flatnonzero(fmin < _BIG)
+            vmin2 = np.full(n, _BIG, dtype=np.int64)
+            np.minimum.at(vmin2, F[hit].ravel(), np.repeat(fmin[hit], 3))
+            chosen = active == np.minimum(vmin2[pa[active]], vmin2[pb[active]])
+            sel = active[chosen]
+            active = active[~chosen]
+            ok, pen, star, kf, coll = _check(st, pa[sel], pb[sel], pX[sel], pint[sel], hit, tun)
+            total = praw[sel] + pen
+            acc = ok & (total <= limit)
+            # remember rejections until the neighbourhood changes
+            rej = ~acc
+            val = np.where(ok[rej], total[rej], np.inf)
+            hr = ph[sel[rej]]
+            st.hcache[hr, _BLK] = val
+            st.blk_pass[hr] = passes
+            if acc.any():
+                keep = acc[kf]
+                remap_k = np.cumsum(acc) - 1
+                acc_edges.append(sel[acc])
+                acc_star.append(star[keep])
+                acc_kf.append(remap_k[kf[keep]] + sum(x.size for x in acc_edges[:-1]))
+                acc_coll.append(coll[keep])
+                touched[F[star[keep]].ravel()] = True
+        if not acc_edges:
+            continue
+        acc = np.concatenate(acc_edges)
+        s_star, s_kf, s_coll = np.concatenate(acc_star), np.concatenate(acc_kf), np.concatenate(acc_coll)
+        if target is not None:
+            removed = np.where(pint[acc], 2, 1)
+            order = np.argsort(pcost[acc], kind="stable")
+            before = np.empty(acc.size, dtype=np.int64)
+            before[order] = np.cumsum(removed[order]) - removed[order]
+            keep_k = before < m - target
+            if not keep_k.all():
+                acc = acc[keep_k]
+                fk = keep_k[s_kf]
+                s_star, s_coll = s_star[fk], s_coll[fk]
+                s_kf = (np.cumsum(keep_k) - 1)[s_kf[fk]]
+        st.worst = max(st.worst, float(hc[pool[acc], _DIST].max()))
+        st.vver[touched] = passes
+        _apply(st, pa[acc], pb[acc], pX[acc], s_star, s_kf, s_coll)
+    return "no_valid_collapse", passes
+
+
+def _apply(st, A, B, X, star, kf, coll):
+    """Collapse every B[k] into A[k] at X[k] at once (stars disjoint)."""
+    F, twin = st.F, st.twin
+    n, m = st.V.shape[0], F.shape[0]
+    cf = star[coll]
+    ck = kf[coll]
+    Fc = F[cf]
+    # glue the twins of the two surviving sides of every removed face
+    hA = 3 * cf + np.argmax(Fc == A[ck][:, None], axis=1)   # edge (B, c)
+    hB = 3 * cf + np.argmax(Fc == B[ck][:, None], axis=1)   # edge (c, A)
+    tA, tB = twin[hA], twin[hB]
+    fl = st.feat[hA] | st.feat[hB]
+    okA, okB = tA >= 0, tB >= 0
+    twin[tA[okA]] = tB[okA]
+    twin[tB[okB]] = tA[okB]
+    st.feat[tA[okA]] = fl[okA]
+    st.feat[tB[okB]] = fl[okB]
+    # positions and quadrics
+    st.moved[A] |= np.any(X != st.V[A], axis=1)
+    st.Q[A] = st.Q[A] + st.Q[B]
+    st.V[A] = X
+    st.fresh[A] = True
+    # remap vertices, drop the removed faces, compact
+    keep_f = np.ones(m, dtype=bool)
+    keep_f[cf] = False
+    new_f = np.cumsum(keep_f) - 1
+    keep_h = np.repeat(keep_f, 3)
+    new_h = 3 * new_f[np.arange(3 * m) // 3] + np.arange(3 * m) % 3
+    tw = twin[keep_h]
+    tw = np.where(tw >= 0, new_h[np.maximum(tw, 0)], tw)
+    keep_v = np.ones(n, dtype=bool)
+    keep_v[B] = False
+    new_v = np.cumsum(keep_v) - 1
+    remap = np.arange(n, dtype=np.int64)
+    remap[B] = A
+    comp = new_v[remap]
+    st.F = comp[F[keep_f]]
+    st.twin = tw
+    st.feat = st.feat[keep_h]
+    st.swap = st.swap[keep_h]
+    st.blk_pass = st.blk_pass[keep_h]
+    st.hcache = st.hcache[keep_h]
+    for name in ("V", "Q", "locked", "moved", "orig", "vver", "fresh"):
+        setattr(st, name, getattr(st, name)[keep_v])
+    st.cur_of_clean = comp[st.cur_of_clean]

@@ -1,0 +1,260 @@
+"""Benchmark: core.simplify against Blender's Decimate (COLLAPSE), same process.
+
+Run with the bpy venv's Python (Blender as a module, NumPy 1.26)::
+
+    python scripts/bench_simplify.py            # every shared mesh at 10%, 2%, 1,000 faces + 1M -> 10k
+    python scripts/bench_simplify.py --quick    # a few small cases
+    python scripts/bench_simplify.py --big      # also 4M -> 40k
+
+For every case Decimate runs first; ``core.simplify`` then gets Decimate's
+output face count as ``target_faces`` so both end at the same size. Errors
+are two-sided surface distances to the input (Metro: area-weighted samples
+on both surfaces plus the vertices, exact point-to-triangle distances), in
+% of the input's bounding-box diagonal. Also reported: non-manifold edges,
+boundary edges and Euler characteristic (input -> output), flipped faces
+(normal against the input's nearest face), the minimum angle, and the peak
+memory of our run (tracemalloc). The table goes to bench_results/simplify.md.
+"""
+
+import argparse
+import math
+import os
+import sys
+import time
+import tracemalloc
+
+import numpy as np
+
+ROOT = os.path.normpath(os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))
+sys.path.insert(0, ROOT)
+
+from core.io_obj import read_obj  # noqa: E402
+from core.mesh import bbox_diagonal, face_normals  # noqa: E402
+from core.simplify import simplify  # noqa: E402
+from core.spatial import TriangleIndex  # noqa: E402
+from core.topology import edge_map, euler_characteristic, manifold_report  # noqa: E402
+
+MESHES = os.path.normpath(os.path.join(ROOT, "..", "shared", "meshes"))
+SEED = 0
+N_SAMPLES = 200_000
+
+try:  # the shared metric, once it exists
+    from core.metrics import surface_distance as _shared_surface_distance  # noqa: E402
+except ImportError:  # pragma: no cover - fallback while metrics.py is being written
+    _shared_surface_distance = None
+
+
+def _sample(V, F, n, rng):
+    A = np.linalg.norm(face_normals(V, F, normalize=False), axis=1)
+    f = rng.choice(F.shape[0], size=n, p=A / A.sum())
+    r1, r2 = rng.random(n), rng.random(n)
+    s = np.sqrt(r1)
+    b = np.stack([1 - s, s * (1 - r2), s * r2], axis=1)
+    return np.einsum("ij,ijk->ik", b, V[F[f]])
+
+
+def surface_distance(Va, Fa, Vb, Fb):
+    """(hausdorff, mean) two-sided distances in mesh units."""
+    if _shared_surface_distance is not None:
+        d = _shared_surface_distance(Va, Fa, Vb, Fb, seed=SEED)
+        return d.hausdorff, d.mean
+    rng = np.random.default_rng(SEED)
+    Pa = np.vstack([Va[np.unique(Fa)], _sample(Va, Fa, N_SAMPLES, rng)])
+    Pb = np.vstack([Vb[np.unique(Fb)], _sample(Vb, Fb, N_SAMPLES, rng)])
+    dab = TriangleIndex(Vb, Fb).closest(Pa).distance
+    dba = TriangleIndex(Va, Fa).closest(Pb).distance
+    return max(dab.max(), dba.max()), 0.5 * (dab.mean() + dba.mean())
+
+
+def min_angle_deg(V, F):
+    P = V[F]
+    ang = []
+    for i in range(3):
+        u = P[:, (i + 1) % 3] - P[:, i]
+        w = P[:, (i + 2) % 3] - P[:, i]
+        c = np.einsum("ij,ij->i", u, w) / np.maximum(np.linalg.norm(u, axis=1) * np.linalg.norm(w, axis=1),
+                                                      1e-300)
+        ang.append(np.degrees(np.arccos(np.clip(c, -1, 1))))
+    return float(np.min(ang)) if F.shape[0] else float("nan")
+
+
+def flipped_faces(V0, F0, index0, V, F):
+    """Faces whose normal points against the input's nearest face."""
+    C = V[F].mean(axis=1)
+    cp = index0.closest(C)
+    n0 = face_normals(V0, F0)[cp.face]
+    n1 = face_normals(V, F)
+    return int((np.einsum("ij,ij->i", n0, n1) < 0).sum())
+
+
+def clean_stats(V, F):
+    n = V.shape[0]
+    em = edge_map(F, n)
+    rep = manifold_report(F, n)
+    return dict(nm=int(rep.non_manifold_edges.shape[0]) + int(rep.non_manifold_vertices.shape[0]),
+                bnd=int((em.edge_face_count == 1).sum()), euler=euler_characteristic(F, n))
+
+
+# ---------------------------------------------------------------- Blender
+def blender_decimate(V, F, target):
+    import bpy
+    bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)
+    n, m = V.shape[0], F.shape[0]
+    me = bpy.data.meshes.new("bench")
+    me.vertices.add(n)
+    me.loops.add(3 * m)
+    me.polygons.add(m)
+    me.attributes["position"].data.foreach_set("vector", V.astype(np.float32).ravel())
+    me.attributes[".corner_vert"].data.foreach_set("value", F.astype(np.int32).ravel())
+    me.polygons.foreach_set("loop_start", np.arange(0, 3 * m, 3, dtype=np.int32))
+    me.update(calc_edges=True)
+    ob = bpy.data.objects.new("bench", me)
+    bpy.context.collection.objects.link(ob)
+    mod = ob.modifiers.new("dec", "DECIMATE")
+    mod.decimate_type = "COLLAPSE"
+    mod.use_collapse_triangulate = True
+    mod.ratio = min(1.0, target / m)
+    t0 = time.perf_counter()
+    dg = bpy.context.evaluated_depsgraph_get()
+    ev = ob.evaluated_get(dg)
+    out = ev.to_mesh()
+    dt = time.perf_counter() - t0
+    n2, m2 = len(out.vertices), len(out.polygons)
+    Vo = np.empty(3 * n2, dtype=np.float32)
+    out.attributes["position"].data.foreach_get("vector", Vo)
+    out.calc_loop_triangles()
+    Fo = np.empty(3 * len(out.loop_triangles), dtype=np.int32)
+    out.loop_triangles.foreach_get("vertices", Fo)
+    ev.to_mesh_clear()
+    return Vo.reshape(-1, 3).astype(np.float64), Fo.reshape(-1, 3).astype(np.int64), dt
+
+
+# ---------------------------------------------------------------- cases
+def synthetic(levels, noise=1e-4):
+    """The bunny midpoint-subdivided ``levels`` times with small noise (fixed seed)."""
+    from tests.mesh_factory import _midpoint_split
+    V, F = read_obj(os.path.join(MESHES, "stanford-bunny.obj"))
+    from core._clean import clean_mesh
+    c = clean_mesh(V, F)
+    V, F = c.V, c.F
+    for _ in range(levels):
+        V, F = _midpoint_split(V, F)
+    rng = np.random.default_rng(SEED)
+    return V + rng.normal(scale=noise * bbox_diagonal(V), size=V.shape), F
+
+
+def run_case(name, V, F, target, use_blender=True):
+    diag = bbox_diagonal(V)
+    index0 = TriangleIndex(V, F)
+    row = dict(mesh=name, faces=F.shape[0])
+    cin = clean_stats(V, F)
+    if use_blender:
+        Vb, Fb, tb = blender_decimate(V, F, target)
+        target = Fb.shape[0]
+        hb, mb = surface_distance(V, F, Vb, Fb)
+        cb = clean_stats(Vb, Fb)
+        row.update(b_time=tb, b_haus=100 * hb / diag, b_mean=100 * mb / diag, b_nm=cb["nm"],
+                   b_bnd=cb["bnd"], b_euler=cb["euler"], b_flip=flipped_faces(V, F, index0, Vb, Fb),
+                   b_minang=min_angle_deg(Vb, Fb))
+    tracemalloc.start()
+    t0 = time.perf_counter()
+    r = simplify(V, F, target_faces=int(target))
+    t = time.perf_counter() - t0
+    peak = tracemalloc.get_traced_memory()[1]
+    tracemalloc.stop()
+    h, mn = surface_distance(V, F, r.V, r.F)
+    c = clean_stats(r.V, r.F)
+    row.update(target=int(target), out=r.F.shape[0], time=t, haus=100 * h / diag, mean=100 * mn / diag,
+               nm_in=cin["nm"], nm=c["nm"], bnd_in=cin["bnd"], bnd=c["bnd"], euler_in=cin["euler"],
+               euler=c["euler"], flip=flipped_faces(V, F, index0, r.V, r.F), minang=min_angle_deg(r.V, r.F),
+               peak_mb=peak / 2**20, stop=r.stopped_because)
+    return row
+
+
+def fmt_table(rows, blender):
+    head = ["mesh", "faces", "target", "ours s", "mean %", "haus %"]
+    if blender:
+        head += ["Dec s", "Dec mean %", "Dec haus %", "t ratio", "mean ratio", "haus ratio"]
+    head += ["nm in/ours" + ("/Dec" if blender else ""), "bnd in/ours" + ("/Dec" if blender else ""),
+             "euler in/ours" + ("/Dec" if blender else ""), "flips ours" + ("/Dec" if blender else ""),
+             "min angle ours" + ("/Dec" if blender else ""), "peak MiB"]
+    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    for r in rows:
+        cells = [r["mesh"], f"{r['faces']:,}", f"{r['out']:,}", f"{r['time']:.2f}", f"{r['mean']:.4f}",
+                 f"{r['haus']:.3f}"]
+        if blender:
+            cells += [f"{r['b_time']:.2f}", f"{r['b_mean']:.4f}", f"{r['b_haus']:.3f}",
+                      f"{r['time'] / r['b_time']:.2f}", f"{r['mean'] / r['b_mean']:.2f}",
+                      f"{r['haus'] / r['b_haus']:.2f}"]
+        sfx = lambda k: f"/{r['b_' + k]}" if blender else ""  # noqa: E731
+        cells += [f"{r['nm_in']}/{r['nm']}{sfx('nm')}", f"{r['bnd_in']}/{r['bnd']}{sfx('bnd')}",
+                  f"{r['euler_in']}/{r['euler']}{sfx('euler')}", f"{r['flip']}{sfx('flip')}",
+                  f"{r['minang']:.1f}" + (f"/{r['b_minang']:.1f}" if blender else ""), f"{r['peak_mb']:.0f}"]
+        lines.append("| " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
+def geomean(xs):
+    xs = [x for x in xs if x > 0 and math.isfinite(x)]
+    return math.exp(sum(math.log(x) for x in xs) / len(xs)) if xs else float("nan")
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--quick", action="store_true", help="a few small cases only")
+    ap.add_argument("--big", action="store_true", help="also the 4M-triangle synthetic mesh")
+    ap.add_argument("--no-blender", action="store_true", help="ours only")
+    ap.add_argument("--meshes", nargs="*", help="only these shared meshes (file names)")
+    ap.add_argument("--no-synthetic", action="store_true", help="skip the 1M mesh")
+    args = ap.parse_args()
+    blender = not args.no_blender
+    if blender:
+        import bpy  # noqa: F401  (fail early when run with the wrong Python)
+    names = sorted(f for f in os.listdir(MESHES) if f.endswith(".obj")) if os.path.isdir(MESHES) else []
+    if args.meshes:
+        names = [n for n in names if n in args.meshes]
+    if args.quick:
+        names = [n for n in names if n in ("fandisk.obj", "cow.obj", "beetle.obj")]
+    rows = []
+    for name in names:
+        V, F = read_obj(os.path.join(MESHES, name))
+        m = F.shape[0]
+        for label, tgt in (("10%", int(round(0.1 * m))), ("2%", int(round(0.02 * m))), ("1000", 1000)):
+            if args.quick and label == "10%":
+                continue
+            if tgt >= m:
+                continue
+            row = run_case(f"{name[:-4]} {label}", V, F, tgt, blender)
+            rows.append(row)
+            print(fmt_table([row], blender).splitlines()[-1], flush=True)
+    real = list(rows)
+    if not args.quick and not args.no_synthetic:
+        for levels, tgt, label in ((2, 10_000, "bunny x16 (1M)"),) + (((3, 40_000, "bunny x64 (4M)"),)
+                                                                      if args.big else ()):
+            V, F = synthetic(levels)
+            row = run_case(label, V, F, tgt, blender)
+            rows.append(row)
+            print(fmt_table([row], blender).splitlines()[-1], flush=True)
+    text = fmt_table(rows, blender)
+    if blender and real:
+        gm = geomean([r["mean"] / r["b_mean"] for r in real])
+        gh = geomean([r["haus"] / r["b_haus"] for r in real])
+        gt = geomean([r["time"] / r["b_time"] for r in real])
+        worst_m = max(r["mean"] / r["b_mean"] for r in real)
+        worst_h = max(r["haus"] / r["b_haus"] for r in real)
+        text += (f"\n\nShared meshes ({len(real)} cases), geometric mean of ours / Decimate: "
+                 f"mean distance {gm:.3f}, Hausdorff {gh:.3f}, time {gt:.2f}; "
+                 f"worst case mean {worst_m:.2f}, Hausdorff {worst_h:.2f}.")
+    metric = "core.metrics.surface_distance" if _shared_surface_distance else \
+        f"Metro fallback ({N_SAMPLES:,} samples + vertices per side, core.spatial)"
+    text += f"\nDistances: {metric}, % of the input's bounding-box diagonal."
+    print()
+    print(text)
+    out = os.path.join(ROOT, "bench_results")
+    os.makedirs(out, exist_ok=True)
+    with open(os.path.join(out, "simplify.md"), "w", encoding="utf-8") as fh:
+        fh.write("# core.simplify vs Blender Decimate (COLLAPSE)\n\n" + text + "\n")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,354 @@
+"""core.simplify: topology kept, shape kept, API contract, bad input."""
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from core.errors import InvalidArgumentError, InvalidMeshError
+from core.mesh import bbox_diagonal, face_normals
+from core.simplify import SimplifyResult, simplify
+from core.topology import edge_map, manifold_report, topology_summary
+from tests.mesh_factory import (cube, double_torus, icosphere, load_shared, regular_grid, tetrahedron,
+                                torus)
+
+
+# ---------------------------------------------------------------- helpers
+def bumpy_sphere(k=3, amp=0.05, seed=0):
+    V, F = icosphere(k)
+    rng = np.random.default_rng(seed)
+    r = 1.0 + amp * np.sin(5 * V[:, 0]) * np.cos(3 * V[:, 1]) + 0.01 * rng.standard_normal(V.shape[0])
+    return V * r[:, None], F
+
+
+def assert_clean(r, V_in=None, F_in=None):
+    """Manifold, oriented, no degenerate/duplicate faces, vertex_map consistent."""
+    n = r.V.shape[0]
+    rep = manifold_report(r.F, n)
+    assert rep.is_oriented_manifold, rep
+    assert np.all(np.isfinite(r.V))
+    # every cage vertex is used and has a preimage
+    assert np.array_equal(np.unique(r.F), np.arange(n))
+    if V_in is not None:
+        used = np.unique(np.asarray(F_in))
+        assert r.vertex_map.shape == (V_in.shape[0],)
+        assert np.all(r.vertex_map[used] >= 0) and np.all(r.vertex_map[used] < n)
+        assert np.array_equal(np.unique(r.vertex_map[used]), np.arange(n))
+
+
+def outward_flips(V, F):
+    """Faces of a star-shaped closed surface around 0 whose normal points inward."""
+    N = face_normals(V, F)
+    C = V[F].mean(axis=1)
+    return int((np.einsum("ij,ij->i", N, C) <= 0).sum())
+
+
+def nearest_vertex_distance(A, B):
+    """Largest distance from points A to their nearest point of B (small sets)."""
+    d = np.linalg.norm(A[:, None, :] - B[None, :, :], axis=2)
+    return float(d.min(axis=1).max())
+
+
+def boundary_edges(F, n):
+    em = edge_map(F, n)
+    return em.E[em.edge_face_count == 1]
+
+
+# ---------------------------------------------------------------- topology
+def test_closed_genus0_goes_down_to_a_tetrahedron_and_no_further():
+    V, F = icosphere(3)
+    r = simplify(V, F, target_faces=0)
+    assert r.F.shape == (4, 3) and r.V.shape == (4, 3)
+    assert r.stopped_because == "no_valid_collapse"
+    assert_clean(r, V, F)
+    assert outward_flips(r.V, r.F) == 0
+    # a tetrahedron cannot be simplified at all
+    Vt, Ft = tetrahedron()
+    rt = simplify(Vt, Ft, target_faces=0)
+    assert np.array_equal(rt.F, Ft) and np.array_equal(rt.V, Vt)
+
+
+@pytest.mark.parametrize("builder, euler", [(torus, 0), (double_torus, -2)])
+def test_genus_is_kept(builder, euler):
+    V, F = builder()
+    before = topology_summary(F, V.shape[0])
+    assert before.euler == euler
+    for target in (F.shape[0] // 4, 0):
+        r = simplify(V, F, target_faces=target)
+        after = topology_summary(r.F, r.V.shape[0])
+        assert after == before  # closed: no boundary edges either
+        assert_clean(r, V, F)
+        if target:
+            assert r.stopped_because == "target" and r.F.shape[0] <= target
+
+
+def test_open_grid_keeps_its_boundary_loop_and_corners():
+    V, F = regular_grid(20, 20)
+    r = simplify(V, F, target_faces=60)
+    assert r.stopped_because == "target" and r.F.shape[0] <= 60
+    assert_clean(r, V, F)
+    t = topology_summary(r.F, r.V.shape[0])
+    assert (t.boundary_loops, t.euler, t.components) == (1, 1, 1)
+    B = boundary_edges(r.F, r.V.shape[0])
+    length = np.linalg.norm(r.V[B[:, 0]] - r.V[B[:, 1]], axis=1).sum()
+    assert length == pytest.approx(4.0, abs=1e-9)
+    # every boundary vertex stays on the square's border, the 4 corners exactly
+    Vb = r.V[np.unique(B)]
+    on_border = np.min(np.abs(np.concatenate([Vb[:, :2], 1 - Vb[:, :2]], axis=1)), axis=1)
+    assert on_border.max() < 1e-9
+    corners = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [1, 1, 0]], dtype=float)
+    assert nearest_vertex_distance(corners, r.V) < 1e-9
+    assert np.abs(r.V[:, 2]).max() < 1e-12
+
+
+def test_preserve_boundary_false_still_manifold_and_one_loop():
+    V, F = regular_grid(12, 12, z=lambda x, y: 0.2 * np.sin(3 * x) * np.cos(2 * y))
+    r = simplify(V, F, target_faces=30, preserve_boundary=False)
+    assert_clean(r, V, F)
+    t = topology_summary(r.F, r.V.shape[0])
+    assert (t.boundary_loops, t.euler) == (1, 1)
+
+
+def test_cube_keeps_its_sharp_edges_and_corners():
+    V, F = cube(6)
+    r = simplify(V, F, target_faces=12)
+    assert r.F.shape == (12, 3)
+    assert_clean(r, V, F)
+    # the 8 corners, nothing else
+    corners = np.array([[x, y, z] for x in (-.5, .5) for y in (-.5, .5) for z in (-.5, .5)])
+    assert nearest_vertex_distance(corners, r.V) < 1e-9
+    assert nearest_vertex_distance(r.V, corners) < 1e-9
+    # the feature edges are the 12 cube edges: corners differing in exactly one coordinate
+    fe = r.feature_edges
+    assert fe.shape == (12, 2)
+    diff = np.abs(r.V[fe[:, 0]] - r.V[fe[:, 1]])
+    np.testing.assert_allclose(np.sort(diff, axis=1), np.tile([0, 0, 1], (12, 1)), atol=1e-9)
+
+
+def test_feature_edges_of_a_moderate_cube_lie_on_the_input_creases():
+    V, F = cube(8)
+    r = simplify(V, F, target_faces=100)
+    assert_clean(r, V, F)
+    # every output vertex is on the cube's surface, every feature edge on a cube edge
+    assert np.abs(np.abs(r.V).max(axis=1) - 0.5).max() < 1e-9
+    fe = r.feature_edges
+    assert fe.shape[0] >= 12
+    for P in (r.V[fe[:, 0]], r.V[fe[:, 1]], 0.5 * (r.V[fe[:, 0]] + r.V[fe[:, 1]])):
+        on_faces = (np.abs(np.abs(P) - 0.5) < 1e-9).sum(axis=1)
+        assert np.all(on_faces >= 2)
+
+
+def test_sphere_shape_flips_and_vertex_map():
+    V, F = bumpy_sphere(3)
+    r = simplify(V, F, ratio=0.1)
+    assert r.F.shape[0] <= round(0.1 * F.shape[0])
+    assert_clean(r, V, F)
+    assert outward_flips(r.V, r.F) == 0
+    assert topology_summary(r.F, r.V.shape[0]).euler == 2
+    # each input vertex is close to the cage vertex it merged into
+    d = np.linalg.norm(V - r.V[r.vertex_map], axis=1)
+    assert d.max() < 0.5 * bbox_diagonal(V)
+    # max_error is a distance of the order of the actual deviation
+    radius = np.linalg.norm(r.V, axis=1)
+    assert 0 < r.max_error < 0.1
+    assert np.abs(radius - 1).max() < 0.2
+    assert isinstance(r, SimplifyResult)
+
+
+# ---------------------------------------------------------------- options
+def test_locked_vertices_never_move_or_disappear():
+    V, F = bumpy_sphere(3, seed=1)
+    rng = np.random.default_rng(3)
+    locked = rng.random(V.shape[0]) < 0.1
+    r = simplify(V, F, target_faces=80, locked=locked)
+    assert_clean(r, V, F)
+    idx = np.flatnonzero(locked)
+    cage = r.vertex_map[idx]
+    assert np.unique(cage).size == idx.size          # no two locked vertices merged
+    assert np.array_equal(r.V[cage], V[idx])         # bit for bit
+    assert r.stopped_because in ("target", "no_valid_collapse")
+
+
+def test_vertex_weights_keep_detail_where_heavy():
+    V, F = bumpy_sphere(3, seed=2)
+    w = np.where(V[:, 0] > 0.3, 100.0, 1.0)
+    plain = simplify(V, F, target_faces=150)
+    heavy = simplify(V, F, target_faces=150, vertex_weights=w)
+    assert_clean(heavy, V, F)
+    assert (heavy.V[:, 0] > 0.3).sum() > (plain.V[:, 0] > 0.3).sum()
+    same = simplify(V, F, target_faces=150, vertex_weights=np.ones(V.shape[0]))
+    assert np.array_equal(same.F, plain.F) and np.array_equal(same.V, plain.V)
+
+
+def test_max_error_bounds_every_accepted_collapse():
+    V, F = bumpy_sphere(3)
+    loose = simplify(V, F, target_faces=0)
+    bound = 0.25 * loose.max_error
+    r = simplify(V, F, max_error=bound)
+    assert r.stopped_because == "max_error"
+    assert 0 < r.max_error <= bound
+    assert r.F.shape[0] > loose.F.shape[0]
+    assert_clean(r, V, F)
+    # whichever stop comes first
+    r2 = simplify(V, F, max_error=bound, target_faces=F.shape[0] - 10)
+    assert r2.stopped_because == "target"
+
+
+def test_progress_reports_fractions_and_cancels():
+    V, F = bumpy_sphere(3)
+    seen = []
+    r = simplify(V, F, target_faces=50, progress=lambda f: seen.append(f) or True)
+    assert r.stopped_because == "target"
+    assert seen and all(0 <= f <= 1 for f in seen) and seen == sorted(seen)
+    calls = []
+
+    def stop_after_two(frac):
+        calls.append(frac)
+        return len(calls) < 2
+
+    c = simplify(V, F, target_faces=50, progress=stop_after_two)
+    assert c.stopped_because == "cancelled" and len(calls) == 2
+    assert 50 < c.F.shape[0] < F.shape[0]
+    assert_clean(c, V, F)
+
+
+def test_units_do_not_matter():
+    V, F = bumpy_sphere(3, seed=4)
+    ref = simplify(V, F, target_faces=120)
+    for s in (0.01, 1e4):
+        shift = np.array([3.0, -1.0, 2.0]) * s
+        r = simplify(V * s + shift, F, target_faces=120)
+        assert np.array_equal(r.F, ref.F)
+        np.testing.assert_allclose((r.V - shift) / s, ref.V, rtol=0, atol=1e-9)
+        assert r.max_error / s == pytest.approx(ref.max_error, rel=1e-6)
+
+
+def test_inputs_are_not_modified_and_target_at_or_above_count_returns_the_cleaned_input():
+    V, F = icosphere(2)
+    V0, F0 = V.copy(), F.copy()
+    r = simplify(V, F, target_faces=F.shape[0])
+    assert np.array_equal(V, V0) and np.array_equal(F, F0)
+    assert np.array_equal(r.F, F) and np.array_equal(r.V, V)
+    assert r.stopped_because == "target" and r.max_error == 0.0
+    assert np.array_equal(simplify(V, F, ratio=1.0).F, F)
+    e = simplify(np.zeros((0, 3)), np.zeros((0, 3), dtype=np.int64), ratio=0.5)
+    assert e.F.shape == (0, 3) and e.V.shape == (0, 3)
+
+
+def test_cleaning_counts_and_drops_messy_input():
+    V, F = icosphere(2)
+    n = V.shape[0]
+    Vx = np.vstack([V, [[5.0, 5.0, 5.0]]])                   # one unreferenced vertex
+    Fx = np.vstack([F, F[:3], [[0, 0, 1]], [[2, 3, 3]]])     # 3 duplicates, 2 degenerate
+    r = simplify(Vx, Fx, ratio=0.5)
+    assert (r.n_duplicate_faces, r.n_degenerate_faces, r.n_unreferenced_vertices) == (3, 2, 1)
+    assert r.vertex_map[n] == -1
+    assert_clean(r)
+    assert topology_summary(r.F, r.V.shape[0]).euler == 2
+
+
+def test_non_manifold_input_is_frozen_not_worsened():
+    # two spheres' worth of faces sharing a fan edge: a "book" of 3 faces on edge (0, 1)
+    V, F = bumpy_sphere(2)
+    n = V.shape[0]
+    e0, e1 = F[0, 0], F[0, 1]
+    Vx = np.vstack([V, V[[e0, e1]].mean(axis=0) * 1.5])
+    Fx = np.vstack([F, [[e0, e1, n]]])
+    before = manifold_report(Fx, n + 1)
+    assert before.non_manifold_edges.shape[0] == 1
+    r = simplify(Vx, Fx, target_faces=40)
+    after = manifold_report(r.F, r.V.shape[0])
+    assert after.non_manifold_edges.shape[0] <= 1
+    assert after.non_manifold_vertices.shape[0] <= before.non_manifold_vertices.shape[0]
+    assert r.n_frozen_vertices >= 2
+    # the frozen vertices did not move
+    for v in (e0, e1, n):
+        assert np.array_equal(r.V[r.vertex_map[v]], Vx[v])
+
+
+# ---------------------------------------------------------------- errors
+@pytest.mark.parametrize("V, F, match", [
+    (np.array([[0, 0, 0], [1, 0, np.nan], [0, 1, 0]]), [[0, 1, 2]], "NaN or infinite"),
+    (np.array([[0, 0, 0], [1, 0, np.inf], [0, 1, 0]]), [[0, 1, 2]], "NaN or infinite"),
+    (np.eye(3), [[0, 1, 3]], "outside"),
+    (np.eye(3), [[0, -1, 2]], "outside"),
+    (np.eye(3), np.zeros((120, 4)), r"F must be \(m,3\) integers, got \(120, 4\) float64"),
+    (np.eye(3), np.array([[0.0, 1.0, 2.0]]), "F must be"),
+    (np.ones((3, 2)), [[0, 1, 2]], "V must be"),
+])
+def test_bad_meshes_raise(V, F, match):
+    with pytest.raises(InvalidMeshError, match=match):
+        simplify(V, F, ratio=0.5)
+
+
+@pytest.mark.parametrize("kwargs, match", [
+    (dict(), "at least one of target_faces, ratio or max_error"),
+    (dict(target_faces=-1), "target_faces must be >= 0"),
+    (dict(target_faces=2.5), "target_faces must be an integer"),
+    (dict(ratio=0.0), r"ratio must be in \(0, 1\]"),
+    (dict(ratio=1.5), r"ratio must be in \(0, 1\]"),
+    (dict(ratio=float("nan")), r"ratio must be in \(0, 1\]"),
+    (dict(max_error=-1.0), "max_error must be a finite distance"),
+    (dict(max_error=float("nan")), "max_error must be a finite distance"),
+    (dict(ratio=0.5, feature_angle_deg=0.0), "feature_angle_deg"),
+    (dict(ratio=0.5, vertex_weights=np.ones(3)), "vertex_weights must be"),
+    (dict(ratio=0.5, vertex_weights=-np.ones(42)), "finite and >= 0"),
+    (dict(ratio=0.5, locked=np.ones(5, dtype=bool)), "locked must be"),
+    (dict(ratio=0.5, progress=3), "progress must be callable"),
+])
+def test_bad_arguments_raise(kwargs, match):
+    V, F = icosphere(1)
+    with pytest.raises(InvalidArgumentError, match=match):
+        simplify(V, F, **kwargs)
+    assert issubclass(InvalidArgumentError, ValueError)
+
+
+# ---------------------------------------------------------------- properties
+@settings(max_examples=25, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(seed=st.integers(0, 10_000), kind=st.sampled_from(["sphere", "grid", "torus"]),
+       frac=st.floats(0.0, 0.6), amp=st.floats(0.0, 0.3))
+def test_invariants_on_random_meshes(seed, kind, frac, amp):
+    rng = np.random.default_rng(seed)
+    if kind == "sphere":
+        V, F = icosphere(2)
+        V = V * (1 + amp * 0.3 * rng.standard_normal(V.shape[0]))[:, None]
+    elif kind == "grid":
+        V, F = regular_grid(10, 8, z=lambda x, y: amp * np.sin(4 * x + seed) * y)
+        V[:, :2] += 0.02 * rng.standard_normal((V.shape[0], 2))
+    else:
+        V, F = torus(16, 8)
+        V = V + amp * 0.1 * rng.standard_normal(V.shape)
+    target = int(frac * F.shape[0])
+    before = topology_summary(F, V.shape[0])
+    r = simplify(V, F, target_faces=target)
+    assert_clean(r, V, F)
+    after = topology_summary(r.F, r.V.shape[0])
+    assert after._replace(boundary_edges=0) == before._replace(boundary_edges=0)
+    assert r.F.shape[0] <= target or r.stopped_because == "no_valid_collapse"
+    assert r.F.shape[0] >= target - 1 or r.stopped_because != "target"
+    if kind == "sphere":
+        assert outward_flips(r.V, r.F) == 0
+
+
+# ---------------------------------------------------------------- real meshes
+@pytest.mark.parametrize("name, ratio", [
+    ("stanford-bunny.obj", 0.05), ("rocker-arm.obj", 0.05), ("fandisk.obj", 0.05), ("beetle.obj", 0.3),
+    ("suzanne.obj", 0.2),
+])
+def test_real_meshes_keep_topology_and_never_get_worse(name, ratio):
+    V, F = load_shared(name)
+    r = simplify(V, F, ratio=ratio)
+    Fc = F[(F[:, 0] != F[:, 1]) & (F[:, 1] != F[:, 2]) & (F[:, 0] != F[:, 2])]
+    rep_in = manifold_report(Fc, V.shape[0])
+    rep = manifold_report(r.F, r.V.shape[0])
+    assert rep.non_manifold_edges.shape[0] <= rep_in.non_manifold_edges.shape[0]
+    assert rep.non_manifold_vertices.shape[0] <= rep_in.non_manifold_vertices.shape[0]
+    assert rep.degenerate_faces.shape[0] == 0 and rep.duplicate_faces.shape[0] == 0
+    if rep_in.is_manifold:
+        before = topology_summary(Fc, V.shape[0])
+        after = topology_summary(r.F, r.V.shape[0])
+        assert (after.euler, after.components, after.boundary_loops) == \
+            (before.euler, before.components, before.boundary_loops)
+        assert rep.is_manifold
+    assert r.F.shape[0] <= round(ratio * (F.shape[0] - r.n_duplicate_faces - r.n_degenerate_faces)) \
+        or r.stopped_because == "no_valid_collapse"
