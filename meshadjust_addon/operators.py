@@ -56,8 +56,14 @@ def cage_unavailable(context, need_binding=False):
         return "Simplify a mesh first: the active object is not a cage"
     if cage.meshadjust.source is None:
         return f"'{cage.name}' lost its source object"
-    if need_binding and cage.meshadjust.edited is None:
-        return f"'{cage.name}' is not bound: use Bind"
+    if need_binding:
+        edited = cage.meshadjust.edited
+        if edited is None:
+            return f"'{cage.name}' is not bound: use Bind"
+        counts = tuple(edited.meshadjust.cage_counts)
+        if cage.mode != 'EDIT' and counts != (len(cage.data.vertices), len(cage.data.polygons)):
+            return (f"'{cage.name}' changed topology since it was bound "
+                    f"({counts[0]} -> {len(cage.data.vertices)} vertices): Bind to re-bind")
     return None
 
 
@@ -386,3 +392,22 @@ class MESHADJUST_OT_edit_cage(bpy.types.Operator):
 
 CLASSES = (MESHADJUST_OT_simplify, MESHADJUST_OT_fit_cage, MESHADJUST_OT_bind,
            MESHADJUST_OT_refine, MESHADJUST_OT_subdivide, MESHADJUST_OT_edit_cage)
+
+
+class MESHADJUST_OT_apply_defaults(bpy.types.Operator):
+    """Copy the add-on preferences' defaults (faces, levels, scheme, fit) into this scene's MeshAdjust settings"""
+
+    bl_idname = "meshadjust.apply_defaults"
+    bl_label = "Apply Preference Defaults"
+    bl_options = {'REGISTER', 'UNDO'}
+
+    def execute(self, context):
+        from .properties import apply_preferences
+        context.scene.meshadjust.initialized = False
+        if not apply_preferences(context.scene, context):
+            self.report({'WARNING'}, "the add-on preferences are not available")
+            return {'CANCELLED'}
+        return {'FINISHED'}
+
+
+CLASSES = CLASSES + (MESHADJUST_OT_apply_defaults,)

@@ -42,6 +42,8 @@ class MESHADJUST_PT_main(bpy.types.Panel):
         layout = self.layout
         s = context.scene.meshadjust
         state = panel_state(context)
+        if not s.initialized:
+            layout.operator("meshadjust.apply_defaults", icon='PREFERENCES')
         obj = context.active_object
 
         box = layout.box()
@@ -100,6 +102,8 @@ class MESHADJUST_PT_main(bpy.types.Panel):
         sub.operator("meshadjust.refine", icon='MOD_SUBSURF').output = s.output
         if state["refine"][1]:
             box.label(text=state["refine"][1], icon='INFO')
+            if "re-bind" in state["refine"][1]:
+                box.operator("meshadjust.bind", text="Re-bind", icon='LINKED')
         if cage is not None and cage.meshadjust.last_report:
             box.label(text=cage.meshadjust.last_report[:120])
 

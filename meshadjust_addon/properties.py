@@ -5,8 +5,8 @@ per-vertex data (the binding) lives in mesh attributes, see ``store.py``.
 """
 
 import bpy
-from bpy.props import (BoolProperty, EnumProperty, FloatProperty, IntProperty, PointerProperty,
-                       StringProperty)
+from bpy.props import (BoolProperty, EnumProperty, FloatProperty, IntProperty, IntVectorProperty,
+                       PointerProperty, StringProperty)
 
 SCHEMES = [
     ('butterfly', "Butterfly", "Modified butterfly (Zorin et al. 1996): interpolating, the cage "
@@ -54,6 +54,9 @@ class MeshAdjustObjectState(bpy.types.PropertyGroup):
                                  description="Per-fine-vertex detail of the binding (data only)")
     fingerprint: StringProperty(name="Cage fingerprint", default="",
                                 description="Topology fingerprint of the cage the binding was made for")
+    cage_counts: IntVectorProperty(name="Cage counts", size=2, default=(0, 0),
+                                   description="Vertices and faces of the cage at bind time "
+                                               "(a cheap staleness check for the panel)")
     levels: IntProperty(name="Levels", default=2, min=0, max=6)
     scheme: EnumProperty(name="Scheme", items=SCHEMES, default='butterfly')
     live: BoolProperty(name="Live", default=False,
@@ -96,6 +99,8 @@ class MeshAdjustSettings(bpy.types.PropertyGroup):
     progress: FloatProperty(name="Progress", default=0.0, min=0.0, max=1.0, subtype='FACTOR')
     progress_text: StringProperty(name="Progress text", default="")
     running: BoolProperty(name="Running", default=False)
+    initialized: BoolProperty(name="Defaults applied", default=False,
+                              description="The add-on preferences' defaults were copied here")
 
 
 class MeshAdjustPreferences(bpy.types.AddonPreferences):
@@ -126,6 +131,26 @@ def preferences(context=None):
     return addon.preferences if addon else None
 
 
+def apply_preferences(scene, context=None):
+    """Copy the preferences' defaults into a scene's settings, once per scene."""
+    settings = scene.meshadjust
+    prefs = preferences(context)
+    if settings.initialized or prefs is None:
+        return False
+    settings.target_faces = prefs.default_faces
+    settings.levels = prefs.default_levels
+    settings.scheme = prefs.default_scheme
+    settings.fit = prefs.default_fit
+    settings.initialized = True
+    return True
+
+
+@bpy.app.handlers.persistent
+def _on_load_post(*_args):
+    for scene in bpy.data.scenes:
+        apply_preferences(scene)
+
+
 CLASSES = (MeshAdjustObjectState, MeshAdjustSettings, MeshAdjustPreferences)
 
 
@@ -134,9 +159,12 @@ def register():
         bpy.utils.register_class(cls)
     bpy.types.Object.meshadjust = PointerProperty(type=MeshAdjustObjectState)
     bpy.types.Scene.meshadjust = PointerProperty(type=MeshAdjustSettings)
+    bpy.app.handlers.load_post.append(_on_load_post)
 
 
 def unregister():
+    if _on_load_post in bpy.app.handlers.load_post:
+        bpy.app.handlers.load_post.remove(_on_load_post)
     del bpy.types.Scene.meshadjust
     del bpy.types.Object.meshadjust
     for cls in reversed(CLASSES):

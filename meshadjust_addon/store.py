@@ -101,6 +101,7 @@ def save_binding(edited, binding):
     if old is not None:
         bpy.data.meshes.remove(old)
     state.fingerprint = binding.fingerprint
+    state.cage_counts = (binding.n_cage, binding.F_cage.shape[0])
     state.levels = binding.levels
     state.scheme = binding.scheme
     _cache[edited.session_uid] = binding

@@ -281,3 +281,38 @@ def test_real_scan_simplify_and_refine(scene):
     diag = np.linalg.norm(np.ptp(V, axis=0))
     err = np.abs(mio().read_positions(cage.meshadjust.edited.data) - V).max() / diag
     assert err < 1e-5
+
+
+def test_panel_offers_rebind_after_topology_change(dense):
+    panel = sys.modules[MODULE + ".meshadjust_addon.panel"]
+    simplify(300)
+    cage = dense.meshadjust.cage
+    bpy.context.view_layer.objects.active = cage
+    bpy.ops.object.mode_set(mode='EDIT')
+    bm = bmesh.from_edit_mesh(cage.data)
+    bm.verts.ensure_lookup_table()
+    bmesh.ops.delete(bm, geom=[bm.verts[3]], context='VERTS')
+    bmesh.update_edit_mesh(cage.data)
+    bpy.ops.object.mode_set(mode='OBJECT')
+    enabled, reason = panel.panel_state(bpy.context)["refine"]
+    assert not enabled and "re-bind" in reason
+    assert bpy.ops.meshadjust.bind() == {'FINISHED'}       # the offered fix
+    assert panel.panel_state(bpy.context)["refine"] == (True, None)
+    assert bpy.ops.meshadjust.refine(output='EDITED') == {'FINISHED'}
+
+
+def test_preferences_defaults_reach_new_scenes(addon, scene):
+    prefs = bpy.context.preferences.addons[MODULE].preferences
+    saved = (prefs.default_faces, prefs.default_levels, prefs.default_scheme)
+    try:
+        prefs.default_faces = 1234
+        prefs.default_levels = 3
+        prefs.default_scheme = 'loop'
+        assert bpy.ops.meshadjust.apply_defaults() == {'FINISHED'}
+        s = bpy.context.scene.meshadjust
+        assert (s.target_faces, s.levels, s.scheme, s.initialized) == (1234, 3, 'loop', True)
+        bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)   # load_post applies them
+        s = bpy.context.scene.meshadjust
+        assert (s.target_faces, s.levels, s.initialized) == (1234, 3, True)
+    finally:
+        prefs.default_faces, prefs.default_levels, prefs.default_scheme = saved
