@@ -214,12 +214,26 @@ class MESHADJUST_OT_simplify(_TargetProps, bpy.types.Operator):
         return {'FINISHED'}
 
 
+class _CageStep:
+    """Mixin: the operator runs on the active object's cage; ``poll`` says
+    why not (``_needs_binding``: the cage must also have a valid binding)."""
+
+    _needs_binding = False
+
+    @classmethod
+    def poll(cls, context):
+        why = cage_unavailable(context, need_binding=cls._needs_binding)
+        if why:
+            cls.poll_message_set(why)
+        return why is None
+
+
 def vars_of(params):
     """A frozen dataclass as keyword arguments."""
     return {k: getattr(params, k) for k in params.__dataclass_fields__}
 
 
-class MESHADJUST_OT_fit_cage(bpy.types.Operator):
+class MESHADJUST_OT_fit_cage(_CageStep, bpy.types.Operator):
     """Move the cage's vertices so that its subdivision surface matches the source (undoes the shrinkage of simplification)"""
 
     bl_idname = "meshadjust.fit_cage"
@@ -228,13 +242,6 @@ class MESHADJUST_OT_fit_cage(bpy.types.Operator):
 
     rebind: BoolProperty(name="Re-bind", default=True,
                          description="Bind the source again to the fitted cage")
-
-    @classmethod
-    def poll(cls, context):
-        why = cage_unavailable(context)
-        if why:
-            cls.poll_message_set(why)
-        return why is None
 
     def execute(self, context):
         cage = cage_of(context.active_object)
@@ -253,7 +260,7 @@ class MESHADJUST_OT_fit_cage(bpy.types.Operator):
         return {'FINISHED'}
 
 
-class MESHADJUST_OT_bind(bpy.types.Operator):
+class MESHADJUST_OT_bind(_CageStep, bpy.types.Operator):
     """Bind (a copy of) the source to the cage as it is now: its current shape becomes the rest shape"""
 
     bl_idname = "meshadjust.bind"
@@ -262,13 +269,6 @@ class MESHADJUST_OT_bind(bpy.types.Operator):
 
     levels: IntProperty(name="Levels", default=2, min=1, max=5)
     scheme: EnumProperty(name="Scheme", items=SCHEMES, default='butterfly')
-
-    @classmethod
-    def poll(cls, context):
-        why = cage_unavailable(context)
-        if why:
-            cls.poll_message_set(why)
-        return why is None
 
     def invoke(self, context, event):
         cage = cage_of(context.active_object)
@@ -288,7 +288,7 @@ class MESHADJUST_OT_bind(bpy.types.Operator):
         return {'FINISHED'}
 
 
-class MESHADJUST_OT_refine(bpy.types.Operator):
+class MESHADJUST_OT_refine(_CageStep, bpy.types.Operator):
     """Refine the edited cage: deform the bound copy of the source and/or build the subdivided cage with the source's detail"""
 
     bl_idname = "meshadjust.refine"
@@ -296,13 +296,7 @@ class MESHADJUST_OT_refine(bpy.types.Operator):
     bl_options = {'REGISTER', 'UNDO'}
 
     output: EnumProperty(name="Output", items=OUTPUTS, default='EDITED')
-
-    @classmethod
-    def poll(cls, context):
-        why = cage_unavailable(context, need_binding=True)
-        if why:
-            cls.poll_message_set(why)
-        return why is None
+    _needs_binding = True
 
     def execute(self, context):
         cage = cage_of(context.active_object)
@@ -363,19 +357,12 @@ class MESHADJUST_OT_subdivide(bpy.types.Operator):
         return {'FINISHED'}
 
 
-class MESHADJUST_OT_edit_cage(bpy.types.Operator):
+class MESHADJUST_OT_edit_cage(_CageStep, bpy.types.Operator):
     """Make the cage active and enter Edit Mode on it (move its vertices with Blender's own tools)"""
 
     bl_idname = "meshadjust.edit_cage"
     bl_label = "Edit Cage"
     bl_options = {'REGISTER', 'UNDO'}
-
-    @classmethod
-    def poll(cls, context):
-        why = cage_unavailable(context)
-        if why:
-            cls.poll_message_set(why)
-        return why is None
 
     def execute(self, context):
         cage = cage_of(context.active_object)
