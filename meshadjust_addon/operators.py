@@ -106,6 +106,7 @@ class MESHADJUST_OT_simplify(_TargetProps, bpy.types.Operator):
     _job = None
     _error = None
     _cancel = False
+    _fraction = 0.0
 
     @classmethod
     def poll(cls, context):
@@ -156,8 +157,11 @@ class MESHADJUST_OT_simplify(_TargetProps, bpy.types.Operator):
         self._cancel = False
         self._error = None
 
+        self._fraction = 0.0
+
         def progress(fraction):
-            settings.progress = fraction   # plain float write, read by the panel
+            # worker thread: touch no Blender data here; modal() copies it
+            self._fraction = fraction
             return not self._cancel
 
         def work():
@@ -182,7 +186,8 @@ class MESHADJUST_OT_simplify(_TargetProps, bpy.types.Operator):
             settings.progress_text = "Cancelling..."
         if event.type != 'TIMER':
             return {'RUNNING_MODAL'} if event.type == 'ESC' else {'PASS_THROUGH'}
-        wm.progress_update(int(100 * settings.progress))
+        settings.progress = self._fraction
+        wm.progress_update(int(100 * self._fraction))
         for area in context.screen.areas if context.screen else []:
             if area.type == 'VIEW_3D':
                 area.tag_redraw()
