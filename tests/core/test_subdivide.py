@@ -14,7 +14,8 @@ from hypothesis import given, settings, strategies as st
 from core import _stencils
 from core.errors import InvalidArgumentError, InvalidMeshError
 from core.subdivide import SubdivisionOperator, subdivide, subdivision_operator
-from core.topology import edge_map, euler_characteristic, manifold_report
+from core.mesh import face_normals
+from core.topology import edge_faces as _edge_faces, edge_map, euler_characteristic, manifold_report
 from tests.mesh_factory import (cube, icosahedron, icosphere, load_shared, octahedron, regular_grid,
                                 tetrahedron, torus)
 
@@ -633,19 +634,48 @@ def test_affine_invariance(name, scheme, seed, levels):
 @pytest.mark.parametrize("scheme", ["butterfly", "loop"])
 def test_real_meshes(name, levels, scheme):
     V, F = load_shared(name)
-    used = np.unique(F)
     res = subdivide(V, F, levels=levels, scheme=scheme)
     e = edge_map(F, len(V)).E.shape[0]
     assert res.F.shape[0] == F.shape[0] * 4 ** levels
     if levels == 1:
         assert res.V.shape[0] == len(V) + e
     assert np.isfinite(res.V).all()
-    rep = manifold_report(res.F, res.V.shape[0])
-    assert rep.is_oriented_manifold
-    assert euler_characteristic(res.F, res.V.shape[0]) == euler_characteristic(F, len(V)) \
-        + (len(used) - len(V)) * 0
+    assert manifold_report(res.F, res.V.shape[0]).is_oriented_manifold
+    assert euler_characteristic(res.F, res.V.shape[0]) == euler_characteristic(F, len(V))
     if scheme == "butterfly":
         assert np.array_equal(res.V[:len(V)], V)
-    # the refined surface stays close to the cage (relative to its size)
+    # the refined surface stays near the cage: inside its box grown by 5% of the diagonal
     diag = np.linalg.norm(V.max(0) - V.min(0))
-    assert np.abs(res.V - res.V.clip(V.min(0) - 0.05 * diag, V.max(0) + 0.05 * diag)).max() == 0
+    assert np.all(res.V >= V.min(0) - 0.05 * diag) and np.all(res.V <= V.max(0) + 0.05 * diag)
+
+
+def _dihedral_deg(V, F, pairs):
+    """Dihedral angle (between face normals) at the given interior edges."""
+    em = edge_map(F, len(V))
+    faces, _ = _edge_faces(em)
+    n = len(V)
+    key = em.E[:, 0] * n + em.E[:, 1]
+    p = np.sort(pairs, axis=1)
+    k = np.searchsorted(key, p[:, 0] * n + p[:, 1])
+    N = face_normals(V, F)
+    return np.degrees(np.arccos(np.clip((N[faces[k, 0]] * N[faces[k, 1]]).sum(1), -1, 1)))
+
+
+@pytest.mark.parametrize("scheme", ["butterfly", "loop"])
+def test_fandisk_creases_stay_sharp(scheme):
+    V, F = load_shared("fandisk.obj")
+    em = edge_map(F, len(V))
+    coarse = _dihedral_deg(V, F, em.E)
+    creases = em.E[coarse > 45]
+    # the creases' descendants after two levels: (a, n+k), (b, n+k) per crease k
+    pairs, Fl, nl = creases, F, len(V)
+    for _ in range(2):
+        eml = edge_map(Fl, nl)
+        k = np.searchsorted(eml.E[:, 0] * nl + eml.E[:, 1], pairs[:, 0] * nl + pairs[:, 1])
+        pairs = np.concatenate([np.stack([pairs[:, 0], nl + k], 1), np.stack([pairs[:, 1], nl + k], 1)])
+        Fl, nl = _stencils.split_faces(Fl, nl, eml.face_edge), nl + eml.E.shape[0]
+    sharp = _dihedral_deg(*subdivide(V, F, levels=2, scheme=scheme, creases=creases), pairs)
+    smooth = _dihedral_deg(*subdivide(V, F, levels=2, scheme=scheme), pairs)
+    assert np.median(sharp) > 0.95 * np.median(coarse[coarse > 45])
+    assert np.percentile(sharp, 5) > 60
+    assert np.median(smooth) < 60
