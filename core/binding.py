@@ -347,34 +347,60 @@ def frames(Vf, Nf, corners, bary):
 
 def _frames_t(VfT, NfT, cornersT, baryT):
     """:func:`frames` on transposed, contiguous (3, .) arrays (the fast layout:
-    every operation runs on contiguous rows). Returns (point, tangent,
-    bitangent, normal), each (3, q)."""
+    every operation runs on contiguous rows, in place where it can). Returns
+    (point, tangent, bitangent, normal), each a new (3, q) array."""
     b0, b1, b2 = baryT[0], baryT[1], baryT[2]
     i0, i1, i2 = cornersT[0], cornersT[1], cornersT[2]
-    a = VfT[:, i0]
-    e1 = VfT[:, i1] - a
-    e2 = VfT[:, i2] - a
-    point = a + b1 * e1 + b2 * e2
-    normal = b0 * NfT[:, i0] + b1 * NfT[:, i1] + b2 * NfT[:, i2]
-    normal, bad = _normalise_t(normal, 1.0)
+    point = VfT[:, i0]
+    e1 = VfT[:, i1]
+    e1 -= point
+    e2 = VfT[:, i2]
+    e2 -= point
+    tmp = np.multiply(b1, e1)
+    point += tmp                                   # a + b1 e1
+    np.multiply(b2, e2, out=tmp)
+    point += tmp                                   # ... + b2 e2
+    normal = NfT[:, i0]
+    normal *= b0
+    np.take(NfT, i1, axis=1, out=tmp)
+    tmp *= b1
+    normal += tmp
+    np.take(NfT, i2, axis=1, out=tmp)
+    tmp *= b2
+    normal += tmp
+    bad = _normalise_t(normal, 1.0)
     if bad.any():
-        fn, fbad = _normalise_t(_cross_t(e1[:, bad], e2[:, bad]),
-                                _length_t(e1[:, bad]) * _length_t(e2[:, bad]))
+        fn = _cross_t(e1[:, bad], e2[:, bad])
+        fbad = _normalise_t(fn, _length_t(e1[:, bad]) * _length_t(e2[:, bad]))
         fn[:, fbad] = np.array([[0.0], [0.0], [1.0]])
         normal[:, bad] = fn
-    tangent, bad = _normalise_t(e1 - _dot_t(e1, normal) * normal, _length_t(e1))
+    e1_length = _length_t(e1)
+    np.multiply(_dot_t(e1, normal), normal, out=tmp)
+    tangent = e1
+    tangent -= tmp                                 # e1 - (e1.n) n
+    bad = _normalise_t(tangent, e1_length)
     if bad.any():
         nb = normal[:, bad]
-        e2b = e2[:, bad]
-        t2, bad2 = _normalise_t(e2b - _dot_t(e2b, nb) * nb, _length_t(e2b))
+        t2 = e2[:, bad]
+        t2 -= _dot_t(t2, nb) * nb
+        bad2 = _normalise_t(t2, _length_t(e2[:, bad]))
         if bad2.any():
             # any unit vector perpendicular to the normal
             nn = nb[:, bad2]
             axis = np.zeros_like(nn)
             axis[np.argmin(np.abs(nn), axis=0), np.arange(nn.shape[1])] = 1.0
-            t2[:, bad2] = _normalise_t(axis - _dot_t(axis, nn) * nn, 1.0)[0]
+            axis -= _dot_t(axis, nn) * nn
+            _normalise_t(axis, 1.0)
+            t2[:, bad2] = axis
         tangent[:, bad] = t2
-    return point, tangent, _cross_t(normal, tangent), normal
+    bitangent = tmp
+    np.multiply(normal[1], tangent[2], out=bitangent[0])
+    bitangent[0] -= normal[2] * tangent[1]
+    np.multiply(normal[2], tangent[0], out=bitangent[1])
+    bitangent[1] -= normal[0] * tangent[2]
+    np.multiply(normal[0], tangent[1], out=bitangent[2])
+    bitangent[2] -= normal[1] * tangent[0]
+    return point, tangent, bitangent, normal
 
 
 def _fine_geometry(binding, V_cage_edited, F_cage, where):
@@ -529,9 +555,15 @@ def _to_frame(d, fr):
 
 
 def _from_frame_t(oT, point, tangent, bitangent, normal):
-    """Points ``point + o0 tangent + o1 bitangent + o2 normal`` as (q,3), from (3,q) inputs."""
-    out = point + oT[0] * tangent + oT[1] * bitangent + oT[2] * normal
-    return np.ascontiguousarray(out.T)
+    """Points ``point + o0 tangent + o1 bitangent + o2 normal`` as a (q,3)
+    array, from (3,q) inputs, which it overwrites."""
+    tangent *= oT[0]
+    point += tangent
+    bitangent *= oT[1]
+    point += bitangent
+    normal *= oT[2]
+    point += normal
+    return np.ascontiguousarray(point.T)
 
 
 def _dot(a, b):
@@ -552,8 +584,11 @@ def _cross_t(a, b):
 
 
 def _normalise_t(v, reference):
-    """Unit columns of the (3,q) ``v`` and a mask of columns shorter than
-    ``_DEGENERATE`` times ``reference`` (scalar or per column), left as is."""
+    """Normalise the columns of the (3,q) ``v`` in place; return the mask of
+    columns shorter than ``_DEGENERATE`` times ``reference`` (scalar or per
+    column), which are left as they are."""
     length = _length_t(v)
     bad = ~(length > _DEGENERATE * reference)
-    return v / np.where(bad, 1.0, length), bad
+    length[bad] = 1.0
+    v /= length
+    return bad

@@ -93,6 +93,20 @@ def test_frames_are_orthonormal_and_right_handed(sphere_binding):
     assert (np.einsum("ij,ij->i", fr.normal, fr.point) > 0).all()
 
 
+def test_frames_fall_back_on_degenerate_input():
+    Vf = np.array([[0.0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]])
+    Nf = np.array([[0.0, 0, 1], [0, 0, -1], [0, 0, 1], [1, 0, 0]])
+    corners = np.array([[0, 1, 2],    # blended normal vanishes: face normal
+                        [0, 3, 1],    # first edge along the normal: second edge
+                        [0, 0, 0]])   # no edges at all: any perpendicular
+    bary = np.array([[0.5, 0.5, 0.0], [1.0, 0.0, 0.0], [1.0, 0.0, 0.0]])
+    fr = frames(Vf, Nf, corners, bary)
+    assert np.allclose(fr.normal, [[0, 0, 1], [0, 0, 1], [0, 0, 1]])
+    assert np.allclose(fr.tangent, [[1, 0, 0], [1, 0, 0], [1, 0, 0]])
+    assert np.allclose(fr.bitangent, [[0, 1, 0], [0, 1, 0], [0, 1, 0]])
+    assert np.allclose(fr.point, [[0.5, 0, 0], [0, 0, 0], [0, 0, 0]])
+
+
 # ------------------------------------------------------------------ rigid motion
 @pytest.mark.parametrize("name", ["sphere_binding", "torus_binding"])
 @pytest.mark.parametrize("seed", [0, 1, 2])
