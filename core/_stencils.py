@@ -126,7 +126,7 @@ def crease_edge_ids(creases, E, n, where):
     return np.unique(pos)
 
 
-def fan_ranks(F, opp, corner_ids, where=None):
+def fan_ranks(F, opp, corner_ids, where=None, rank=True):
     """Rotational order of the corners around their vertices.
 
     ``corner_ids`` must hold *all* corners of a set of vertices. Going
@@ -138,7 +138,8 @@ def fan_ranks(F, opp, corner_ids, where=None):
 
     Returns
     -------
-    rank : (q,) int64, position of each corner in its fan, 0 at the head.
+    rank : (q,) int64, position of each corner in its fan, 0 at the head
+        (None when ``rank`` is False: only the manifold check is wanted).
     head : (q,) bool, fan heads.
     Raises InvalidMeshError (when ``where`` is given) if a vertex has more
     than one fan (non-manifold vertex).
@@ -174,6 +175,8 @@ def fan_ranks(F, opp, corner_ids, where=None):
             raise InvalidMeshError(
                 f"{where}: {bad.size} non-manifold vertices (their faces form more than one fan), "
                 f"e.g. vertex {bad[0]}")
+    if not rank:
+        return None, head
     # list ranking along prv, cut at the heads
     pred = np.where(head, me, prv)
     rank = (~head).astype(np.int64)
@@ -267,7 +270,7 @@ def topology(F, n, crease_ids, where, check):
                 f"{where}: duplicate faces (same three vertices), e.g. faces {f0} = {F[f0].tolist()} "
                 f"and {f1} = {F[f1].tolist()}")
     if check and m:
-        fan_ranks(F, opp, np.arange(3 * m, dtype=np.int64), where=where)
+        fan_ranks(F, opp, np.arange(3 * m, dtype=np.int64), where=where, rank=False)
     T = Topology(F, n, E, FE, faces, corners, opp, None, None, None, None, None)
     return mark_sharp(T, crease_ids)
 
@@ -356,16 +359,23 @@ def refine_topology(T):
     FE2[:, 3, :] = inner
     FE2 = FE2.reshape(4 * m, 3)
 
-    # faces / corners of each fine edge, in edge_faces order (smaller half-edge first)
-    faces2 = np.full((E2.shape[0], 2), -1, dtype=np.int64)
-    corners2 = np.full((E2.shape[0], 2), -1, dtype=np.int64)
-    for slot, (fs, cs, ok) in enumerate(((f0, c0, np.ones(e, dtype=bool)), (f1s, c1s, has1))):
-        for step in (1, 2):
-            j = (cs + step) % 3
-            v = F[fs, j]
-            fid = np.where(lo == v, child_lo, child_hi)
-            faces2[fid[ok], slot] = 4 * fs[ok] + j[ok]
-            corners2[fid[ok], slot] = cs[ok]
+    # faces / corners of each fine edge, in edge_faces order (smaller half-edge first).
+    # In f0 the edge runs P0 -> Q0 (corners c0+1, c0+2), in f1 (if any) Q0 -> P0.
+    j1, j2 = _NEXT[c0], _NEXT[_NEXT[c0]]
+    p_is_lo = lo == F[f0, j1]
+    half_p = np.where(p_is_lo, child_lo, child_hi)    # the half at P0
+    half_q = np.where(p_is_lo, child_hi, child_lo)    # the half at Q0
+    e2 = E2.shape[0]
+    faces2 = np.empty((e2, 2), dtype=np.int64)
+    corners2 = np.empty((e2, 2), dtype=np.int64)
+    faces2[half_p, 0], corners2[half_p, 0] = 4 * f0 + j1, c0
+    faces2[half_q, 0], corners2[half_q, 0] = 4 * f0 + j2, c0
+    hp, hq, f1h, c1h = half_p[has1], half_q[has1], f1[has1], c1[has1]
+    faces2[hq, 1], corners2[hq, 1] = 4 * f1h + _NEXT[c1h], c1h
+    faces2[hp, 1], corners2[hp, 1] = 4 * f1h + _NEXT[_NEXT[c1h]], c1h
+    nb = ~has1
+    faces2[half_p[nb], 1] = corners2[half_p[nb], 1] = -1
+    faces2[half_q[nb], 1] = corners2[half_q[nb], 1] = -1
     fm = np.arange(m, dtype=np.int64)[:, None]
     jj = np.arange(3)
     faces2[inner, 0] = 4 * fm + jj
