@@ -68,6 +68,7 @@ _BVH_STEP = 2              # BVH levels descended per traversal step (4 children
 _SLAB_LEVELS = 3           # lowest BVH levels that also get cylinder bounds
 _PAIR_CHUNK = 1 << 18      # target own-cell (query, triangle) pairs per chunk
 _QUERY_CHUNK = 1 << 16     # at most this many queries per chunk
+_KERNEL_BLOCK = 1 << 14    # pairs per kernel call (temporaries of 128 KiB)
 _FRONTIER_CAP = 1 << 21    # BVH frontier pairs before it is split and processed depth first
 _SLACK = 1e-9              # relative slack on pruning tests (keeps rounding conservative)
 
@@ -115,8 +116,14 @@ def _triangle_rows(A, B, C):
     thin = (nn <= _THIN_SIN2 * s_ab * s_ac) | (nn <= _THIN_SIN2 * s_ab * s_bc) \
         | (nn <= _THIN_SIN2 * s_ac * s_bc)
     unit[thin] = 0.0
-    return np.ascontiguousarray(np.vstack([A.T, ab.T, ac.T, s_ab, s_ac, s_abac, unit.T,
-                                           thin.astype(np.float64)]))
+    D = np.empty((16, A.shape[0]))
+    D[0:3] = A.T
+    D[3:6] = ab.T
+    D[6:9] = ac.T
+    D[9], D[10], D[11] = s_ab, s_ac, s_abac
+    D[12:15] = unit.T
+    D[15] = thin
+    return D
 
 
 def _kernel(px, py, pz, D):
@@ -380,8 +387,7 @@ class TriangleIndex:
         self._D = _triangle_rows(A, B, C)
         self._any_thin = bool(self._D[15].any())
         self._build_grid(tlo, thi, A, B, C, extent)
-        self._build_bvh(tlo, thi)
-        self._build_slabs(A, B, C)
+        self._bvh = None                          # built on first need (far queries)
         # bounding disks: centroid, radius (slightly inflated so that rounding never makes
         # the lower bound exceed the true distance) and unit normal, for the cheap test
         centre = (A + B + C) / 3.0
@@ -426,20 +432,18 @@ class TriangleIndex:
         cx = c0[tri, 0] + local % nx
         cy = c0[tri, 1] + (local // nx) % ny
         cz = c0[tri, 2] + local // (nx * ny)
-        # keep only the cells the triangle's plane passes through (conservatively)
-        multi = cnt[tri] > 1
-        if multi.any():
-            sel = np.flatnonzero(multi)
-            t = tri[sel]
-            nrm = np.cross(B[t] - A[t], C[t] - A[t])
-            centre = self._lo + (np.stack([cx[sel], cy[sel], cz[sel]], axis=1) + 0.5) * h
-            dist = np.abs(np.einsum("ij,ij->i", nrm, centre - A[t]))
-            reach = 0.5 * h * np.abs(nrm).sum(axis=1)
-            scale = np.abs(nrm).sum(axis=1) * (np.abs(centre).max(axis=1) + h)
-            drop = dist > reach + _SLACK * scale
-            keep = np.ones(tri.shape[0], dtype=bool)
-            keep[sel[drop]] = False
-            tri, cx, cy, cz = tri[keep], cx[keep], cy[keep], cz[keep]
+        # keep only the cells the triangle's plane passes through (conservatively): with the
+        # unnormalised normal n and o = n.A, drop a cell whose centre x has
+        # |n.x - o| > h/2 (|nx| + |ny| + |nz|) plus a rounding margin
+        nrm = np.cross(B - A, C - A)
+        off = np.einsum("ij,ij->i", nrm, A)
+        l1 = np.abs(nrm).sum(axis=1)
+        reach = 0.5 * h * l1 + _SLACK * l1 * (np.abs(A).max(axis=1) + ext + 2 * h)
+        x0 = self._lo + 0.5 * h
+        dist = np.abs(nrm[tri, 0] * (x0[0] + cx * h) + nrm[tri, 1] * (x0[1] + cy * h)
+                      + nrm[tri, 2] * (x0[2] + cz * h) - off[tri])
+        keep = dist <= reach[tri]
+        tri, cx, cy, cz = tri[keep], cx[keep], cy[keep], cz[keep]
         cell = cx + dims[0] * (cy + dims[1] * cz)
         o = np.argsort(cell, kind="stable")
         self._cell_tri = tri[o].astype(np.int32 if m < 2**31 else np.int64)
@@ -478,23 +482,28 @@ class TriangleIndex:
         m = A.shape[0]
         n_pad = 1 << self._depth
         pad = n_pad * _LEAF - m
-        X = np.concatenate([np.stack([A, B, C], axis=1), np.full((pad, 3, 3), np.nan)])
-        N = np.concatenate([np.cross(B - A, C - A), np.zeros((pad, 3))])
+        # padding repeats the last triangle: a real triangle, so every bound stays valid
+        X = np.stack([A, B, C], axis=1)
+        N = np.cross(B - A, C - A)
+        if pad:
+            X = np.concatenate([X, np.repeat(X[-1:], pad, axis=0)])
+            N = np.concatenate([N, np.zeros((pad, 3))])
+        valid = np.arange(n_pad * _LEAF) < m
         self._slab = {}
         low = min(_SLAB_LEVELS, self._depth + 1)
         for j in range(low):
             g = n_pad >> j
             Xg = X.reshape(g, -1, 3)                                   # (g, 3 * group, 3)
-            cnt = np.sum(~np.isnan(Xg[:, :, 0]), axis=1)
-            c = np.nansum(Xg, axis=1) / np.maximum(cnt, 1)[:, None]
+            cnt = valid.reshape(g, -1).sum(axis=1)
+            c = Xg.mean(axis=1)
             nsum = N.reshape(g, -1, 3).sum(axis=1)
             n = _unit(nsum)
             rel = Xg - c[:, None, :]
             h = np.einsum("gkj,gj->gk", rel, n)
             lat2 = np.einsum("gkj,gkj->gk", rel, rel) - h * h
-            r = np.sqrt(np.maximum(np.fmax.reduce(lat2, axis=1, initial=0.0), 0.0))
-            t = np.fmax.reduce(np.abs(h), axis=1, initial=0.0)
-            size = np.fmax.reduce(np.abs(rel).max(axis=2), axis=1, initial=0.0)
+            r = np.sqrt(np.maximum(lat2.max(axis=1), 0.0))
+            t = np.abs(h).max(axis=1)
+            size = np.abs(rel).max(axis=(1, 2))
             self._store_slab(self._depth - j, c, n, r, t, size, cnt, nsum)
         for level in range(self._depth - low, -1, -1):
             cc, nn, rr, tt, cnt, ns = self._slab_parts[level + 1]
@@ -646,9 +655,18 @@ class TriangleIndex:
             self._fold(q, t, v, w, d2, _run_lengths(q), best)
 
     def _eval(self, PT, q, t):
-        """The exact kernel on the pairs (query columns q of PT, internal triangles t)."""
-        X = np.take(PT, q, axis=1)
-        return _kernel(X[0], X[1], X[2], np.take(self._D, t, axis=1))
+        """The exact kernel on the pairs (query columns q of PT, internal triangles t),
+        in blocks small enough for the temporaries to stay in cache."""
+        k = q.size
+        if k <= _KERNEL_BLOCK:
+            X = np.take(PT, q, axis=1)
+            return _kernel(X[0], X[1], X[2], np.take(self._D, t, axis=1))
+        v, w, d2 = np.empty(k), np.empty(k), np.empty(k)
+        for s in range(0, k, _KERNEL_BLOCK):
+            e = min(s + _KERNEL_BLOCK, k)
+            X = np.take(PT, q[s:e], axis=1)
+            v[s:e], w[s:e], d2[s:e] = _kernel(X[0], X[1], X[2], np.take(self._D, t[s:e], axis=1))
+        return v, w, d2
 
     def _cell_pairs(self, qi, g):
         """Pairs (query, triangle) for the (query, cell) list (qi, g), grouped by query."""
@@ -712,6 +730,13 @@ class TriangleIndex:
         near the surface patch closest to the query without any initial guess.
         """
         m = self.n_faces
+        if self._bvh is None:
+            # corners as the kernel sees them (A + ab, A + ac); bounds carry rounding margins
+            A = self._D[0:3].T
+            B = A + self._D[3:6].T
+            C = A + self._D[6:9].T
+            self._build_bvh(np.minimum(np.minimum(A, B), C), np.maximum(np.maximum(A, B), C))
+            self._build_slabs(A, B, C)
         ub = np.full(PT.shape[1], np.inf)
         for s in range(0, far.size, _QUERY_CHUNK // 4):
             qs = far[s:s + _QUERY_CHUNK // 4]
