@@ -314,3 +314,37 @@ def test_index_real_mesh_bunny():
     assert (r.bary >= 0).all()
     np.testing.assert_allclose(np.einsum("ij,ijk->ik", r.bary, V[F[r.face]]), r.point,
                                atol=1e-12 * diag)
+
+
+def test_bvh_bounds_contain_their_triangles():
+    """Internal invariant of the far-query path: every node's box and cylinder contain
+    every vertex of the triangles below it (and the BVH is built lazily, once)."""
+    V, F = torus(30, 12)
+    V = V + 0.02 * np.random.default_rng(0).normal(size=V.shape)
+    index = TriangleIndex(V, F)
+    assert index._bvh is None
+    index.closest([[0.0, 0.0, 50.0]])                 # far: builds the BVH
+    assert index._bvh is not None
+    m = F.shape[0]
+    X = V[F[index._order]]                              # (m, 3, 3) in internal order
+    for level in range(index._depth + 1):
+        group = spatial._LEAF << (index._depth - level)
+        box, slab = index._bvh[level], index._slab[level]
+        for node in range(box.shape[1]):
+            pts = X[node * group:(node + 1) * group].reshape(-1, 3)
+            if pts.size == 0:
+                continue
+            assert (pts >= box[0:3, node]).all() and (pts <= box[3:6, node]).all()
+            rel = pts - slab[0:3, node]
+            h = rel @ slab[3:6, node]
+            lat = np.sqrt(np.maximum(np.einsum("ij,ij->i", rel, rel) - h * h, 0))
+            assert (np.abs(h) <= slab[7, node]).all() and (lat <= slab[6, node]).all()
+
+
+def test_index_reuse_gives_identical_results():
+    V, F = icosphere(3)
+    P = np.random.default_rng(1).normal(size=(500, 3)) * 3
+    index = TriangleIndex(V, F)
+    a = index.closest(P)
+    b = index.closest(P[::-1])
+    assert (a.distance == b.distance[::-1]).all() and (a.face == b.face[::-1]).all()
