@@ -1,12 +1,19 @@
 """Per-level topology and stencil tables for :mod:`core.subdivide` (private).
 
-Everything here works on whole arrays: half-edges are found through
-:func:`core.topology.edge_faces`, one-rings are put in rotational order by
-pointer jumping (list ranking) along the "next face around the vertex" map,
-and stencil rows are assembled by a counting scatter, so no Python loop ever
-runs over vertices, edges or faces. The only loops run over the few distinct
-valences of extraordinary vertices and over the ``log2(valence)`` jumping
-passes.
+Everything here works on whole arrays, so no Python loop ever runs over
+vertices, edges or faces; the only loops run over the few distinct valences of
+extraordinary vertices, over the ``log2(valence)`` pointer-jumping passes and
+over the handful of stencil slots.
+
+* Level 0: one stable sort of the half-edge keys gives the edge map (the same
+  numbering as :func:`core.topology.edge_map`) and each edge's faces (as
+  :func:`core.topology.edge_faces`); the manifold checks run there.
+* Finer levels: :func:`refine_topology` derives the fine edge map, face-edge
+  map and edge faces from the coarse ones by construction (no sort of the
+  fine mesh).
+* One-rings of extraordinary vertices are put in rotational order by pointer
+  jumping (list ranking) along the "next face around the vertex" map.
+* Stencil rows are assembled by a counting scatter into CSR (rows sorted).
 
 Corner ``x = 3 f + c`` is corner ``c`` of face ``f``; the half-edge "opposite
 corner ``x``" runs ``F[f, c+1] -> F[f, c+2]`` (indices mod 3), the same

@@ -145,7 +145,7 @@ from typing import NamedTuple
 import numpy as np
 
 from . import _stencils as _st
-from .errors import InvalidArgumentError, InvalidMeshError
+from .errors import InvalidArgumentError
 from .mesh import check_mesh
 
 SCHEMES = ("butterfly", "loop")
@@ -285,9 +285,10 @@ class SubdivisionOperator:
             mask = np.zeros(self.n_coarse, dtype=bool)
             mask[ids] = True
         for S in self.stencils:
+            if S.n_out == 0:
+                return np.zeros(0, dtype=bool)
             hit = mask[S.cols] & (S.weights != 0)
-            mask = np.add.reduceat(hit.astype(np.int64), S.indptr[:-1]) > 0 if S.n_out else \
-                np.zeros(0, dtype=bool)
+            mask = np.add.reduceat(hit.astype(np.int64), S.indptr[:-1]) > 0
         return mask
 
     def fine_vertex_parent(self):
@@ -371,7 +372,6 @@ def _build(F, n, levels, scheme, creases, where):
     level_fn = _st.butterfly_level if scheme == "butterfly" else _st.loop_level
     stencils = []
     T = _st.mark_sharp(T, cids)
-    no_creases = np.zeros(0, dtype=np.int64)
     for lev in range(levels):
         if lev > 0:
             T_prev = T
@@ -382,7 +382,6 @@ def _build(F, n, levels, scheme, creases, where):
         stencils.append(level_fn(T))
     Fl, nl = (T.F, T.n) if levels == 0 else \
         (_st.split_faces(T.F, T.n, T.face_edge), T.n + T.E.shape[0])
-    m = F.shape[0]
     f2c = np.arange(Fl.shape[0], dtype=np.int64) // (4 ** levels)
     return SubdivisionOperator(
         n_coarse=n, n_fine=nl, F_fine=Fl, fine_to_coarse_face=f2c, scheme=scheme, levels=levels,
