@@ -636,13 +636,14 @@ class TriangleIndex:
         best.v[qq] = v[win]
         best.w[qq] = w[win]
 
-    def _scan(self, PT, q, t, best):
+    def _scan(self, PT, q, t, best, probe=True):
         """Exact minimum over candidate pairs (q, t), grouped contiguously by query.
 
         A cheap lower bound discards most pairs: squared height above the triangle's plane
-        plus the squared lateral excess beyond its bounding disk (centroid, radius). First
-        the pair with the smallest bound is evaluated exactly (a tight upper bound), then
-        only the pairs whose lower bound is within it.
+        plus the squared lateral excess beyond its bounding disk (centroid, radius). With
+        ``probe``, the pair with the smallest bound is evaluated exactly first (a tight
+        upper bound), then only the pairs whose lower bound is within it; without (when
+        the queries already have a tight bound), every pair within the bound at once.
         """
         if q.size == 0:
             return
@@ -663,6 +664,10 @@ class TriangleIndex:
         if keep.size == 0:
             return
         q, t, lb = q[keep], t[keep], lb[keep]
+        if not probe:
+            v, w, d2 = self._eval(PT, q, t)
+            self._fold(q, t, v, w, d2, _run_lengths(q), best)
+            return
         counts = _run_lengths(q)
         first = _group_argmin(lb, counts)
         qa, ta = q[first], t[first]
@@ -740,7 +745,7 @@ class TriangleIndex:
             cheb = np.abs(g3 - cc[qi[sel]][own]).max(axis=1)
             keep = (cheb > reach[sel][own]) & (dd2 <= u2[sel][own] * (1 + 4 * _SLACK))
             keep &= start[g + 1] > start[g]
-            self._scan(PT, *self._cell_pairs(qi[sel][own[keep]], g[keep]), best)
+            self._scan(PT, *self._cell_pairs(qi[sel][own[keep]], g[keep]), best, probe=False)
         return qi[far]
 
     def _bvh_query(self, PT, far, best):
@@ -773,7 +778,7 @@ class TriangleIndex:
                     self._scan_leaves(PT, q[first], node[first], best)
                     rest = near2 <= best.d2[q] * (1 + 4 * _SLACK)
                     rest[first] = False
-                    self._scan_leaves(PT, q[rest], node[rest], best)
+                    self._scan_leaves(PT, q[rest], node[rest], best, probe=False)
                     continue
                 # descend _BVH_STEP levels at once (a 2**_BVH_STEP-ary tree)
                 step = min(_BVH_STEP, self._depth - level)
@@ -821,10 +826,10 @@ class TriangleIndex:
                 elif q.size:
                     stack.append((level + 1, q, child, near2))
 
-    def _scan_leaves(self, PT, q, leaf, best):
+    def _scan_leaves(self, PT, q, leaf, best, probe=True):
         t, own = _ragged(leaf * _LEAF, np.full(q.size, _LEAF, dtype=np.int64))
         ok = t < self.n_faces
-        self._scan(PT, q[own[ok]], t[ok], best)
+        self._scan(PT, q[own[ok]], t[ok], best, probe)
 
 
 class _Best:
