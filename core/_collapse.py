@@ -30,8 +30,7 @@ _PREV = np.array([2, 0, 1], dtype=np.int64)
 _SQRT3x2 = 2.0 * np.sqrt(3.0)
 _SNAP2 = 1e-12  # (distance / edge length)^2 below which a position is an endpoint
 
-# columns of State.hcache
-_COST, _X, _DIST, _BLK = 0, 1, 4, 5
+_take = np.take
 
 
 class State:
@@ -44,11 +43,20 @@ class State:
         self.orig = np.arange(n, dtype=np.int64)       # clean index of each current vertex
         self.vver = np.full(n, -1, dtype=np.int64)     # pass in which the one-ring last changed
         self.fresh = np.ones(n, dtype=bool)            # quadric / position changed: recost edges
+        self.is_bnd = np.zeros(n, dtype=bool)          # on a boundary edge
+        hb = np.flatnonzero(twin == BOUNDARY)
+        if hb.size:
+            ub, wb = _ends(F, hb)
+            self.is_bnd[ub] = True
+            self.is_bnd[wb] = True
         self.F, self.twin, self.feat = F, twin, feat
         self.blk_pass = np.full(h3, -1, dtype=np.int64)
         self.swap = np.zeros(h3, dtype=bool)           # survivor is the half-edge's second end
-        self.hcache = np.zeros((h3, 6))                # cost, X (3), dist, blocked value
-        self.hcache[:, _BLK] = -1.0
+        # per half-edge cache (on representatives): cost, position, error, blocked value
+        self.c_cost = np.zeros(h3)
+        self.c_x = [np.zeros(h3), np.zeros(h3), np.zeros(h3)]
+        self.c_dist = np.zeros(h3)
+        self.c_blk = np.full(h3, -1.0)
         self.cur_of_clean = np.arange(n, dtype=np.int64)
         self.worst = 0.0
 
@@ -57,7 +65,7 @@ def _ends(F, h):
     """Endpoints (U, W) of half-edges ``h``."""
     Fr = F.ravel()
     base, c = h - h % 3, h % 3
-    return Fr[base + _NEXT[c]], Fr[base + _PREV[c]]
+    return _take(Fr, base + _take(_NEXT, c)), _take(Fr, base + _take(_PREV, c))
 
 
 def _recost(st, rep, U, W, stale, preserve_boundary):
@@ -65,62 +73,52 @@ def _recost(st, rep, U, W, stale, preserve_boundary):
     hs = rep[stale]
     a, b = U[stale], W[stale]
     interior = st.twin[hs] >= 0
-    tw = st.twin
-    hb = np.flatnonzero(tw == BOUNDARY)
-    is_bnd = np.zeros(st.V.shape[0], dtype=bool)
-    if hb.size:
-        ub, wb = _ends(st.F, hb)
-        is_bnd[ub] = True
-        is_bnd[wb] = True
-    lock = st.locked
-    valid = ~(lock[a] & lock[b]) & ~(interior & is_bnd[a] & is_bnd[b])
+    is_bnd, lock = st.is_bnd, st.locked
+    la, lb, ba, bb = lock[a], lock[b], is_bnd[a], is_bnd[b]
+    valid = ~(la & lb) & ~(interior & ba & bb)
     if preserve_boundary:  # a boundary vertex never merges into a locked interior one
-        valid &= ~(interior & ((lock[a] & is_bnd[b]) | (lock[b] & is_bnd[a])))
+        valid &= ~(interior & ((la & bb) | (lb & ba)))
     # survivor: a locked endpoint, else the boundary endpoint of an interior edge
-    swap = lock[b] | (~lock[a] & preserve_boundary & interior & is_bnd[b])
+    swap = lb | (~la & preserve_boundary & interior & bb)
     a, b = np.where(swap, b, a), np.where(swap, a, b)
-    Qe = st.Q[a] + st.Q[b]
-    X, err = optimal_placement(Qe, st.V[a], st.V[b])
+    la, ba = np.where(swap, lb, la), np.where(swap, bb, ba)
+    Qe = _take(st.Q, a, axis=0)
+    Qe += _take(st.Q, b, axis=0)
+    Va, Vb = _take(st.V, a, axis=0), _take(st.V, b, axis=0)
+    X, err = optimal_placement(Qe, Va, Vb)
     # a position within round-off of an endpoint is that endpoint (it stays exact)
-    E = st.V[b] - st.V[a]
+    E = Vb - Va
     tol2 = _SNAP2 * np.einsum("ij,ij->i", E, E)
-    for P in (st.V[b], st.V[a]):
-        D = X - P
-        near = np.einsum("ij,ij->i", D, D) <= tol2
-        X[near] = P[near]
-    pin = lock[a] | (preserve_boundary & interior & is_bnd[a])
-    if pin.any():
-        X[pin] = st.V[a[pin]]
-        err[pin] = quadric_error(Qe[pin], X[pin])
-    c = st.hcache
-    c[hs, _COST] = np.where(valid, err, np.inf)
-    c[hs, _X:_X + 3] = X
-    c[hs, _DIST] = quadric_distance(Qe, err)
+    D = X - Vb
+    snap_b = np.einsum("ij,ij->i", D, D) <= tol2
+    D = X - Va
+    pin = (np.einsum("ij,ij->i", D, D) <= tol2) | la | (preserve_boundary & interior & ba)
+    snap_b &= ~pin
+    X[snap_b] = Vb[snap_b]
+    X[pin] = Va[pin]
+    fix = np.flatnonzero(pin | snap_b)
+    if fix.size:
+        err[fix] = quadric_error(Qe[fix], X[fix])
+    st.c_cost[hs] = np.where(valid, err, np.inf)
+    for j in range(3):
+        st.c_x[j][hs] = X[:, j]
+    st.c_dist[hs] = quadric_distance(Qe, err)
     st.swap[hs] = swap
 
 
-def _check(st, A, B, X, interior, faces, tun):
+def _check(st, A, B, X, interior, star, kf, tun):
     """Validity and compactness penalty of independent collapses B[k] -> A[k]
     at X[k], judged on the current mesh.
 
-    ``faces`` must contain every face around the endpoints. Returns
-    ``ok`` (k,) bool, ``penalty`` (k,), and the star: face ids, their
-    collapse index, and whether each face is removed by the collapse.
+    ``star`` lists every face around the endpoints, ``kf`` the collapse each
+    belongs to. Returns ``ok`` (k,) bool, ``penalty`` (k,), and the star:
+    face ids, their collapse index, and whether each face is removed.
     """
     F, V = st.F, st.V
     n, k = V.shape[0], A.size
-    eov = np.full(n, -1, dtype=np.int64)
-    kk = np.arange(k, dtype=np.int64)
-    eov[A] = kk
-    eov[B] = kk
-    fe = eov[F[faces]]
-    inside = (fe >= 0).any(axis=1)
-    star = faces[inside]
-    fe = fe[inside]
-    kf = fe.max(axis=1)
-    Fs = F[star]
-    isA = Fs == A[kf][:, None]
-    isB = Fs == B[kf][:, None]
+    Fs = _take(F, star, axis=0)
+    isA = Fs == _take(A, kf)[:, None]
+    isB = Fs == _take(B, kf)[:, None]
     coll = isA.any(axis=1) & isB.any(axis=1)
     ok = np.ones(k, dtype=bool)
 
@@ -169,11 +167,11 @@ def _check(st, A, B, X, interior, faces, tun):
     # --- geometry of the faces that move
     mv = ~coll
     mk = kf[mv]
-    P = V[Fs[mv]]                                   # (s,3,3)
+    P = _take(V, np.compress(mv, Fs, axis=0), axis=0)   # (s,3,3)
     N0 = np.cross(P[:, 1] - P[:, 0], P[:, 2] - P[:, 0])
     Pn = P.copy()
     mc = (isA[mv] | isB[mv])
-    Pn[mc] = X[mk]
+    Pn[mc] = _take(X, mk, axis=0)
     e0, e1, e2 = Pn[:, 1] - Pn[:, 0], Pn[:, 2] - Pn[:, 1], Pn[:, 0] - Pn[:, 2]
     N1 = np.cross(e0, -e2)
     l0 = np.sqrt(np.einsum("ij,ij->i", N0, N0))
@@ -193,7 +191,7 @@ def _check(st, A, B, X, interior, faces, tun):
     np.minimum.at(gmin_old, mk, g_old)
     ok &= ~((gmin_new < tun.gamma_hard) & (gmin_new < 0.5 * gmin_old))
     area = np.bincount(mk, weights=0.5 * l1, minlength=k)
-    D = V[B] - V[A]
+    D = _take(V, B, axis=0) - _take(V, A, axis=0)
     L2 = np.einsum("ij,ij->i", D, D)
     # only collapses that make the neighbourhood less compact than it was pay
     short = np.maximum(0.0, np.minimum(gmin_old, tun.gamma_soft) - gmin_new) / tun.gamma_soft
@@ -224,14 +222,13 @@ def run(st, target, max_err_n, preserve_boundary, progress, m0, tun):
         if stale.any():
             _recost(st, rep, U, W, stale, preserve_boundary)
         st.fresh[:] = False
-        hc = st.hcache[rep]
-        cost = hc[:, _COST]
-        bv = hc[:, _BLK]
-        blocked = (bv >= 0) & (st.blk_pass[rep] > np.maximum(st.vver[U], st.vver[W]))
+        cost = _take(st.c_cost, rep)
+        bv = _take(st.c_blk, rep)
+        blocked = (bv >= 0) & (_take(st.blk_pass, rep) > np.maximum(_take(st.vver, U), _take(st.vver, W)))
         cost = np.where(blocked, np.maximum(cost, bv), cost)
         cand = np.isfinite(cost)
         if max_err_n is not None:
-            within = hc[:, _DIST] <= max_err_n
+            within = _take(st.c_dist, rep) <= max_err_n
             if not (cand & within).any():
                 return ("max_error" if cand.any() else "no_valid_collapse"), passes
             cand &= within
@@ -255,21 +252,22 @@ def run(st, target, max_err_n, preserve_boundary, progress, m0, tun):
         sw = st.swap[ph]
         pa = np.where(sw, W[pool], U[pool])
         pb = np.where(sw, U[pool], W[pool])
-        pX = hc[pool, _X:_X + 3]
+        pX = np.stack([_take(c, ph) for c in st.c_x], axis=1)
         pint = twin[ph] >= 0
         pcost = cost[pool]
-        praw = hc[pool, _COST]
+        praw = _take(st.c_cost, ph)
         # priority: cheaper cost band first; inside a band a fixed pseudo-random
         # order (a hash of the endpoints), so the local minima are dense
         band = (np.arange(P, dtype=np.int64) * tun.bands) // P
         mix = ((pa * np.int64(0x9E3779B1)) ^ (pb * np.int64(0x85EBCA77))) & np.int64(0x7FFFFFFF)
-        order = np.lexsort((np.arange(P), mix, band))
+        order = np.argsort((band << np.int64(32)) | mix, kind="stable")
         pool, ph, sw, pa, pb, pX, pint, pcost, praw = (x[order] for x in (pool, ph, sw, pa, pb, pX, pint, pcost, praw))
         rank_all = np.arange(P, dtype=np.int64)
 
         touched = np.zeros(n, dtype=bool)
         acc_edges, acc_star, acc_kf, acc_coll = [], [], [], []
         active = rank_all
+        FT = np.ascontiguousarray(F.T)
         for _ in range(tun.max_rounds):
             active = active[~touched[pa[active]] & ~touched[pb[active]]]
             if active.size == 0:
@@ -277,21 +275,29 @@ def run(st, target, max_err_n, preserve_boundary, progress, m0, tun):
             vmin = np.full(n, _BIG, dtype=np.int64)
             np.minimum.at(vmin, pa[active], active)
             np.minimum.at(vmin, pb[active], active)
-            fmin = vmin[F].min(axis=1)
+            fmin = np.minimum(np.minimum(_take(vmin, FT[0]), _take(vmin, FT[1])), _take(vmin, FT[2]))
             hit = np.flatnonzero(fmin < _BIG)
+            fh = _take(fmin, hit)
             vmin2 = np.full(n, _BIG, dtype=np.int64)
-            np.minimum.at(vmin2, F[hit].ravel(), np.repeat(fmin[hit], 3))
-            chosen = active == np.minimum(vmin2[pa[active]], vmin2[pb[active]])
+            for j in range(3):
+                np.minimum.at(vmin2, _take(FT[j], hit), fh)
+            chosen = active == np.minimum(_take(vmin2, pa[active]), _take(vmin2, pb[active]))
             sel = active[chosen]
             active = active[~chosen]
-            ok, pen, star, kf, coll = _check(st, pa[sel], pb[sel], pX[sel], pint[sel], hit, tun)
+            # the star of a chosen edge is exactly the set of faces whose minimum is its rank
+            pos = np.full(P, -1, dtype=np.int64)
+            pos[sel] = np.arange(sel.size)
+            in_star = pos[fh] >= 0
+            star = hit[in_star]
+            kf = pos[fh[in_star]]
+            ok, pen, star, kf, coll = _check(st, pa[sel], pb[sel], pX[sel], pint[sel], star, kf, tun)
             total = praw[sel] + pen
             acc = ok & (total <= limit)
             # remember rejections until the neighbourhood changes
             rej = ~acc
             val = np.where(ok[rej], total[rej], np.inf)
             hr = ph[sel[rej]]
-            st.hcache[hr, _BLK] = val
+            st.c_blk[hr] = val
             st.blk_pass[hr] = passes
             if acc.any():
                 keep = acc[kf]
@@ -300,7 +306,7 @@ def run(st, target, max_err_n, preserve_boundary, progress, m0, tun):
                 acc_star.append(star[keep])
                 acc_kf.append(remap_k[kf[keep]] + sum(x.size for x in acc_edges[:-1]))
                 acc_coll.append(coll[keep])
-                touched[F[star[keep]].ravel()] = True
+                touched[_take(F, star[keep], axis=0).ravel()] = True
         if not acc_edges:
             continue
         acc = np.concatenate(acc_edges)
@@ -316,7 +322,7 @@ def run(st, target, max_err_n, preserve_boundary, progress, m0, tun):
                 fk = keep_k[s_kf]
                 s_star, s_coll = s_star[fk], s_coll[fk]
                 s_kf = (np.cumsum(keep_k) - 1)[s_kf[fk]]
-        st.worst = max(st.worst, float(hc[pool[acc], _DIST].max()))
+        st.worst = max(st.worst, float(_take(st.c_dist, ph[acc]).max()))
         st.vver[touched] = passes
         _apply(st, pa[acc], pb[acc], pX[acc], s_star, s_kf, s_coll)
     return "no_valid_collapse", passes
@@ -328,7 +334,7 @@ def _apply(st, A, B, X, star, kf, coll):
     n, m = st.V.shape[0], F.shape[0]
     cf = star[coll]
     ck = kf[coll]
-    Fc = F[cf]
+    Fc = _take(F, cf, axis=0)
     # glue the twins of the two surviving sides of every removed face
     hA = 3 * cf + np.argmax(Fc == A[ck][:, None], axis=1)   # edge (B, c)
     hB = 3 * cf + np.argmax(Fc == B[ck][:, None], axis=1)   # edge (c, A)
@@ -344,26 +350,27 @@ def _apply(st, A, B, X, star, kf, coll):
     st.Q[A] = st.Q[A] + st.Q[B]
     st.V[A] = X
     st.fresh[A] = True
+    st.is_bnd[A] |= st.is_bnd[B]
     # remap vertices, drop the removed faces, compact
     keep_f = np.ones(m, dtype=bool)
     keep_f[cf] = False
     new_f = np.cumsum(keep_f) - 1
     keep_h = np.repeat(keep_f, 3)
-    new_h = 3 * new_f[np.arange(3 * m) // 3] + np.arange(3 * m) % 3
-    tw = twin[keep_h]
-    tw = np.where(tw >= 0, new_h[np.maximum(tw, 0)], tw)
+    h = np.arange(3 * m, dtype=np.int64)
+    new_h = 3 * _take(new_f, h // 3) + h % 3
+    tw = np.compress(keep_h, twin)
+    tw = np.where(tw >= 0, _take(new_h, np.maximum(tw, 0)), tw)
     keep_v = np.ones(n, dtype=bool)
     keep_v[B] = False
     new_v = np.cumsum(keep_v) - 1
     remap = np.arange(n, dtype=np.int64)
     remap[B] = A
-    comp = new_v[remap]
-    st.F = comp[F[keep_f]]
+    comp = _take(new_v, remap)
+    st.F = _take(comp, np.compress(keep_f, F, axis=0))
     st.twin = tw
-    st.feat = st.feat[keep_h]
-    st.swap = st.swap[keep_h]
-    st.blk_pass = st.blk_pass[keep_h]
-    st.hcache = st.hcache[keep_h]
-    for name in ("V", "Q", "locked", "moved", "orig", "vver", "fresh"):
-        setattr(st, name, getattr(st, name)[keep_v])
-    st.cur_of_clean = comp[st.cur_of_clean]
+    for name in ("feat", "swap", "blk_pass", "c_cost", "c_dist", "c_blk"):
+        setattr(st, name, np.compress(keep_h, getattr(st, name)))
+    st.c_x = [np.compress(keep_h, c) for c in st.c_x]
+    for name in ("V", "Q", "locked", "moved", "orig", "vver", "fresh", "is_bnd"):
+        setattr(st, name, np.compress(keep_v, getattr(st, name), axis=0))
+    st.cur_of_clean = _take(comp, st.cur_of_clean)

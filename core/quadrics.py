@@ -186,8 +186,7 @@ def optimal_placement(Q, P0, P1):
     X : (k,3) float64, the chosen positions.
     err : (k,) float64, the quadric error at ``X`` (>= 0).
     """
-    q0, q1, q2, q3, q4, q5 = (Q[:, i] for i in range(6))
-    b = Q[:, 6:9]
+    q0, q1, q2, q3, q4, q5, b0, b1, b2 = np.ascontiguousarray(Q[:, :9].T)
     c00 = q3 * q5 - q4 * q4
     c01 = q2 * q4 - q1 * q5
     c02 = q1 * q4 - q2 * q3
@@ -195,18 +194,24 @@ def optimal_placement(Q, P0, P1):
     c12 = q1 * q2 - q0 * q4
     c22 = q0 * q3 - q1 * q1
     det = q0 * c00 + q1 * c01 + q2 * c02
-    tr = (q0 + q3 + q5) / 3.0
+    tr = (q0 + q3 + q5) * (1.0 / 3.0)
     ok = np.abs(det) > DET_EPS * tr * tr * tr
-    safe = np.where(ok, det, 1.0)
-    X = -np.stack([c00 * b[:, 0] + c01 * b[:, 1] + c02 * b[:, 2],
-                   c01 * b[:, 0] + c11 * b[:, 1] + c12 * b[:, 2],
-                   c02 * b[:, 0] + c12 * b[:, 1] + c22 * b[:, 2]], axis=1) / safe[:, None]
-    D = P1 - P0
+    inv = -1.0 / np.where(ok, det, 1.0)
+    # solve about the edge midpoint (better conditioned): A y = -(A mid + b), X = mid + y
     mid = 0.5 * (P0 + P1)
+    mx, my, mz = mid[:, 0], mid[:, 1], mid[:, 2]
+    r0 = q0 * mx + q1 * my + q2 * mz + b0
+    r1 = q1 * mx + q3 * my + q4 * mz + b1
+    r2 = q2 * mx + q4 * my + q5 * mz + b2
+    y = np.empty_like(mid)
+    y[:, 0] = (c00 * r0 + c01 * r1 + c02 * r2) * inv
+    y[:, 1] = (c01 * r0 + c11 * r1 + c12 * r2) * inv
+    y[:, 2] = (c02 * r0 + c12 * r1 + c22 * r2) * inv
+    D = P1 - P0
     len2 = np.einsum("ij,ij->i", D, D)
-    drift = X - mid
-    ok &= np.einsum("ij,ij->i", drift, drift) <= (MAX_DRIFT * MAX_DRIFT) * len2
-    X = np.where(ok[:, None], X, mid)
+    ok &= np.einsum("ij,ij->i", y, y) <= (MAX_DRIFT * MAX_DRIFT) * len2
+    y[~ok] = 0.0
+    X = mid + y
     err = quadric_error(Q, X)
     bad = np.flatnonzero(~ok)
     if bad.size:

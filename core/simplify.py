@@ -52,7 +52,7 @@ class Tuning:
     feature_weight: float = 3.0      #: crease plane weight, times the edge length squared
     pool_share: float = 0.15         #: at most this share of the candidate edges per pass
     pool_goal_factor: float = 1.5    #: ... and at most this many times the collapses still needed
-    max_rounds: int = 4              #: selection rounds per pass
+    max_rounds: int = 3              #: selection rounds per pass
     bands: int = 8                   #: cost bands of the pool (random order inside a band)
     flip_cos: float = 0.0            #: reject if a face normal turns by more than acos(flip_cos)
     gamma_hard: float = 0.02         #: reject new triangles less compact than this (and than before)
