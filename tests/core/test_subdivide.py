@@ -679,3 +679,16 @@ def test_fandisk_creases_stay_sharp(scheme):
     assert np.median(sharp) > 0.95 * np.median(coarse[coarse > 45])
     assert np.percentile(sharp, 5) > 60
     assert np.median(smooth) < 60
+
+
+@pytest.mark.parametrize("name", ["beetle.obj", "cow.obj", "suzanne.obj"])
+def test_real_non_manifold_meshes_raise_naming_what_manifold_report_finds(name):
+    V, F = load_shared(name)
+    rep = manifold_report(F, len(V))
+    if rep.non_manifold_edges.shape[0]:
+        a, b = rep.non_manifold_edges[0]
+        match = rf"non-manifold edges .*\({a}, {b}\)"
+    else:
+        match = rf"non-manifold vertices .*vertex {rep.non_manifold_vertices[0]}\b"
+    with pytest.raises(InvalidMeshError, match=match):
+        subdivide(V, F, scheme="loop")
