@@ -401,15 +401,14 @@ def split_faces(F, n, face_edge):
     child 0 = (a, mc, mb), 1 = (mc, b, ma), 2 = (mb, ma, c), 3 = (ma, mb, mc).
     """
     m = F.shape[0]
-    mid = n + face_edge
-    a, b, c = F[:, 0], F[:, 1], F[:, 2]
-    ma, mb, mc = mid[:, 0], mid[:, 1], mid[:, 2]
-    out = np.empty((m, 4, 3), dtype=np.int64)
-    out[:, 0, 0], out[:, 0, 1], out[:, 0, 2] = a, mc, mb
-    out[:, 1, 0], out[:, 1, 1], out[:, 1, 2] = mc, b, ma
-    out[:, 2, 0], out[:, 2, 1], out[:, 2, 2] = mb, ma, c
-    out[:, 3, 0], out[:, 3, 1], out[:, 3, 2] = ma, mb, mc
-    return out.reshape(4 * m, 3)
+    A = np.empty((m, 6), dtype=np.int64)      # a, b, c, ma, mb, mc
+    A[:, :3] = F
+    np.add(face_edge, n, out=A[:, 3:])
+    return np.take(A, _CHILD_CORNERS, axis=1).reshape(4 * m, 3)
+
+
+#: columns of (a, b, c, ma, mb, mc) forming children 0..3
+_CHILD_CORNERS = np.array([[0, 5, 4], [5, 1, 3], [4, 3, 2], [3, 4, 5]], dtype=np.int64).ravel()
 
 
 #: barycentric coordinates of child i's corners in the parent face, CHILD_BARY[i, corner] (3,)
