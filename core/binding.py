@@ -351,16 +351,16 @@ def _frames_t(VfT, NfT, cornersT, baryT):
     (point, tangent, bitangent, normal), each a new (3, q) array."""
     b0, b1, b2 = baryT[0], baryT[1], baryT[2]
     i0, i1, i2 = cornersT[0], cornersT[1], cornersT[2]
-    point = VfT[:, i0]
-    e1 = VfT[:, i1]
+    point = np.take(VfT, i0, axis=1)              # np.take: 2-3x faster than VfT[:, i0]
+    e1 = np.take(VfT, i1, axis=1)
     e1 -= point
-    e2 = VfT[:, i2]
+    e2 = np.take(VfT, i2, axis=1)
     e2 -= point
     tmp = np.multiply(b1, e1)
     point += tmp                                   # a + b1 e1
     np.multiply(b2, e2, out=tmp)
     point += tmp                                   # ... + b2 e2
-    normal = NfT[:, i0]
+    normal = np.take(NfT, i0, axis=1)
     normal *= b0
     np.take(NfT, i1, axis=1, out=tmp)
     tmp *= b1
