@@ -667,18 +667,15 @@ def test_fandisk_creases_stay_sharp(scheme):
     em = edge_map(F, len(V))
     coarse = _dihedral_deg(V, F, em.E)
     creases = em.E[coarse > 45]
-    # the creases' descendants after two levels: (a, n+k), (b, n+k) per crease k
-    pairs, Fl, nl = creases, F, len(V)
-    for _ in range(2):
-        eml = edge_map(Fl, nl)
-        k = np.searchsorted(eml.E[:, 0] * nl + eml.E[:, 1], pairs[:, 0] * nl + pairs[:, 1])
-        pairs = np.concatenate([np.stack([pairs[:, 0], nl + k], 1), np.stack([pairs[:, 1], nl + k], 1)])
-        Fl, nl = _stencils.split_faces(Fl, nl, eml.face_edge), nl + eml.E.shape[0]
-    sharp = _dihedral_deg(*subdivide(V, F, levels=2, scheme=scheme, creases=creases), pairs)
-    smooth = _dihedral_deg(*subdivide(V, F, levels=2, scheme=scheme), pairs)
+    # the creases' descendants after one level: (a, n+k), (b, n+k) per crease k
+    n = len(V)
+    k = np.searchsorted(em.E[:, 0] * n + em.E[:, 1], creases[:, 0] * n + creases[:, 1])
+    pairs = np.concatenate([np.stack([creases[:, 0], n + k], 1), np.stack([creases[:, 1], n + k], 1)])
+    sharp = _dihedral_deg(*subdivide(V, F, levels=1, scheme=scheme, creases=creases), pairs)
+    smooth = _dihedral_deg(*subdivide(V, F, levels=1, scheme=scheme), pairs)
     assert np.median(sharp) > 0.95 * np.median(coarse[coarse > 45])
     assert np.percentile(sharp, 5) > 60
-    assert np.median(smooth) < 60
+    assert np.median(smooth) < 0.85 * np.median(sharp)   # without the tags they round off
 
 
 @pytest.mark.parametrize("name", ["beetle.obj", "cow.obj", "suzanne.obj"])
