@@ -74,7 +74,7 @@ __all__ = ["ClosestPoints", "TriangleClosest", "TriangleIndex", "closest_points"
 # --- tolerances and tuning, in one place -------------------------------------------------------
 _THIN_SIN2 = 1e-4          # |ab x ac|^2 < this * |ab|^2 |ac|^2 (and same at B): robust path
 _FLAT_SIN2 = 1e-16         # below this sin^2 at A a triangle is treated as its three edges
-_CELL_FACTOR = 1.0         # grid cell size = this * mean triangle bounding-box extent
+_CELL_FACTOR = 1.5         # grid cell size = this * mean triangle bounding-box extent
 _MAX_CELLS = 1 << 23       # dense grid cap (int64 offsets: 64 MiB)
 _MAX_REFS_PER_FACE = 12    # grow the cells if triangles would be referenced more often
 _MAX_PHASE2_CELLS = 64     # queries whose ball spans more cells go to the BVH

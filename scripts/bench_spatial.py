@@ -103,12 +103,12 @@ def diagonal(V):
 
 
 def run_ours(V, F, P):
-    t0 = time.perf_counter()
+    c0, t0 = time.process_time(), time.perf_counter()
     index = TriangleIndex(V, F)
     t1 = time.perf_counter()
     r = index.closest(P)
-    t2 = time.perf_counter()
-    return t1 - t0, t2 - t1, r.distance
+    c2, t2 = time.process_time(), time.perf_counter()
+    return t1 - t0, t2 - t1, c2 - c0, r.distance
 
 
 def run_blender(V, F, P):
@@ -117,12 +117,13 @@ def run_blender(V, F, P):
     t0 = time.perf_counter()
     verts, polys, pts = V.tolist(), F.tolist(), P.tolist()
     t1 = time.perf_counter()
+    c1 = time.process_time()
     tree = BVHTree.FromPolygons(verts, polys, all_triangles=True)
     t2 = time.perf_counter()
     find = tree.find_nearest
     d = np.array([find(p)[3] for p in pts])
-    t3 = time.perf_counter()
-    return t1 - t0, t2 - t1, t3 - t2, d
+    c3, t3 = time.process_time(), time.perf_counter()
+    return t1 - t0, t2 - t1, t3 - t2, c3 - c1, d
 
 
 def main():
@@ -131,6 +132,7 @@ def main():
     ap.add_argument("--no-blender", action="store_true", help="skip the Blender runs")
     args = ap.parse_args()
     quick = args.quick
+    load0 = os.getloadavg()[0]
     rng = np.random.default_rng(0)
     n_pts = 200_000 if quick else 1_000_000
 
@@ -171,11 +173,11 @@ def main():
 
     rows = []
     for name, V, F, P in cases:
-        tb, tq, d = run_ours(V, F, P)
-        row = dict(name=name, ours_build=tb, ours_query=tq)
+        tb, tq, tc, d = run_ours(V, F, P)
+        row = dict(name=name, ours_build=tb, ours_query=tq, ours_cpu=tc)
         if not args.no_blender:
-            tl, bb, bq, db = run_blender(V, F, P)
-            row.update(bl_list=tl, bl_build=bb, bl_query=bq,
+            tl, bb, bq, bc, db = run_blender(V, F, P)
+            row.update(bl_list=tl, bl_build=bb, bl_query=bq, bl_cpu=bc,
                        diff=100 * float(np.max(np.abs(d - db))) / diagonal(V))
         rows.append(row)
         print(row, flush=True)
@@ -196,17 +198,21 @@ def main():
 
     lines = ["# Closest points: core.spatial vs Blender BVHTree.find_nearest", "",
              "`python scripts/bench_spatial.py%s` (bpy %s, NumPy %s, 2-core machine shared "
-             "with other jobs: wall-clock times vary by up to 2x between runs)." % (
+             "with other jobs: wall-clock times vary by up to 2x between runs; the CPU-time "
+             "ratio, build + query, is the steadier comparison)." % (
                  " --quick" if quick else "", _bpy_version(), np.__version__), "",
+             "Load average (1 min) at the start and the end: %.1f, %.1f." % (
+                 load0, os.getloadavg()[0]),
+             "",
              "| case | ours: build | ours: query | Blender: build | Blender: query loop "
-             "| query ratio (ours / Blender) | total ratio | max diff (% diag) |",
+             "| ratio (ours / Blender), wall | ratio, CPU time | max diff (% diag) |",
              "| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: |"]
     for r in rows:
         if "bl_query" in r:
             lines.append("| %s | %.2f s | %.2f s | %.2f s | %.2f s | %.2f | %.2f | %.1e |" % (
                 r["name"], r["ours_build"], r["ours_query"], r["bl_build"], r["bl_query"],
-                r["ours_query"] / r["bl_query"],
-                (r["ours_build"] + r["ours_query"]) / (r["bl_build"] + r["bl_query"]), r["diff"]))
+                (r["ours_build"] + r["ours_query"]) / (r["bl_build"] + r["bl_query"]),
+                r["ours_cpu"] / r["bl_cpu"], r["diff"]))
         else:
             lines.append("| %s | %.2f s | %.2f s | - | - | - | - | - |" % (
                 r["name"], r["ours_build"], r["ours_query"]))

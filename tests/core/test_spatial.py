@@ -316,9 +316,10 @@ def test_index_real_mesh_bunny():
                                atol=1e-12 * diag)
 
 
-def test_bvh_bounds_contain_their_triangles():
+def test_bvh_bounds_contain_their_triangles(monkeypatch):
     """Internal invariant of the far-query path: every node's box and cylinder contain
     every vertex of the triangles below it (and the BVH is built lazily, once)."""
+    monkeypatch.setattr(spatial, "_MAX_PHASE2_CELLS", 1)
     V, F = torus(30, 12)
     V = V + 0.02 * np.random.default_rng(0).normal(size=V.shape)
     index = TriangleIndex(V, F)
