@@ -123,6 +123,8 @@ def fit_cage(V_dense, F_dense, V_cage, F_cage, *, levels=2, scheme="butterfly", 
     V_dense = V_dense - centre
     V_cage = V_cage - centre
     n_c = V_cage.shape[0]
+    if creases is not None and np.asarray(creases).size == 0:
+        creases = None                      # as bind does: same operator, same fingerprint
     op = subdivision_operator(F_cage, n_c, levels=levels, scheme=scheme, creases=creases)
     Ff = op.F_fine
     if samples is None:

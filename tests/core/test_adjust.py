@@ -11,15 +11,11 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from tests.core._standins_adjust import ensure_core_modules
-
-ensure_core_modules()
-
-from core.adjust import Binding, bind, deform, frames, refine  # noqa: E402
-from core.errors import InvalidArgumentError, InvalidMeshError, TopologyMismatchError  # noqa: E402
-from core.mesh import bbox_diagonal, vertex_normals  # noqa: E402
-from core.spatial import closest_points  # noqa: E402
-from tests.mesh_factory import cube, icosphere, load_shared, torus  # noqa: E402
+from core.adjust import Binding, bind, deform, frames, refine
+from core.errors import InvalidArgumentError, InvalidMeshError, TopologyMismatchError
+from core.mesh import bbox_diagonal, vertex_normals
+from core.spatial import closest_points
+from tests.mesh_factory import cube, icosphere, load_shared, torus
 
 
 def _bumpy_sphere(k=3, amp=0.03, seed=0):

@@ -3,17 +3,13 @@
 import numpy as np
 import pytest
 
-from tests.core._standins_adjust import ensure_core_modules
-
-ensure_core_modules()
-
-from core.adjust import fit_cage  # noqa: E402
-from core.cg import conjugate_gradient  # noqa: E402
-from core.errors import InvalidArgumentError, InvalidMeshError  # noqa: E402
-from core.mesh import bbox_diagonal, enclosed_volume  # noqa: E402
-from core.spatial import closest_points  # noqa: E402
-from core.subdivide import subdivision_operator  # noqa: E402
-from tests.mesh_factory import icosphere, load_shared, torus  # noqa: E402
+from core.adjust import fit_cage
+from core.cg import conjugate_gradient
+from core.errors import InvalidArgumentError, InvalidMeshError
+from core.mesh import bbox_diagonal, enclosed_volume
+from core.spatial import closest_points
+from core.subdivide import subdivision_operator
+from tests.mesh_factory import icosphere, load_shared, torus
 
 
 # ------------------------------------------------------------------ conjugate gradients
