@@ -53,42 +53,47 @@ def plane_quadrics(normals, offsets, weights):
     n = np.asarray(normals, dtype=np.float64)
     d = np.asarray(offsets, dtype=np.float64)
     w = np.asarray(weights, dtype=np.float64)
-    nx, ny, nz = n[:, 0], n[:, 1], n[:, 2]
-    Q = np.empty((n.shape[0], N_COEFFS))
-    Q[:, 0] = nx * nx
-    Q[:, 1] = nx * ny
-    Q[:, 2] = nx * nz
-    Q[:, 3] = ny * ny
-    Q[:, 4] = ny * nz
-    Q[:, 5] = nz * nz
-    Q[:, 6] = nx * d
-    Q[:, 7] = ny * d
-    Q[:, 8] = nz * d
-    Q[:, 9] = d * d
-    Q[:, :10] *= w[:, None]
-    Q[:, 10] = w
-    return Q
+    nx, ny, nz = (np.ascontiguousarray(n[:, i]) for i in range(3))
+    wx, wy, wz, wd = w * nx, w * ny, w * nz, w * d
+    # built coefficient-major, returned as a (k,11) view (accumulate needs no copy)
+    QT = np.empty((N_COEFFS, n.shape[0]))
+    np.multiply(wx, nx, out=QT[0])
+    np.multiply(wx, ny, out=QT[1])
+    np.multiply(wx, nz, out=QT[2])
+    np.multiply(wy, ny, out=QT[3])
+    np.multiply(wy, nz, out=QT[4])
+    np.multiply(wz, nz, out=QT[5])
+    np.multiply(wd, nx, out=QT[6])
+    np.multiply(wd, ny, out=QT[7])
+    np.multiply(wd, nz, out=QT[8])
+    np.multiply(wd, d, out=QT[9])
+    QT[10] = w
+    return QT.T
 
 
-def face_quadrics(V, F, *, area_power=1.0):
+def face_quadrics(V, F, *, area_power=1.0, return_normals=False):
     """Area-weighted plane quadric of every face, ``(m, 11)``.
 
     The weight of face ``f`` is ``A_f^p * mean(A)^(1-p)`` with
     ``p = area_power``: 1 is Garland & Heckbert's area weighting, 0 weighs
     every plane the same (as Blender's Decimate does); any ``p`` keeps the
     weight an area, so the error stays unit-independent. Degenerate faces
-    (zero area) get a zero quadric.
+    (zero area) get a zero quadric. With ``return_normals`` also returns the
+    unit face normals (m,3).
     """
-    p0 = V[F[:, 0]]
-    N = np.cross(V[F[:, 1]] - p0, V[F[:, 2]] - p0)
-    length = np.linalg.norm(N, axis=1)
+    p0 = np.take(V, F[:, 0], axis=0)
+    N = np.cross(np.take(V, F[:, 1], axis=0) - p0, np.take(V, F[:, 2], axis=0) - p0)
+    length = np.sqrt(np.einsum("ij,ij->i", N, N))
     unit = np.divide(N, length[:, None], out=np.zeros_like(N), where=length[:, None] > 0)
     d = -np.einsum("ij,ij->i", unit, p0)
     area = 0.5 * length
     if area_power != 1.0 and area.size:
         mean = float(area.mean())
-        area = np.where(area > 0, area ** area_power * mean ** (1.0 - area_power), 0.0) if mean > 0 else area
-    return plane_quadrics(unit, d, area)
+        if mean > 0:
+            pos = area > 0
+            area[pos] = area[pos] ** area_power * mean ** (1.0 - area_power)
+    Q = plane_quadrics(unit, d, area)
+    return (Q, unit) if return_normals else Q
 
 
 def edge_constraint_quadrics(V, E, face_normals, weights):

@@ -151,19 +151,12 @@ def _check_args(n, target_faces, ratio, max_error, feature_angle_deg, vertex_wei
     return w, lk
 
 
-def _unit_normals(P0, P1, P2):
-    N = np.cross(P1 - P0, P2 - P0)
-    L = np.linalg.norm(N, axis=1)
-    return np.divide(N, L[:, None], out=np.zeros_like(N), where=L[:, None] > 0), L
-
-
 def _initial_quadrics(V, F, twin, U, W, preserve_boundary, feature_angle_deg, tun):
     """Vertex quadrics with boundary and crease planes, and the crease flags
     per half-edge."""
     n = V.shape[0]
-    Qf = face_quadrics(V, F, area_power=tun.area_power)
+    Qf, Nf = face_quadrics(V, F, area_power=tun.area_power, return_normals=True)
     Q = accumulate(Qf, F.T.ravel(), n, repeat=3)
-    Nf, _ = _unit_normals(V[F[:, 0]], V[F[:, 1]], V[F[:, 2]])
     h = np.arange(twin.size, dtype=np.int64)
     feat = np.zeros(twin.size, dtype=bool)
     items, ends = [], []
