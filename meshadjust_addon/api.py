@@ -261,34 +261,38 @@ def _edited_copy(source, cage):
     return edited
 
 
-def bind_object(cage, *, levels=None, scheme=None):
-    """(Re-)bind the cage's source to the cage's current shape.
+def bind_object(cage, *, levels=None, scheme=None, from_rest=False):
+    """(Re-)bind the cage's source to the cage.
 
     The source's copy (the *edited original*) is created on first use; its
-    vertices are reset to the source's and bound to the cage's subdivision
-    surface. Returns the edited-original object.
+    vertices are reset to the source's and bound to the subdivision surface of
+    the cage as it is now (its shape becomes the rest shape), or, with
+    ``from_rest``, as it was at the last bind (to change levels or scheme
+    without losing an edit). Returns the edited-original object.
     """
     cs = cage.meshadjust
     source = cs.source
     if source is None:
         raise core.MeshAdjustError(f"'{cage.name}' is not a MeshAdjust cage (no source linked)")
-    if levels is not None:
-        cs.levels = levels
-    if scheme is not None:
-        cs.scheme = scheme
-    edited = _edited_copy(source, cage)
+    V_cage = store.load_rest(cage) if from_rest else _cage_in_source_space(cage, source)
+    F_cage, _, creases = store.cage_topology(cage)
+    levels = cs.levels if levels is None else levels
+    scheme = cs.scheme if scheme is None else scheme
     depsgraph = bpy.context.evaluated_depsgraph_get()
     src = mesh_io.read_object(source, depsgraph=depsgraph)
+    binding = core.bind(src.V, src.F, V_cage, F_cage, levels=levels, scheme=scheme,
+                        creases=creases)
+    edited = _edited_copy(source, cage)
     if src.V.shape[0] != len(edited.data.vertices):
         raise core.TopologyMismatchError(
             f"'{source.name}' now has {src.V.shape[0]} vertices, its edited copy "
             f"{len(edited.data.vertices)}: delete '{edited.name}' and bind again")
     mesh_io.write_positions(edited.data, src.V)
-    F_cage, _, creases = store.cage_topology(cage)
-    V_cage = _cage_in_source_space(cage, source)
-    binding = core.bind(src.V, src.F, V_cage, F_cage, levels=cs.levels, scheme=cs.scheme,
-                        creases=creases)
     store.save_binding(edited, binding)
+    if not from_rest:
+        store.save_rest(cage, V_cage)
+    cs.levels = levels
+    cs.scheme = scheme
     cs.fingerprint = binding.fingerprint
     return edited
 
@@ -310,7 +314,7 @@ def fit_cage_object(cage, *, levels=None, scheme=None):
     return fit
 
 
-def refine_object(cage, *, output='EDITED'):
+def refine_object(cage, *, output='EDITED', levels=None, scheme=None):
     """Update the results of an edited cage; returns a :class:`Report`.
 
     ``output``: ``'EDITED'`` (the bound copy of the source, deformed; same
@@ -326,6 +330,8 @@ def refine_object(cage, *, output='EDITED'):
     edited = cs.edited
     if edited is None:
         raise core.MeshAdjustError(f"'{cage.name}' is not bound yet: bind it first")
+    if (levels is not None and levels != cs.levels) or (scheme is not None and scheme != cs.scheme):
+        bind_object(cage, levels=levels, scheme=scheme, from_rest=True)
     binding = store.load_binding(edited, cage)
     V_cage = _cage_in_source_space(cage, source)
     parts = []

@@ -301,12 +301,18 @@ class MESHADJUST_OT_refine(_CageStep, bpy.types.Operator):
     bl_options = {'REGISTER', 'UNDO'}
 
     output: EnumProperty(name="Output", items=OUTPUTS, default='EDITED')
+    levels: IntProperty(name="Levels", default=0, min=0, max=5,
+                        description="Subdivision levels (0: those of the binding); other "
+                                    "values re-bind from the rest shape, keeping the edit")
+    scheme: EnumProperty(name="Scheme", items=[('BOUND', "As bound", "The binding's scheme")]
+                         + SCHEMES, default='BOUND')
     _needs_binding = True
 
     def execute(self, context):
         cage = cage_of(context.active_object)
         try:
-            report = api.refine_object(cage, output=self.output)
+            report = api.refine_object(cage, output=self.output, levels=self.levels or None,
+                                       scheme=None if self.scheme == 'BOUND' else self.scheme)
         except core.TopologyMismatchError as exc:
             self.report({'ERROR'}, f"{exc} (Bind re-binds the changed cage)")
             return {'CANCELLED'}

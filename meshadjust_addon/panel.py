@@ -99,7 +99,15 @@ class MESHADJUST_PT_main(bpy.types.Panel):
             col.prop(cage.meshadjust, "live", toggle=True, icon='PLAY')
         sub = box.column()
         sub.enabled = state["refine"][0]
-        sub.operator("meshadjust.refine", icon='MOD_SUBSURF').output = s.output
+        row = box.row(align=True)
+        row.prop(s, "scheme", text="")
+        row.prop(s, "levels")
+        op = sub.operator("meshadjust.refine", icon='MOD_SUBSURF')
+        op.output = s.output
+        op.levels = s.levels
+        op.scheme = s.scheme
+        if cage is not None and cage.meshadjust.edited is not None:
+            box.label(text=f"Bound: {cage.meshadjust.scheme}, {cage.meshadjust.levels} levels")
         if state["refine"][1]:
             box.label(text=state["refine"][1], icon='INFO')
             if "re-bind" in state["refine"][1]:

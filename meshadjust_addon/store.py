@@ -6,8 +6,9 @@
 * On a small data-only mesh ``<edited>.detail`` (fake user, pointed to from the
   edited object's state): the per-fine-vertex detail as vertex positions, used
   by the *refined mesh* output.
-* On the **cage**: its own topology, and the crease edges as the boolean edge
-  attribute ``meshadjust_crease``.
+* On the **cage**: its own topology, the crease edges as the boolean edge
+  attribute ``meshadjust_crease``, and its rest shape at bind time (source
+  space) as the point attribute ``meshadjust_rest``.
 * On the edited object's :class:`MeshAdjustObjectState`: levels, scheme and the
   cage fingerprint.
 
@@ -15,6 +16,8 @@ All of it survives save and reload; a :class:`core.binding.Binding` is rebuilt
 from it (and cached for the session, so live edits do not rebuild the
 subdivision operator).
 """
+
+import contextlib
 
 import bpy
 import numpy as np
@@ -26,6 +29,7 @@ FACE = "meshadjust_face"
 BARY = "meshadjust_bary"
 OFFSET = "meshadjust_offset"
 CREASE = "meshadjust_crease"
+REST = "meshadjust_rest"
 
 _cache = {}
 
@@ -55,31 +59,50 @@ def _get_point_attr(mesh, name, kind):
     return buf.reshape(n, 3).astype(np.float64)
 
 
+@contextlib.contextmanager
+def _readable_cage_mesh(cage):
+    """The cage's mesh with its attributes readable: the mesh itself, or in
+    Edit Mode (where ``attributes`` lists the BMesh layers) its evaluated
+    copy, which has the same topology when the cage has no modifiers."""
+    if cage.mode == 'EDIT':
+        cage.update_from_editmode()
+    if not cage.data.is_editmode:
+        yield cage.data
+        return
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    ob_eval = cage.evaluated_get(depsgraph)
+    mesh = ob_eval.to_mesh()
+    try:
+        if len(mesh.vertices) != len(cage.data.vertices) or \
+                len(mesh.edges) != len(cage.data.edges):
+            raise core.MeshAdjustError(f"'{cage.name}' has modifiers that change its topology: "
+                                       "leave Edit Mode to refine")
+        yield mesh
+    finally:
+        ob_eval.to_mesh_clear()
+
+
 def cage_topology(cage):
     """(F_cage, n_cage, creases) of a cage object, read from its mesh (an
     Edit Mode cage is synced first)."""
-    if cage.mode == 'EDIT':
-        cage.update_from_editmode()
+    with _readable_cage_mesh(cage) as mesh:
+        creases = mesh_io.get_edge_flags(mesh, CREASE)
     F, _ = mesh_io.read_triangles(cage.data)
-    n = len(cage.data.vertices)
-    if cage.data.is_editmode:
-        # Edit Mode hides the mesh's own attributes behind the BMesh layers:
-        # read the edge flags from the evaluated copy (same topology without
-        # modifiers)
-        depsgraph = bpy.context.evaluated_depsgraph_get()
-        ob_eval = cage.evaluated_get(depsgraph)
-        mesh = ob_eval.to_mesh()
-        try:
-            same = len(mesh.vertices) == n and len(mesh.edges) == len(cage.data.edges)
-            creases = mesh_io.get_edge_flags(mesh, CREASE) if same else None
-        finally:
-            ob_eval.to_mesh_clear()
-        if creases is None:
-            raise core.MeshAdjustError(f"'{cage.name}' has modifiers that change its topology: "
-                                       "leave Edit Mode to refine")
-    else:
-        creases = mesh_io.get_edge_flags(cage.data, CREASE)
-    return F, n, (creases if creases.shape[0] else None)
+    return F, len(cage.data.vertices), (creases if creases.shape[0] else None)
+
+
+def save_rest(cage, V_rest):
+    """Keep the cage's rest positions (source space) on the cage, so a
+    binding with other levels or scheme can be made after the cage was edited."""
+    _set_point_attr(cage.data, REST, 'FLOAT_VECTOR', V_rest)
+
+
+def load_rest(cage):
+    """The cage's rest positions (source space) saved at bind time."""
+    with _readable_cage_mesh(cage) as mesh:
+        if mesh.attributes.get(REST) is None:
+            raise core.MeshAdjustError(f"'{cage.name}' has no rest shape: bind it first")
+        return _get_point_attr(mesh, REST, 'FLOAT_VECTOR')
 
 
 def save_binding(edited, binding):

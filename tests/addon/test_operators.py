@@ -316,3 +316,16 @@ def test_preferences_defaults_reach_new_scenes(addon, scene):
         assert (s.target_faces, s.levels, s.initialized) == (1234, 3, True)
     finally:
         prefs.default_faces, prefs.default_levels, prefs.default_scheme = saved
+
+
+def test_refine_with_other_levels_and_scheme_keeps_the_edit(dense):
+    simplify(300)
+    cage = dense.meshadjust.cage
+    Vc = mio().read_positions(cage.data)
+    mio().write_positions(cage.data, Vc + [0.0, 0.0, 0.2])      # the edit: a translation
+    assert bpy.ops.meshadjust.refine(output='BOTH', levels=1, scheme='loop') == {'FINISHED'}
+    assert (cage.meshadjust.levels, cage.meshadjust.scheme) == (1, 'loop')
+    assert len(cage.meshadjust.refined.data.polygons) == 4 * 300
+    dz = mio().read_positions(cage.meshadjust.edited.data)[:, 2] - \
+        mio().read_positions(dense.data)[:, 2]
+    assert np.allclose(dz, 0.2, atol=1e-4)   # re-bound from the rest shape: the edit survives
