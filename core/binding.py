@@ -25,9 +25,9 @@ The binding's arrays are meant to be read-only: the cache is built from them.
 The same frames carry the detail for :func:`refine`: each fine vertex is seen
 as the corner of its first incident fine face (barycentric coordinates a unit
 vector), its frame is built exactly like a dense vertex's, and the offset to
-the dense surface is stored in it (the closest point, searched in the
-two-ring of the nearest bound dense vertex: no spatial index over the dense
-mesh is needed, see :func:`_dense_points_near`).
+the dense surface is stored in it: the closest point (an index over the dense
+mesh), or for very large dense meshes a point found by a local search
+around the bound dense vertices (no index: see :func:`_dense_points_near`).
 
 Properties (tested): ``deform(bind(D, C), C) == D`` to rounding; a rigid motion
 of the cage moves the dense mesh rigidly; moving one cage vertex moves only the
@@ -46,6 +46,11 @@ from .subdivide import subdivision_operator
 
 #: relative length under which a normal or tangent counts as degenerate
 _DEGENERATE = 1e-12
+
+#: dense meshes up to this many faces get an exact spatial index for the
+#: refine detail (``detail_search="auto"``); larger ones the local search
+_EXACT_DETAIL_FACES = 500_000
+_DETAIL_SEARCHES = ("auto", "exact", "local")
 
 #: keys of :meth:`Binding.to_arrays`
 _ARRAY_KEYS = ("fine_face", "bary", "offset", "fine_detail", "F_cage", "n_cage", "levels",
@@ -206,7 +211,8 @@ class Binding:
         return normal_changed[self._cache["corners_t"]].any(axis=0)
 
 
-def bind(V_dense, F_dense, V_cage, F_cage, *, levels=2, scheme="butterfly", creases=None):
+def bind(V_dense, F_dense, V_cage, F_cage, *, levels=2, scheme="butterfly", creases=None,
+         detail_search="auto"):
     """Bind a dense mesh to the subdivision surface of a cage.
 
     Parameters
@@ -223,6 +229,14 @@ def bind(V_dense, F_dense, V_cage, F_cage, *, levels=2, scheme="butterfly", crea
         ``"butterfly"`` or ``"loop"`` (whatever ``subdivision_operator`` accepts).
     creases : None or (k,2) int
         Cage edges refined as sharp curves.
+    detail_search : {"auto", "exact", "local"}
+        How the refine detail (the dense surface point of each fine vertex)
+        is found: ``"exact"`` builds a :class:`~.spatial.TriangleIndex` over
+        the dense mesh (the closest point); ``"local"`` searches around the
+        dense vertices bound near each fine vertex, without an index (for
+        very large meshes: the closest point for about 99.5% of fine
+        vertices, a farther point of the dense surface for the rest);
+        ``"auto"`` is exact up to 500,000 dense faces.
 
     Returns
     -------
@@ -242,6 +256,9 @@ def bind(V_dense, F_dense, V_cage, F_cage, *, levels=2, scheme="butterfly", crea
     V_dense, F_dense = check_mesh(V_dense, F_dense, where="bind")
     V_cage, F_cage = check_mesh(V_cage, F_cage, where="bind", allow_empty=False)
     creases = _normalise_creases(creases, "bind")
+    if detail_search not in _DETAIL_SEARCHES:
+        raise InvalidArgumentError(
+            f"bind: detail_search must be one of {_DETAIL_SEARCHES}, got {detail_search!r}")
     op = subdivision_operator(F_cage, V_cage.shape[0], levels=levels, scheme=scheme,
                               creases=creases)
     Vf = op.apply(V_cage)
@@ -256,7 +273,12 @@ def bind(V_dense, F_dense, V_cage, F_cage, *, levels=2, scheme="butterfly", crea
     fine_detail = np.zeros((op.n_fine, 3))
     if F_dense.shape[0]:
         vfr = frames(Vf, Nf, op.F_fine[d_face], d_bary)
-        q = _dense_points_near(V_dense, F_dense, fine_face, op.F_fine, vfr.point)
+        exact = detail_search == "exact" or (
+            detail_search == "auto" and F_dense.shape[0] <= _EXACT_DETAIL_FACES)
+        if exact:
+            q = TriangleIndex(V_dense, F_dense).closest(vfr.point).point
+        else:
+            q = _dense_points_near(V_dense, F_dense, fine_face, op.F_fine, vfr.point)
         fine_detail = _to_frame(q - vfr.point, vfr)
     return Binding(fine_face=fine_face, bary=bary, offset=offset, fine_detail=fine_detail,
                    F_cage=F_cage, n_cage=int(V_cage.shape[0]), levels=int(levels),

@@ -262,6 +262,8 @@ def test_bad_inputs_raise_named_errors(sphere_binding):
         bind(Vd, Fd[:, :2], Vc, Fc)
     with pytest.raises(InvalidMeshError, match="no faces"):
         bind(Vd, Fd, Vc, np.zeros((0, 3), np.int64))
+    with pytest.raises(InvalidArgumentError, match="detail_search must be one of"):
+        bind(Vd, Fd, Vc, Fc, detail_search="fast")
     with pytest.raises(InvalidArgumentError, match="creases must be"):
         bind(Vd, Fd, Vc, Fc, creases=np.array([[0.5, 1.0]]))
     with pytest.raises(InvalidArgumentError, match="expected a Binding"):
@@ -306,11 +308,27 @@ def test_refine_of_unedited_cage_lies_on_dense_surface(name, request):
     Vr, Fr = refine(b, Vc)
     assert np.array_equal(Fr, b.operator.F_fine)
     assert Vr.shape == (b.operator.n_fine, 3)
-    d = closest_points(Vd, Fd, Vr).distance
-    assert d.max() <= 1e-9 * bbox_diagonal(Vd)
-    # and it is closer to the dense surface than the plain subdivided cage
-    plain = closest_points(Vd, Fd, b.operator.apply(Vc)).distance
-    assert plain.mean() > 1e-3 * bbox_diagonal(Vd)
+    # small meshes use the exact search: each fine vertex goes to its closest
+    # point on the dense surface
+    Vf = b.operator.apply(Vc)
+    near = closest_points(Vd, Fd, Vf)
+    assert np.abs(Vr - near.point).max() <= 1e-9 * bbox_diagonal(Vd)
+    assert closest_points(Vd, Fd, Vr).distance.max() <= 1e-9 * bbox_diagonal(Vd)
+    # and the plain subdivided cage was not on it
+    assert near.distance.mean() > 1e-3 * bbox_diagonal(Vd)
+
+
+@pytest.mark.parametrize("name", ["sphere_binding", "torus_binding"])
+def test_local_detail_search_finds_points_on_the_dense_surface(name, request):
+    Vd, Fd, Vc, Fc, b = request.getfixturevalue(name)
+    local = bind(Vd, Fd, Vc, Fc, levels=b.levels, detail_search="local")
+    assert np.array_equal(local.offset, b.offset)        # only the detail differs
+    Vr = refine(local, Vc).V
+    diag = bbox_diagonal(Vd)
+    assert closest_points(Vd, Fd, Vr).distance.max() <= 1e-9 * diag
+    exact = refine(b, Vc).V
+    same = np.linalg.norm(Vr - exact, axis=1) <= 1e-9 * diag
+    assert same.mean() >= 0.99
 
 
 def test_refine_follows_rigid_motion(sphere_binding):
