@@ -16,7 +16,7 @@ from core.errors import InvalidArgumentError, InvalidMeshError
 from core.subdivide import SubdivisionOperator, subdivide, subdivision_operator
 from core.mesh import face_normals
 from core.topology import edge_faces as _edge_faces, edge_map, euler_characteristic, manifold_report
-from tests.mesh_factory import (cube, icosahedron, icosphere, load_shared, octahedron, regular_grid,
+from tests.mesh_factory import (_midpoint_split, cube, icosahedron, icosphere, load_shared, octahedron, regular_grid,
                                 tetrahedron, torus)
 
 # ---------------------------------------------------------------------------
@@ -243,6 +243,30 @@ def test_numbering_new_vertex_on_edge_k():
     # child i < 3 of face f keeps corner i
     for i in range(3):
         assert np.array_equal(op.F_fine[i::4, i], F[:, i])
+
+
+@pytest.mark.parametrize("name", ["icosphere1", "patch", "cube"])
+def test_fine_vertex_parent_matches_iterated_midpoint_split(name):
+    V, F = MESHES[name]()
+    op = subdivision_operator(F, len(V), levels=3, scheme="loop")
+    face, bary = op.fine_vertex_parent()
+    assert np.all(bary >= 0) and np.allclose(bary.sum(axis=1), 1.0)
+    param = np.einsum("ij,ijk->ik", bary, V[F[face]])
+    Vm, Fm = V, F
+    for _ in range(3):
+        Vm, Fm = _midpoint_split(Vm, Fm)   # the test factory's own split, same vertex numbering
+    np.testing.assert_allclose(param, Vm, rtol=0, atol=1e-14)
+    # each fine face's corners lie in (or on the border of) its parent coarse face
+    T = V[F[op.fine_to_coarse_face]]                   # (m 4^L, 3, 3)
+    e1, e2 = T[:, 1] - T[:, 0], T[:, 2] - T[:, 0]
+    G = np.stack([np.stack([(e1 * e1).sum(1), (e1 * e2).sum(1)], 1),
+                  np.stack([(e1 * e2).sum(1), (e2 * e2).sum(1)], 1)], 1)
+    for j in range(3):
+        d = param[op.F_fine[:, j]] - T[:, 0]
+        uv = np.linalg.solve(G, np.stack([(d * e1).sum(1), (d * e2).sum(1)], 1)[..., None])[..., 0]
+        b = np.column_stack([1 - uv.sum(1), uv])
+        assert b.min() > -1e-12
+        np.testing.assert_allclose(np.einsum("ij,ijk->ik", b, T), param[op.F_fine[:, j]], atol=1e-12)
 
 
 @pytest.mark.parametrize("scheme", ["butterfly", "loop"])
