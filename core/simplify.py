@@ -38,6 +38,7 @@ from ._clean import BOUNDARY, clean_mesh, half_edge_ends, non_manifold_vertices,
 from .errors import InvalidArgumentError
 from .mesh import check_mesh
 from ._collapse import State, run
+from ._relocate import relocate
 from .quadrics import accumulate, edge_constraint_quadrics, face_quadrics
 
 _WHERE = "simplify"
@@ -58,6 +59,8 @@ class Tuning:
     gamma_hard: float = 0.02         #: reject new triangles less compact than this (and than before)
     gamma_soft: float = 0.3          #: penalise new triangles less compact than this
     compact_weight: float = 1e-5     #: penalty scale: star area * edge length^2 * (1 - g/g_soft)^2
+    relocate_iters: int = 2          #: final relocation rounds towards the input (0: off)
+    relocate_samples: int = 100000   #: at most this many input vertices as relocation targets
     snap_bits: int = 32              #: coordinates snapped to 2^-snap_bits of the diagonal
     max_passes: int = 100000
 
@@ -189,6 +192,20 @@ def _initial_quadrics(V, F, twin, U, W, preserve_boundary, feature_angle_deg, tu
     return Q, feat
 
 
+def _relocate_cage(mesh, Vn, tun):
+    """Move free cage vertices towards the input surface (see ``core._relocate``)."""
+    Fm = mesh.F
+    movable = ~mesh.locked & ~mesh.is_bnd
+    Uo, Wo = half_edge_ends(Fm)
+    movable[Uo[mesh.feat]] = False
+    movable[Wo[mesh.feat]] = False
+    step = max(1, int(np.ceil(Vn.shape[0] / tun.relocate_samples)))
+    P = Vn[::step]
+    Vnew = relocate(mesh.V, Fm, P, movable, iters=tun.relocate_iters)
+    mesh.moved |= np.any(Vnew != mesh.V, axis=1)
+    mesh.V = Vnew
+
+
 def simplify(V, F, *, target_faces=None, ratio=None, max_error=None, preserve_boundary=True,
              preserve_topology=True, feature_angle_deg=60.0, vertex_weights=None, locked=None,
              progress=None):
@@ -290,6 +307,8 @@ def simplify(V, F, *, target_faces=None, ratio=None, max_error=None, preserve_bo
     if target is None or m0 > target:
         stopped, passes = run(mesh, target, max_err_n, preserve_boundary, progress, m0, tun)
     worst = mesh.worst
+    if tun.relocate_iters > 0 and passes > 0 and stopped != "cancelled" and mesh.F.shape[0] < m0:
+        _relocate_cage(mesh, Vn, tun)
 
     # back to the caller's units; vertices never moved keep their exact input position
     Vout = mesh.V * scale + centre

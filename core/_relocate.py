@@ -1,0 +1,107 @@
+"""Final vertex relocation of a simplified cage towards the original surface.
+
+After the collapses, every movable cage vertex is moved to reduce the squared
+distance from points of the original surface to the cage (ICP-like, with the
+correspondences fixed per iteration)::
+
+    repeat iters times:
+        (f_s, b_s) = closest cage face and barycentrics of each sample p_s
+        minimise  sum_s |sum_c b_sc v[F[f_s, c]] - p_s|^2 + sum_j l_j |v_j - v0_j|^2
+                  (conjugate gradients on the normal equations, per coordinate)
+        undo the move of every vertex of a face that would flip or degenerate
+
+Boundary, crease, locked and frozen vertices do not move, so borders,
+creases and the caller's constraints are kept exactly.
+"""
+
+import numpy as np
+
+from .spatial import TriangleIndex
+
+
+def _matvec(F, f, b, x, lam):
+    """(B^T B + diag(lam)) x for the sample-to-cage barycentric operator B."""
+    Bx = (b[:, 0, None] * x[F[f, 0]] + b[:, 1, None] * x[F[f, 1]] + b[:, 2, None] * x[F[f, 2]])
+    out = lam[:, None] * x
+    n = x.shape[0]
+    for c in range(3):
+        w = b[:, c, None] * Bx
+        for k in range(3):
+            out[:, k] += np.bincount(F[f, c], weights=w[:, k], minlength=n)
+    return out
+
+
+def _normals(V, F):
+    return np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]])
+
+
+def relocate(V, F, P, movable, *, iters=2, cg_iters=25, reg=0.05, min_cos=0.2):
+    """Move ``movable`` vertices of the cage ``(V, F)`` towards points ``P``.
+
+    Parameters
+    ----------
+    V : (n,3) float64 cage vertices (not modified).
+    F : (m,3) int64 cage faces.
+    P : (s,3) float64 points on the original surface.
+    movable : (n,) bool.
+    iters : int, correspondence updates.
+    cg_iters : int, conjugate-gradient steps per update.
+    reg : float, weight pulling each vertex to its current position, relative
+        to the vertex's own sample weight (unit-free).
+    min_cos : float, a moved face whose normal turns by more than
+        ``acos(min_cos)`` is undone.
+
+    Returns
+    -------
+    (n,3) float64 new positions.
+    """
+    V = V.copy()
+    n = V.shape[0]
+    if not movable.any() or F.shape[0] == 0 or P.shape[0] == 0:
+        return V
+    N_ref = _normals(V, F)
+    for _ in range(iters):
+        cp = TriangleIndex(V, F).closest(P)
+        f, b = cp.face, cp.bary
+        diag = np.zeros(n)
+        for c in range(3):
+            diag += np.bincount(F[f, c], weights=b[:, c] ** 2, minlength=n)
+        lam = reg * diag + reg * max(float(diag.mean()), 1e-300)
+        lam[~movable] = 1e30  # pinned
+        # right-hand side B^T P + lam V0, solved for the displacement D = V_new - V
+        r = np.zeros((n, 3))
+        Bv = b[:, 0, None] * V[F[f, 0]] + b[:, 1, None] * V[F[f, 1]] + b[:, 2, None] * V[F[f, 2]]
+        res = P - Bv
+        for c in range(3):
+            w = b[:, c, None] * res
+            for k in range(3):
+                r[:, k] += np.bincount(F[f, c], weights=w[:, k], minlength=n)
+        r[~movable] = 0.0
+        # CG on (B^T B + lam) D = B^T (P - B V)
+        D = np.zeros((n, 3))
+        Rk = r.copy()
+        Pk = Rk.copy()
+        rs = np.einsum("ij,ij->j", Rk, Rk)
+        for _ in range(cg_iters):
+            Ap = _matvec(F, f, b, Pk, lam)
+            pAp = np.einsum("ij,ij->j", Pk, Ap)
+            alpha = np.divide(rs, pAp, out=np.zeros(3), where=pAp > 0)
+            D += alpha * Pk
+            Rk -= alpha * Ap
+            rs_new = np.einsum("ij,ij->j", Rk, Rk)
+            beta = np.divide(rs_new, rs, out=np.zeros(3), where=rs > 0)
+            Pk = Rk + beta * Pk
+            rs = rs_new
+        D[~movable] = 0.0
+        # undo moves that flip or flatten a face (a few sweeps: undoing can expose others)
+        for _ in range(10):
+            Vn = V + D
+            N1 = _normals(Vn, F)
+            l0 = np.linalg.norm(N_ref, axis=1)
+            l1 = np.linalg.norm(N1, axis=1)
+            bad = np.einsum("ij,ij->i", N_ref, N1) <= min_cos * l0 * l1
+            if not bad.any():
+                break
+            D[F[bad].ravel()] = 0.0
+        V = V + D
+    return V
