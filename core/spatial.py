@@ -706,10 +706,11 @@ class TriangleIndex:
         """Grid search of the queries ``qi``; returns those left for the BVH."""
         h, dims, lo = self._h, self._dims, self._lo
         start = self._cell_start
-        # phase 1: the query's own cell; for an empty cell its 26 neighbours
+        # phase 1: the query's own cell; for an empty cell, the nearest non-empty one of its
+        # 26 neighbours (box distance)
         c0 = cid[qi]
         self._scan(PT, *self._cell_pairs(qi, c0), best)
-        reach = np.zeros(qi.size, dtype=np.int64)      # Chebyshev radius already scanned
+        done = c0.copy()                                # a second cell already scanned
         empty = np.flatnonzero(~np.isfinite(best.d2[qi]))
         if empty.size:
             k, own = _ragged(np.zeros(empty.size, dtype=np.int64),
@@ -719,8 +720,15 @@ class TriangleIndex:
             own, g3 = own[ok], g3[ok]
             g = g3[:, 0] + dims[0] * (g3[:, 1] + dims[1] * g3[:, 2])
             ok = (g != c0[empty][own]) & (start[g + 1] > start[g])
-            self._scan(PT, *self._cell_pairs(qi[empty][own[ok]], g[ok]), best)
-            reach[empty] = 1
+            own, g3, g = own[ok], g3[ok], g[ok]
+            if own.size:
+                pq = PT[:, qi[empty][own]].T
+                cell_lo = lo + g3 * h
+                dd = np.maximum(np.maximum(cell_lo - pq, pq - (cell_lo + h)), 0.0)
+                nearest = _group_argmin(np.einsum("ij,ij->i", dd, dd), _run_lengths(own))
+                own, g = own[nearest], g[nearest]
+                self._scan(PT, *self._cell_pairs(qi[empty][own], g), best)
+                done[empty[own]] = g
         # phase 2: every other cell within the bound
         u2 = best.d2[qi]
         finite = np.isfinite(u2)
@@ -742,8 +750,8 @@ class TriangleIndex:
             cell_lo = lo + g3 * h
             dd = np.maximum(np.maximum(cell_lo - pq, pq - (cell_lo + h)), 0.0)
             dd2 = np.einsum("ij,ij->i", dd, dd)
-            cheb = np.abs(g3 - cc[qi[sel]][own]).max(axis=1)
-            keep = (cheb > reach[sel][own]) & (dd2 <= u2[sel][own] * (1 + 4 * _SLACK))
+            keep = (g != c0[sel][own]) & (g != done[sel][own])
+            keep &= dd2 <= u2[sel][own] * (1 + 4 * _SLACK)
             keep &= start[g + 1] > start[g]
             self._scan(PT, *self._cell_pairs(qi[sel][own[keep]], g[keep]), best, probe=False)
         return qi[far]
