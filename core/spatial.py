@@ -31,8 +31,8 @@ The index (:class:`TriangleIndex`) answers "nearest triangle" exactly:
    plane both touch (cell size about the mean triangle extent, capped at
    ``_MAX_CELLS`` cells).
 2. Queries are sorted by cell and processed in chunks. Phase 1: the triangles
-   of the query's own cell (of its 26 neighbours if that cell is empty) give an
-   upper bound ``u``, an exact distance to a real triangle. Phase 2: every other
+   of the query's own cell (if it is empty, of the nearest non-empty one of its
+   26 neighbours) give an upper bound ``u``, an exact distance to a real triangle. Phase 2: every other
    cell within ``u`` of the query (box distance) is examined; any triangle
    closer than ``u`` has a point in one of those cells and is referenced there,
    so the minimum is exact.
