@@ -119,7 +119,9 @@ def _check(st, A, B, X, interior, star, kf, tun):
     Fs = _take(F, star, axis=0)
     isA = Fs == _take(A, kf)[:, None]
     isB = Fs == _take(B, kf)[:, None]
-    coll = isA.any(axis=1) & isB.any(axis=1)
+    rowsA = isA[:, 0] | isA[:, 1] | isA[:, 2]
+    rowsB = isB[:, 0] | isB[:, 1] | isB[:, 2]
+    coll = rowsA & rowsB
     ok = np.ones(k, dtype=bool)
 
     # --- link condition (Dey et al.): the common neighbours of A and B are
@@ -138,10 +140,8 @@ def _check(st, A, B, X, interior, star, kf, tun):
     n_removed = np.bincount(ck, minlength=k)
     ok &= n_removed == np.where(interior, 2, 1)
     nn = np.int64(max(n, 1))
-    rowsA = isA.any(axis=1)
     keysA = (kf[:, None] * nn + Fs)[rowsA[:, None] & other].ravel()
     keysA.sort()
-    rowsB = isB.any(axis=1)
     selB = rowsB[:, None] & other
     qk = np.broadcast_to(kf[:, None], Fs.shape)[selB]
     qx = Fs[selB]

@@ -217,17 +217,20 @@ def optimal_placement(Q, P0, P1):
     ok &= np.einsum("ij,ij->i", y, y) <= (MAX_DRIFT * MAX_DRIFT) * len2
     y[~ok] = 0.0
     X = mid + y
-    err = quadric_error(Q, X)
+    x, yy, z = X[:, 0], X[:, 1], X[:, 2]
+    err = np.maximum(q0 * x * x + q3 * yy * yy + q5 * z * z
+                     + 2.0 * (q1 * x * yy + q2 * x * z + q4 * yy * z + b0 * x + b1 * yy + b2 * z)
+                     + np.ascontiguousarray(Q[:, 9]), 0.0)
     bad = np.flatnonzero(~ok)
     if bad.size:
-        Qb, p0, d = Q[bad], P0[bad], D[bad]
+        Qb, p0, d = np.take(Q, bad, axis=0), np.take(P0, bad, axis=0), np.take(D, bad, axis=0)
         AD = _apply_A(Qb, d)
         dAd = np.einsum("ij,ij->i", d, AD)
         # derivative of E(p0 + t d) is 2 (d.A p0 + d.b) + 2 t dAd
         g = np.einsum("ij,ij->i", d, _apply_A(Qb, p0)) + np.einsum("ij,ij->i", d, Qb[:, 6:9])
         t = np.where(dAd > 0, -g / np.where(dAd > 0, dAd, 1.0), 0.5)
         t = np.clip(t, 0.0, 1.0)
-        cands = [p0 + t[:, None] * d, p0, P1[bad]]
+        cands = [p0 + t[:, None] * d, p0, np.take(P1, bad, axis=0)]
         errs = np.stack([quadric_error(Qb, cnd) for cnd in cands], axis=1)
         best = np.argmin(errs, axis=1)
         X[bad] = np.stack(cands, axis=1)[np.arange(bad.size), best]

@@ -10,18 +10,21 @@ of independent edges, each batch checked on the mesh as it is::
     clean the input; freeze non-manifold edges and vertices
     Q[v] = sum of area-weighted face planes (+ boundary and crease planes)
     repeat (one pass):
-        cost every edge: Q = Q[a] + Q[b], x = argmin Q (3x3 solve), err = Q(x)
+        cost the edges around vertices moved by the last pass (cached
+        otherwise): Q = Q[a] + Q[b], x = argmin Q (3x3 solve), err = Q(x)
         pool = the cheapest edges (a bounded share: never much costlier
-               than the cheapest remaining ones)
+               than the cheapest remaining ones), split into cost bands
         repeat (rounds):
-            pick pool edges that are the cheapest within two rings
-            (their stars -- the faces around both endpoints -- are disjoint)
+            pick pool edges whose priority (band, then a fixed hash) is the
+            smallest within two rings, so their stars -- the faces around
+            both endpoints -- are disjoint
             check each on the current mesh: link condition, no flipped or
             near-degenerate face; add the compactness penalty
             accept those still within the pool's cost bound, lock their stars
         apply every accepted collapse with one remap (b -> a, V[a] = x,
         Q[a] += Q[b]); glue the half-edge twins of the removed faces
     until the target, the error bound, or no valid collapse
+    move the free cage vertices towards the input surface (``core._relocate``)
 
 The mesh is kept as faces plus a half-edge twin table (``core._clean``), which
 collapses update locally: no sort after the first one.
@@ -35,10 +38,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from ._clean import BOUNDARY, clean_mesh, half_edge_ends, non_manifold_vertices, twin_table
-from .errors import InvalidArgumentError
-from .mesh import check_mesh
 from ._collapse import State, run
 from ._relocate import relocate
+from .errors import InvalidArgumentError
+from .mesh import check_mesh
 from .quadrics import accumulate, edge_constraint_quadrics, face_quadrics
 
 _WHERE = "simplify"
@@ -51,16 +54,18 @@ class Tuning:
     area_power: float = 0.5          #: face plane weight = area^p * mean area^(1-p)
     boundary_weight: float = 100.0   #: boundary plane weight, times the edge length squared
     feature_weight: float = 3.0      #: crease plane weight, times the edge length squared
-    pool_share: float = 0.15         #: at most this share of the candidate edges per pass
+    pool_share: float = 0.3          #: at most this share of the candidate edges per pass
     pool_goal_factor: float = 1.5    #: ... and at most this many times the collapses still needed
-    max_rounds: int = 3              #: selection rounds per pass
+    max_rounds: int = 4              #: selection rounds per pass
     bands: int = 8                   #: cost bands of the pool (random order inside a band)
     flip_cos: float = 0.0            #: reject if a face normal turns by more than acos(flip_cos)
     gamma_hard: float = 0.02         #: reject new triangles less compact than this (and than before)
     gamma_soft: float = 0.3          #: penalise new triangles less compact than this
     compact_weight: float = 1e-5     #: penalty scale: star area * edge length^2 * (1 - g/g_soft)^2
     relocate_iters: int = 2          #: final relocation rounds towards the input (0: off)
-    relocate_samples: int = 100000   #: at most this many input vertices as relocation targets
+    relocate_samples: int = 60000    #: at most this many input vertices as relocation targets
+    relocate_max_faces: int = 200000  #: ... only for cages up to this size
+    relocate_max_share: float = 0.5  #: ... and at most this share of the input's faces
     snap_bits: int = 32              #: coordinates snapped to 2^-snap_bits of the diagonal
     max_passes: int = 100000
 
@@ -80,7 +85,9 @@ class SimplifyResult:
     vertex_map : (n_input,) int64, the cage vertex each input vertex was merged
         into (``-1`` for input vertices no face used).
     max_error : float, largest error of an accepted collapse, as a distance in
-        mesh units (``sqrt(quadric error / quadric area)``, see ``core.quadrics``).
+        mesh units (``sqrt(quadric error / quadric area)``, see ``core.quadrics``);
+        the final relocation only moves vertices closer to the input and is
+        not counted in it.
     stopped_because : str, ``"target"``, ``"max_error"``, ``"no_valid_collapse"``
         or ``"cancelled"``.
     feature_edges : (k,2) int64, cage edges (sorted rows) that descend from the
@@ -307,7 +314,8 @@ def simplify(V, F, *, target_faces=None, ratio=None, max_error=None, preserve_bo
     if target is None or m0 > target:
         stopped, passes = run(mesh, target, max_err_n, preserve_boundary, progress, m0, tun)
     worst = mesh.worst
-    if tun.relocate_iters > 0 and passes > 0 and stopped != "cancelled" and mesh.F.shape[0] < m0:
+    if (tun.relocate_iters > 0 and passes > 0 and stopped != "cancelled"
+            and mesh.F.shape[0] <= min(tun.relocate_max_faces, tun.relocate_max_share * m0)):
         _relocate_cage(mesh, Vn, tun)
 
     # back to the caller's units; vertices never moved keep their exact input position
