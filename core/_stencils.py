@@ -449,7 +449,8 @@ def _assemble(n_out, n_in, tables, patches=()):
 
     A counting scatter (no sort) puts every entry at its row's next free slot.
     ``patches`` are tables overwriting rows that one table filled on its own
-    (same width, entries in the same slots). Zero weights are dropped at the end.
+    (same width, entries in the same slots). The stencils never produce a
+    zero weight, so every entry is kept.
     """
     counts = np.zeros(n_out, dtype=np.int64)
     for t in tables:
@@ -473,13 +474,6 @@ def _assemble(n_out, n_in, tables, patches=()):
             out_c[pos] = col
             out_w[pos] = w
             pos += 1
-    nonzero = out_w != 0
-    if not nonzero.all():
-        zero = np.flatnonzero(~nonzero)
-        row_of_zero = np.searchsorted(indptr, zero, side="right") - 1
-        indptr[1:] -= np.cumsum(np.bincount(row_of_zero, minlength=n_out))
-        out_c = out_c[nonzero]
-        out_w = out_w[nonzero]
     return Stencil(indptr, out_c, out_w, n_in)
 
 
@@ -533,12 +527,14 @@ def butterfly_level(T):
         a, b = a_all[ks], b_all[ks]
         ca = T.n_sharp[a] != 2
         cb = T.n_sharp[b] != 2
+        # a corner end x is reflected, x' = 2x - y: the slot of x' holds (x, -2/16)
+        # and the +1/16 on y goes to y's own weight (no zero weights, no missing point)
         a2 = np.where(ca, a, T.nb_sum[a] - b)
         b2 = np.where(cb, b, T.nb_sum[b] - a)
-        wa = 9 / 16 - 2 / 16 * ca + 1 / 16 * cb
-        wb = 9 / 16 - 2 / 16 * cb + 1 / 16 * ca
+        wa = 9 / 16 + 1 / 16 * cb
+        wb = 9 / 16 + 1 / 16 * ca
         tables.append(_Table(n + ks, [a, b, a2, b2],
-                             [wa, wb, np.where(ca, 0.0, -1 / 16), np.where(cb, 0.0, -1 / 16)]))
+                             [wa, wb, np.where(ca, -2 / 16, -1 / 16), np.where(cb, -2 / 16, -1 / 16)]))
 
     smooth_x = (T.n_sharp == 0) & (T.valence != 6) & (T.valence > 0)
     not_sharp = ~T.sharp
@@ -575,16 +571,17 @@ def butterfly_level(T):
         if sel.size:
             # rows with reflected wings: same slots, the wing's weight moves to P0, Q0, c, d
             c_s = c[sel]
+            # -1/16 (P + Q - R) for a missing wing: the slot keeps -1/16 on the face's
+            # third vertex (c or d), the +-1/16 on the edge's ends go to their weights,
+            # so no weight is ever zero (a row may name c or d twice)
             mA, mB, mC, mD = (mk[sel].astype(np.float64) for mk in miss)
             s16 = 1 / 16
             wP = 0.5 + s16 * (mA - mB + mD - mC)
             wQ = 0.5 + s16 * (mB - mA + mC - mD)
-            wc = 0.125 - s16 * (mA + mB)
-            wd = 0.125 - s16 * (mC + mD)
-            wing_c = [np.where(mk[sel], c_s, w[sel]) for w, mk in zip(wings, miss)]
-            wing_w = [np.where(mk[sel], 0.0, -s16) for mk in miss]
-            patches.append(_Table(n + kr[sel], [P0[sel], Q0[sel], c_s, d[sel]] + wing_c,
-                                  [wP, wQ, wc, wd] + wing_w))
+            d_s = d[sel]
+            wing_c = [np.where(mk[sel], cd, w[sel]) for w, mk, cd in zip(wings, miss, (c_s, c_s, d_s, d_s))]
+            patches.append(_Table(n + kr[sel], [P0[sel], Q0[sel], c_s, d_s] + wing_c,
+                                  [wP, wQ, 0.125, 0.125] + [-s16] * 4))
 
     # --- extraordinary ends: their own ring stencil (halved when both ends are)
     kx = np.flatnonzero(xa | xb)
@@ -610,8 +607,10 @@ def butterfly_level(T):
                     continue
                 r = rank_of_corner[y[sel]]
                 base = start[vs]
-                cols = [vs] + [ring[base + (r + j) % k] for j in range(k)]
-                ws = [0.75 * f] + [wj * f for wj in butterfly_weights(k)]
+                sj = butterfly_weights(k)
+                js = np.flatnonzero(sj)          # the valence-4 stencil has two zeros
+                cols = [vs] + [ring[base + (r + j) % k] for j in js]
+                ws = [0.75 * f] + [sj[j] * f for j in js]
                 tables.append(_Table(n + kx[sel], cols, ws))
     return _assemble(n + e, n, tables, patches)
 
