@@ -84,6 +84,7 @@ _SLAB_LEVELS = 3           # lowest BVH levels that also get cylinder bounds
 _PAIR_CHUNK = 1 << 18      # target own-cell (query, triangle) pairs per chunk
 _QUERY_CHUNK = 1 << 16     # at most this many queries per chunk
 _KERNEL_BLOCK = 1 << 14    # pairs per kernel call (temporaries of 128 KiB)
+_BRUTE_PAIRS = 1 << 24     # fewer far (query, triangle) pairs than this: no BVH, scan all
 _FRONTIER_CAP = 1 << 21    # BVH frontier pairs before it is split and processed depth first
 _SLACK = 1e-9              # relative slack on pruning tests (keeps rounding conservative)
 
@@ -766,6 +767,12 @@ class TriangleIndex:
         near the surface patch closest to the query without any initial guess.
         """
         m = self.n_faces
+        if self._bvh is None and far.size * m <= _BRUTE_PAIRS:
+            # a handful of far queries: every triangle through the lower-bound filter costs
+            # less than building the hierarchy
+            for qi in far:
+                self._scan(PT, np.full(m, qi), np.arange(m), best)
+            return
         if self._bvh is None:
             # corners as the kernel sees them (A + ab, A + ac); bounds carry rounding margins
             A = self._D[0:3].T

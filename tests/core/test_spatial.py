@@ -192,7 +192,18 @@ def test_index_matches_brute_force(name, V, F):
     assert (on <= 1e-15 * scale).all()
 
 
-def test_index_far_queries_and_equidistant_centre():
+@pytest.mark.parametrize("name,V,F", list(_meshes())[:3], ids=[m[0] for m in _meshes()][:3])
+def test_index_bvh_path_matches_brute_force(monkeypatch, name, V, F):
+    """Every query that leaves its cell goes through the BVH (no scan-all shortcut)."""
+    monkeypatch.setattr(spatial, "_MAX_PHASE2_CELLS", 1)
+    monkeypatch.setattr(spatial, "_BRUTE_PAIRS", 0)
+    P = _random_queries(V, np.random.default_rng(6), 300)
+    _check_result(V, F, P, TriangleIndex(V, F).closest(P))
+
+
+@pytest.mark.parametrize("brute_pairs", [0, spatial._BRUTE_PAIRS], ids=["bvh", "scan-all"])
+def test_index_far_queries_and_equidistant_centre(monkeypatch, brute_pairs):
+    monkeypatch.setattr(spatial, "_BRUTE_PAIRS", brute_pairs)
     V, F = icosphere(3)
     rng = np.random.default_rng(2)
     dirs = rng.normal(size=(200, 3))
@@ -208,6 +219,7 @@ def test_index_small_chunks_and_frontier_splits(monkeypatch):
     monkeypatch.setattr(spatial, "_QUERY_CHUNK", 32)
     monkeypatch.setattr(spatial, "_FRONTIER_CAP", 16)
     monkeypatch.setattr(spatial, "_MAX_PHASE2_CELLS", 2)
+    monkeypatch.setattr(spatial, "_BRUTE_PAIRS", 0)
     V, F = torus(20, 10)
     rng = np.random.default_rng(4)
     P = _random_queries(V, rng, 300)
@@ -320,6 +332,7 @@ def test_bvh_bounds_contain_their_triangles(monkeypatch):
     """Internal invariant of the far-query path: every node's box and cylinder contain
     every vertex of the triangles below it (and the BVH is built lazily, once)."""
     monkeypatch.setattr(spatial, "_MAX_PHASE2_CELLS", 1)
+    monkeypatch.setattr(spatial, "_BRUTE_PAIRS", 0)
     V, F = torus(30, 12)
     V = V + 0.02 * np.random.default_rng(0).normal(size=V.shape)
     index = TriangleIndex(V, F)
