@@ -36,7 +36,7 @@ _take = np.take
 class State:
     """Mutable working mesh of one simplification (private)."""
 
-    def __init__(self, V, F, twin, Q, locked, feat):
+    def __init__(self, V, F, twin, Q, locked, feat, Nref):
         n, h3 = V.shape[0], twin.size
         self.V, self.Q, self.locked = V, Q, locked
         self.moved = np.zeros(n, dtype=bool)
@@ -44,6 +44,7 @@ class State:
         self.vver = np.full(n, -1, dtype=np.int64)     # pass in which the one-ring last changed
         self.fresh = np.ones(n, dtype=bool)            # quadric / position changed: recost edges
         self.is_bnd = np.zeros(n, dtype=bool)          # on a boundary edge
+        self.Nref = Nref                               # summed area normals of the input faces merged in
         hb = np.flatnonzero(twin == BOUNDARY)
         if hb.size:
             ub, wb = _ends(F, hb)
@@ -177,6 +178,13 @@ def _check(st, A, B, X, interior, star, kf, tun):
     l0 = np.sqrt(np.einsum("ij,ij->i", N0, N0))
     l1 = np.sqrt(np.einsum("ij,ij->i", N1, N1))
     flip = (l0 > 0) & (np.einsum("ij,ij->i", N0, N1) <= tun.flip_cos * l0 * l1)
+    # and never against the input surface the face stands for (the summed
+    # normals of the input faces merged into its vertices): no slow drift
+    Nr = st.Nref
+    ref = _take(Nr, np.compress(mv, Fs, axis=0), axis=0).sum(axis=1)
+    moved_v = np.compress(mv, Fs, axis=0)[mc]
+    ref += (_take(Nr, A, axis=0) + _take(Nr, B, axis=0))[mk] - _take(Nr, moved_v, axis=0)
+    flip |= np.einsum("ij,ij->i", ref, N1) < 0
     ok[mk[flip]] = False
     sumsq = (np.einsum("ij,ij->i", e0, e0) + np.einsum("ij,ij->i", e1, e1)
              + np.einsum("ij,ij->i", e2, e2))
@@ -348,6 +356,7 @@ def _apply(st, A, B, X, star, kf, coll):
     # positions and quadrics
     st.moved[A] |= np.any(X != st.V[A], axis=1)
     st.Q[A] = st.Q[A] + st.Q[B]
+    st.Nref[A] = st.Nref[A] + st.Nref[B]
     st.V[A] = X
     st.fresh[A] = True
     st.is_bnd[A] |= st.is_bnd[B]
@@ -371,6 +380,6 @@ def _apply(st, A, B, X, star, kf, coll):
     for name in ("feat", "swap", "blk_pass", "c_cost", "c_dist", "c_blk"):
         setattr(st, name, np.compress(keep_h, getattr(st, name)))
     st.c_x = [np.compress(keep_h, c) for c in st.c_x]
-    for name in ("V", "Q", "locked", "moved", "orig", "vver", "fresh", "is_bnd"):
+    for name in ("V", "Q", "Nref", "locked", "moved", "orig", "vver", "fresh", "is_bnd"):
         setattr(st, name, np.compress(keep_v, getattr(st, name), axis=0))
     st.cur_of_clean = _take(comp, st.cur_of_clean)

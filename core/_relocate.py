@@ -19,15 +19,22 @@ import numpy as np
 from .spatial import TriangleIndex
 
 
-def _matvec(F, f, b, x, lam):
-    """(B^T B + diag(lam)) x for the sample-to-cage barycentric operator B."""
-    Bx = (b[:, 0, None] * x[F[f, 0]] + b[:, 1, None] * x[F[f, 1]] + b[:, 2, None] * x[F[f, 2]])
-    out = lam[:, None] * x
-    n = x.shape[0]
-    for c in range(3):
-        w = b[:, c, None] * Bx
-        for k in range(3):
-            out[:, k] += np.bincount(F[f, c], weights=w[:, k], minlength=n)
+def _matvec(idx, b, x, lam):
+    """(B^T B + diag(lam)) x for the sample-to-cage barycentric operator B.
+
+    ``idx`` is (3, s): the cage vertex of each sample's three corners,
+    ``b`` is (3, s): their barycentric weights."""
+    Bx = (b[0, :, None] * np.take(x, idx[0], axis=0) + b[1, :, None] * np.take(x, idx[1], axis=0)
+          + b[2, :, None] * np.take(x, idx[2], axis=0))
+    return _scatter(idx, b, Bx, x.shape[0]) + lam[:, None] * x
+
+
+def _scatter(idx, b, R, n):
+    """B^T R: (s,3) sample residuals to (n,3) vertex sums."""
+    flat = idx.ravel()
+    out = np.empty((n, 3))
+    for k in range(3):
+        out[:, k] = np.bincount(flat, weights=(b * R[:, k]).ravel(), minlength=n)
     return out
 
 
@@ -35,7 +42,7 @@ def _normals(V, F):
     return np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]])
 
 
-def relocate(V, F, P, movable, *, iters=2, cg_iters=25, reg=0.05, min_cos=0.2):
+def relocate(V, F, P, movable, *, iters=2, cg_iters=15, reg=0.05, min_cos=0.2):
     """Move ``movable`` vertices of the cage ``(V, F)`` towards points ``P``.
 
     Parameters
@@ -62,28 +69,22 @@ def relocate(V, F, P, movable, *, iters=2, cg_iters=25, reg=0.05, min_cos=0.2):
     N_ref = _normals(V, F)
     for _ in range(iters):
         cp = TriangleIndex(V, F).closest(P)
-        f, b = cp.face, cp.bary
-        diag = np.zeros(n)
-        for c in range(3):
-            diag += np.bincount(F[f, c], weights=b[:, c] ** 2, minlength=n)
+        idx = np.ascontiguousarray(np.take(F, cp.face, axis=0).T)     # (3, s)
+        b = np.ascontiguousarray(cp.bary.T)                           # (3, s)
+        diag = np.bincount(idx.ravel(), weights=(b * b).ravel(), minlength=n)
         lam = reg * diag + reg * max(float(diag.mean()), 1e-300)
         lam[~movable] = 1e30  # pinned
-        # right-hand side B^T P + lam V0, solved for the displacement D = V_new - V
-        r = np.zeros((n, 3))
-        Bv = b[:, 0, None] * V[F[f, 0]] + b[:, 1, None] * V[F[f, 1]] + b[:, 2, None] * V[F[f, 2]]
-        res = P - Bv
-        for c in range(3):
-            w = b[:, c, None] * res
-            for k in range(3):
-                r[:, k] += np.bincount(F[f, c], weights=w[:, k], minlength=n)
+        # solve (B^T B + lam) D = B^T (P - B V) for the displacement D by CG
+        Bv = (b[0, :, None] * np.take(V, idx[0], axis=0) + b[1, :, None] * np.take(V, idx[1], axis=0)
+              + b[2, :, None] * np.take(V, idx[2], axis=0))
+        r = _scatter(idx, b, P - Bv, n)
         r[~movable] = 0.0
-        # CG on (B^T B + lam) D = B^T (P - B V)
         D = np.zeros((n, 3))
         Rk = r.copy()
         Pk = Rk.copy()
         rs = np.einsum("ij,ij->j", Rk, Rk)
         for _ in range(cg_iters):
-            Ap = _matvec(F, f, b, Pk, lam)
+            Ap = _matvec(idx, b, Pk, lam)
             pAp = np.einsum("ij,ij->j", Pk, Ap)
             alpha = np.divide(rs, pAp, out=np.zeros(3), where=pAp > 0)
             D += alpha * Pk

@@ -41,7 +41,7 @@ from ._clean import BOUNDARY, clean_mesh, half_edge_ends, non_manifold_vertices,
 from ._collapse import State, run
 from ._relocate import relocate
 from .errors import InvalidArgumentError
-from .mesh import check_mesh
+from .mesh import check_mesh, face_normals
 from .quadrics import accumulate, edge_constraint_quadrics, face_quadrics
 
 _WHERE = "simplify"
@@ -64,6 +64,7 @@ class Tuning:
     compact_weight: float = 1e-5     #: penalty scale: star area * edge length^2 * (1 - g/g_soft)^2
     relocate_iters: int = 2          #: final relocation rounds towards the input (0: off)
     relocate_samples: int = 60000    #: at most this many input vertices as relocation targets
+    relocate_reg: float = 1.0        #: pull of each vertex to its place, relative to its samples
     relocate_max_faces: int = 200000  #: ... only for cages up to this size
     relocate_max_share: float = 0.5  #: ... and at most this share of the input's faces
     snap_bits: int = 32              #: coordinates snapped to 2^-snap_bits of the diagonal
@@ -208,7 +209,7 @@ def _relocate_cage(mesh, Vn, tun):
     movable[Wo[mesh.feat]] = False
     step = max(1, int(np.ceil(Vn.shape[0] / tun.relocate_samples)))
     P = Vn[::step]
-    Vnew = relocate(mesh.V, Fm, P, movable, iters=tun.relocate_iters)
+    Vnew = relocate(mesh.V, Fm, P, movable, iters=tun.relocate_iters, reg=tun.relocate_reg)
     mesh.moved |= np.any(Vnew != mesh.V, axis=1)
     mesh.V = Vnew
 
@@ -306,7 +307,10 @@ def simplify(V, F, *, target_faces=None, ratio=None, max_error=None, preserve_bo
     Q, feat = _initial_quadrics(Vn, Fc, twin, U, W, preserve_boundary, feature_angle_deg, tun)
     if weights is not None:
         Q *= weights[clean.clean_to_vertex][:, None]
-    mesh = State(Vn, Fc.copy(), twin, Q, lock, feat)
+    Nf = face_normals(Vn, Fc, normalize=False)
+    Nref = np.stack([np.bincount(Fc.ravel(), weights=np.repeat(Nf[:, k], 3), minlength=n) for k in range(3)],
+                    axis=1) if m0 else np.zeros((n, 3))
+    mesh = State(Vn, Fc.copy(), twin, Q, lock, feat, Nref)
     max_err_n = None if max_error is None else float(max_error) / scale
 
     stopped = "target"
