@@ -770,8 +770,10 @@ class TriangleIndex:
         if self._bvh is None and far.size * m <= _BRUTE_PAIRS:
             # a handful of far queries: every triangle through the lower-bound filter costs
             # less than building the hierarchy
-            for qi in far:
-                self._scan(PT, np.full(m, qi), np.arange(m), best)
+            per = max(1, _PAIR_CHUNK // m)
+            for s in range(0, far.size, per):
+                qs = far[s:s + per]
+                self._scan(PT, np.repeat(qs, m), np.tile(np.arange(m), qs.size), best)
             return
         if self._bvh is None:
             # corners as the kernel sees them (A + ab, A + ac); bounds carry rounding margins
