@@ -569,11 +569,11 @@ def butterfly_level(T):
         tables.append(_Table(n + kr, [P0, Q0, c, d] + wings, [0.5, 0.5, 0.125, 0.125] + [-1 / 16] * 4))
         sel = np.flatnonzero(miss[0] | miss[1] | miss[2] | miss[3])
         if sel.size:
-            # rows with reflected wings: same slots, the wing's weight moves to P0, Q0, c, d
+            # rows with reflected wings, same slots: -1/16 (P + Q - R) for a missing
+            # wing keeps -1/16 on the face's third vertex (c or d) in the wing's slot
+            # and moves the +-1/16 on the edge's ends into their weights, so no
+            # weight is ever zero (a row may name c or d twice)
             c_s = c[sel]
-            # -1/16 (P + Q - R) for a missing wing: the slot keeps -1/16 on the face's
-            # third vertex (c or d), the +-1/16 on the edge's ends go to their weights,
-            # so no weight is ever zero (a row may name c or d twice)
             mA, mB, mC, mD = (mk[sel].astype(np.float64) for mk in miss)
             s16 = 1 / 16
             wP = 0.5 + s16 * (mA - mB + mD - mC)
