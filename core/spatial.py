@@ -32,10 +32,10 @@ The index (:class:`TriangleIndex`) answers "nearest triangle" exactly:
    ``_MAX_CELLS`` cells).
 2. Queries are sorted by cell and processed in chunks. Phase 1: the triangles
    of the query's own cell (if it is empty, of the nearest non-empty one of its
-   26 neighbours) give an upper bound ``u``, an exact distance to a real triangle. Phase 2: every other
-   cell within ``u`` of the query (box distance) is examined; any triangle
-   closer than ``u`` has a point in one of those cells and is referenced there,
-   so the minimum is exact.
+   26 neighbours) give an upper bound ``u``, an exact distance to a real
+   triangle. Phase 2: every other cell within ``u`` of the query (box
+   distance) is examined; any triangle closer than ``u`` has a point in one of
+   those cells and is referenced there, so the minimum is exact.
 3. Every candidate set is first filtered by a cheap lower bound, the height
    above the triangle's plane and the lateral excess beyond its bounding disk::
 
@@ -358,7 +358,7 @@ def _morton(X, lo, extent):
             | (_spread_bits(q[:, 2]) << np.uint64(2)))
 
 
-# --- the index -------------------------------------------------------------------------------------
+# --- the index ---------------------------------------------------------------------------------
 
 class TriangleIndex:
     """Exact nearest-triangle queries on a triangle mesh (pure NumPy).
@@ -813,20 +813,18 @@ class TriangleIndex:
                     near2 += near * near
                     fa = np.maximum(np.abs(a), np.abs(b))
                     far2 += fa * fa
-                slab = self._slab[level + 1]
-                if True:
-                    # the node's cylinder: lower and upper bounds (max / min with the box's)
-                    S = np.take(slab, child, axis=1)
-                    dx, dy, dz = p[0] - S[0], p[1] - S[1], p[2] - S[2]
-                    dc2 = dx * dx + dy * dy + dz * dz
-                    hh = np.abs(dx * S[3] + dy * S[4] + dz * S[5])
-                    lat = np.sqrt(np.maximum(dc2 - hh * hh, 0.0))
-                    el = np.maximum(lat - S[6], 0.0)
-                    eh = np.maximum(hh - S[7], 0.0)
-                    near2 = np.maximum(near2, el * el + eh * eh - 1e-14 * dc2)
-                    fl = lat + S[6]
-                    fh = hh + S[7]
-                    far2 = np.minimum(far2, fl * fl + fh * fh + 1e-14 * dc2)
+                # the node's cylinder: lower and upper bounds (max / min with the box's)
+                S = np.take(self._slab[level + 1], child, axis=1)
+                dx, dy, dz = p[0] - S[0], p[1] - S[1], p[2] - S[2]
+                dc2 = dx * dx + dy * dy + dz * dz
+                hh = np.abs(dx * S[3] + dy * S[4] + dz * S[5])
+                lat = np.sqrt(np.maximum(dc2 - hh * hh, 0.0))
+                el = np.maximum(lat - S[6], 0.0)
+                eh = np.maximum(hh - S[7], 0.0)
+                near2 = np.maximum(near2, el * el + eh * eh - 1e-14 * dc2)
+                fl = lat + S[6]
+                fh = hh + S[7]
+                far2 = np.minimum(far2, fl * fl + fh * fh + 1e-14 * dc2)
                 far2 *= 1 + 4 * _SLACK
                 counts = _run_lengths(q)
                 starts = np.cumsum(counts) - counts
