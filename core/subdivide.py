@@ -130,12 +130,14 @@ corners and isolated vertices stay put::
 
 Implementation
 --------------
-Everything is vectorised (``core/_stencils.py``): edges and their faces from
-``core.topology``, one-rings of extraordinary vertices put in rotational
-order by pointer jumping along the "next face around the vertex" map, rows
-assembled by a counting scatter. A level is a CSR matrix (rows sorted);
-``apply`` is a gather plus ``np.add.reduceat``, ``apply_transpose`` the
-matching ``np.bincount`` scatter.
+Everything is vectorised (``core/_refine.py``: the topology of each level;
+``core/_stencils.py``: the stencils). Edges and their faces come from one sort
+at the coarse level and by construction below it; one-rings of extraordinary
+vertices are put in rotational order by pointer jumping along the "next face
+around the vertex" map; rows are assembled by a counting scatter. A level is
+a CSR matrix (rows sorted); ``apply`` is a gather plus ``np.add.reduceat``,
+``apply_transpose`` the matching ``np.bincount`` scatter. No Python loop runs
+over vertices, edges or faces.
 """
 
 import hashlib
@@ -144,6 +146,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from . import _refine as _rf
 from . import _stencils as _st
 from .errors import InvalidArgumentError
 from .mesh import check_mesh
@@ -312,7 +315,7 @@ class SubdivisionOperator:
         for _ in range(self.levels):
             child = g % 4
             # bary (in the child) -> bary in the parent: sum_j bary_j * CHILD_BARY[child, j]
-            bary = np.einsum("ij,ijk->ik", bary, _st.CHILD_BARY[child])
+            bary = np.einsum("ij,ijk->ik", bary, _rf.CHILD_BARY[child])
             g //= 4
         face = np.full(self.n_fine, -1, dtype=np.int64)
         face[used] = g
@@ -366,22 +369,22 @@ def _fingerprint(F, n, levels, scheme, creases):
 
 
 def _build(F, n, levels, scheme, creases, where):
-    T = _st.topology(F, n, np.zeros(0, dtype=np.int64), where, check=True)
-    cids = _st.crease_edge_ids(creases, T.E, n, where)
+    T = _rf.topology(F, n, np.zeros(0, dtype=np.int64), where, check=True)
+    cids = _rf.crease_edge_ids(creases, T.E, n, where)
     crease_pairs = T.E[cids].copy()
     level_fn = _st.butterfly_level if scheme == "butterfly" else _st.loop_level
     stencils = []
-    T = _st.mark_sharp(T, cids)
+    T = _rf.mark_sharp(T, cids)
     for lev in range(levels):
         if lev > 0:
             T_prev = T
-            T = _st.refine_topology(T_prev)
+            T = _rf.refine_topology(T_prev)
             if cids.size:
-                cids = _st.child_crease_ids(T_prev, cids, T.E, T.n)
-                T = _st.mark_sharp(T, cids)
+                cids = _rf.child_crease_ids(T_prev, cids, T.E, T.n)
+                T = _rf.mark_sharp(T, cids)
         stencils.append(level_fn(T))
     Fl, nl = (T.F, T.n) if levels == 0 else \
-        (_st.split_faces(T.F, T.n, T.face_edge), T.n + T.E.shape[0])
+        (_rf.split_faces(T.F, T.n, T.face_edge), T.n + T.E.shape[0])
     f2c = np.arange(Fl.shape[0], dtype=np.int64) // (4 ** levels)
     return SubdivisionOperator(
         n_coarse=n, n_fine=nl, F_fine=Fl, fine_to_coarse_face=f2c, scheme=scheme, levels=levels,

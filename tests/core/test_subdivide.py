@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 from hypothesis import given, settings, strategies as st
 
-from core import _stencils
+from core import _refine
 from core.errors import InvalidArgumentError, InvalidMeshError
 from core.subdivide import SubdivisionOperator, subdivide, subdivision_operator
 from core.mesh import face_normals
@@ -216,7 +216,7 @@ def test_exact_counts_per_level(name, scheme):
         n_exp, F_exp = n, F
         for _ in range(levels):
             e = edge_map(F_exp, n_exp).E.shape[0]
-            F_exp = _stencils.split_faces(F_exp, n_exp, edge_map(F_exp, n_exp).face_edge)
+            F_exp = _refine.split_faces(F_exp, n_exp, edge_map(F_exp, n_exp).face_edge)
             n_exp += e
         assert op.n_fine == n_exp
         assert op.F_fine.shape == (m * 4 ** levels, 3)
@@ -341,10 +341,10 @@ def test_operator_composes_over_levels(scheme):
 def test_refined_topology_equals_topology_from_scratch():
     for name in ("torus", "patch", "cube", "fan3"):
         V, F = MESHES[name]()
-        T = _stencils.topology(F, len(V), np.zeros(0, dtype=np.int64), "test", True)
+        T = _refine.topology(F, len(V), np.zeros(0, dtype=np.int64), "test", True)
         for _ in range(2):
-            T2 = _stencils.refine_topology(T)
-            R = _stencils.topology(T2.F, T2.n, np.zeros(0, dtype=np.int64), "test", True)
+            T2 = _refine.refine_topology(T)
+            R = _refine.topology(T2.F, T2.n, np.zeros(0, dtype=np.int64), "test", True)
             for field in ("F", "E", "face_edge", "faces", "corners", "opp", "valence", "n_sharp"):
                 assert np.array_equal(getattr(T2, field), getattr(R, field)), (name, field)
             T = T2
