@@ -184,7 +184,8 @@ def _check(st, A, B, X, interior, star, kf, tun):
     ref = _take(Nr, np.compress(mv, Fs, axis=0), axis=0).sum(axis=1)
     moved_v = np.compress(mv, Fs, axis=0)[mc]
     ref += (_take(Nr, A, axis=0) + _take(Nr, B, axis=0))[mk] - _take(Nr, moved_v, axis=0)
-    flip |= np.einsum("ij,ij->i", ref, N1) < 0
+    lr = np.sqrt(np.einsum("ij,ij->i", ref, ref))
+    flip |= np.einsum("ij,ij->i", ref, N1) < tun.ref_cos * lr * l1
     ok[mk[flip]] = False
     sumsq = (np.einsum("ij,ij->i", e0, e0) + np.einsum("ij,ij->i", e1, e1)
              + np.einsum("ij,ij->i", e2, e2))
