@@ -43,6 +43,7 @@ from .errors import InvalidArgumentError, InvalidMeshError, TopologyMismatchErro
 from .mesh import check_mesh, vertex_normals
 from .spatial import TriangleIndex, point_triangle_closest
 from .subdivide import subdivision_operator
+from ._groups import group_argmin, ragged_ranges
 
 #: relative length under which a normal or tangent counts as degenerate
 _DEGENERATE = 1e-12
@@ -476,20 +477,20 @@ def _dense_points_near(V_dense, F_dense, fine_face, F_fine, P):
     cnt_f = np.bincount(fine_face, minlength=m_f)
     inc = np.argsort(F_fine.ravel(), kind="stable")
     inc_j, inc_f = F_fine.ravel()[inc], inc // 3
-    idx, owner = _ragged(np.cumsum(cnt_f)[inc_f] - cnt_f[inc_f], cnt_f[inc_f])
+    idx, owner = ragged_ranges(np.cumsum(cnt_f)[inc_f] - cnt_f[inc_f], cnt_f[inc_f])
     pj, pk = inc_j[owner], by_face[idx]
     keep = degree[pk] > 0
     pj, pk = pj[keep], pk[keep]
     d = V_dense[pk] - P[pj]
     cnt_j = np.bincount(pj, minlength=n_f)
     has = np.flatnonzero(cnt_j)
-    nearest = pk[_group_argmin(_dot(d, d), cnt_j[has])]
+    nearest = pk[group_argmin(_dot(d, d), cnt_j[has])]
     # closest point on the triangle fan of the nearest vertex; where it lands
     # on the fan's rim (zero weight on the centre), look in the two-ring
     flat = F_dense.ravel()
     by_vertex = np.argsort(flat, kind="stable") // 3
     start_v = np.cumsum(degree) - degree
-    idx, owner = _ragged(start_v[nearest], degree[nearest])
+    idx, owner = ragged_ranges(start_v[nearest], degree[nearest])
     fan_f = by_vertex[idx]
     point, corners, bary = _closest_in_groups(V_dense, F_dense, P, has[owner], fan_f,
                                               degree[nearest])
@@ -500,7 +501,7 @@ def _dense_points_near(V_dense, F_dense, fine_face, F_fine, P):
         keep = rim[owner]
         ring_j, ring_v = _unique_pairs(np.repeat(has[owner][keep], 3), F_dense[fan_f[keep]].ravel(),
                                        n_d)
-        idx, owner2 = _ragged(start_v[ring_v], degree[ring_v])
+        idx, owner2 = ragged_ranges(start_v[ring_v], degree[ring_v])
         cand_j, cand_f = _unique_pairs(ring_j[owner2], by_vertex[idx], F_dense.shape[0])
         counts = np.bincount(cand_j, minlength=n_f)
         js = np.flatnonzero(counts)
@@ -517,7 +518,7 @@ def _closest_in_groups(V, F, P, j, face, counts):
     the best point, its face's corners and barycentric coordinates per group."""
     T = F[face]
     hit = point_triangle_closest(P[j], V[T[:, 0]], V[T[:, 1]], V[T[:, 2]])
-    best = _group_argmin(hit.distance, counts)
+    best = group_argmin(hit.distance, counts)
     return hit.point[best], T[best], hit.bary[best]
 
 
@@ -525,25 +526,6 @@ def _unique_pairs(a, b, n_b):
     """Distinct pairs ``(a[k], b[k])`` sorted by ``a`` then ``b``."""
     key = np.unique(a * np.int64(n_b) + b)
     return key // n_b, key % n_b
-
-
-def _ragged(starts, counts):
-    """Concatenated ``arange(starts[i], starts[i] + counts[i])`` and the group of each entry."""
-    owner = np.repeat(np.arange(counts.shape[0], dtype=np.int64), counts)
-    offsets = np.cumsum(counts) - counts
-    idx = np.arange(int(counts.sum()), dtype=np.int64) + np.repeat(starts - offsets, counts)
-    return idx, owner
-
-
-def _group_argmin(values, counts):
-    """Index of the first minimum of each contiguous group (every count > 0)."""
-    starts = np.cumsum(counts) - counts
-    mins = np.minimum.reduceat(values, starts)
-    pos = np.flatnonzero(values == np.repeat(mins, counts))
-    group = np.searchsorted(starts, pos, side="right") - 1
-    first = np.ones(pos.shape[0], dtype=bool)
-    first[1:] = group[1:] != group[:-1]
-    return pos[first]
 
 
 def _vertex_corners(F, n):

@@ -67,6 +67,7 @@ import numpy as np
 
 from .errors import InvalidArgumentError
 from .mesh import check_mesh
+from ._groups import group_argmin, ragged_ranges
 
 __all__ = ["ClosestPoints", "TriangleClosest", "TriangleIndex", "closest_points",
            "point_triangle_closest"]
@@ -313,26 +314,6 @@ def _bary(v, w):
 
 # --- small vectorised helpers --------------------------------------------------------------------
 
-def _ragged(starts, counts):
-    """Concatenation of ``arange(starts[i], starts[i] + counts[i])`` and the owner of each entry."""
-    total = int(counts.sum())
-    owner = np.repeat(np.arange(counts.shape[0]), counts)
-    offs = np.cumsum(counts) - counts
-    idx = np.arange(total, dtype=np.int64) + np.repeat(starts - offs, counts)
-    return idx, owner
-
-
-def _group_argmin(d2, counts):
-    """Index of the (first) minimum of each contiguous group; every count must be > 0."""
-    starts = np.cumsum(counts) - counts
-    mins = np.minimum.reduceat(d2, starts)
-    pos = np.flatnonzero(d2 == np.repeat(mins, counts))
-    grp = np.searchsorted(starts, pos, side="right") - 1
-    first = np.ones(pos.shape[0], dtype=bool)
-    first[1:] = grp[1:] != grp[:-1]
-    return pos[first]
-
-
 def _unit(X):
     """Rows of X normalised (zero rows stay zero)."""
     length = np.linalg.norm(X, axis=1)
@@ -446,7 +427,7 @@ class TriangleIndex:
         self._h = h
         self._dims = dims
         cnt = np.prod(nr, axis=1)
-        idx, tri = _ragged(np.zeros(m, dtype=np.int64), cnt)
+        idx, tri = ragged_ranges(np.zeros(m, dtype=np.int64), cnt)
         local = idx                                   # 0..cnt-1 within each triangle
         nx = nr[tri, 0]
         ny = nr[tri, 1]
@@ -628,7 +609,7 @@ class TriangleIndex:
         nz = counts[counts > 0]
         if nz.size == 0:
             return
-        win = _group_argmin(d2, nz)
+        win = group_argmin(d2, nz)
         qq = q[win]
         better = d2[win] < best.d2[qq]
         qq, win = qq[better], win[better]
@@ -670,7 +651,7 @@ class TriangleIndex:
             self._fold(q, t, v, w, d2, _run_lengths(q), best)
             return
         counts = _run_lengths(q)
-        first = _group_argmin(lb, counts)
+        first = group_argmin(lb, counts)
         qa, ta = q[first], t[first]
         v, w, d2 = self._eval(PT, qa, ta)
         self._fold(qa, ta, v, w, d2, np.ones(qa.size, dtype=np.int64), best)
@@ -700,7 +681,7 @@ class TriangleIndex:
     def _cell_pairs(self, qi, g):
         """Pairs (query, triangle) for the (query, cell) list (qi, g), grouped by query."""
         start = self._cell_start
-        ref, own = _ragged(start[g], start[g + 1] - start[g])
+        ref, own = ragged_ranges(start[g], start[g + 1] - start[g])
         return qi[own], self._cell_tri[ref]
 
     def _grid_chunk(self, PT, qi, cc, cid, best):
@@ -714,7 +695,7 @@ class TriangleIndex:
         done = c0.copy()                                # a second cell already scanned
         empty = np.flatnonzero(~np.isfinite(best.d2[qi]))
         if empty.size:
-            k, own = _ragged(np.zeros(empty.size, dtype=np.int64),
+            k, own = ragged_ranges(np.zeros(empty.size, dtype=np.int64),
                              np.full(empty.size, 27, dtype=np.int64))
             g3 = cc[qi[empty]][own] + np.stack([k % 3, (k // 3) % 3, k // 9], axis=1) - 1
             ok = ((g3 >= 0) & (g3 < dims)).all(axis=1)
@@ -726,7 +707,7 @@ class TriangleIndex:
                 pq = PT[:, qi[empty][own]].T
                 cell_lo = lo + g3 * h
                 dd = np.maximum(np.maximum(cell_lo - pq, pq - (cell_lo + h)), 0.0)
-                nearest = _group_argmin(np.einsum("ij,ij->i", dd, dd), _run_lengths(own))
+                nearest = group_argmin(np.einsum("ij,ij->i", dd, dd), _run_lengths(own))
                 own, g = own[nearest], g[nearest]
                 self._scan(PT, *self._cell_pairs(qi[empty][own], g), best)
                 done[empty[own]] = g
@@ -742,7 +723,7 @@ class TriangleIndex:
         far = ~finite | (ncell > _MAX_PHASE2_CELLS)
         sel = np.flatnonzero(~far & (ncell > 1))
         if sel.size:
-            k, own = _ragged(np.zeros(sel.size, dtype=np.int64), ncell[sel])
+            k, own = ragged_ranges(np.zeros(sel.size, dtype=np.int64), ncell[sel])
             sp = span[sel][own]
             g3 = c_lo[sel][own] + np.stack(
                 [k % sp[:, 0], (k // sp[:, 0]) % sp[:, 1], k // (sp[:, 0] * sp[:, 1])], axis=1)
@@ -791,7 +772,7 @@ class TriangleIndex:
                 level, q, node, near2 = stack.pop()
                 if level == self._depth:
                     # the nearest leaf first (a tight exact bound), then the leaves within it
-                    first = _group_argmin(near2, _run_lengths(q))
+                    first = group_argmin(near2, _run_lengths(q))
                     self._scan_leaves(PT, q[first], node[first], best)
                     rest = near2 <= best.d2[q] * (1 + 4 * _SLACK)
                     rest[first] = False
@@ -842,7 +823,7 @@ class TriangleIndex:
                     stack.append((level + 1, q, child, near2))
 
     def _scan_leaves(self, PT, q, leaf, best, probe=True):
-        t, own = _ragged(leaf * _LEAF, np.full(q.size, _LEAF, dtype=np.int64))
+        t, own = ragged_ranges(leaf * _LEAF, np.full(q.size, _LEAF, dtype=np.int64))
         ok = t < self.n_faces
         self._scan(PT, q[own[ok]], t[ok], best, probe)
 

@@ -45,38 +45,9 @@ from core.metrics import surface_distance  # noqa: E402
 from core.simplify import simplify  # noqa: E402
 from core.spatial import closest_points  # noqa: E402
 from core.subdivide import subdivision_operator  # noqa: E402
+from tests.mesh_factory import BUMP, analytic_bend as bend, bumpy_tube  # noqa: E402
 
 SHARED = os.path.normpath(os.path.join(ROOT, "..", "shared", "meshes"))
-
-BUMP = 0.01
-
-
-TUBE_LENGTH, TUBE_RADIUS = 3.0, 0.3
-BEND_RADIUS = TUBE_LENGTH / (np.pi / 2)
-
-
-def bumpy_tube(nu, nv):
-    """Open tube along x (length 3, radius 0.3), bumps of amplitude BUMP
-    (wavelength 0.125 along the axis, 16 around); as in tests/core/test_adjust.py."""
-    u = np.linspace(0.0, TUBE_LENGTH, nu + 1)
-    v = np.arange(nv) * 2 * np.pi / nv
-    U, W = np.meshgrid(u, v, indexing="ij")
-    r = TUBE_RADIUS + BUMP * np.sin(2 * np.pi * U / 0.125) * np.sin(16 * W)
-    V = np.stack([U, r * np.cos(W), r * np.sin(W)], axis=-1).reshape(-1, 3)
-    i, j = np.meshgrid(np.arange(nu), np.arange(nv), indexing="ij")
-    a = (i * nv + j).ravel()
-    b = ((i + 1) * nv + j).ravel()
-    c = ((i + 1) * nv + (j + 1) % nv).ravel()
-    d = (i * nv + (j + 1) % nv).ravel()
-    F = np.concatenate([np.stack([a, c, b], 1), np.stack([a, d, c], 1)]).astype(np.int64)
-    return V, F
-
-
-def bend(V):
-    """Quarter-turn bend of the tube's axis around (x=0, z=-R) || y."""
-    th = V[:, 0] / BEND_RADIUS
-    r = BEND_RADIUS + V[:, 2]
-    return np.stack([r * np.sin(th), V[:, 1], r * np.cos(th) - BEND_RADIUS], axis=1)
 
 
 def bumpy_torus(n_major, n_minor, R=1.0, r=0.35, bump=0.01):

@@ -15,7 +15,9 @@ from core.adjust import Binding, bind, deform, frames, refine
 from core.errors import InvalidArgumentError, InvalidMeshError, TopologyMismatchError
 from core.mesh import bbox_diagonal, vertex_normals
 from core.spatial import closest_points
-from tests.mesh_factory import cube, icosphere, load_shared, torus
+from tests.mesh_factory import (BEND_RADIUS, BUMP, TUBE_LENGTH, TUBE_RADIUS, analytic_bend,
+                                 bumpy_tube, cube, icosphere, load_shared,
+                                 torus)
 
 
 def _bumpy_sphere(k=3, amp=0.03, seed=0):
@@ -340,37 +342,6 @@ def test_refine_follows_rigid_motion(sphere_binding):
 
 
 # ------------------------------------------------------------------ analytic bend
-BUMP = 0.01                        # bump amplitude
-TUBE_LENGTH, TUBE_RADIUS = 3.0, 0.3
-BEND_RADIUS = TUBE_LENGTH / (np.pi / 2)   # the tube's axis bends a quarter turn
-
-
-def bumpy_tube(nu=240, nv=96):
-    """Open tube along x (length 3, radius 0.3) with bumps of amplitude
-    ``BUMP`` (wavelength 0.125 along the axis, 16 around): a smooth shape
-    with high-frequency detail no 800-face cage can hold."""
-    u = np.linspace(0.0, TUBE_LENGTH, nu + 1)
-    v = np.arange(nv) * 2 * np.pi / nv
-    U, W = np.meshgrid(u, v, indexing="ij")
-    r = TUBE_RADIUS + BUMP * np.sin(2 * np.pi * U / 0.125) * np.sin(16 * W)
-    V = np.stack([U, r * np.cos(W), r * np.sin(W)], axis=-1).reshape(-1, 3)
-    i, j = np.meshgrid(np.arange(nu), np.arange(nv), indexing="ij")
-    a = (i * nv + j).ravel()
-    b = ((i + 1) * nv + j).ravel()
-    c = ((i + 1) * nv + (j + 1) % nv).ravel()
-    d = (i * nv + (j + 1) % nv).ravel()
-    F = np.concatenate([np.stack([a, c, b], 1), np.stack([a, d, c], 1)]).astype(np.int64)
-    return V, F
-
-
-def analytic_bend(V):
-    """Bend around the axis (x=0, z=-R) parallel to y: the line z = 0 maps
-    isometrically onto the circle of radius R, z offsets go along its normal."""
-    th = V[:, 0] / BEND_RADIUS
-    r = BEND_RADIUS + V[:, 2]
-    return np.stack([r * np.sin(th), V[:, 1], r * np.cos(th) - BEND_RADIUS], axis=1)
-
-
 def bend_errors(Vd, Fd, Vc, Fc, levels=2, creases=None):
     """Errors in bump heights against the analytic bend of the dense vertices:
     (max, mean) of deform, then (max, mean) of the plain subdivided bent
