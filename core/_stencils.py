@@ -17,18 +17,45 @@ import numpy as np
 from ._refine import NEXT_CORNER, fan_ranks, next_corner
 
 
+class _Block(NamedTuple):
+    """Rows ``start:stop`` of a stencil as a padded fixed-width table (ELL):
+    row ``start + i`` is ``sum_j weights[i, j] * X[cols[i * width + j]]``
+    (padding has weight 0), or a plain copy of ``X[start:stop]``."""
+
+    start: int
+    stop: int
+    copy: bool
+    width: int
+    cols: np.ndarray      #: ((stop-start) * width,) int64, empty for a copy
+    weights: np.ndarray   #: (stop-start, width) float64, empty for a copy
+
+
+class ApplyPlan(NamedTuple):
+    """How :meth:`Stencil.apply_t` evaluates a level: contiguous row blocks as
+    padded tables (one gather and one multiply-sum per column, no per-row
+    overhead), and the few rows longer than their block's width from the CSR
+    arrays with ``np.add.reduceat``."""
+
+    blocks: tuple
+    long_rows: np.ndarray     #: (q,) int64
+    long_entries: np.ndarray  #: CSR entry indices of the long rows, row by row
+    long_starts: np.ndarray   #: (q,) offsets into long_entries
+
+
 class Stencil(NamedTuple):
     """One subdivision level as a sparse matrix in CSR form (rows sorted).
 
     Row ``i`` (a fine vertex) is ``sum(weights[j] * X[cols[j]])`` for ``j`` in
     ``indptr[i]:indptr[i+1]``. Every row has at least one entry and sums to 1;
-    a row may name a column twice (the weights add).
+    a row may name a column twice (the weights add). ``plan`` is the same
+    matrix rearranged for a fast :meth:`apply_t` (see :func:`make_plan`).
     """
 
     indptr: np.ndarray   #: (n_out+1,) int64
     cols: np.ndarray     #: (nnz,) int64, coarse vertex of each entry
     weights: np.ndarray  #: (nnz,) float64
     n_in: int
+    plan: object = None  #: ApplyPlan or None (then apply_t uses the CSR arrays)
 
     @property
     def n_out(self):
@@ -43,11 +70,25 @@ class Stencil(NamedTuple):
         out = np.empty((Xt.shape[0], self.n_out))
         if self.n_out == 0:
             return out
-        starts = self.indptr[:-1]
-        for d in range(Xt.shape[0]):
-            g = Xt[d][self.cols]
-            g *= self.weights
-            out[d] = np.add.reduceat(g, starts)
+        if self.plan is None:
+            starts = self.indptr[:-1]
+            for d in range(Xt.shape[0]):
+                g = Xt[d][self.cols]
+                g *= self.weights
+                out[d] = np.add.reduceat(g, starts)
+            return out
+        for b in self.plan.blocks:
+            if b.copy:
+                out[:, b.start:b.stop] = Xt[:, b.start:b.stop]
+                continue
+            for d in range(Xt.shape[0]):
+                g = Xt[d][b.cols].reshape(b.stop - b.start, b.width)
+                out[d, b.start:b.stop] = np.einsum("ij,ij->i", g, b.weights)
+        p = self.plan
+        if p.long_rows.shape[0]:
+            c, w = self.cols[p.long_entries], self.weights[p.long_entries]
+            for d in range(Xt.shape[0]):
+                out[d, p.long_rows] = np.add.reduceat(Xt[d][c] * w, p.long_starts)
         return out
 
     def apply_transpose_t(self, Gt, rows=None):
@@ -65,6 +106,51 @@ class Stencil(NamedTuple):
     def apply_transpose(self, G):
         """``G`` (n_out, k) float64 -> (n_in, k), the exact adjoint of :meth:`apply`."""
         return self.apply_transpose_t(np.ascontiguousarray(G.T)).T
+
+
+_MAX_WIDTH = 16
+
+
+def make_plan(S, bounds):
+    """The :class:`ApplyPlan` of stencil ``S`` for row blocks ``bounds[i]:bounds[i+1]``.
+
+    A block whose rows are all ``X[i]`` becomes a copy; otherwise its width is
+    its most common row length (at most 16): shorter rows are padded with
+    zero weights, longer ones are evaluated from the CSR arrays.
+    """
+    lens = np.diff(S.indptr)
+    blocks, long_rows = [], []
+    for r0, r1 in zip(bounds[:-1], bounds[1:]):
+        r0, r1 = int(r0), int(r1)
+        if r1 <= r0:
+            continue
+        L = lens[r0:r1]
+        first = S.indptr[r0:r1]
+        if np.all(L == 1) and np.array_equal(S.cols[first], np.arange(r0, r1)) \
+                and np.all(S.weights[first] == 1.0):
+            blocks.append(_Block(r0, r1, True, 1, np.zeros(0, np.int64), np.zeros((0, 1))))
+            continue
+        width = int(min(np.bincount(L).argmax(), _MAX_WIDTH))
+        if np.all(L == width):      # a uniform block is a view of the CSR arrays
+            e0, e1 = S.indptr[r0], S.indptr[r1]
+            blocks.append(_Block(r0, r1, False, width, S.cols[e0:e1], S.weights[e0:e1].reshape(-1, width)))
+            continue
+        # slots past a row's end read the next row's entries: their weight is zeroed
+        idx = first[:, None] + np.arange(width)
+        cols = S.cols.take(idx, mode="clip")
+        w = S.weights.take(idx, mode="clip")
+        short = np.flatnonzero(L < width)
+        w[short] *= np.arange(width) < L[short, None]
+        too_long = np.flatnonzero(L > width)
+        w[too_long] = 0.0
+        long_rows.append(r0 + too_long)
+        blocks.append(_Block(r0, r1, False, width, cols.ravel(), w))
+    long_rows = np.concatenate(long_rows) if long_rows else np.zeros(0, dtype=np.int64)
+    ll = lens[long_rows]
+    starts = np.zeros(long_rows.shape[0], dtype=np.int64)
+    np.cumsum(ll[:-1], out=starts[1:])
+    entries = np.repeat(S.indptr[long_rows] - starts, ll) + np.arange(int(ll.sum()))
+    return ApplyPlan(tuple(blocks), long_rows, entries, starts)
 
 
 class _Table(NamedTuple):
@@ -244,7 +330,8 @@ def butterfly_level(T):
                 cols = [vs] + [ring[base + (r + j) % k] for j in js]
                 ws = [0.75 * f] + [sj[j] * f for j in js]
                 tables.append(_Table(n + kx[sel], cols, ws))
-    return _assemble(n + e, n, tables, patches)
+    S = _assemble(n + e, n, tables, patches)
+    return S._replace(plan=make_plan(S, [0, n, n + e]))
 
 
 def loop_beta(k):
@@ -309,4 +396,5 @@ def loop_level(T):
         c = F[T.faces[ki, 0], T.corners[ki, 0]]
         d = F[T.faces[ki, 1], T.corners[ki, 1]]
         tables.append(_Table(n + ki, [E[ki, 0], E[ki, 1], c, d], [0.375, 0.375, 0.125, 0.125]))
-    return _assemble(n + e, n, tables)
+    S = _assemble(n + e, n, tables)
+    return S._replace(plan=make_plan(S, [0, n, n + e]))

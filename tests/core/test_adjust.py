@@ -15,7 +15,7 @@ from core.adjust import Binding, bind, deform, frames, refine
 from core.errors import InvalidArgumentError, InvalidMeshError, TopologyMismatchError
 from core.mesh import bbox_diagonal, vertex_normals
 from core.spatial import closest_points
-from tests.mesh_factory import (BEND_RADIUS, BUMP, TUBE_LENGTH, TUBE_RADIUS, analytic_bend,
+from tests.mesh_factory import (BEND_RADIUS, BUMP, TUBE_LENGTH, analytic_bend,
                                  bumpy_tube, cube, icosphere, load_shared,
                                  torus)
 
