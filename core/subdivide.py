@@ -135,9 +135,13 @@ Everything is vectorised (``core/_refine.py``: the topology of each level;
 at the coarse level and by construction below it; one-rings of extraordinary
 vertices are put in rotational order by pointer jumping along the "next face
 around the vertex" map; rows are assembled by a counting scatter. A level is
-a CSR matrix (rows sorted); ``apply`` is a gather plus ``np.add.reduceat``,
-``apply_transpose`` the matching ``np.bincount`` scatter. No Python loop runs
-over vertices, edges or faces.
+a CSR matrix (rows sorted). ``apply_transpose`` is the matching
+``np.bincount`` scatter. ``apply`` runs from an apply plan made once per level:
+the old-vertex rows and the new-vertex rows as two padded fixed-width tables
+(a butterfly's old vertices are a plain copy), so each coordinate costs one
+gather and one multiply-sum, and the few rows longer than their table's width
+(high-valence vertices) through ``np.add.reduceat`` on the CSR arrays. No
+Python loop runs over vertices, edges or faces.
 """
 
 import hashlib

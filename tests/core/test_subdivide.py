@@ -338,6 +338,22 @@ def test_operator_composes_over_levels(scheme):
     assert np.all(np.diff(rows * op2.n_coarse + cols) > 0)   # sorted, no repeated pair
 
 
+@pytest.mark.parametrize("scheme", ["butterfly", "loop"])
+@pytest.mark.parametrize("name", ["bipyramid", "fan9", "patch", "cube"])
+def test_apply_plan_equals_the_csr_arrays(name, scheme):
+    V, F = MESHES[name]()
+    op = subdivision_operator(F, len(V), levels=2, scheme=scheme)
+    X = _random_positions(V, 9)
+    for S in op.stencils:
+        assert S.plan is not None
+        csr = S._replace(plan=None).apply(X)
+        np.testing.assert_allclose(S.apply(X), csr, rtol=0, atol=1e-14)
+        X = csr
+    # the long rows (valence > 7) really went through the overflow path
+    if name == "fan9" or (name, scheme) == ("bipyramid", "loop"):
+        assert op.stencils[0].plan.long_rows.shape[0] > 0
+
+
 def test_refined_topology_equals_topology_from_scratch():
     for name in ("torus", "patch", "cube", "fan3"):
         V, F = MESHES[name]()
