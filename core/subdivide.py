@@ -180,8 +180,9 @@ class SubdivisionOperator:
     levels : int
     creases : (k,2) int64, the coarse crease edges (sorted ``lo < hi`` rows, unique).
     fingerprint : str, a hash of (F, n_coarse, levels, scheme, creases).
-    stencils : tuple of per-level CSR stencils (``indptr, cols, weights, n_in``),
-        rows sorted; the fine vertices of level ``i`` are the coarse ones of
+    stencils : tuple of per-level stencils (``core._stencils.Stencil``: CSR
+        ``indptr, cols, weights`` with rows sorted, ``n_in``, and the apply
+        ``plan``); the fine vertices of level ``i`` are the coarse ones of
         level ``i+1``.
     """
 
