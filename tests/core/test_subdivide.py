@@ -729,3 +729,19 @@ def test_real_non_manifold_meshes_raise_naming_what_manifold_report_finds(name):
         match = rf"non-manifold vertices .*vertex {rep.non_manifold_vertices[0]}\b"
     with pytest.raises(InvalidMeshError, match=match):
         subdivide(V, F, scheme="loop")
+
+
+@settings(max_examples=15, deadline=None)
+@given(name=st.sampled_from(["icosphere1", "torus", "patch", "fan5", "bipyramid", "octahedron"]),
+       scheme=st.sampled_from(["butterfly", "loop"]),
+       seed=st.integers(0, 2 ** 31 - 1))
+def test_random_creases_equal_reference(name, scheme, seed):
+    V, F = MESHES[name]()
+    rng = np.random.default_rng(seed)
+    E = edge_map(F, len(V)).E
+    creases = E[rng.random(E.shape[0]) < rng.uniform(0.05, 0.5)]
+    V = V + 0.05 * rng.standard_normal(V.shape)
+    Vf, Ff = subdivide(V, F, levels=2, scheme=scheme, creases=creases if len(creases) else None)
+    Vr, Fr = reference(V, F, 2, scheme, creases)
+    assert np.array_equal(Ff, Fr)
+    np.testing.assert_allclose(Vf, Vr, rtol=0, atol=1e-12)
