@@ -53,12 +53,13 @@ class FitResult(NamedTuple):
     dense_to_fine: np.ndarray   #: (iterations+1,) mean distance dense samples -> fine surface
     cg_iterations: np.ndarray   #: (iterations,) CG iterations of each solve
     diagonal: float             #: bounding-box diagonal of the dense mesh
+    cancelled: bool = False     #: True when ``progress`` asked to stop (V is then the last iterate)
 
 
 def fit_cage(V_dense, F_dense, V_cage, F_cage, *, levels=2, scheme="butterfly", creases=None,
              iterations=8, smoothness=0.05, point_to_point=0.1, laplacian="uniform",
              samples=None, seed=0,
-             cg_rtol=1e-6, cg_max_iterations=300):
+             cg_rtol=1e-6, cg_max_iterations=300, progress=None):
     """Cage positions whose subdivision surface best matches a dense surface.
 
     Parameters
@@ -88,6 +89,10 @@ def fit_cage(V_dense, F_dense, V_cage, F_cage, *, levels=2, scheme="butterfly", 
         Seed of the surface sampling.
     cg_rtol, cg_max_iterations
         Stopping rule of each conjugate-gradient solve.
+    progress : callable, optional
+        Called with the fraction done (0..1) after each iteration; returning
+        False stops the fit (``FitResult.cancelled``; the distance records
+        then end at the last completed iteration).
 
     Returns
     -------
@@ -146,6 +151,7 @@ def fit_cage(V_dense, F_dense, V_cage, F_cage, *, levels=2, scheme="butterfly", 
     N_samples = _interpolate(N_dense, F_dense, sampled.face, sampled.bary)
     ws = 1.0 / n_s
     f2d, d2f, cg_its = [], [], []
+    cancelled = False
     for it in range(int(iterations) + 1):
         Vf = op.apply(X)
         area = _vertex_areas(Vf, Ff, op.n_fine)
@@ -196,10 +202,14 @@ def fit_cage(V_dense, F_dense, V_cage, F_cage, *, levels=2, scheme="butterfly", 
                                  max_iterations=cg_max_iterations, preconditioner=lambda r: r * inv)
         X = sol.X.reshape(n_c, 3)
         cg_its.append(sol.iterations)
+        if progress is not None and progress((it + 1) / (int(iterations) + 1)) is False:
+            cancelled = True
+            break
     f2d = np.array(f2d)
     d2f = np.array(d2f)
     diag = float(np.linalg.norm(V_dense.max(axis=0) - V_dense.min(axis=0)))
-    return FitResult(X + centre, 0.5 * (f2d + d2f), f2d, d2f, np.array(cg_its, dtype=np.int64), diag)
+    return FitResult(X + centre, 0.5 * (f2d + d2f), f2d, d2f, np.array(cg_its, dtype=np.int64), diag,
+                     cancelled)
 
 
 def _interpolate(N, F, face, bary):

@@ -151,8 +151,12 @@ def compute_simplify(job, *, progress=None):
         if progress is not None and progress(0.8) is False:
             job.cancelled = True
             return job
+        fit_progress = None if progress is None else (lambda f: progress(0.8 + 0.18 * f))
         job.fit = core.fit_cage(job.V, job.F, res.V, res.F, levels=p.levels, scheme=p.scheme,
-                                creases=creases)
+                                creases=creases, progress=fit_progress)
+        if job.fit.cancelled:
+            job.cancelled = True
+            return job
         job.V_cage = job.fit.V
     job.seconds = time.perf_counter() - t0
     if progress is not None:

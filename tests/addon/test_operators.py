@@ -329,3 +329,15 @@ def test_refine_with_other_levels_and_scheme_keeps_the_edit(dense):
     dz = mio().read_positions(cage.meshadjust.edited.data)[:, 2] - \
         mio().read_positions(dense.data)[:, 2]
     assert np.allclose(dz, 0.2, atol=1e-4)   # re-bound from the rest shape: the edit survives
+
+
+@pytest.mark.parametrize("stop_at", [0.3, 0.75, 0.85])   # in simplify, measuring, fitting
+def test_cancelled_simplify_leaves_the_scene_unchanged(dense, stop_at):
+    api = sys.modules[MODULE + ".meshadjust_addon.api"]
+    objects = set(bpy.data.objects)
+    meshes = set(bpy.data.meshes)
+    cage, report = api.simplify_object(dense, target_faces=300, fit=True, bind=True,
+                                       progress=lambda f: f < stop_at)
+    assert cage is None and "cancelled" in report.message
+    assert set(bpy.data.objects) == objects and set(bpy.data.meshes) == meshes
+    assert dense.meshadjust.cage is None and dense.meshadjust.role == 'NONE'

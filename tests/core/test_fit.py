@@ -182,3 +182,14 @@ def test_fit_restores_the_enclosed_volume(name):
     op = subdivision_operator(Fc, Vc.shape[0], levels=2, scheme="butterfly", creases=creases)
     vol = enclosed_volume(Vd, Fd)
     assert abs(enclosed_volume(op.apply(r.V), op.F_fine) - vol) <= 0.002 * abs(vol)
+
+
+def test_progress_reports_and_cancels():
+    from tests.mesh_factory import icosphere as _ico
+    V, F = _ico(3)
+    Vc, Fc = _ico(1)
+    seen = []
+    r = fit_cage(V, F, Vc * 0.9, Fc, levels=1, iterations=4, progress=lambda f: seen.append(f))
+    assert seen == [0.2, 0.4, 0.6, 0.8] and not r.cancelled
+    r = fit_cage(V, F, Vc * 0.9, Fc, levels=1, iterations=4, progress=lambda f: f < 0.3)
+    assert r.cancelled and r.cg_iterations.shape[0] == 2
