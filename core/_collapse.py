@@ -180,12 +180,13 @@ def _check(st, A, B, X, interior, star, kf, tun):
     flip = (l0 > 0) & (np.einsum("ij,ij->i", N0, N1) <= tun.flip_cos * l0 * l1)
     # and never against the input surface the face stands for (the summed
     # normals of the input faces merged into its vertices): no slow drift
-    Nr = st.Nref
-    ref = _take(Nr, np.compress(mv, Fs, axis=0), axis=0).sum(axis=1)
-    moved_v = np.compress(mv, Fs, axis=0)[mc]
-    ref += (_take(Nr, A, axis=0) + _take(Nr, B, axis=0))[mk] - _take(Nr, moved_v, axis=0)
-    lr = np.sqrt(np.einsum("ij,ij->i", ref, ref))
-    flip |= np.einsum("ij,ij->i", ref, N1) < tun.ref_cos * lr * l1
+    if tun.ref_cos > -1.0:
+        Nr = st.Nref
+        ref = _take(Nr, np.compress(mv, Fs, axis=0), axis=0).sum(axis=1)
+        moved_v = np.compress(mv, Fs, axis=0)[mc]
+        ref += (_take(Nr, A, axis=0) + _take(Nr, B, axis=0))[mk] - _take(Nr, moved_v, axis=0)
+        lr = np.sqrt(np.einsum("ij,ij->i", ref, ref))
+        flip |= np.einsum("ij,ij->i", ref, N1) < tun.ref_cos * lr * l1
     ok[mk[flip]] = False
     sumsq = (np.einsum("ij,ij->i", e0, e0) + np.einsum("ij,ij->i", e1, e1)
              + np.einsum("ij,ij->i", e2, e2))

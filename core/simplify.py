@@ -59,7 +59,9 @@ class Tuning:
     max_rounds: int = 4              #: selection rounds per pass
     bands: int = 8                   #: cost bands of the pool (random order inside a band)
     flip_cos: float = 0.0            #: reject if a face normal turns by more than acos(flip_cos)
-    ref_cos: float = 0.3             #: ... or ends farther than acos(ref_cos) from the input it stands for
+    #: ... or ends farther than acos(ref_cos) from the summed normals of the input it
+    #: stands for (-1: off; on rough scans it blocks too many collapses, see the report)
+    ref_cos: float = -1.0
     gamma_hard: float = 0.02         #: reject new triangles less compact than this (and than before)
     gamma_soft: float = 0.3          #: penalise new triangles less compact than this
     compact_weight: float = 1e-5     #: penalty scale: star area * edge length^2 * (1 - g/g_soft)^2
