@@ -265,57 +265,106 @@ def _edited_copy(source, cage):
     return edited
 
 
-def bind_object(cage, *, levels=None, scheme=None, from_rest=False):
-    """(Re-)bind the cage's source to the cage.
+@dataclass
+class CageJob:
+    """The compute half of a bind or a fit: source and cage read from Blender."""
 
-    The source's copy (the *edited original*) is created on first use; its
-    vertices are reset to the source's and bound to the subdivision surface of
-    the cage as it is now (its shape becomes the rest shape), or, with
-    ``from_rest``, as it was at the last bind (to change levels or scheme
-    without losing an edit). Returns the edited-original object.
-    """
+    cage_name: str
+    V: np.ndarray                #: source positions (its local space)
+    F: np.ndarray                #: source triangles
+    V_cage: np.ndarray           #: cage positions in the source's space
+    F_cage: np.ndarray
+    creases: object
+    levels: int
+    scheme: str
+    from_rest: bool = False
+    binding: object = None       #: core.Binding, after compute_bind
+    fit: object = None           #: core.FitResult, after compute_fit
+    cancelled: bool = False
+
+
+def prepare_cage_job(cage, *, levels=None, scheme=None, from_rest=False):
+    """Read what a bind or a fit of ``cage`` needs (main thread).
+
+    ``from_rest`` takes the cage's shape at the last bind instead of its
+    current one (to change levels or scheme without losing an edit)."""
     cs = cage.meshadjust
     source = cs.source
     if source is None:
         raise core.MeshAdjustError(f"'{cage.name}' is not a MeshAdjust cage (no source linked)")
     V_cage = store.load_rest(cage) if from_rest else _cage_in_source_space(cage, source)
     F_cage, _, creases = store.cage_topology(cage)
-    levels = cs.levels if levels is None else levels
-    scheme = cs.scheme if scheme is None else scheme
     depsgraph = bpy.context.evaluated_depsgraph_get()
     src = mesh_io.read_object(source, depsgraph=depsgraph)
-    binding = core.bind(src.V, src.F, V_cage, F_cage, levels=levels, scheme=scheme,
-                        creases=creases)
-    edited = _edited_copy(source, cage)
-    if src.V.shape[0] != len(edited.data.vertices):
+    return CageJob(cage.name, src.V, src.F, V_cage, F_cage, creases,
+                   cs.levels if levels is None else levels,
+                   cs.scheme if scheme is None else scheme, from_rest)
+
+
+def compute_bind(job, *, progress=None):
+    """Bind the source to the cage's subdivision surface (pure NumPy, any
+    thread). ``progress`` is only asked whether to go on, at the end."""
+    job.binding = core.bind(job.V, job.F, job.V_cage, job.F_cage, levels=job.levels,
+                            scheme=job.scheme, creases=job.creases)
+    if progress is not None and progress(1.0) is False:
+        job.cancelled = True
+    return job
+
+
+def commit_bind(cage, job):
+    """Write a computed binding: the edited-original copy (created on first
+    use, its vertices reset to the source's), its binding attributes and the
+    cage's rest shape. Returns the edited-original object."""
+    cs = cage.meshadjust
+    edited = _edited_copy(cs.source, cage)
+    if job.V.shape[0] != len(edited.data.vertices):
         raise core.TopologyMismatchError(
-            f"'{source.name}' now has {src.V.shape[0]} vertices, its edited copy "
+            f"'{cs.source.name}' now has {job.V.shape[0]} vertices, its edited copy "
             f"{len(edited.data.vertices)}: delete '{edited.name}' and bind again")
-    mesh_io.write_positions(edited.data, src.V)
-    store.save_binding(edited, binding)
-    if not from_rest:
-        store.save_rest(cage, V_cage)
-    cs.levels = levels
-    cs.scheme = scheme
-    cs.fingerprint = binding.fingerprint
+    mesh_io.write_positions(edited.data, job.V)
+    store.save_binding(edited, job.binding)
+    if not job.from_rest:
+        store.save_rest(cage, job.V_cage)
+    cs.levels = job.levels
+    cs.scheme = job.scheme
+    cs.fingerprint = job.binding.fingerprint
     return edited
 
 
-def fit_cage_object(cage, *, levels=None, scheme=None):
-    """Move the cage's vertices so its subdivision matches its source.
-    Returns the core's ``FitResult``."""
-    cs = cage.meshadjust
-    source = cs.source
-    if source is None:
-        raise core.MeshAdjustError(f"'{cage.name}' is not a MeshAdjust cage (no source linked)")
-    src = mesh_io.read_object(source)
-    F_cage, _, creases = store.cage_topology(cage)
-    V_cage = _cage_in_source_space(cage, source)
-    fit = core.fit_cage(src.V, src.F, V_cage, F_cage, levels=levels or cs.levels,
-                        scheme=scheme or cs.scheme, creases=creases)
+def bind_object(cage, *, levels=None, scheme=None, from_rest=False):
+    """(Re-)bind the cage's source to the cage (the synchronous path).
+
+    The cage's current shape becomes the rest shape (or, with ``from_rest``,
+    the shape of the last bind is used again). Returns the edited-original
+    object.
+    """
+    job = prepare_cage_job(cage, levels=levels, scheme=scheme, from_rest=from_rest)
+    return commit_bind(cage, compute_bind(job))
+
+
+def compute_fit(job, *, progress=None):
+    """Fit the cage to the source (pure NumPy, any thread; cancellable)."""
+    job.fit = core.fit_cage(job.V, job.F, job.V_cage, job.F_cage, levels=job.levels,
+                            scheme=job.scheme, creases=job.creases, progress=progress)
+    job.cancelled = job.fit.cancelled
+    return job
+
+
+def commit_fit(cage, job):
+    """Move the cage's vertices to the fitted positions."""
+    source = cage.meshadjust.source
     M = np.array(cage.matrix_world.inverted() @ source.matrix_world)
-    mesh_io.write_positions(cage.data, fit.V @ M[:3, :3].T + M[:3, 3])
-    return fit
+    if cage.mode == 'EDIT':
+        raise core.MeshAdjustError(f"leave Edit Mode on '{cage.name}' to fit it")
+    mesh_io.write_positions(cage.data, job.fit.V @ M[:3, :3].T + M[:3, 3])
+    return job.fit
+
+
+def fit_cage_object(cage, *, levels=None, scheme=None):
+    """Move the cage's vertices so its subdivision matches its source (the
+    synchronous path). Returns the core's ``FitResult``."""
+    job = prepare_cage_job(cage, levels=levels, scheme=scheme)
+    return commit_fit(cage, compute_fit(job))
 
 
 def refine_object(cage, *, output='EDITED', levels=None, scheme=None):

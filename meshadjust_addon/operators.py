@@ -67,39 +67,17 @@ def cage_unavailable(context, need_binding=False):
     return None
 
 
-class _TargetProps:
-    target_mode: EnumProperty(name="Target", items=TARGET_MODES, default='FACES')
-    target_faces: IntProperty(name="Faces", default=2000, min=4, soft_max=50000)
-    ratio: FloatProperty(name="Ratio", default=0.02, min=1e-5, max=1.0, subtype='FACTOR')
-    max_error_pct: FloatProperty(name="Max error %", default=0.5, min=0.0, soft_max=5.0)
-    preserve_boundary: BoolProperty(name="Preserve boundary", default=True)
-    preserve_topology: BoolProperty(name="Keep topology", default=True)
-    feature_angle_deg: FloatProperty(name="Feature angle", default=60.0, min=0.0, max=180.0)
-    weight_group: StringProperty(name="Importance group", default="")
-    lock_group: StringProperty(name="Locked group", default="")
-    fit: BoolProperty(name="Fit cage", default=True)
-    bind: BoolProperty(name="Bind source", default=True)
-    levels: IntProperty(name="Levels", default=2, min=1, max=5)
-    scheme: EnumProperty(name="Scheme", items=SCHEMES, default='butterfly')
-    hide_source: BoolProperty(name="Hide source", default=False)
+class _Background:
+    """Mixin for long operators: the pure-NumPy compute half runs in a worker
+    thread while a modal timer shows progress (``wm.progress_*`` and the
+    panel's bar); Esc cancels, and nothing in the scene changes until
+    ``finish()`` commits the result on the main thread. Headless (no window),
+    ``execute()`` runs the synchronous path instead.
 
-    def params(self):
-        return api.SimplifyParams(
-            target_faces=self.target_faces if self.target_mode == 'FACES' else None,
-            ratio=self.ratio if self.target_mode == 'RATIO' else None,
-            max_error_pct=self.max_error_pct if self.target_mode == 'ERROR' else None,
-            preserve_boundary=self.preserve_boundary, preserve_topology=self.preserve_topology,
-            feature_angle_deg=None if self.feature_angle_deg >= 180.0 else self.feature_angle_deg,
-            weight_group=self.weight_group, lock_group=self.lock_group, fit=self.fit,
-            bind=self.bind, levels=self.levels, scheme=self.scheme, hide_source=self.hide_source)
-
-
-class MESHADJUST_OT_simplify(_TargetProps, bpy.types.Operator):
-    """Simplify the selected dense meshes into coarse cages (QEM edge collapse); the sources are never modified"""
-
-    bl_idname = "meshadjust.simplify"
-    bl_label = "Simplify to Cage"
-    bl_options = {'REGISTER', 'UNDO'}
+    The operator calls ``start_background(context, label, compute)`` from
+    ``invoke()``, where ``compute(progress)`` returns a job with a
+    ``cancelled`` flag, and implements ``finish(context)``.
+    """
 
     _timer = None
     _thread = None
@@ -108,55 +86,13 @@ class MESHADJUST_OT_simplify(_TargetProps, bpy.types.Operator):
     _cancel = False
     _fraction = 0.0
 
-    @classmethod
-    def poll(cls, context):
-        why = simplify_unavailable(context)
-        if why:
-            cls.poll_message_set(why)
-        return why is None
-
-    def _targets(self, context):
-        objs = [o for o in context.selected_objects if o.type == 'MESH'
-                and o.meshadjust.role != 'CAGE']
-        act = context.active_object
-        if act is not None and act not in objs:
-            objs.insert(0, act)
-        return objs
-
-    def execute(self, context):
-        messages = []
-        for obj in self._targets(context):
-            try:
-                cage, report = api.simplify_object(obj, **vars_of(self.params()))
-            except USER_ERRORS as exc:
-                self.report({'ERROR'}, f"{obj.name}: {exc}")
-                return {'CANCELLED'}
-            messages.append(f"{obj.name}: {report.message}")
-        for obj in context.selected_objects:
-            obj.select_set(False)
-        if messages:
-            cage.select_set(True)
-            context.view_layer.objects.active = cage
-        self.report({'INFO'}, " | ".join(messages))
-        return {'FINISHED'}
-
-    # --- modal path (interactive UI): compute in a worker thread, Esc cancels
-    def invoke(self, context, event):
-        if bpy.app.background or len(self._targets(context)) != 1:
-            return self.execute(context)
-        obj = context.active_object
-        try:
-            self._job = api.prepare_simplify(obj, self.params())
-        except USER_ERRORS as exc:
-            self.report({'ERROR'}, f"{obj.name}: {exc}")
-            return {'CANCELLED'}
+    def start_background(self, context, label, compute):
         settings = context.scene.meshadjust
         settings.running = True
         settings.progress = 0.0
-        settings.progress_text = f"Simplifying {obj.name}"
+        settings.progress_text = label
         self._cancel = False
         self._error = None
-
         self._fraction = 0.0
 
         def progress(fraction):
@@ -166,7 +102,7 @@ class MESHADJUST_OT_simplify(_TargetProps, bpy.types.Operator):
 
         def work():
             try:
-                api.compute_simplify(self._job, progress=progress)
+                self._job = compute(progress)
             except Exception as exc:   # reported from the main thread in modal()
                 self._error = exc
 
@@ -202,15 +138,99 @@ class MESHADJUST_OT_simplify(_TargetProps, bpy.types.Operator):
                 self.report({'ERROR'}, str(self._error))
                 return {'CANCELLED'}
             raise self._error
-        if self._job.cancelled:
-            self.report({'WARNING'}, "Simplify cancelled: nothing was changed")
+        if self._cancel or getattr(self._job, "cancelled", False):
+            self.report({'WARNING'}, f"{self.bl_label} cancelled: nothing was changed")
             return {'CANCELLED'}
-        obj = bpy.data.objects.get(self._job.source_name)
         try:
-            cage, report = api.commit_simplify(obj, self._job)
+            return self.finish(context)
         except USER_ERRORS as exc:
             self.report({'ERROR'}, str(exc))
             return {'CANCELLED'}
+
+
+class _TargetProps:
+    target_mode: EnumProperty(name="Target", items=TARGET_MODES, default='FACES')
+    target_faces: IntProperty(name="Faces", default=2000, min=4, soft_max=50000)
+    ratio: FloatProperty(name="Ratio", default=0.02, min=1e-5, max=1.0, subtype='FACTOR')
+    max_error_pct: FloatProperty(name="Max error %", default=0.5, min=0.0, soft_max=5.0)
+    preserve_boundary: BoolProperty(name="Preserve boundary", default=True)
+    preserve_topology: BoolProperty(name="Keep topology", default=True)
+    feature_angle_deg: FloatProperty(name="Feature angle", default=60.0, min=0.0, max=180.0)
+    weight_group: StringProperty(name="Importance group", default="")
+    lock_group: StringProperty(name="Locked group", default="")
+    fit: BoolProperty(name="Fit cage", default=True)
+    bind: BoolProperty(name="Bind source", default=True)
+    levels: IntProperty(name="Levels", default=2, min=1, max=5)
+    scheme: EnumProperty(name="Scheme", items=SCHEMES, default='butterfly')
+    hide_source: BoolProperty(name="Hide source", default=False)
+
+    def params(self):
+        return api.SimplifyParams(
+            target_faces=self.target_faces if self.target_mode == 'FACES' else None,
+            ratio=self.ratio if self.target_mode == 'RATIO' else None,
+            max_error_pct=self.max_error_pct if self.target_mode == 'ERROR' else None,
+            preserve_boundary=self.preserve_boundary, preserve_topology=self.preserve_topology,
+            feature_angle_deg=None if self.feature_angle_deg >= 180.0 else self.feature_angle_deg,
+            weight_group=self.weight_group, lock_group=self.lock_group, fit=self.fit,
+            bind=self.bind, levels=self.levels, scheme=self.scheme, hide_source=self.hide_source)
+
+
+class MESHADJUST_OT_simplify(_Background, _TargetProps, bpy.types.Operator):
+    """Simplify the selected dense meshes into coarse cages (QEM edge collapse); the sources are never modified"""
+
+    bl_idname = "meshadjust.simplify"
+    bl_label = "Simplify to Cage"
+    bl_options = {'REGISTER', 'UNDO'}
+
+    @classmethod
+    def poll(cls, context):
+        why = simplify_unavailable(context)
+        if why:
+            cls.poll_message_set(why)
+        return why is None
+
+    def _targets(self, context):
+        objs = [o for o in context.selected_objects if o.type == 'MESH'
+                and o.meshadjust.role != 'CAGE']
+        act = context.active_object
+        if act is not None and act not in objs:
+            objs.insert(0, act)
+        return objs
+
+    def execute(self, context):
+        messages = []
+        for obj in self._targets(context):
+            try:
+                cage, report = api.simplify_object(obj, **vars_of(self.params()))
+            except USER_ERRORS as exc:
+                self.report({'ERROR'}, f"{obj.name}: {exc}")
+                return {'CANCELLED'}
+            messages.append(f"{obj.name}: {report.message}")
+        for obj in context.selected_objects:
+            obj.select_set(False)
+        if messages:
+            cage.select_set(True)
+            context.view_layer.objects.active = cage
+        self.report({'INFO'}, " | ".join(messages))
+        return {'FINISHED'}
+
+    # --- interactive path: compute in a worker thread, Esc cancels
+    def invoke(self, context, event):
+        if bpy.app.background or len(self._targets(context)) != 1:
+            return self.execute(context)
+        obj = context.active_object
+        try:
+            job = api.prepare_simplify(obj, self.params())
+        except USER_ERRORS as exc:
+            self.report({'ERROR'}, f"{obj.name}: {exc}")
+            return {'CANCELLED'}
+        self._job = job
+        return self.start_background(context, f"Simplifying {obj.name}",
+                                     lambda progress: api.compute_simplify(job, progress=progress))
+
+    def finish(self, context):
+        obj = bpy.data.objects.get(self._job.source_name)
+        cage, report = api.commit_simplify(obj, self._job)
         for o in context.selected_objects:
             o.select_set(False)
         cage.select_set(True)
@@ -238,7 +258,7 @@ def vars_of(params):
     return {k: getattr(params, k) for k in params.__dataclass_fields__}
 
 
-class MESHADJUST_OT_fit_cage(_CageStep, bpy.types.Operator):
+class MESHADJUST_OT_fit_cage(_Background, _CageStep, bpy.types.Operator):
     """Move the cage's vertices so that its subdivision surface matches the source (undoes the shrinkage of simplification)"""
 
     bl_idname = "meshadjust.fit_cage"
@@ -248,24 +268,54 @@ class MESHADJUST_OT_fit_cage(_CageStep, bpy.types.Operator):
     rebind: BoolProperty(name="Re-bind", default=True,
                          description="Bind the source again to the fitted cage")
 
-    def execute(self, context):
+    def _prepare(self, context):
         cage = cage_of(context.active_object)
+        if cage.mode == 'EDIT':
+            bpy.ops.object.mode_set(mode='OBJECT')
+        return cage, api.prepare_cage_job(cage)
+
+    def _compute(self, job, progress=None):
+        api.compute_fit(job, progress=progress)
+        if self.rebind and not job.cancelled and self._bound:
+            job.V_cage = job.fit.V
+            api.compute_bind(job)
+        return job
+
+    def execute(self, context):
         try:
-            if cage.mode == 'EDIT':
-                bpy.ops.object.mode_set(mode='OBJECT')
-            fit = api.fit_cage_object(cage)
-            if self.rebind and cage.meshadjust.edited is not None:
-                api.bind_object(cage)
+            cage, job = self._prepare(context)
+            self._bound = cage.meshadjust.edited is not None
+            self._job = self._compute(job)
+            return self.finish(context)
         except USER_ERRORS as exc:
             self.report({'ERROR'}, str(exc))
             return {'CANCELLED'}
+
+    def invoke(self, context, event):
+        if bpy.app.background:
+            return self.execute(context)
+        try:
+            cage, job = self._prepare(context)
+        except USER_ERRORS as exc:
+            self.report({'ERROR'}, str(exc))
+            return {'CANCELLED'}
+        self._bound = cage.meshadjust.edited is not None
+        return self.start_background(context, f"Fitting {cage.name}",
+                                     lambda progress: self._compute(job, progress))
+
+    def finish(self, context):
+        cage = bpy.data.objects[self._job.cage_name]
+        fit = api.commit_fit(cage, self._job)
+        if self._job.binding is not None:
+            api.commit_bind(cage, self._job)
         d = fit.mean_distance
         self.report({'INFO'}, f"fitted '{cage.name}': mean distance {100 * d[0] / fit.diagonal:.3f}%"
-                              f" -> {100 * d[-1] / fit.diagonal:.3f}% of size")
+                              f" -> {100 * d[-1] / fit.diagonal:.3f}% of size"
+                              + ("; re-bound" if self._job.binding is not None else ""))
         return {'FINISHED'}
 
 
-class MESHADJUST_OT_bind(_CageStep, bpy.types.Operator):
+class MESHADJUST_OT_bind(_Background, _CageStep, bpy.types.Operator):
     """Bind (a copy of) the source to the cage as it is now: its current shape becomes the rest shape"""
 
     bl_idname = "meshadjust.bind"
@@ -275,19 +325,40 @@ class MESHADJUST_OT_bind(_CageStep, bpy.types.Operator):
     levels: IntProperty(name="Levels", default=2, min=1, max=5)
     scheme: EnumProperty(name="Scheme", items=SCHEMES, default='butterfly')
 
-    def invoke(self, context, event):
-        cage = cage_of(context.active_object)
-        self.levels = cage.meshadjust.levels
-        self.scheme = cage.meshadjust.scheme
-        return self.execute(context)
+    def _defaults_from_cage(self, cage):
+        """Unset levels / scheme mean: keep the cage's current ones."""
+        if not self.properties.is_property_set("levels"):
+            self.levels = cage.meshadjust.levels
+        if not self.properties.is_property_set("scheme"):
+            self.scheme = cage.meshadjust.scheme
 
     def execute(self, context):
         cage = cage_of(context.active_object)
+        self._defaults_from_cage(cage)
         try:
-            edited = api.bind_object(cage, levels=self.levels, scheme=self.scheme)
+            self._job = api.compute_bind(api.prepare_cage_job(cage, levels=self.levels,
+                                                              scheme=self.scheme))
+            return self.finish(context)
         except USER_ERRORS as exc:
             self.report({'ERROR'}, str(exc))
             return {'CANCELLED'}
+
+    def invoke(self, context, event):
+        cage = cage_of(context.active_object)
+        self._defaults_from_cage(cage)
+        if bpy.app.background:
+            return self.execute(context)
+        try:
+            job = api.prepare_cage_job(cage, levels=self.levels, scheme=self.scheme)
+        except USER_ERRORS as exc:
+            self.report({'ERROR'}, str(exc))
+            return {'CANCELLED'}
+        return self.start_background(context, f"Binding to {cage.name}",
+                                     lambda progress: api.compute_bind(job, progress=progress))
+
+    def finish(self, context):
+        cage = bpy.data.objects[self._job.cage_name]
+        edited = api.commit_bind(cage, self._job)
         self.report({'INFO'}, f"bound '{edited.name}' ({len(edited.data.vertices):,} vertices) "
                               f"to '{cage.name}' ({self.scheme}, {self.levels} levels)")
         return {'FINISHED'}

@@ -341,3 +341,38 @@ def test_cancelled_simplify_leaves_the_scene_unchanged(dense, stop_at):
     assert cage is None and "cancelled" in report.message
     assert set(bpy.data.objects) == objects and set(bpy.data.meshes) == meshes
     assert dense.meshadjust.cage is None and dense.meshadjust.role == 'NONE'
+
+
+def test_fit_cage_operator_moves_the_cage_closer_and_rebinds(dense):
+    simplify(300, fit=False)
+    cage = dense.meshadjust.cage
+    before = mio().read_positions(cage.data)
+    assert bpy.ops.meshadjust.fit_cage() == {'FINISHED'}
+    after = mio().read_positions(cage.data)
+    assert np.abs(after - before).max() > 1e-4
+    # re-bound to the fitted cage: refining the unedited cage gives the source back
+    assert bpy.ops.meshadjust.refine(output='EDITED', levels=2, scheme='butterfly') == {'FINISHED'}
+    err = np.abs(mio().read_positions(cage.meshadjust.edited.data)
+                 - mio().read_positions(dense.data)).max()
+    assert err < 1e-5
+
+
+def test_background_operator_runs_compute_then_commit(dense):
+    """The modal path's parts, driven by hand (invoke/modal never run headless):
+    compute in a thread, nothing changes until finish() commits."""
+    import threading
+    ops = sys.modules[MODULE + ".meshadjust_addon.operators"]
+    api = sys.modules[MODULE + ".meshadjust_addon.api"]
+    simplify(300, bind=False, fit=False)
+    cage = dense.meshadjust.cage
+    job = api.prepare_cage_job(cage, levels=2, scheme='butterfly')
+    box = {}
+    worker = threading.Thread(target=lambda: box.update(job=api.compute_bind(job)))
+    worker.start()
+    worker.join()
+    assert cage.meshadjust.edited is None            # nothing committed yet
+    edited = api.commit_bind(cage, box["job"])
+    assert edited is not None and cage.meshadjust.edited == edited
+    assert issubclass(ops.MESHADJUST_OT_bind, ops._Background)
+    assert issubclass(ops.MESHADJUST_OT_fit_cage, ops._Background)
+    assert issubclass(ops.MESHADJUST_OT_simplify, ops._Background)
