@@ -45,62 +45,22 @@ from core.metrics import surface_distance  # noqa: E402
 from core.simplify import simplify  # noqa: E402
 from core.spatial import closest_points  # noqa: E402
 from core.subdivide import subdivision_operator  # noqa: E402
-from tests.mesh_factory import BUMP, analytic_bend as bend, bumpy_tube  # noqa: E402
+from tests.mesh_factory import BUMP, analytic_bend as bend, bumpy_tube, torus  # noqa: E402
+from _bench import blender_object, empty_scene, evaluated_positions, mesh_io  # noqa: E402
 
 SHARED = os.path.normpath(os.path.join(ROOT, "..", "shared", "meshes"))
 
 
-def bumpy_torus(n_major, n_minor, R=1.0, r=0.35, bump=0.01):
-    u = np.arange(n_major) * 2 * np.pi / n_major
-    v = np.arange(n_minor) * 2 * np.pi / n_minor
-    U, W = np.meshgrid(u, v, indexing="ij")
-    rr = r + bump * np.sin(40 * U) * np.sin(20 * W)
-    V = np.stack([(R + rr * np.cos(W)) * np.cos(U), (R + rr * np.cos(W)) * np.sin(U),
-                  rr * np.sin(W)], axis=-1).reshape(-1, 3)
-    i, j = np.meshgrid(np.arange(n_major), np.arange(n_minor), indexing="ij")
-    a = (i * n_minor + j).ravel()
-    b = (((i + 1) % n_major) * n_minor + j).ravel()
-    c = (((i + 1) % n_major) * n_minor + (j + 1) % n_minor).ravel()
-    d = (i * n_minor + (j + 1) % n_minor).ravel()
-    F = np.concatenate([np.stack([a, b, c], 1), np.stack([a, c, d], 1)]).astype(np.int64)
-    return V, F
+def bumpy_torus(n_major, n_minor, bump=0.01):
+    return torus(n_major, n_minor, bump=bump, bump_waves=(40, 20))
 
 
 # ------------------------------------------------------------------ Blender side
-def _bpy():
-    import bpy
-    bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)
-    return bpy
-
-
-def _mesh_object(bpy, name, V, F):
-    me = bpy.data.meshes.new(name)
-    me.vertices.add(V.shape[0])
-    me.loops.add(F.size)
-    me.polygons.add(F.shape[0])
-    me.attributes["position"].data.foreach_set("vector", V.astype(np.float32).ravel())
-    me.attributes[".corner_vert"].data.foreach_set("value", F.astype(np.int32).ravel())
-    me.polygons.foreach_set("loop_start", np.arange(0, F.size, 3, dtype=np.int32))
-    me.update(calc_edges=True)
-    ob = bpy.data.objects.new(name, me)
-    bpy.context.scene.collection.objects.link(ob)
-    return ob
-
-
-def _evaluated_positions(bpy, ob):
-    dg = bpy.context.evaluated_depsgraph_get()
-    ev = ob.evaluated_get(dg)
-    me = ev.data
-    out = np.empty(len(me.vertices) * 3, dtype=np.float32)
-    me.attributes["position"].data.foreach_get("vector", out)
-    return out.reshape(-1, 3).astype(np.float64)
-
-
 def surface_deform(V_dense, F_dense, V_cage, F_cage, V_cage_edited):
     """Blender's Surface Deform: (bind seconds, deform seconds, deformed positions)."""
-    bpy = _bpy()
-    dense = _mesh_object(bpy, "dense", V_dense, F_dense)
-    cage = _mesh_object(bpy, "cage", V_cage, F_cage)
+    bpy = empty_scene()
+    dense = blender_object("dense", V_dense, F_dense)
+    cage = blender_object("cage", V_cage, F_cage)
     mod = dense.modifiers.new("SurfaceDeform", "SURFACE_DEFORM")
     mod.target = cage
     bpy.context.view_layer.objects.active = dense
@@ -108,15 +68,13 @@ def surface_deform(V_dense, F_dense, V_cage, F_cage, V_cage_edited):
     t = time.perf_counter()
     with bpy.context.temp_override(object=dense, active_object=dense):
         bpy.ops.object.surfacedeform_bind(modifier=mod.name)
-    _evaluated_positions(bpy, dense)  # the bind happens on the next evaluation
+    evaluated_positions(dense)  # the bind happens on the next evaluation
     t_bind = time.perf_counter() - t
     if not mod.is_bound:
         raise RuntimeError("Surface Deform did not bind")
-    cage.data.attributes["position"].data.foreach_set(
-        "vector", V_cage_edited.astype(np.float32).ravel())
-    cage.data.update()
+    mesh_io().write_positions(cage.data, V_cage_edited)
     t = time.perf_counter()
-    out = _evaluated_positions(bpy, dense)
+    out = evaluated_positions(dense)
     t_def = time.perf_counter() - t
     return t_bind, t_def, out
 

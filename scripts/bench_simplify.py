@@ -29,41 +29,20 @@ ROOT = os.path.normpath(os.path.join(os.path.dirname(os.path.abspath(__file__)),
 sys.path.insert(0, ROOT)
 
 from core.io_obj import read_obj  # noqa: E402
+from core.metrics import surface_distance as core_surface_distance  # noqa: E402
 from core.mesh import bbox_diagonal, face_normals  # noqa: E402
 from core.simplify import simplify  # noqa: E402
 from core.spatial import TriangleIndex  # noqa: E402
 from core.topology import edge_map, euler_characteristic, manifold_report  # noqa: E402
+from _bench import blender_object, empty_scene, evaluated_arrays  # noqa: E402
 
 MESHES = os.path.normpath(os.path.join(ROOT, "..", "shared", "meshes"))
 SEED = 0
-N_SAMPLES = 200_000
-
-try:  # the shared metric, once it exists
-    from core.metrics import surface_distance as _shared_surface_distance  # noqa: E402
-except ImportError:  # pragma: no cover - fallback while metrics.py is being written
-    _shared_surface_distance = None
-
-
-def _sample(V, F, n, rng):
-    A = np.linalg.norm(face_normals(V, F, normalize=False), axis=1)
-    f = rng.choice(F.shape[0], size=n, p=A / A.sum())
-    r1, r2 = rng.random(n), rng.random(n)
-    s = np.sqrt(r1)
-    b = np.stack([1 - s, s * (1 - r2), s * r2], axis=1)
-    return np.einsum("ij,ijk->ik", b, V[F[f]])
-
 
 def surface_distance(Va, Fa, Vb, Fb):
-    """(hausdorff, mean) two-sided distances in mesh units."""
-    if _shared_surface_distance is not None:
-        d = _shared_surface_distance(Va, Fa, Vb, Fb, seed=SEED)
-        return d.hausdorff, d.mean
-    rng = np.random.default_rng(SEED)
-    Pa = np.vstack([Va[np.unique(Fa)], _sample(Va, Fa, N_SAMPLES, rng)])
-    Pb = np.vstack([Vb[np.unique(Fb)], _sample(Vb, Fb, N_SAMPLES, rng)])
-    dab = TriangleIndex(Vb, Fb).closest(Pa).distance
-    dba = TriangleIndex(Va, Fa).closest(Pb).distance
-    return max(dab.max(), dba.max()), 0.5 * (dab.mean() + dba.mean())
+    """(hausdorff, mean) two-sided distances in mesh units (Metro)."""
+    d = core_surface_distance(Va, Fa, Vb, Fb, seed=SEED)
+    return d.hausdorff, d.mean
 
 
 def min_angle_deg(V, F):
@@ -119,48 +98,29 @@ def _peak_rss():
 
 # ---------------------------------------------------------------- Blender
 def blender_decimate(V, F, target):
-    import bpy
-    bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)
-    n, m = V.shape[0], F.shape[0]
-    me = bpy.data.meshes.new("bench")
-    me.vertices.add(n)
-    me.loops.add(3 * m)
-    me.polygons.add(m)
-    me.attributes["position"].data.foreach_set("vector", V.astype(np.float32).ravel())
-    me.attributes[".corner_vert"].data.foreach_set("value", F.astype(np.int32).ravel())
-    me.polygons.foreach_set("loop_start", np.arange(0, 3 * m, 3, dtype=np.int32))
-    me.update(calc_edges=True)
-    ob = bpy.data.objects.new("bench", me)
-    bpy.context.collection.objects.link(ob)
+    m = F.shape[0]
+    empty_scene()
+    ob = blender_object("bench", V, F)
     mod = ob.modifiers.new("dec", "DECIMATE")
     mod.decimate_type = "COLLAPSE"
     mod.use_collapse_triangulate = True
     mod.ratio = min(1.0, target / m)
     t0 = time.perf_counter()
-    dg = bpy.context.evaluated_depsgraph_get()
-    ev = ob.evaluated_get(dg)
-    out = ev.to_mesh()
+    Vo, Fo = evaluated_arrays(ob)
     dt = time.perf_counter() - t0
-    n2, m2 = len(out.vertices), len(out.polygons)
-    Vo = np.empty(3 * n2, dtype=np.float32)
-    out.attributes["position"].data.foreach_get("vector", Vo)
-    out.calc_loop_triangles()
-    Fo = np.empty(3 * len(out.loop_triangles), dtype=np.int32)
-    out.loop_triangles.foreach_get("vertices", Fo)
-    ev.to_mesh_clear()
-    return Vo.reshape(-1, 3).astype(np.float64), Fo.reshape(-1, 3).astype(np.int64), dt
+    return Vo, Fo, dt
 
 
 # ---------------------------------------------------------------- cases
 def synthetic(levels, noise=1e-4):
     """The bunny midpoint-subdivided ``levels`` times with small noise (fixed seed)."""
-    from tests.mesh_factory import _midpoint_split
+    from tests.mesh_factory import midpoint_split
     V, F = read_obj(os.path.join(MESHES, "stanford-bunny.obj"))
     from core._clean import clean_mesh
     c = clean_mesh(V, F)
     V, F = c.V, c.F
     for _ in range(levels):
-        V, F = _midpoint_split(V, F)
+        V, F = midpoint_split(V, F)
     rng = np.random.default_rng(SEED)
     return V + rng.normal(scale=noise * bbox_diagonal(V), size=V.shape), F
 
@@ -271,9 +231,7 @@ def main():
         text += (f"\n\nShared meshes ({len(real)} cases), geometric mean of ours / Decimate: "
                  f"mean distance {gm:.3f}, Hausdorff {gh:.3f}, time {gt:.2f}; "
                  f"worst case mean {worst_m:.2f}, Hausdorff {worst_h:.2f}.")
-    metric = "core.metrics.surface_distance" if _shared_surface_distance else \
-        f"Metro fallback ({N_SAMPLES:,} samples + vertices per side, core.spatial)"
-    text += f"\nDistances: {metric}, % of the input's bounding-box diagonal."
+    text += "\nDistances: core.metrics.surface_distance, % of the input's bounding-box diagonal."
     print()
     print(text)
     out = os.path.join(ROOT, "bench_results")

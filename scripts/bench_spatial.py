@@ -40,62 +40,15 @@ sys.path.insert(0, ROOT)
 from core.io_obj import read_obj  # noqa: E402
 from core.metrics import surface_distance  # noqa: E402
 from core.spatial import TriangleIndex  # noqa: E402
+from core.metrics import sample_surface  # noqa: E402
+from tests.mesh_factory import icosphere, midpoint_split, torus  # noqa: E402
 
 SHARED = os.path.normpath(os.path.join(ROOT, "..", "shared", "meshes"))
 
 
-def midpoint_split(V, F):
-    """One 1-to-4 midpoint subdivision."""
-    n = V.shape[0]
-    half = F[:, [1, 2, 2, 0, 0, 1]].reshape(-1, 2)
-    key = np.minimum(half[:, 0], half[:, 1]) * n + np.maximum(half[:, 0], half[:, 1])
-    uniq, inv = np.unique(key, return_inverse=True)
-    mid = n + inv.reshape(-1, 3)
-    V2 = np.vstack([V, 0.5 * (V[uniq // n] + V[uniq % n])])
-    a, b, c = F.T
-    ma, mb, mc = mid.T
-    F2 = np.concatenate([np.stack([a, mc, mb], 1), np.stack([b, ma, mc], 1),
-                         np.stack([c, mb, ma], 1), np.stack([ma, mb, mc], 1)])
-    return V2, F2
-
-
-def torus(nu, nv, R=1.0, r=0.35, bump=0.0):
-    u = np.arange(nu) * 2 * np.pi / nu
-    v = np.arange(nv) * 2 * np.pi / nv
-    U, W = np.meshgrid(u, v, indexing="ij")
-    rr = r + bump * np.sin(40 * U) * np.sin(12 * W)
-    V = np.stack([(R + rr * np.cos(W)) * np.cos(U), (R + rr * np.cos(W)) * np.sin(U),
-                  rr * np.sin(W)], axis=-1).reshape(-1, 3)
-    i, j = np.meshgrid(np.arange(nu), np.arange(nv), indexing="ij")
-    a = (i * nv + j).ravel()
-    b = (((i + 1) % nu) * nv + j).ravel()
-    c = (((i + 1) % nu) * nv + (j + 1) % nv).ravel()
-    d = (i * nv + (j + 1) % nv).ravel()
-    F = np.concatenate([np.stack([a, b, c], 1), np.stack([a, c, d], 1)]).astype(np.int64)
-    return V, F
-
-
-def icosphere(k):
-    t = (1 + 5 ** 0.5) / 2
-    V = np.array([[-1, t, 0], [1, t, 0], [-1, -t, 0], [1, -t, 0], [0, -1, t], [0, 1, t],
-                  [0, -1, -t], [0, 1, -t], [t, 0, -1], [t, 0, 1], [-t, 0, -1], [-t, 0, 1]], float)
-    F = np.array([[0, 11, 5], [0, 5, 1], [0, 1, 7], [0, 7, 10], [0, 10, 11], [1, 5, 9],
-                  [5, 11, 4], [11, 10, 2], [10, 7, 6], [7, 1, 8], [3, 9, 4], [3, 4, 2],
-                  [3, 2, 6], [3, 6, 8], [3, 8, 9], [4, 9, 5], [2, 4, 11], [6, 2, 10],
-                  [8, 6, 7], [9, 8, 1]])
-    V /= np.linalg.norm(V, axis=1)[:, None]
-    for _ in range(k):
-        V, F = midpoint_split(V, F)
-        V /= np.linalg.norm(V, axis=1)[:, None]
-    return V, F
-
-
 def surface_points(V, F, n, rng):
-    area = np.linalg.norm(np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]]), axis=1)
-    f = np.searchsorted(np.cumsum(area), rng.random(n) * area.sum())
-    f = np.minimum(f, F.shape[0] - 1)
-    b = rng.dirichlet([1, 1, 1], n)
-    return np.einsum("ij,ijk->ik", b, V[F[f]])
+    """Area-weighted random points on the surface (seeded from ``rng``)."""
+    return sample_surface(V, F, n, seed=int(rng.integers(2**31))).points
 
 
 def diagonal(V):

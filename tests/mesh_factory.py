@@ -59,8 +59,9 @@ def icosahedron():
     return V, F
 
 
-def _midpoint_split(V, F):
-    """One 1-to-4 midpoint split (used to build spheres without core code)."""
+def midpoint_split(V, F):
+    """One 1-to-4 midpoint split (builds spheres and large test meshes
+    without core code)."""
     n = V.shape[0]
     half = F[:, [1, 2, 2, 0, 0, 1]].reshape(-1, 2)
     key = np.minimum(half[:, 0], half[:, 1]) * n + np.maximum(half[:, 0], half[:, 1])
@@ -78,7 +79,7 @@ def _midpoint_split(V, F):
 def icosphere(subdivisions=2, radius=1.0):
     V, F = icosahedron()
     for _ in range(subdivisions):
-        V, F = _midpoint_split(V, F)
+        V, F = midpoint_split(V, F)
         V /= np.linalg.norm(V, axis=1)[:, None]
     return V * radius, F
 
@@ -105,13 +106,15 @@ def regular_grid(nx=10, ny=10, size=1.0, z=None):
     return V, F
 
 
-def torus(n_major=24, n_minor=12, R=1.0, r=0.35):
-    """Closed genus-1 torus, regular valence 6."""
+def torus(n_major=24, n_minor=12, R=1.0, r=0.35, bump=0.0, bump_waves=(40, 12)):
+    """Closed genus-1 torus, regular valence 6; ``bump`` adds a tube radius
+    ``bump * sin(a u) sin(b v)`` with ``(a, b) = bump_waves`` (detail)."""
     u = np.arange(n_major) * 2 * np.pi / n_major
     v = np.arange(n_minor) * 2 * np.pi / n_minor
     U, W = np.meshgrid(u, v, indexing="ij")
-    V = np.stack([(R + r * np.cos(W)) * np.cos(U), (R + r * np.cos(W)) * np.sin(U), r * np.sin(W)],
-                 axis=-1).reshape(-1, 3)
+    rr = r + bump * np.sin(bump_waves[0] * U) * np.sin(bump_waves[1] * W)
+    V = np.stack([(R + rr * np.cos(W)) * np.cos(U), (R + rr * np.cos(W)) * np.sin(U),
+                  rr * np.sin(W)], axis=-1).reshape(-1, 3)
     i, j = np.meshgrid(np.arange(n_major), np.arange(n_minor), indexing="ij")
     a = (i * n_minor + j).ravel()
     b = (((i + 1) % n_major) * n_minor + j).ravel()

@@ -16,7 +16,7 @@ from core.errors import InvalidArgumentError, InvalidMeshError
 from core.subdivide import SubdivisionOperator, subdivide, subdivision_operator
 from core.mesh import face_normals
 from core.topology import edge_faces as _edge_faces, edge_map, euler_characteristic, manifold_report
-from tests.mesh_factory import (_midpoint_split, cube, icosahedron, icosphere, load_shared, octahedron, regular_grid,
+from tests.mesh_factory import (midpoint_split, cube, icosahedron, icosphere, load_shared, octahedron, regular_grid,
                                 tetrahedron, torus)
 
 # ---------------------------------------------------------------------------
@@ -254,7 +254,7 @@ def test_fine_vertex_parent_matches_iterated_midpoint_split(name):
     param = np.einsum("ij,ijk->ik", bary, V[F[face]])
     Vm, Fm = V, F
     for _ in range(3):
-        Vm, Fm = _midpoint_split(Vm, Fm)   # the test factory's own split, same vertex numbering
+        Vm, Fm = midpoint_split(Vm, Fm)   # the test factory's own split, same vertex numbering
     np.testing.assert_allclose(param, Vm, rtol=0, atol=1e-14)
     # each fine face's corners lie in (or on the border of) its parent coarse face
     T = V[F[op.fine_to_coarse_face]]                   # (m 4^L, 3, 3)
