@@ -376,3 +376,66 @@ def test_background_operator_runs_compute_then_commit(dense):
     assert issubclass(ops.MESHADJUST_OT_bind, ops._Background)
     assert issubclass(ops.MESHADJUST_OT_fit_cage, ops._Background)
     assert issubclass(ops.MESHADJUST_OT_simplify, ops._Background)
+
+
+class _FakeLayout:
+    """Records what a panel's draw() asks for and checks every property and
+    operator name against Blender's RNA (draw() itself never runs headless)."""
+
+    def __init__(self, log):
+        self.log = log
+        self.enabled = True
+
+    def _child(self, *args, **kwargs):
+        return _FakeLayout(self.log)
+
+    box = column = row = _child
+
+    def label(self, text="", **kwargs):
+        self.log.append(("label", text))
+
+    def prop(self, data, name, **kwargs):
+        assert name in data.bl_rna.properties, f"{type(data).__name__} has no property {name}"
+        self.log.append(("prop", name))
+
+    def prop_search(self, data, name, search_data, search_name, **kwargs):
+        assert name in data.bl_rna.properties and hasattr(search_data, search_name)
+        self.log.append(("prop_search", name))
+
+    def progress(self, **kwargs):
+        self.log.append(("progress", kwargs.get("factor")))
+
+    def operator(self, idname, **kwargs):
+        mod, name = idname.split(".")
+        rna = getattr(getattr(bpy.ops, mod), name).get_rna_type()
+        self.log.append(("operator", idname))
+        log = self.log
+
+        class Props:
+            def __setattr__(self, key, value):
+                assert key in rna.properties, f"{idname} has no property {key}"
+                log.append(("set", idname, key))
+        return Props()
+
+
+def _draw_panel():
+    panel = sys.modules[MODULE + ".meshadjust_addon.panel"]
+    log = []
+    fake = type("P", (), {"layout": _FakeLayout(log)})()
+    panel.MESHADJUST_PT_main.draw(fake, bpy.context)
+    return log
+
+
+def test_panel_draw_uses_existing_properties_and_operators(scene):
+    log = _draw_panel()                                   # nothing selected
+    assert ("label", "Select a mesh object") in log
+    V, F = bumpy_sphere(3)
+    obj = make_object("dense", V, F)
+    bpy.context.scene.meshadjust.running = True           # the progress bar row
+    log = _draw_panel()
+    assert ("operator", "meshadjust.simplify") in log and any(e[0] == "progress" for e in log)
+    bpy.context.scene.meshadjust.running = False
+    simplify(200)
+    log = _draw_panel()                                   # a bound cage is active
+    assert ("operator", "meshadjust.refine") in log and ("prop", "live") in log
+    assert any(e[0] == "label" and e[1].startswith("Bound:") for e in log)
