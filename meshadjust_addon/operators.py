@@ -32,6 +32,16 @@ def cage_of(obj):
     return None
 
 
+def selected_cages(context):
+    """The cages of the active and the selected objects, active first, each once."""
+    cages = []
+    for obj in [context.active_object, *context.selected_objects]:
+        cage = cage_of(obj)
+        if cage is not None and cage not in cages:
+            cages.append(cage)
+    return cages
+
+
 def simplify_unavailable(context):
     """Why Simplify cannot run on the active object (None when it can)."""
     obj = context.active_object
@@ -268,50 +278,57 @@ class MESHADJUST_OT_fit_cage(_Background, _CageStep, bpy.types.Operator):
     rebind: BoolProperty(name="Re-bind", default=True,
                          description="Bind the source again to the fitted cage")
 
-    def _prepare(self, context):
-        cage = cage_of(context.active_object)
+    def _prepare(self, cage):
         if cage.mode == 'EDIT':
             bpy.ops.object.mode_set(mode='OBJECT')
-        return cage, api.prepare_cage_job(cage)
+        return api.prepare_cage_job(cage)
 
-    def _compute(self, job, progress=None):
+    def _compute(self, job, bound, progress=None):
         api.compute_fit(job, progress=progress)
-        if self.rebind and not job.cancelled and self._bound:
+        if self.rebind and bound and not job.cancelled:
             job.V_cage = job.fit.V
             api.compute_bind(job)
         return job
 
-    def execute(self, context):
-        try:
-            cage, job = self._prepare(context)
-            self._bound = cage.meshadjust.edited is not None
-            self._job = self._compute(job)
-            return self.finish(context)
-        except USER_ERRORS as exc:
-            self.report({'ERROR'}, str(exc))
-            return {'CANCELLED'}
-
-    def invoke(self, context, event):
-        if bpy.app.background:
-            return self.execute(context)
-        try:
-            cage, job = self._prepare(context)
-        except USER_ERRORS as exc:
-            self.report({'ERROR'}, str(exc))
-            return {'CANCELLED'}
-        self._bound = cage.meshadjust.edited is not None
-        return self.start_background(context, f"Fitting {cage.name}",
-                                     lambda progress: self._compute(job, progress))
-
-    def finish(self, context):
+    def _commit(self):
         cage = bpy.data.objects[self._job.cage_name]
         fit = api.commit_fit(cage, self._job)
         if self._job.binding is not None:
             api.commit_bind(cage, self._job)
         d = fit.mean_distance
-        self.report({'INFO'}, f"fitted '{cage.name}': mean distance {100 * d[0] / fit.diagonal:.3f}%"
-                              f" -> {100 * d[-1] / fit.diagonal:.3f}% of size"
-                              + ("; re-bound" if self._job.binding is not None else ""))
+        return (f"fitted '{cage.name}': mean distance {100 * d[0] / fit.diagonal:.3f}% -> "
+                f"{100 * d[-1] / fit.diagonal:.3f}% of size"
+                + ("; re-bound" if self._job.binding is not None else ""))
+
+    def execute(self, context):
+        messages = []
+        for cage in selected_cages(context):
+            try:
+                job = self._prepare(cage)
+                self._job = self._compute(job, cage.meshadjust.edited is not None)
+                messages.append(self._commit())
+            except USER_ERRORS as exc:
+                self.report({'ERROR'}, f"{cage.name}: {exc}")
+                return {'CANCELLED'}
+        self.report({'INFO'}, " | ".join(messages))
+        return {'FINISHED'}
+
+    def invoke(self, context, event):
+        cages = selected_cages(context)
+        if bpy.app.background or len(cages) != 1:
+            return self.execute(context)
+        cage = cages[0]
+        try:
+            job = self._prepare(cage)
+        except USER_ERRORS as exc:
+            self.report({'ERROR'}, str(exc))
+            return {'CANCELLED'}
+        bound = cage.meshadjust.edited is not None
+        return self.start_background(context, f"Fitting {cage.name}",
+                                     lambda progress: self._compute(job, bound, progress))
+
+    def finish(self, context):
+        self.report({'INFO'}, self._commit())
         return {'FINISHED'}
 
 
@@ -322,45 +339,49 @@ class MESHADJUST_OT_bind(_Background, _CageStep, bpy.types.Operator):
     bl_label = "Bind"
     bl_options = {'REGISTER', 'UNDO'}
 
-    levels: IntProperty(name="Levels", default=2, min=1, max=5)
-    scheme: EnumProperty(name="Scheme", items=SCHEMES, default='butterfly')
+    levels: IntProperty(name="Levels", default=2, min=1, max=5,
+                        description="Subdivision levels (unset: the cage's current ones)")
+    scheme: EnumProperty(name="Scheme", items=SCHEMES, default='butterfly',
+                         description="Subdivision scheme (unset: the cage's current one)")
 
-    def _defaults_from_cage(self, cage):
-        """Unset levels / scheme mean: keep the cage's current ones."""
-        if not self.properties.is_property_set("levels"):
-            self.levels = cage.meshadjust.levels
-        if not self.properties.is_property_set("scheme"):
-            self.scheme = cage.meshadjust.scheme
+    def _prepare(self, cage):
+        """A bind job; unset levels / scheme keep the cage's current ones."""
+        levels = self.levels if self.properties.is_property_set("levels") else None
+        scheme = self.scheme if self.properties.is_property_set("scheme") else None
+        return api.prepare_cage_job(cage, levels=levels, scheme=scheme)
+
+    def _commit(self):
+        cage = bpy.data.objects[self._job.cage_name]
+        edited = api.commit_bind(cage, self._job)
+        return (f"bound '{edited.name}' ({len(edited.data.vertices):,} vertices) to "
+                f"'{cage.name}' ({self._job.scheme}, {self._job.levels} levels)")
 
     def execute(self, context):
-        cage = cage_of(context.active_object)
-        self._defaults_from_cage(cage)
-        try:
-            self._job = api.compute_bind(api.prepare_cage_job(cage, levels=self.levels,
-                                                              scheme=self.scheme))
-            return self.finish(context)
-        except USER_ERRORS as exc:
-            self.report({'ERROR'}, str(exc))
-            return {'CANCELLED'}
+        messages = []
+        for cage in selected_cages(context):
+            try:
+                self._job = api.compute_bind(self._prepare(cage))
+                messages.append(self._commit())
+            except USER_ERRORS as exc:
+                self.report({'ERROR'}, f"{cage.name}: {exc}")
+                return {'CANCELLED'}
+        self.report({'INFO'}, " | ".join(messages))
+        return {'FINISHED'}
 
     def invoke(self, context, event):
-        cage = cage_of(context.active_object)
-        self._defaults_from_cage(cage)
-        if bpy.app.background:
+        cages = selected_cages(context)
+        if bpy.app.background or len(cages) != 1:
             return self.execute(context)
         try:
-            job = api.prepare_cage_job(cage, levels=self.levels, scheme=self.scheme)
+            job = self._prepare(cages[0])
         except USER_ERRORS as exc:
             self.report({'ERROR'}, str(exc))
             return {'CANCELLED'}
-        return self.start_background(context, f"Binding to {cage.name}",
+        return self.start_background(context, f"Binding to {cages[0].name}",
                                      lambda progress: api.compute_bind(job, progress=progress))
 
     def finish(self, context):
-        cage = bpy.data.objects[self._job.cage_name]
-        edited = api.commit_bind(cage, self._job)
-        self.report({'INFO'}, f"bound '{edited.name}' ({len(edited.data.vertices):,} vertices) "
-                              f"to '{cage.name}' ({self.scheme}, {self.levels} levels)")
+        self.report({'INFO'}, self._commit())
         return {'FINISHED'}
 
 
@@ -380,17 +401,21 @@ class MESHADJUST_OT_refine(_CageStep, bpy.types.Operator):
     _needs_binding = True
 
     def execute(self, context):
-        cage = cage_of(context.active_object)
-        try:
-            report = api.refine_object(cage, output=self.output, levels=self.levels or None,
-                                       scheme=None if self.scheme == 'BOUND' else self.scheme)
-        except core.TopologyMismatchError as exc:
-            self.report({'ERROR'}, f"{exc} (Bind re-binds the changed cage)")
-            return {'CANCELLED'}
-        except USER_ERRORS as exc:
-            self.report({'ERROR'}, str(exc))
-            return {'CANCELLED'}
-        self.report({'INFO'}, report.message)
+        messages = []
+        for cage in selected_cages(context):
+            if cage.meshadjust.edited is None:
+                continue
+            try:
+                report = api.refine_object(cage, output=self.output, levels=self.levels or None,
+                                           scheme=None if self.scheme == 'BOUND' else self.scheme)
+            except core.TopologyMismatchError as exc:
+                self.report({'ERROR'}, f"{exc} (Bind re-binds the changed cage)")
+                return {'CANCELLED'}
+            except USER_ERRORS as exc:
+                self.report({'ERROR'}, f"{cage.name}: {exc}")
+                return {'CANCELLED'}
+            messages.append(report.message)
+        self.report({'INFO'}, " | ".join(messages))
         return {'FINISHED'}
 
 

@@ -439,3 +439,23 @@ def test_panel_draw_uses_existing_properties_and_operators(scene):
     log = _draw_panel()                                   # a bound cage is active
     assert ("operator", "meshadjust.refine") in log and ("prop", "live") in log
     assert any(e[0] == "label" and e[1].startswith("Bound:") for e in log)
+
+
+def test_cage_steps_handle_several_selected_cages(scene):
+    objs = []
+    for k in range(2):
+        V, F = bumpy_sphere(3)
+        obj = make_object(f"dense{k}", V + [3.0 * k, 0, 0], F)
+        assert simplify(200) == {'FINISHED'}
+        objs.append(obj)
+    cages = [o.meshadjust.cage for o in objs]
+    for c in cages:
+        c.select_set(True)
+        mio().write_positions(c.data, mio().read_positions(c.data) + [0.0, 0.0, 0.1])
+    assert bpy.ops.meshadjust.refine(output='EDITED') == {'FINISHED'}
+    for obj, c in zip(objs, cages):
+        dz = mio().read_positions(c.meshadjust.edited.data)[:, 2] - \
+            mio().read_positions(obj.data)[:, 2]
+        assert np.allclose(dz, 0.1, atol=1e-4)
+    assert bpy.ops.meshadjust.bind(levels=1) == {'FINISHED'}      # both re-bound, one level
+    assert [c.meshadjust.levels for c in cages] == [1, 1]
