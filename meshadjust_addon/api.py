@@ -278,6 +278,7 @@ class CageJob:
     levels: int
     scheme: str
     from_rest: bool = False
+    rebind: bool = False         #: a fit also re-binds (the cage was bound)
     binding: object = None       #: core.Binding, after compute_bind
     fit: object = None           #: core.FitResult, after compute_fit
     cancelled: bool = False

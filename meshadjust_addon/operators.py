@@ -268,7 +268,42 @@ def vars_of(params):
     return {k: getattr(params, k) for k in params.__dataclass_fields__}
 
 
-class MESHADJUST_OT_fit_cage(_Background, _CageStep, bpy.types.Operator):
+class _CageJobStep(_Background, _CageStep):
+    """Mixin for the long cage steps (fit, bind): every selected cage in turn
+    from ``execute()``; a single cage runs in the background from ``invoke()``.
+    Subclasses implement ``_prepare(cage) -> job`` (main thread),
+    ``_compute(job, progress) -> job`` (any thread) and ``_commit() -> message``."""
+
+    def execute(self, context):
+        messages = []
+        for cage in selected_cages(context):
+            try:
+                self._job = self._compute(self._prepare(cage))
+                messages.append(self._commit())
+            except USER_ERRORS as exc:
+                self.report({'ERROR'}, f"{cage.name}: {exc}")
+                return {'CANCELLED'}
+        self.report({'INFO'}, " | ".join(messages))
+        return {'FINISHED'}
+
+    def invoke(self, context, event):
+        cages = selected_cages(context)
+        if bpy.app.background or len(cages) != 1:
+            return self.execute(context)
+        try:
+            job = self._prepare(cages[0])
+        except USER_ERRORS as exc:
+            self.report({'ERROR'}, str(exc))
+            return {'CANCELLED'}
+        return self.start_background(context, f"{self.bl_label}: {cages[0].name}",
+                                     lambda progress: self._compute(job, progress))
+
+    def finish(self, context):
+        self.report({'INFO'}, self._commit())
+        return {'FINISHED'}
+
+
+class MESHADJUST_OT_fit_cage(_CageJobStep, bpy.types.Operator):
     """Move the cage's vertices so that its subdivision surface matches the source (undoes the shrinkage of simplification)"""
 
     bl_idname = "meshadjust.fit_cage"
@@ -281,11 +316,13 @@ class MESHADJUST_OT_fit_cage(_Background, _CageStep, bpy.types.Operator):
     def _prepare(self, cage):
         if cage.mode == 'EDIT':
             bpy.ops.object.mode_set(mode='OBJECT')
-        return api.prepare_cage_job(cage)
+        job = api.prepare_cage_job(cage)
+        job.rebind = self.rebind and cage.meshadjust.edited is not None
+        return job
 
-    def _compute(self, job, bound, progress=None):
+    def _compute(self, job, progress=None):
         api.compute_fit(job, progress=progress)
-        if self.rebind and bound and not job.cancelled:
+        if job.rebind and not job.cancelled:
             job.V_cage = job.fit.V
             api.compute_bind(job)
         return job
@@ -300,39 +337,8 @@ class MESHADJUST_OT_fit_cage(_Background, _CageStep, bpy.types.Operator):
                 f"{100 * d[-1] / fit.diagonal:.3f}% of size"
                 + ("; re-bound" if self._job.binding is not None else ""))
 
-    def execute(self, context):
-        messages = []
-        for cage in selected_cages(context):
-            try:
-                job = self._prepare(cage)
-                self._job = self._compute(job, cage.meshadjust.edited is not None)
-                messages.append(self._commit())
-            except USER_ERRORS as exc:
-                self.report({'ERROR'}, f"{cage.name}: {exc}")
-                return {'CANCELLED'}
-        self.report({'INFO'}, " | ".join(messages))
-        return {'FINISHED'}
 
-    def invoke(self, context, event):
-        cages = selected_cages(context)
-        if bpy.app.background or len(cages) != 1:
-            return self.execute(context)
-        cage = cages[0]
-        try:
-            job = self._prepare(cage)
-        except USER_ERRORS as exc:
-            self.report({'ERROR'}, str(exc))
-            return {'CANCELLED'}
-        bound = cage.meshadjust.edited is not None
-        return self.start_background(context, f"Fitting {cage.name}",
-                                     lambda progress: self._compute(job, bound, progress))
-
-    def finish(self, context):
-        self.report({'INFO'}, self._commit())
-        return {'FINISHED'}
-
-
-class MESHADJUST_OT_bind(_Background, _CageStep, bpy.types.Operator):
+class MESHADJUST_OT_bind(_CageJobStep, bpy.types.Operator):
     """Bind (a copy of) the source to the cage as it is now: its current shape becomes the rest shape"""
 
     bl_idname = "meshadjust.bind"
@@ -350,39 +356,14 @@ class MESHADJUST_OT_bind(_Background, _CageStep, bpy.types.Operator):
         scheme = self.scheme if self.properties.is_property_set("scheme") else None
         return api.prepare_cage_job(cage, levels=levels, scheme=scheme)
 
+    def _compute(self, job, progress=None):
+        return api.compute_bind(job, progress=progress)
+
     def _commit(self):
         cage = bpy.data.objects[self._job.cage_name]
         edited = api.commit_bind(cage, self._job)
         return (f"bound '{edited.name}' ({len(edited.data.vertices):,} vertices) to "
                 f"'{cage.name}' ({self._job.scheme}, {self._job.levels} levels)")
-
-    def execute(self, context):
-        messages = []
-        for cage in selected_cages(context):
-            try:
-                self._job = api.compute_bind(self._prepare(cage))
-                messages.append(self._commit())
-            except USER_ERRORS as exc:
-                self.report({'ERROR'}, f"{cage.name}: {exc}")
-                return {'CANCELLED'}
-        self.report({'INFO'}, " | ".join(messages))
-        return {'FINISHED'}
-
-    def invoke(self, context, event):
-        cages = selected_cages(context)
-        if bpy.app.background or len(cages) != 1:
-            return self.execute(context)
-        try:
-            job = self._prepare(cages[0])
-        except USER_ERRORS as exc:
-            self.report({'ERROR'}, str(exc))
-            return {'CANCELLED'}
-        return self.start_background(context, f"Binding to {cages[0].name}",
-                                     lambda progress: api.compute_bind(job, progress=progress))
-
-    def finish(self, context):
-        self.report({'INFO'}, self._commit())
-        return {'FINISHED'}
 
 
 class MESHADJUST_OT_refine(_CageStep, bpy.types.Operator):
