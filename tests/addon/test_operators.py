@@ -138,16 +138,21 @@ def test_cage_object_transform_is_respected(dense):
     assert np.allclose(dx, 0.5, atol=1e-4)
 
 
-def test_topology_changed_cage_is_refused_then_rebound(dense):
-    simplify(300)
-    cage = dense.meshadjust.cage
+def delete_cage_vertex(cage, index):
+    """Change the cage's topology the way an artist would: in Edit Mode."""
     bpy.context.view_layer.objects.active = cage
     bpy.ops.object.mode_set(mode='EDIT')
     bm = bmesh.from_edit_mesh(cage.data)
     bm.verts.ensure_lookup_table()
-    bmesh.ops.delete(bm, geom=[bm.verts[0]], context='VERTS')
+    bmesh.ops.delete(bm, geom=[bm.verts[index]], context='VERTS')
     bmesh.update_edit_mesh(cage.data)
     bpy.ops.object.mode_set(mode='OBJECT')
+
+
+def test_topology_changed_cage_is_refused_then_rebound(dense):
+    simplify(300)
+    cage = dense.meshadjust.cage
+    delete_cage_vertex(cage, 0)
     with pytest.raises(RuntimeError, match="re-bind"):
         bpy.ops.meshadjust.refine(output='EDITED')
 
@@ -287,13 +292,7 @@ def test_panel_offers_rebind_after_topology_change(dense):
     panel = sys.modules[MODULE + ".meshadjust_addon.panel"]
     simplify(300)
     cage = dense.meshadjust.cage
-    bpy.context.view_layer.objects.active = cage
-    bpy.ops.object.mode_set(mode='EDIT')
-    bm = bmesh.from_edit_mesh(cage.data)
-    bm.verts.ensure_lookup_table()
-    bmesh.ops.delete(bm, geom=[bm.verts[3]], context='VERTS')
-    bmesh.update_edit_mesh(cage.data)
-    bpy.ops.object.mode_set(mode='OBJECT')
+    delete_cage_vertex(cage, 3)
     enabled, reason = panel.panel_state(bpy.context)["refine"]
     assert not enabled and "re-bind" in reason
     assert bpy.ops.meshadjust.bind() == {'FINISHED'}       # the offered fix
