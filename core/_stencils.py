@@ -40,6 +40,8 @@ class ApplyPlan(NamedTuple):
     long_rows: np.ndarray     #: (q,) int64
     long_entries: np.ndarray  #: CSR entry indices of the long rows, row by row
     long_starts: np.ndarray   #: (q,) offsets into long_entries
+    long_cols: np.ndarray     #: cols[long_entries], gathered once
+    long_weights: np.ndarray  #: weights[long_entries]
 
 
 class Stencil(NamedTuple):
@@ -65,30 +67,42 @@ class Stencil(NamedTuple):
         """Row of each entry, (nnz,) int64."""
         return np.repeat(np.arange(self.n_out, dtype=np.int64), np.diff(self.indptr))
 
-    def apply_t(self, Xt):
-        """Column-major apply: ``Xt`` (k, n_in) C-contiguous -> (k, n_out)."""
-        out = np.empty((Xt.shape[0], self.n_out))
+    def apply_t(self, Xt, out=None):
+        """Column-major apply: ``Xt`` (k, n_in) C-contiguous -> (k, n_out).
+
+        ``out``, if given, is a (k, n_out) float64 array of any strides (e.g.
+        the transpose of a C-contiguous (n_out, k) result) and is returned.
+        Gathers use ``take(..., mode="wrap")``: the indices are valid by
+        construction, and it is about twice as fast as fancy indexing or the
+        default bounds-checked ``mode="raise"`` (same values, bit for bit).
+        """
+        k = Xt.shape[0]
+        if out is None:
+            out = np.empty((k, self.n_out))
         if self.n_out == 0:
             return out
         if self.plan is None:
             starts = self.indptr[:-1]
-            for d in range(Xt.shape[0]):
-                g = Xt[d][self.cols]
+            for d in range(k):
+                g = Xt[d].take(self.cols, mode="wrap")
                 g *= self.weights
                 out[d] = np.add.reduceat(g, starts)
             return out
-        for b in self.plan.blocks:
+        p = self.plan
+        for b in p.blocks:
             if b.copy:
                 out[:, b.start:b.stop] = Xt[:, b.start:b.stop]
                 continue
-            for d in range(Xt.shape[0]):
-                g = Xt[d][b.cols].reshape(b.stop - b.start, b.width)
-                out[d, b.start:b.stop] = np.einsum("ij,ij->i", g, b.weights)
-        p = self.plan
+            g = np.empty(b.cols.shape[0])
+            g2 = g.reshape(b.stop - b.start, b.width)
+            for d in range(k):
+                Xt[d].take(b.cols, out=g, mode="wrap")
+                np.einsum("ij,ij->i", g2, b.weights, out=out[d, b.start:b.stop])
         if p.long_rows.shape[0]:
-            c, w = self.cols[p.long_entries], self.weights[p.long_entries]
-            for d in range(Xt.shape[0]):
-                out[d, p.long_rows] = np.add.reduceat(Xt[d][c] * w, p.long_starts)
+            for d in range(k):
+                g = Xt[d].take(p.long_cols, mode="wrap")
+                g *= p.long_weights
+                out[d, p.long_rows] = np.add.reduceat(g, p.long_starts)
         return out
 
     def apply_transpose_t(self, Gt, rows=None):
@@ -150,7 +164,7 @@ def make_plan(S, bounds):
     starts = np.zeros(long_rows.shape[0], dtype=np.int64)
     np.cumsum(ll[:-1], out=starts[1:])
     entries = np.repeat(S.indptr[long_rows] - starts, ll) + np.arange(int(ll.sum()))
-    return ApplyPlan(tuple(blocks), long_rows, entries, starts)
+    return ApplyPlan(tuple(blocks), long_rows, entries, starts, S.cols[entries], S.weights[entries])
 
 
 class _Table(NamedTuple):

@@ -140,8 +140,10 @@ a CSR matrix (rows sorted). ``apply_transpose`` is the matching
 the old-vertex rows and the new-vertex rows as two padded fixed-width tables
 (a butterfly's old vertices are a plain copy), so each coordinate costs one
 gather and one multiply-sum, and the few rows longer than their table's width
-(high-valence vertices) through ``np.add.reduceat`` on the CSR arrays. No
-Python loop runs over vertices, edges or faces.
+(high-valence vertices) through ``np.add.reduceat`` on the CSR arrays
+(gathered once, in the plan). The last level writes straight into the
+``(n_fine, k)`` result, so no fine-sized transpose is made. No Python loop
+runs over vertices, edges or faces.
 """
 
 import hashlib
@@ -218,9 +220,14 @@ class SubdivisionOperator:
         """
         X, one_d = self._as_2d(Vc, self.n_coarse, "apply")
         Xt = np.ascontiguousarray(X.T)          # column-major: each gather reads one column
-        for S in self.stencils:
+        if not self.stencils:
+            return Xt[0].copy() if one_d else np.ascontiguousarray(Xt.T)
+        for S in self.stencils[:-1]:
             Xt = S.apply_t(Xt)
-        return Xt[0].copy() if one_d else np.ascontiguousarray(Xt.T)
+        # the last level writes straight into the (n_fine, k) result (no final transpose)
+        out = np.empty((self.n_fine, Xt.shape[0]))
+        self.stencils[-1].apply_t(Xt, out=out.T)
+        return out[:, 0] if one_d else out
 
     def apply_transpose(self, G):
         """The exact adjoint: ``<apply(x), g> == <x, apply_transpose(g)>``.

@@ -354,6 +354,28 @@ def test_apply_plan_equals_the_csr_arrays(name, scheme):
         assert op.stencils[0].plan.long_rows.shape[0] > 0
 
 
+@pytest.mark.parametrize("scheme", ["butterfly", "loop"])
+@pytest.mark.parametrize("name", ["fan9", "patch", "cube", "torus"])
+def test_apply_writes_the_last_level_into_the_result_bit_for_bit(name, scheme):
+    """apply() evaluates the last level straight into the (n_fine, k) result;
+    it equals the level-by-level Stencil.apply chain exactly, for any k and 1-D."""
+    V, F = MESHES[name]()
+    for levels in (1, 2, 3):
+        op = subdivision_operator(F, len(V), levels=levels, scheme=scheme)
+        X = np.random.default_rng(levels).standard_normal((len(V), 5))
+        chain = X
+        for S in op.stencils:
+            chain = S.apply(chain)
+        out = op.apply(X)
+        assert out.shape == (op.n_fine, 5) and out.flags.c_contiguous
+        assert np.array_equal(out, chain)
+        one = op.apply(X[:, 2])
+        assert one.shape == (op.n_fine,) and one.flags.c_contiguous
+        assert np.array_equal(one, chain[:, 2])
+    op0 = subdivision_operator(F, len(V), levels=0, scheme=scheme)
+    assert np.array_equal(op0.apply(X), X) and not np.shares_memory(op0.apply(X), X)
+
+
 def test_refined_topology_equals_topology_from_scratch():
     for name in ("torus", "patch", "cube", "fan3"):
         V, F = MESHES[name]()
