@@ -31,23 +31,10 @@ import numpy as np  # noqa: E402
 
 from core.io_obj import read_obj  # noqa: E402
 from core.subdivide import subdivide, subdivision_operator  # noqa: E402
+from tests.mesh_factory import midpoint_split  # noqa: E402
+from _bench import blender_object, empty_scene  # noqa: E402
 
 MESHES = os.path.normpath(os.path.join(ROOT, "..", "shared", "meshes"))
-
-
-def midpoint_split(V, F):
-    n = V.shape[0]
-    half = F[:, [1, 2, 2, 0, 0, 1]].reshape(-1, 2)
-    key = np.minimum(half[:, 0], half[:, 1]) * n + np.maximum(half[:, 0], half[:, 1])
-    uniq, inv = np.unique(key, return_inverse=True)
-    E = np.stack([uniq // n, uniq % n], axis=1)
-    mid = n + inv.reshape(-1, 3)
-    V2 = np.vstack([V, 0.5 * (V[E[:, 0]] + V[E[:, 1]])])
-    a, b, c = F[:, 0], F[:, 1], F[:, 2]
-    ma, mb, mc = mid[:, 0], mid[:, 1], mid[:, 2]
-    F2 = np.concatenate([np.stack([a, mc, mb], 1), np.stack([mc, b, ma], 1),
-                         np.stack([mb, ma, c], 1), np.stack([ma, mb, mc], 1)])
-    return V2, F2
 
 
 def best_of(fn, repeats):
@@ -76,18 +63,8 @@ def bench_blender(V, F, levels, repeats):
     import bpy
     best, faces, verts = np.inf, 0, 0
     for _ in range(repeats):
-        bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)
-        me = bpy.data.meshes.new("cage")
-        n, m = V.shape[0], F.shape[0]
-        me.vertices.add(n)
-        me.loops.add(3 * m)
-        me.polygons.add(m)
-        me.attributes["position"].data.foreach_set("vector", V.astype(np.float32).ravel())
-        me.attributes[".corner_vert"].data.foreach_set("value", F.astype(np.int32).ravel())
-        me.polygons.foreach_set("loop_start", np.arange(0, 3 * m, 3, dtype=np.int32))
-        me.update(calc_edges=True)
-        ob = bpy.data.objects.new("cage", me)
-        bpy.context.collection.objects.link(ob)
+        empty_scene()
+        ob = blender_object("cage", V, F)
         bpy.context.view_layer.objects.active = ob
         mod = ob.modifiers.new("subsurf", "SUBSURF")
         mod.subdivision_type = "CATMULL_CLARK"
