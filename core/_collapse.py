@@ -14,7 +14,8 @@ One pass::
     rounds:  chosen = pool edges whose rank is the smallest over every face
              around both endpoints  -> the stars of chosen edges are disjoint
              check chosen edges on the current mesh (link condition, flips,
-             compactness); accept those within the pool's cost bound;
+             turn against the input normals, compactness and Hausdorff
+             penalties); accept those within the pool's cost bound;
              their closed one-rings become untouchable for later rounds
     apply all accepted collapses at once, glue twins, compact
 """
@@ -23,6 +24,7 @@ import numpy as np
 
 from ._clean import BOUNDARY, NON_MANIFOLD
 from .quadrics import optimal_placement, quadric_distance, quadric_error
+from .spatial import _kernel, _triangle_rows
 
 _BIG = np.iinfo(np.int64).max
 _NEXT = np.array([1, 2, 0], dtype=np.int64)
@@ -60,6 +62,7 @@ class State:
         self.c_blk = np.full(h3, -1.0)
         self.cur_of_clean = np.arange(n, dtype=np.int64)
         self.worst = 0.0
+        self.wit = V.copy()                            # witness: merged input point farthest from the surface
 
 
 def _ends(F, h):
@@ -112,8 +115,10 @@ def _check(st, A, B, X, interior, star, kf, tun):
     at X[k], judged on the current mesh.
 
     ``star`` lists every face around the endpoints, ``kf`` the collapse each
-    belongs to. Returns ``ok`` (k,) bool, ``penalty`` (k,), and the star:
-    face ids, their collapse index, and whether each face is removed.
+    belongs to. Returns ``ok`` (k,) bool, ``penalty`` (k,), the star:
+    face ids, their collapse index, and whether each face is removed, and the
+    survivor's witness (k,3): of A's and B's witnesses, the one farther from
+    the new faces.
     """
     F, V = st.F, st.V
     n, k = V.shape[0], A.size
@@ -206,7 +211,25 @@ def _check(st, A, B, X, interior, star, kf, tun):
     # only collapses that make the neighbourhood less compact than it was pay
     short = np.maximum(0.0, np.minimum(gmin_old, tun.gamma_soft) - gmin_new) / tun.gamma_soft
     penalty = tun.compact_weight * area * L2 * short * short
-    return ok, penalty, star, kf, coll
+    # --- Hausdorff-aware term: distance of the witnesses of A and B (the input
+    # points merged into them that were farthest from the surface) to the new faces
+    wA, wB = _take(st.wit, A, axis=0), _take(st.wit, B, axis=0)
+    wnew = wA
+    if tun.haus_weight > 0.0 and mk.size:
+        Pa = np.concatenate([wA[mk], wB[mk]])
+        T = np.concatenate([Pn, Pn])
+        _, _, d2 = _kernel(Pa[:, 0].copy(), Pa[:, 1].copy(), Pa[:, 2].copy(),
+                           _triangle_rows(T[:, 0], T[:, 1], T[:, 2]))
+        dA = np.full(k, np.inf)
+        np.minimum.at(dA, mk, d2[:mk.size])
+        dB = np.full(k, np.inf)
+        np.minimum.at(dB, mk, d2[mk.size:])
+        dA[~np.isfinite(dA)] = 0.0
+        dB[~np.isfinite(dB)] = 0.0
+        wnew = np.where((dB > dA)[:, None], wB, wA)
+        Wq = _take(st.Q[:, 10], A) + _take(st.Q[:, 10], B)
+        penalty = penalty + tun.haus_weight * Wq * np.maximum(dA, dB)
+    return ok, penalty, star, kf, coll, wnew
 
 
 def run(st, target, max_err_n, preserve_boundary, progress, m0, tun):
@@ -275,7 +298,7 @@ def run(st, target, max_err_n, preserve_boundary, progress, m0, tun):
         rank_all = np.arange(P, dtype=np.int64)
 
         touched = np.zeros(n, dtype=bool)
-        acc_edges, acc_star, acc_kf, acc_coll = [], [], [], []
+        acc_edges, acc_star, acc_kf, acc_coll, acc_wit = [], [], [], [], []
         active = rank_all
         FT = np.ascontiguousarray(F.T)
         for _ in range(tun.max_rounds):
@@ -300,7 +323,7 @@ def run(st, target, max_err_n, preserve_boundary, progress, m0, tun):
             in_star = pos[fh] >= 0
             star = hit[in_star]
             kf = pos[fh[in_star]]
-            ok, pen, star, kf, coll = _check(st, pa[sel], pb[sel], pX[sel], pint[sel], star, kf, tun)
+            ok, pen, star, kf, coll, wnew = _check(st, pa[sel], pb[sel], pX[sel], pint[sel], star, kf, tun)
             total = praw[sel] + pen
             acc = ok & (total <= limit)
             # remember rejections until the neighbourhood changes
@@ -313,6 +336,7 @@ def run(st, target, max_err_n, preserve_boundary, progress, m0, tun):
                 keep = acc[kf]
                 remap_k = np.cumsum(acc) - 1
                 acc_edges.append(sel[acc])
+                acc_wit.append(wnew[acc])
                 acc_star.append(star[keep])
                 acc_kf.append(remap_k[kf[keep]] + sum(x.size for x in acc_edges[:-1]))
                 acc_coll.append(coll[keep])
@@ -321,6 +345,7 @@ def run(st, target, max_err_n, preserve_boundary, progress, m0, tun):
             continue
         acc = np.concatenate(acc_edges)
         s_star, s_kf, s_coll = np.concatenate(acc_star), np.concatenate(acc_kf), np.concatenate(acc_coll)
+        s_wit = np.concatenate(acc_wit)
         if target is not None:
             removed = np.where(pint[acc], 2, 1)
             order = np.argsort(pcost[acc], kind="stable")
@@ -329,11 +354,13 @@ def run(st, target, max_err_n, preserve_boundary, progress, m0, tun):
             keep_k = before < m - target
             if not keep_k.all():
                 acc = acc[keep_k]
+                s_wit = s_wit[keep_k]
                 fk = keep_k[s_kf]
                 s_star, s_coll = s_star[fk], s_coll[fk]
                 s_kf = (np.cumsum(keep_k) - 1)[s_kf[fk]]
         st.worst = max(st.worst, float(_take(st.c_dist, ph[acc]).max()))
         st.vver[touched] = passes
+        st.wit[pa[acc]] = s_wit
         _apply(st, pa[acc], pb[acc], pX[acc], s_star, s_kf, s_coll)
     return "no_valid_collapse", passes
 
@@ -382,6 +409,6 @@ def _apply(st, A, B, X, star, kf, coll):
     for name in ("feat", "swap", "blk_pass", "c_cost", "c_dist", "c_blk"):
         setattr(st, name, np.compress(keep_h, getattr(st, name)))
     st.c_x = [np.compress(keep_h, c) for c in st.c_x]
-    for name in ("V", "Q", "Nref", "locked", "moved", "orig", "vver", "fresh", "is_bnd"):
+    for name in ("V", "Q", "Nref", "wit", "locked", "moved", "orig", "vver", "fresh", "is_bnd"):
         setattr(st, name, np.compress(keep_v, getattr(st, name), axis=0))
     st.cur_of_clean = _take(comp, st.cur_of_clean)

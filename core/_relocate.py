@@ -42,7 +42,7 @@ def _normals(V, F):
     return np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]])
 
 
-def relocate(V, F, P, movable, *, iters=2, cg_iters=15, reg=0.05, min_cos=0.2):
+def relocate(V, F, P, movable, *, iters=2, cg_iters=15, reg=0.05, min_cos=0.2, N_keep=None):
     """Move ``movable`` vertices of the cage ``(V, F)`` towards points ``P``.
 
     Parameters
@@ -57,6 +57,9 @@ def relocate(V, F, P, movable, *, iters=2, cg_iters=15, reg=0.05, min_cos=0.2):
         to the vertex's own sample weight (unit-free).
     min_cos : float, a moved face whose normal turns by more than
         ``acos(min_cos)`` is undone.
+    N_keep : (m,3) float64 or None, reference normals: a moved face whose normal
+        ends more than 90 degrees from its row is undone too (the caller passes
+        the summed input normals each face stands for).
 
     Returns
     -------
@@ -94,13 +97,17 @@ def relocate(V, F, P, movable, *, iters=2, cg_iters=15, reg=0.05, min_cos=0.2):
             Pk = Rk + beta * Pk
             rs = rs_new
         D[~movable] = 0.0
-        # undo moves that flip or flatten a face (a few sweeps: undoing can expose others)
-        for _ in range(10):
+        # undo moves that flip or flatten a face (sweeps: undoing can expose others;
+        # each sweep zeroes at least one move, and no move at all is valid)
+        l0 = np.linalg.norm(N_ref, axis=1)
+        while True:
             Vn = V + D
             N1 = _normals(Vn, F)
-            l0 = np.linalg.norm(N_ref, axis=1)
             l1 = np.linalg.norm(N1, axis=1)
             bad = np.einsum("ij,ij->i", N_ref, N1) <= min_cos * l0 * l1
+            if N_keep is not None:
+                bad |= np.einsum("ij,ij->i", N_keep, N1) <= 0.0
+            bad &= np.any(D[F] != 0.0, axis=(1, 2))
             if not bad.any():
                 break
             D[F[bad].ravel()] = 0.0

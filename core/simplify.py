@@ -19,7 +19,11 @@ of independent edges, each batch checked on the mesh as it is::
             smallest within two rings, so their stars -- the faces around
             both endpoints -- are disjoint
             check each on the current mesh: link condition, no flipped or
-            near-degenerate face; add the compactness penalty
+            near-degenerate face, no face turned > 90 deg from the summed
+            input normals it stands for; add the compactness penalty and a
+            Hausdorff-aware one (distance of the merged vertices' witnesses,
+            the input points they stood for that lay farthest from the
+            surface, to the new faces)
             accept those still within the pool's cost bound, lock their stars
         apply every accepted collapse with one remap (b -> a, V[a] = x,
         Q[a] += Q[b]); glue the half-edge twins of the removed faces
@@ -60,11 +64,14 @@ class Tuning:
     bands: int = 8                   #: cost bands of the pool (random order inside a band)
     flip_cos: float = 0.0            #: reject if a face normal turns by more than acos(flip_cos)
     #: ... or ends farther than acos(ref_cos) from the summed normals of the input it
-    #: stands for (-1: off; on rough scans it blocks too many collapses, see the report)
-    ref_cos: float = -1.0
+    #: stands for (-1: off; 0, i.e. 90 degrees, keeps rough scans collapsing; stricter stalls them)
+    ref_cos: float = 0.0
     gamma_hard: float = 0.02         #: reject new triangles less compact than this (and than before)
     gamma_soft: float = 0.3          #: penalise new triangles less compact than this
     compact_weight: float = 1e-5     #: penalty scale: star area * edge length^2 * (1 - g/g_soft)^2
+    #: Hausdorff-aware penalty: weight * merged area * (distance of the farther merged
+    #: vertex's witness -- its input point farthest from the surface so far -- to the new faces)^2
+    haus_weight: float = 0.15
     relocate_iters: int = 2          #: final relocation rounds towards the input (0: off)
     relocate_samples: int = 60000    #: at most this many input vertices as relocation targets
     relocate_reg: float = 1.0        #: pull of each vertex to its place, relative to its samples
@@ -212,7 +219,8 @@ def _relocate_cage(mesh, Vn, tun):
     movable[Wo[mesh.feat]] = False
     step = max(1, int(np.ceil(Vn.shape[0] / tun.relocate_samples)))
     P = Vn[::step]
-    Vnew = relocate(mesh.V, Fm, P, movable, iters=tun.relocate_iters, reg=tun.relocate_reg)
+    Nkeep = mesh.Nref[Fm].sum(axis=1) if tun.ref_cos > -1.0 else None
+    Vnew = relocate(mesh.V, Fm, P, movable, iters=tun.relocate_iters, reg=tun.relocate_reg, N_keep=Nkeep)
     mesh.moved |= np.any(Vnew != mesh.V, axis=1)
     mesh.V = Vnew
 
