@@ -110,7 +110,7 @@ def _recost(st, rep, U, W, stale, preserve_boundary):
     st.swap[hs] = swap
 
 
-def _check(st, A, B, X, interior, star, kf, tun):
+def _check(st, A, B, X, interior, star, kf, tun, haus=True):
     """Validity and compactness penalty of independent collapses B[k] -> A[k]
     at X[k], judged on the current mesh.
 
@@ -215,7 +215,7 @@ def _check(st, A, B, X, interior, star, kf, tun):
     # points merged into them that were farthest from the surface) to the new faces
     wA, wB = _take(st.wit, A, axis=0), _take(st.wit, B, axis=0)
     wnew = wA
-    if tun.haus_weight > 0.0 and mk.size:
+    if haus and tun.haus_weight > 0.0 and mk.size:
         Pa = np.concatenate([wA[mk], wB[mk]])
         T = np.concatenate([Pn, Pn])
         _, _, d2 = _kernel(Pa[:, 0].copy(), Pa[:, 1].copy(), Pa[:, 2].copy(),
@@ -240,6 +240,8 @@ def run(st, target, max_err_n, preserve_boundary, progress, m0, tun):
         m, n = F.shape[0], st.V.shape[0]
         if target is not None and m <= target:
             return "target", passes
+        # the Hausdorff penalty matters once the cage is coarse: skip it before
+        haus = target is None or m <= tun.haus_phase * target
         if progress is not None and passes > 0:
             if target is not None and m0 > target:
                 frac = (m0 - m) / (m0 - target)
@@ -323,7 +325,8 @@ def run(st, target, max_err_n, preserve_boundary, progress, m0, tun):
             in_star = pos[fh] >= 0
             star = hit[in_star]
             kf = pos[fh[in_star]]
-            ok, pen, star, kf, coll, wnew = _check(st, pa[sel], pb[sel], pX[sel], pint[sel], star, kf, tun)
+            ok, pen, star, kf, coll, wnew = _check(st, pa[sel], pb[sel], pX[sel], pint[sel], star, kf, tun,
+                                                  haus)
             total = praw[sel] + pen
             acc = ok & (total <= limit)
             # remember rejections until the neighbourhood changes

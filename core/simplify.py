@@ -72,6 +72,7 @@ class Tuning:
     #: Hausdorff-aware penalty: weight * merged area * (distance of the farther merged
     #: vertex's witness -- its input point farthest from the surface so far -- to the new faces)^2
     haus_weight: float = 0.15
+    haus_phase: float = 4.0          #: ... only once the mesh has at most this many times the target faces
     relocate_iters: int = 2          #: final relocation rounds towards the input (0: off)
     relocate_samples: int = 60000    #: at most this many input vertices as relocation targets
     relocate_reg: float = 1.0        #: pull of each vertex to its place, relative to its samples
