@@ -43,6 +43,19 @@ def outward_flips(V, F):
     return int((np.einsum("ij,ij->i", N, C) <= 0).sum())
 
 
+def faces_turned_against_input(r, V, F):
+    """Output faces whose normal has a non-positive dot product with the summed
+    area normals of the input faces around the input vertices merged into its
+    corners (the simplifier's no-flip guarantee)."""
+    Nin = face_normals(V, F, normalize=False)
+    to_cage = r.vertex_map[F]                      # (m,3) cage vertex of each input corner
+    Nv = np.stack([np.bincount(to_cage.ravel(), weights=np.repeat(Nin[:, k], 3),
+                               minlength=r.V.shape[0]) for k in range(3)], axis=1)
+    ref = Nv[r.F].sum(axis=1)
+    N = face_normals(r.V, r.F, normalize=False)
+    return int((np.einsum("ij,ij->i", ref, N) <= 0).sum())
+
+
 def nearest_vertex_distance(A, B):
     """Largest distance from points A to their nearest point of B (small sets)."""
     d = np.linalg.norm(A[:, None, :] - B[None, :, :], axis=2)
@@ -326,8 +339,12 @@ def test_invariants_on_random_meshes(seed, kind, frac, amp):
     assert after._replace(boundary_edges=0) == before._replace(boundary_edges=0)
     assert r.F.shape[0] <= target or r.stopped_because == "no_valid_collapse"
     assert r.F.shape[0] >= target - 1 or r.stopped_because != "target"
-    if kind == "sphere":
-        assert outward_flips(r.V, r.F) == 0
+    if kind != "grid":
+        # closed inputs; on noisy open grids 4 in 450 random cases still turn a border face
+        # (the next fix of the simplifier: apply the guard to border collapses too)
+        assert faces_turned_against_input(r, V, F) == 0
+    if kind == "sphere" and amp == 0:
+        assert outward_flips(r.V, r.F) == 0     # a convex input stays star-shaped
 
 
 # ---------------------------------------------------------------- real meshes
@@ -363,10 +380,4 @@ def test_no_face_turns_more_than_90_degrees_from_the_input_it_stands_for():
         r = simplify(V, F, target_faces=target)
         assert_clean(r, V, F)
         assert topology_summary(r.F, r.V.shape[0]).euler == topology_summary(F, V.shape[0]).euler
-        Nin = face_normals(V, F, normalize=False)
-        to_cage = r.vertex_map[F]                      # (m,3) cage vertex of each input corner
-        Nv = np.stack([np.bincount(to_cage.ravel(), weights=np.repeat(Nin[:, k], 3),
-                                   minlength=r.V.shape[0]) for k in range(3)], axis=1)
-        ref = Nv[r.F].sum(axis=1)
-        N = face_normals(r.V, r.F, normalize=False)
-        assert np.all(np.einsum("ij,ij->i", ref, N) > 0)
+        assert faces_turned_against_input(r, V, F) == 0
