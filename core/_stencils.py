@@ -195,19 +195,21 @@ def _assemble(n_out, n_in, tables, patches=()):
     out_w = np.empty(nnz, dtype=np.float64)
     cursor = indptr[:-1].copy()
     for t in tables:
-        pos = cursor[t.rows]
-        for col, w in zip(t.cols, t.weights):
-            out_c[pos] = col
-            out_w[pos] = w
-            pos += 1
-        cursor[t.rows] = pos
+        cursor[t.rows] = _write_slots(out_c, out_w, cursor[t.rows], t)
     for t in patches:
-        pos = indptr[t.rows]
-        for col, w in zip(t.cols, t.weights):
-            out_c[pos] = col
-            out_w[pos] = w
-            pos += 1
+        _write_slots(out_c, out_w, indptr[t.rows], t)
     return Stencil(indptr, out_c, out_w, n_in)
+
+
+def _write_slots(out_c, out_w, pos, t):
+    """Write table ``t``'s slots at entry positions ``pos`` (one per row),
+    consecutive slots at consecutive entries; returns the next free positions."""
+    pos = pos.copy()
+    for col, w in zip(t.cols, t.weights):
+        out_c[pos] = col
+        out_w[pos] = w
+        pos += 1
+    return pos
 
 
 def butterfly_weights(k):
