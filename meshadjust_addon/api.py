@@ -254,9 +254,8 @@ def _edited_copy(source, cage):
     edited = bpy.data.objects.new(f"{source.name}_edited", mesh)
     edited.matrix_world = source.matrix_world.copy()
     _link_like(edited, source)
-    for slot_src, mat in zip(range(len(source.material_slots)), source.material_slots):
-        if slot_src < len(edited.material_slots):
-            edited.material_slots[slot_src].material = mat.material
+    for slot, src_slot in enumerate(source.material_slots[:len(edited.material_slots)]):
+        edited.material_slots[slot].material = src_slot.material
     st = edited.meshadjust
     st.role = 'EDITED'
     st.source = source
@@ -428,9 +427,9 @@ def subdivide_object(obj, *, levels=1, scheme="butterfly", in_place=False):
     or ``obj`` itself when ``in_place``."""
     t0 = time.perf_counter()
     arrays = mesh_io.read_object(obj)
-    creases = mesh_io.get_edge_flags(obj.data, "sharp_edge")
-    if arrays.evaluated:
-        creases = np.zeros((0, 2), np.int64)
+    # sharp edges index the mesh data: they only apply when it was used as is
+    creases = (np.zeros((0, 2), np.int64) if arrays.evaluated
+               else mesh_io.get_edge_flags(obj.data, "sharp_edge"))
     Vf, Ff = core.subdivide(arrays.V, arrays.F, levels=levels, scheme=scheme,
                             creases=creases if creases.shape[0] else None)
     name = f"{obj.name}_{scheme}{levels}"
