@@ -23,13 +23,15 @@ One pass::
 import numpy as np
 
 from ._clean import BOUNDARY, NON_MANIFOLD
-from .quadrics import optimal_placement, quadric_distance, quadric_error
+from ._parallel import blocks, run_blocks
+from .quadrics import DET_EPS, MAX_DRIFT
 from .spatial import _kernel, _triangle_rows
 
 _BIG = np.iinfo(np.int64).max
 _NEXT = np.array([1, 2, 0], dtype=np.int64)
 _PREV = np.array([2, 0, 1], dtype=np.int64)
 _SQRT3x2 = 2.0 * np.sqrt(3.0)
+_BLOCK = 1 << 16  # elements per block of work (see core._parallel)
 _SNAP2 = 1e-12  # (distance / edge length)^2 below which a position is an endpoint
 
 _take = np.take
@@ -40,7 +42,9 @@ class State:
 
     def __init__(self, V, F, twin, Q, locked, feat, Nref):
         n, h3 = V.shape[0], twin.size
-        self.V, self.Q, self.locked = V, Q, locked
+        self.V, self.locked = V, locked
+        self.Q = np.ascontiguousarray(Q.T)             # (11,n): one row per coefficient
+        self.VT = np.ascontiguousarray(V.T)            # (3,n) copy of V for column gathers
         self.moved = np.zeros(n, dtype=bool)
         self.orig = np.arange(n, dtype=np.int64)       # clean index of each current vertex
         self.vver = np.full(n, -1, dtype=np.int64)     # pass in which the one-ring last changed
@@ -60,6 +64,7 @@ class State:
         self.c_x = [np.zeros(h3), np.zeros(h3), np.zeros(h3)]
         self.c_dist = np.zeros(h3)
         self.c_blk = np.full(h3, -1.0)
+        self.c_stale = np.ones(h3, dtype=bool)          # cached cost is only a lower bound
         self.cur_of_clean = np.arange(n, dtype=np.int64)
         self.worst = 0.0
         self.wit = V.copy()                            # witness: merged input point farthest from the surface
@@ -72,45 +77,127 @@ def _ends(F, h):
     return _take(Fr, base + _take(_NEXT, c)), _take(Fr, base + _take(_PREV, c))
 
 
+def _quadric_at(q, x, y, z):
+    """Quadric error of columns ``q`` (11,k) at points ``(x, y, z)``, >= 0."""
+    return np.maximum(q[0] * x * x + q[3] * y * y + q[5] * z * z
+                      + 2.0 * (q[1] * x * y + q[2] * x * z + q[4] * y * z + q[6] * x + q[7] * y + q[8] * z)
+                      + q[9], 0.0)
+
+
+def _place(q, p0, p1):
+    """:func:`core.quadrics.optimal_placement` on columns: ``q`` (11,k) merged
+    quadrics, ``p0``, ``p1`` (3,k) endpoints; returns ``X`` (3,k) and the error (k,).
+
+    Same rule: closed-form 3x3 solve about the midpoint; where it is
+    ill-conditioned or drifts more than ``MAX_DRIFT`` edge lengths, the best of
+    the segment's minimum and the two endpoints.
+    """
+    q0, q1, q2, q3, q4, q5, b0, b1, b2 = q[:9]
+    c00 = q3 * q5 - q4 * q4
+    c01 = q2 * q4 - q1 * q5
+    c02 = q1 * q4 - q2 * q3
+    c11 = q0 * q5 - q2 * q2
+    c12 = q1 * q2 - q0 * q4
+    c22 = q0 * q3 - q1 * q1
+    det = q0 * c00 + q1 * c01 + q2 * c02
+    tr = (q0 + q3 + q5) * (1.0 / 3.0)
+    ok = np.abs(det) > DET_EPS * tr * tr * tr
+    inv = -1.0 / np.where(ok, det, 1.0)
+    mid = 0.5 * (p0 + p1)
+    mx, my, mz = mid
+    r0 = q0 * mx + q1 * my + q2 * mz + b0
+    r1 = q1 * mx + q3 * my + q4 * mz + b1
+    r2 = q2 * mx + q4 * my + q5 * mz + b2
+    y0 = (c00 * r0 + c01 * r1 + c02 * r2) * inv
+    y1 = (c01 * r0 + c11 * r1 + c12 * r2) * inv
+    y2 = (c02 * r0 + c12 * r1 + c22 * r2) * inv
+    d = p1 - p0
+    len2 = d[0] * d[0] + d[1] * d[1] + d[2] * d[2]
+    ok &= y0 * y0 + y1 * y1 + y2 * y2 <= (MAX_DRIFT * MAX_DRIFT) * len2
+    X = np.stack([mx + np.where(ok, y0, 0.0), my + np.where(ok, y1, 0.0), mz + np.where(ok, y2, 0.0)])
+    err = _quadric_at(q, X[0], X[1], X[2])
+    bad = np.flatnonzero(~ok)
+    if bad.size:
+        qb, s0, s1, db = q[:, bad], p0[:, bad], p1[:, bad], d[:, bad]
+        Ad = [qb[0] * db[0] + qb[1] * db[1] + qb[2] * db[2], qb[1] * db[0] + qb[3] * db[1] + qb[4] * db[2],
+              qb[2] * db[0] + qb[4] * db[1] + qb[5] * db[2]]
+        dAd = db[0] * Ad[0] + db[1] * Ad[1] + db[2] * Ad[2]
+        # derivative of E(p0 + t d) is 2 (d.(A p0 + b)) + 2 t dAd
+        g = Ad[0] * s0[0] + Ad[1] * s0[1] + Ad[2] * s0[2] + db[0] * qb[6] + db[1] * qb[7] + db[2] * qb[8]
+        t = np.clip(np.where(dAd > 0, -g / np.where(dAd > 0, dAd, 1.0), 0.5), 0.0, 1.0)
+        cands = [s0 + t * db, s0, s1]
+        errs = np.stack([_quadric_at(qb, *c) for c in cands])
+        best = np.argmin(errs, axis=0)
+        X[:, bad] = np.choose(best, cands)
+        err[bad] = errs[best, np.arange(bad.size)]
+    return X, err
+
+
 def _recost(st, rep, U, W, stale, preserve_boundary):
-    """Placement and cost of the stale edges, written into the cache."""
-    hs = rep[stale]
-    a, b = U[stale], W[stale]
-    interior = st.twin[hs] >= 0
-    is_bnd, lock = st.is_bnd, st.locked
-    la, lb, ba, bb = lock[a], lock[b], is_bnd[a], is_bnd[b]
-    valid = ~(la & lb) & ~(interior & ba & bb)
-    if preserve_boundary:  # a boundary vertex never merges into a locked interior one
-        valid &= ~(interior & ((la & bb) | (lb & ba)))
-    # survivor: a locked endpoint, else the boundary endpoint of an interior edge
-    swap = lb | (~la & preserve_boundary & interior & bb)
-    a, b = np.where(swap, b, a), np.where(swap, a, b)
-    la, ba = np.where(swap, lb, la), np.where(swap, bb, ba)
-    Qe = _take(st.Q, a, axis=0)
-    Qe += _take(st.Q, b, axis=0)
-    Va, Vb = _take(st.V, a, axis=0), _take(st.V, b, axis=0)
-    X, err = optimal_placement(Qe, Va, Vb)
-    # a position within round-off of an endpoint is that endpoint (it stays exact)
-    E = Vb - Va
-    tol2 = _SNAP2 * np.einsum("ij,ij->i", E, E)
-    D = X - Vb
-    snap_b = np.einsum("ij,ij->i", D, D) <= tol2
-    D = X - Va
-    pin = (np.einsum("ij,ij->i", D, D) <= tol2) | la | (preserve_boundary & interior & ba)
-    snap_b &= ~pin
-    X[snap_b] = Vb[snap_b]
-    X[pin] = Va[pin]
-    fix = np.flatnonzero(pin | snap_b)
-    if fix.size:
-        err[fix] = quadric_error(Qe[fix], X[fix])
-    st.c_cost[hs] = np.where(valid, err, np.inf)
-    for j in range(3):
-        st.c_x[j][hs] = X[:, j]
-    st.c_dist[hs] = quadric_distance(Qe, err)
-    st.swap[hs] = swap
+    """Placement and cost of the stale edges, written into the cache (in
+    blocks, on the worker threads)."""
+    hs_all, a_all, b_all = rep[stale], U[stale], W[stale]
+
+    def block(i, j):
+        hs, a, b = hs_all[i:j], a_all[i:j], b_all[i:j]
+        interior = st.twin[hs] >= 0
+        is_bnd, lock = st.is_bnd, st.locked
+        la, lb, ba, bb = lock[a], lock[b], is_bnd[a], is_bnd[b]
+        valid = ~(la & lb) & ~(interior & ba & bb)
+        if preserve_boundary:  # a boundary vertex never merges into a locked interior one
+            valid &= ~(interior & ((la & bb) | (lb & ba)))
+        # survivor: a locked endpoint, else the boundary endpoint of an interior edge
+        swap = lb | (~la & preserve_boundary & interior & bb)
+        a, b = np.where(swap, b, a), np.where(swap, a, b)
+        la, ba = np.where(swap, lb, la), np.where(swap, bb, ba)
+        q = _take(st.Q, a, axis=1)
+        q += _take(st.Q, b, axis=1)
+        pa, pb = _take(st.VT, a, axis=1), _take(st.VT, b, axis=1)
+        X, err = _place(q, pa, pb)
+        # a position within round-off of an endpoint is that endpoint (it stays exact)
+        E = pb - pa
+        tol2 = _SNAP2 * (E[0] * E[0] + E[1] * E[1] + E[2] * E[2])
+        D = X - pb
+        snap_b = D[0] * D[0] + D[1] * D[1] + D[2] * D[2] <= tol2
+        D = X - pa
+        pin = (D[0] * D[0] + D[1] * D[1] + D[2] * D[2] <= tol2) | la | (preserve_boundary & interior & ba)
+        snap_b &= ~pin
+        X = np.where(pin, pa, np.where(snap_b, pb, X))
+        fix = np.flatnonzero(pin | snap_b)
+        if fix.size:
+            err[fix] = _quadric_at(q[:, fix], *X[:, fix])
+        st.c_cost[hs] = np.where(valid, err, np.inf)
+        for c in range(3):
+            st.c_x[c][hs] = X[c]
+        w = q[10]
+        st.c_dist[hs] = np.where(w > 0, np.sqrt(err / np.where(w > 0, w, 1.0)), 0.0)
+        st.swap[hs] = swap
+
+    run_blocks(block, blocks(hs_all.size, _BLOCK))
 
 
 def _check(st, A, B, X, interior, star, kf, tun, haus=True):
+    """:func:`_check_block` over blocks of collapses, on the worker threads.
+    Same results; the star rows come back grouped by block."""
+    spans = blocks(A.size, _BLOCK // 10)
+    if len(spans) <= 1:
+        return _check_block(st, A, B, X, interior, star, kf, tun, haus)
+    starts = np.array([i for i, _ in spans], dtype=np.int64)
+    blk = np.searchsorted(starts, kf, side="right") - 1
+    order = np.argsort(blk, kind="stable")
+    cut = np.concatenate([[0], np.cumsum(np.bincount(blk, minlength=len(spans)))])
+    star, kf = star[order], kf[order]
+
+    def block(b):
+        (i, j), r0, r1 = spans[b], cut[b], cut[b + 1]
+        return _check_block(st, A[i:j], B[i:j], X[i:j], interior[i:j], star[r0:r1], kf[r0:r1] - i, tun, haus)
+
+    res = run_blocks(lambda b, _: block(b), [(b, b + 1) for b in range(len(spans))])
+    ok, pen, _, _, coll, wnew = (np.concatenate([r[c] for r in res]) for c in range(6))
+    return ok, pen, star, kf, coll, wnew
+
+
+def _check_block(st, A, B, X, interior, star, kf, tun, haus=True):
     """Validity and compactness penalty of independent collapses B[k] -> A[k]
     at X[k], judged on the current mesh.
 
@@ -227,9 +314,35 @@ def _check(st, A, B, X, interior, star, kf, tun, haus=True):
         dA[~np.isfinite(dA)] = 0.0
         dB[~np.isfinite(dB)] = 0.0
         wnew = np.where((dB > dA)[:, None], wB, wA)
-        Wq = _take(st.Q[:, 10], A) + _take(st.Q[:, 10], B)
+        Wq = _take(st.Q[10], A) + _take(st.Q[10], B)
         penalty = penalty + tun.haus_weight * Wq * np.maximum(dA, dB)
     return ok, penalty, star, kf, coll, wnew
+
+
+def _pool_size(ne, m, target, tun):
+    """How many of the ``ne`` candidate edges one pass may consider."""
+    P = int(np.ceil(tun.pool_share * ne))
+    if target is not None:
+        P = min(P, int(np.ceil(tun.pool_goal_factor * (m - target) / 2.0)) + 1)
+    return max(1, min(P, ne))
+
+
+def _priority(cost, a, b, bands):
+    """Unique int64 priority of each pool edge (smaller first), without a sort:
+    the cost band (quantiles of the pool's costs) in the high bits, a fixed
+    hash of the endpoints in the middle (dense local minima), the pool index
+    in the low bits (``key & (2^bits - 1)`` gives it back)."""
+    P = cost.size
+    bits = max(1, int(P - 1).bit_length())
+    if bits > 28:
+        raise OverflowError("simplify: more than 2^28 edges in one pass")
+    if P > bands:
+        kth = (np.arange(1, bands, dtype=np.int64) * P) // bands
+        band = np.searchsorted(np.partition(cost, kth)[kth], cost, side="left").astype(np.int64)
+    else:
+        band = np.zeros(P, dtype=np.int64)
+    mix = ((a * np.int64(0x9E3779B1)) ^ (b * np.int64(0x85EBCA77))) & np.int64(0x7FFFFFFF)
+    return (((band << np.int64(31)) | mix) << np.int64(bits)) | np.arange(P, dtype=np.int64)
 
 
 def run(st, target, max_err_n, preserve_boundary, progress, m0, tun):
@@ -253,36 +366,49 @@ def run(st, target, max_err_n, preserve_boundary, progress, m0, tun):
         h = np.arange(3 * m, dtype=np.int64)
         rep = np.flatnonzero((twin == BOUNDARY) | (twin > h))
         U, W = _ends(F, rep)
-        stale = st.fresh[U] | st.fresh[W]
-        if stale.any():
-            _recost(st, rep, U, W, stale, preserve_boundary)
+        st.c_stale[rep[st.fresh[U] | st.fresh[W]]] = True
         st.fresh[:] = False
+        stale = _take(st.c_stale, rep)
         cost = _take(st.c_cost, rep)
         bv = _take(st.c_blk, rep)
         blocked = (bv >= 0) & (_take(st.blk_pass, rep) > np.maximum(_take(st.vver, U), _take(st.vver, W)))
         cost = np.where(blocked, np.maximum(cost, bv), cost)
+        cand = np.isfinite(cost)
+        ne = int(np.count_nonzero(cand))
+        if ne == 0:
+            return "no_valid_collapse", passes
+        P = _pool_size(ne, m, target, tun)
+        # lazy recosting: merging only adds quadrics, so the cached cost of a
+        # stale edge is a lower bound of its new cost; recost only the stale
+        # edges that could still be among the P cheapest
+        need = stale & cand
+        if max_err_n is None and P < ne:
+            need &= cost <= np.partition(cost[cand], P - 1)[P - 1]
+        if need.any():
+            _recost(st, rep, U, W, need, preserve_boundary)
+            st.c_stale[rep[need]] = False
+            stale &= ~need
+            cost[need] = np.where(blocked[need], np.maximum(st.c_cost[rep[need]], bv[need]),
+                                  st.c_cost[rep[need]])
         cand = np.isfinite(cost)
         if max_err_n is not None:
             within = _take(st.c_dist, rep) <= max_err_n
             if not (cand & within).any():
                 return ("max_error" if cand.any() else "no_valid_collapse"), passes
             cand &= within
+        cand &= ~stale
         ci = np.flatnonzero(cand)
         if ci.size == 0:
+            if stale.any():
+                continue
             return "no_valid_collapse", passes
-        # pool: the cheapest share of the candidates
+        # pool: every fresh candidate no costlier than the P-th cheapest (ties included)
         ne = ci.size
-        P = int(np.ceil(tun.pool_share * ne))
-        if target is not None:
-            P = min(P, int(np.ceil(tun.pool_goal_factor * (m - target) / 2.0)) + 1)
         P = max(1, min(P, ne))
         cc = cost[ci]
-        # the pool: every candidate no costlier than the P-th cheapest (ties included)
         limit = np.partition(cc, P - 1)[P - 1] if P < ne else cc.max()
-        pool = np.flatnonzero(cc <= limit)
-        pool = ci[pool[np.argsort(cc[pool], kind="stable")]]
+        pool = ci[cc <= limit]
         P = pool.size
-        # per pool edge (position = rank)
         ph = rep[pool]
         sw = st.swap[ph]
         pa = np.where(sw, W[pool], U[pool])
@@ -291,40 +417,40 @@ def run(st, target, max_err_n, preserve_boundary, progress, m0, tun):
         pint = twin[ph] >= 0
         pcost = cost[pool]
         praw = _take(st.c_cost, ph)
-        # priority: cheaper cost band first; inside a band a fixed pseudo-random
-        # order (a hash of the endpoints), so the local minima are dense
-        band = (np.arange(P, dtype=np.int64) * tun.bands) // P
-        mix = ((pa * np.int64(0x9E3779B1)) ^ (pb * np.int64(0x85EBCA77))) & np.int64(0x7FFFFFFF)
-        order = np.argsort((band << np.int64(32)) | mix, kind="stable")
-        pool, ph, sw, pa, pb, pX, pint, pcost, praw = (x[order] for x in (pool, ph, sw, pa, pb, pX, pint, pcost, praw))
-        rank_all = np.arange(P, dtype=np.int64)
+        key = _priority(pcost, pa, pb, tun.bands)
 
         touched = np.zeros(n, dtype=bool)
         acc_edges, acc_star, acc_kf, acc_coll, acc_wit = [], [], [], [], []
-        active = rank_all
+        active = np.arange(P, dtype=np.int64)
         FT = np.ascontiguousarray(F.T)
+        fidx = np.arange(m, dtype=np.int64)     # faces that may still touch an active edge
+        imask = (np.int64(1) << np.int64(max(1, int(P - 1).bit_length()))) - 1
         for _ in range(tun.max_rounds):
             active = active[~touched[pa[active]] & ~touched[pb[active]]]
             if active.size == 0:
                 break
+            ka, aa, ab = key[active], pa[active], pb[active]
             vmin = np.full(n, _BIG, dtype=np.int64)
-            np.minimum.at(vmin, pa[active], active)
-            np.minimum.at(vmin, pb[active], active)
+            np.minimum.at(vmin, aa, ka)
+            np.minimum.at(vmin, ab, ka)
             fmin = np.minimum(np.minimum(_take(vmin, FT[0]), _take(vmin, FT[1])), _take(vmin, FT[2]))
-            hit = np.flatnonzero(fmin < _BIG)
-            fh = _take(fmin, hit)
+            live = np.flatnonzero(fmin < _BIG)
+            fh = _take(fmin, live)
+            FT = np.ascontiguousarray(FT[:, live])
+            fidx = fidx[live]
             vmin2 = np.full(n, _BIG, dtype=np.int64)
             for j in range(3):
-                np.minimum.at(vmin2, _take(FT[j], hit), fh)
-            chosen = active == np.minimum(_take(vmin2, pa[active]), _take(vmin2, pb[active]))
+                np.minimum.at(vmin2, FT[j], fh)
+            chosen = ka == np.minimum(_take(vmin2, aa), _take(vmin2, ab))
             sel = active[chosen]
             active = active[~chosen]
-            # the star of a chosen edge is exactly the set of faces whose minimum is its rank
+            # the star of a chosen edge is exactly the set of faces whose minimum is its key
             pos = np.full(P, -1, dtype=np.int64)
             pos[sel] = np.arange(sel.size)
-            in_star = pos[fh] >= 0
-            star = hit[in_star]
-            kf = pos[fh[in_star]]
+            fpos = pos[fh & imask]
+            in_star = fpos >= 0
+            star = fidx[in_star]
+            kf = fpos[in_star]
             ok, pen, star, kf, coll, wnew = _check(st, pa[sel], pb[sel], pX[sel], pint[sel], star, kf, tun,
                                                   haus)
             total = praw[sel] + pen
@@ -387,9 +513,10 @@ def _apply(st, A, B, X, star, kf, coll):
     st.feat[tB[okB]] = fl[okB]
     # positions and quadrics
     st.moved[A] |= np.any(X != st.V[A], axis=1)
-    st.Q[A] = st.Q[A] + st.Q[B]
+    st.Q[:, A] = st.Q[:, A] + st.Q[:, B]
     st.Nref[A] = st.Nref[A] + st.Nref[B]
     st.V[A] = X
+    st.VT[:, A] = X.T
     st.fresh[A] = True
     st.is_bnd[A] |= st.is_bnd[B]
     # remap vertices, drop the removed faces, compact
@@ -397,21 +524,32 @@ def _apply(st, A, B, X, star, kf, coll):
     keep_f[cf] = False
     new_f = np.cumsum(keep_f) - 1
     keep_h = np.repeat(keep_f, 3)
-    h = np.arange(3 * m, dtype=np.int64)
-    new_h = 3 * _take(new_f, h // 3) + h % 3
-    tw = np.compress(keep_h, twin)
-    tw = np.where(tw >= 0, _take(new_h, np.maximum(tw, 0)), tw)
     keep_v = np.ones(n, dtype=bool)
     keep_v[B] = False
     new_v = np.cumsum(keep_v) - 1
     remap = np.arange(n, dtype=np.int64)
     remap[B] = A
     comp = _take(new_v, remap)
-    st.F = _take(comp, np.compress(keep_f, F, axis=0))
-    st.twin = tw
-    for name in ("feat", "swap", "blk_pass", "c_cost", "c_dist", "c_blk"):
-        setattr(st, name, np.compress(keep_h, getattr(st, name)))
-    st.c_x = [np.compress(keep_h, c) for c in st.c_x]
-    for name in ("V", "Q", "Nref", "wit", "locked", "moved", "orig", "vver", "fresh", "is_bnd"):
-        setattr(st, name, np.compress(keep_v, getattr(st, name), axis=0))
+
+    def twins():
+        tw = np.compress(keep_h, twin)
+        t = np.maximum(tw, 0)
+        return np.where(tw >= 0, 3 * _take(new_f, t // 3) + t % 3, tw)
+
+    # every array shrinks independently: one job each, on the worker threads
+    jobs = [("twin", twins), ("F", lambda: _take(comp, np.compress(keep_f, F, axis=0)))]
+    for name in ("feat", "swap", "blk_pass", "c_cost", "c_dist", "c_blk", "c_stale"):
+        jobs.append((name, lambda a=getattr(st, name): np.compress(keep_h, a)))
+    for c in range(3):
+        jobs.append((c, lambda a=st.c_x[c]: np.compress(keep_h, a)))
+    for name in ("V", "Nref", "wit", "locked", "moved", "orig", "vver", "fresh", "is_bnd"):
+        jobs.append((name, lambda a=getattr(st, name): np.compress(keep_v, a, axis=0)))
+    for name in ("Q", "VT"):
+        jobs.append((name, lambda a=getattr(st, name): np.compress(keep_v, a, axis=1)))
+    out = run_blocks(lambda i, _: jobs[i][1](), [(i, i + 1) for i in range(len(jobs))])
+    for (name, _), arr in zip(jobs, out):
+        if isinstance(name, int):
+            st.c_x[name] = arr
+        else:
+            setattr(st, name, arr)
     st.cur_of_clean = _take(comp, st.cur_of_clean)

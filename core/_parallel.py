@@ -1,0 +1,46 @@
+"""Run NumPy-heavy blocks of work on a few threads (private).
+
+NumPy releases the GIL inside its array operations, so independent blocks of
+a long vectorised computation run side by side on several cores. Blocks of
+a few tens of thousands of elements also keep the temporaries in cache and
+below the allocator's ``mmap`` threshold, which makes even the one-thread
+case faster than a single pass over millions of elements.
+
+Results never depend on the number of threads: the blocks are fixed by the
+problem size alone and every block writes its own slice.
+"""
+
+import os
+import threading
+from concurrent.futures import ThreadPoolExecutor
+
+#: worker threads (at most 4: the hot loops are memory bound beyond that)
+WORKERS = max(1, min(4, os.cpu_count() or 1))
+
+_lock = threading.Lock()
+_pool = None
+
+
+def _executor():
+    global _pool
+    with _lock:
+        if _pool is None:
+            _pool = ThreadPoolExecutor(max_workers=WORKERS, thread_name_prefix="meshadjust")
+        return _pool
+
+
+def blocks(n, size):
+    """Split ``range(n)`` into consecutive ``(start, stop)`` blocks of about ``size``."""
+    if n <= 0:
+        return []
+    k = max(1, -(-n // max(1, size)))
+    edges = [(i * n) // k for i in range(k + 1)]
+    return list(zip(edges[:-1], edges[1:]))
+
+
+def run_blocks(fn, spans):
+    """Call ``fn(start, stop)`` for every span, on the worker threads when
+    there are several; returns the results in span order."""
+    if len(spans) <= 1 or WORKERS == 1 or threading.current_thread().name.startswith("meshadjust"):
+        return [fn(a, b) for a, b in spans]
+    return list(_executor().map(lambda s: fn(*s), spans))
