@@ -6,6 +6,19 @@ numbering as ``core.topology``'s face-edge ``c``). ``twin[h]`` is the other
 half-edge on the same undirected edge (whatever its direction, so meshes
 with inconsistent orientation work too), ``-1`` on a boundary edge and
 ``-2`` on a non-manifold edge (used by more than two faces).
+
+Fans: the faces around a vertex ``v`` are joined across the manifold
+interior edges at ``v``. Every face has two edges at ``v``, so the joins
+form paths (open fans, ending on a boundary or non-manifold edge) and
+cycles (closed fans)::
+
+    corners(v) = faces around v           ends(v) = edges at v with twin < 0
+    paths(v)   = ends(v) / 2              (each open fan has two ends)
+    one fan  <=>  paths <= 1 and the fan through one start corner visits
+                  every corner of v (walked around v through the twins)
+
+A closed fan has at least 3 faces, so the walk is only needed where the
+counts leave room for a second fan; all walks advance in lock-step.
 """
 
 from typing import NamedTuple
@@ -16,6 +29,12 @@ from .topology import connected_labels
 
 BOUNDARY = -1
 NON_MANIFOLD = -2
+
+#: offset from half-edge ``h`` to the next / previous half-edge of its face
+_NEXT_OFF = np.array([1, 1, -2], dtype=np.int64)
+_PREV_OFF = np.array([2, -1, -1], dtype=np.int64)
+#: lock-step fan walks longer than this finish with a union-find instead
+_MAX_WALK = 64
 
 
 class CleanMesh(NamedTuple):
@@ -30,8 +49,47 @@ class CleanMesh(NamedTuple):
     n_unreferenced_vertices: int  #: vertices no kept face uses
 
 
+def _face_keys(F, n_in):
+    """Key of each face's vertex set, ``(lo n + mid) n + hi`` (the sorted row)."""
+    a, b, c = F[:, 0], F[:, 1], F[:, 2]
+    lo = np.minimum(np.minimum(a, b), c)
+    hi = np.maximum(np.maximum(a, b), c)
+    mid = a + b + c - lo - hi
+    nn = np.int64(max(n_in, 1))
+    return (lo * nn + mid) * nn + hi
+
+
+def _first_of_keys(key):
+    """Mask of the first face of each key (the faces ``clean_mesh`` keeps)."""
+    _, first = np.unique(key, return_index=True)
+    keep = np.zeros(key.size, dtype=bool)
+    keep[first] = True
+    return keep
+
+
+def _drop_unreferenced(V, F, n_in, n_deg, n_dup):
+    """Compact the vertices to those ``F`` uses and build the CleanMesh."""
+    used = np.zeros(n_in, dtype=bool)
+    used[F.ravel()] = True
+    if used.all():  # common case: the identity map
+        ident = np.arange(n_in, dtype=np.int64)
+        return CleanMesh(V.copy(), F.copy(), ident, ident.copy(), n_deg, n_dup, 0)
+    clean_to_vertex = np.flatnonzero(used)
+    vertex_to_clean = np.full(n_in, -1, dtype=np.int64)
+    vertex_to_clean[clean_to_vertex] = np.arange(clean_to_vertex.size)
+    return CleanMesh(V[clean_to_vertex], vertex_to_clean[F], vertex_to_clean, clean_to_vertex,
+                     n_deg, n_dup, int(n_in - clean_to_vertex.size))
+
+
+def _degenerate(F):
+    return (F[:, 0] == F[:, 1]) | (F[:, 1] == F[:, 2]) | (F[:, 0] == F[:, 2])
+
+
 def clean_mesh(V, F):
     """Drop degenerate and duplicate faces and unreferenced vertices.
+
+    Kept faces stay in their input order; of faces with the same vertex set
+    the first is kept. Kept vertices keep their relative order.
 
     Parameters
     ----------
@@ -42,26 +100,63 @@ def clean_mesh(V, F):
     CleanMesh
     """
     n_in = V.shape[0]
-    m_in = F.shape[0]
-    degenerate = (F[:, 0] == F[:, 1]) | (F[:, 1] == F[:, 2]) | (F[:, 0] == F[:, 2])
-    F = F[~degenerate]
+    degenerate = _degenerate(F)
+    n_deg = int(degenerate.sum())
+    if n_deg:
+        F = F[~degenerate]
     n_dup = 0
     if F.shape[0]:
-        Fs = np.sort(F, axis=1)
-        nn = np.int64(max(n_in, 1))
-        key = (Fs[:, 0] * nn + Fs[:, 1]) * nn + Fs[:, 2]
-        _, first = np.unique(key, return_index=True)
-        keep = np.zeros(F.shape[0], dtype=bool)
-        keep[first] = True
-        n_dup = int(F.shape[0] - first.size)
-        F = F[keep]  # boolean mask keeps the original face order
-    used = np.zeros(n_in, dtype=bool)
-    used[F.ravel()] = True
-    clean_to_vertex = np.flatnonzero(used)
-    vertex_to_clean = np.full(n_in, -1, dtype=np.int64)
-    vertex_to_clean[clean_to_vertex] = np.arange(clean_to_vertex.size)
-    return CleanMesh(V[clean_to_vertex], vertex_to_clean[F], vertex_to_clean, clean_to_vertex,
-                     int(degenerate.sum()), n_dup, int(n_in - clean_to_vertex.size))
+        key = _face_keys(F, n_in)
+        sk = np.sort(key)
+        if (sk[1:] == sk[:-1]).any():
+            keep = _first_of_keys(key)
+            n_dup = int(F.shape[0] - np.count_nonzero(keep))
+            F = F[keep]  # boolean mask keeps the original face order
+    return _drop_unreferenced(V, F, n_in, n_deg, n_dup)
+
+
+def clean_with_twins(V, F):
+    """``clean_mesh(V, F)`` together with the twin table and half-edge ends
+    of the cleaned faces, sharing one sort of the edge keys.
+
+    A face with the vertex set of another shares all three edges with it, so
+    it either meets the same face across two of its edges or lies on a
+    non-manifold edge; only those candidates are compared by face key.
+
+    Returns
+    -------
+    clean : CleanMesh, as :func:`clean_mesh`.
+    twin : (3m,) int64, ``twin_table(clean.F, n)``.
+    U, W : (3m,) int64, ``half_edge_ends(clean.F)``.
+    """
+    n_in = V.shape[0]
+    degenerate = _degenerate(F)
+    n_deg = int(degenerate.sum())
+    if n_deg:
+        F = F[~degenerate]
+    U, W = half_edge_ends(F)
+    twin = twin_table(F, n_in, ends=(U, W))
+    n_dup = 0
+    if F.shape[0]:
+        t = twin.reshape(-1, 3)
+        g = np.where(t >= 0, t // 3, -1 - np.arange(3))  # distinct negatives never match
+        cand = (g[:, 0] == g[:, 1]) | (g[:, 1] == g[:, 2]) | (g[:, 0] == g[:, 2])
+        cand |= (t == NON_MANIFOLD).any(axis=1)
+        ci = np.flatnonzero(cand)
+        if ci.size:
+            keep_c = _first_of_keys(_face_keys(F[ci], n_in))
+            if not keep_c.all():
+                keep = np.ones(F.shape[0], dtype=bool)
+                keep[ci[~keep_c]] = False
+                n_dup = int(F.shape[0] - np.count_nonzero(keep))
+                F = F[keep]
+                U, W = half_edge_ends(F)
+                twin = twin_table(F, n_in, ends=(U, W))
+    clean = _drop_unreferenced(V, F, n_in, n_deg, n_dup)
+    if clean.n_unreferenced_vertices:
+        # relabelling is monotone: the same edges pair up, only the ends change
+        U, W = clean.vertex_to_clean[U], clean.vertex_to_clean[W]
+    return clean, twin, U, W
 
 
 def half_edge_ends(F):
@@ -69,41 +164,59 @@ def half_edge_ends(F):
     return F[:, [1, 2, 0]].ravel(), F[:, [2, 0, 1]].ravel()
 
 
-def twin_table(F, n_vertices):
+def twin_table(F, n_vertices, *, ends=None):
     """Twin of every half-edge (see the module docstring), (3m,) int64.
 
     One sort of the undirected edge keys; edges used once are boundary
     (``-1``), twice are paired, more than twice non-manifold (``-2``).
+    ``ends`` may pass ``half_edge_ends(F)`` when the caller has it.
     """
-    U, W = half_edge_ends(F)
-    nn = np.int64(max(n_vertices, 1))
-    key = np.minimum(U, W) * nn + np.maximum(U, W)
-    order = np.argsort(key, kind="stable")
-    ks = key[order]
-    size = ks.size
+    U, W = half_edge_ends(F) if ends is None else ends
+    size = U.size
     twin = np.full(size, BOUNDARY, dtype=np.int64)
     if size == 0:
         return twin
-    start = np.flatnonzero(np.concatenate([[True], ks[1:] != ks[:-1]]))
-    count = np.diff(np.concatenate([start, [size]]))
-    pair = start[count == 2]
+    nn = max(n_vertices, 1)
+    key = np.minimum(U, W)
+    key *= np.int64(nn)
+    key += np.maximum(U, W)
+    bits = int(size - 1).bit_length()
+    if (nn * nn) << bits <= 1 << 63:
+        # sort (key, h) packed in one int64: a plain sort, no indirection
+        key <<= bits
+        key |= np.arange(size, dtype=np.int64)
+        key.sort(kind="stable")
+        order = key & np.int64((1 << bits) - 1)
+        ks = key >> bits
+    else:
+        order = np.argsort(key, kind="stable")
+        ks = key[order]
+    eq = ks[1:] == ks[:-1]          # sorted position i and i+1 are the same edge
+    if not eq.any():
+        return twin
+    before = np.empty_like(eq)
+    before[0] = False
+    before[1:] = eq[:-1]
+    after = np.empty_like(eq)
+    after[-1] = False
+    after[:-1] = eq[1:]
+    lone = before | after           # i and i+1 belong to a run of 3 or more
+    pair = np.flatnonzero(eq & ~lone)
     h0, h1 = order[pair], order[pair + 1]
     twin[h0] = h1
     twin[h1] = h0
-    multi = np.repeat(count > 2, count)
-    twin[order[multi]] = NON_MANIFOLD
+    multi = np.flatnonzero(eq & lone)
+    if multi.size:
+        twin[order[multi]] = NON_MANIFOLD
+        twin[order[multi + 1]] = NON_MANIFOLD
     return twin
 
 
-def non_manifold_vertices(F, n_vertices, twin):
-    """Boolean mask of vertices on a non-manifold edge or whose faces form
-    more than one fan (bow-tie vertices), (n,) bool."""
-    U, W = half_edge_ends(F)
-    bad = np.zeros(n_vertices, dtype=bool)
-    nm = twin == NON_MANIFOLD
-    bad[U[nm]] = True
-    bad[W[nm]] = True
-    # fans: join the corners of the same vertex across manifold interior edges
+def _fans_union_find(F, twin, U, W, vertices, n_vertices):
+    """Number of fans of each vertex in ``vertices`` (the rest 0), by a
+    union-find of their corners across manifold interior edges."""
+    sel = np.zeros(n_vertices, dtype=bool)
+    sel[vertices] = True
     h = np.flatnonzero(twin > np.arange(twin.size))
     t = twin[h]
     f_h, f_t = h - h % 3, t - t % 3
@@ -114,11 +227,72 @@ def non_manifold_vertices(F, n_vertices, twin):
         c = np.where(Fr[face_base] == vertex, 0, np.where(Fr[face_base + 1] == vertex, 1, 2))
         return face_base + c
 
-    u, w = U[h], W[h]
-    pairs = np.concatenate([np.stack([corner(f_h, u), corner(f_t, u)], axis=1),
-                            np.stack([corner(f_h, w), corner(f_t, w)], axis=1)])
-    labels = connected_labels(Fr.size, pairs)
-    roots = labels == np.arange(Fr.size)
-    fans = np.bincount(Fr[roots], minlength=n_vertices)
-    bad |= fans > 1
+    pairs = []
+    for v in (U[h], W[h]):
+        keep = sel[v]
+        pairs.append(np.stack([corner(f_h[keep], v[keep]), corner(f_t[keep], v[keep])], axis=1))
+    pairs = np.concatenate(pairs)
+    nodes = np.flatnonzero(sel[Fr])                 # corners of the selected vertices
+    local = np.full(Fr.size, -1, dtype=np.int64)
+    local[nodes] = np.arange(nodes.size)
+    labels = connected_labels(nodes.size, local[pairs])
+    roots = labels == np.arange(nodes.size)
+    return np.bincount(Fr[nodes[roots]], minlength=n_vertices)
+
+
+def non_manifold_vertices(F, n_vertices, twin, *, ends=None):
+    """Boolean mask of vertices on a non-manifold edge or whose faces form
+    more than one fan (bow-tie vertices), (n,) bool.
+
+    ``F`` must be clean (no degenerate or duplicate faces, as after
+    :func:`clean_mesh`); ``twin`` is ``twin_table(F, n_vertices)`` and
+    ``ends`` may pass ``half_edge_ends(F)``. Fans are counted as described in
+    the module docstring: from the corner and open-edge counts, walking only
+    around the vertices where a second closed fan could hide.
+    """
+    U, W = half_edge_ends(F) if ends is None else ends
+    n = n_vertices
+    bad = np.zeros(n, dtype=bool)
+    if twin.size == 0:
+        return bad
+    nm = np.flatnonzero(twin == NON_MANIFOLD)
+    bad[U[nm]] = True
+    bad[W[nm]] = True
+    Fr = F.ravel()
+    corners = np.bincount(Fr, minlength=n)
+    hopen = np.flatnonzero(twin < 0)
+    Uo, Wo = U[hopen], W[hopen]
+    paths = (np.bincount(Uo, minlength=n) + np.bincount(Wo, minlength=n)) // 2
+    bad |= paths > 1
+    # a closed fan has >= 3 corners: one path plus a cycle needs 4, two cycles 6
+    walk = ~bad & (corners >= np.where(paths == 0, 6, 4))
+    # start: the face after an open end, else any face, leaving through an edge at v
+    start = np.empty(n, dtype=np.int64)
+    start[U] = np.arange(U.size, dtype=np.int64)      # half-edge leaving v = U[h]
+    j = hopen % 3
+    start[Uo] = hopen + _PREV_OFF[j]                  # the other edge at U in that face
+    start[Wo] = hopen + _NEXT_OFF[j]                  # the other edge at W
+    v = np.flatnonzero(walk)
+    e = start[v]
+    base0 = e - e % 3                                 # first face (3 f) of the walk
+    count = np.ones(v.size, dtype=np.int64)
+    steps = 0
+    while v.size:
+        if steps == _MAX_WALK:                        # very high valence: union-find the rest
+            bad[v[_fans_union_find(F, twin, U, W, v, n)[v] > 1]] = True
+            break
+        steps += 1
+        t = twin[e]
+        jt = t % 3
+        g = t - jt
+        stop = (t < 0) | (g == base0)                 # open end reached / back at the start
+        done = np.flatnonzero(stop)
+        if done.size:
+            vd = v[done]
+            bad[vd[count[done] < corners[vd]]] = True
+            go = np.flatnonzero(~stop)
+            v, t, jt, base0, count = v[go], t[go], jt[go], base0[go], count[go]
+        count += 1
+        # leave the new face through its other edge at v
+        e = t + np.where(U[t] == v, _PREV_OFF[jt], _NEXT_OFF[jt])
     return bad

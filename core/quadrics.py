@@ -81,19 +81,32 @@ def face_quadrics(V, F, *, area_power=1.0, return_normals=False):
     (zero area) get a zero quadric. With ``return_normals`` also returns the
     unit face normals (m,3).
     """
+    Q, unit, _ = _face_planes(V, F, area_power)
+    return (Q, unit) if return_normals else Q
+
+
+def _face_planes(V, F, area_power):
+    """``face_quadrics`` plus both normals: ``(Q (m,11), unit (m,3), N (m,3))``,
+    ``N`` the unnormalised normal (length twice the area, as
+    ``core.mesh.face_normals(V, F, normalize=False)``)."""
     p0 = np.take(V, F[:, 0], axis=0)
     N = np.cross(np.take(V, F[:, 1], axis=0) - p0, np.take(V, F[:, 2], axis=0) - p0)
     length = np.sqrt(np.einsum("ij,ij->i", N, N))
-    unit = np.divide(N, length[:, None], out=np.zeros_like(N), where=length[:, None] > 0)
+    pos = length > 0
+    if pos.all():
+        unit = N / length[:, None]
+    else:
+        unit = np.divide(N, length[:, None], out=np.zeros_like(N), where=pos[:, None])
     d = -np.einsum("ij,ij->i", unit, p0)
     area = 0.5 * length
     if area_power != 1.0 and area.size:
         mean = float(area.mean())
         if mean > 0:
-            pos = area > 0
-            area[pos] = area[pos] ** area_power * mean ** (1.0 - area_power)
-    Q = plane_quadrics(unit, d, area)
-    return (Q, unit) if return_normals else Q
+            if pos.all():
+                area = area ** area_power * mean ** (1.0 - area_power)
+            else:
+                area[pos] = area[pos] ** area_power * mean ** (1.0 - area_power)
+    return plane_quadrics(unit, d, area), unit, N
 
 
 def edge_constraint_quadrics(V, E, face_normals, weights):
@@ -138,11 +151,21 @@ def accumulate(Q_items, index, n, *, repeat=1):
     -------
     (n,11) float64
     """
+    return np.ascontiguousarray(_accumulate_T(Q_items, index, n, repeat).T)
+
+
+def _accumulate_T(Q_items, index, n, repeat):
+    """``accumulate`` coefficient-major: (11, n). Each bin sums its items in
+    the order of ``index`` (one ``bincount`` per coefficient)."""
     QT = np.ascontiguousarray(Q_items.T)
-    out = np.empty((n, N_COEFFS))
+    k = QT.shape[1]
+    out = np.empty((N_COEFFS, n))
+    w = np.empty(k * repeat) if repeat > 1 else None
     for j in range(N_COEFFS):  # loop over the 11 coefficients, not over items
-        w = np.tile(QT[j], repeat) if repeat > 1 else QT[j]
-        out[:, j] = np.bincount(index, weights=w, minlength=n)
+        if repeat > 1:
+            for r in range(repeat):
+                w[r * k:(r + 1) * k] = QT[j]
+        out[j] = np.bincount(index, weights=QT[j] if w is None else w, minlength=n)
     return out
 
 

@@ -41,14 +41,16 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ._clean import BOUNDARY, clean_mesh, half_edge_ends, non_manifold_vertices, twin_table
+from ._clean import BOUNDARY, clean_with_twins, half_edge_ends, non_manifold_vertices
 from ._collapse import State, run
 from ._relocate import relocate
 from .errors import InvalidArgumentError
-from .mesh import check_mesh, face_normals
-from .quadrics import accumulate, edge_constraint_quadrics, face_quadrics
+from .mesh import check_mesh
+from .quadrics import _accumulate_T, _face_planes, edge_constraint_quadrics
 
 _WHERE = "simplify"
+_NEXT = np.array([1, 2, 0], dtype=np.int64)  # corner after c
+_PREV = np.array([2, 0, 1], dtype=np.int64)
 
 
 @dataclass(frozen=True)
@@ -174,12 +176,13 @@ def _check_args(n, target_faces, ratio, max_error, feature_angle_deg, vertex_wei
 
 
 def _initial_quadrics(V, F, twin, U, W, preserve_boundary, feature_angle_deg, tun):
-    """Vertex quadrics with boundary and crease planes, and the crease flags
-    per half-edge."""
+    """Vertex quadrics with boundary and crease planes, the crease flags per
+    half-edge, and the unnormalised face normals (m,3) (as
+    ``face_normals(V, F, normalize=False)``)."""
     n = V.shape[0]
-    Qf, Nf = face_quadrics(V, F, area_power=tun.area_power, return_normals=True)
-    Q = accumulate(Qf, F.T.ravel(), n, repeat=3)
-    h = np.arange(twin.size, dtype=np.int64)
+    Qf, Nf, Nraw = _face_planes(V, F, tun.area_power)
+    QT = _accumulate_T(Qf, F.T.ravel(), n, 3)  # (11, n), transposed once at the end
+    del Qf
     feat = np.zeros(twin.size, dtype=bool)
     items, ends = [], []
     if preserve_boundary:
@@ -189,12 +192,12 @@ def _initial_quadrics(V, F, twin, U, W, preserve_boundary, feature_angle_deg, tu
         items.append(edge_constraint_quadrics(V, E, Nf[hb // 3], tun.boundary_weight * L2))
         ends.append(E)
     if feature_angle_deg is not None:
-        hi = np.flatnonzero(twin > h)
+        hi = np.flatnonzero(twin > np.arange(twin.size, dtype=np.int64))
         t = twin[hi]
-        n0, n1 = Nf[hi // 3], Nf[t // 3]
-        consistent = U[hi] == W[t]
-        cosang = np.einsum("ij,ij->i", n0, n1) * np.where(consistent, 1.0, -1.0)
-        sharp = cosang < np.cos(np.radians(feature_angle_deg))
+        cosang = np.einsum("ij,ij->i", np.take(Nf, hi // 3, axis=0), np.take(Nf, t // 3, axis=0))
+        # faces that disagree on the edge's direction have opposite normal conventions
+        np.negative(cosang, out=cosang, where=U[hi] != W[t])
+        sharp = np.flatnonzero(cosang < np.cos(np.radians(feature_angle_deg)))
         hs, ts = hi[sharp], t[sharp]
         feat[hs] = True
         feat[ts] = True
@@ -207,8 +210,17 @@ def _initial_quadrics(V, F, twin, U, W, preserve_boundary, feature_angle_deg, tu
         Qc = np.concatenate(items)
         Ec = np.concatenate(ends)
         Qc[:, 10] = 0.0  # constraint planes do not count as surface area
-        Q += accumulate(Qc, Ec.T.ravel(), n, repeat=2)
-    return Q, feat
+        QT += _accumulate_T(Qc, Ec.T.ravel(), n, 2)
+    return np.ascontiguousarray(QT.T), feat, Nraw
+
+
+def _normal_sums(F, N, n):
+    """Sum of the face normals ``N`` (m,3) around each vertex, (n,3) float64
+    (each bin adds its faces in face order)."""
+    if F.shape[0] == 0:
+        return np.zeros((n, 3))
+    Fr = F.ravel()
+    return np.stack([np.bincount(Fr, weights=np.repeat(N[:, k], 3), minlength=n) for k in range(3)], axis=1)
 
 
 def _relocate_cage(mesh, Vn, tun):
@@ -291,7 +303,7 @@ def simplify(V, F, *, target_faces=None, ratio=None, max_error=None, preserve_bo
     n_in = V.shape[0]
     weights, lk = _check_args(n_in, target_faces, ratio, max_error, feature_angle_deg, vertex_weights,
                               locked, progress)
-    clean = clean_mesh(V, F)
+    clean, twin, U, W = clean_with_twins(V, F)
     Vc, Fc = clean.V, clean.F
     n, m0 = Vc.shape[0], Fc.shape[0]
 
@@ -302,9 +314,7 @@ def simplify(V, F, *, target_faces=None, ratio=None, max_error=None, preserve_bo
         t = int(round(float(ratio) * m0))
         target = t if target is None else max(target, t)
 
-    twin = twin_table(Fc, n)
-    U, W = half_edge_ends(Fc)
-    frozen = non_manifold_vertices(Fc, n, twin) if m0 else np.zeros(n, dtype=bool)
+    frozen = non_manifold_vertices(Fc, n, twin, ends=(U, W)) if m0 else np.zeros(n, dtype=bool)
     lock = frozen.copy()
     if lk is not None:
         lock |= lk[clean.clean_to_vertex]
@@ -314,15 +324,18 @@ def simplify(V, F, *, target_faces=None, ratio=None, max_error=None, preserve_bo
     centre = 0.5 * (lo + hi)
     scale = float(np.linalg.norm(hi - lo)) or 1.0
     grid = float(2 ** tun.snap_bits)
-    Vn = np.round((Vc - centre) / scale * grid) / grid
+    Vn = Vc - centre
+    Vn /= scale
+    Vn *= grid
+    np.round(Vn, out=Vn)
+    Vn /= grid
 
-    Q, feat = _initial_quadrics(Vn, Fc, twin, U, W, preserve_boundary, feature_angle_deg, tun)
+    Q, feat, Nf = _initial_quadrics(Vn, Fc, twin, U, W, preserve_boundary, feature_angle_deg, tun)
     if weights is not None:
         Q *= weights[clean.clean_to_vertex][:, None]
-    Nf = face_normals(Vn, Fc, normalize=False)
-    Nref = np.stack([np.bincount(Fc.ravel(), weights=np.repeat(Nf[:, k], 3), minlength=n) for k in range(3)],
-                    axis=1) if m0 else np.zeros((n, 3))
-    mesh = State(Vn, Fc.copy(), twin, Q, lock, feat, Nref)
+    Nref = _normal_sums(Fc, Nf, n)
+    del Nf
+    mesh = State(Vn, Fc, twin, Q, lock, feat, Nref)  # Fc is clean_with_twins' own copy
     max_err_n = None if max_error is None else float(max_error) / scale
 
     stopped = "target"
@@ -341,10 +354,13 @@ def simplify(V, F, *, target_faces=None, ratio=None, max_error=None, preserve_bo
     vertex_map = np.full(n_in, -1, dtype=np.int64)
     vertex_map[clean.clean_to_vertex] = mesh.cur_of_clean
     Fo = mesh.F
-    Uo, Wo = half_edge_ends(Fo)
-    hf = np.flatnonzero(mesh.feat & ((mesh.twin > np.arange(mesh.twin.size)) | (mesh.twin == BOUNDARY)))
-    fe = np.sort(np.stack([Uo[hf], Wo[hf]], axis=1), axis=1)
-    fe = fe[np.lexsort((fe[:, 1], fe[:, 0]))] if fe.shape[0] else fe.reshape(0, 2)
+    hf = np.flatnonzero(mesh.feat)
+    tf = mesh.twin[hf]
+    hf = hf[(tf > hf) | (tf == BOUNDARY)]  # one half-edge per feature edge
+    Fr, c = Fo.ravel(), hf % 3
+    a, b = Fr[hf - c + _NEXT[c]], Fr[hf - c + _PREV[c]]
+    fe = np.stack([np.minimum(a, b), np.maximum(a, b)], axis=1)
+    fe = fe[np.lexsort((fe[:, 1], fe[:, 0]))]
     return SimplifyResult(
         V=Vout, F=Fo.copy(), vertex_map=vertex_map, max_error=float(worst * scale),
         stopped_because=stopped, feature_edges=fe.astype(np.int64),
