@@ -197,6 +197,27 @@ def _check(st, A, B, X, interior, star, kf, tun, haus=True):
     return ok, pen, star, kf, coll, wnew
 
 
+def _common_pairs(ka, xa, kb, xb, n):
+    """For each pair ``(kb[i], xb[i])``: is ``(kb[i], xb[i])`` among the pairs
+    ``(ka, xa)``? Marks vertices with their collapse (last write wins) and
+    settles the few vertices claimed by several collapses with a sort."""
+    mark = np.full(n, -1, dtype=np.int64)
+    mark[xa] = ka
+    hit = _take(mark, xb) == kb
+    lost = _take(mark, xa) != ka
+    if lost.any():
+        contested = np.zeros(n, dtype=bool)
+        contested[xa[lost]] = True
+        sa = np.flatnonzero(contested[xa])
+        sb = np.flatnonzero(contested[xb])
+        nn = np.int64(max(n, 1))
+        keys = np.sort(ka[sa] * nn + xa[sa])
+        q = kb[sb] * nn + xb[sb]
+        pos = np.minimum(np.searchsorted(keys, q), keys.size - 1)
+        hit[sb] = keys[pos] == q
+    return hit
+
+
 def _check_block(st, A, B, X, interior, star, kf, tun, haus=True):
     """Validity and compactness penalty of independent collapses B[k] -> A[k]
     at X[k], judged on the current mesh.
@@ -232,40 +253,38 @@ def _check_block(st, A, B, X, interior, star, kf, tun, haus=True):
     opp[ck[~first], 1] = cv[~first]
     n_removed = np.bincount(ck, minlength=k)
     ok &= n_removed == np.where(interior, 2, 1)
-    nn = np.int64(max(n, 1))
-    keysA = (kf[:, None] * nn + Fs)[rowsA[:, None] & other].ravel()
-    keysA.sort()
+    selA = rowsA[:, None] & other
     selB = rowsB[:, None] & other
-    qk = np.broadcast_to(kf[:, None], Fs.shape)[selB]
-    qx = Fs[selB]
-    q = qk * nn + qx
-    not_opp = (qx != opp[qk, 0]) & (qx != opp[qk, 1])
-    if keysA.size and q.size:
-        pos = np.minimum(np.searchsorted(keysA, q), keysA.size - 1)
-        extra = (keysA[pos] == q) & not_opp
+    kfb = np.broadcast_to(kf[:, None], Fs.shape)
+    qk, qx = kfb[selB], Fs[selB]
+    if qk.size:
+        common = _common_pairs(kfb[selA], Fs[selA], qk, qx, n)
+        extra = common & (qx != opp[qk, 0]) & (qx != opp[qk, 1])
         ok[qk[extra]] = False
     # not the last tetrahedron (both endpoints of valence 3)
     valA = np.bincount(kf[rowsA], minlength=k)
     valB = np.bincount(kf[rowsB], minlength=k)
     ok &= ~(interior & (valA == 3) & (valB == 3))
     # not an isolated triangle; never touch a non-manifold edge
-    cF = Fs[cidx]
     hA = 3 * star[cidx] + np.argmax(isA[cidx], axis=1)   # edge (B, c)
     hB = 3 * star[cidx] + np.argmax(isB[cidx], axis=1)   # edge (c, A)
     tA, tB = st.twin[hA], st.twin[hB]
     bad = (tA == NON_MANIFOLD) | (tB == NON_MANIFOLD) | ((tA == BOUNDARY) & (tB == BOUNDARY))
     ok[kf[cidx][bad]] = False
-    del cF
 
-    # --- geometry of the faces that move
-    mv = ~coll
-    mk = kf[mv]
-    P = _take(V, np.compress(mv, Fs, axis=0), axis=0)   # (s,3,3)
-    N0 = np.cross(P[:, 1] - P[:, 0], P[:, 2] - P[:, 0])
-    Pn = P.copy()
-    mc = (isA[mv] | isB[mv])
-    Pn[mc] = _take(X, mk, axis=0)
-    e0, e1, e2 = Pn[:, 1] - Pn[:, 0], Pn[:, 2] - Pn[:, 1], Pn[:, 0] - Pn[:, 2]
+    # --- geometry of the faces that move (one corner each: A or B goes to X)
+    mv = np.flatnonzero(~coll)
+    mk = _take(kf, mv)
+    Fm = _take(Fs, mv, axis=0)
+    cm = np.argmax(_take(isA, mv, axis=0) | _take(isB, mv, axis=0), axis=1)
+    P0, P1, P2 = (_take(V, Fm[:, c], axis=0) for c in range(3))
+    Xm = _take(X, mk, axis=0)
+    Q0 = np.where((cm == 0)[:, None], Xm, P0)
+    Q1 = np.where((cm == 1)[:, None], Xm, P1)
+    Q2 = np.where((cm == 2)[:, None], Xm, P2)
+    o0, o1, o2 = P1 - P0, P2 - P1, P0 - P2
+    e0, e1, e2 = Q1 - Q0, Q2 - Q1, Q0 - Q2
+    N0 = np.cross(o0, -o2)
     N1 = np.cross(e0, -e2)
     l0 = np.sqrt(np.einsum("ij,ij->i", N0, N0))
     l1 = np.sqrt(np.einsum("ij,ij->i", N1, N1))
@@ -274,18 +293,15 @@ def _check_block(st, A, B, X, interior, star, kf, tun, haus=True):
     # normals of the input faces merged into its vertices): no slow drift
     if tun.ref_cos > -1.0:
         Nr = st.Nref
-        ref = _take(Nr, np.compress(mv, Fs, axis=0), axis=0).sum(axis=1)
-        moved_v = np.compress(mv, Fs, axis=0)[mc]
-        ref += (_take(Nr, A, axis=0) + _take(Nr, B, axis=0))[mk] - _take(Nr, moved_v, axis=0)
+        moved_v = Fm[np.arange(mv.size), cm]
+        ref = (_take(Nr, Fm[:, 0], axis=0) + _take(Nr, Fm[:, 1], axis=0) + _take(Nr, Fm[:, 2], axis=0)
+               - _take(Nr, moved_v, axis=0) + _take(_take(Nr, A, axis=0) + _take(Nr, B, axis=0), mk, axis=0))
         lr = np.sqrt(np.einsum("ij,ij->i", ref, ref))
         flip |= np.einsum("ij,ij->i", ref, N1) < tun.ref_cos * lr * l1
     ok[mk[flip]] = False
-    sumsq = (np.einsum("ij,ij->i", e0, e0) + np.einsum("ij,ij->i", e1, e1)
-             + np.einsum("ij,ij->i", e2, e2))
+    sumsq = np.einsum("ij,ij->i", e0, e0) + np.einsum("ij,ij->i", e1, e1) + np.einsum("ij,ij->i", e2, e2)
     g_new = _SQRT3x2 * l1 / np.where(sumsq > 0, sumsq, 1.0)
-    o0, o1, o2 = P[:, 1] - P[:, 0], P[:, 2] - P[:, 1], P[:, 0] - P[:, 2]
-    osq = (np.einsum("ij,ij->i", o0, o0) + np.einsum("ij,ij->i", o1, o1)
-           + np.einsum("ij,ij->i", o2, o2))
+    osq = np.einsum("ij,ij->i", o0, o0) + np.einsum("ij,ij->i", o1, o1) + np.einsum("ij,ij->i", o2, o2)
     g_old = _SQRT3x2 * l0 / np.where(osq > 0, osq, 1.0)
     gmin_new = np.ones(k)
     np.minimum.at(gmin_new, mk, g_new)
@@ -304,9 +320,9 @@ def _check_block(st, A, B, X, interior, star, kf, tun, haus=True):
     wnew = wA
     if haus and tun.haus_weight > 0.0 and mk.size:
         Pa = np.concatenate([wA[mk], wB[mk]])
-        T = np.concatenate([Pn, Pn])
         _, _, d2 = _kernel(Pa[:, 0].copy(), Pa[:, 1].copy(), Pa[:, 2].copy(),
-                           _triangle_rows(T[:, 0], T[:, 1], T[:, 2]))
+                           _triangle_rows(np.concatenate([Q0, Q0]), np.concatenate([Q1, Q1]),
+                                          np.concatenate([Q2, Q2])))
         dA = np.full(k, np.inf)
         np.minimum.at(dA, mk, d2[:mk.size])
         dB = np.full(k, np.inf)

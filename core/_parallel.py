@@ -15,7 +15,7 @@ import threading
 from concurrent.futures import ThreadPoolExecutor
 
 #: worker threads (at most 4: the hot loops are memory bound beyond that)
-WORKERS = max(1, min(4, os.cpu_count() or 1))
+WORKERS = int(os.environ.get("MA_WORKERS", 0)) or max(1, min(4, os.cpu_count() or 1))
 
 _lock = threading.Lock()
 _pool = None
