@@ -55,8 +55,8 @@ def check_mesh(V, F, *, where, allow_empty=True):
         raise InvalidMeshError(f"{where}: F must be (m,3) integers, got {F_in.shape} {F_in.dtype}")
     V_out = np.array(V_in, dtype=np.float64, order="C", copy=True)
     F_out = np.array(F_in, dtype=np.int64, order="C", copy=True)
-    bad = ~np.isfinite(V_out).all(axis=1)
-    if bad.any():
+    if not np.isfinite(V_out).all():
+        bad = ~np.isfinite(V_out).all(axis=1)
         rows = np.flatnonzero(bad)
         raise InvalidMeshError(
             f"{where}: {rows.size} vertices have NaN or infinite coordinates, "
@@ -64,8 +64,8 @@ def check_mesh(V, F, *, where, allow_empty=True):
         )
     n = V_out.shape[0]
     if F_out.size:
-        out = (F_out < 0) | (F_out >= n)
-        if out.any():
+        if F_out.min() < 0 or F_out.max() >= n:
+            out = (F_out < 0) | (F_out >= n)
             f, c = np.argwhere(out)[0]
             raise InvalidMeshError(
                 f"{where}: {int(out.any(axis=1).sum())} faces index vertices outside [0, {n}), "

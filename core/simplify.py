@@ -176,9 +176,10 @@ def _check_args(n, target_faces, ratio, max_error, feature_angle_deg, vertex_wei
 
 
 def _initial_quadrics(V, F, twin, U, W, preserve_boundary, feature_angle_deg, tun):
-    """Vertex quadrics with boundary and crease planes, the crease flags per
-    half-edge, and the unnormalised face normals (m,3) (as
-    ``face_normals(V, F, normalize=False)``)."""
+    """Vertex quadrics (n,11) with boundary and crease planes, the crease
+    flags per half-edge, and the unnormalised face normals (m,3) (as
+    ``face_normals(V, F, normalize=False)``). The quadrics are the transposed
+    view of an (11,n) C-contiguous array (``State`` keeps that layout)."""
     n = V.shape[0]
     Qf, Nf, Nraw = _face_planes(V, F, tun.area_power)
     QT = _accumulate_T(Qf, F.T.ravel(), n, 3)  # (11, n), transposed once at the end
@@ -211,7 +212,7 @@ def _initial_quadrics(V, F, twin, U, W, preserve_boundary, feature_angle_deg, tu
         Ec = np.concatenate(ends)
         Qc[:, 10] = 0.0  # constraint planes do not count as surface area
         QT += _accumulate_T(Qc, Ec.T.ravel(), n, 2)
-    return np.ascontiguousarray(QT.T), feat, Nraw
+    return QT.T, feat, Nraw  # (n,11) view of the coefficient-major array the engine uses
 
 
 def _normal_sums(F, N, n):
@@ -320,7 +321,10 @@ def simplify(V, F, *, target_faces=None, ratio=None, max_error=None, preserve_bo
         lock |= lk[clean.clean_to_vertex]
 
     # unit-free working coordinates: centred, unit diagonal, snapped to a grid
-    lo, hi = (Vc.min(axis=0), Vc.max(axis=0)) if n else (np.zeros(3), np.zeros(3))
+    cols = np.ascontiguousarray(Vc.T)  # column reductions: much faster than min(axis=0)
+    lo = np.array([c.min() for c in cols]) if n else np.zeros(3)
+    hi = np.array([c.max() for c in cols]) if n else np.zeros(3)
+    del cols
     centre = 0.5 * (lo + hi)
     scale = float(np.linalg.norm(hi - lo)) or 1.0
     grid = float(2 ** tun.snap_bits)

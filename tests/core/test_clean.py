@@ -1,0 +1,224 @@
+"""Cleaning, the half-edge twin table and fan counting (``core._clean``).
+
+Every fast path is checked against a plain reference: the argsort twin
+table and the corner union-find fan count the simplifier used before."""
+
+import numpy as np
+import pytest
+
+from core._clean import (BOUNDARY, NON_MANIFOLD, _MAX_WALK, clean_mesh, clean_with_twins, half_edge_ends,
+                         non_manifold_vertices, twin_table)
+from core.topology import connected_labels
+from tests.mesh_factory import icosphere, load_shared, regular_grid, shared_mesh_names, torus
+
+
+# --- references (the union-find versions) -----------------------------------------------
+
+def ref_twin_table(F, n):
+    U, W = half_edge_ends(F)
+    key = np.minimum(U, W) * np.int64(max(n, 1)) + np.maximum(U, W)
+    order = np.argsort(key, kind="stable")
+    ks = key[order]
+    twin = np.full(ks.size, BOUNDARY, dtype=np.int64)
+    if ks.size == 0:
+        return twin
+    start = np.flatnonzero(np.concatenate([[True], ks[1:] != ks[:-1]]))
+    count = np.diff(np.concatenate([start, [ks.size]]))
+    pair = start[count == 2]
+    twin[order[pair]] = order[pair + 1]
+    twin[order[pair + 1]] = order[pair]
+    twin[order[np.repeat(count > 2, count)]] = NON_MANIFOLD
+    return twin
+
+
+def ref_non_manifold_vertices(F, n, twin):
+    U, W = half_edge_ends(F)
+    bad = np.zeros(n, dtype=bool)
+    nm = twin == NON_MANIFOLD
+    bad[U[nm]] = True
+    bad[W[nm]] = True
+    h = np.flatnonzero(twin > np.arange(twin.size))
+    t = twin[h]
+    f_h, f_t = h - h % 3, t - t % 3
+    Fr = F.ravel()
+
+    def corner(base, v):
+        return base + np.where(Fr[base] == v, 0, np.where(Fr[base + 1] == v, 1, 2))
+
+    pairs = np.concatenate([np.stack([corner(f_h, U[h]), corner(f_t, U[h])], axis=1),
+                            np.stack([corner(f_h, W[h]), corner(f_t, W[h])], axis=1)])
+    labels = connected_labels(Fr.size, pairs)
+    fans = np.bincount(Fr[labels == np.arange(Fr.size)], minlength=n)
+    return bad | (fans > 1)
+
+
+def check_against_reference(F, n):
+    """Fast twin table and fan mask equal the references; returns the mask."""
+    twin = twin_table(F, n)
+    np.testing.assert_array_equal(twin, ref_twin_table(F, n))
+    bad = non_manifold_vertices(F, n, twin)
+    np.testing.assert_array_equal(bad, ref_non_manifold_vertices(F, n, twin))
+    np.testing.assert_array_equal(bad, non_manifold_vertices(F, n, twin, ends=half_edge_ends(F)))
+    return bad
+
+
+# --- built meshes --------------------------------------------------------------------------
+
+def cone(k, apex=0, first=1, flip=False):
+    """Closed cone: apex, a ring of k vertices and a base centre; 2k faces."""
+    ring = first + np.arange(k)
+    centre = first + k
+    nxt = np.roll(ring, -1)
+    side = np.stack([np.full(k, apex), ring, nxt], axis=1)
+    base = np.stack([np.full(k, centre), nxt, ring], axis=1)
+    F = np.concatenate([side, base])
+    return F[:, ::-1] if flip else F
+
+
+def open_fan(k, apex=0, first=1):
+    """k triangles around apex, not closed (a boundary vertex with one fan)."""
+    ring = first + np.arange(k + 1)
+    return np.stack([np.full(k, apex), ring[:-1], ring[1:]], axis=1)
+
+
+def test_bow_tie_of_two_closed_cones_freezes_only_the_apex():
+    F = np.concatenate([cone(5), cone(7, first=7)])
+    n = 15
+    bad = check_against_reference(F, n)
+    assert np.flatnonzero(bad).tolist() == [0]
+    assert (twin_table(F, n) >= 0).all()            # every edge is a manifold interior edge
+
+
+def test_two_fans_on_a_boundary_vertex():
+    F = np.concatenate([open_fan(3), open_fan(4, first=5)])
+    assert np.flatnonzero(check_against_reference(F, 10)).tolist() == [0]
+
+
+def test_open_fan_plus_closed_cone_and_single_fans():
+    # a path and a cycle at vertex 0 (only the walk can tell)
+    F = np.concatenate([open_fan(3), cone(4, first=5)])
+    assert np.flatnonzero(check_against_reference(F, 10)).tolist() == [0]
+    # one open fan, one closed cone, an inconsistently oriented cone: all manifold
+    assert not check_against_reference(open_fan(6), 8).any()
+    assert not check_against_reference(cone(6), 8).any()
+    Fi = cone(6).copy()
+    Fi[::2] = Fi[::2, ::-1]
+    assert not check_against_reference(Fi, 8).any()
+    # two cones, one of them flipped
+    F2 = np.concatenate([cone(6), cone(6, first=8, flip=True)])
+    assert np.flatnonzero(check_against_reference(F2, 15)).tolist() == [0]
+
+
+def test_non_manifold_edge_freezes_its_two_ends_only():
+    F = np.array([[0, 1, 2], [1, 0, 3], [0, 1, 4], [2, 1, 5]])
+    twin = twin_table(F, 6)
+    assert (twin == NON_MANIFOLD).sum() == 3
+    assert np.flatnonzero(check_against_reference(F, 6)).tolist() == [0, 1]
+
+
+def test_high_valence_fans_finish_with_the_union_find():
+    k = 3 * _MAX_WALK
+    one = cone(k)
+    assert not check_against_reference(one, k + 2).any()
+    two = np.concatenate([cone(k), cone(k, first=k + 2)])
+    assert np.flatnonzero(check_against_reference(two, 2 * k + 3)).tolist() == [0]
+    path_and_cycle = np.concatenate([open_fan(k), cone(k, first=k + 2)])
+    assert np.flatnonzero(check_against_reference(path_and_cycle, 2 * k + 3)).tolist() == [0]
+
+
+@pytest.mark.parametrize("make", [lambda: icosphere(3), lambda: torus(), lambda: regular_grid(9, 7)])
+def test_closed_and_open_manifolds_have_no_frozen_vertex(make):
+    V, F = make()
+    assert not check_against_reference(F, V.shape[0]).any()
+
+
+def test_random_holes_match_the_union_find():
+    """Deleting random faces of a sphere makes boundary and bow-tie vertices."""
+    V, F = icosphere(3)
+    rng = np.random.default_rng(7)
+    total = 0
+    for _ in range(20):
+        keep = rng.random(F.shape[0]) < rng.uniform(0.3, 0.9)
+        total += int(check_against_reference(F[keep], V.shape[0]).sum())
+    assert total > 0  # the cases were exercised
+
+
+@pytest.mark.parametrize("name", shared_mesh_names())
+def test_shared_meshes_match_the_references(name):
+    V, F = load_shared(name)
+    c = clean_mesh(V, F)
+    check_against_reference(c.F, c.V.shape[0])
+
+
+# --- twin table ------------------------------------------------------------------------------
+
+def test_twin_table_pairs_boundary_and_non_manifold():
+    F = np.array([[0, 1, 2], [2, 1, 3]])             # h0 = (1, 2) and h5 = (2, 1) are twins
+    assert twin_table(F, 4).tolist() == [5, -1, -1, -1, -1, 0]
+    Fn = np.array([[0, 1, 2], [1, 0, 3], [0, 1, 4]])  # edge (0, 1) used three times
+    assert twin_table(Fn, 5).tolist() == [-1, -1, -2, -1, -1, -2, -1, -1, -2]
+    assert twin_table(np.zeros((0, 3), dtype=np.int64), 0).size == 0
+
+
+def test_twin_table_without_room_to_pack_uses_the_argsort():
+    V, F = torus()
+    n = V.shape[0]
+    big = 2 ** 31                                   # n^2 * 2^bits no longer fits in int64
+    np.testing.assert_array_equal(twin_table(F, big), ref_twin_table(F, big))
+    np.testing.assert_array_equal(twin_table(F, big), twin_table(F, n))
+
+
+# --- cleaning ----------------------------------------------------------------------------------
+
+def messy_mesh():
+    V, F = icosphere(2)
+    n = V.shape[0]
+    F = np.concatenate([F[:40], F[[3, 7]], F[[5]][:, ::-1], [[0, 0, 1], [4, 5, 4]], F[40:],
+                        [[n + 1, n + 2, n + 3]], F[[7]][:, [1, 2, 0]]])
+    V = np.concatenate([V, [[5.0, 5, 5]], np.eye(3) * 3])  # vertex n is unreferenced
+    return V, F
+
+
+def test_clean_mesh_drops_degenerate_duplicate_and_unreferenced():
+    V, F = messy_mesh()
+    c = clean_mesh(V, F)
+    assert (c.n_degenerate_faces, c.n_duplicate_faces, c.n_unreferenced_vertices) == (2, 4, 1)
+    assert c.F.shape[0] == F.shape[0] - 6
+    # first copies are kept, in order; vertex maps are inverse to each other
+    Fi = icosphere(2)[1]
+    np.testing.assert_array_equal(c.clean_to_vertex[c.F[:Fi.shape[0]]], Fi)
+    np.testing.assert_array_equal(c.vertex_to_clean[c.clean_to_vertex], np.arange(c.V.shape[0]))
+    np.testing.assert_array_equal(c.V, V[c.clean_to_vertex])
+
+
+@pytest.mark.parametrize("case", ["messy", "clean", "empty", "dup_on_nm_edge"])
+def test_clean_with_twins_equals_the_separate_steps(case):
+    if case == "messy":
+        V, F = messy_mesh()
+    elif case == "clean":
+        V, F = torus()
+    elif case == "empty":
+        V, F = np.zeros((3, 3)), np.zeros((0, 3), dtype=np.int64)
+    else:  # a duplicated face on an edge that is non-manifold anyway
+        V = np.zeros((6, 3))
+        F = np.array([[0, 1, 2], [1, 0, 3], [0, 1, 4], [2, 1, 5], [4, 1, 0]])
+    c = clean_mesh(V, F)
+    cw, twin, U, W = clean_with_twins(V, F)
+    for a, b in zip(c, cw):
+        np.testing.assert_array_equal(a, b)
+    n = c.V.shape[0]
+    np.testing.assert_array_equal(twin, ref_twin_table(c.F, n))
+    Ue, We = half_edge_ends(c.F)
+    np.testing.assert_array_equal(U, Ue)
+    np.testing.assert_array_equal(W, We)
+
+
+def test_clean_mesh_does_not_modify_or_alias_its_inputs():
+    V, F = torus()
+    V0, F0 = V.copy(), F.copy()
+    c = clean_mesh(V, F)
+    cw = clean_with_twins(V, F)[0]
+    for out in (c, cw):
+        assert not np.shares_memory(out.V, V) and not np.shares_memory(out.F, F)
+    np.testing.assert_array_equal(V, V0)
+    np.testing.assert_array_equal(F, F0)
