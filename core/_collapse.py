@@ -28,6 +28,8 @@ from .quadrics import DET_EPS, MAX_DRIFT
 from .spatial import _kernel, _triangle_rows
 
 _BIG = np.iinfo(np.int64).max
+DEAD = -3  #: twin of a half-edge of a removed face (before compaction)
+_COMPACT = 0.75  # compact once the live faces are fewer than this share of the rows
 _NEXT = np.array([1, 2, 0], dtype=np.int64)
 _PREV = np.array([2, 0, 1], dtype=np.int64)
 _SQRT3x2 = 2.0 * np.sqrt(3.0)
@@ -62,10 +64,14 @@ class State:
         # per half-edge cache (on representatives): cost, position, error, blocked value
         self.c_cost = np.zeros(h3)
         self.c_x = [np.zeros(h3), np.zeros(h3), np.zeros(h3)]
-        self.c_dist = np.zeros(h3)
         self.c_blk = np.full(h3, -1.0)
         self.c_stale = np.ones(h3, dtype=bool)          # cached cost is only a lower bound
         self.cur_of_clean = np.arange(n, dtype=np.int64)
+        # removed faces and vertices stay in the arrays (faces marked dead, their
+        # half-edges' twin DEAD) until enough have gone to make compaction pay
+        self.alive = np.ones(F.shape[0], dtype=bool)
+        self.dead_v = np.zeros(n, dtype=bool)
+        self.m_live = F.shape[0]
         self.worst = 0.0
         self.wit = V.copy()                            # witness: merged input point farthest from the surface
 
@@ -133,6 +139,13 @@ def _place(q, p0, p1):
     return X, err
 
 
+def _distance(st, cost, a, b):
+    """RMS distance ``sqrt(cost / w)`` of edge collapses (``w``: the merged
+    quadric's area; 0 where it has none), in working units."""
+    w = _take(st.Q[10], a) + _take(st.Q[10], b)
+    return np.where(w > 0, np.sqrt(np.maximum(cost, 0.0) / np.where(w > 0, w, 1.0)), 0.0)
+
+
 def _recost(st, rep, U, W, stale, preserve_boundary):
     """Placement and cost of the stale edges, written into the cache (in
     blocks, on the worker threads)."""
@@ -169,8 +182,6 @@ def _recost(st, rep, U, W, stale, preserve_boundary):
         st.c_cost[hs] = np.where(valid, err, np.inf)
         for c in range(3):
             st.c_x[c][hs] = X[c]
-        w = q[10]
-        st.c_dist[hs] = np.where(w > 0, np.sqrt(err / np.where(w > 0, w, 1.0)), 0.0)
         st.swap[hs] = swap
 
     run_blocks(block, blocks(hs_all.size, _BLOCK))
@@ -362,11 +373,21 @@ def _priority(cost, a, b, bands):
 
 
 def run(st, target, max_err_n, preserve_boundary, progress, m0, tun):
-    """The batched collapse loop. Returns (stopped_because, passes)."""
+    """The batched collapse loop. Returns (stopped_because, passes); the
+    state is compact afterwards."""
+    try:
+        return _run(st, target, max_err_n, preserve_boundary, progress, m0, tun)
+    finally:
+        _compact(st)
+
+
+def _run(st, target, max_err_n, preserve_boundary, progress, m0, tun):
     passes = 0
     while passes < tun.max_passes:
+        if st.m_live < _COMPACT * st.F.shape[0]:
+            _compact(st)
         F, twin = st.F, st.twin
-        m, n = F.shape[0], st.V.shape[0]
+        m, n = st.m_live, st.V.shape[0]
         if target is not None and m <= target:
             return "target", passes
         # the Hausdorff penalty matters once the cage is coarse: skip it before
@@ -379,7 +400,7 @@ def run(st, target, max_err_n, preserve_boundary, progress, m0, tun):
             if progress(float(min(max(frac, 0.0), 1.0))) is False:
                 return "cancelled", passes
         passes += 1
-        h = np.arange(3 * m, dtype=np.int64)
+        h = np.arange(twin.size, dtype=np.int64)
         rep = np.flatnonzero((twin == BOUNDARY) | (twin > h))
         U, W = _ends(F, rep)
         st.c_stale[rep[st.fresh[U] | st.fresh[W]]] = True
@@ -408,7 +429,7 @@ def run(st, target, max_err_n, preserve_boundary, progress, m0, tun):
                                   st.c_cost[rep[need]])
         cand = np.isfinite(cost)
         if max_err_n is not None:
-            within = _take(st.c_dist, rep) <= max_err_n
+            within = _distance(st, _take(st.c_cost, rep), U, W) <= max_err_n
             if not (cand & within).any():
                 return ("max_error" if cand.any() else "no_valid_collapse"), passes
             cand &= within
@@ -438,8 +459,8 @@ def run(st, target, max_err_n, preserve_boundary, progress, m0, tun):
         touched = np.zeros(n, dtype=bool)
         acc_edges, acc_star, acc_kf, acc_coll, acc_wit = [], [], [], [], []
         active = np.arange(P, dtype=np.int64)
-        FT = np.ascontiguousarray(F.T)
-        fidx = np.arange(m, dtype=np.int64)     # faces that may still touch an active edge
+        fidx = np.flatnonzero(st.alive)         # faces that may still touch an active edge
+        FT = np.ascontiguousarray(_take(F, fidx, axis=0).T)
         imask = (np.int64(1) << np.int64(max(1, int(P - 1).bit_length()))) - 1
         for _ in range(tun.max_rounds):
             active = active[~touched[pa[active]] & ~touched[pb[active]]]
@@ -503,7 +524,7 @@ def run(st, target, max_err_n, preserve_boundary, progress, m0, tun):
                 fk = keep_k[s_kf]
                 s_star, s_coll = s_star[fk], s_coll[fk]
                 s_kf = (np.cumsum(keep_k) - 1)[s_kf[fk]]
-        st.worst = max(st.worst, float(_take(st.c_dist, ph[acc]).max()))
+        st.worst = max(st.worst, float(_distance(st, praw[acc], pa[acc], pb[acc]).max()))
         st.vver[touched] = passes
         st.wit[pa[acc]] = s_wit
         _apply(st, pa[acc], pb[acc], pX[acc], s_star, s_kf, s_coll)
@@ -535,37 +556,53 @@ def _apply(st, A, B, X, star, kf, coll):
     st.VT[:, A] = X.T
     st.fresh[A] = True
     st.is_bnd[A] |= st.is_bnd[B]
-    # remap vertices, drop the removed faces, compact
-    keep_f = np.ones(m, dtype=bool)
-    keep_f[cf] = False
-    new_f = np.cumsum(keep_f) - 1
-    keep_h = np.repeat(keep_f, 3)
-    keep_v = np.ones(n, dtype=bool)
-    keep_v[B] = False
-    new_v = np.cumsum(keep_v) - 1
+    # B leaves the faces around it; the removed faces and B are marked dead
+    sf = star[~coll]
+    Fs = _take(F, sf, axis=0)
+    Bk = _take(B, kf[~coll])[:, None]
+    F[sf] = np.where(Fs == Bk, _take(A, kf[~coll])[:, None], Fs)
+    twin[(3 * cf[:, None] + np.arange(3)).ravel()] = DEAD
+    st.alive[cf] = False
+    st.m_live -= cf.size
+    st.dead_v[B] = True
     remap = np.arange(n, dtype=np.int64)
     remap[B] = A
-    comp = _take(new_v, remap)
+    st.cur_of_clean = _take(remap, st.cur_of_clean)
+
+
+def _compact(st):
+    """Drop the dead faces and vertices from every array (one job per array,
+    on the worker threads)."""
+    keep_f, keep_v = st.alive, ~st.dead_v
+    if keep_f.all() and keep_v.all():
+        return
+    F, twin = st.F, st.twin
+    new_f = np.cumsum(keep_f) - 1
+    new_v = np.cumsum(keep_v) - 1
+    ih = np.flatnonzero(np.repeat(keep_f, 3))
+    iv = np.flatnonzero(keep_v)
 
     def twins():
-        tw = np.compress(keep_h, twin)
+        tw = _take(twin, ih)
         t = np.maximum(tw, 0)
         return np.where(tw >= 0, 3 * _take(new_f, t // 3) + t % 3, tw)
 
-    # every array shrinks independently: one job each, on the worker threads
-    jobs = [("twin", twins), ("F", lambda: _take(comp, np.compress(keep_f, F, axis=0)))]
-    for name in ("feat", "swap", "blk_pass", "c_cost", "c_dist", "c_blk", "c_stale"):
-        jobs.append((name, lambda a=getattr(st, name): np.compress(keep_h, a)))
+    jobs = [("twin", twins), ("F", lambda: _take(new_v, np.compress(keep_f, F, axis=0)))]
+    for name in ("feat", "swap", "blk_pass", "c_cost", "c_blk", "c_stale"):
+        jobs.append((name, lambda a=getattr(st, name): _take(a, ih)))
     for c in range(3):
-        jobs.append((c, lambda a=st.c_x[c]: np.compress(keep_h, a)))
+        jobs.append((c, lambda a=st.c_x[c]: _take(a, ih)))
     for name in ("V", "Nref", "wit", "locked", "moved", "orig", "vver", "fresh", "is_bnd"):
-        jobs.append((name, lambda a=getattr(st, name): np.compress(keep_v, a, axis=0)))
+        jobs.append((name, lambda a=getattr(st, name): _take(a, iv, axis=0)))
     for name in ("Q", "VT"):
-        jobs.append((name, lambda a=getattr(st, name): np.compress(keep_v, a, axis=1)))
+        jobs.append((name, lambda a=getattr(st, name): _take(a, iv, axis=1)))
     out = run_blocks(lambda i, _: jobs[i][1](), [(i, i + 1) for i in range(len(jobs))])
     for (name, _), arr in zip(jobs, out):
         if isinstance(name, int):
             st.c_x[name] = arr
         else:
             setattr(st, name, arr)
-    st.cur_of_clean = _take(comp, st.cur_of_clean)
+    st.cur_of_clean = _take(new_v, st.cur_of_clean)
+    st.alive = np.ones(st.F.shape[0], dtype=bool)
+    st.dead_v = np.zeros(st.V.shape[0], dtype=bool)
+    st.m_live = st.F.shape[0]
