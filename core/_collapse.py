@@ -557,10 +557,10 @@ def _apply(st, A, B, X, star, kf, coll):
     st.fresh[A] = True
     st.is_bnd[A] |= st.is_bnd[B]
     # B leaves the faces around it; the removed faces and B are marked dead
-    sf = star[~coll]
-    Fs = _take(F, sf, axis=0)
-    Bk = _take(B, kf[~coll])[:, None]
-    F[sf] = np.where(Fs == Bk, _take(A, kf[~coll])[:, None], Fs)
+    live = np.flatnonzero(~coll)
+    sf, sk = _take(star, live), _take(kf, live)
+    r, c = np.nonzero(_take(F, sf, axis=0) == _take(B, sk)[:, None])
+    np.put(F, 3 * _take(sf, r) + c, _take(A, _take(sk, r)))
     twin[(3 * cf[:, None] + np.arange(3)).ravel()] = DEAD
     st.alive[cf] = False
     st.m_live -= cf.size
