@@ -18,7 +18,8 @@ cycles (closed fans)::
                   every corner of v (walked around v through the twins)
 
 A closed fan has at least 3 faces, so the walk is only needed where the
-counts leave room for a second fan; all walks advance in lock-step.
+counts leave room for a second fan, and it stops as soon as fewer than 3
+faces are left unseen; all walks advance in lock-step.
 """
 
 from typing import NamedTuple
@@ -267,32 +268,32 @@ def non_manifold_vertices(F, n_vertices, twin, *, ends=None):
     # a closed fan has >= 3 corners: one path plus a cycle needs 4, two cycles 6
     walk = ~bad & (corners >= np.where(paths == 0, 6, 4))
     # start: the face after an open end, else any face, leaving through an edge at v
-    start = np.empty(n, dtype=np.int64)
-    start[U] = np.arange(U.size, dtype=np.int64)      # half-edge leaving v = U[h]
+    start = np.full(n, -1, dtype=np.int64)
+    start[F[:, 0]] = 3 * np.arange(F.shape[0], dtype=np.int64) + 2   # 3f+2 leaves F[f, 0]
+    if (walk & (start < 0)).any():
+        start[U] = np.arange(U.size, dtype=np.int64)      # half-edge h leaves U[h]
     j = hopen % 3
-    start[Uo] = hopen + _PREV_OFF[j]                  # the other edge at U in that face
-    start[Wo] = hopen + _NEXT_OFF[j]                  # the other edge at W
+    start[Uo] = hopen + _PREV_OFF[j]                      # the other edge at U in that face
+    start[Wo] = hopen + _NEXT_OFF[j]                      # the other edge at W
     v = np.flatnonzero(walk)
     e = start[v]
-    base0 = e - e % 3                                 # first face (3 f) of the walk
-    count = np.ones(v.size, dtype=np.int64)
+    base0 = e - e % 3                                     # first face (3 f) of the walk
+    # once a walk has seen more than corners - 3 faces, the rest cannot hold
+    # another (closed) fan: one fan. A walk that ends before that is one of several.
+    left = corners[v] - 4                                 # faces to see after the next one
     steps = 0
     while v.size:
-        if steps == _MAX_WALK:                        # very high valence: union-find the rest
+        if steps == _MAX_WALK:                            # very high valence: union-find the rest
             bad[v[_fans_union_find(F, twin, U, W, v, n)[v] > 1]] = True
             break
         steps += 1
         t = twin[e]
         jt = t % 3
         g = t - jt
-        stop = (t < 0) | (g == base0)                 # open end reached / back at the start
-        done = np.flatnonzero(stop)
-        if done.size:
-            vd = v[done]
-            bad[vd[count[done] < corners[vd]]] = True
-            go = np.flatnonzero(~stop)
-            v, t, jt, base0, count = v[go], t[go], jt[go], base0[go], count[go]
-        count += 1
+        stop = (t < 0) | (g == base0)                     # open end reached / back at the start
+        bad[v[stop]] = True
+        go = np.flatnonzero(~stop & (left > 0))
+        v, t, jt, base0, left = v[go], t[go], jt[go], base0[go], left[go] - 1
         # leave the new face through its other edge at v
         e = t + np.where(U[t] == v, _PREV_OFF[jt], _NEXT_OFF[jt])
     return bad
