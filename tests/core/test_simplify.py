@@ -339,10 +339,10 @@ def test_invariants_on_random_meshes(seed, kind, frac, amp):
     assert after._replace(boundary_edges=0) == before._replace(boundary_edges=0)
     assert r.F.shape[0] <= target or r.stopped_because == "no_valid_collapse"
     assert r.F.shape[0] >= target - 1 or r.stopped_because != "target"
-    if kind != "grid":
-        # closed inputs; on noisy open grids 4 in 450 random cases still turn a border face
-        # (the next fix of the simplifier: apply the guard to border collapses too)
-        assert faces_turned_against_input(r, V, F) == 0
+    # the xy noise folds some grid faces of the input itself (~15% of the examples); the
+    # simplifier never adds one: every output face against the input is an input fold kept
+    identity = SimplifyResult(V, F, np.arange(V.shape[0]), 0.0, "target", np.zeros((0, 2), np.int64))
+    assert faces_turned_against_input(r, V, F) <= faces_turned_against_input(identity, V, F)
     if kind == "sphere" and amp == 0:
         assert outward_flips(r.V, r.F) == 0     # a convex input stays star-shaped
 
@@ -381,3 +381,22 @@ def test_no_face_turns_more_than_90_degrees_from_the_input_it_stands_for():
         assert_clean(r, V, F)
         assert topology_summary(r.F, r.V.shape[0]).euler == topology_summary(F, V.shape[0]).euler
         assert faces_turned_against_input(r, V, F) == 0
+
+
+def test_output_does_not_depend_on_threads_or_block_size(monkeypatch):
+    # the engine splits recosting, checking and compaction into blocks run on worker
+    # threads; the blocks depend on the problem size only, so any thread count gives
+    # the same cage bit for bit
+    import importlib
+    collapse = importlib.import_module("core._collapse")
+    parallel = importlib.import_module("core._parallel")
+    V, F = torus(40, 20, bump=0.2)
+    monkeypatch.setattr(collapse, "_BLOCK", 640)   # many blocks even on a small mesh
+    runs = []
+    for workers in (1, 2):
+        monkeypatch.setattr(parallel, "WORKERS", workers)
+        runs.append(simplify(V, F, target_faces=300))
+    a, b = runs
+    assert np.array_equal(a.F, b.F) and np.array_equal(a.V, b.V)
+    assert np.array_equal(a.vertex_map, b.vertex_map)
+    assert a.F.shape[0] == 300 and a.n_passes == b.n_passes
