@@ -602,7 +602,8 @@ def _compact(st):
             st.c_x[name] = arr
         else:
             setattr(st, name, arr)
-    st.cur_of_clean = _take(new_v, st.cur_of_clean)
+    cur = st.cur_of_clean
+    st.cur_of_clean = np.where(cur >= 0, _take(new_v, np.maximum(cur, 0)), -1)  # -1: removed component
     st.alive = np.ones(st.F.shape[0], dtype=bool)
     st.dead_v = np.zeros(st.V.shape[0], dtype=bool)
     st.m_live = st.F.shape[0]

@@ -43,10 +43,11 @@ import numpy as np
 
 from ._clean import BOUNDARY, clean_with_twins, half_edge_ends, non_manifold_vertices
 from ._collapse import State, run
+from ._relax import close_triangular_holes, drop_stuck_components
 from ._relocate import relocate
 from .errors import InvalidArgumentError
 from .mesh import check_mesh
-from .quadrics import _accumulate_T, _face_planes, edge_constraint_quadrics
+from .quadrics import _accumulate_T, _vertex_face_quadrics, edge_constraint_quadrics
 
 _WHERE = "simplify"
 _NEXT = np.array([1, 2, 0], dtype=np.int64)  # corner after c
@@ -80,6 +81,8 @@ class Tuning:
     relocate_reg: float = 1.0        #: pull of each vertex to its place, relative to its samples
     relocate_max_faces: int = 200000  #: ... only for cages up to this size
     relocate_max_share: float = 0.5  #: ... and at most this share of the input's faces
+    #: preserve_topology=False removes stuck components up to this size (share of the diagonal)
+    relax_max_size: float = 0.25
     snap_bits: int = 32              #: coordinates snapped to 2^-snap_bits of the diagonal
     max_passes: int = 100000
 
@@ -97,7 +100,8 @@ class SimplifyResult:
     V : (n,3) float64, the cage's vertices.
     F : (m,3) int64, the cage's faces.
     vertex_map : (n_input,) int64, the cage vertex each input vertex was merged
-        into (``-1`` for input vertices no face used).
+        into (``-1`` for input vertices no face used, and for those of
+        components removed with ``preserve_topology=False``).
     max_error : float, largest error of an accepted collapse, as a distance in
         mesh units (``sqrt(quadric error / quadric area)``, see ``core.quadrics``);
         the final relocation only moves vertices closer to the input and is
@@ -181,9 +185,7 @@ def _initial_quadrics(V, F, twin, U, W, preserve_boundary, feature_angle_deg, tu
     ``face_normals(V, F, normalize=False)``). The quadrics are the transposed
     view of an (11,n) C-contiguous array (``State`` keeps that layout)."""
     n = V.shape[0]
-    Qf, Nf, Nraw = _face_planes(V, F, tun.area_power)
-    QT = _accumulate_T(Qf, F.T.ravel(), n, 3)  # (11, n), transposed once at the end
-    del Qf
+    QT, Nf, Nraw = _vertex_face_quadrics(V, F, n, tun.area_power)  # (11, n)
     feat = np.zeros(twin.size, dtype=bool)
     items, ends = [], []
     if preserve_boundary:
@@ -223,7 +225,12 @@ def _normal_sums(F, N, n):
     if F.shape[0] == 0:
         return np.zeros((n, 3))
     Fr = F.ravel()
-    return np.stack([np.bincount(Fr, weights=np.repeat(N[:, k], 3), minlength=n) for k in range(3)], axis=1)
+    w = np.empty(Fr.size)
+    out = np.empty((n, 3))
+    for k in range(3):
+        w.reshape(-1, 3)[:] = N[:, k, None]  # np.repeat(N[:, k], 3) without a new array
+        out[:, k] = np.bincount(Fr, weights=w, minlength=n)
+    return out
 
 
 def _relocate_cage(mesh, Vn, tun):
@@ -266,10 +273,15 @@ def simplify(V, F, *, target_faces=None, ratio=None, max_error=None, preserve_bo
         Add heavy constraint planes on open borders so they keep their shape;
         an interior edge with one boundary endpoint collapses onto it.
     preserve_topology : bool
-        Enforce the link condition (genus, boundary loops and components kept,
-        never a non-manifold edge or vertex). ``False`` is accepted for API
-        compatibility and currently behaves the same (the output is never
-        allowed to become non-manifold either way).
+        Enforce the link condition: genus, boundary loops and components
+        kept, never a non-manifold edge or vertex. With ``False``, once the
+        link condition stops every collapse before the target, holes bounded
+        by three edges are closed with a triangle and components that cannot
+        shrink any further (a tetrahedron, a lone triangle; at most a quarter
+        of the mesh's size and no larger than ``max_error`` when it is given;
+        never the largest component or one with locked vertices) are
+        removed, smallest first, and simplification goes on. The output is still a
+        clean manifold; input vertices of removed components map to ``-1``.
     feature_angle_deg : float in (0, 180] or None
         Edges whose faces meet at more than this angle get constraint planes
         (creases and corners survive) and are reported in ``feature_edges``.
@@ -348,6 +360,18 @@ def simplify(V, F, *, target_faces=None, ratio=None, max_error=None, preserve_bo
     passes = 0
     if target is None or m0 > target:
         stopped, passes = run(mesh, target, max_err_n, preserve_boundary, progress, m0, tun)
+        while not preserve_topology and stopped == "no_valid_collapse":
+            # the link condition stopped every collapse: close 3-edge holes, drop
+            # components that cannot shrink, and go on
+            need = mesh.F.shape[0] - target if target is not None else mesh.F.shape[0]
+            changed = close_triangular_holes(mesh)
+            if not changed:
+                size = tun.relax_max_size if max_err_n is None else min(tun.relax_max_size, max_err_n)
+                changed = drop_stuck_components(mesh, need, size)
+            if not changed:
+                break
+            stopped, more = run(mesh, target, max_err_n, preserve_boundary, progress, m0, tun)
+            passes += more
     worst = mesh.worst
     if (tun.relocate_iters > 0 and passes > 0 and stopped != "cancelled"
             and mesh.F.shape[0] <= min(tun.relocate_max_faces, tun.relocate_max_share * m0)):

@@ -400,3 +400,95 @@ def test_output_does_not_depend_on_threads_or_block_size(monkeypatch):
     assert np.array_equal(a.F, b.F) and np.array_equal(a.V, b.V)
     assert np.array_equal(a.vertex_map, b.vertex_map)
     assert a.F.shape[0] == 300 and a.n_passes == b.n_passes
+
+
+# ---------------------------------------------------------------- preserve_topology=False
+def _two_spheres(small=0.05):
+    V1, F1 = icosphere(2)
+    V2, F2 = icosphere(1, radius=small)
+    return np.concatenate([V1, V2 + [3.0, 0.0, 0.0]]), np.concatenate([F1, F2 + V1.shape[0]])
+
+
+def test_relaxed_topology_drops_a_component_that_cannot_shrink():
+    V, F = _two_spheres()
+    kept = simplify(V, F, target_faces=4)
+    assert kept.F.shape[0] == 8 and kept.stopped_because == "no_valid_collapse"
+    assert topology_summary(kept.F, kept.V.shape[0]).components == 2
+    r = simplify(V, F, target_faces=4, preserve_topology=False)
+    assert r.F.shape[0] == 4 and r.stopped_because == "target"
+    rep = manifold_report(r.F, r.V.shape[0])
+    assert rep.is_oriented_manifold
+    summary = topology_summary(r.F, r.V.shape[0])
+    assert (summary.components, summary.euler, summary.boundary_edges) == (1, 2, 0)
+    small = np.arange(V.shape[0]) >= icosphere(2)[0].shape[0]
+    assert np.all(r.vertex_map[small] == -1) and np.all(r.vertex_map[~small] >= 0)
+    assert_clean(r)
+
+
+def test_relaxed_topology_respects_max_error_and_locks():
+    V, F = _two_spheres(small=0.05)
+    # the small sphere (diagonal ~0.17) is larger than the bound: it stays
+    r = simplify(V, F, max_error=0.01, target_faces=4, preserve_topology=False)
+    assert topology_summary(r.F, r.V.shape[0]).components == 2
+    # a component with a locked vertex is never removed, nor the largest one
+    locked = np.zeros(V.shape[0], dtype=bool)
+    locked[-1] = True
+    r = simplify(V, F, target_faces=4, preserve_topology=False, locked=locked)
+    assert topology_summary(r.F, r.V.shape[0]).components == 2 and r.F.shape[0] == 8
+    assert r.stopped_because == "no_valid_collapse"
+    assert np.array_equal(r.V[r.vertex_map[-1]], V[-1])
+    # nor one larger than a quarter of the mesh
+    V2, F2 = _two_spheres(small=0.9)
+    r = simplify(V2, F2, target_faces=4, preserve_topology=False)
+    assert topology_summary(r.F, r.V.shape[0]).components == 2
+
+
+def test_relaxed_topology_closes_triangular_holes():
+    # an open tube (two boundary loops) can shrink to a 6-face band with its topology
+    # kept; relaxed, both rims close once they are triangles and it ends as a tetrahedron
+    n_u, n_v = 12, 6
+    u = np.arange(n_u) * 2 * np.pi / n_u
+    z = np.linspace(0.0, 1.0, n_v)
+    V = np.stack([np.repeat(np.cos(u)[None], n_v, 0), np.repeat(np.sin(u)[None], n_v, 0),
+                  np.repeat(z[:, None], n_u, 1)], axis=2).reshape(-1, 3)
+    i, j = np.meshgrid(np.arange(n_v - 1), np.arange(n_u), indexing="ij")
+    a, b = i * n_u + j, i * n_u + (j + 1) % n_u
+    c, d = a + n_u, b + n_u
+    F = np.concatenate([np.stack([a, b, d], -1).reshape(-1, 3), np.stack([a, d, c], -1).reshape(-1, 3)])
+    before = topology_summary(F, V.shape[0])
+    assert (before.boundary_loops, before.euler) == (2, 0)
+    kept = simplify(V, F, target_faces=4)
+    s = topology_summary(kept.F, kept.V.shape[0])
+    assert (s.boundary_loops, s.euler, kept.F.shape[0]) == (2, 0, 6)
+    r = simplify(V, F, target_faces=4, preserve_topology=False)
+    s = topology_summary(r.F, r.V.shape[0])
+    assert (s.boundary_loops, s.boundary_edges, s.euler, s.components, r.F.shape[0]) == (0, 0, 2, 1, 4)
+    assert manifold_report(r.F, r.V.shape[0]).is_oriented_manifold
+    assert_clean(r, V, F)
+
+
+@settings(max_examples=25, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(seed=st.integers(0, 10_000), holes=st.integers(0, 6), frac=st.floats(0.0, 0.3))
+def test_relaxed_topology_always_leaves_a_clean_manifold(seed, holes, frac):
+    # spheres with holes punched in and a tiny floating shell, taken far down
+    rng = np.random.default_rng(seed)
+    V, F = _two_spheres(small=0.02)
+    big = np.flatnonzero(F.max(axis=1) < icosphere(2)[0].shape[0])
+    F = np.delete(F, rng.choice(big, size=holes, replace=False), axis=0)
+    V = V * (1 + 0.05 * rng.standard_normal(V.shape[0]))[:, None]
+    target = int(frac * F.shape[0])
+    r = simplify(V, F, target_faces=target, preserve_topology=False)
+    rep = manifold_report(r.F, r.V.shape[0])
+    rep_in = manifold_report(F, V.shape[0])     # holes sharing a corner make a bow-tie vertex
+    assert rep.non_manifold_edges.shape[0] == 0
+    assert rep.non_manifold_vertices.shape[0] <= rep_in.non_manifold_vertices.shape[0]
+    assert rep.is_oriented_manifold or not rep_in.is_oriented_manifold, rep
+    assert rep.degenerate_faces.shape[0] == 0 and rep.duplicate_faces.shape[0] == 0
+    used = np.unique(r.F)
+    assert np.array_equal(used, np.arange(r.V.shape[0]))
+    assert np.all(r.vertex_map < r.V.shape[0])
+    assert np.array_equal(np.unique(r.vertex_map[r.vertex_map >= 0]), used)
+    before = topology_summary(F, V.shape[0])
+    after = topology_summary(r.F, r.V.shape[0])
+    assert after.components <= before.components and after.boundary_loops <= before.boundary_loops
+    assert r.F.shape[0] <= max(target, 4) or r.stopped_because == "no_valid_collapse"

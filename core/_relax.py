@@ -1,0 +1,129 @@
+"""Topology changes that ``simplify(..., preserve_topology=False)`` allows
+once the link condition has stopped every collapse (private).
+
+Both keep the mesh a clean manifold:
+
+* a hole bounded by three edges is closed with one triangle (the rim's
+  half-edges get the new face's as twins), so its rim can collapse further;
+* a component that cannot lose another face (a tetrahedron, a lone
+  triangle) is removed, smallest first, while faces are still needed.
+
+They work on a compact :class:`core._collapse.State` and leave it compact.
+"""
+
+import numpy as np
+
+from ._clean import BOUNDARY
+from ._collapse import _compact, _ends
+from .topology import face_components
+
+_HALF_EDGE = {"twin": -1, "feat": False, "swap": False, "blk_pass": -1, "c_cost": 0.0, "c_blk": -1.0,
+              "c_stale": True}
+
+
+def close_triangular_holes(st):
+    """Cap every boundary loop of exactly three edges whose triangle is not
+    already a face. Returns the number of caps."""
+    F, twin = st.F, st.twin
+    n = st.V.shape[0]
+    hb = np.flatnonzero(twin == BOUNDARY)
+    if hb.size < 3:
+        return 0
+    u, w = _ends(F, hb)                           # the face runs u -> w along its border
+    deg = np.bincount(u, minlength=n) + np.bincount(w, minlength=n)
+    nsum = np.bincount(u, weights=w, minlength=n) + np.bincount(w, weights=u, minlength=n)
+    nsum = np.rint(nsum).astype(np.int64)         # sum of each rim vertex's two rim neighbours
+    z = nsum[u] - w                                # u's other rim neighbour
+    loop = (deg[u] == 2) & (deg[w] == 2) & (z == nsum[w] - u)
+    z = np.where(loop, z, 0)
+    loop &= (deg[z] == 2) & (nsum[z] == u + w) & (z != u) & (z != w)
+    if not loop.any():
+        return 0
+    hb, u, w, z = hb[loop], u[loop], w[loop], z[loop]
+    # one cap per loop (each loop was found from its three edges) ...
+    tri = np.sort(np.stack([u, w, z], axis=1), axis=1)
+    nn = np.int64(n)
+    key = (tri[:, 0] * nn + tri[:, 1]) * nn + tri[:, 2]
+    _, first = np.unique(key, return_index=True)
+    hb, u, w, z, key = hb[first], u[first], w[first], z[first], key[first]
+    # ... unless that triangle is already a face (a lone triangle, or a cap would double a face)
+    Fs = np.sort(F, axis=1)
+    fkey = np.sort((Fs[:, 0] * nn + Fs[:, 1]) * nn + Fs[:, 2])
+    pos = np.minimum(np.searchsorted(fkey, key), fkey.size - 1)
+    new = fkey[pos] != key
+    hb, u, w, z = hb[new], u[new], w[new], z[new]
+    k = hb.size
+    if k == 0:
+        return 0
+    # rim half-edges by undirected key, to pair the caps' sides with them
+    hall = np.flatnonzero(twin == BOUNDARY)
+    ua, wa = _ends(F, hall)
+    ekey = np.minimum(ua, wa) * nn + np.maximum(ua, wa)
+    order = np.argsort(ekey)
+    ekey, hall = ekey[order], hall[order]
+
+    def rim(a, b):
+        q = np.minimum(a, b) * nn + np.maximum(a, b)
+        return hall[np.searchsorted(ekey, q)]
+
+    m = F.shape[0]
+    caps = np.stack([w, u, z], axis=1)            # opposite direction to the rim: w -> u, u -> z, z -> w
+    hc = 3 * (m + np.arange(k, dtype=np.int64))
+    pairs = [(hc + 0, rim(u, z)), (hc + 1, rim(z, w)), (hc + 2, hb)]  # edge c is opposite corner c
+    st.F = np.concatenate([F, caps])
+    for name, fill in _HALF_EDGE.items():
+        setattr(st, name, np.concatenate([getattr(st, name), np.full(3 * k, fill)]))
+    st.c_x = [np.concatenate([c, np.zeros(3 * k)]) for c in st.c_x]
+    for a, b in pairs:
+        st.twin[a] = b
+        st.twin[b] = a
+    st.alive = np.ones(st.F.shape[0], dtype=bool)
+    st.m_live = st.F.shape[0]
+    rimv = np.concatenate([u, w, z])
+    st.is_bnd[rimv] = False
+    # the rims' edges were invalid (both ends on a border): cost everything afresh
+    st.c_cost[:] = 0.0
+    st.c_stale[:] = True
+    return k
+
+
+def drop_stuck_components(st, need, max_size):
+    """Remove components of at most four faces (they cannot collapse further),
+    smallest bounding box first, until ``need`` faces are gone; only those
+    whose bounding-box diagonal is at most ``max_size`` (working units), that
+    have no locked vertex and are not the largest component. Returns the
+    number of faces removed."""
+    F = st.F
+    n, m = st.V.shape[0], F.shape[0]
+    if m == 0 or need <= 0:
+        return 0
+    comp, k = face_components(F, n)
+    size = np.bincount(comp, minlength=k)
+    vcomp = np.full(n, -1, dtype=np.int64)
+    vcomp[F.ravel()] = np.repeat(comp, 3)
+    used = vcomp >= 0
+    lo = np.full((k, 3), np.inf)
+    hi = np.full((k, 3), -np.inf)
+    np.minimum.at(lo, vcomp[used], st.V[used])
+    np.maximum.at(hi, vcomp[used], st.V[used])
+    diag = np.linalg.norm(hi - lo, axis=1)
+    locked = np.bincount(vcomp[used], weights=st.locked[used], minlength=k) > 0
+    ok = (size <= 4) & ~locked & (diag <= max_size)
+    ok[np.argmax(diag)] = False
+    cand = np.flatnonzero(ok)
+    if cand.size == 0:
+        return 0
+    cand = cand[np.argsort(diag[cand], kind="stable")]
+    take = np.cumsum(size[cand]) - size[cand] < need
+    drop = np.zeros(k, dtype=bool)
+    drop[cand[take]] = True
+    st.alive = ~drop[comp]
+    dead_v = used & drop[np.maximum(vcomp, 0)]
+    st.dead_v = dead_v
+    cur = st.cur_of_clean
+    st.cur_of_clean = np.where(cur >= 0, cur, 0)
+    st.cur_of_clean = np.where((cur >= 0) & ~dead_v[st.cur_of_clean], cur, -1)
+    st.m_live = int(st.alive.sum())
+    removed = m - st.m_live
+    _compact(st)
+    return removed
