@@ -78,8 +78,9 @@ class MeshAdjustSettings(bpy.types.PropertyGroup):
                                              "diagonal")
     preserve_boundary: BoolProperty(name="Preserve boundary", default=True)
     preserve_topology: BoolProperty(name="Keep topology", default=True,
-                                    description="Keep genus, holes and components (needed to "
-                                                "refine the cage)")
+                                    description="Keep genus, holes and components. Off: once "
+                                                "nothing else can collapse, holes of three edges "
+                                                "close and tiny pieces that cannot shrink go")
     feature_angle_deg: FloatProperty(name="Feature angle", default=60.0, min=0.0, max=180.0,
                                      description="Edges sharper than this are kept as creases "
                                                  "(180 turns it off)")
