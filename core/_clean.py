@@ -36,6 +36,8 @@ _NEXT_OFF = np.array([1, 1, -2], dtype=np.int64)
 _PREV_OFF = np.array([2, -1, -1], dtype=np.int64)
 #: lock-step fan walks longer than this finish with a union-find instead
 _MAX_WALK = 64
+#: vertices walked together (keeps the walk's temporaries in cache)
+_WALK_CHUNK = 1 << 15
 
 
 class CleanMesh(NamedTuple):
@@ -241,6 +243,30 @@ def _fans_union_find(F, twin, U, W, vertices, n_vertices):
     return np.bincount(Fr[nodes[roots]], minlength=n_vertices)
 
 
+def _walk_fans(twin, U, v, e, corners):
+    """Lock-step walks around vertices ``v`` from the exit half-edges ``e``
+    (in the first face). Returns the vertices found with several fans and
+    those still walking after ``_MAX_WALK`` steps."""
+    base0 = e - e % 3                                     # first face (3 f) of the walk
+    # once a walk has seen more than corners - 3 faces, the rest cannot hold
+    # another (closed) fan: one fan. A walk that ends before that is one of several.
+    left = corners - 4                                    # faces to see after the next one
+    found = []
+    for _ in range(_MAX_WALK):
+        if v.size == 0:
+            break
+        t = twin[e]
+        jt = t % 3
+        g = t - jt
+        stop = (t < 0) | (g == base0)                     # open end reached / back at the start
+        found.append(v[stop])
+        go = np.flatnonzero(~stop & (left > 0))
+        v, t, jt, base0, left = v[go], t[go], jt[go], base0[go], left[go] - 1
+        # leave the new face through its other edge at v
+        e = t + np.where(U[t] == v, _PREV_OFF[jt], _NEXT_OFF[jt])
+    return np.concatenate(found) if found else v[:0], v
+
+
 def non_manifold_vertices(F, n_vertices, twin, *, ends=None):
     """Boolean mask of vertices on a non-manifold edge or whose faces form
     more than one fan (bow-tie vertices), (n,) bool.
@@ -275,25 +301,15 @@ def non_manifold_vertices(F, n_vertices, twin, *, ends=None):
     j = hopen % 3
     start[Uo] = hopen + _PREV_OFF[j]                      # the other edge at U in that face
     start[Wo] = hopen + _NEXT_OFF[j]                      # the other edge at W
-    v = np.flatnonzero(walk)
-    e = start[v]
-    base0 = e - e % 3                                     # first face (3 f) of the walk
-    # once a walk has seen more than corners - 3 faces, the rest cannot hold
-    # another (closed) fan: one fan. A walk that ends before that is one of several.
-    left = corners[v] - 4                                 # faces to see after the next one
-    steps = 0
-    while v.size:
-        if steps == _MAX_WALK:                            # very high valence: union-find the rest
-            bad[v[_fans_union_find(F, twin, U, W, v, n)[v] > 1]] = True
-            break
-        steps += 1
-        t = twin[e]
-        jt = t % 3
-        g = t - jt
-        stop = (t < 0) | (g == base0)                     # open end reached / back at the start
-        bad[v[stop]] = True
-        go = np.flatnonzero(~stop & (left > 0))
-        v, t, jt, base0, left = v[go], t[go], jt[go], base0[go], left[go] - 1
-        # leave the new face through its other edge at v
-        e = t + np.where(U[t] == v, _PREV_OFF[jt], _NEXT_OFF[jt])
+    # walk in chunks of vertices: every temporary stays small (in cache)
+    todo = np.flatnonzero(walk)
+    rest = []
+    for i in range(0, todo.size, _WALK_CHUNK):
+        v = todo[i:i + _WALK_CHUNK]
+        bad_v, left_v = _walk_fans(twin, U, v, start[v], corners[v])
+        bad[bad_v] = True
+        rest.append(left_v)
+    rest = np.concatenate(rest) if rest else todo[:0]
+    if rest.size:  # very high valence: union-find the rest
+        bad[rest[_fans_union_find(F, twin, U, W, rest, n)[rest] > 1]] = True
     return bad

@@ -89,24 +89,82 @@ def _face_planes(V, F, area_power):
     """``face_quadrics`` plus both normals: ``(Q (m,11), unit (m,3), N (m,3))``,
     ``N`` the unnormalised normal (length twice the area, as
     ``core.mesh.face_normals(V, F, normalize=False)``)."""
-    p0 = np.take(V, F[:, 0], axis=0)
-    N = np.cross(np.take(V, F[:, 1], axis=0) - p0, np.take(V, F[:, 2], axis=0) - p0)
-    length = np.sqrt(np.einsum("ij,ij->i", N, N))
-    pos = length > 0
-    if pos.all():
-        unit = N / length[:, None]
-    else:
-        unit = np.divide(N, length[:, None], out=np.zeros_like(N), where=pos[:, None])
-    d = -np.einsum("ij,ij->i", unit, p0)
-    area = 0.5 * length
+    N, unit, d, area = _face_geometry(V, F)
+    return plane_quadrics(unit, d, _plane_weights(area, area_power)), unit, N
+
+
+#: faces per block of work (temporaries stay in cache)
+_BLOCK = 1 << 15
+
+
+def _face_geometry(V, F):
+    """Unnormalised normals N (m,3), unit normals (m,3) (zero for degenerate
+    faces), plane offsets d (m,) and areas (m,), block by block."""
+    m = F.shape[0]
+    N = np.empty((m, 3))
+    unit = np.empty((m, 3))
+    d = np.empty(m)
+    area = np.empty(m)
+    for a in range(0, m, _BLOCK):
+        b = min(a + _BLOCK, m)
+        Fb = F[a:b]
+        p0 = np.take(V, Fb[:, 0], axis=0)
+        Nb = np.cross(np.take(V, Fb[:, 1], axis=0) - p0, np.take(V, Fb[:, 2], axis=0) - p0)
+        N[a:b] = Nb
+        length = np.sqrt(np.einsum("ij,ij->i", Nb, Nb))
+        ub = np.divide(Nb, length[:, None], out=np.zeros_like(Nb), where=length[:, None] > 0)
+        unit[a:b] = ub
+        d[a:b] = -np.einsum("ij,ij->i", ub, p0)
+        area[a:b] = 0.5 * length
+    return N, unit, d, area
+
+
+def _plane_weights(area, area_power):
+    """``A^p * mean(A)^(1-p)`` where ``A > 0`` (see :func:`face_quadrics`); may
+    reuse ``area``."""
     if area_power != 1.0 and area.size:
         mean = float(area.mean())
         if mean > 0:
-            if pos.all():
-                area = area ** area_power * mean ** (1.0 - area_power)
-            else:
-                area[pos] = area[pos] ** area_power * mean ** (1.0 - area_power)
-    return plane_quadrics(unit, d, area), unit, N
+            pos = area > 0
+            area[pos] = area[pos] ** area_power * mean ** (1.0 - area_power)
+    return area
+
+
+def _vertex_face_quadrics(V, F, n, area_power):
+    """Sum of the face quadrics around each vertex, coefficient-major.
+
+    The same numbers as ``accumulate(face_quadrics(V, F, area_power=p),
+    F.T.ravel(), n, repeat=3)`` (same operations, same summation order),
+    without the (m,11) stack: each coefficient row is made block by block
+    straight into the weights of its ``bincount``.
+
+    Returns
+    -------
+    QT : (11,n) float64, C-contiguous.
+    unit : (m,3) float64, unit face normals (zero for degenerate faces).
+    N : (m,3) float64, unnormalised normals (length twice the area).
+    """
+    m = F.shape[0]
+    N, unit, d, area = _face_geometry(V, F)
+    w = _plane_weights(area, area_power)
+    # plane_quadrics' products (w * first) * second, one coefficient at a time
+    nx, ny, nz = unit[:, 0], unit[:, 1], unit[:, 2]
+    rows = [(nx, nx), (nx, ny), (nx, nz), (ny, ny), (ny, nz), (nz, nz), (d, nx), (d, ny), (d, nz), (d, d)]
+    QT = np.empty((N_COEFFS, n))
+    w3 = np.empty(3 * m)
+    index = F.T.ravel()
+    for j in range(N_COEFFS):
+        if j == 10:
+            w3[:m] = w
+        else:
+            f1, f2 = rows[j]
+            for a in range(0, m, _BLOCK):
+                b = min(a + _BLOCK, m)
+                np.multiply(w[a:b] * f1[a:b], f2[a:b], out=w3[a:b])
+        w3[m:2 * m] = w3[:m]
+        w3[2 * m:] = w3[:m]
+        QT[j] = np.bincount(index, weights=w3, minlength=n)
+    return QT, unit, N
 
 
 def edge_constraint_quadrics(V, E, face_normals, weights):
