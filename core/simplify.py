@@ -77,7 +77,7 @@ class Tuning:
     haus_weight: float = 0.15
     haus_phase: float = 4.0          #: ... only once the mesh has at most this many times the target faces
     relocate_iters: int = 2          #: final relocation rounds towards the input (0: off)
-    relocate_samples: int = 60000    #: at most this many input vertices as relocation targets
+    relocate_samples: int = 20000    #: at most this many input vertices as relocation targets
     relocate_reg: float = 1.0        #: pull of each vertex to its place, relative to its samples
     relocate_max_faces: int = 200000  #: ... only for cages up to this size
     relocate_max_share: float = 0.5  #: ... and at most this share of the input's faces
