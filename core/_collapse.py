@@ -67,6 +67,7 @@ class State:
         self.c_blk = np.full(h3, -1.0)
         self.c_stale = np.ones(h3, dtype=bool)          # cached cost is only a lower bound
         self.cur_of_clean = np.arange(n, dtype=np.int64)
+        self.parent = np.arange(n, dtype=np.int64)      # survivor of each vertex merged since the last compaction
         # removed faces and vertices stay in the arrays (faces marked dead, their
         # half-edges' twin DEAD) until enough have gone to make compaction pay
         self.alive = np.ones(F.shape[0], dtype=bool)
@@ -408,7 +409,9 @@ def _run(st, target, max_err_n, preserve_boundary, progress, m0, tun):
         stale = _take(st.c_stale, rep)
         cost = _take(st.c_cost, rep)
         bv = _take(st.c_blk, rep)
-        blocked = (bv >= 0) & (_take(st.blk_pass, rep) > np.maximum(_take(st.vver, U), _take(st.vver, W)))
+        mem = np.flatnonzero(bv >= 0)           # rejections remembered until the neighbourhood changes
+        blocked = np.zeros(rep.size, dtype=bool)
+        blocked[mem] = _take(st.blk_pass, rep[mem]) > np.maximum(_take(st.vver, U[mem]), _take(st.vver, W[mem]))
         cost = np.where(blocked, np.maximum(cost, bv), cost)
         cand = np.isfinite(cost)
         ne = int(np.count_nonzero(cand))
@@ -472,9 +475,12 @@ def _run(st, target, max_err_n, preserve_boundary, progress, m0, tun):
             np.minimum.at(vmin, ab, ka)
             fmin = np.minimum(np.minimum(_take(vmin, FT[0]), _take(vmin, FT[1])), _take(vmin, FT[2]))
             live = np.flatnonzero(fmin < _BIG)
-            fh = _take(fmin, live)
-            FT = np.ascontiguousarray(FT[:, live])
-            fidx = fidx[live]
+            if live.size < 0.75 * fidx.size:      # keep only the faces still in play
+                FT = np.ascontiguousarray(FT[:, live])
+                fidx = fidx[live]
+                fh = _take(fmin, live)
+            else:                                 # (a _BIG minimum changes nothing below)
+                fh = fmin
             vmin2 = np.full(n, _BIG, dtype=np.int64)
             for j in range(3):
                 np.minimum.at(vmin2, FT[j], fh)
@@ -484,7 +490,7 @@ def _run(st, target, max_err_n, preserve_boundary, progress, m0, tun):
             # the star of a chosen edge is exactly the set of faces whose minimum is its key
             pos = np.full(P, -1, dtype=np.int64)
             pos[sel] = np.arange(sel.size)
-            fpos = pos[fh & imask]
+            fpos = np.where(fh < _BIG, _take(pos, np.minimum(fh & imask, P - 1)), -1)
             in_star = fpos >= 0
             star = fidx[in_star]
             kf = fpos[in_star]
@@ -565,9 +571,20 @@ def _apply(st, A, B, X, star, kf, coll):
     st.alive[cf] = False
     st.m_live -= cf.size
     st.dead_v[B] = True
-    remap = np.arange(n, dtype=np.int64)
-    remap[B] = A
-    st.cur_of_clean = _take(remap, st.cur_of_clean)
+    st.parent[B] = A
+
+
+def _survivors(st):
+    """Current vertex of every clean input vertex (``-1``: removed), following
+    the merges since the last compaction (a few pointer jumps)."""
+    cur = st.cur_of_clean
+    ok = cur >= 0
+    c = np.where(ok, cur, 0)
+    while True:
+        nxt = _take(st.parent, c)
+        if np.array_equal(nxt, c):
+            return np.where(ok, c, -1)
+        c = nxt
 
 
 def _compact(st):
@@ -602,8 +619,9 @@ def _compact(st):
             st.c_x[name] = arr
         else:
             setattr(st, name, arr)
-    cur = st.cur_of_clean
+    cur = _survivors(st)
     st.cur_of_clean = np.where(cur >= 0, _take(new_v, np.maximum(cur, 0)), -1)  # -1: removed component
     st.alive = np.ones(st.F.shape[0], dtype=bool)
     st.dead_v = np.zeros(st.V.shape[0], dtype=bool)
+    st.parent = np.arange(st.V.shape[0], dtype=np.int64)
     st.m_live = st.F.shape[0]

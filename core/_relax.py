@@ -14,7 +14,7 @@ They work on a compact :class:`core._collapse.State` and leave it compact.
 import numpy as np
 
 from ._clean import BOUNDARY
-from ._collapse import _compact, _ends
+from ._collapse import _compact, _ends, _survivors
 from .topology import face_components
 
 _HALF_EDGE = {"twin": -1, "feat": False, "swap": False, "blk_pass": -1, "c_cost": 0.0, "c_blk": -1.0,
@@ -120,9 +120,9 @@ def drop_stuck_components(st, need, max_size):
     st.alive = ~drop[comp]
     dead_v = used & drop[np.maximum(vcomp, 0)]
     st.dead_v = dead_v
-    cur = st.cur_of_clean
-    st.cur_of_clean = np.where(cur >= 0, cur, 0)
-    st.cur_of_clean = np.where((cur >= 0) & ~dead_v[st.cur_of_clean], cur, -1)
+    cur = _survivors(st)
+    st.cur_of_clean = np.where((cur >= 0) & ~dead_v[np.maximum(cur, 0)], cur, -1)
+    st.parent = np.arange(n, dtype=np.int64)
     st.m_live = int(st.alive.sum())
     removed = m - st.m_live
     _compact(st)
