@@ -52,14 +52,30 @@ class CleanMesh(NamedTuple):
     n_unreferenced_vertices: int  #: vertices no kept face uses
 
 
+_KEY_MAX_N = 2_097_151  # (n + 1)^3 <= 2^63: ``(lo n + mid) n + hi`` fits in an int64
+
+
 def _face_keys(F, n_in):
-    """Key of each face's vertex set, ``(lo n + mid) n + hi`` (the sorted row)."""
+    """Key of each face's vertex set: equal keys for equal sets.
+
+    ``(lo n + mid) n + hi`` of the sorted row when that fits in an int64
+    (fewer than ~2.1M vertices), else the rank of the sorted row among the
+    distinct rows (one lexicographic sort).
+    """
     a, b, c = F[:, 0], F[:, 1], F[:, 2]
     lo = np.minimum(np.minimum(a, b), c)
     hi = np.maximum(np.maximum(a, b), c)
     mid = a + b + c - lo - hi
-    nn = np.int64(max(n_in, 1))
-    return (lo * nn + mid) * nn + hi
+    if n_in <= _KEY_MAX_N:
+        nn = np.int64(max(n_in, 1))
+        return (lo * nn + mid) * nn + hi
+    order = np.lexsort((hi, mid, lo))
+    new = np.ones(order.size, dtype=bool)
+    new[1:] = ((lo[order[1:]] != lo[order[:-1]]) | (mid[order[1:]] != mid[order[:-1]])
+               | (hi[order[1:]] != hi[order[:-1]]))
+    key = np.empty(order.size, dtype=np.int64)
+    key[order] = np.cumsum(new) - 1
+    return key
 
 
 def _first_of_keys(key):

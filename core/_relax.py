@@ -13,7 +13,7 @@ They work on a compact :class:`core._collapse.State` and leave it compact.
 
 import numpy as np
 
-from ._clean import BOUNDARY
+from ._clean import BOUNDARY, _face_keys
 from ._collapse import _compact, _ends, _survivors
 from .topology import face_components
 
@@ -41,17 +41,15 @@ def close_triangular_holes(st):
         return 0
     hb, u, w, z = hb[loop], u[loop], w[loop], z[loop]
     # one cap per loop (each loop was found from its three edges) ...
-    tri = np.sort(np.stack([u, w, z], axis=1), axis=1)
-    nn = np.int64(n)
-    key = (tri[:, 0] * nn + tri[:, 1]) * nn + tri[:, 2]
+    keys = _face_keys(np.concatenate([np.stack([u, w, z], axis=1), F]), n)
+    key, fkey = keys[:u.size], np.sort(keys[u.size:])
     _, first = np.unique(key, return_index=True)
     hb, u, w, z, key = hb[first], u[first], w[first], z[first], key[first]
     # ... unless that triangle is already a face (a lone triangle, or a cap would double a face)
-    Fs = np.sort(F, axis=1)
-    fkey = np.sort((Fs[:, 0] * nn + Fs[:, 1]) * nn + Fs[:, 2])
     pos = np.minimum(np.searchsorted(fkey, key), fkey.size - 1)
     new = fkey[pos] != key
     hb, u, w, z = hb[new], u[new], w[new], z[new]
+    nn = np.int64(n)
     k = hb.size
     if k == 0:
         return 0

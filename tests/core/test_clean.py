@@ -222,3 +222,24 @@ def test_clean_mesh_does_not_modify_or_alias_its_inputs():
         assert not np.shares_memory(out.V, V) and not np.shares_memory(out.F, F)
     np.testing.assert_array_equal(V, V0)
     np.testing.assert_array_equal(F, F0)
+
+
+def test_duplicate_faces_found_beyond_the_packed_key_range(monkeypatch):
+    # above ~2.1M vertices (lo n + mid) n + hi overflows an int64; the keys fall back
+    # to ranks of the sorted rows: check both paths agree, and a real index that large
+    import importlib
+    clean = importlib.import_module("core._clean")
+    V, F = icosphere(2)
+    F = np.concatenate([F, F[[3, 7]][:, [1, 2, 0]], F[[5]][:, ::-1]])   # 3 duplicates, any order
+    ref = clean_mesh(V, F)
+    monkeypatch.setattr(clean, "_KEY_MAX_N", 0)
+    fast = clean_mesh(V, F)
+    both = clean.clean_with_twins(V, F)[0]
+    for got in (fast, both):
+        assert got.n_duplicate_faces == 3 == ref.n_duplicate_faces
+        assert np.array_equal(got.F, ref.F)
+    monkeypatch.undo()
+    big = 3_000_000
+    Fb = np.array([[0, 1, big], [big, 0, 1], [1, 2, big], [0, 2, big - 1]], dtype=np.int64)
+    keys = clean._face_keys(Fb, big + 1)
+    assert keys[0] == keys[1] and len(set(keys.tolist())) == 3
