@@ -306,10 +306,13 @@ def _check_block(st, A, B, X, interior, star, kf, tun, haus=True):
     if tun.ref_cos > -1.0:
         Nr = st.Nref
         moved_v = Fm[np.arange(mv.size), cm]
-        ref = (_take(Nr, Fm[:, 0], axis=0) + _take(Nr, Fm[:, 1], axis=0) + _take(Nr, Fm[:, 2], axis=0)
-               - _take(Nr, moved_v, axis=0) + _take(_take(Nr, A, axis=0) + _take(Nr, B, axis=0), mk, axis=0))
+        ref0 = _take(Nr, Fm[:, 0], axis=0) + _take(Nr, Fm[:, 1], axis=0) + _take(Nr, Fm[:, 2], axis=0)
+        ref = ref0 - _take(Nr, moved_v, axis=0) + _take(_take(Nr, A, axis=0) + _take(Nr, B, axis=0), mk, axis=0)
         lr = np.sqrt(np.einsum("ij,ij->i", ref, ref))
         flip |= np.einsum("ij,ij->i", ref, N1) < tun.ref_cos * lr * l1
+        # a face already against its input (a fold of a noisy input) may move freely:
+        # holding it would freeze its whole neighbourhood at full resolution
+        flip &= np.einsum("ij,ij->i", ref0, N0) >= 0
     ok[mk[flip]] = False
     sumsq = np.einsum("ij,ij->i", e0, e0) + np.einsum("ij,ij->i", e1, e1) + np.einsum("ij,ij->i", e2, e2)
     g_new = _SQRT3x2 * l1 / np.where(sumsq > 0, sumsq, 1.0)

@@ -77,7 +77,8 @@ class Tuning:
     haus_weight: float = 0.15
     haus_phase: float = 4.0          #: ... only once the mesh has at most this many times the target faces
     relocate_iters: int = 2          #: final relocation rounds towards the input (0: off)
-    relocate_samples: int = 20000    #: at most this many input vertices as relocation targets
+    relocate_samples: int = 20000    #: input vertices as relocation targets: this many ...
+    relocate_per_vertex: int = 4     #: ... or this many per cage vertex, whichever is more
     relocate_reg: float = 1.0        #: pull of each vertex to its place, relative to its samples
     relocate_max_faces: int = 200000  #: ... only for cages up to this size
     relocate_max_share: float = 0.5  #: ... and at most this share of the input's faces
@@ -240,7 +241,8 @@ def _relocate_cage(mesh, Vn, tun):
     Uo, Wo = half_edge_ends(Fm)
     movable[Uo[mesh.feat]] = False
     movable[Wo[mesh.feat]] = False
-    step = max(1, int(np.ceil(Vn.shape[0] / tun.relocate_samples)))
+    samples = max(tun.relocate_samples, tun.relocate_per_vertex * mesh.V.shape[0])
+    step = max(1, int(np.ceil(Vn.shape[0] / samples)))
     P = Vn[::step]
     Nkeep = mesh.Nref[Fm].sum(axis=1) if tun.ref_cos > -1.0 else None
     Vnew = relocate(mesh.V, Fm, P, movable, iters=tun.relocate_iters, reg=tun.relocate_reg, N_keep=Nkeep)
