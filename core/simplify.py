@@ -61,7 +61,7 @@ class Tuning:
     area_power: float = 0.5          #: face plane weight = area^p * mean area^(1-p)
     boundary_weight: float = 100.0   #: boundary plane weight, times the edge length squared
     feature_weight: float = 3.0      #: crease plane weight, times the edge length squared
-    pool_share: float = 0.3          #: at most this share of the candidate edges per pass
+    pool_share: float = 0.2          #: at most this share of the candidate edges per pass
     pool_goal_factor: float = 1.5    #: ... and at most this many times the collapses still needed
     max_rounds: int = 4              #: selection rounds per pass
     bands: int = 8                   #: cost bands of the pool (random order inside a band)
