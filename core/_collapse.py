@@ -24,7 +24,7 @@ import numpy as np
 
 from ._clean import BOUNDARY, NON_MANIFOLD
 from ._parallel import blocks, run_blocks
-from .quadrics import DET_EPS, MAX_DRIFT
+from .quadrics import place_columns, quadric_at
 from .spatial import _kernel, _triangle_rows
 
 _BIG = np.iinfo(np.int64).max
@@ -84,62 +84,6 @@ def _ends(F, h):
     return _take(Fr, base + _take(_NEXT, c)), _take(Fr, base + _take(_PREV, c))
 
 
-def _quadric_at(q, x, y, z):
-    """Quadric error of columns ``q`` (11,k) at points ``(x, y, z)``, >= 0."""
-    return np.maximum(q[0] * x * x + q[3] * y * y + q[5] * z * z
-                      + 2.0 * (q[1] * x * y + q[2] * x * z + q[4] * y * z + q[6] * x + q[7] * y + q[8] * z)
-                      + q[9], 0.0)
-
-
-def _place(q, p0, p1):
-    """:func:`core.quadrics.optimal_placement` on columns: ``q`` (11,k) merged
-    quadrics, ``p0``, ``p1`` (3,k) endpoints; returns ``X`` (3,k) and the error (k,).
-
-    Same rule: closed-form 3x3 solve about the midpoint; where it is
-    ill-conditioned or drifts more than ``MAX_DRIFT`` edge lengths, the best of
-    the segment's minimum and the two endpoints.
-    """
-    q0, q1, q2, q3, q4, q5, b0, b1, b2 = q[:9]
-    c00 = q3 * q5 - q4 * q4
-    c01 = q2 * q4 - q1 * q5
-    c02 = q1 * q4 - q2 * q3
-    c11 = q0 * q5 - q2 * q2
-    c12 = q1 * q2 - q0 * q4
-    c22 = q0 * q3 - q1 * q1
-    det = q0 * c00 + q1 * c01 + q2 * c02
-    tr = (q0 + q3 + q5) * (1.0 / 3.0)
-    ok = np.abs(det) > DET_EPS * tr * tr * tr
-    inv = -1.0 / np.where(ok, det, 1.0)
-    mid = 0.5 * (p0 + p1)
-    mx, my, mz = mid
-    r0 = q0 * mx + q1 * my + q2 * mz + b0
-    r1 = q1 * mx + q3 * my + q4 * mz + b1
-    r2 = q2 * mx + q4 * my + q5 * mz + b2
-    y0 = (c00 * r0 + c01 * r1 + c02 * r2) * inv
-    y1 = (c01 * r0 + c11 * r1 + c12 * r2) * inv
-    y2 = (c02 * r0 + c12 * r1 + c22 * r2) * inv
-    d = p1 - p0
-    len2 = d[0] * d[0] + d[1] * d[1] + d[2] * d[2]
-    ok &= y0 * y0 + y1 * y1 + y2 * y2 <= (MAX_DRIFT * MAX_DRIFT) * len2
-    X = np.stack([mx + np.where(ok, y0, 0.0), my + np.where(ok, y1, 0.0), mz + np.where(ok, y2, 0.0)])
-    err = _quadric_at(q, X[0], X[1], X[2])
-    bad = np.flatnonzero(~ok)
-    if bad.size:
-        qb, s0, s1, db = q[:, bad], p0[:, bad], p1[:, bad], d[:, bad]
-        Ad = [qb[0] * db[0] + qb[1] * db[1] + qb[2] * db[2], qb[1] * db[0] + qb[3] * db[1] + qb[4] * db[2],
-              qb[2] * db[0] + qb[4] * db[1] + qb[5] * db[2]]
-        dAd = db[0] * Ad[0] + db[1] * Ad[1] + db[2] * Ad[2]
-        # derivative of E(p0 + t d) is 2 (d.(A p0 + b)) + 2 t dAd
-        g = Ad[0] * s0[0] + Ad[1] * s0[1] + Ad[2] * s0[2] + db[0] * qb[6] + db[1] * qb[7] + db[2] * qb[8]
-        t = np.clip(np.where(dAd > 0, -g / np.where(dAd > 0, dAd, 1.0), 0.5), 0.0, 1.0)
-        cands = [s0 + t * db, s0, s1]
-        errs = np.stack([_quadric_at(qb, *c) for c in cands])
-        best = np.argmin(errs, axis=0)
-        X[:, bad] = np.choose(best, cands)
-        err[bad] = errs[best, np.arange(bad.size)]
-    return X, err
-
-
 def _distance(st, cost, a, b):
     """RMS distance ``sqrt(cost / w)`` of edge collapses (``w``: the merged
     quadric's area; 0 where it has none), in working units."""
@@ -167,7 +111,7 @@ def _recost(st, rep, U, W, stale, preserve_boundary):
         q = _take(st.Q, a, axis=1)
         q += _take(st.Q, b, axis=1)
         pa, pb = _take(st.VT, a, axis=1), _take(st.VT, b, axis=1)
-        X, err = _place(q, pa, pb)
+        X, err = place_columns(q, pa, pb)
         # a position within round-off of an endpoint is that endpoint (it stays exact)
         E = pb - pa
         tol2 = _SNAP2 * (E[0] * E[0] + E[1] * E[1] + E[2] * E[2])
@@ -179,7 +123,7 @@ def _recost(st, rep, U, W, stale, preserve_boundary):
         X = np.where(pin, pa, np.where(snap_b, pb, X))
         fix = np.flatnonzero(pin | snap_b)
         if fix.size:
-            err[fix] = _quadric_at(q[:, fix], *X[:, fix])
+            err[fix] = quadric_at(q[:, fix], *X[:, fix])
         st.c_cost[hs] = np.where(valid, err, np.inf)
         for c in range(3):
             st.c_x[c][hs] = X[c]

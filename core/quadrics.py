@@ -230,11 +230,7 @@ def _accumulate_T(Q_items, index, n, repeat):
 def quadric_error(Q, X):
     """Quadric error ``x^T A x + 2 b . x + c`` of points ``X`` (k,3) for
     quadrics ``Q`` (k,11); clamped at 0 against round-off."""
-    x, y, z = X[:, 0], X[:, 1], X[:, 2]
-    err = (Q[:, 0] * x * x + Q[:, 3] * y * y + Q[:, 5] * z * z
-           + 2.0 * (Q[:, 1] * x * y + Q[:, 2] * x * z + Q[:, 4] * y * z)
-           + 2.0 * (Q[:, 6] * x + Q[:, 7] * y + Q[:, 8] * z) + Q[:, 9])
-    return np.maximum(err, 0.0)
+    return quadric_at(Q.T, X[:, 0], X[:, 1], X[:, 2])
 
 
 def quadric_distance(Q, err):
@@ -244,11 +240,60 @@ def quadric_distance(Q, err):
     return np.where(w > 0, np.sqrt(np.maximum(err, 0.0) / safe), 0.0)
 
 
-def _apply_A(Q, X):
-    x, y, z = X[:, 0], X[:, 1], X[:, 2]
-    return np.stack([Q[:, 0] * x + Q[:, 1] * y + Q[:, 2] * z,
-                     Q[:, 1] * x + Q[:, 3] * y + Q[:, 4] * z,
-                     Q[:, 2] * x + Q[:, 4] * y + Q[:, 5] * z], axis=1)
+def quadric_at(q, x, y, z):
+    """Quadric error of columns ``q`` (11,k) at points ``(x, y, z)``, >= 0."""
+    return np.maximum(q[0] * x * x + q[3] * y * y + q[5] * z * z
+                      + 2.0 * (q[1] * x * y + q[2] * x * z + q[4] * y * z + q[6] * x + q[7] * y + q[8] * z)
+                      + q[9], 0.0)
+
+
+def place_columns(q, p0, p1):
+    """:func:`optimal_placement` on columns: ``q`` (11,k) merged
+    quadrics, ``p0``, ``p1`` (3,k) endpoints; returns ``X`` (3,k) and the error (k,).
+
+    Same rule: closed-form 3x3 solve about the midpoint; where it is
+    ill-conditioned or drifts more than ``MAX_DRIFT`` edge lengths, the best of
+    the segment's minimum and the two endpoints.
+    """
+    q0, q1, q2, q3, q4, q5, b0, b1, b2 = q[:9]
+    c00 = q3 * q5 - q4 * q4
+    c01 = q2 * q4 - q1 * q5
+    c02 = q1 * q4 - q2 * q3
+    c11 = q0 * q5 - q2 * q2
+    c12 = q1 * q2 - q0 * q4
+    c22 = q0 * q3 - q1 * q1
+    det = q0 * c00 + q1 * c01 + q2 * c02
+    tr = (q0 + q3 + q5) * (1.0 / 3.0)
+    ok = np.abs(det) > DET_EPS * tr * tr * tr
+    inv = -1.0 / np.where(ok, det, 1.0)
+    mid = 0.5 * (p0 + p1)
+    mx, my, mz = mid
+    r0 = q0 * mx + q1 * my + q2 * mz + b0
+    r1 = q1 * mx + q3 * my + q4 * mz + b1
+    r2 = q2 * mx + q4 * my + q5 * mz + b2
+    y0 = (c00 * r0 + c01 * r1 + c02 * r2) * inv
+    y1 = (c01 * r0 + c11 * r1 + c12 * r2) * inv
+    y2 = (c02 * r0 + c12 * r1 + c22 * r2) * inv
+    d = p1 - p0
+    len2 = d[0] * d[0] + d[1] * d[1] + d[2] * d[2]
+    ok &= y0 * y0 + y1 * y1 + y2 * y2 <= (MAX_DRIFT * MAX_DRIFT) * len2
+    X = np.stack([mx + np.where(ok, y0, 0.0), my + np.where(ok, y1, 0.0), mz + np.where(ok, y2, 0.0)])
+    err = quadric_at(q, X[0], X[1], X[2])
+    bad = np.flatnonzero(~ok)
+    if bad.size:
+        qb, s0, s1, db = q[:, bad], p0[:, bad], p1[:, bad], d[:, bad]
+        Ad = [qb[0] * db[0] + qb[1] * db[1] + qb[2] * db[2], qb[1] * db[0] + qb[3] * db[1] + qb[4] * db[2],
+              qb[2] * db[0] + qb[4] * db[1] + qb[5] * db[2]]
+        dAd = db[0] * Ad[0] + db[1] * Ad[1] + db[2] * Ad[2]
+        # derivative of E(p0 + t d) is 2 (d.(A p0 + b)) + 2 t dAd
+        g = Ad[0] * s0[0] + Ad[1] * s0[1] + Ad[2] * s0[2] + db[0] * qb[6] + db[1] * qb[7] + db[2] * qb[8]
+        t = np.clip(np.where(dAd > 0, -g / np.where(dAd > 0, dAd, 1.0), 0.5), 0.0, 1.0)
+        cands = [s0 + t * db, s0, s1]
+        errs = np.stack([quadric_at(qb, *c) for c in cands])
+        best = np.argmin(errs, axis=0)
+        X[:, bad] = np.choose(best, cands)
+        err[bad] = errs[best, np.arange(bad.size)]
+    return X, err
 
 
 def optimal_placement(Q, P0, P1):
@@ -272,48 +317,5 @@ def optimal_placement(Q, P0, P1):
     X : (k,3) float64, the chosen positions.
     err : (k,) float64, the quadric error at ``X`` (>= 0).
     """
-    q0, q1, q2, q3, q4, q5, b0, b1, b2 = np.ascontiguousarray(Q[:, :9].T)
-    c00 = q3 * q5 - q4 * q4
-    c01 = q2 * q4 - q1 * q5
-    c02 = q1 * q4 - q2 * q3
-    c11 = q0 * q5 - q2 * q2
-    c12 = q1 * q2 - q0 * q4
-    c22 = q0 * q3 - q1 * q1
-    det = q0 * c00 + q1 * c01 + q2 * c02
-    tr = (q0 + q3 + q5) * (1.0 / 3.0)
-    ok = np.abs(det) > DET_EPS * tr * tr * tr
-    inv = -1.0 / np.where(ok, det, 1.0)
-    # solve about the edge midpoint (better conditioned): A y = -(A mid + b), X = mid + y
-    mid = 0.5 * (P0 + P1)
-    mx, my, mz = mid[:, 0], mid[:, 1], mid[:, 2]
-    r0 = q0 * mx + q1 * my + q2 * mz + b0
-    r1 = q1 * mx + q3 * my + q4 * mz + b1
-    r2 = q2 * mx + q4 * my + q5 * mz + b2
-    y = np.empty_like(mid)
-    y[:, 0] = (c00 * r0 + c01 * r1 + c02 * r2) * inv
-    y[:, 1] = (c01 * r0 + c11 * r1 + c12 * r2) * inv
-    y[:, 2] = (c02 * r0 + c12 * r1 + c22 * r2) * inv
-    D = P1 - P0
-    len2 = np.einsum("ij,ij->i", D, D)
-    ok &= np.einsum("ij,ij->i", y, y) <= (MAX_DRIFT * MAX_DRIFT) * len2
-    y[~ok] = 0.0
-    X = mid + y
-    x, yy, z = X[:, 0], X[:, 1], X[:, 2]
-    err = np.maximum(q0 * x * x + q3 * yy * yy + q5 * z * z
-                     + 2.0 * (q1 * x * yy + q2 * x * z + q4 * yy * z + b0 * x + b1 * yy + b2 * z)
-                     + np.ascontiguousarray(Q[:, 9]), 0.0)
-    bad = np.flatnonzero(~ok)
-    if bad.size:
-        Qb, p0, d = np.take(Q, bad, axis=0), np.take(P0, bad, axis=0), np.take(D, bad, axis=0)
-        AD = _apply_A(Qb, d)
-        dAd = np.einsum("ij,ij->i", d, AD)
-        # derivative of E(p0 + t d) is 2 (d.A p0 + d.b) + 2 t dAd
-        g = np.einsum("ij,ij->i", d, _apply_A(Qb, p0)) + np.einsum("ij,ij->i", d, Qb[:, 6:9])
-        t = np.where(dAd > 0, -g / np.where(dAd > 0, dAd, 1.0), 0.5)
-        t = np.clip(t, 0.0, 1.0)
-        cands = [p0 + t[:, None] * d, p0, np.take(P1, bad, axis=0)]
-        errs = np.stack([quadric_error(Qb, cnd) for cnd in cands], axis=1)
-        best = np.argmin(errs, axis=1)
-        X[bad] = np.stack(cands, axis=1)[np.arange(bad.size), best]
-        err[bad] = errs[np.arange(bad.size), best]
-    return X, err
+    X, err = place_columns(np.ascontiguousarray(Q.T), np.ascontiguousarray(P0.T), np.ascontiguousarray(P1.T))
+    return np.ascontiguousarray(X.T), err
