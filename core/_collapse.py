@@ -80,7 +80,8 @@ class State:
 def _ends(F, h):
     """Endpoints (U, W) of half-edges ``h``."""
     Fr = F.ravel()
-    base, c = h - h % 3, h % 3
+    c = h % 3
+    base = h - c
     return _take(Fr, base + _take(_NEXT, c)), _take(Fr, base + _take(_PREV, c))
 
 
@@ -503,7 +504,8 @@ def _apply(st, A, B, X, star, kf, coll):
     st.feat[tB[okB]] = fl[okB]
     # positions and quadrics
     st.moved[A] |= np.any(X != st.V[A], axis=1)
-    st.Q[:, A] = st.Q[:, A] + st.Q[:, B]
+    for q in st.Q:                                 # one coefficient row at a time (A are distinct)
+        q[A] += _take(q, B)
     st.Nref[A] = st.Nref[A] + st.Nref[B]
     st.V[A] = X
     st.VT[:, A] = X.T
