@@ -43,7 +43,6 @@ import numpy as np
 
 from ._clean import BOUNDARY, clean_with_twins, half_edge_ends, non_manifold_vertices
 from ._collapse import State, run
-from ._memory import reuse_freed_memory
 from ._relax import close_triangular_holes, drop_stuck_components
 from ._relocate import relocate
 from .errors import InvalidArgumentError
@@ -316,13 +315,6 @@ def simplify(V, F, *, target_faces=None, ratio=None, max_error=None, preserve_bo
     >>> r.F.shape[0] <= 100, r.stopped_because
     (True, 'target')
     """
-    with reuse_freed_memory():
-        return _simplify(V, F, target_faces, ratio, max_error, preserve_boundary, preserve_topology,
-                         feature_angle_deg, vertex_weights, locked, progress)
-
-
-def _simplify(V, F, target_faces, ratio, max_error, preserve_boundary, preserve_topology, feature_angle_deg,
-              vertex_weights, locked, progress):
     tun = TUNING
     V, F = check_mesh(V, F, where=_WHERE)
     n_in = V.shape[0]
