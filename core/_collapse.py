@@ -17,14 +17,15 @@ One pass::
              turn against the input normals, compactness and Hausdorff
              penalties); accept those within the pool's cost bound;
              their closed one-rings become untouchable for later rounds
-    apply all accepted collapses at once, glue twins, compact
+    apply all accepted collapses at once, glue twins; removed faces and
+    vertices are only marked dead until a quarter of the rows are (then compact)
 """
 
 import numpy as np
 
 from ._clean import BOUNDARY, NON_MANIFOLD
-from ._parallel import blocks, run_blocks
-from .quadrics import place_columns, quadric_at
+from ._parallel import blocks, run_blocks, run_each
+from .quadrics import place_columns, quadric_at, rms_distance
 from .spatial import _kernel, _triangle_rows
 
 _BIG = np.iinfo(np.int64).max
@@ -37,6 +38,10 @@ _BLOCK = 1 << 16  # elements per block of work (see core._parallel)
 _SNAP2 = 1e-12  # (distance / edge length)^2 below which a position is an endpoint
 
 _take = np.take
+
+#: per half-edge cache arrays and the value a new half-edge starts with (besides
+#: ``twin``, ``feat`` and the three position columns ``c_x``)
+HALF_EDGE_CACHE = {"swap": False, "blk_pass": -1, "c_cost": 0.0, "c_blk": -1.0, "c_stale": True}
 
 
 class State:
@@ -59,13 +64,12 @@ class State:
             self.is_bnd[ub] = True
             self.is_bnd[wb] = True
         self.F, self.twin, self.feat = F, twin, feat
-        self.blk_pass = np.full(h3, -1, dtype=np.int64)
-        self.swap = np.zeros(h3, dtype=bool)           # survivor is the half-edge's second end
-        # per half-edge cache (on representatives): cost, position, error, blocked value
-        self.c_cost = np.zeros(h3)
+        # per half-edge cache (on representatives): survivor is the half-edge's second
+        # end (swap), pass of the remembered rejection and its value (blk_pass, c_blk),
+        # cost, position, and whether the cost is only a lower bound (c_stale)
+        for name, fill in HALF_EDGE_CACHE.items():
+            setattr(self, name, np.full(h3, fill))
         self.c_x = [np.zeros(h3), np.zeros(h3), np.zeros(h3)]
-        self.c_blk = np.full(h3, -1.0)
-        self.c_stale = np.ones(h3, dtype=bool)          # cached cost is only a lower bound
         self.cur_of_clean = np.arange(n, dtype=np.int64)
         self.parent = np.arange(n, dtype=np.int64)      # survivor of each vertex merged since the last compaction
         # removed faces and vertices stay in the arrays (faces marked dead, their
@@ -88,8 +92,7 @@ def _ends(F, h):
 def _distance(st, cost, a, b):
     """RMS distance ``sqrt(cost / w)`` of edge collapses (``w``: the merged
     quadric's area; 0 where it has none), in working units."""
-    w = _take(st.Q[10], a) + _take(st.Q[10], b)
-    return np.where(w > 0, np.sqrt(np.maximum(cost, 0.0) / np.where(w > 0, w, 1.0)), 0.0)
+    return rms_distance(cost, _take(st.Q[10], a) + _take(st.Q[10], b))
 
 
 def _recost(st, rep, U, W, stale, preserve_boundary):
@@ -149,7 +152,7 @@ def _check(st, A, B, X, interior, star, kf, tun, haus=True):
         (i, j), r0, r1 = spans[b], cut[b], cut[b + 1]
         return _check_block(st, A[i:j], B[i:j], X[i:j], interior[i:j], star[r0:r1], kf[r0:r1] - i, tun, haus)
 
-    res = run_blocks(lambda b, _: block(b), [(b, b + 1) for b in range(len(spans))])
+    res = run_each(block, range(len(spans)))
     ok, pen, _, _, coll, wnew = (np.concatenate([r[c] for r in res]) for c in range(6))
     return ok, pen, star, kf, coll, wnew
 
@@ -488,7 +491,6 @@ def _run(st, target, max_err_n, preserve_boundary, progress, m0, tun):
 def _apply(st, A, B, X, star, kf, coll):
     """Collapse every B[k] into A[k] at X[k] at once (stars disjoint)."""
     F, twin = st.F, st.twin
-    n, m = st.V.shape[0], F.shape[0]
     cf = star[coll]
     ck = kf[coll]
     Fc = _take(F, cf, axis=0)
@@ -554,7 +556,7 @@ def _compact(st):
         return np.where(tw >= 0, 3 * _take(new_f, t // 3) + t % 3, tw)
 
     jobs = [("twin", twins), ("F", lambda: _take(new_v, np.compress(keep_f, F, axis=0)))]
-    for name in ("feat", "swap", "blk_pass", "c_cost", "c_blk", "c_stale"):
+    for name in ("feat", *HALF_EDGE_CACHE):
         jobs.append((name, lambda a=getattr(st, name): _take(a, ih)))
     for c in range(3):
         jobs.append((c, lambda a=st.c_x[c]: _take(a, ih)))
@@ -562,7 +564,7 @@ def _compact(st):
         jobs.append((name, lambda a=getattr(st, name): _take(a, iv, axis=0)))
     for name in ("Q", "VT"):
         jobs.append((name, lambda a=getattr(st, name): _take(a, iv, axis=1)))
-    out = run_blocks(lambda i, _: jobs[i][1](), [(i, i + 1) for i in range(len(jobs))])
+    out = run_each(lambda job: job[1](), jobs)
     for (name, _), arr in zip(jobs, out):
         if isinstance(name, int):
             st.c_x[name] = arr

@@ -14,8 +14,9 @@ import os
 import threading
 from concurrent.futures import ThreadPoolExecutor
 
-#: worker threads (at most 4: the hot loops are memory bound beyond that)
-WORKERS = int(os.environ.get("MA_WORKERS", 0)) or max(1, min(4, os.cpu_count() or 1))
+#: worker threads (at most 4: the hot loops are memory bound beyond that;
+#: the environment variable MESHADJUST_THREADS overrides it, 1 runs everything inline)
+WORKERS = int(os.environ.get("MESHADJUST_THREADS", 0)) or max(1, min(4, os.cpu_count() or 1))
 
 _lock = threading.Lock()
 _pool = None
@@ -38,9 +39,15 @@ def blocks(n, size):
     return list(zip(edges[:-1], edges[1:]))
 
 
+def run_each(fn, items):
+    """``[fn(item) for item in items]``, on the worker threads when there are
+    several items (and this is not already a worker); results in item order."""
+    items = list(items)
+    if len(items) <= 1 or WORKERS == 1 or threading.current_thread().name.startswith("meshadjust"):
+        return [fn(item) for item in items]
+    return list(_executor().map(fn, items))
+
+
 def run_blocks(fn, spans):
-    """Call ``fn(start, stop)`` for every span, on the worker threads when
-    there are several; returns the results in span order."""
-    if len(spans) <= 1 or WORKERS == 1 or threading.current_thread().name.startswith("meshadjust"):
-        return [fn(a, b) for a, b in spans]
-    return list(_executor().map(lambda s: fn(*s), spans))
+    """Call ``fn(start, stop)`` for every span of :func:`blocks`, as :func:`run_each`."""
+    return run_each(lambda s: fn(*s), spans)

@@ -235,9 +235,13 @@ def quadric_error(Q, X):
 
 def quadric_distance(Q, err):
     """RMS distance ``sqrt(err / w)`` in mesh units (0 where ``w`` is 0)."""
-    w = Q[:, 10]
-    safe = np.where(w > 0, w, 1.0)
-    return np.where(w > 0, np.sqrt(np.maximum(err, 0.0) / safe), 0.0)
+    return rms_distance(err, Q[:, 10])
+
+
+def rms_distance(err, w):
+    """``sqrt(err / w)`` for quadric errors ``err`` and quadric areas ``w``
+    (0 where ``w`` is 0; negative round-off in ``err`` counts as 0)."""
+    return np.where(w > 0, np.sqrt(np.maximum(err, 0.0) / np.where(w > 0, w, 1.0)), 0.0)
 
 
 def quadric_at(q, x, y, z):
