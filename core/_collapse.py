@@ -23,7 +23,7 @@ One pass::
 
 import numpy as np
 
-from ._clean import BOUNDARY, NON_MANIFOLD
+from ._clean import _NEXT_OFF, _PREV_OFF, BOUNDARY, NON_MANIFOLD
 from ._parallel import blocks, run_blocks, run_each
 from .quadrics import place_columns, quadric_at, rms_distance
 from .spatial import _kernel, _triangle_rows
@@ -31,13 +31,23 @@ from .spatial import _kernel, _triangle_rows
 _BIG = np.iinfo(np.int64).max
 DEAD = -3  #: twin of a half-edge of a removed face (before compaction)
 _COMPACT = 0.75  # compact once the live faces are fewer than this share of the rows
-_NEXT = np.array([1, 2, 0], dtype=np.int64)
-_PREV = np.array([2, 0, 1], dtype=np.int64)
 _SQRT3x2 = 2.0 * np.sqrt(3.0)
 _BLOCK = 1 << 16  # elements per block of work (see core._parallel)
 _SNAP2 = 1e-12  # (distance / edge length)^2 below which a position is an endpoint
+_SAMPLE = 1 << 16  # cost thresholds of larger arrays come from a sample of about this size
 
 _take = np.take
+_NEXT = np.array([1, 2, 0], dtype=np.int64)  # corner after c
+_PREV = np.array([2, 0, 1], dtype=np.int64)  # corner before c
+
+
+def _corner(Fs, v):
+    """Corner (0, 1, 2) of vertex ``v[i]`` in face row ``Fs[i]``, -1 where absent."""
+    e0, e1, e2 = Fs[:, 0] == v, Fs[:, 1] == v, Fs[:, 2] == v
+    c = (e0 | e1 | e2).astype(np.int64) - 1
+    c += e1
+    c += 2 * e2
+    return c
 
 #: per half-edge cache arrays and the value a new half-edge starts with (besides
 #: ``twin``, ``feat`` and the three position columns ``c_x``)
@@ -85,8 +95,7 @@ def _ends(F, h):
     """Endpoints (U, W) of half-edges ``h``."""
     Fr = F.ravel()
     c = h % 3
-    base = h - c
-    return _take(Fr, base + _take(_NEXT, c)), _take(Fr, base + _take(_PREV, c))
+    return _take(Fr, h + _take(_NEXT_OFF, c)), _take(Fr, h + _take(_PREV_OFF, c))
 
 
 def _distance(st, cost, a, b):
@@ -96,9 +105,9 @@ def _distance(st, cost, a, b):
 
 
 def _recost(st, rep, U, W, stale, preserve_boundary):
-    """Placement and cost of the stale edges, written into the cache (in
-    blocks, on the worker threads)."""
-    hs_all, a_all, b_all = rep[stale], U[stale], W[stale]
+    """Placement and cost of the edges ``rep[stale]`` (``stale``: indices),
+    written into the cache (in blocks, on the worker threads)."""
+    hs_all, a_all, b_all = _take(rep, stale), _take(U, stale), _take(W, stale)
 
     def block(i, j):
         hs, a, b = hs_all[i:j], a_all[i:j], b_all[i:j]
@@ -153,8 +162,9 @@ def _check(st, A, B, X, interior, star, kf, tun, haus=True):
         return _check_block(st, A[i:j], B[i:j], X[i:j], interior[i:j], star[r0:r1], kf[r0:r1] - i, tun, haus)
 
     res = run_each(block, range(len(spans)))
-    ok, pen, _, _, coll, wnew = (np.concatenate([r[c] for r in res]) for c in range(6))
-    return ok, pen, star, kf, coll, wnew
+    ok, pen, wnew = (np.concatenate([r[c] for r in res]) for c in (0, 1, 3))
+    coll, cA, cB = (np.concatenate([r[2][c] for r in res]) for c in (2, 3, 4))
+    return ok, pen, (star, kf, coll, cA, cB), wnew
 
 
 def _common_pairs(ka, xa, kb, xb, n):
@@ -183,60 +193,68 @@ def _check_block(st, A, B, X, interior, star, kf, tun, haus=True):
     at X[k], judged on the current mesh.
 
     ``star`` lists every face around the endpoints, ``kf`` the collapse each
-    belongs to. Returns ``ok`` (k,) bool, ``penalty`` (k,), the star:
-    face ids, their collapse index, and whether each face is removed, and the
+    belongs to. Returns ``ok`` (k,) bool, ``penalty`` (k,), the star rows
+    ``(star, kf, coll, cA, cB)``: face ids, their collapse index, whether each
+    face is removed, and the corners of A and B in it (-1: absent), and the
     survivor's witness (k,3): of A's and B's witnesses, the one farther from
     the new faces.
     """
     F, V = st.F, st.V
     n, k = V.shape[0], A.size
     Fs = _take(F, star, axis=0)
-    isA = Fs == _take(A, kf)[:, None]
-    isB = Fs == _take(B, kf)[:, None]
-    rowsA = isA[:, 0] | isA[:, 1] | isA[:, 2]
-    rowsB = isB[:, 0] | isB[:, 1] | isB[:, 2]
+    Ak, Bk = _take(A, kf), _take(B, kf)
+    cA = _corner(Fs, Ak)
+    cB = _corner(Fs, Bk)
+    rowsA, rowsB = cA >= 0, cB >= 0
     coll = rowsA & rowsB
     ok = np.ones(k, dtype=bool)
+    Fr = Fs.ravel()
 
     # --- link condition (Dey et al.): the common neighbours of A and B are
     # exactly the opposite vertices of the removed faces
-    other = ~(isA | isB)
-    opp = np.full((k, 2), -1, dtype=np.int64)
     cidx = np.flatnonzero(coll)
-    ck = kf[cidx]
-    cv = Fs[cidx][other[cidx]]                  # one opposite vertex per removed face
-    order = np.argsort(ck, kind="stable")
-    ck, cv = ck[order], cv[order]
+    kc = _take(kf, cidx)
+    cv = _take(Fr, 3 * cidx + 3 - _take(cA, cidx) - _take(cB, cidx))  # opposite vertex of each removed face
+    order = np.argsort(kc, kind="stable")
+    ck, cv = _take(kc, order), _take(cv, order)
     first = np.ones(ck.size, dtype=bool)
     first[1:] = ck[1:] != ck[:-1]
+    opp = np.full((k, 2), -1, dtype=np.int64)
     opp[ck[first], 0] = cv[first]
     opp[ck[~first], 1] = cv[~first]
     n_removed = np.bincount(ck, minlength=k)
     ok &= n_removed == np.where(interior, 2, 1)
-    selA = rowsA[:, None] & other
-    selB = rowsB[:, None] & other
-    kfb = np.broadcast_to(kf[:, None], Fs.shape)
-    qk, qx = kfb[selB], Fs[selB]
-    if qk.size:
-        common = _common_pairs(kfb[selA], Fs[selA], qk, qx, n)
-        extra = common & (qx != opp[qk, 0]) & (qx != opp[qk, 1])
+    # the faces that stay (each has A or B, not both), the corner that moves,
+    # and its two other vertices: neighbours of A (or B) other than the opposite ones
+    mv = np.flatnonzero(~coll)
+    mk = _take(kf, mv)
+    onA = _take(rowsA, mv)
+    cm = np.where(onA, _take(cA, mv), _take(cB, mv))
+    base = 3 * mv
+    x1 = _take(Fr, base + _take(_NEXT, cm))
+    x2 = _take(Fr, base + _take(_PREV, cm))
+    ia, ib = np.flatnonzero(onA), np.flatnonzero(~onA)
+    if ia.size and ib.size:
+        ka = np.concatenate([_take(mk, ia), _take(mk, ia)])
+        xa = np.concatenate([_take(x1, ia), _take(x2, ia)])
+        qk = np.concatenate([_take(mk, ib), _take(mk, ib)])
+        qx = np.concatenate([_take(x1, ib), _take(x2, ib)])
+        common = _common_pairs(ka, xa, qk, qx, n)
+        extra = common & (qx != _take(opp[:, 0], qk)) & (qx != _take(opp[:, 1], qk))
         ok[qk[extra]] = False
     # not the last tetrahedron (both endpoints of valence 3)
     valA = np.bincount(kf[rowsA], minlength=k)
     valB = np.bincount(kf[rowsB], minlength=k)
     ok &= ~(interior & (valA == 3) & (valB == 3))
     # not an isolated triangle; never touch a non-manifold edge
-    hA = 3 * star[cidx] + np.argmax(isA[cidx], axis=1)   # edge (B, c)
-    hB = 3 * star[cidx] + np.argmax(isB[cidx], axis=1)   # edge (c, A)
+    hA = 3 * star[cidx] + _take(cA, cidx)   # edge (B, c)
+    hB = 3 * star[cidx] + _take(cB, cidx)   # edge (c, A)
     tA, tB = st.twin[hA], st.twin[hB]
     bad = (tA == NON_MANIFOLD) | (tB == NON_MANIFOLD) | ((tA == BOUNDARY) & (tB == BOUNDARY))
-    ok[kf[cidx][bad]] = False
+    ok[kc[bad]] = False
 
     # --- geometry of the faces that move (one corner each: A or B goes to X)
-    mv = np.flatnonzero(~coll)
-    mk = _take(kf, mv)
     Fm = _take(Fs, mv, axis=0)
-    cm = np.argmax(_take(isA, mv, axis=0) | _take(isB, mv, axis=0), axis=1)
     P0, P1, P2 = (_take(V, Fm[:, c], axis=0) for c in range(3))
     Xm = _take(X, mk, axis=0)
     Q0 = np.where((cm == 0)[:, None], Xm, P0)
@@ -253,7 +271,7 @@ def _check_block(st, A, B, X, interior, star, kf, tun, haus=True):
     # normals of the input faces merged into its vertices): no slow drift
     if tun.ref_cos > -1.0:
         Nr = st.Nref
-        moved_v = Fm[np.arange(mv.size), cm]
+        moved_v = _take(Fr, base + cm)
         ref0 = _take(Nr, Fm[:, 0], axis=0) + _take(Nr, Fm[:, 1], axis=0) + _take(Nr, Fm[:, 2], axis=0)
         ref = ref0 - _take(Nr, moved_v, axis=0) + _take(_take(Nr, A, axis=0) + _take(Nr, B, axis=0), mk, axis=0)
         lr = np.sqrt(np.einsum("ij,ij->i", ref, ref))
@@ -295,7 +313,21 @@ def _check_block(st, A, B, X, interior, star, kf, tun, haus=True):
         wnew = np.where((dB > dA)[:, None], wB, wA)
         Wq = _take(st.Q[10], A) + _take(st.Q[10], B)
         penalty = penalty + tun.haus_weight * Wq * np.maximum(dA, dB)
-    return ok, penalty, star, kf, coll, wnew
+    return ok, penalty, (star, kf, coll, cA, cB), wnew
+
+
+def _kth_smallest(x, k):
+    """The ``k``-th smallest value of ``x`` (0-based). Exact for arrays of up to
+    ``4 * _SAMPLE``; for larger ones estimated from an evenly strided sample,
+    two standard deviations of the estimate on the high side (a pool bound
+    then takes a few more edges, never many fewer). Deterministic."""
+    if x.size <= 4 * _SAMPLE:
+        return np.partition(x, k)[k]
+    s = x[::x.size // _SAMPLE]
+    q = (k + 1) / x.size
+    j = int(np.ceil(q * s.size + 2.0 * np.sqrt(q * (1.0 - q) * s.size)))
+    j = min(max(j, 0), s.size - 1)
+    return np.partition(s, j)[j]
 
 
 def _pool_size(ne, m, target, tun):
@@ -316,8 +348,9 @@ def _priority(cost, a, b, bands):
     if bits > 28:
         raise OverflowError("simplify: more than 2^28 edges in one pass")
     if P > bands:
-        kth = (np.arange(1, bands, dtype=np.int64) * P) // bands
-        band = np.searchsorted(np.partition(cost, kth)[kth], cost, side="left").astype(np.int64)
+        s = cost if P <= 4 * _SAMPLE else cost[::P // _SAMPLE]    # band edges: quantiles (of a sample)
+        ks = (np.arange(1, bands, dtype=np.int64) * s.size) // bands
+        band = np.searchsorted(np.partition(s, ks)[ks], cost, side="left").astype(np.int64)
     else:
         band = np.zeros(P, dtype=np.int64)
     mix = ((a * np.int64(0x9E3779B1)) ^ (b * np.int64(0x85EBCA77))) & np.int64(0x7FFFFFFF)
@@ -374,13 +407,15 @@ def _run(st, target, max_err_n, preserve_boundary, progress, m0, tun):
         # edges that could still be among the P cheapest
         need = stale & cand
         if max_err_n is None and P < ne:
-            need &= cost <= np.partition(cost[cand], P - 1)[P - 1]
-        if need.any():
-            _recost(st, rep, U, W, need, preserve_boundary)
-            st.c_stale[rep[need]] = False
-            stale &= ~need
-            cost[need] = np.where(blocked[need], np.maximum(st.c_cost[rep[need]], bv[need]),
-                                  st.c_cost[rep[need]])
+            need &= cost <= _kth_smallest(cost, P - 1)    # (non-candidates are inf: they sort last)
+        ni = np.flatnonzero(need)
+        if ni.size:
+            _recost(st, rep, U, W, ni, preserve_boundary)
+            hn = _take(rep, ni)
+            st.c_stale[hn] = False
+            stale[ni] = False
+            fresh_cost = _take(st.c_cost, hn)
+            cost[ni] = np.where(_take(blocked, ni), np.maximum(fresh_cost, _take(bv, ni)), fresh_cost)
         cand = np.isfinite(cost)
         if max_err_n is not None:
             within = _distance(st, _take(st.c_cost, rep), U, W) <= max_err_n
@@ -397,7 +432,7 @@ def _run(st, target, max_err_n, preserve_boundary, progress, m0, tun):
         ne = ci.size
         P = max(1, min(P, ne))
         cc = cost[ci]
-        limit = np.partition(cc, P - 1)[P - 1] if P < ne else cc.max()
+        limit = _kth_smallest(cc, P - 1) if P < ne else cc.max()
         pool = ci[cc <= limit]
         P = pool.size
         ph = rep[pool]
@@ -411,10 +446,9 @@ def _run(st, target, max_err_n, preserve_boundary, progress, m0, tun):
         key = _priority(pcost, pa, pb, tun.bands)
 
         touched = np.zeros(n, dtype=bool)
-        acc_edges, acc_star, acc_kf, acc_coll, acc_wit = [], [], [], [], []
+        acc_edges, acc_wit, acc_rows = [], [], []
         active = np.arange(P, dtype=np.int64)
-        fidx = np.flatnonzero(st.alive)         # faces that may still touch an active edge
-        FT = np.ascontiguousarray(_take(F, fidx, axis=0).T)
+        FT = None                               # faces that may still touch an active edge (transposed)
         imask = (np.int64(1) << np.int64(max(1, int(P - 1).bit_length()))) - 1
         for _ in range(tun.max_rounds):
             active = active[~touched[pa[active]] & ~touched[pb[active]]]
@@ -424,14 +458,22 @@ def _run(st, target, max_err_n, preserve_boundary, progress, m0, tun):
             vmin = np.full(n, _BIG, dtype=np.int64)
             np.minimum.at(vmin, aa, ka)
             np.minimum.at(vmin, ab, ka)
-            fmin = np.minimum(np.minimum(_take(vmin, FT[0]), _take(vmin, FT[1])), _take(vmin, FT[2]))
-            live = np.flatnonzero(fmin < _BIG)
-            if live.size < 0.75 * fidx.size:      # keep only the faces still in play
-                FT = np.ascontiguousarray(FT[:, live])
-                fidx = fidx[live]
-                fh = _take(fmin, live)
-            else:                                 # (a _BIG minimum changes nothing below)
-                fh = fmin
+            if FT is None:                        # first round: every live face
+                G = _take(vmin, F)
+                fmin = np.minimum(np.minimum(G[:, 0], G[:, 1]), G[:, 2])
+                del G
+                fidx = np.flatnonzero((fmin < _BIG) & st.alive)
+                FT = np.ascontiguousarray(_take(F, fidx, axis=0).T)
+                fh = _take(fmin, fidx)
+            else:
+                fmin = np.minimum(np.minimum(_take(vmin, FT[0]), _take(vmin, FT[1])), _take(vmin, FT[2]))
+                live = np.flatnonzero(fmin < _BIG)
+                if live.size < 0.75 * fidx.size:  # keep only the faces still in play
+                    FT = np.ascontiguousarray(FT[:, live])
+                    fidx = fidx[live]
+                    fh = _take(fmin, live)
+                else:                             # (a _BIG minimum changes nothing below)
+                    fh = fmin
             vmin2 = np.full(n, _BIG, dtype=np.int64)
             for j in range(3):
                 np.minimum.at(vmin2, FT[j], fh)
@@ -445,8 +487,7 @@ def _run(st, target, max_err_n, preserve_boundary, progress, m0, tun):
             in_star = fpos >= 0
             star = fidx[in_star]
             kf = fpos[in_star]
-            ok, pen, star, kf, coll, wnew = _check(st, pa[sel], pb[sel], pX[sel], pint[sel], star, kf, tun,
-                                                  haus)
+            ok, pen, rows, wnew = _check(st, pa[sel], pb[sel], pX[sel], pint[sel], star, kf, tun, haus)
             total = praw[sel] + pen
             acc = ok & (total <= limit)
             # remember rejections until the neighbourhood changes
@@ -456,18 +497,15 @@ def _run(st, target, max_err_n, preserve_boundary, progress, m0, tun):
             st.c_blk[hr] = val
             st.blk_pass[hr] = passes
             if acc.any():
-                keep = acc[kf]
-                remap_k = np.cumsum(acc) - 1
+                rows = _keep_rows(rows, acc, sum(x.size for x in acc_edges))
                 acc_edges.append(sel[acc])
                 acc_wit.append(wnew[acc])
-                acc_star.append(star[keep])
-                acc_kf.append(remap_k[kf[keep]] + sum(x.size for x in acc_edges[:-1]))
-                acc_coll.append(coll[keep])
-                touched[_take(F, star[keep], axis=0).ravel()] = True
+                acc_rows.append(rows)
+                touched[_take(F, rows[0], axis=0).ravel()] = True
         if not acc_edges:
             continue
         acc = np.concatenate(acc_edges)
-        s_star, s_kf, s_coll = np.concatenate(acc_star), np.concatenate(acc_kf), np.concatenate(acc_coll)
+        rows = tuple(np.concatenate(c) for c in zip(*acc_rows))
         s_wit = np.concatenate(acc_wit)
         if target is not None:
             removed = np.where(pint[acc], 2, 1)
@@ -478,25 +516,34 @@ def _run(st, target, max_err_n, preserve_boundary, progress, m0, tun):
             if not keep_k.all():
                 acc = acc[keep_k]
                 s_wit = s_wit[keep_k]
-                fk = keep_k[s_kf]
-                s_star, s_coll = s_star[fk], s_coll[fk]
-                s_kf = (np.cumsum(keep_k) - 1)[s_kf[fk]]
+                rows = _keep_rows(rows, keep_k)
         st.worst = max(st.worst, float(_distance(st, praw[acc], pa[acc], pb[acc]).max()))
         st.vver[touched] = passes
         st.wit[pa[acc]] = s_wit
-        _apply(st, pa[acc], pb[acc], pX[acc], s_star, s_kf, s_coll)
+        _apply(st, pa[acc], pb[acc], pX[acc], rows)
     return "no_valid_collapse", passes
 
 
-def _apply(st, A, B, X, star, kf, coll):
-    """Collapse every B[k] into A[k] at X[k] at once (stars disjoint)."""
+def _keep_rows(rows, keep, offset=0):
+    """The star rows ``(star, kf, coll, cA, cB)`` of the collapses ``keep``
+    (bool per collapse), renumbered from ``offset``."""
+    kf = rows[1]
+    r = np.flatnonzero(_take(keep, kf))
+    out = [_take(c, r) for c in rows]
+    out[1] = _take(np.cumsum(keep) - 1 + offset, out[1])
+    return tuple(out)
+
+
+def _apply(st, A, B, X, rows):
+    """Collapse every B[k] into A[k] at X[k] at once (stars disjoint;
+    ``rows`` as returned by :func:`_check`)."""
     F, twin = st.F, st.twin
-    cf = star[coll]
-    ck = kf[coll]
-    Fc = _take(F, cf, axis=0)
+    star, kf, coll, cA, cB = rows
+    rc = np.flatnonzero(coll)
+    cf = _take(star, rc)
     # glue the twins of the two surviving sides of every removed face
-    hA = 3 * cf + np.argmax(Fc == A[ck][:, None], axis=1)   # edge (B, c)
-    hB = 3 * cf + np.argmax(Fc == B[ck][:, None], axis=1)   # edge (c, A)
+    hA = 3 * cf + _take(cA, rc)   # edge (B, c)
+    hB = 3 * cf + _take(cB, rc)   # edge (c, A)
     tA, tB = twin[hA], twin[hB]
     fl = st.feat[hA] | st.feat[hB]
     okA, okB = tA >= 0, tB >= 0
@@ -505,7 +552,8 @@ def _apply(st, A, B, X, star, kf, coll):
     st.feat[tA[okA]] = fl[okA]
     st.feat[tB[okB]] = fl[okB]
     # positions and quadrics
-    st.moved[A] |= np.any(X != st.V[A], axis=1)
+    VA = _take(st.VT, A, axis=1)
+    st.moved[A] |= (X[:, 0] != VA[0]) | (X[:, 1] != VA[1]) | (X[:, 2] != VA[2])
     for q in st.Q:                                 # one coefficient row at a time (A are distinct)
         q[A] += _take(q, B)
     st.Nref[A] = st.Nref[A] + st.Nref[B]
@@ -514,10 +562,8 @@ def _apply(st, A, B, X, star, kf, coll):
     st.fresh[A] = True
     st.is_bnd[A] |= st.is_bnd[B]
     # B leaves the faces around it; the removed faces and B are marked dead
-    live = np.flatnonzero(~coll)
-    sf, sk = _take(star, live), _take(kf, live)
-    r, c = np.nonzero(_take(F, sf, axis=0) == _take(B, sk)[:, None])
-    np.put(F, 3 * _take(sf, r) + c, _take(A, _take(sk, r)))
+    r = np.flatnonzero(~coll & (cB >= 0))
+    np.put(F, 3 * _take(star, r) + _take(cB, r), _take(A, _take(kf, r)))
     twin[(3 * cf[:, None] + np.arange(3)).ravel()] = DEAD
     st.alive[cf] = False
     st.m_live -= cf.size

@@ -402,6 +402,33 @@ def test_output_does_not_depend_on_threads_or_block_size(monkeypatch):
     assert a.F.shape[0] == 300 and a.n_passes == b.n_passes
 
 
+def test_sampled_cost_thresholds_are_exact_when_small_and_slightly_high_when_large():
+    import importlib
+    collapse = importlib.import_module("core._collapse")
+    rng = np.random.default_rng(3)
+    small = rng.random(1000)
+    assert collapse._kth_smallest(small, 123) == np.partition(small, 123)[123]
+    x = np.concatenate([rng.random(1_000_000), np.full(50_000, np.inf)])
+    for k in (0, 1000, 200_000, 999_999):
+        rank = int(np.count_nonzero(x < collapse._kth_smallest(x, k)))
+        # at or above the exact k-th value, and within 0.5% of the array above it
+        assert k - 5 * np.sqrt(k + 1) <= rank <= k + 0.005 * x.size
+
+
+def test_sampled_thresholds_keep_every_invariant(monkeypatch):
+    # large meshes take their pool bounds and cost bands from samples: force that
+    # path on a small mesh
+    import importlib
+    collapse = importlib.import_module("core._collapse")
+    monkeypatch.setattr(collapse, "_SAMPLE", 16)
+    V, F = torus(40, 20, bump=0.2)
+    r = simplify(V, F, target_faces=300)
+    assert r.F.shape[0] == 300 and r.stopped_because == "target"
+    assert_clean(r, V, F)
+    assert topology_summary(r.F, r.V.shape[0]).euler == 0
+    assert faces_turned_against_input(r, V, F) == 0
+
+
 # ---------------------------------------------------------------- preserve_topology=False
 def _two_spheres(small=0.05):
     V1, F1 = icosphere(2)
