@@ -57,7 +57,7 @@ HALF_EDGE_CACHE = {"swap": False, "blk_pass": -1, "c_cost": 0.0, "c_blk": -1.0, 
 class State:
     """Mutable working mesh of one simplification (private)."""
 
-    def __init__(self, V, F, twin, Q, locked, feat, Nref):
+    def __init__(self, V, F, twin, Q, locked, feat, Nref, forig=None):
         n, h3 = V.shape[0], twin.size
         self.V, self.locked = V, locked
         self.Q = np.ascontiguousarray(Q.T)             # (11,n): one row per coefficient
@@ -74,6 +74,8 @@ class State:
             self.is_bnd[ub] = True
             self.is_bnd[wb] = True
         self.F, self.twin, self.feat = F, twin, feat
+        # input face each face descends from (the output keeps input order); caps: _BIG
+        self.forig = np.arange(F.shape[0], dtype=np.int64) if forig is None else forig
         # per half-edge cache (on representatives): survivor is the half-edge's second
         # end (swap), pass of the remembered rejection and its value (blk_pass, c_blk),
         # cost, position, and whether the cost is only a lower bound (c_stale)
@@ -555,8 +557,8 @@ def _apply(st, A, B, X, rows):
     VA = _take(st.VT, A, axis=1)
     st.moved[A] |= (X[:, 0] != VA[0]) | (X[:, 1] != VA[1]) | (X[:, 2] != VA[2])
     for q in st.Q:                                 # one coefficient row at a time (A are distinct)
-        q[A] += _take(q, B)
-    st.Nref[A] = st.Nref[A] + st.Nref[B]
+        np.put(q, A, _take(q, A) + _take(q, B))
+    st.Nref[A] = _take(st.Nref, A, axis=0) + _take(st.Nref, B, axis=0)
     st.V[A] = X
     st.VT[:, A] = X.T
     st.fresh[A] = True
@@ -601,7 +603,8 @@ def _compact(st):
         t = np.maximum(tw, 0)
         return np.where(tw >= 0, 3 * _take(new_f, t // 3) + t % 3, tw)
 
-    jobs = [("twin", twins), ("F", lambda: _take(new_v, np.compress(keep_f, F, axis=0)))]
+    jobs = [("twin", twins), ("F", lambda: _take(new_v, np.compress(keep_f, F, axis=0))),
+            ("forig", lambda: np.compress(keep_f, st.forig))]
     for name in ("feat", *HALF_EDGE_CACHE):
         jobs.append((name, lambda a=getattr(st, name): _take(a, ih)))
     for c in range(3):

@@ -41,7 +41,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ._clean import BOUNDARY, clean_with_twins, half_edge_ends, non_manifold_vertices
+from ._clean import BOUNDARY, clean_with_twins, half_edge_ends, non_manifold_vertices, spatial_order
 from ._collapse import State, run
 from ._relax import close_triangular_holes, drop_stuck_components
 from ._relocate import relocate
@@ -321,7 +321,11 @@ def simplify(V, F, *, target_faces=None, ratio=None, max_error=None, preserve_bo
     weights, lk = _check_args(n_in, target_faces, ratio, max_error, feature_angle_deg, vertex_weights,
                               locked, progress)
     clean, twin, U, W = clean_with_twins(V, F)
-    Vc, Fc = clean.V, clean.F
+    # working order: neighbours near each other in memory; to_input[i] is the
+    # input vertex of working vertex i
+    Vc, Fc, twin, U, W, order, forder = spatial_order(clean.V, clean.F, twin)
+    to_input = clean.clean_to_vertex[order]
+    del order
     n, m0 = Vc.shape[0], Fc.shape[0]
 
     target = None
@@ -334,7 +338,7 @@ def simplify(V, F, *, target_faces=None, ratio=None, max_error=None, preserve_bo
     frozen = non_manifold_vertices(Fc, n, twin, ends=(U, W)) if m0 else np.zeros(n, dtype=bool)
     lock = frozen.copy()
     if lk is not None:
-        lock |= lk[clean.clean_to_vertex]
+        lock |= lk[to_input]
 
     # unit-free working coordinates: centred, unit diagonal, snapped to a grid
     cols = np.ascontiguousarray(Vc.T)  # column reductions: much faster than min(axis=0)
@@ -352,10 +356,10 @@ def simplify(V, F, *, target_faces=None, ratio=None, max_error=None, preserve_bo
 
     Q, feat, Nf = _initial_quadrics(Vn, Fc, twin, U, W, preserve_boundary, feature_angle_deg, tun)
     if weights is not None:
-        Q *= weights[clean.clean_to_vertex][:, None]
+        Q *= weights[to_input][:, None]
     Nref = _normal_sums(Fc, Nf, n)
     del Nf
-    mesh = State(Vn, Fc, twin, Q, lock, feat, Nref)  # Fc is clean_with_twins' own copy
+    mesh = State(Vn, Fc, twin, Q, lock, feat, Nref, forig=forder)  # Fc is spatial_order's own array
     max_err_n = None if max_error is None else float(max_error) / scale
 
     stopped = "target"
@@ -383,18 +387,25 @@ def simplify(V, F, *, target_faces=None, ratio=None, max_error=None, preserve_bo
     Vout = mesh.V * scale + centre
     still = ~mesh.moved
     Vout[still] = Vc[mesh.orig[still]]
+    # back to the input's order: cage vertices in the order of the input vertices
+    # they keep, faces in the order of the input faces they descend from
+    vorder = np.argsort(to_input[mesh.orig], kind="stable")
+    new_v = np.empty(vorder.size, dtype=np.int64)
+    new_v[vorder] = np.arange(vorder.size, dtype=np.int64)
+    cur = mesh.cur_of_clean
     vertex_map = np.full(n_in, -1, dtype=np.int64)
-    vertex_map[clean.clean_to_vertex] = mesh.cur_of_clean
-    Fo = mesh.F
+    vertex_map[to_input] = np.where(cur >= 0, new_v[np.maximum(cur, 0)], -1)
+    Fr = mesh.F.ravel()
     hf = np.flatnonzero(mesh.feat)
     tf = mesh.twin[hf]
     hf = hf[(tf > hf) | (tf == BOUNDARY)]  # one half-edge per feature edge
-    Fr, c = Fo.ravel(), hf % 3
-    a, b = Fr[hf - c + _NEXT[c]], Fr[hf - c + _PREV[c]]
+    c = hf % 3
+    a, b = new_v[Fr[hf - c + _NEXT[c]]], new_v[Fr[hf - c + _PREV[c]]]
     fe = np.stack([np.minimum(a, b), np.maximum(a, b)], axis=1)
     fe = fe[np.lexsort((fe[:, 1], fe[:, 0]))]
+    Fo = new_v[mesh.F[np.argsort(mesh.forig, kind="stable")]]
     return SimplifyResult(
-        V=Vout, F=Fo.copy(), vertex_map=vertex_map, max_error=float(worst * scale),
+        V=Vout[vorder], F=Fo, vertex_map=vertex_map, max_error=float(worst * scale),
         stopped_because=stopped, feature_edges=fe.astype(np.int64),
         n_degenerate_faces=clean.n_degenerate_faces, n_duplicate_faces=clean.n_duplicate_faces,
         n_unreferenced_vertices=clean.n_unreferenced_vertices, n_frozen_vertices=int(frozen.sum()),

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from core._clean import (BOUNDARY, NON_MANIFOLD, _MAX_WALK, clean_mesh, clean_with_twins, half_edge_ends,
-                         non_manifold_vertices, twin_table)
+                         non_manifold_vertices, spatial_order, twin_table)
 from core.topology import connected_labels
 from tests.mesh_factory import icosphere, load_shared, regular_grid, shared_mesh_names, torus
 
@@ -243,3 +243,30 @@ def test_duplicate_faces_found_beyond_the_packed_key_range(monkeypatch):
     Fb = np.array([[0, 1, big], [big, 0, 1], [1, 2, big], [0, 2, big - 1]], dtype=np.int64)
     keys = clean._face_keys(Fb, big + 1)
     assert keys[0] == keys[1] and len(set(keys.tolist())) == 3
+
+
+@pytest.mark.parametrize("case", ["torus", "grid", "nonmanifold", "empty"])
+def test_spatial_order_is_the_same_mesh_with_its_own_twin_table(case):
+    if case == "torus":
+        V, F = torus(30, 15)
+    elif case == "grid":
+        V, F = regular_grid(12, 9)
+    elif case == "nonmanifold":  # a fin on a grid: three faces on one edge
+        V, F = regular_grid(6, 6)
+        V = np.concatenate([V, [[0.5, 0.5, 1.0]]])
+        F = np.concatenate([F, [[F[0, 0], F[0, 1], V.shape[0] - 1]]])
+    else:
+        V, F = np.zeros((0, 3)), np.zeros((0, 3), dtype=np.int64)
+    twin = twin_table(F, V.shape[0])
+    V2, F2, twin2, U2, W2, order, forder = spatial_order(V, F, twin)
+    assert np.array_equal(np.sort(order), np.arange(V.shape[0]))
+    assert np.array_equal(np.sort(forder), np.arange(F.shape[0]))
+    assert np.array_equal(V2, V[order])
+    assert np.array_equal(order[F2], F[forder])            # same faces, same corners
+    assert np.array_equal(twin2, twin_table(F2, V.shape[0]))
+    U, W = half_edge_ends(F2)
+    assert np.array_equal(U2, U) and np.array_equal(W2, W)
+    if F.shape[0]:
+        # faces in the order of their smallest (new) vertex
+        first = F2.min(axis=1)
+        assert np.all(np.diff(first) >= 0)
