@@ -40,15 +40,6 @@ _take = np.take
 _NEXT = np.array([1, 2, 0], dtype=np.int64)  # corner after c
 _PREV = np.array([2, 0, 1], dtype=np.int64)  # corner before c
 
-
-def _corner(Fs, v):
-    """Corner (0, 1, 2) of vertex ``v[i]`` in face row ``Fs[i]``, -1 where absent."""
-    e0, e1, e2 = Fs[:, 0] == v, Fs[:, 1] == v, Fs[:, 2] == v
-    c = (e0 | e1 | e2).astype(np.int64) - 1
-    c += e1
-    c += 2 * e2
-    return c
-
 #: per half-edge cache arrays and the value a new half-edge starts with (besides
 #: ``twin``, ``feat`` and the three position columns ``c_x``)
 HALF_EDGE_CACHE = {"swap": False, "blk_pass": -1, "c_cost": 0.0, "c_blk": -1.0, "c_stale": True}
@@ -98,6 +89,15 @@ def _ends(F, h):
     Fr = F.ravel()
     c = h % 3
     return _take(Fr, h + _take(_NEXT_OFF, c)), _take(Fr, h + _take(_PREV_OFF, c))
+
+
+def _corner(Fs, v):
+    """Corner (0, 1, 2) of vertex ``v[i]`` in face row ``Fs[i]``, -1 where absent."""
+    e0, e1, e2 = Fs[:, 0] == v, Fs[:, 1] == v, Fs[:, 2] == v
+    c = (e0 | e1 | e2).astype(np.int64) - 1
+    c += e1
+    c += 2 * e2
+    return c
 
 
 def _distance(st, cost, a, b):

@@ -42,7 +42,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ._clean import BOUNDARY, clean_with_twins, half_edge_ends, non_manifold_vertices, spatial_order
-from ._collapse import State, run
+from ._collapse import State, _ends, run
 from ._relax import close_triangular_holes, drop_stuck_components
 from ._relocate import relocate
 from .errors import InvalidArgumentError
@@ -50,8 +50,6 @@ from .mesh import check_mesh
 from .quadrics import _accumulate_T, _vertex_face_quadrics, edge_constraint_quadrics
 
 _WHERE = "simplify"
-_NEXT = np.array([1, 2, 0], dtype=np.int64)  # corner after c
-_PREV = np.array([2, 0, 1], dtype=np.int64)
 
 
 @dataclass(frozen=True)
@@ -74,7 +72,7 @@ class Tuning:
     compact_weight: float = 1e-5     #: penalty scale: star area * edge length^2 * (1 - g/g_soft)^2
     #: Hausdorff-aware penalty: weight * merged area * (distance of the farther merged
     #: vertex's witness -- its input point farthest from the surface so far -- to the new faces)^2
-    haus_weight: float = 0.15
+    haus_weight: float = 0.45
     haus_phase: float = 4.0          #: ... only once the mesh has at most this many times the target faces
     relocate_iters: int = 2          #: final relocation rounds towards the input (0: off)
     relocate_samples: int = 20000    #: input vertices as relocation targets: this many ...
@@ -395,12 +393,10 @@ def simplify(V, F, *, target_faces=None, ratio=None, max_error=None, preserve_bo
     cur = mesh.cur_of_clean
     vertex_map = np.full(n_in, -1, dtype=np.int64)
     vertex_map[to_input] = np.where(cur >= 0, new_v[np.maximum(cur, 0)], -1)
-    Fr = mesh.F.ravel()
     hf = np.flatnonzero(mesh.feat)
     tf = mesh.twin[hf]
     hf = hf[(tf > hf) | (tf == BOUNDARY)]  # one half-edge per feature edge
-    c = hf % 3
-    a, b = new_v[Fr[hf - c + _NEXT[c]]], new_v[Fr[hf - c + _PREV[c]]]
+    a, b = (new_v[e] for e in _ends(mesh.F, hf))
     fe = np.stack([np.minimum(a, b), np.maximum(a, b)], axis=1)
     fe = fe[np.lexsort((fe[:, 1], fe[:, 0]))]
     Fo = new_v[mesh.F[np.argsort(mesh.forig, kind="stable")]]
