@@ -158,7 +158,7 @@ def run_case(name, V, F, target, use_blender=True):
 
 
 def fmt_table(rows, blender):
-    head = ["mesh", "faces", "target", "ours s", "mean %", "haus %"]
+    head = ["mesh", "faces", "target / ours", "ours s", "mean %", "haus %"]
     if blender:
         head += ["Dec s", "Dec mean %", "Dec haus %", "t ratio", "mean ratio", "haus ratio"]
     head += ["nm in/ours" + ("/Dec" if blender else ""), "bnd in/ours" + ("/Dec" if blender else ""),
@@ -166,7 +166,7 @@ def fmt_table(rows, blender):
              "min angle ours" + ("/Dec" if blender else ""), "peak MiB"]
     lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for r in rows:
-        cells = [r["mesh"], f"{r['faces']:,}", f"{r['out']:,}", f"{r['time']:.2f}", f"{r['mean']:.4f}",
+        cells = [r["mesh"], f"{r['faces']:,}", f"{r['target']:,} / {r['out']:,}", f"{r['time']:.2f}", f"{r['mean']:.4f}",
                  f"{r['haus']:.3f}"]
         if blender:
             cells += [f"{r['b_time']:.2f}", f"{r['b_mean']:.4f}", f"{r['b_haus']:.3f}",
