@@ -186,6 +186,14 @@ for _b in range(_MORTON_BITS):  # a 1024-entry table, built once (not a loop ove
 del _b
 
 
+def renumber_twins(t, new_f):
+    """Twin entries ``t`` (half-edge ids, or the negative markers, kept) once
+    the faces are renumbered by ``new_f`` (old face -> new face; a half-edge
+    keeps its corner: ``3 f + c`` becomes ``3 new_f[f] + c``)."""
+    new_h = (3 * new_f[:, None] + np.arange(3)).ravel()
+    return np.where(t >= 0, np.take(new_h, np.maximum(t, 0)), t)
+
+
 def spatial_order(V, F, twin):
     """The same mesh with vertices in Morton (Z-curve) order of their
     position and faces in order of their smallest new vertex index, so that
@@ -229,9 +237,7 @@ def spatial_order(V, F, twin):
     del Fn
     new_f = np.empty(m, dtype=np.int64)
     new_f[forder] = np.arange(m, dtype=np.int64)
-    new_h = 3 * new_f[:, None] + np.arange(3)   # new id of each old half-edge
-    t = np.take(twin.reshape(m, 3), forder, axis=0).ravel()
-    twin2 = np.where(t >= 0, np.take(new_h.ravel(), np.maximum(t, 0)), t)
+    twin2 = renumber_twins(np.take(twin.reshape(m, 3), forder, axis=0).ravel(), new_f)
     U2, W2 = half_edge_ends(F2)
     return V[order], F2, twin2, U2, W2, order, forder
 

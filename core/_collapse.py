@@ -23,7 +23,7 @@ One pass::
 
 import numpy as np
 
-from ._clean import _NEXT_OFF, _PREV_OFF, BOUNDARY, NON_MANIFOLD
+from ._clean import _NEXT_OFF, _PREV_OFF, BOUNDARY, NON_MANIFOLD, renumber_twins
 from ._parallel import blocks, run_blocks, run_each
 from .quadrics import place_columns, quadric_at, rms_distance
 from .spatial import _kernel, _triangle_rows
@@ -598,12 +598,7 @@ def _compact(st):
     ih = np.flatnonzero(np.repeat(keep_f, 3))
     iv = np.flatnonzero(keep_v)
 
-    def twins():
-        tw = _take(twin, ih)
-        t = np.maximum(tw, 0)
-        return np.where(tw >= 0, 3 * _take(new_f, t // 3) + t % 3, tw)
-
-    jobs = [("twin", twins), ("F", lambda: _take(new_v, np.compress(keep_f, F, axis=0))),
+    jobs = [("twin", lambda: renumber_twins(_take(twin, ih), new_f)), ("F", lambda: _take(new_v, np.compress(keep_f, F, axis=0))),
             ("forig", lambda: np.compress(keep_f, st.forig))]
     for name in ("feat", *HALF_EDGE_CACHE):
         jobs.append((name, lambda a=getattr(st, name): _take(a, ih)))
