@@ -50,7 +50,7 @@ class State:
 
     def __init__(self, V, F, twin, Q, locked, feat, Nref, forig=None):
         n, h3 = V.shape[0], twin.size
-        self.V, self.locked = V, locked
+        self.V, self.locked = V.copy(), locked           # (V stays the input: relocation samples it)
         self.Q = np.ascontiguousarray(Q.T)             # (11,n): one row per coefficient
         self.VT = np.ascontiguousarray(V.T)            # (3,n) copy of V for column gathers
         self.moved = np.zeros(n, dtype=bool)

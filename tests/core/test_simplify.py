@@ -519,3 +519,27 @@ def test_relaxed_topology_always_leaves_a_clean_manifold(seed, holes, frac):
     after = topology_summary(r.F, r.V.shape[0])
     assert after.components <= before.components and after.boundary_loops <= before.boundary_loops
     assert r.F.shape[0] <= max(target, 4) or r.stopped_because == "no_valid_collapse"
+
+
+def test_relocation_samples_the_input_not_the_collapsed_positions(monkeypatch):
+    # the engine moves its own copy of the vertices; the final relocation must see
+    # the input points as they were
+    import importlib
+    simplify_mod = importlib.import_module("core.simplify")
+    seen = {}
+    state_cls, relocate_cage = simplify_mod.State, simplify_mod._relocate_cage
+
+    def state(V, *args, **kw):
+        seen["start"] = V.copy()
+        return state_cls(V, *args, **kw)
+
+    def relocate(mesh, Vn, tun):
+        seen["relocate"] = Vn.copy()
+        return relocate_cage(mesh, Vn, tun)
+
+    monkeypatch.setattr(simplify_mod, "State", state)
+    monkeypatch.setattr(simplify_mod, "_relocate_cage", relocate)
+    V, F = torus(40, 20, bump=0.2)
+    r = simplify(V, F, target_faces=200)
+    assert r.F.shape[0] == 200
+    assert np.array_equal(seen["start"], seen["relocate"])
