@@ -332,8 +332,12 @@ def _spread_bits(x):
 
 
 def _morton(X, lo, extent):
-    """63-bit Morton codes of points X (clamped to the box ``lo + [0, extent]``)."""
-    scale = np.where(extent > 0, ((1 << 21) - 1) / np.where(extent > 0, extent, 1.0), 0.0)
+    """63-bit Morton codes of points X (clamped to the box ``lo + [0, extent]``).
+    An axis thinner than 1e-12 of the widest counts as flat (code bits 0)."""
+    extent = np.asarray(extent, dtype=np.float64)
+    live = extent > 1e-12 * extent.max()
+    scale = np.zeros(3)
+    scale[live] = ((1 << 21) - 1) / extent[live]
     q = np.clip((X - lo) * scale, 0, (1 << 21) - 1).astype(np.uint64)
     return (_spread_bits(q[:, 0]) | (_spread_bits(q[:, 1]) << np.uint64(1))
             | (_spread_bits(q[:, 2]) << np.uint64(2)))
