@@ -35,7 +35,7 @@ import numpy as np
 
 from .cg import conjugate_gradient
 from .errors import InvalidArgumentError
-from .mesh import check_mesh, face_areas, vertex_normals
+from .mesh import bbox_diagonal, bounding_box, check_mesh, face_areas, vertex_normals
 from .metrics import sample_surface
 from .spatial import TriangleIndex
 from .subdivide import subdivision_operator
@@ -124,7 +124,7 @@ def fit_cage(V_dense, F_dense, V_cage, F_cage, *, levels=2, scheme="butterfly", 
             f"fit_cage: laplacian must be one of {_LAPLACIANS}, got {laplacian!r}")
     # work around the dense bounding-box centre: the result then does not
     # depend on where the mesh sits (the CG stopping rule is relative)
-    centre = 0.5 * (V_dense.max(axis=0) + V_dense.min(axis=0))
+    centre = 0.5 * np.add(*bounding_box(V_dense))
     V_dense = V_dense - centre
     V_cage = V_cage - centre
     n_c = V_cage.shape[0]
@@ -207,7 +207,7 @@ def fit_cage(V_dense, F_dense, V_cage, F_cage, *, levels=2, scheme="butterfly", 
             break
     f2d = np.array(f2d)
     d2f = np.array(d2f)
-    diag = float(np.linalg.norm(V_dense.max(axis=0) - V_dense.min(axis=0)))
+    diag = bbox_diagonal(V_dense)
     return FitResult(X + centre, 0.5 * (f2d + d2f), f2d, d2f, np.array(cg_its, dtype=np.int64), diag,
                      cancelled)
 

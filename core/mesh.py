@@ -76,16 +76,24 @@ def check_mesh(V, F, *, where, allow_empty=True):
     return V_out, F_out
 
 
+def bounding_box(V):
+    """Corners ``(lo, hi)`` of the axis-aligned bounding box of ``V`` (n,3),
+    each (3,) float64 (zeros if empty)."""
+    V = np.asarray(V, dtype=np.float64)
+    if V.shape[0] == 0:
+        return np.zeros(3), np.zeros(3)
+    cols = np.ascontiguousarray(V.T)  # column reductions: much faster than min(axis=0)
+    return np.array([c.min() for c in cols]), np.array([c.max() for c in cols])
+
+
 def bbox_diagonal(V):
     """Length of the axis-aligned bounding-box diagonal of ``V`` (0 if empty).
 
     Every tolerance in ``core`` is expressed relative to this length, so that
     results do not depend on the mesh's units.
     """
-    V = np.asarray(V, dtype=np.float64)
-    if V.shape[0] == 0:
-        return 0.0
-    return float(np.linalg.norm(V.max(axis=0) - V.min(axis=0)))
+    lo, hi = bounding_box(V)
+    return float(np.linalg.norm(hi - lo))
 
 
 def face_normals(V, F, *, normalize=True):

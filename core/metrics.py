@@ -26,7 +26,7 @@ from typing import NamedTuple
 import numpy as np
 
 from .errors import InvalidArgumentError
-from .mesh import check_mesh, face_areas
+from .mesh import bbox_diagonal, check_mesh, face_areas
 from .spatial import TriangleIndex
 
 __all__ = ["SurfaceSamples", "SurfaceDistance", "sample_surface", "surface_distance"]
@@ -203,7 +203,7 @@ def surface_distance(V_a, F_a, V_b, F_b, *, samples=None, seed=0):
         n = _check_count(samples, "surface_distance", "samples")
     used_a = V_a[np.unique(F_a)]
     used_b = V_b[np.unique(F_b)]
-    diagonal = float(np.linalg.norm(used_a.max(axis=0) - used_a.min(axis=0)))
+    diagonal = bbox_diagonal(used_a)
     s_a = _sample(V_a, F_a, n, np.random.default_rng(seed)).points
     s_b = _sample(V_b, F_b, n, np.random.default_rng(seed)).points
     ab_max, ab_mean, ab_rms = _one_side(TriangleIndex(V_b, F_b), s_a, used_a)

@@ -46,7 +46,7 @@ from ._collapse import State, _ends, run
 from ._relax import close_triangular_holes, drop_stuck_components
 from ._relocate import relocate
 from .errors import InvalidArgumentError
-from .mesh import check_mesh
+from .mesh import bounding_box, check_mesh
 from .quadrics import _accumulate_T, _vertex_face_quadrics, edge_constraint_quadrics
 
 _WHERE = "simplify"
@@ -321,7 +321,8 @@ def simplify(V, F, *, target_faces=None, ratio=None, max_error=None, preserve_bo
     clean, twin, U, W = clean_with_twins(V, F)
     # working order: neighbours near each other in memory; to_input[i] is the
     # input vertex of working vertex i
-    Vc, Fc, twin, U, W, order, forder = spatial_order(clean.V, clean.F, twin)
+    lo, hi = bounding_box(clean.V)
+    Vc, Fc, twin, U, W, order, forder = spatial_order(clean.V, clean.F, twin, box=(lo, hi))
     to_input = clean.clean_to_vertex[order]
     del order
     n, m0 = Vc.shape[0], Fc.shape[0]
@@ -339,10 +340,6 @@ def simplify(V, F, *, target_faces=None, ratio=None, max_error=None, preserve_bo
         lock |= lk[to_input]
 
     # unit-free working coordinates: centred, unit diagonal, snapped to a grid
-    cols = np.ascontiguousarray(Vc.T)  # column reductions: much faster than min(axis=0)
-    lo = np.array([c.min() for c in cols]) if n else np.zeros(3)
-    hi = np.array([c.max() for c in cols]) if n else np.zeros(3)
-    del cols
     centre = 0.5 * (lo + hi)
     scale = float(np.linalg.norm(hi - lo)) or 1.0
     grid = float(2 ** tun.snap_bits)
@@ -387,7 +384,7 @@ def simplify(V, F, *, target_faces=None, ratio=None, max_error=None, preserve_bo
     Vout[still] = Vc[mesh.orig[still]]
     # back to the input's order: cage vertices in the order of the input vertices
     # they keep, faces in the order of the input faces they descend from
-    vorder = np.argsort(to_input[mesh.orig], kind="stable")
+    vorder = np.argsort(to_input[mesh.orig])  # (distinct keys)
     new_v = np.empty(vorder.size, dtype=np.int64)
     new_v[vorder] = np.arange(vorder.size, dtype=np.int64)
     cur = mesh.cur_of_clean
