@@ -592,28 +592,34 @@ def _compact(st):
     keep_f, keep_v = st.alive, ~st.dead_v
     if keep_f.all() and keep_v.all():
         return
-    F, twin = st.F, st.twin
     new_f = np.cumsum(keep_f) - 1
     new_v = np.cumsum(keep_v) - 1
     ih = np.flatnonzero(np.repeat(keep_f, 3))
     iv = np.flatnonzero(keep_v)
 
-    jobs = [("twin", lambda: renumber_twins(_take(twin, ih), new_f)), ("F", lambda: _take(new_v, np.compress(keep_f, F, axis=0))),
-            ("forig", lambda: np.compress(keep_f, st.forig))]
-    for name in ("feat", *HALF_EDGE_CACHE):
-        jobs.append((name, lambda a=getattr(st, name): _take(a, ih)))
-    for c in range(3):
-        jobs.append((c, lambda a=st.c_x[c]: _take(a, ih)))
-    for name in ("V", "Nref", "wit", "locked", "moved", "orig", "vver", "fresh", "is_bnd"):
-        jobs.append((name, lambda a=getattr(st, name): _take(a, iv, axis=0)))
-    for name in ("Q", "VT"):
-        jobs.append((name, lambda a=getattr(st, name): _take(a, iv, axis=1)))
-    out = run_each(lambda job: job[1](), jobs)
-    for (name, _), arr in zip(jobs, out):
+    def on_h(a):   # per half-edge
+        return _take(a, ih)
+
+    def on_v(a):   # per vertex
+        return _take(a, iv, axis=0)
+
+    def on_vt(a):  # per vertex, coefficient-major
+        return _take(a, iv, axis=1)
+
+    per_vertex = ("V", "Nref", "wit", "locked", "moved", "orig", "vver", "fresh", "is_bnd")
+    rules = {"twin": lambda a: renumber_twins(_take(a, ih), new_f),
+             "F": lambda a: _take(new_v, np.compress(keep_f, a, axis=0)),
+             "forig": lambda a: np.compress(keep_f, a),
+             "feat": on_h, **dict.fromkeys(HALF_EDGE_CACHE, on_h), **dict.fromkeys(per_vertex, on_v),
+             "Q": on_vt, "VT": on_vt}
+
+    def swap(name):  # each job replaces one array: the old one goes as soon as its job is done
         if isinstance(name, int):
-            st.c_x[name] = arr
+            st.c_x[name] = on_h(st.c_x[name])
         else:
-            setattr(st, name, arr)
+            setattr(st, name, rules[name](getattr(st, name)))
+
+    run_each(swap, [*rules, 0, 1, 2])
     cur = _survivors(st)
     st.cur_of_clean = np.where(cur >= 0, _take(new_v, np.maximum(cur, 0)), -1)  # -1: removed component
     st.alive = np.ones(st.F.shape[0], dtype=bool)

@@ -324,7 +324,9 @@ def simplify(V, F, *, target_faces=None, ratio=None, max_error=None, preserve_bo
     lo, hi = bounding_box(clean.V)
     Vc, Fc, twin, U, W, order, forder = spatial_order(clean.V, clean.F, twin, box=(lo, hi))
     to_input = clean.clean_to_vertex[order]
-    del order
+    dropped = {k: getattr(clean, k) for k in ("n_degenerate_faces", "n_duplicate_faces",
+                                              "n_unreferenced_vertices")}
+    del order, clean  # the reordered copies replace the cleaned mesh
     n, m0 = Vc.shape[0], Fc.shape[0]
 
     target = None
@@ -350,6 +352,7 @@ def simplify(V, F, *, target_faces=None, ratio=None, max_error=None, preserve_bo
     Vn /= grid
 
     Q, feat, Nf = _initial_quadrics(Vn, Fc, twin, U, W, preserve_boundary, feature_angle_deg, tun)
+    del U, W  # (3m,) each: not needed past the set-up
     if weights is not None:
         Q *= weights[to_input][:, None]
     Nref = _normal_sums(Fc, Nf, n)
@@ -400,6 +403,5 @@ def simplify(V, F, *, target_faces=None, ratio=None, max_error=None, preserve_bo
     return SimplifyResult(
         V=Vout[vorder], F=Fo, vertex_map=vertex_map, max_error=float(worst * scale),
         stopped_because=stopped, feature_edges=fe.astype(np.int64),
-        n_degenerate_faces=clean.n_degenerate_faces, n_duplicate_faces=clean.n_duplicate_faces,
-        n_unreferenced_vertices=clean.n_unreferenced_vertices, n_frozen_vertices=int(frozen.sum()),
+        **dropped, n_frozen_vertices=int(frozen.sum()),
         n_passes=passes)
