@@ -318,14 +318,20 @@ def _check_block(st, A, B, X, interior, star, kf, tun, haus=True):
     return ok, penalty, (star, kf, coll, cA, cB), wnew
 
 
+def _thinned(x):
+    """``x`` itself up to ``4 * _SAMPLE`` values, else an evenly strided
+    sample of ``_SAMPLE`` to ``2 * _SAMPLE`` of them (a view; deterministic)."""
+    return x if x.size <= 4 * _SAMPLE else x[::x.size // _SAMPLE]
+
+
 def _kth_smallest(x, k):
     """The ``k``-th smallest value of ``x`` (0-based). Exact for arrays of up to
-    ``4 * _SAMPLE``; for larger ones estimated from an evenly strided sample,
-    two standard deviations of the estimate on the high side (a pool bound
-    then takes a few more edges, never many fewer). Deterministic."""
-    if x.size <= 4 * _SAMPLE:
+    ``4 * _SAMPLE``; for larger ones estimated from :func:`_thinned`, two
+    standard deviations of the estimate on the high side (a pool bound then
+    takes a few more edges, never many fewer)."""
+    s = _thinned(x)
+    if s is x:
         return np.partition(x, k)[k]
-    s = x[::x.size // _SAMPLE]
     q = (k + 1) / x.size
     j = int(np.ceil(q * s.size + 2.0 * np.sqrt(q * (1.0 - q) * s.size)))
     j = min(max(j, 0), s.size - 1)
@@ -350,7 +356,7 @@ def _priority(cost, a, b, bands):
     if bits > 28:
         raise OverflowError("simplify: more than 2^28 edges in one pass")
     if P > bands:
-        s = cost if P <= 4 * _SAMPLE else cost[::P // _SAMPLE]    # band edges: quantiles (of a sample)
+        s = _thinned(cost)                  # band edges: quantiles (of a sample on large pools)
         ks = (np.arange(1, bands, dtype=np.int64) * s.size) // bands
         band = np.searchsorted(np.partition(s, ks)[ks], cost, side="left").astype(np.int64)
     else:
