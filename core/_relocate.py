@@ -1,17 +1,29 @@
 """Final vertex relocation of a simplified cage towards the original surface.
 
 After the collapses, every movable cage vertex is moved to reduce the squared
-distance from points of the original surface to the cage (ICP-like, with the
-correspondences fixed per iteration)::
+distance between the cage and the original surface in both directions
+(symmetric ICP, with the correspondences fixed per iteration)::
 
     repeat iters times:
-        (f_s, b_s) = closest cage face and barycentrics of each sample p_s
-        minimise  sum_s |sum_c b_sc v[F[f_s, c]] - p_s|^2 + sum_j l_j |v_j - v0_j|^2
+        forward:  (f_s, b_s) = closest cage face and barycentrics of each
+                  input point p_s (surface samples, plus the input's crease
+                  vertices); each input border vertex to its closest cage
+                  border edge
+        backward: x_t = fixed barycentric points b_t on every cage face f_t,
+                  q_t = their closest points on the input surface, each row
+                  weighted by the cage area it stands for (only when the
+                  caller passes an index of the input)
+        minimise  sum_s |sum_c b_sc v[F[f_s, c]] - p_s|^2
+                + sum_t w_t |sum_c b_tc v[F[f_t, c]] - q_t|^2
+                + sum_j l_j |v_j - v0_j|^2
                   (conjugate gradients on the normal equations, per coordinate)
         undo the move of every vertex of a face that would flip or degenerate
 
-Boundary, crease, locked and frozen vertices do not move, so borders,
-creases and the caller's constraints are kept exactly.
+The forward term alone cannot see a cage face that spans a gap of the input
+(no input point is closest to it); the backward term pulls such faces in.
+The input's border is matched to the cage's border edges both ways, so borders
+follow the input's instead of drifting with the surface. Locked vertices (the
+caller's and frozen non-manifold ones) do not move.
 """
 
 import numpy as np
@@ -42,7 +54,60 @@ def _normals(V, F):
     return np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]])
 
 
-def relocate(V, F, P, movable, *, iters=2, cg_iters=15, reg=0.05, min_cos=0.2, N_keep=None):
+#: barycentric points of each cage face for the backward term: the centroid and
+#: the centroids of the three corner sub-triangles' halves towards each corner
+_BACK_BARY = np.array([[2.0, 2.0, 2.0], [4.0, 1.0, 1.0], [1.0, 4.0, 1.0], [1.0, 1.0, 4.0]]) / 6.0
+
+
+def _back_rows(V, F, surface, total):
+    """Rows of the backward term: (idx (3,r), b (3,r), targets (r,3)), each row
+    scaled by the square root of its weight (``total`` shared out by the area
+    each point stands for) so it can join the forward rows unchanged."""
+    m, k = F.shape[0], _BACK_BARY.shape[0]
+    idx = np.repeat(F.T, k, axis=1)                                   # (3, m*k)
+    b = np.tile(_BACK_BARY.T, (1, m))                                 # (3, m*k)
+    X = (b[0, :, None] * np.take(V, idx[0], axis=0) + b[1, :, None] * np.take(V, idx[1], axis=0)
+         + b[2, :, None] * np.take(V, idx[2], axis=0))
+    T = surface.closest(X).point
+    area = np.linalg.norm(_normals(V, F), axis=1)
+    w = np.sqrt(np.repeat(area * (total / max(k * float(area.sum()), 1e-300)), k))
+    return idx, b * w, T * w[:, None]
+
+
+_SEG_T = np.array([0.25, 0.5, 0.75])   #: points along each cage border edge (backward)
+
+
+def segment_triangles(E):
+    """Edges (k,2) as zero-area triangles (k,3) ``(a, b, b)``, so a
+    :class:`~.spatial.TriangleIndex` finds closest points on polylines."""
+    return np.concatenate([E, E[:, 1:]], axis=1)
+
+
+def _border_rows(V, C, Eb, C_index, weight):
+    """Rows tying the cage's border edges ``Eb`` to the input's border: each
+    input border point ``C`` to its closest cage border edge (forward), and
+    points along every cage border edge to the closest input border edge
+    ``C_index`` (backward, as much weight in all as the forward rows, shared
+    by length). Returns (idx (3,r), b (3,r), targets (r,3)), rows pre-scaled
+    by the square roots of their weights."""
+    T3 = segment_triangles(Eb)
+    cp = TriangleIndex(V, T3).closest(C)
+    idx_f = np.take(T3, cp.face, axis=0).T
+    b_f = cp.bary.T * np.sqrt(weight)
+    k = _SEG_T.size
+    idx_b = np.repeat(T3.T, k, axis=1)
+    t = np.tile(_SEG_T, Eb.shape[0])
+    b_b = np.stack([1.0 - t, t, np.zeros_like(t)])
+    X = b_b[0, :, None] * np.take(V, idx_b[0], axis=0) + b_b[1, :, None] * np.take(V, idx_b[1], axis=0)
+    Tb = C_index.closest(X).point
+    length = np.linalg.norm(V[Eb[:, 1]] - V[Eb[:, 0]], axis=1)
+    w = np.sqrt(np.repeat(length * (weight * C.shape[0] / max(k * float(length.sum()), 1e-300)), k))
+    return (np.concatenate([idx_f, idx_b], axis=1), np.concatenate([b_f, b_b * w], axis=1),
+            np.concatenate([C * np.sqrt(weight), Tb * w[:, None]]))
+
+
+def relocate(V, F, P, movable, *, iters=2, cg_iters=15, reg=0.05, min_cos=0.2, N_keep=None,
+             surface=None, back=0.0, border=None):
     """Move ``movable`` vertices of the cage ``(V, F)`` towards points ``P``.
 
     Parameters
@@ -60,6 +125,12 @@ def relocate(V, F, P, movable, *, iters=2, cg_iters=15, reg=0.05, min_cos=0.2, N
     N_keep : (m,3) float64 or None, reference normals: a moved face whose normal
         ends more than 90 degrees from its row is undone too (the caller passes
         the summed input normals each face stands for).
+    surface : TriangleIndex of the input surface or None (no backward term).
+    back : float, weight of the backward term: the cage's whole area counts
+        ``back`` times as much as all the forward points together.
+    border : None or (C (c,3) input border points, Eb (k,2) cage border edges,
+        TriangleIndex of the input's border edges, weight per point): ties the
+        cage's borders to the input's in both directions.
 
     Returns
     -------
@@ -70,17 +141,29 @@ def relocate(V, F, P, movable, *, iters=2, cg_iters=15, reg=0.05, min_cos=0.2, N
     if not movable.any() or F.shape[0] == 0 or P.shape[0] == 0:
         return V
     N_ref = _normals(V, F)
+    use_back = surface is not None and back > 0.0
     for _ in range(iters):
         cp = TriangleIndex(V, F).closest(P)
         idx = np.ascontiguousarray(np.take(F, cp.face, axis=0).T)     # (3, s)
         b = np.ascontiguousarray(cp.bary.T)                           # (3, s)
+        T = P
+        if use_back:
+            i2, b2, T2 = _back_rows(V, F, surface, back * P.shape[0])
+            idx = np.concatenate([idx, i2], axis=1)
+            b = np.concatenate([b, b2], axis=1)
+            T = np.concatenate([P, T2])
+        if border is not None and border[1].shape[0] and border[0].shape[0]:
+            i3, b3, T3 = _border_rows(V, *border)
+            idx = np.concatenate([idx, i3], axis=1)
+            b = np.concatenate([b, b3], axis=1)
+            T = np.concatenate([T, T3])
         diag = np.bincount(idx.ravel(), weights=(b * b).ravel(), minlength=n)
         lam = reg * diag + reg * max(float(diag.mean()), 1e-300)
         lam[~movable] = 1e30  # pinned
-        # solve (B^T B + lam) D = B^T (P - B V) for the displacement D by CG
+        # solve (B^T B + lam) D = B^T (T - B V) for the displacement D by CG
         Bv = (b[0, :, None] * np.take(V, idx[0], axis=0) + b[1, :, None] * np.take(V, idx[1], axis=0)
               + b[2, :, None] * np.take(V, idx[2], axis=0))
-        r = _scatter(idx, b, P - Bv, n)
+        r = _scatter(idx, b, T - Bv, n)
         r[~movable] = 0.0
         D = np.zeros((n, 3))
         Rk = r.copy()

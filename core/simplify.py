@@ -28,7 +28,8 @@ of independent edges, each batch checked on the mesh as it is::
         apply every accepted collapse with one remap (b -> a, V[a] = x,
         Q[a] += Q[b]); glue the half-edge twins of the removed faces
     until the target, the error bound, or no valid collapse
-    move the free cage vertices towards the input surface (``core._relocate``)
+    move the unlocked cage vertices towards the input surface, both ways, and
+    its borders onto the input's (``core._relocate``)
 
 The mesh is kept as faces plus a half-edge twin table (``core._clean``), which
 collapses update locally: no sort after the first one.
@@ -41,13 +42,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ._clean import BOUNDARY, clean_with_twins, half_edge_ends, non_manifold_vertices, spatial_order
+from ._clean import BOUNDARY, clean_with_twins, non_manifold_vertices, spatial_order
 from ._collapse import State, _ends, run
 from ._relax import close_triangular_holes, drop_stuck_components
-from ._relocate import relocate
+from ._relocate import relocate, segment_triangles
 from .errors import InvalidArgumentError
 from .mesh import bounding_box, check_mesh
 from .quadrics import _accumulate_T, _vertex_face_quadrics, edge_constraint_quadrics
+from .spatial import TriangleIndex
 
 _WHERE = "simplify"
 
@@ -75,6 +77,12 @@ class Tuning:
     haus_weight: float = 0.45
     haus_phase: float = 4.0          #: ... only once the mesh has at most this many times the target faces
     relocate_iters: int = 2          #: final relocation rounds towards the input (0: off)
+    #: inputs up to this many faces also get the backward pull (cage towards the input
+    #: surface, which needs an index of the whole input) ...
+    relocate_back_max_faces: int = 50000
+    relocate_back: float = 0.3       #: ... with this weight (cage area against the input points)
+    relocate_back_iters: int = 4     #: ... and this many rounds
+    relocate_border_weight: float = 1.0  #: weight of each input border point (a surface sample: 1)
     relocate_samples: int = 20000    #: input vertices as relocation targets: this many ...
     relocate_per_vertex: int = 4     #: ... or this many per cage vertex, whichever is more
     relocate_reg: float = 1.0        #: pull of each vertex to its place, relative to its samples
@@ -232,18 +240,28 @@ def _normal_sums(F, N, n):
     return out
 
 
-def _relocate_cage(mesh, Vn, tun):
-    """Move free cage vertices towards the input surface (see ``core._relocate``)."""
+def _relocate_cage(mesh, Vn, creases, Eb_in, surface, tun):
+    """Move the unlocked cage vertices towards the input (see ``core._relocate``):
+    the input's crease vertices ``creases`` join the surface samples, its
+    border edges ``Eb_in`` (k,2) are tied to the cage's, and ``surface`` (the
+    input faces, or None) turns on the backward pull. Borders, creases and
+    corners move too, towards the input's (pinning them measured worse: their
+    collapse positions are often off the input)."""
     Fm = mesh.F
-    movable = ~mesh.locked & ~mesh.is_bnd
-    Uo, Wo = half_edge_ends(Fm)
-    movable[Uo[mesh.feat]] = False
-    movable[Wo[mesh.feat]] = False
+    movable = ~mesh.locked
     samples = max(tun.relocate_samples, tun.relocate_per_vertex * mesh.V.shape[0])
     step = max(1, int(np.ceil(Vn.shape[0] / samples)))
-    P = Vn[::step]
+    P = np.concatenate([Vn[::step], Vn[creases[::step]]])
+    border = None
+    if Eb_in.shape[0]:
+        hb = np.flatnonzero(mesh.twin == BOUNDARY)
+        Eb = np.stack(_ends(Fm, hb), axis=1)
+        C = Vn[np.unique(Eb_in)[::step]]
+        border = (C, Eb, TriangleIndex(Vn, segment_triangles(Eb_in)), tun.relocate_border_weight)
     Nkeep = mesh.Nref[Fm].sum(axis=1) if tun.ref_cos > -1.0 else None
-    Vnew = relocate(mesh.V, Fm, P, movable, iters=tun.relocate_iters, reg=tun.relocate_reg, N_keep=Nkeep)
+    back = dict(surface=TriangleIndex(Vn, surface), back=tun.relocate_back,
+                iters=tun.relocate_back_iters) if surface is not None else dict(iters=tun.relocate_iters)
+    Vnew = relocate(mesh.V, Fm, P, movable, reg=tun.relocate_reg, N_keep=Nkeep, border=border, **back)
     mesh.moved |= np.any(Vnew != mesh.V, axis=1)
     mesh.V = Vnew
 
@@ -352,6 +370,12 @@ def simplify(V, F, *, target_faces=None, ratio=None, max_error=None, preserve_bo
     Vn /= grid
 
     Q, feat, Nf = _initial_quadrics(Vn, Fc, twin, U, W, preserve_boundary, feature_angle_deg, tun)
+    # for the final relocation: the input's border edges and crease vertices, and its
+    # faces when small enough for the backward pull (the engine rewrites Fc)
+    hb = np.flatnonzero(twin == BOUNDARY)
+    Eb_in = np.stack([U[hb], W[hb]], axis=1)
+    creases = np.unique(np.concatenate([U[feat], W[feat]]))
+    Fin = Fc.copy() if m0 <= tun.relocate_back_max_faces else None
     del U, W  # (3m,) each: not needed past the set-up
     if weights is not None:
         Q *= weights[to_input][:, None]
@@ -379,7 +403,7 @@ def simplify(V, F, *, target_faces=None, ratio=None, max_error=None, preserve_bo
     worst = mesh.worst
     if (tun.relocate_iters > 0 and passes > 0 and stopped != "cancelled"
             and mesh.F.shape[0] <= min(tun.relocate_max_faces, tun.relocate_max_share * m0)):
-        _relocate_cage(mesh, Vn, tun)
+        _relocate_cage(mesh, Vn, creases, Eb_in, Fin, tun)
 
     # back to the caller's units; vertices never moved keep their exact input position
     Vout = mesh.V * scale + centre

@@ -533,9 +533,9 @@ def test_relocation_samples_the_input_not_the_collapsed_positions(monkeypatch):
         seen["start"] = V.copy()
         return state_cls(V, *args, **kw)
 
-    def relocate(mesh, Vn, tun):
+    def relocate(mesh, Vn, *args):
         seen["relocate"] = Vn.copy()
-        return relocate_cage(mesh, Vn, tun)
+        return relocate_cage(mesh, Vn, *args)
 
     monkeypatch.setattr(simplify_mod, "State", state)
     monkeypatch.setattr(simplify_mod, "_relocate_cage", relocate)

@@ -1,0 +1,64 @@
+"""The final relocation of a simplified cage (``core._relocate``): the
+backward pull and the border ties, each against the same set-up without it."""
+
+import numpy as np
+
+from core._relocate import relocate, segment_triangles
+from core.spatial import TriangleIndex
+from core.topology import edge_map
+from tests.mesh_factory import regular_grid
+
+
+def _square(n=9, z=0.0):
+    V, F = regular_grid(n, n)
+    V = V.copy()
+    V[:, 2] = z
+    return V, F
+
+
+def _border_edges(F):
+    em = edge_map(F, int(F.max()) + 1)
+    return em.E[em.edge_face_count == 1]
+
+
+def test_backward_pull_brings_in_cage_parts_no_input_point_sees():
+    # the cage floats 0.2 above the input square; the only forward samples sit
+    # in one corner, so the forward term alone cannot move the far side
+    Vc, Fc = _square(9, z=0.2)
+    Vi, Fi = _square(17)
+    P = Vi[(Vi[:, 0] < 0.2) & (Vi[:, 1] < 0.2)]
+    movable = np.ones(Vc.shape[0], dtype=bool)
+    far = (Vc[:, 0] > 0.6) & (Vc[:, 1] > 0.6)
+    alone = relocate(Vc, Fc, P, movable, iters=4)
+    pulled = relocate(Vc, Fc, P, movable, iters=4, surface=TriangleIndex(Vi, Fi), back=0.3)
+    assert alone[far, 2].min() > 0.15
+    assert np.abs(pulled[:, 2]).max() < 0.02
+    assert np.abs(pulled[:, :2] - Vc[:, :2]).max() < 1e-3  # straight down, to the closest points
+
+
+def test_border_ties_pull_an_overhanging_border_back_onto_the_input_border():
+    # the cage's right column sticks out 0.05 beyond the input square's border,
+    # in the plane: every input point projects onto the cage with no residual
+    Vc, Fc = _square(9)
+    right = Vc[:, 0] > 1 - 1e-9
+    Vc[right, 0] += 0.05
+    Vi, Fi = _square(17)
+    movable = np.ones(Vc.shape[0], dtype=bool)
+    Eb_c, Eb_i = _border_edges(Fc), _border_edges(Fi)
+    C = Vi[np.unique(Eb_i)]
+    seg = TriangleIndex(Vi, segment_triangles(Eb_i))
+    alone = relocate(Vc, Fc, Vi, movable, iters=4)
+    tied = relocate(Vc, Fc, Vi, movable, iters=4, border=(C, Eb_c, seg, 1.0))
+    assert (alone[right, 0] - 1).min() > 0.04
+    assert np.abs(tied[right, 0] - 1).max() < 0.02  # from 0.05; the corners turn, so not to 0
+    assert np.abs(tied[:, 2]).max() < 1e-12  # nothing leaves the plane
+
+
+def test_locked_vertices_never_move():
+    Vc, Fc = _square(9, z=0.2)
+    Vi, Fi = _square(17)
+    movable = np.ones(Vc.shape[0], dtype=bool)
+    movable[::3] = False
+    out = relocate(Vc, Fc, Vi, movable, iters=3, surface=TriangleIndex(Vi, Fi), back=0.3)
+    np.testing.assert_array_equal(out[~movable], Vc[~movable])
+    assert np.abs(out[movable, 2]).max() < 0.2  # the others did move down
