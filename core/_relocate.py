@@ -17,7 +17,8 @@ distance between the cage and the original surface in both directions
                 + sum_t w_t |sum_c b_tc v[F[f_t, c]] - q_t|^2
                 + sum_j l_j |v_j - v0_j|^2
                   (conjugate gradients on the normal equations, per coordinate)
-        undo the move of every vertex of a face that would flip or degenerate
+        undo the move of every vertex of a face that would flip, degenerate
+        or become a sliver
 
 The forward term alone cannot see a cage face that spans a gap of the input
 (no input point is closest to it); the backward term pulls such faces in.
@@ -52,6 +53,14 @@ def _scatter(idx, b, R, n):
 
 def _normals(V, F):
     return np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]])
+
+
+def _compactness(V, F, l):
+    """Garland's compactness ``4 sqrt(3) area / sum of squared edge lengths``
+    of each face, given ``l`` = twice the areas."""
+    E = V[F[:, [1, 2, 0]]] - V[F]
+    sumsq = np.einsum("ijk,ijk->i", E, E)
+    return 2.0 * np.sqrt(3.0) * l / np.where(sumsq > 0, sumsq, 1.0)
 
 
 #: barycentric points of each cage face for the backward term: the centroid and
@@ -107,7 +116,7 @@ def _border_rows(V, C, Eb, C_index, weight):
 
 
 def relocate(V, F, P, movable, *, iters=2, cg_iters=15, reg=0.05, min_cos=0.2, N_keep=None,
-             surface=None, back=0.0, border=None):
+             surface=None, back=0.0, border=None, min_compact=0.0):
     """Move ``movable`` vertices of the cage ``(V, F)`` towards points ``P``.
 
     Parameters
@@ -125,6 +134,9 @@ def relocate(V, F, P, movable, *, iters=2, cg_iters=15, reg=0.05, min_cos=0.2, N
     N_keep : (m,3) float64 or None, reference normals: a moved face whose normal
         ends more than 90 degrees from its row is undone too (the caller passes
         the summed input normals each face stands for).
+    min_compact : float, a moved face less compact than this (``4 sqrt(3) area /
+        sum of squared edges``, 1 for equilateral) and than half its own
+        compactness before is undone too (no new slivers).
     surface : TriangleIndex of the input surface or None (no backward term).
     back : float, weight of the backward term: the cage's whole area counts
         ``back`` times as much as all the forward points together.
@@ -141,6 +153,7 @@ def relocate(V, F, P, movable, *, iters=2, cg_iters=15, reg=0.05, min_cos=0.2, N
     if not movable.any() or F.shape[0] == 0 or P.shape[0] == 0:
         return V
     N_ref = _normals(V, F)
+    g0 = _compactness(V, F, np.linalg.norm(N_ref, axis=1))  # of the cage as it came
     use_back = surface is not None and back > 0.0
     for _ in range(iters):
         cp = TriangleIndex(V, F).closest(P)
@@ -190,6 +203,9 @@ def relocate(V, F, P, movable, *, iters=2, cg_iters=15, reg=0.05, min_cos=0.2, N
             bad = np.einsum("ij,ij->i", N_ref, N1) <= min_cos * l0 * l1
             if N_keep is not None:
                 bad |= np.einsum("ij,ij->i", N_keep, N1) <= 0.0
+            if min_compact > 0.0:
+                g1 = _compactness(Vn, F, l1)
+                bad |= (g1 < min_compact) & (g1 < 0.5 * g0)
             bad &= np.any(D[F] != 0.0, axis=(1, 2))
             if not bad.any():
                 break

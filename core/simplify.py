@@ -261,7 +261,8 @@ def _relocate_cage(mesh, Vn, creases, Eb_in, surface, tun):
     Nkeep = mesh.Nref[Fm].sum(axis=1) if tun.ref_cos > -1.0 else None
     back = dict(surface=TriangleIndex(Vn, surface), back=tun.relocate_back,
                 iters=tun.relocate_back_iters) if surface is not None else dict(iters=tun.relocate_iters)
-    Vnew = relocate(mesh.V, Fm, P, movable, reg=tun.relocate_reg, N_keep=Nkeep, border=border, **back)
+    Vnew = relocate(mesh.V, Fm, P, movable, reg=tun.relocate_reg, N_keep=Nkeep, border=border,
+                    min_compact=tun.gamma_hard, **back)
     mesh.moved |= np.any(Vnew != mesh.V, axis=1)
     mesh.V = Vnew
 

@@ -62,3 +62,24 @@ def test_locked_vertices_never_move():
     out = relocate(Vc, Fc, Vi, movable, iters=3, surface=TriangleIndex(Vi, Fi), back=0.3)
     np.testing.assert_array_equal(out[~movable], Vc[~movable])
     assert np.abs(out[movable, 2]).max() < 0.2  # the others did move down
+
+
+def compactness(V):
+    """4 sqrt(3) area / sum of squared edges of the triangle V (3,3)."""
+    area = 0.5 * np.linalg.norm(np.cross(V[1] - V[0], V[2] - V[0]))
+    return 4 * np.sqrt(3) * area / sum(np.sum((V[i] - V[i - 1]) ** 2) for i in range(3))
+
+
+def test_a_move_that_would_make_a_sliver_is_undone():
+    # the input is a needle along the cage triangle's base: the backward pull
+    # drags the free apex down onto it
+    V = np.array([[0, 0, 0], [1, 0, 0], [0.5, 0.5, 0]], dtype=float)
+    F = np.array([[0, 1, 2]], dtype=np.int64)
+    Vi = np.array([[0, 0, 0], [1, 0, 0], [0.5, 0.002, 0]], dtype=float)
+    surface = TriangleIndex(Vi, F)
+    movable = np.array([False, False, True])
+    free = relocate(V, F, Vi, movable, iters=4, surface=surface, back=5.0)
+    kept = relocate(V, F, Vi, movable, iters=4, surface=surface, back=5.0, min_compact=0.02)
+    assert compactness(free) < 0.01                # unguarded: the face becomes a needle
+    assert compactness(kept) >= 0.02               # guarded: the step that would is undone
+    assert kept[2, 1] < 0.1                        # ... the ones before it stay
