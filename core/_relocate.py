@@ -64,7 +64,7 @@ def _compactness(V, F, l):
 
 
 #: barycentric points of each cage face for the backward term: the centroid and
-#: the centroids of the three corner sub-triangles' halves towards each corner
+#: the three points halfway from it to each corner
 _BACK_BARY = np.array([[2.0, 2.0, 2.0], [4.0, 1.0, 1.0], [1.0, 4.0, 1.0], [1.0, 1.0, 4.0]]) / 6.0
 
 
