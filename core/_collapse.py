@@ -91,6 +91,13 @@ def _ends(F, h):
     return _take(Fr, h + _take(_NEXT_OFF, c)), _take(Fr, h + _take(_PREV_OFF, c))
 
 
+def compactness(l, sumsq):
+    """Garland's compactness ``4 sqrt(3) area / sum of squared edge lengths``
+    (1 for an equilateral triangle, 0 for a degenerate one) from ``l`` = twice
+    the areas and ``sumsq`` = the sums of squared edge lengths."""
+    return _SQRT3x2 * l / np.where(sumsq > 0, sumsq, 1.0)
+
+
 def _corner(Fs, v):
     """Corner (0, 1, 2) of vertex ``v[i]`` in face row ``Fs[i]``, -1 where absent."""
     e0, e1, e2 = Fs[:, 0] == v, Fs[:, 1] == v, Fs[:, 2] == v
@@ -283,9 +290,9 @@ def _check_block(st, A, B, X, interior, star, kf, tun, haus=True):
         flip &= np.einsum("ij,ij->i", ref0, N0) >= 0
     ok[mk[flip]] = False
     sumsq = np.einsum("ij,ij->i", e0, e0) + np.einsum("ij,ij->i", e1, e1) + np.einsum("ij,ij->i", e2, e2)
-    g_new = _SQRT3x2 * l1 / np.where(sumsq > 0, sumsq, 1.0)
+    g_new = compactness(l1, sumsq)
     osq = np.einsum("ij,ij->i", o0, o0) + np.einsum("ij,ij->i", o1, o1) + np.einsum("ij,ij->i", o2, o2)
-    g_old = _SQRT3x2 * l0 / np.where(osq > 0, osq, 1.0)
+    g_old = compactness(l0, osq)
     gmin_new = np.ones(k)
     np.minimum.at(gmin_new, mk, g_new)
     gmin_old = np.ones(k)

@@ -29,17 +29,21 @@ caller's and frozen non-manifold ones) do not move.
 
 import numpy as np
 
+from ._collapse import compactness
 from .spatial import TriangleIndex
 
 
-def _matvec(idx, b, x, lam):
-    """(B^T B + diag(lam)) x for the sample-to-cage barycentric operator B.
+def _gather(idx, b, x):
+    """B x: the barycentric combinations (s,3) of rows of ``x`` (n,3), with
+    ``idx`` (3, s) the three vertices of each row and ``b`` (3, s) their weights."""
+    return (b[0, :, None] * np.take(x, idx[0], axis=0) + b[1, :, None] * np.take(x, idx[1], axis=0)
+            + b[2, :, None] * np.take(x, idx[2], axis=0))
 
-    ``idx`` is (3, s): the cage vertex of each sample's three corners,
-    ``b`` is (3, s): their barycentric weights."""
-    Bx = (b[0, :, None] * np.take(x, idx[0], axis=0) + b[1, :, None] * np.take(x, idx[1], axis=0)
-          + b[2, :, None] * np.take(x, idx[2], axis=0))
-    return _scatter(idx, b, Bx, x.shape[0]) + lam[:, None] * x
+
+def _matvec(idx, b, x, lam):
+    """(B^T B + diag(lam)) x for the sample-to-cage barycentric operator B
+    (see ``_gather``)."""
+    return _scatter(idx, b, _gather(idx, b, x), x.shape[0]) + lam[:, None] * x
 
 
 def _scatter(idx, b, R, n):
@@ -56,11 +60,10 @@ def _normals(V, F):
 
 
 def _compactness(V, F, l):
-    """Garland's compactness ``4 sqrt(3) area / sum of squared edge lengths``
-    of each face, given ``l`` = twice the areas."""
+    """Compactness (``core._collapse.compactness``) of each face, given ``l`` =
+    twice the areas."""
     E = V[F[:, [1, 2, 0]]] - V[F]
-    sumsq = np.einsum("ijk,ijk->i", E, E)
-    return 2.0 * np.sqrt(3.0) * l / np.where(sumsq > 0, sumsq, 1.0)
+    return compactness(l, np.einsum("ijk,ijk->i", E, E))
 
 
 #: barycentric points of each cage face for the backward term: the centroid and
@@ -75,9 +78,7 @@ def _back_rows(V, F, surface, total):
     m, k = F.shape[0], _BACK_BARY.shape[0]
     idx = np.repeat(F.T, k, axis=1)                                   # (3, m*k)
     b = np.tile(_BACK_BARY.T, (1, m))                                 # (3, m*k)
-    X = (b[0, :, None] * np.take(V, idx[0], axis=0) + b[1, :, None] * np.take(V, idx[1], axis=0)
-         + b[2, :, None] * np.take(V, idx[2], axis=0))
-    T = surface.closest(X).point
+    T = surface.closest(_gather(idx, b, V)).point
     area = np.linalg.norm(_normals(V, F), axis=1)
     w = np.sqrt(np.repeat(area * (total / max(k * float(area.sum()), 1e-300)), k))
     return idx, b * w, T * w[:, None]
@@ -107,8 +108,7 @@ def _border_rows(V, C, Eb, C_index, weight):
     idx_b = np.repeat(T3.T, k, axis=1)
     t = np.tile(_SEG_T, Eb.shape[0])
     b_b = np.stack([1.0 - t, t, np.zeros_like(t)])
-    X = b_b[0, :, None] * np.take(V, idx_b[0], axis=0) + b_b[1, :, None] * np.take(V, idx_b[1], axis=0)
-    Tb = C_index.closest(X).point
+    Tb = C_index.closest(_gather(idx_b, b_b, V)).point
     length = np.linalg.norm(V[Eb[:, 1]] - V[Eb[:, 0]], axis=1)
     w = np.sqrt(np.repeat(length * (weight * C.shape[0] / max(k * float(length.sum()), 1e-300)), k))
     return (np.concatenate([idx_f, idx_b], axis=1), np.concatenate([b_f, b_b * w], axis=1),
@@ -157,26 +157,19 @@ def relocate(V, F, P, movable, *, iters=2, cg_iters=15, reg=0.05, min_cos=0.2, N
     use_back = surface is not None and back > 0.0
     for _ in range(iters):
         cp = TriangleIndex(V, F).closest(P)
-        idx = np.ascontiguousarray(np.take(F, cp.face, axis=0).T)     # (3, s)
-        b = np.ascontiguousarray(cp.bary.T)                           # (3, s)
-        T = P
+        rows = [(np.take(F, cp.face, axis=0).T, cp.bary.T, P)]  # (3,s) vertices, (3,s) weights, targets
         if use_back:
-            i2, b2, T2 = _back_rows(V, F, surface, back * P.shape[0])
-            idx = np.concatenate([idx, i2], axis=1)
-            b = np.concatenate([b, b2], axis=1)
-            T = np.concatenate([P, T2])
+            rows.append(_back_rows(V, F, surface, back * P.shape[0]))
         if border is not None and border[1].shape[0] and border[0].shape[0]:
-            i3, b3, T3 = _border_rows(V, *border)
-            idx = np.concatenate([idx, i3], axis=1)
-            b = np.concatenate([b, b3], axis=1)
-            T = np.concatenate([T, T3])
+            rows.append(_border_rows(V, *border))
+        idx = np.concatenate([r[0] for r in rows], axis=1)   # C-contiguous copies
+        b = np.concatenate([r[1] for r in rows], axis=1)
+        T = np.concatenate([r[2] for r in rows])
         diag = np.bincount(idx.ravel(), weights=(b * b).ravel(), minlength=n)
         lam = reg * diag + reg * max(float(diag.mean()), 1e-300)
         lam[~movable] = 1e30  # pinned
         # solve (B^T B + lam) D = B^T (T - B V) for the displacement D by CG
-        Bv = (b[0, :, None] * np.take(V, idx[0], axis=0) + b[1, :, None] * np.take(V, idx[1], axis=0)
-              + b[2, :, None] * np.take(V, idx[2], axis=0))
-        r = _scatter(idx, b, T - Bv, n)
+        r = _scatter(idx, b, T - _gather(idx, b, V), n)
         r[~movable] = 0.0
         D = np.zeros((n, 3))
         Rk = r.copy()

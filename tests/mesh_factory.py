@@ -1,4 +1,5 @@
-"""Meshes the tests build themselves, and access to ``../shared/meshes``.
+"""Meshes the tests build themselves, access to ``../shared/meshes``, and
+``boundary_edges`` to read a mesh's borders back.
 
 Every builder returns ``(V, F)`` as float64 / int64 arrays with outward,
 consistent orientation.
@@ -8,6 +9,8 @@ import os
 
 import numpy as np
 import pytest
+
+from core.topology import edge_map
 
 SHARED_MESHES = os.path.normpath(
     os.path.join(os.path.dirname(__file__), "..", "..", "shared", "meshes"))
@@ -232,3 +235,9 @@ def analytic_bend(V):
     th = V[:, 0] / BEND_RADIUS
     r = BEND_RADIUS + V[:, 2]
     return np.stack([r * np.sin(th), V[:, 1], r * np.cos(th) - BEND_RADIUS], axis=1)
+
+
+def boundary_edges(F, n):
+    """(k,2) int64: the edges of ``F`` used by exactly one face."""
+    em = edge_map(F, n)
+    return em.E[em.edge_face_count == 1]

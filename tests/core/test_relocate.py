@@ -5,8 +5,7 @@ import numpy as np
 
 from core._relocate import relocate, segment_triangles
 from core.spatial import TriangleIndex
-from core.topology import edge_map
-from tests.mesh_factory import regular_grid
+from tests.mesh_factory import boundary_edges, regular_grid
 
 
 def _square(n=9, z=0.0):
@@ -14,11 +13,6 @@ def _square(n=9, z=0.0):
     V = V.copy()
     V[:, 2] = z
     return V, F
-
-
-def _border_edges(F):
-    em = edge_map(F, int(F.max()) + 1)
-    return em.E[em.edge_face_count == 1]
 
 
 def test_backward_pull_brings_in_cage_parts_no_input_point_sees():
@@ -44,7 +38,7 @@ def test_border_ties_pull_an_overhanging_border_back_onto_the_input_border():
     Vc[right, 0] += 0.05
     Vi, Fi = _square(17)
     movable = np.ones(Vc.shape[0], dtype=bool)
-    Eb_c, Eb_i = _border_edges(Fc), _border_edges(Fi)
+    Eb_c, Eb_i = boundary_edges(Fc, Vc.shape[0]), boundary_edges(Fi, Vi.shape[0])
     C = Vi[np.unique(Eb_i)]
     seg = TriangleIndex(Vi, segment_triangles(Eb_i))
     alone = relocate(Vc, Fc, Vi, movable, iters=4)

@@ -8,9 +8,9 @@ from hypothesis import strategies as st
 from core.errors import InvalidArgumentError, InvalidMeshError
 from core.mesh import bbox_diagonal, face_normals
 from core.simplify import SimplifyResult, simplify
-from core.topology import edge_map, manifold_report, topology_summary
-from tests.mesh_factory import (cube, double_torus, icosphere, load_shared, regular_grid, tetrahedron,
-                                torus)
+from core.topology import manifold_report, topology_summary
+from tests.mesh_factory import (boundary_edges, cube, double_torus, icosphere, load_shared, regular_grid,
+                                tetrahedron, torus)
 
 
 # ---------------------------------------------------------------- helpers
@@ -60,11 +60,6 @@ def nearest_vertex_distance(A, B):
     """Largest distance from points A to their nearest point of B (small sets)."""
     d = np.linalg.norm(A[:, None, :] - B[None, :, :], axis=2)
     return float(d.min(axis=1).max())
-
-
-def boundary_edges(F, n):
-    em = edge_map(F, n)
-    return em.E[em.edge_face_count == 1]
 
 
 # ---------------------------------------------------------------- topology
