@@ -23,7 +23,7 @@ from .errors import InvalidArgumentError, InvalidMeshError, MeshAdjustError, Top
 from .mesh import (bbox_diagonal, check_mesh, enclosed_volume, face_areas, face_normals,
                    vertex_normals)
 from .topology import EdgeMap, edge_map, euler_characteristic, manifold_report, topology_summary
-from .io_obj import read_obj, write_obj
+from .io_mesh import MeshFile, read_mesh, read_obj, read_smf, write_mesh, write_obj, write_smf
 from .spatial import ClosestPoints, TriangleIndex, closest_points
 from .metrics import SurfaceDistance, sample_surface, surface_distance
 from .subdivide import SubdivisionOperator, SubdivisionResult, subdivide, subdivision_operator
@@ -35,7 +35,8 @@ __all__ = [
     "MeshAdjustError", "InvalidMeshError", "InvalidArgumentError", "TopologyMismatchError",
     "check_mesh", "bbox_diagonal", "enclosed_volume", "face_areas", "face_normals",
     "vertex_normals", "EdgeMap", "edge_map", "manifold_report", "topology_summary",
-    "euler_characteristic", "read_obj", "write_obj",
+    "euler_characteristic", "read_obj", "write_obj", "read_smf", "write_smf", "read_mesh",
+    "write_mesh", "MeshFile",
     "TriangleIndex", "ClosestPoints", "closest_points",
     "surface_distance", "SurfaceDistance", "sample_surface",
     "subdivide", "subdivision_operator", "SubdivisionOperator", "SubdivisionResult",

@@ -1,0 +1,294 @@
+"""Mesh files without Blender: Wavefront OBJ and SMF (positions and faces).
+
+SMF is the format of Garland and Heckbert's QSlim ("Simple Model Format"),
+the seed format of quadric simplification; OBJ is its common superset::
+
+    # a comment                       both formats
+    v 0.5 -1.25 3                     a vertex: x y z (OBJ may add w or r g b)
+    f 1 2 3                           a face: 1-based vertex indices
+    f 1/1/1 2/2/2 3/3/3 4/4/4         OBJ: v/vt/vn, negative = relative
+                                      (a polygon is fan-triangulated:
+                                       v0 v1 v2, v0 v2 v3, ...)
+
+Every other keyword (SMF ``c``, ``n``, ``r``, ``t``, ``bind``, ``begin``,
+``end``, ``set``...; OBJ ``vt``, ``vn``, ``o``, ``g``, ``usemtl``, ``l``...)
+is counted and skipped: :func:`read_mesh` says how many of each.
+
+Reading checks what a geometry core needs and names the line that breaks it
+(``read_smf: scan.smf line 12: 'v 1 x 3' is not a number``): a coordinate that
+is not a finite number, a face with fewer than 3 vertices or an index outside
+the file's vertices. Writing is exact: floats are written with ``repr``, the
+shortest text that reads back to the same float64, so ``write`` then ``read``
+returns bit-identical arrays.
+
+Lines are classified in one pass; the numbers are converted in bulk, and only
+when that fails is the offending line searched for.
+"""
+
+import os
+from typing import NamedTuple
+
+import numpy as np
+
+from .errors import InvalidArgumentError, InvalidMeshError
+
+#: the extensions :func:`read_mesh` and :func:`write_mesh` understand
+MESH_EXTENSIONS = (".obj", ".smf")
+
+
+class MeshFile(NamedTuple):
+    """What :func:`read_mesh` read.
+
+    Attributes
+    ----------
+    V : (n,3) float64, vertex positions.
+    F : (m,3) int64, triangles (polygons fan-triangulated), 0-based.
+    n_polygons : int, faces in the file (before triangulation).
+    skipped : dict str -> int, lines of each other keyword, skipped.
+    """
+
+    V: np.ndarray
+    F: np.ndarray
+    n_polygons: int
+    skipped: dict
+
+
+def _line_text(path, lineno):
+    """Line ``lineno`` (1-based) of ``path``, stripped and shortened."""
+    with open(path, "r", encoding="utf-8", errors="replace") as fh:
+        for k, line in enumerate(fh, 1):
+            if k == lineno:
+                text = line.strip()
+                return text if len(text) <= 80 else text[:77] + "..."
+    return ""
+
+
+def _line_error(fn, path, lineno, problem):
+    return InvalidMeshError(f"{fn}: {path} line {lineno}: '{_line_text(path, lineno)}' {problem}")
+
+
+def _vertices(fn, path, rows, lines):
+    """(n,3) float64 from the coordinate strings of the ``v`` lines."""
+    if not rows:
+        return np.zeros((0, 3), dtype=np.float64)
+    try:
+        V = np.array(rows, dtype=np.float64)
+    except ValueError:
+        for row, lineno in zip(rows, lines):
+            try:
+                [float(x) for x in row]
+            except ValueError:
+                raise _line_error(fn, path, lineno, "is not a number") from None
+        raise
+    bad = np.flatnonzero(~np.isfinite(V).all(axis=1))
+    if bad.size:
+        raise _line_error(fn, path, lines[bad[0]], "has a coordinate that is not a finite number")
+    return V
+
+
+def _read(path, fn, obj):
+    """Parse an OBJ (``obj=True``) or SMF file into a :class:`MeshFile`."""
+    v_rows, v_lines = [], []
+    tri_rows, tri_lines, tri_base = [], [], []   # faces as index strings
+    poly = []                                    # (lineno, index strings, vertex count)
+    skipped = {}
+    with open(path, "r", encoding="utf-8", errors="replace") as fh:
+        for lineno, line in enumerate(fh, 1):
+            parts = line.split()
+            if not parts:
+                continue
+            key = parts[0]
+            if key == "v":
+                if len(parts) < 4:
+                    raise _line_error(fn, path, lineno, "needs 3 coordinates")
+                v_rows.append(parts[1:4])
+                v_lines.append(lineno)
+            elif key == "f":
+                idx = parts[1:]
+                if obj:
+                    idx = [t.partition("/")[0] for t in idx]
+                if len(idx) < 3:
+                    raise _line_error(fn, path, lineno, "needs at least 3 vertices")
+                if len(idx) == 3:
+                    tri_rows.append(idx)
+                    tri_lines.append(lineno)
+                    tri_base.append(len(v_rows))
+                else:
+                    poly.append((lineno, idx, len(v_rows)))
+            elif not key.startswith("#"):
+                skipped[key] = skipped.get(key, 0) + 1
+    V = _vertices(fn, path, v_rows, v_lines)
+    del v_rows
+    n = V.shape[0]
+    # polygons: fan-triangulated after the triangles, then sorted back by
+    # line so the faces keep the file's order
+    for lineno, idx, base in poly:
+        for k in range(1, len(idx) - 1):
+            tri_rows.append([idx[0], idx[k], idx[k + 1]])
+            tri_lines.append(lineno)
+            tri_base.append(base)
+    if not tri_rows:
+        return MeshFile(V, np.zeros((0, 3), dtype=np.int64), 0, skipped)
+    try:
+        R = np.array(tri_rows, dtype=np.int64)     # the file's indices
+    except ValueError:
+        for row, lineno in zip(tri_rows, tri_lines):
+            try:
+                [int(x) for x in row]
+            except ValueError:
+                raise _line_error(fn, path, lineno, "has an index that is not an integer") from None
+        raise
+    del tri_rows
+    lines = np.array(tri_lines, dtype=np.int64)
+    base = np.array(tri_base, dtype=np.int64)
+    if poly:
+        order = np.argsort(lines, kind="stable")
+        R, lines, base = R[order], lines[order], base[order]
+    if obj:   # negative: relative to the vertices read before the line
+        F = np.where(R > 0, R - 1, base[:, None] + R)
+    else:
+        F = R - 1
+    bad = np.flatnonzero((R == 0).any(axis=1) | (F < 0).any(axis=1) | (F >= n).any(axis=1))
+    if bad.size:
+        k = bad[0]
+        problem = ("has vertex index 0 (indices are 1-based)" if (R[k] == 0).any() else
+                   f"refers to a vertex outside the file's {n:,} vertices")
+        raise _line_error(fn, path, int(lines[k]), problem)
+    n_polygons = F.shape[0] - sum(len(idx) - 3 for _, idx, _ in poly)
+    return MeshFile(V, F, n_polygons, skipped)
+
+
+def read_smf(path):
+    """Read an SMF file.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+
+    Returns
+    -------
+    V : (n,3) float64
+    F : (m,3) int64, 0-based; polygons fan-triangulated.
+
+    Raises
+    ------
+    InvalidMeshError
+        A bad line, named with its number: a coordinate that is not a finite
+        number, fewer than 3 coordinates or vertices, an index outside the
+        file's vertices.
+
+    Examples
+    --------
+    >>> core.write_smf("tet.smf", V, F)
+    >>> V2, F2 = core.read_smf("tet.smf")     # V2 == V bit for bit
+    """
+    m = _read(os.fspath(path), "read_smf", obj=False)
+    return m.V, m.F
+
+
+def read_obj(path):
+    """Read a Wavefront OBJ file (positions and faces only).
+
+    Texture and normal indices (``v/vt/vn``) are ignored, negative (relative)
+    indices resolved, polygons fan-triangulated.
+
+    Returns
+    -------
+    V : (n,3) float64
+    F : (m,3) int64, 0-based.
+
+    Raises
+    ------
+    InvalidMeshError
+        A bad line, named with its number (see :func:`read_smf`).
+    """
+    m = _read(os.fspath(path), "read_obj", obj=True)
+    return m.V, m.F
+
+
+def _extension(fn, path):
+    ext = os.path.splitext(os.fspath(path))[1].lower()
+    if ext not in MESH_EXTENSIONS:
+        raise InvalidArgumentError(f"{fn}: {os.fspath(path)}: unsupported extension "
+                                   f"'{ext or '(none)'}' (use {' or '.join(MESH_EXTENSIONS)})")
+    return ext
+
+
+def read_mesh(path):
+    """Read an OBJ or SMF file, chosen by its extension.
+
+    Returns
+    -------
+    MeshFile
+        ``V`` (n,3) float64, ``F`` (m,3) int64, ``n_polygons`` (faces in the
+        file) and ``skipped`` (lines of other keywords, per keyword).
+
+    Raises
+    ------
+    InvalidArgumentError
+        An extension other than ``.obj`` / ``.smf``.
+    InvalidMeshError
+        A bad line (see :func:`read_smf`).
+
+    Examples
+    --------
+    >>> m = core.read_mesh("scan.smf")
+    >>> m.V.shape, m.F.shape, m.skipped            # ((n, 3), (m, 3), {'c': 120})
+    """
+    path = os.fspath(path)
+    ext = _extension("read_mesh", path)
+    return _read(path, "read_obj" if ext == ".obj" else "read_smf", obj=ext == ".obj")
+
+
+def _write(path, V, F, fn):
+    V = np.asarray(V, dtype=np.float64)
+    F = np.asarray(F)
+    if V.ndim != 2 or V.shape[1] != 3:
+        raise InvalidMeshError(f"{fn}: V must be (n,3), got {V.shape}")
+    if F.ndim != 2 or F.shape[1] != 3 or not np.issubdtype(F.dtype, np.integer):
+        raise InvalidMeshError(f"{fn}: F must be (m,3) integers, got {F.shape} {F.dtype}")
+    if F.size and (F.min() < 0 or F.max() >= V.shape[0]):
+        raise InvalidMeshError(f"{fn}: F indexes vertices outside 0..{V.shape[0] - 1}")
+    with open(path, "w", encoding="utf-8") as fh:
+        fh.write(f"# written by MeshAdjust: {V.shape[0]} vertices, {F.shape[0]} triangles\n")
+        # repr: the shortest text that reads back to the same float64
+        fh.writelines(f"v {x!r} {y!r} {z!r}\n" for x, y, z in V.tolist())
+        fh.writelines(f"f {a} {b} {c}\n" for a, b, c in (F.astype(np.int64) + 1).tolist())
+
+
+def write_smf(path, V, F):
+    """Write positions and triangles to an SMF file, exactly.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+    V : (n,3) float array_like
+    F : (m,3) int array_like, 0-based (written 1-based).
+
+    Raises
+    ------
+    InvalidMeshError
+        Wrong shapes or indices outside ``V``.
+    """
+    _write(os.fspath(path), V, F, "write_smf")
+
+
+def write_obj(path, V, F):
+    """Write positions and triangles to an OBJ file, exactly (see
+    :func:`write_smf`; the text is the same)."""
+    _write(os.fspath(path), V, F, "write_obj")
+
+
+def write_mesh(path, V, F):
+    """Write an OBJ or SMF file, chosen by the extension of ``path``.
+
+    Raises
+    ------
+    InvalidArgumentError
+        An extension other than ``.obj`` / ``.smf``.
+    InvalidMeshError
+        Wrong shapes or indices outside ``V``.
+    """
+    path = os.fspath(path)
+    ext = _extension("write_mesh", path)
+    _write(path, V, F, "write_obj" if ext == ".obj" else "write_smf")

@@ -1,0 +1,112 @@
+"""core.io_mesh: OBJ and SMF reading and writing."""
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+import core
+from core import InvalidArgumentError, InvalidMeshError
+from tests.mesh_factory import icosphere, load_shared, tetrahedron
+
+
+@pytest.mark.parametrize("ext", [".smf", ".obj"])
+def test_round_trip_is_bit_exact(tmp_path, ext):
+    V, F = icosphere(3)
+    rng = np.random.default_rng(7)
+    V = V * rng.uniform(1e-3, 1e3, size=V.shape) + rng.normal(size=V.shape) * 1e-9
+    V[0] = [1e-300, -5e-324, 1.7976931348623157e308]     # extremes of float64
+    path = tmp_path / f"mesh{ext}"
+    core.write_mesh(path, V, F)
+    m = core.read_mesh(path)
+    assert m.V.dtype == np.float64 and m.F.dtype == np.int64
+    assert np.array_equal(m.V.view(np.int64), V.view(np.int64))   # every bit, signed zero too
+    assert np.array_equal(m.F, F)
+    assert m.n_polygons == F.shape[0] and m.skipped == {}
+
+
+@settings(max_examples=25, deadline=None)
+@given(st.lists(st.tuples(*[st.floats(allow_nan=False, allow_infinity=False)] * 3),
+                min_size=3, max_size=30))
+def test_round_trip_property(tmp_path_factory, rows):
+    V = np.array(rows, dtype=np.float64)
+    F = np.array([[0, 1, 2], [len(rows) - 1, 0, 1]], dtype=np.int64)
+    path = tmp_path_factory.mktemp("rt") / "m.smf"
+    core.write_smf(path, V, F)
+    V2, F2 = core.read_smf(path)
+    assert np.array_equal(V2.view(np.int64), V.view(np.int64)) and np.array_equal(F2, F)
+
+
+def test_smf_comments_other_keywords_and_polygons(tmp_path):
+    path = tmp_path / "quad.smf"
+    path.write_text("# QSlim output\nbegin\nv 0 0 0\nv 1 0 0\n\nv 1 1 0\nv 0 1 0\n"
+                    "c 1 0 0\nc 0 1 0\nn 0 0 1\nf 1 2 3 4\nf 1 3 4\nend\n"
+                    "set vertex_correction 0\n")
+    m = core.read_mesh(path)
+    assert m.V.shape == (4, 3)
+    assert m.F.tolist() == [[0, 1, 2], [0, 2, 3], [0, 2, 3]]   # quad fanned, file order kept
+    assert m.n_polygons == 2
+    assert m.skipped == {"begin": 1, "c": 2, "n": 1, "end": 1, "set": 1}
+    V, F = core.read_smf(path)
+    assert np.array_equal(F, m.F)
+
+
+def test_obj_slashes_negative_indices_and_extra_coordinates(tmp_path):
+    path = tmp_path / "m.obj"
+    path.write_text("o thing\nv 0 0 0 1.0\nv 1 0 0 1.0\nv 0 1 0\nvt 0 0\nvn 0 0 1\n"
+                    "f 1/1/1 2/1/1 3/1/1\nv 0 0 1\nf -4//1 -2//1 -1//1\n")
+    m = core.read_mesh(path)
+    assert m.F.tolist() == [[0, 1, 2], [0, 2, 3]]
+    assert m.skipped == {"o": 1, "vt": 1, "vn": 1}
+    V, F = core.read_obj(path)          # the old name reads the same
+    assert np.array_equal(F, m.F) and V.shape == (4, 3)
+
+
+@pytest.mark.parametrize("text, lineno, problem", [
+    ("v 0 0 0\nv 1 x 3\nv 0 1 0\nf 1 2 3\n", 2, r"'v 1 x 3' is not a number"),
+    ("v 0 0 0\nv 1 0 0\nv nan 1 0\nf 1 2 3\n", 3, r"'v nan 1 0' has a coordinate that is not"),
+    ("v 0 0 0\nv 1 0 inf\nv 0 1 0\nf 1 2 3\n", 2, r"'v 1 0 inf' .*not a finite number"),
+    ("v 0 0\n", 1, r"'v 0 0' needs 3 coordinates"),
+    ("v 0 0 0\nv 1 0 0\nv 0 1 0\n# comment\nf 1 2 9\n", 5,
+     r"'f 1 2 9' refers to a vertex outside the file's 3 vertices"),
+    ("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 0 1 2\n", 4, r"'f 0 1 2' has vertex index 0 \(indices are 1-based\)"),
+    ("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2\n", 4, r"'f 1 2' needs at least 3 vertices"),
+    ("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3.5\n", 4, r"'f 1 2 3\.5' has an index that is not an integer"),
+    ("v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 2 3 99\n", 5, r"'f 1 2 3 99' refers to a vertex outside the file's 4 vertices"),
+])
+def test_bad_lines_are_named(tmp_path, text, lineno, problem):
+    path = tmp_path / "scan.smf"
+    path.write_text(text)
+    with pytest.raises(InvalidMeshError, match=rf"^read_smf: .*scan\.smf line {lineno}: {problem}"):
+        core.read_smf(path)
+    obj = tmp_path / "scan.obj"
+    obj.write_text(text)
+    with pytest.raises(InvalidMeshError, match=rf"^read_obj: .*scan\.obj line {lineno}: "):
+        core.read_mesh(obj)
+
+
+def test_unsupported_extension_and_bad_arrays(tmp_path):
+    with pytest.raises(InvalidArgumentError, match=r"read_mesh: .*scan\.ply: unsupported "
+                                                   r"extension '\.ply' \(use \.obj or \.smf\)"):
+        core.read_mesh(tmp_path / "scan.ply")
+    V, F = tetrahedron()
+    with pytest.raises(InvalidArgumentError, match="write_mesh"):
+        core.write_mesh(tmp_path / "x.stl", V, F)
+    with pytest.raises(InvalidMeshError, match=r"write_smf: F must be \(m,3\) integers"):
+        core.write_smf(tmp_path / "x.smf", V, F.astype(float))
+    with pytest.raises(InvalidMeshError, match="write_smf: F indexes vertices outside 0..3"):
+        core.write_smf(tmp_path / "x.smf", V, F + 1)
+
+
+def test_empty_file(tmp_path):
+    path = tmp_path / "empty.smf"
+    path.write_text("# nothing\n")
+    m = core.read_mesh(path)
+    assert m.V.shape == (0, 3) and m.F.shape == (0, 3) and m.n_polygons == 0
+
+
+def test_real_mesh_through_smf(tmp_path):
+    V, F = load_shared("cow.obj")
+    core.write_smf(tmp_path / "cow.smf", V, F)
+    V2, F2 = core.read_smf(tmp_path / "cow.smf")
+    assert np.array_equal(V2, V) and np.array_equal(F2, F) and F.shape == (5804, 3)
