@@ -29,9 +29,18 @@ the dense surface is stored in it: the closest point (an index over the dense
 mesh), or for very large dense meshes a point found by a local search
 around the bound dense vertices (no index: see :func:`_dense_points_near`).
 
+Incremental deform (``deform(b, V, moved=ids, out=D)``, for live editing):
+the dependency chain cage vertex -> fine positions (the operator's support)
+-> fine normals (one fine ring) -> fine faces -> bound dense vertices is
+followed on index sets of the fine mesh (a fine face -> dense vertices index
+built on first use), fine positions and normals are computed only where they
+are read, and only those dense rows are rebuilt: the cost is proportional to
+what moves, not to the dense mesh.
+
 Properties (tested): ``deform(bind(D, C), C) == D`` to rounding; a rigid motion
 of the cage moves the dense mesh rigidly; moving one cage vertex moves only the
-dense vertices returned by :meth:`Binding.affected` (bit-for-bit elsewhere).
+dense vertices returned by :meth:`Binding.affected` (bit-for-bit elsewhere);
+an incremental deform equals the full one to rounding.
 """
 
 from dataclasses import dataclass, field
@@ -287,7 +296,7 @@ def bind(V_dense, F_dense, V_cage, F_cage, *, levels=2, scheme="butterfly", crea
                    _operator=op)
 
 
-def deform(binding, V_cage_edited, *, F_cage=None):
+def deform(binding, V_cage_edited, *, F_cage=None, moved=None, out=None):
     """Place the dense vertices on the subdivision of an edited cage.
 
     Parameters
@@ -297,10 +306,22 @@ def deform(binding, V_cage_edited, *, F_cage=None):
         New cage positions (same vertex order as at bind time).
     F_cage : (m,3) int, optional
         The edited cage's faces; when given they must equal the bound ones.
+    moved : (k,) int, optional
+        Incremental update: the cage vertices whose positions differ from
+        the ones ``out`` was computed from (duplicates allowed, empty for
+        none). Only the dense vertices they influence (a subset of
+        :meth:`Binding.affected`) are recomputed, in ``out``; the others
+        are left as they are. Needs ``out``.
+    out : (n_dense,3) float64 C-contiguous ndarray, optional
+        Where to write the result (returned). Without ``moved`` every row is
+        written; with it, only the influenced rows.
 
     Returns
     -------
     (n_dense,3) float64 ndarray
+        ``out`` when given, else a new array. An incremental update equals a
+        full deform of ``V_cage_edited`` (each dense vertex is computed by
+        the same row-wise operations on the same fine positions and normals).
 
     Raises
     ------
@@ -308,10 +329,131 @@ def deform(binding, V_cage_edited, *, F_cage=None):
         The edited cage has a different vertex count or different faces.
     InvalidMeshError
         Positions are not (n,3) finite numbers.
+    InvalidArgumentError
+        ``moved`` holds a non-integer or out-of-range index, ``moved`` is
+        given without ``out``, or ``out`` is not a writable (n_dense,3)
+        float64 C-contiguous array.
+
+    Examples
+    --------
+    >>> D = deform(b, V_cage)                                     # doctest: +SKIP
+    >>> V_cage[[3, 7]] += 0.01                                    # doctest: +SKIP
+    >>> deform(b, V_cage, moved=[3, 7], out=D)                    # doctest: +SKIP
     """
+    if out is not None:
+        _check_out(binding, out)
+    if moved is not None:
+        if out is None:
+            raise InvalidArgumentError(
+                "deform: moved needs out (the dense positions computed before the move)")
+        ids = _check_moved(binding, moved)
+        Vc = _check_cage(binding, V_cage_edited, F_cage, "deform")
+        if ids.size:
+            rows, needed = _influenced_dense(binding, ids)
+            if rows.size:
+                Vf, Nf = _fine_geometry_at(binding, Vc, needed)
+                c = binding._cache
+                fr = _frames_t(Vf, Nf, np.take(c["corners_t"], rows, axis=1),
+                               np.take(c["bary_t"], rows, axis=1))
+                out[rows] = _from_frame_t(np.take(c["offset_t"], rows, axis=1), *fr)
+        return out
     Vf, Nf = _fine_geometry(binding, V_cage_edited, F_cage, "deform")
     c = binding._cache
-    return _from_frame_t(c["offset_t"], *_frames_t(Vf, Nf, c["corners_t"], c["bary_t"]))
+    D = _from_frame_t(c["offset_t"], *_frames_t(Vf, Nf, c["corners_t"], c["bary_t"]))
+    if out is None:
+        return D
+    out[...] = D
+    return out
+
+
+def _check_out(binding, out):
+    if not isinstance(out, np.ndarray) or out.shape != (binding.n_dense, 3) \
+            or out.dtype != np.float64 or not out.flags.c_contiguous or not out.flags.writeable:
+        desc = (f"{out.shape} {out.dtype}" if isinstance(out, np.ndarray)
+                else type(out).__name__)
+        raise InvalidArgumentError(
+            f"deform: out must be a writable C-contiguous ({binding.n_dense}, 3) float64 "
+            f"array, got {desc}")
+
+
+def _check_moved(binding, moved):
+    """``moved`` as distinct sorted int64 cage vertex ids, checked."""
+    ids = np.asarray(moved)
+    if ids.size == 0:
+        return np.zeros(0, dtype=np.int64)
+    if not np.issubdtype(ids.dtype, np.integer):
+        raise InvalidArgumentError(
+            f"deform: moved must be integer cage vertex indices, got {ids.dtype}")
+    ids = ids.astype(np.int64).ravel()
+    bad = (ids < 0) | (ids >= binding.n_cage)
+    if bad.any():
+        raise InvalidArgumentError(
+            f"deform: moved index {int(ids[bad][0])} is out of range [0, {binding.n_cage}) "
+            f"({int(bad.sum())} such)")
+    return np.unique(ids)
+
+
+def _influenced_dense(binding, ids):
+    """Dense vertices (int64, grouped by fine face) whose deformed position
+    depends on the cage vertices ``ids``, and the fine vertices whose normals
+    they read: ``(rows, needed)``, ``needed`` an (n_fine,) bool mask.
+
+    The chain, all on index sets of the fine mesh (O(fine support + result),
+    never O(dense mesh)): fine vertices in the operator's support of ``ids``
+    (positions change) -> every corner of a fine face touching them (normals
+    change) -> the fine faces with such a corner (their bound dense vertices
+    move) -> the corners of those faces (``needed``). The fine face -> dense
+    vertices and fine vertex -> fine faces indices are built on first use
+    and cached in the binding.
+    """
+    op = binding._operator
+    idx = _incremental_index(binding)
+    Ff = op.F_fine
+    m_fine = Ff.shape[0]
+    pos_changed = np.flatnonzero(op.support(ids))
+    touched = _faces_around(idx, pos_changed, m_fine)
+    normal_changed = np.zeros(op.n_fine, dtype=bool)
+    normal_changed[Ff[touched].ravel()] = True
+    faces = _faces_around(idx, np.flatnonzero(normal_changed), m_fine)
+    needed = np.zeros(op.n_fine, dtype=bool)
+    needed[Ff[faces].ravel()] = True
+    k, _ = ragged_ranges(idx["dense_start"][faces], idx["dense_count"][faces])
+    return idx["dense_by_face"][k], needed
+
+
+def _incremental_index(binding):
+    """The cached fine face -> bound dense vertices and fine vertex ->
+    incident fine faces indices (CSR: order, start, count)."""
+    c = binding._cache
+    if "incremental" not in c:
+        op = binding._operator
+        m_fine = op.F_fine.shape[0]
+        d_count = np.bincount(binding.fine_face, minlength=m_fine)
+        flat = op.F_fine.ravel()
+        v_count = np.bincount(flat, minlength=op.n_fine)
+        c["incremental"] = {
+            "dense_by_face": np.argsort(binding.fine_face, kind="stable"),
+            "dense_count": d_count, "dense_start": np.cumsum(d_count) - d_count,
+            "faces_by_vertex": np.argsort(flat, kind="stable") // 3,
+            "vertex_count": v_count, "vertex_start": np.cumsum(v_count) - v_count,
+            "rows": _composed_rows(op),
+        }
+    return c["incremental"]
+
+
+def _composed_rows(op):
+    r, cols, w = op.triplets()
+    indptr = np.zeros(op.n_fine + 1, dtype=np.int64)
+    np.cumsum(np.bincount(r, minlength=op.n_fine), out=indptr[1:])
+    return _Rows(indptr, cols, w)
+
+
+def _faces_around(idx, vertices, m_fine):
+    """Sorted distinct fine faces incident to the given fine vertices."""
+    k, _ = ragged_ranges(idx["vertex_start"][vertices], idx["vertex_count"][vertices])
+    mask = np.zeros(m_fine, dtype=bool)
+    mask[idx["faces_by_vertex"][k]] = True
+    return np.flatnonzero(mask)
 
 
 def refine(binding, V_cage_edited, *, F_cage=None):
@@ -426,9 +568,8 @@ def _frames_t(VfT, NfT, cornersT, baryT):
     return point, tangent, bitangent, normal
 
 
-def _fine_geometry(binding, V_cage_edited, F_cage, where):
-    """Check an edited cage against the binding; return fine positions and
-    normals, transposed (3, n_fine)."""
+def _check_cage(binding, V_cage_edited, F_cage, where):
+    """Check an edited cage against the binding; return it as float64."""
     if not isinstance(binding, Binding):
         raise InvalidArgumentError(f"{where}: expected a Binding, got {type(binding).__name__}")
     Vc = np.asarray(V_cage_edited)
@@ -449,10 +590,50 @@ def _fine_geometry(binding, V_cage_edited, F_cage, where):
     Vc = np.asarray(Vc, dtype=np.float64)
     if not np.isfinite(Vc).all():
         raise InvalidMeshError(f"{where}: V_cage_edited has NaN or infinite coordinates")
+    return Vc
+
+
+def _fine_geometry(binding, V_cage_edited, F_cage, where):
+    """Check an edited cage against the binding; return fine positions and
+    normals, transposed (3, n_fine)."""
+    Vc = _check_cage(binding, V_cage_edited, F_cage, where)
     op = binding._operator
     Vf = op.apply(Vc)
     Nf = vertex_normals(Vf, op.F_fine)
     return np.ascontiguousarray(Vf.T), np.ascontiguousarray(Nf.T)
+
+
+def _fine_geometry_at(binding, Vc, needed):
+    """Fine positions and normals, transposed (3, n_fine), valid where
+    ``needed`` (zero elsewhere). Positions come from the composed
+    coarse-to-fine rows of the vertices ``needed`` and the corners of the
+    faces around them; normals are summed over those faces, in the order
+    of :func:`~.mesh.vertex_normals`. Equal to the full computation to
+    rounding (the composed rows sum in another order than the level-by-level
+    apply)."""
+    op = binding._operator
+    idx = _incremental_index(binding)
+    faces = _faces_around(idx, np.flatnonzero(needed), op.F_fine.shape[0])
+    Fs = op.F_fine[faces]
+    at = np.zeros(op.n_fine, dtype=bool)
+    at[Fs.ravel()] = True
+    verts = np.flatnonzero(at)
+    rows = idx["rows"]
+    k, owner = ragged_ranges(rows.indptr[verts], rows.indptr[verts + 1] - rows.indptr[verts])
+    w, cols = rows.weights[k], rows.cols[k]
+    Vf = np.zeros((op.n_fine, 3))
+    for d in range(3):
+        Vf[verts, d] = np.bincount(owner, weights=w * Vc[cols, d], minlength=verts.shape[0])
+    Nf = vertex_normals(Vf, Fs)
+    return np.ascontiguousarray(Vf.T), np.ascontiguousarray(Nf.T)
+
+
+class _Rows(NamedTuple):
+    """The composed coarse-to-fine operator as CSR rows."""
+
+    indptr: np.ndarray  #: (n_fine + 1,) int64
+    cols: np.ndarray    #: (nnz,) int64 coarse vertices
+    weights: np.ndarray  #: (nnz,) float64
 
 
 def _dense_points_near(V_dense, F_dense, fine_face, F_fine, P):

@@ -1,0 +1,158 @@
+"""Incremental deform: ``deform(b, V, moved=ids, out=D)`` recomputes only the
+dense vertices the moved cage vertices influence, and equals a full deform.
+
+Properties: incremental == full (hypothesis, random moved sets, both
+schemes, chains of updates), the recomputed rows lie inside
+``Binding.affected``, rows outside it are never written, duplicates are
+fine, an empty ``moved`` writes nothing, and bad ``moved`` / ``out`` raise
+named errors.
+"""
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from core.adjust import bind, deform
+from core.errors import InvalidArgumentError
+from core.mesh import bbox_diagonal
+from core.simplify import simplify
+from tests.mesh_factory import icosphere, torus
+
+
+def _bumpy_sphere(k=4, amp=0.02, seed=0):
+    V, F = icosphere(k)
+    rng = np.random.default_rng(seed)
+    return V * (1 + amp * rng.standard_normal((V.shape[0], 1))), F
+
+
+@pytest.fixture(scope="module", params=["butterfly", "loop"])
+def case(request):
+    Vd, Fd = _bumpy_sphere()
+    cage = simplify(Vd, Fd, target_faces=120)
+    b = bind(Vd, Fd, cage.V, cage.F, levels=2, scheme=request.param)
+    return Vd, cage.V, b
+
+
+@pytest.fixture(scope="module")
+def torus_case():
+    Vd, Fd = torus(96, 48, bump=0.01)
+    cage = simplify(Vd, Fd, target_faces=200)
+    return Vd, cage.V, bind(Vd, Fd, cage.V, cage.F, levels=2)
+
+
+def _tol(Vd):
+    return 1e-12 * bbox_diagonal(Vd)
+
+
+@settings(max_examples=25, deadline=None)
+@given(data=st.data())
+def test_incremental_equals_full_for_random_moved_sets(case, data):
+    Vd, Vc, b = case
+    n = Vc.shape[0]
+    seed = data.draw(st.integers(0, 2**31 - 1))
+    ids = np.array(data.draw(st.lists(st.integers(0, n - 1), min_size=1, max_size=12)))
+    rng = np.random.default_rng(seed)
+    D = deform(b, Vc)
+    Ve = Vc.copy()
+    Ve[ids] += 0.05 * rng.standard_normal((ids.shape[0], 3))
+    got = deform(b, Ve, moved=ids, out=D)
+    assert got is D
+    assert np.abs(D - deform(b, Ve)).max() <= _tol(Vd)
+
+
+def test_chain_of_updates_tracks_the_full_deform(torus_case):
+    Vd, Vc, b = torus_case
+    rng = np.random.default_rng(3)
+    D = deform(b, Vc)
+    Ve = Vc.copy()
+    for _ in range(6):
+        ids = rng.choice(Vc.shape[0], rng.integers(1, 8), replace=False)
+        Ve[ids] += 0.02 * rng.standard_normal((ids.shape[0], 3))
+        deform(b, Ve, moved=ids, out=D)
+        assert np.abs(D - deform(b, Ve)).max() <= _tol(Vd)
+
+
+def test_only_affected_rows_are_written(torus_case):
+    Vd, Vc, b = torus_case
+    ids = np.array([4, 17])
+    allowed = b.affected(ids)
+    # a sentinel outside the affected rows survives the update
+    D = deform(b, Vc)
+    D[~allowed] = 7.0
+    Ve = Vc.copy()
+    Ve[ids] += 0.03
+    deform(b, Ve, moved=ids, out=D)
+    assert (D[~allowed] == 7.0).all()
+    full = deform(b, Ve)
+    assert np.abs(D[allowed] - full[allowed]).max() <= _tol(Vd)
+    assert allowed.sum() < 0.5 * Vd.shape[0]
+
+
+def test_duplicates_and_dtypes_of_moved(case):
+    Vd, Vc, b = case
+    D = deform(b, Vc)
+    Ve = Vc.copy()
+    Ve[[2, 9]] -= 0.04
+    deform(b, Ve, moved=np.array([9, 2, 2, 9, 9], dtype=np.int32), out=D)
+    assert np.abs(D - deform(b, Ve)).max() <= _tol(Vd)
+    D2 = deform(b, Vc)
+    deform(b, Ve, moved=[2, 9], out=D2)
+    assert np.array_equal(D, D2)
+
+
+def test_empty_moved_changes_nothing(case):
+    Vd, Vc, b = case
+    D = deform(b, Vc)
+    before = D.copy()
+    for empty in ([], np.zeros(0, dtype=np.int64), np.zeros((0,), dtype=np.float64)):
+        assert deform(b, Vc * 2.0, moved=empty, out=D) is D
+        assert np.array_equal(D, before)
+
+
+def test_full_deform_into_out(case):
+    Vd, Vc, b = case
+    D = np.full((b.n_dense, 3), np.nan)
+    assert deform(b, Vc * 1.1, out=D) is D
+    assert np.array_equal(D, deform(b, Vc * 1.1))
+
+
+def test_inputs_are_not_modified(case):
+    Vd, Vc, b = case
+    Ve = Vc + 0.01
+    Ve0 = Ve.copy()
+    ids = np.array([1, 5])
+    ids0 = ids.copy()
+    deform(b, Ve, moved=ids, out=deform(b, Vc))
+    assert np.array_equal(Ve, Ve0) and np.array_equal(ids, ids0)
+
+
+@pytest.mark.parametrize("bad", [[-1], [0, 10**6], [3, -5, 2]])
+def test_out_of_range_moved_raises_naming_the_index(case, bad):
+    Vd, Vc, b = case
+    D = deform(b, Vc)
+    if bad == [0, 10**6]:
+        bad = [0, Vc.shape[0]]
+    first = next(i for i in bad if i < 0 or i >= Vc.shape[0])
+    with pytest.raises(InvalidArgumentError, match=rf"moved index {first} is out of range "
+                                                   rf"\[0, {Vc.shape[0]}\)"):
+        deform(b, Vc, moved=bad, out=D)
+
+
+def test_bad_moved_and_out_raise_named_errors(case):
+    Vd, Vc, b = case
+    D = deform(b, Vc)
+    with pytest.raises(InvalidArgumentError, match="moved must be integer"):
+        deform(b, Vc, moved=[0.5], out=D)
+    with pytest.raises(InvalidArgumentError, match="moved needs out"):
+        deform(b, Vc, moved=[0])
+    n = b.n_dense
+    for out in (np.zeros((n - 1, 3)), np.zeros((n, 3), np.float32), np.zeros((3, n)).T,
+                D.tolist()):
+        with pytest.raises(InvalidArgumentError, match=rf"out must be a writable C-contiguous "
+                                                       rf"\({n}, 3\) float64"):
+            deform(b, Vc, moved=[0], out=out)
+    ro = D.copy()
+    ro.flags.writeable = False
+    with pytest.raises(InvalidArgumentError, match="out must be a writable"):
+        deform(b, Vc, out=ro)
