@@ -53,6 +53,7 @@ from .mesh import check_mesh, vertex_normals
 from .spatial import TriangleIndex, point_triangle_closest
 from .subdivide import subdivision_operator
 from ._groups import group_argmin, ragged_ranges
+from ._parallel import blocks, run_blocks
 
 #: relative length under which a normal or tangent counts as degenerate
 _DEGENERATE = 1e-12
@@ -61,6 +62,10 @@ _DEGENERATE = 1e-12
 #: refine detail (``detail_search="auto"``); larger ones the local search
 _EXACT_DETAIL_FACES = 500_000
 _DETAIL_SEARCHES = ("auto", "exact", "local")
+
+#: dense vertices per block of the bind's closest-point query (one block per
+#: worker-thread task)
+_BIND_BLOCK = 131_072
 
 #: keys of :meth:`Binding.to_arrays`
 _ARRAY_KEYS = ("fine_face", "bary", "offset", "fine_detail", "F_cage", "n_cage", "levels",
@@ -273,9 +278,7 @@ def bind(V_dense, F_dense, V_cage, F_cage, *, levels=2, scheme="butterfly", crea
                               creases=creases)
     Vf = op.apply(V_cage)
     Nf = vertex_normals(Vf, op.F_fine)
-    hit = TriangleIndex(Vf, op.F_fine).closest(V_dense)
-    fine_face = np.asarray(hit.face, dtype=np.int64)
-    bary = np.ascontiguousarray(hit.bary, dtype=np.float64)
+    fine_face, bary = _closest_on(TriangleIndex(Vf, op.F_fine), V_dense)
     corners = np.ascontiguousarray(op.F_fine[fine_face])
     fr = frames(Vf, Nf, corners, bary)
     offset = _to_frame(V_dense - fr.point, fr)
@@ -634,6 +637,24 @@ class _Rows(NamedTuple):
     indptr: np.ndarray  #: (n_fine + 1,) int64
     cols: np.ndarray    #: (nnz,) int64 coarse vertices
     weights: np.ndarray  #: (nnz,) float64
+
+
+def _closest_on(index, P):
+    """Closest points of ``P`` on an indexed mesh: (face (q,) int64, bary (q,3)
+    float64), queried in fixed blocks of ``_BIND_BLOCK`` points on the
+    worker threads (NumPy releases the GIL in the index's array work; the
+    blocks depend on the size alone, so results do not depend on the number
+    of threads)."""
+    face = np.empty(P.shape[0], dtype=np.int64)
+    bary = np.empty((P.shape[0], 3))
+
+    def query(start, stop):
+        hit = index.closest(P[start:stop])
+        face[start:stop] = hit.face
+        bary[start:stop] = hit.bary
+
+    run_blocks(query, blocks(P.shape[0], _BIND_BLOCK))
+    return face, bary
 
 
 def _dense_points_near(V_dense, F_dense, fine_face, F_fine, P):

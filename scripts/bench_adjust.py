@@ -40,12 +40,14 @@ sys.path.insert(0, ROOT)
 
 from core.adjust import bind, deform, fit_cage, refine  # noqa: E402
 from core.io_obj import read_obj  # noqa: E402
-from core.mesh import enclosed_volume  # noqa: E402
+from core.errors import MeshAdjustError  # noqa: E402
+from core.mesh import bbox_diagonal, enclosed_volume, face_normals, vertex_normals  # noqa: E402
 from core.metrics import surface_distance  # noqa: E402
 from core.simplify import simplify  # noqa: E402
 from core.spatial import closest_points  # noqa: E402
 from core.subdivide import subdivision_operator  # noqa: E402
-from tests.mesh_factory import BUMP, analytic_bend as bend, bumpy_tube, torus  # noqa: E402
+from tests.mesh_factory import (BUMP, analytic_bend as bend, bumpy_tube, midpoint_split,  # noqa: E402
+                                 torus)
 from _bench import blender_object, empty_scene, evaluated_positions, mesh_io  # noqa: E402
 
 SHARED = os.path.normpath(os.path.join(ROOT, "..", "shared", "meshes"))
@@ -180,6 +182,158 @@ def run_fit(names):
     return rows
 
 
+# ------------------------------------------------------------------ folds
+FOLD_SCHEMES = ("butterfly", "loop")
+
+
+def synthetic_scan(levels=2, noise=1e-4, seed=0):
+    """The bunny midpoint-split ``levels`` times (1.1M triangles for 2) with
+    noise of ``noise`` diagonals (fixed seed): a ~1M-triangle stand-in scan."""
+    V, F = read_obj(os.path.join(SHARED, "stanford-bunny.obj"))
+    used = np.zeros(V.shape[0], dtype=bool)
+    used[F.ravel()] = True
+    remap = np.cumsum(used) - 1
+    V, F = V[used], remap[F]
+    for _ in range(levels):
+        V, F = midpoint_split(V, F)
+    rng = np.random.default_rng(seed)
+    return V + rng.normal(scale=noise * bbox_diagonal(V), size=V.shape), F
+
+
+def one_ring(F, v):
+    """``v`` and its neighbours in the triangles ``F``."""
+    rows = np.flatnonzero((F == v).any(axis=1))
+    return np.unique(np.concatenate([[v], F[rows].ravel()]))
+
+
+def artist_edits(Vc, Fc, diag, centres):
+    """Per centre cage vertex: its one-ring lifted along its normal by 1% and
+    3% of the diagonal, and a smooth proportional lift of 5% (weight
+    (1 - (d/r)^2)^2, r = 12% of the diagonal). Returns [(label, V_edited)]."""
+    N = vertex_normals(Vc, Fc)
+    out = []
+    for v in centres:
+        ring = one_ring(Fc, v)
+        for pct in (1, 3):
+            Ve = Vc.copy()
+            Ve[ring] += pct / 100 * diag * N[v]
+            out.append((f"v{v} one-ring {pct}%", Ve))
+        d = np.linalg.norm(Vc - Vc[v], axis=1) / (0.12 * diag)
+        w = np.clip(1 - d ** 2, 0.0, None) ** 2
+        out.append((f"v{v} smooth 5%", Vc + 0.05 * diag * w[:, None] * N[v]))
+    return out
+
+
+def count_folds(V_rest, V_new, F):
+    """Faces whose normal turned by more than 90 degrees (degenerate rest faces
+    not counted)."""
+    n0 = face_normals(V_rest, F, normalize=False)
+    n1 = face_normals(V_new, F, normalize=False)
+    ok = np.einsum("ij,ij->i", n0, n0) > 0
+    return int(((np.einsum("ij,ij->i", n0, n1) < 0) & ok).sum())
+
+
+def surface_deform_many(V_dense, F_dense, V_cage, F_cage, edits):
+    """Surface Deform bound once, evaluated for each edited cage: list of
+    deformed positions, and the bind seconds."""
+    bpy = empty_scene()
+    dense = blender_object("dense", V_dense, F_dense)
+    cage = blender_object("cage", V_cage, F_cage)
+    mod = dense.modifiers.new("SurfaceDeform", "SURFACE_DEFORM")
+    mod.target = cage
+    bpy.context.view_layer.objects.active = dense
+    t = time.perf_counter()
+    with bpy.context.temp_override(object=dense, active_object=dense):
+        bpy.ops.object.surfacedeform_bind(modifier=mod.name)
+    evaluated_positions(dense)
+    t_bind = time.perf_counter() - t
+    if not mod.is_bound:
+        raise RuntimeError("Surface Deform did not bind")
+    out = []
+    for Ve in edits:
+        mesh_io().write_positions(cage.data, Ve)
+        out.append(evaluated_positions(dense))
+    return out, t_bind
+
+
+def best_of(fn, repeat=3):
+    times = []
+    for _ in range(repeat):
+        t = time.perf_counter()
+        fn()
+        times.append(time.perf_counter() - t)
+    return min(times)
+
+
+def deform_timings(b, Vc, Fc, centre, seed=0):
+    """Seconds: full deform, and incremental deforms after moving the
+    one-ring of ``centre`` and after moving 5 random cage vertices (best of 3
+    each; the first incremental call, which builds the index, not timed)."""
+    D = deform(b, Vc)
+    t_full = best_of(lambda: deform(b, Vc, out=D))
+    out = {"full": t_full}
+    rng = np.random.default_rng(seed)
+    for label, ids in (("one-ring", one_ring(Fc, centre)),
+                       ("5 random", rng.choice(Vc.shape[0], 5, replace=False))):
+        Ve = Vc.copy()
+        Ve[ids] += 0.001
+        deform(b, Ve, moved=ids, out=D)
+        out[label] = best_of(lambda: deform(b, Ve, moved=ids, out=D))
+        out[label + " moved"] = len(ids)
+        out[label + " rows"] = int((D != deform(b, Vc)).any(axis=1).sum())
+        deform(b, Vc, out=D)
+    return out
+
+
+def run_folds(cases, faces=2000, centres_per_mesh=2, seed=1, timings=None):
+    """Fold counts per edit: rows (mesh, edit, {column: folds}); columns
+    butterfly / Loop (core.deform, each on its own fitted cage, two levels)
+    and Surface Deform on each of those cages. ``timings`` (a list) receives
+    (mesh, scheme, n_dense, cage faces, bind s, Surface Deform bind s,
+    :func:`deform_timings`)."""
+    rows = []
+    for name, V, F in cases:
+        diag = bbox_diagonal(V)
+        try:
+            cage = simplify(V, F, target_faces=min(faces, F.shape[0] // 4))
+        except MeshAdjustError as exc:
+            print(f"folds: {name} skipped ({exc})")
+            continue
+        creases = cage.feature_edges if len(cage.feature_edges) else None
+        rng = np.random.default_rng(seed)
+        centres = np.sort(rng.choice(cage.V.shape[0], centres_per_mesh, replace=False))
+        res = {}
+        for scheme in FOLD_SCHEMES:
+            try:
+                Vc = fit_cage(V, F, cage.V, cage.F, levels=2, scheme=scheme, creases=creases).V
+                t = time.perf_counter()
+                b = bind(V, F, Vc, cage.F, levels=2, scheme=scheme, creases=creases)
+                t_bind = time.perf_counter() - t
+            except MeshAdjustError as exc:
+                print(f"folds: {name} {scheme} skipped ({exc})")
+                break
+            edits = artist_edits(Vc, cage.F, diag, centres)
+            sd, t_sd = surface_deform_many(V, F, Vc, cage.F, [e for _, e in edits])
+            if timings is not None:
+                timings.append((name, scheme, V.shape[0], cage.F.shape[0], t_bind, t_sd,
+                                deform_timings(b, Vc, cage.F, centres[0])))
+            for (label, Ve), S in zip(edits, sd):
+                r = res.setdefault(label, {})
+                r[scheme] = count_folds(V, deform(b, Ve), F)
+                r[f"SD {scheme} cage"] = count_folds(V, S, F)
+        rows += [(name, label, r) for label, r in res.items()]
+    return rows
+
+
+def fold_cases(quick):
+    names = ["spot.obj"] if quick else sorted(
+        f for f in os.listdir(SHARED) if f.endswith(".obj")) if os.path.isdir(SHARED) else []
+    cases = [(n[:-4], *read_obj(os.path.join(SHARED, n))) for n in names]
+    if not quick and os.path.isdir(SHARED):
+        cases.append(("bunny x16 (1.1M tris)", *synthetic_scan()))
+    return cases
+
+
 def _fmt(x, digits=3):
     return "-" if x != x else f"{x:.{digits}f}"
 
@@ -187,11 +341,13 @@ def _fmt(x, digits=3):
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="smaller meshes, no results file")
-    ap.add_argument("--only", choices=("bend", "scale", "fit"), action="append",
+    ap.add_argument("--only", choices=("bend", "scale", "fit", "folds"), action="append",
                     help="run only these parts (repeatable); the results file is then not written")
     args = ap.parse_args(argv)
-    parts = set(args.only or ("bend", "scale", "fit"))
+    parts = set(args.only or ("bend", "scale", "fit", "folds"))
     lines = []
+    if "folds" in parts:
+        lines += _folds_section(args.quick)
     if "bend" in parts:
         lines += _bend_section(args.quick)
     if "scale" in parts:
@@ -225,6 +381,38 @@ def _scale_section(quick):
     lines += [f"| {r[0]} | {_fmt(r[1], 2)} | {_fmt(r[2], 3)} | {_fmt(r[3], 3)} |" for r in rows]
     lines += ["", "targets: bind <= 15 s, deform <= 0.3 s; 1-minute load average of the "
               f"2-core machine after the run: {os.getloadavg()[0]:.1f}", ""]
+    return lines
+
+
+def _folds_section(quick):
+    timings = []
+    rows = run_folds(fold_cases(quick), timings=timings)
+    cols = [c for s in FOLD_SCHEMES for c in (s, f"SD {s} cage")]
+    lines = ["## Folds of artist-like edits (faces turned by more than 90 degrees)", "",
+             "QEM cage of 2,000 faces (a quarter of the input's faces when smaller), fitted "
+             "for each scheme, two levels; Surface Deform (bpy) on the same cage and edit",
+             "", "| mesh | edit | " + " | ".join(cols) + " |",
+             "| --- | --- | " + " | ".join("---:" for _ in cols) + " |"]
+    total = dict.fromkeys(cols, 0)
+    for name, label, r in rows:
+        lines.append(f"| {name} | {label} | " + " | ".join(str(r.get(c, "-")) for c in cols) + " |")
+        for c in cols:
+            total[c] += r.get(c, 0)
+    lines.append("| **total** | " + f"{len(rows)} edits | " + " | ".join(
+        f"**{total[c]}**" for c in cols) + " |")
+    lines += ["", "## Bind and deform per case (same run; incremental = deform(moved=, out=))", "",
+              "| mesh | scheme | dense vertices | cage faces | bind s | Surface Deform bind s | "
+              "bind / SD | full deform ms | one-ring: moved, rows, ms, / full | "
+              "5 random: rows, ms, / full |",
+              "| --- | --- | ---: | ---: | ---: | ---: | ---: | ---: | --- | --- |"]
+    for name, scheme, n, m, tb, tsd, d in timings:
+        f = d["full"]
+        lines.append(
+            f"| {name} | {scheme} | {n:,} | {m:,} | {tb:.2f} | {tsd:.2f} | {tb / tsd:.2f} | "
+            f"{1e3 * f:.1f} | {d['one-ring moved']}, {d['one-ring rows']:,}, "
+            f"{1e3 * d['one-ring']:.1f}, {d['one-ring'] / f:.3f} | {d['5 random rows']:,}, "
+            f"{1e3 * d['5 random']:.1f}, {d['5 random'] / f:.3f} |")
+    lines += ["", f"load average after the fold runs: {os.getloadavg()[0]:.1f}", ""]
     return lines
 
 
