@@ -409,3 +409,64 @@ def test_identity_rigid_and_locality_on_the_bunny():
     allowed = b.affected([7])
     assert np.array_equal(D[~allowed], base[~allowed])
     assert np.any(D[allowed] != base[allowed])
+
+
+# ------------------------------------------------------------------ artist-like edits
+def _smooth_bumpy_sphere(k=4, amp=0.01, waves=12):
+    V, F = icosphere(k)
+    r = 1 + amp * np.sin(waves * V[:, 0]) * np.sin(waves * V[:, 1]) * np.sin(waves * V[:, 2])
+    return V * r[:, None], F
+
+
+def _artist_edits(Vc, Fc, diag, v):
+    """The one-ring of ``v`` lifted along its normal by 1% and 3% of the
+    diagonal, and a smooth 5% lift with quartic falloff over 12%."""
+    N = vertex_normals(Vc, Fc)
+    ring = np.unique(np.concatenate([[v], Fc[(Fc == v).any(axis=1)].ravel()]))
+    out = []
+    for pct in (1, 3):
+        Ve = Vc.copy()
+        Ve[ring] += pct / 100 * diag * N[v]
+        out.append(Ve)
+    w = np.clip(1 - (np.linalg.norm(Vc - Vc[v], axis=1) / (0.12 * diag)) ** 2, 0, None) ** 2
+    out.append(Vc + 0.05 * diag * w[:, None] * N[v])
+    return out
+
+
+def _folds(V0, V1, F):
+    from core.mesh import face_normals
+    n0, n1 = face_normals(V0, F, normalize=False), face_normals(V1, F, normalize=False)
+    return int((np.einsum("ij,ij->i", n0, n1) < 0).sum())
+
+
+@pytest.fixture(scope="module", params=["sphere", "torus"])
+def smooth_shape(request):
+    from core.simplify import simplify
+    Vd, Fd = _smooth_bumpy_sphere() if request.param == "sphere" else \
+        torus(128, 64, bump=0.01, bump_waves=(40, 20))
+    return Vd, Fd, simplify(Vd, Fd, target_faces=300)
+
+
+@pytest.mark.parametrize("scheme", ["butterfly", "loop"])
+def test_artist_edits_do_not_fold_smooth_shapes(smooth_shape, scheme):
+    from core.fit import fit_cage
+    Vd, Fd, cage = smooth_shape
+    Vc = fit_cage(Vd, Fd, cage.V, cage.F, levels=2, scheme=scheme).V
+    b = bind(Vd, Fd, Vc, cage.F, levels=2, scheme=scheme)
+    diag = bbox_diagonal(Vd)
+    for v in (3, Vc.shape[0] // 2):
+        for Ve in _artist_edits(Vc, cage.F, diag, v):
+            D = deform(b, Ve)
+            assert np.abs(D - Vd).max() > 1e-3 * diag      # the edit did something
+            assert _folds(Vd, D, Fd) == 0
+
+
+@pytest.mark.parametrize("scheme", ["butterfly", "loop"])
+def test_identity_and_rigid_motion_exact_to_1e12_of_the_diagonal(smooth_shape, scheme):
+    Vd, Fd, cage = smooth_shape
+    b = bind(Vd, Fd, cage.V, cage.F, levels=2, scheme=scheme)
+    diag = bbox_diagonal(Vd)
+    assert np.abs(deform(b, cage.V) - Vd).max() <= 1e-12 * diag
+    for seed in range(3):
+        Q, t = _random_rigid(seed)
+        assert np.abs(deform(b, cage.V @ Q.T + t) - (Vd @ Q.T + t)).max() <= 1e-12 * diag
