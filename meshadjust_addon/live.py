@@ -3,8 +3,13 @@
 A ``depsgraph_update_post`` handler notices geometry updates of cages whose
 ``live`` toggle is on and schedules one refine through ``bpy.app.timers``,
 at most every ``live_interval`` seconds (add-on preferences), so the viewport
-stays responsive on dense meshes. Errors turn live mode off for that cage and
-are kept in its ``last_report`` rather than raised inside the handler.
+stays responsive on dense meshes. The edited original is updated by
+:func:`.live_update.update_edited`: only the cage vertices that moved since
+the last update are followed through the binding (``core.deform`` with
+``moved=``), so an update costs what the edit touches, not the whole scan.
+The other outputs go through ``api.refine_object``. Errors turn live mode
+off for that cage and are kept in its ``last_report`` rather than raised
+inside the handler.
 """
 
 import time
@@ -12,7 +17,7 @@ import time
 import bpy
 
 from .. import core
-from . import api
+from . import api, live_update
 from .properties import preferences
 
 _pending = set()
@@ -29,6 +34,7 @@ def refine_pending():
     directly, e.g. in tests). Returns None so the timer does not repeat."""
     names = list(_pending)
     _pending.clear()
+    live_update.forget()
     output = 'EDITED'
     scene = bpy.context.scene
     if scene is not None and hasattr(scene, "meshadjust"):
@@ -38,7 +44,13 @@ def refine_pending():
         if cage is None or not cage.meshadjust.live or cage.meshadjust.edited is None:
             continue
         try:
-            api.refine_object(cage, output=output)
+            if output in ('EDITED', 'BOTH'):
+                report = live_update.update_edited(cage).summary()
+                if output == 'BOTH':
+                    report += "; " + api.refine_object(cage, output='REFINED').message
+                cage.meshadjust.last_report = report
+            else:
+                api.refine_object(cage, output=output)
         except core.MeshAdjustError as exc:
             cage.meshadjust.live = False
             cage.meshadjust.last_report = f"live refine stopped: {exc}"
@@ -75,3 +87,4 @@ def unregister():
     if bpy.app.timers.is_registered(refine_pending):
         bpy.app.timers.unregister(refine_pending)
     _pending.clear()
+    live_update.forget()

@@ -156,3 +156,18 @@ def test_bad_moved_and_out_raise_named_errors(case):
     ro.flags.writeable = False
     with pytest.raises(InvalidArgumentError, match="out must be a writable"):
         deform(b, Vc, out=ro)
+
+
+def test_influenced_lists_exactly_the_rows_the_update_writes(torus_case):
+    Vd, Vc, b = torus_case
+    ids = [4, 17, 17]
+    rows = b.influenced(ids)
+    assert rows.dtype == np.int64 and np.array_equal(rows, np.unique(rows))
+    assert b.affected(ids)[rows].all()
+    D = np.full((b.n_dense, 3), 7.0)
+    deform(b, Vc + 0.01, moved=ids, out=D)
+    written = (D != 7.0).any(axis=1)
+    assert np.array_equal(np.flatnonzero(written), rows)
+    assert b.influenced([]).shape == (0,)
+    with pytest.raises(InvalidArgumentError, match="Binding.influenced: moved index -2"):
+        b.influenced([-2])

@@ -1,0 +1,57 @@
+"""Live mode's incremental update of the edited original
+(``meshadjust_addon.live_update``): equal to a full refine, only what moved
+is recomputed, nothing is written when nothing moved, a re-bind starts over."""
+
+import sys
+
+import bpy
+import numpy as np
+import pytest
+
+from tests.addon.conftest import MODULE, make_object
+from tests.mesh_factory import icosphere
+
+
+def _mod(name):
+    return sys.modules[f"{MODULE}.meshadjust_addon.{name}"]
+
+
+@pytest.fixture()
+def bound_cage(scene):
+    V, F = icosphere(4)
+    V = V * (1.0 + 0.03 * np.sin(9 * V[:, 0]) * np.sin(7 * V[:, 1]))[:, None]
+    dense = make_object("dense", V, F)
+    assert bpy.ops.meshadjust.simplify(target_mode='FACES', target_faces=300, fit=True,
+                                       bind=True, levels=2) == {'FINISHED'}
+    _mod("live_update").forget()
+    return dense.meshadjust.cage
+
+
+def test_incremental_live_update_equals_a_full_refine(bound_cage):
+    lu, mio = _mod("live_update"), _mod("mesh_io")
+    cage = bound_cage
+    edited = cage.meshadjust.edited
+    first = lu.update_edited(cage)
+    assert first.full and first.rows == len(edited.data.vertices)
+    Vc = mio.read_positions(cage.data)
+    Vc[[3, 4, 5]] += [0.0, 0.02, 0.05]
+    mio.write_positions(cage.data, Vc)
+    t = lu.update_edited(cage)
+    assert not t.full and t.moved == 3 and 0 < t.rows < len(edited.data.vertices)
+    assert "3 cage vertices moved" in cage.meshadjust.last_report
+    live = mio.read_positions(edited.data)
+    assert bpy.ops.meshadjust.refine(output='EDITED') == {'FINISHED'}
+    full = mio.read_positions(edited.data)
+    assert np.abs(live - full).max() <= 1e-6
+    # nothing moved: nothing recomputed
+    again = lu.update_edited(cage)
+    assert again.moved == 0 and again.rows == 0 and not again.full
+    assert np.array_equal(mio.read_positions(edited.data), full)
+
+
+def test_rebind_starts_from_a_full_deform(bound_cage):
+    lu = _mod("live_update")
+    cage = bound_cage
+    lu.update_edited(cage)
+    assert bpy.ops.meshadjust.bind() == {'FINISHED'}
+    assert lu.update_edited(cage).full
