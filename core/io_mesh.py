@@ -152,7 +152,7 @@ def _read(path, fn, obj):
     if bad.size:
         k = bad[0]
         problem = ("has vertex index 0 (indices are 1-based)" if (R[k] == 0).any() else
-                   f"refers to a vertex outside the file's {n:,} vertices")
+                   f"refers to a missing vertex (the file has {n:,})")
         raise _line_error(fn, path, int(lines[k]), problem)
     n_polygons = F.shape[0] - sum(len(idx) - 3 for _, idx, _ in poly)
     return MeshFile(V, F, n_polygons, skipped)

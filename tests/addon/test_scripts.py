@@ -58,6 +58,48 @@ def test_batch_parallel_jobs_and_ply_output(tmp_path):
     assert "2 converted, 0 failed" in proc.stdout
 
 
+def write_ascii_ply(path, V, F, *, faces_in_header=None, truncate=False):
+    lines = ["ply", "format ascii 1.0", f"element vertex {len(V)}", "property float x",
+             "property float y", "property float z",
+             f"element face {len(F) if faces_in_header is None else faces_in_header}",
+             "property list uchar int vertex_indices", "end_header"]
+    lines += [f"{x!r} {y!r} {z!r}" for x, y, z in V.tolist()]
+    lines += [f"3 {a} {b} {c}" for a, b, c in F.tolist()]
+    if truncate:
+        lines = lines[:len(lines) // 2]
+    path.write_text("\n".join(lines) + "\n")
+
+
+def test_batch_quotes_blender_importer_errors_and_keeps_its_log_out_of_stdout(tmp_path):
+    V, F = icosphere(3)
+    write_ascii_ply(tmp_path / "good.ply", V, F)
+    write_ascii_ply(tmp_path / "cut.ply", V, F, truncate=True)
+    bad_face = np.vstack([F, [[0, 1, len(V) + 5]]])          # Blender drops this face
+    write_ascii_ply(tmp_path / "dropped.ply", V, bad_face)
+    out, log = tmp_path / "out", tmp_path / "blender.log"
+    proc = run_script(["scripts/meshadjust_batch.py", str(tmp_path / "good.ply"),
+                       str(tmp_path / "cut.ply"), str(tmp_path / "dropped.ply"), "--faces", "100",
+                       "--out", str(out), "--log", str(log), "--report", str(tmp_path / "r.json")],
+                      tmp_path)
+    assert proc.returncode == 1, proc.stdout + proc.stderr
+    lines = proc.stdout.splitlines()
+    assert len(lines) == 2 + 3 + 1, proc.stdout        # table, three rows, summary: nothing else
+    assert "| good.ply | 1,280 | 100 | 100 |" in proc.stdout
+    cut = next(ln for ln in lines if ln.startswith("| cut.ply"))
+    assert ("FAILED: cut.ply: read failed: Blender's importer failed on cut.ply: "
+            "Error: PLY Importer: failed importing, unknown error (Blender's log: " in cut)
+    assert "ERROR PLY Importer: failed importing cut: " in cut     # the cause, from its log
+    dropped = next(ln for ln in lines if ln.startswith("| dropped.ply"))
+    assert "| warn: Blender's PLY importer kept 1,280 of the file's 1,281 faces" in dropped
+    assert "PLY import of" not in proc.stdout + proc.stderr
+    assert "PLY import of 'good.ply'" in log.read_text()
+    assert sorted(os.listdir(out)) == ["dropped_cage.ply", "good_cage.ply"]
+    import json
+    files = json.loads((tmp_path / "r.json").read_text())["files"]
+    assert [f["status"] for f in files] == ["ok", "failed", "warn"]
+    assert all(f["log"] is None for f in files)           # it went to --log
+
+
 def test_batch_help_and_bad_arguments(tmp_path):
     proc = run_script(["scripts/meshadjust_batch.py", "--help"], tmp_path)
     assert proc.returncode == 0

@@ -68,11 +68,11 @@ def test_obj_slashes_negative_indices_and_extra_coordinates(tmp_path):
     ("v 0 0 0\nv 1 0 inf\nv 0 1 0\nf 1 2 3\n", 2, r"'v 1 0 inf' .*not a finite number"),
     ("v 0 0\n", 1, r"'v 0 0' needs 3 coordinates"),
     ("v 0 0 0\nv 1 0 0\nv 0 1 0\n# comment\nf 1 2 9\n", 5,
-     r"'f 1 2 9' refers to a vertex outside the file's 3 vertices"),
+     r"'f 1 2 9' refers to a missing vertex \(the file has 3\)"),
     ("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 0 1 2\n", 4, r"'f 0 1 2' has vertex index 0 \(indices are 1-based\)"),
     ("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2\n", 4, r"'f 1 2' needs at least 3 vertices"),
     ("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3.5\n", 4, r"'f 1 2 3\.5' has an index that is not an integer"),
-    ("v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 2 3 99\n", 5, r"'f 1 2 3 99' refers to a vertex outside the file's 4 vertices"),
+    ("v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 2 3 99\n", 5, r"'f 1 2 3 99' refers to a missing vertex \(the file has 4\)"),
 ])
 def test_bad_lines_are_named(tmp_path, text, lineno, problem):
     path = tmp_path / "scan.smf"

@@ -1,0 +1,374 @@
+"""meshadjust-batch: simplify (and optionally fit and refine) many meshes.
+
+    meshadjust-batch scans/ --faces 2000 --fit --refine 2 --out out/ --report out/report.json
+    meshadjust-batch scans/ --ratio 0.01 --dask tcp://scheduler:8786 --out /shared/out
+    .venv/bin/python scripts/meshadjust_batch.py scan.smf --faces 500      # from a checkout
+
+Inputs are files or folders (searched one level) of OBJ and SMF (read by the
+core, NumPy only) and PLY, STL, glTF/GLB (Blender's importers: needs the bpy
+module). For each input ``NAME.ext`` it writes ``NAME_cage.<fmt>`` and, with
+``--refine``, ``NAME_refined.<fmt>`` into ``--out``; inputs whose names
+collide get their extension in the name (``scan.obj`` and ``scan.ply`` ->
+``scan_obj_cage.obj``, ``scan_ply_cage.obj``), then a number.
+
+Before any compute the output folder, the report and the log are checked (a
+file where the folder should be is an immediate error, exit status 2). At the
+end one table row per file (status ``ok``, ``warn`` with the reason,
+``FAILED`` with the step and the cause, ``skipped``, ``cancelled``), a
+summary line, and with ``--report`` a JSON report of every file. Exit status:
+0 all converted (warnings allowed unless ``--strict``), 1 a file failed
+(or warned, with ``--strict``), 2 bad arguments, 130 interrupted (Ctrl-C: the
+workers are stopped, the summary and the report still written).
+"""
+
+import argparse
+import datetime
+import json
+import math
+import os
+import sys
+import time
+from collections import Counter
+from dataclasses import asdict
+
+from . import convert as _convert
+from . import runners
+
+PROG = "meshadjust-batch"
+#: how a worker process is started from an installed package
+MODULE_ENTRY = ["-m", "meshadjust.cli.batch"]
+
+
+def parse_args(argv, prog=PROG):
+    p = argparse.ArgumentParser(
+        prog=prog,
+        description="Simplify meshes into cages with MeshAdjust (QEM), optionally fit the "
+                    "cages to the originals and refine them back with the detail.",
+        epilog="Exit status: 0 all files converted (warnings allowed unless --strict), 1 a file "
+               "failed, 2 bad arguments or output paths, 130 interrupted. Inside Blender put the "
+               "options after '--': blender -b -P scripts/meshadjust_batch.py -- IN... --faces N.")
+    p.add_argument("inputs", nargs="+", help="mesh files or folders (.obj .smf: NumPy only; "
+                   ".ply .stl .gltf .glb: Blender's importers)")
+    target = p.add_mutually_exclusive_group(required=True)
+    target.add_argument("--faces", type=int, metavar="N", help="cage face count")
+    target.add_argument("--ratio", type=float, metavar="R", help="cage faces as a fraction "
+                        "(0 < R <= 1) of the input's")
+    target.add_argument("--max-error", type=float, metavar="E", help="stop before the error "
+                        "exceeds E percent of the bounding-box diagonal")
+    p.add_argument("--fit", action="store_true", help="fit the cage so its subdivision "
+                   "matches the input (undoes QEM's shrinkage)")
+    p.add_argument("--refine", type=int, metavar="LEVELS", default=0,
+                   help="also write the cage refined LEVELS times with the input's detail")
+    p.add_argument("--scheme", choices=("butterfly", "loop"), default="butterfly",
+                   help="subdivision scheme for --fit and --refine (default: butterfly)")
+    p.add_argument("--feature-angle", type=float, default=60.0, metavar="DEG",
+                   help="dihedral angle above which edges are kept sharp (default 60)")
+    p.add_argument("--out", default="out", metavar="DIR", help="output folder (default: out)")
+    p.add_argument("--format", choices=_convert.OUTPUT_FORMATS, default=None,
+                   help="output format (default: the input's own, glTF as glb)")
+    p.add_argument("--jobs", type=int, default=1, metavar="N",
+                   help="files converted at once, each in its own worker process (default 1: "
+                        "in this process); with --dask local, the number of Dask workers")
+    p.add_argument("--dask", metavar="ADDRESS", default=None,
+                   help="send each file as a task to a Dask scheduler (tcp://host:8786), or "
+                        "'local' for a LocalCluster of --jobs workers; needs dask.distributed, "
+                        "and paths every worker sees")
+    p.add_argument("--report", metavar="FILE.json", default=None,
+                   help="write a JSON report: per file the input, faces in and out, target, why "
+                        "it stopped, deviation, cleaning, time of each step, outputs, warnings")
+    p.add_argument("--log", metavar="FILE", default=None,
+                   help="write Blender's log here (default: into the report, never to stdout)")
+    p.add_argument("--skip-existing", action="store_true",
+                   help="skip a file whose outputs all exist already (to resume a batch)")
+    p.add_argument("--strict", action="store_true",
+                   help="exit 1 when a file only warned (missed target, unchanged cage)")
+    args = p.parse_args(argv)
+    if args.faces is not None and args.faces < 4:
+        p.error("--faces must be at least 4")
+    if args.ratio is not None and not 0 < args.ratio <= 1:
+        p.error("--ratio must be in (0, 1]")
+    if args.max_error is not None and args.max_error <= 0:
+        p.error("--max-error must be positive")
+    if args.refine < 0 or args.jobs < 1:
+        p.error("--refine must be >= 0 and --jobs >= 1")
+    return args
+
+
+def options(args):
+    return _convert.Options(faces=args.faces, ratio=args.ratio, max_error_pct=args.max_error,
+                            fit=args.fit, refine=args.refine, scheme=args.scheme,
+                            feature_angle_deg=args.feature_angle, format=args.format)
+
+
+def collect_inputs(paths):
+    """Files to convert, in the order given (folders: their mesh files,
+    sorted); the same file named twice is converted once."""
+    files, seen = [], set()
+    for path in paths:
+        if os.path.isdir(path):
+            found = sorted(os.path.join(path, f) for f in os.listdir(path)
+                           if os.path.splitext(f)[1].lower() in _convert.INPUT_EXTENSIONS)
+        else:
+            found = [path]
+        for f in found:
+            key = os.path.realpath(f)
+            if key not in seen:
+                seen.add(key)
+                files.append(f)
+    return files
+
+
+def plan(files, opts, out):
+    """One task per file: its name as shown and its output paths, distinct
+    even when input names collide (compared without case)."""
+    stems = [os.path.splitext(os.path.basename(f))[0] for f in files]
+    n_stem = Counter(s.casefold() for s in stems)
+    n_base = Counter(os.path.basename(f).casefold() for f in files)
+    used, tasks = set(), []
+    for f, stem in zip(files, stems):
+        if n_stem[stem.casefold()] > 1:
+            stem = f"{stem}_{os.path.splitext(f)[1].lower().lstrip('.')}"
+        base, k = stem, 2
+        while stem.casefold() in used:
+            stem, k = f"{base}_{k}", k + 1
+        used.add(stem.casefold())
+        fmt = _convert.output_format(f, opts)
+        name = os.path.basename(f) if n_base[os.path.basename(f).casefold()] == 1 else f
+        tasks.append({"input": os.path.abspath(f), "name": name,
+                      "cage": os.path.join(out, f"{stem}_cage.{fmt}"),
+                      "refined": os.path.join(out, f"{stem}_refined.{fmt}") if opts.refine
+                      else None})
+    return tasks
+
+
+def check_paths(args):
+    """Problems with --out, --report and --log, found before any compute."""
+    problems = []
+    if os.path.exists(args.out) and not os.path.isdir(args.out):
+        problems.append(f"--out {args.out} is a file, not a folder")
+    else:
+        try:
+            os.makedirs(args.out, exist_ok=True)
+        except OSError as exc:
+            problems.append(f"--out {args.out}: cannot create it ({exc.strerror})")
+        else:
+            if not os.access(args.out, os.W_OK | os.X_OK):
+                problems.append(f"--out {args.out}: not writable")
+    for opt, path in (("--report", args.report), ("--log", args.log)):
+        if path is None:
+            continue
+        folder = os.path.dirname(os.path.abspath(path))
+        if os.path.isdir(path):
+            problems.append(f"{opt} {path} is a folder")
+        elif not os.path.isdir(folder):
+            problems.append(f"{opt} {path}: no folder {folder}")
+        elif not os.access(folder, os.W_OK):
+            problems.append(f"{opt} {path}: {folder} is not writable")
+    if args.dask is not None:
+        try:
+            import distributed  # noqa: F401
+        except ImportError:
+            problems.append("--dask needs dask.distributed (pip install 'dask[distributed]')")
+    return problems
+
+
+def progress_bar(done, total, name, width=28):
+    filled = int(width * done / max(total, 1))
+    sys.stderr.write(f"\r[{'#' * filled}{'.' * (width - filled)}] {done}/{total} {name[:40]:<40}")
+    if done == total:
+        sys.stderr.write("\n")
+    sys.stderr.flush()
+
+
+def _cell(text):
+    """Text safe in one Markdown table cell: one line, pipes escaped."""
+    text = str(text).replace("|", "\\|")
+    return text.replace("\r\n", "\\n").replace("\n", "\\n").replace("\r", "\\n").strip()
+
+
+def _status(r):
+    s = r["status"]
+    if s == "ok":
+        return "ok"
+    if s == "warn":
+        return "warn: " + "; ".join(r["warnings"])
+    if s == "failed":
+        return "FAILED: " + (r.get("error") or "unknown")
+    if s == "skipped":
+        return "skipped: outputs exist"
+    return s
+
+
+def summary_table(results):
+    lines = ["| file | faces in | cage faces | target | max dev % | refined faces | time s | status |",
+             "| --- | ---: | ---: | ---: | ---: | ---: | ---: | --- |"]
+
+    def num(v, fmt="{:,}"):
+        return "" if v is None else fmt.format(v)
+
+    for r in results:
+        lines.append("| " + " | ".join(_cell(c) for c in (
+            r["name"], num(r.get("faces_in")), num(r.get("faces_out")),
+            num(r.get("target_faces")), num(r.get("deviation_pct"), "{:.3f}"),
+            num(r.get("refined_faces")), num(r.get("seconds"), "{:.2f}"), _status(r))) + " |")
+    return "\n".join(lines)
+
+
+def _counts(results):
+    c = Counter(r["status"] for r in results)
+    return {k: c.get(k, 0) for k in ("ok", "warn", "failed", "skipped", "cancelled")}
+
+
+def summary_line(results, out):
+    c = _counts(results)
+    line = f"{c['ok'] + c['warn']} converted"
+    if c["warn"]:
+        line += f" ({c['warn']} with warnings)"
+    line += f", {c['failed']} failed"
+    for k in ("skipped", "cancelled"):
+        if c[k]:
+            line += f", {c[k]} {k}"
+    return line + f"; output in {out}"
+
+
+def _write_json(path, data):
+    tmp = f"{path}.part-{os.getpid()}"
+    with open(tmp, "w", encoding="utf-8") as fh:
+        json.dump(data, fh, indent=1, allow_nan=False, default=str)
+        fh.write("\n")
+    os.replace(tmp, path)
+
+
+def _json_safe(r):
+    """NaN and infinity are not JSON: None instead."""
+    return {k: None if isinstance(v, float) and not math.isfinite(v) else v for k, v in r.items()}
+
+
+def worker_main(payload_json):
+    """A worker process: convert one file, print its report on one line."""
+    import signal
+
+    def terminate(signum, frame):
+        raise KeyboardInterrupt
+    signal.signal(signal.SIGTERM, terminate)
+    signal.signal(signal.SIGINT, signal.SIG_IGN)     # the driver decides
+    payload = json.loads(payload_json)
+    task = payload["task"]
+    try:
+        report = _convert.convert(task, _convert.Options(**payload["options"]))
+    except KeyboardInterrupt:
+        report = runners.cancelled_report(task)
+    print(runners.RESULT_MARK + json.dumps(_json_safe(report)), flush=True)
+    return 0
+
+
+def main(argv=None, *, entry=None, prog=PROG):
+    """Run the batch; returns the exit status.
+
+    ``entry``: how worker processes run this tool after the Python
+    executable (default ``-m meshadjust.cli.batch``; the checkout's script
+    passes its own path)."""
+    argv = sys.argv[1:] if argv is None else list(argv)
+    if argv[:1] == ["--worker"]:
+        return worker_main(argv[1])
+    args = parse_args(argv, prog)
+    entry = MODULE_ENTRY if entry is None else entry
+    t0 = time.perf_counter()
+    started = datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds")
+    problems = check_paths(args)
+    if problems:
+        for msg in problems:
+            print(f"{prog}: {msg}", file=sys.stderr)
+        return 2
+    files = collect_inputs(args.inputs)
+    if not files:
+        print(f"{prog}: no input files found", file=sys.stderr)
+        return 2
+    opts = options(args)
+    tasks = plan(files, opts, os.path.abspath(args.out))
+    results = [None] * len(tasks)
+    todo = []
+    for i, task in enumerate(tasks):
+        outs = [p for p in (task["cage"], task["refined"]) if p]
+        if args.skip_existing and all(os.path.isfile(p) for p in outs):
+            results[i] = dict(runners.cancelled_report(task), status="skipped", outputs=outs)
+        else:
+            todo.append(i)
+    log_fh = open(args.log, "w", encoding="utf-8") if args.log else None
+    done = [len(tasks) - len(todo)]
+    progress_bar(done[0], len(tasks), "")
+
+    def on_done(k, report):
+        i = todo[k]
+        if log_fh is not None:
+            if report.get("log"):
+                log_fh.write(f"==== {report['input']} ====\n{report['log']}\n")
+                log_fh.flush()
+            report["log"] = None
+        results[i] = report
+        done[0] += 1
+        progress_bar(done[0], len(tasks), tasks[i]["name"])
+
+    sub = [tasks[i] for i in todo]
+
+    def payload(task):
+        return json.dumps({"task": task, "options": asdict(opts)})
+
+    try:
+        if not sub:
+            interrupted = False
+        elif args.dask is not None:
+            interrupted = runners.run_dask(sub, payload, entry, args.dask, args.jobs, on_done)
+        elif args.jobs > 1:
+            interrupted = runners.run_processes(sub, payload, lambda p: worker_command(entry, p),
+                                                args.jobs, on_done)
+        else:
+            interrupted = runners.run_serial(sub, lambda t: _convert.convert(t, opts), on_done)
+    finally:
+        if log_fh is not None:
+            log_fh.close()
+    if interrupted:
+        sys.stderr.write("\n")
+        print(f"{prog}: interrupted; the files not finished are cancelled", file=sys.stderr)
+    results = [r if r is not None else runners.cancelled_report(t)
+               for r, t in zip(results, tasks)]
+    print(summary_table(results))
+    print(summary_line(results, args.out))
+    c = _counts(results)
+    status = 130 if interrupted else 1 if c["failed"] or (args.strict and c["warn"]) else 0
+    if args.report:
+        _write_json(args.report, {
+            "tool": prog, "started": started, "arguments": argv, "options": asdict(opts),
+            "out": os.path.abspath(args.out), "log": os.path.abspath(args.log) if args.log else None,
+            "seconds": round(time.perf_counter() - t0, 3), "interrupted": interrupted,
+            "exit_status": status, "counts": c, "files": [_json_safe(r) for r in results]})
+    return status
+
+
+def worker_command(entry, payload_json):
+    """A worker's command line: this Python (or the Blender binary running
+    us) with ``entry`` and the worker's JSON argument."""
+    bpy = sys.modules.get("bpy")
+    binary = getattr(getattr(bpy, "app", None), "binary_path", "") if bpy else ""
+    if binary and os.path.basename(binary).lower().startswith("blender") and entry[:1] != ["-m"]:
+        return [binary, "-b", "--factory-startup", "-P", entry[0], "--", "--worker", payload_json]
+    return [sys.executable, *entry, "--worker", payload_json]
+
+
+def exit_now(status):
+    """Leave without the interpreter's shutdown, which bpy as a module can
+    crash after everything is written."""
+    sys.stdout.flush()
+    sys.stderr.flush()
+    if "bpy" in sys.modules:
+        os._exit(status)
+    sys.exit(status)
+
+
+def console_main():
+    """The ``meshadjust-batch`` console script."""
+    exit_now(main())
+
+
+if __name__ == "__main__":
+    console_main()

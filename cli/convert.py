@@ -1,0 +1,241 @@
+"""One file through the batch pipeline, timed step by step, reported honestly.
+
+    read -> simplify -> measure -> [fit] -> write cage -> [bind -> refine -> write refined]
+
+OBJ and SMF are read and written by the core (``core.read_mesh``: a bad
+coordinate is an error naming the line, not a zero); PLY, STL and glTF go
+through Blender (``cli.blender_io``). The geometry is the core's, as in the
+add-on's ``api.compute_simplify``: QEM, the deviation of QEM's cage measured
+with ``core.surface_distance``, then the fit, the binding and the refinement.
+
+Nothing computed is thrown away: when the fit, the binding or the refinement
+fails after the simplify succeeded, the (unfitted) cage is still written and
+the file is marked failed *in that step*, with the cause. A cage that missed
+its target by more than :data:`TARGET_SLACK` or came back unchanged is a
+warning with the reason (``stopped at 216 faces: 23 border loops kept``).
+
+Outputs are written to a temporary name beside the final one and renamed, so
+an interrupted run never leaves a half-written file under the final name (and
+``--skip-existing`` can trust what it finds).
+"""
+
+import os
+import time
+from dataclasses import dataclass
+
+from .. import core
+from . import blender_io
+
+#: a cage with more than (1 + TARGET_SLACK) x its target faces is a warning
+TARGET_SLACK = 0.05
+#: samples per surface for the deviation (as in the add-on's reports)
+MEASURE_SAMPLES = 60_000
+CORE_FORMATS = {".obj", ".smf"}
+INPUT_EXTENSIONS = CORE_FORMATS | set(blender_io.BLENDER_IMPORT)
+OUTPUT_FORMATS = ("obj", "smf", "ply", "stl", "glb")
+
+
+@dataclass(frozen=True)
+class Options:
+    """What the batch does to each file (JSON-able: workers get it as a dict)."""
+
+    faces: int = None
+    ratio: float = None
+    max_error_pct: float = None      #: % of the bounding-box diagonal
+    fit: bool = False
+    refine: int = 0                  #: levels; 0 = no refined output
+    scheme: str = "butterfly"
+    feature_angle_deg: float = 60.0
+    format: str = None               #: None: the input's own (glTF as glb)
+
+    @property
+    def levels(self):
+        """Subdivision levels of the fit and the binding."""
+        return max(self.refine, 1) if (self.fit or self.refine) else 2
+
+
+def output_format(path, opts):
+    """The output extension (no dot) for input ``path``."""
+    ext = os.path.splitext(path)[1].lower().lstrip(".")
+    return opts.format or ("glb" if ext in ("gltf", "glb") else ext)
+
+
+class StepFailed(Exception):
+    """A step failed; ``step`` names it, the message is the cause."""
+
+    def __init__(self, step, message):
+        super().__init__(message)
+        self.step = step
+
+
+def _cause(exc):
+    """An exception as a user-facing cause: our own errors by their message,
+    anything else with its type."""
+    if isinstance(exc, (core.MeshAdjustError, blender_io.BlenderIOError)):
+        return str(exc)
+    if isinstance(exc, OSError) and exc.strerror:
+        return f"{exc.strerror}: {exc.filename}" if exc.filename else exc.strerror
+    return f"{type(exc).__name__}: {exc}"
+
+
+class _Run:
+    """The report of one file, filled in as the steps run."""
+
+    def __init__(self, task):
+        self.task = task
+        self.log = []
+        self.r = {"input": task["input"], "name": task["name"], "status": "ok",
+                  "faces_in": None, "polygons_in": None, "target_faces": None,
+                  "max_error_pct": None, "faces_out": None, "stopped_because": None,
+                  "message": None, "deviation_pct": None, "mean_deviation_pct": None,
+                  "cleaning": None, "fit": None, "refined_faces": None, "phases_s": {},
+                  "outputs": [], "warnings": [], "notes": [], "failed_step": None,
+                  "error": None}
+
+    def step(self, name, fn, *args, **kwargs):
+        """Run one step, timed; a failure becomes :class:`StepFailed`."""
+        t = time.perf_counter()
+        try:
+            return fn(*args, **kwargs)
+        except Exception as exc:    # any failure of one file is that file's, not the batch's
+            raise StepFailed(name, _cause(exc)) from exc
+        finally:
+            self.r["phases_s"][name] = round(time.perf_counter() - t, 4)
+
+    def fail(self, exc, *, after_cage=False):
+        self.r["status"] = "failed"
+        self.r["failed_step"] = exc.step
+        where = f"{exc.step} failed"
+        if after_cage:
+            where += (" (the cage was written without the fit)" if exc.step == "fit"
+                      else " (the cage was written)")
+        self.r["error"] = f"{self.task['name']}: {where}: {exc}"
+
+
+def _write(path, V, F, log):
+    """Write through a temporary name in the same folder, then rename."""
+    folder, base = os.path.split(path)
+    stem, ext = os.path.splitext(base)
+    tmp = os.path.join(folder, f".{stem}.part-{os.getpid()}{ext}")
+    try:
+        if ext.lower() in CORE_FORMATS:
+            core.write_mesh(tmp, V, F)
+        else:
+            blender_io.write_with_blender(tmp, V, F, log)
+        os.replace(tmp, path)
+    finally:
+        if os.path.exists(tmp):
+            os.remove(tmp)
+
+
+def _read(path, log):
+    """``(V, F, n_polygons, notes, warnings)`` of an input file."""
+    ext = os.path.splitext(path)[1].lower()
+    if not os.path.isfile(path):
+        raise FileNotFoundError(2, "no such file", path)
+    if ext in CORE_FORMATS:
+        m = core.read_mesh(path)
+        notes = [f"skipped {n:,} '{k}' line" + ("s" if n != 1 else "")
+                 for k, n in sorted(m.skipped.items())]
+        return m.V, m.F, m.n_polygons, notes, []
+    if ext not in blender_io.BLENDER_IMPORT:
+        raise core.InvalidArgumentError(f"unsupported file type '{ext}' (use "
+                                        f"{', '.join(sorted(INPUT_EXTENSIONS))})")
+    V, F, n_poly, warnings = blender_io.read_with_blender(path, log)
+    return V, F, n_poly, [], warnings
+
+
+def _target(opts, m):
+    if opts.faces is not None:
+        return opts.faces
+    if opts.ratio is not None:
+        return int(round(opts.ratio * m))
+    return None
+
+
+def _stop_message(res, faces_in):
+    """One sentence on how the simplify ended."""
+    return (f"{faces_in:,} -> {res.F.shape[0]:,} faces, stopped because: "
+            f"{res.stopped_because.replace('_', ' ')}")
+
+
+def _check_target(r, res, faces_in):
+    """Warnings for a missed target or an unchanged cage."""
+    out, target = r["faces_out"], r["target_faces"]
+    if out >= faces_in and (target is None or target < faces_in):
+        r["warnings"].append(f"the cage came back unchanged ({out:,} faces; stopped because: "
+                             f"{res.stopped_because.replace('_', ' ')})")
+    elif target is not None and out > (1 + TARGET_SLACK) * target:
+        r["warnings"].append(f"target {target:,} missed by {100 * (out / max(target, 1) - 1):.0f}%"
+                             f": {r['message']}")
+
+
+def convert(task, opts):
+    """Convert one file; returns its report (a JSON-able dict).
+
+    ``task``: ``input`` (path), ``name`` (as shown), ``cage`` (output path),
+    ``refined`` (output path or None). Never raises for a bad file: the
+    report's ``status`` is ``"failed"`` and ``error`` names the file, the
+    step and the cause. ``KeyboardInterrupt`` goes through.
+    """
+    run = _Run(task)
+    r = run.r
+    t_start = time.perf_counter()
+    cage_written = False
+    try:
+        V, F, n_poly, notes, warnings = run.step("read", _read, task["input"], run.log)
+        r["notes"] += notes
+        r["warnings"] += warnings
+        r["faces_in"], r["polygons_in"] = int(F.shape[0]), int(n_poly)
+        if n_poly != F.shape[0]:
+            r["notes"].append(f"triangulated {n_poly:,} polygons into {F.shape[0]:,} triangles")
+        if F.shape[0] == 0:
+            raise StepFailed("read", "no faces in the file")
+        r["target_faces"] = _target(opts, F.shape[0])
+        diag = core.bbox_diagonal(V)
+        max_error = None
+        if opts.max_error_pct is not None:
+            r["max_error_pct"] = opts.max_error_pct
+            max_error = opts.max_error_pct / 100.0 * diag
+        res = run.step("simplify", core.simplify, V, F, target_faces=opts.faces,
+                       ratio=opts.ratio, max_error=max_error,
+                       feature_angle_deg=opts.feature_angle_deg)
+        r["faces_out"] = int(res.F.shape[0])
+        r["stopped_because"] = res.stopped_because
+        r["message"] = _stop_message(res, F.shape[0])
+        _check_target(r, res, F.shape[0])
+        dist = run.step("measure", core.surface_distance, V, F, res.V, res.F,
+                        samples=MEASURE_SAMPLES)
+        r["deviation_pct"] = 100.0 * dist.hausdorff / max(diag, 1e-300)
+        r["mean_deviation_pct"] = 100.0 * dist.mean / max(diag, 1e-300)
+        creases = res.feature_edges if len(res.feature_edges) else None
+        V_cage, later = res.V, None
+        if opts.fit:
+            try:
+                fit = run.step("fit", core.fit_cage, V, F, res.V, res.F, levels=opts.levels,
+                               scheme=opts.scheme, creases=creases)
+                V_cage = fit.V
+                d = fit.mean_distance
+                r["fit"] = {"mean_before_pct": 100 * d[0] / fit.diagonal,
+                            "mean_after_pct": 100 * d[-1] / fit.diagonal}
+            except StepFailed as exc:
+                later = exc
+        run.step("write cage", _write, task["cage"], V_cage, res.F, run.log)
+        r["outputs"].append(task["cage"])
+        cage_written = True
+        if later is not None:
+            raise later
+        if task.get("refined"):
+            binding = run.step("bind", core.bind, V, F, V_cage, res.F, levels=opts.levels,
+                               scheme=opts.scheme, creases=creases)
+            Vr, Fr = run.step("refine", core.refine, binding, V_cage)
+            r["refined_faces"] = int(Fr.shape[0])
+            run.step("write refined", _write, task["refined"], Vr, Fr, run.log)
+            r["outputs"].append(task["refined"])
+    except StepFailed as exc:
+        run.fail(exc, after_cage=cage_written)
+    if r["status"] == "ok" and r["warnings"]:
+        r["status"] = "warn"
+    r["seconds"] = round(time.perf_counter() - t_start, 4)
+    r["log"] = "".join(run.log)
+    return r

@@ -1,0 +1,211 @@
+"""Where the batch's files are converted: in this process, in local worker
+processes (``--jobs N``) or as tasks on a Dask cluster (``--dask``).
+
+Every runner calls ``on_done(index, report)`` as each file finishes and
+returns True when it was interrupted (Ctrl-C), after stopping what it started;
+the driver then marks the files without a report as cancelled.
+
+A worker is always a fresh process running this tool with ``--worker JSON``
+(one file; it prints ``MESHADJUST_RESULT <json report>``): Blender as a
+module is neither thread-safe nor safe to fork, and a crash (a segmentation
+fault in an importer) takes one file down, not the batch. Workers start in a
+session of their own, so the terminal's Ctrl-C reaches only the driver, which
+then stops them in order: SIGTERM (the worker turns it into a cancel, removes
+its temporary output and reports), then SIGKILL after :data:`STOP_GRACE_S`.
+
+On Dask each task starts such a process on its worker machine with the
+worker's own Python (``python -m meshadjust.cli.batch``, or the checkout's
+``scripts/meshadjust_batch.py`` when the driver runs from a checkout; the
+paths must be the same on every machine). A cancel is a Dask ``Event`` the
+running tasks poll; tasks not yet started are cancelled by the client.
+"""
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import tempfile
+import time
+import uuid
+
+RESULT_MARK = "MESHADJUST_RESULT "
+#: seconds a worker gets to stop after SIGTERM before it is killed
+STOP_GRACE_S = 10.0
+_POLL_S = 0.05
+
+
+def run_serial(tasks, convert, on_done):
+    """Convert the files one by one in this process."""
+    for i, task in enumerate(tasks):
+        try:
+            report = convert(task)
+        except KeyboardInterrupt:
+            return True
+        on_done(i, report)
+    return False
+
+
+class WorkerProcess:
+    """One worker process converting one file, its output in a temporary file."""
+
+    def __init__(self, cmd):
+        self.out = tempfile.TemporaryFile()
+        self.proc = subprocess.Popen(cmd, stdout=self.out, stderr=subprocess.STDOUT,
+                                     stdin=subprocess.DEVNULL, start_new_session=True)
+
+    def poll(self):
+        return self.proc.poll()
+
+    def stop(self):
+        """SIGTERM, then SIGKILL after the grace period."""
+        for sig, wait in ((signal.SIGTERM, STOP_GRACE_S), (signal.SIGKILL, 5.0)):
+            if self.proc.poll() is not None:
+                return
+            try:
+                os.killpg(self.proc.pid, sig)
+            except ProcessLookupError:
+                return
+            try:
+                self.proc.wait(timeout=wait)
+            except subprocess.TimeoutExpired:
+                continue
+
+    def report(self, task, *, stopped=False):
+        """The worker's report, or a failed / cancelled one when it has none."""
+        self.out.seek(0)
+        text = self.out.read().decode("utf-8", "replace")
+        self.out.close()
+        for line in reversed(text.splitlines()):
+            if line.startswith(RESULT_MARK):
+                return json.loads(line[len(RESULT_MARK):])
+        if stopped:
+            return cancelled_report(task)
+        code = self.proc.returncode
+        how = f"exit status {code}"
+        if code is not None and code < 0:
+            how = f"killed by {signal.Signals(-code).name}"
+        tail = " | ".join(text.strip().splitlines()[-3:])
+        return failed_report(task, f"the worker process died ({how})" + (f": {tail}" if tail else ""),
+                             log=text)
+
+
+def failed_report(task, cause, *, log=""):
+    return {"input": task["input"], "name": task["name"], "status": "failed",
+            "failed_step": "worker", "error": f"{task['name']}: {cause}", "outputs": [],
+            "warnings": [], "notes": [], "phases_s": {}, "log": log}
+
+
+def cancelled_report(task):
+    return {"input": task["input"], "name": task["name"], "status": "cancelled",
+            "outputs": [], "warnings": [], "notes": [], "phases_s": {}, "log": ""}
+
+
+def run_processes(tasks, payload, command, jobs, on_done):
+    """Convert the files in up to ``jobs`` worker processes at a time.
+
+    ``payload(task)`` is the worker's JSON argument, ``command(payload)`` its
+    command line."""
+    pending = list(range(len(tasks)))
+    running = {}
+    try:
+        while pending or running:
+            while pending and len(running) < jobs:
+                i = pending.pop(0)
+                running[i] = WorkerProcess(command(payload(tasks[i])))
+            for i in [i for i, w in running.items() if w.poll() is not None]:
+                on_done(i, running.pop(i).report(tasks[i]))
+            time.sleep(_POLL_S)
+        return False
+    except KeyboardInterrupt:
+        old = signal.signal(signal.SIGINT, signal.SIG_IGN)   # a second Ctrl-C must not cut this short
+        try:
+            for w in running.values():
+                if w.poll() is None:
+                    os.killpg(w.proc.pid, signal.SIGTERM)
+            for i, w in running.items():
+                w.stop()
+                on_done(i, w.report(tasks[i], stopped=True))
+        finally:
+            signal.signal(signal.SIGINT, old)
+        return True
+
+
+def _dask_task(entry, payload_json, cancel_event):
+    """Runs on a Dask worker: one worker process for one file; polls the
+    cancel event while it runs."""
+    from distributed import Event
+    task = json.loads(payload_json)["task"]
+    w = WorkerProcess([sys.executable, *entry, "--worker", payload_json])
+    event = Event(cancel_event)
+    while w.poll() is None:
+        try:
+            w.proc.wait(timeout=0.5)
+        except subprocess.TimeoutExpired:
+            if event.is_set():
+                w.stop()
+                return w.report(task, stopped=True)
+    return w.report(task)
+
+
+def run_dask(tasks, payload, entry, address, jobs, on_done):
+    """Convert the files as tasks on a Dask cluster: ``address`` is a
+    scheduler (``tcp://host:8786``) or ``"local"`` for a ``LocalCluster`` of
+    ``jobs`` workers in this process (each task runs its own worker process,
+    so threads are enough here)."""
+    import cloudpickle
+    from distributed import Client, Event, LocalCluster, as_completed
+    # the task function travels by value: workers need not import this module
+    cloudpickle.register_pickle_by_value(sys.modules[__name__])
+    cluster = None
+    if address == "local":
+        cluster = LocalCluster(n_workers=jobs, threads_per_worker=1, processes=False,
+                               dashboard_address=None)
+        client = Client(cluster)
+    else:
+        client = Client(address, timeout="20s")
+    cancel_event = f"meshadjust-cancel-{uuid.uuid4().hex}"
+    try:
+        futures = [client.submit(_dask_task, entry, payload(task), cancel_event, pure=False,
+                                 key=f"meshadjust-{i}-{uuid.uuid4().hex[:8]}")
+                   for i, task in enumerate(tasks)]
+        index = {f.key: i for i, f in enumerate(futures)}
+        done = set()
+
+        def collect(fut):
+            i = index[fut.key]
+            try:
+                report = fut.result()
+            except Exception as exc:     # the task itself failed on the worker
+                report = failed_report(tasks[i], f"the Dask task failed: {type(exc).__name__}: {exc}")
+            done.add(i)
+            on_done(i, report)
+
+        try:
+            for fut in as_completed(futures):
+                collect(fut)
+            return False
+        except KeyboardInterrupt:
+            old = signal.signal(signal.SIGINT, signal.SIG_IGN)
+            try:
+                Event(cancel_event, client=client).set()
+                running = {k for keys in client.processing().values() for k in keys}
+                waiting = [f for f in futures if index[f.key] not in done]
+                client.cancel([f for f in waiting if f.key not in running])
+                # the running tasks see the event, stop their worker and report
+                deadline = time.monotonic() + STOP_GRACE_S + 5
+                for f in waiting:
+                    if f.key not in running:
+                        continue
+                    while f.status == "pending" and time.monotonic() < deadline:
+                        time.sleep(_POLL_S)
+                    if f.status == "finished":
+                        collect(f)
+            finally:
+                signal.signal(signal.SIGINT, old)
+            return True
+    finally:
+        client.close()
+        if cluster is not None:
+            cluster.close()
+

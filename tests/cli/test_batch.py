@@ -1,0 +1,253 @@
+"""The batch CLI on OBJ and SMF (NumPy only, no Blender), in fresh processes:
+reports, statuses, name collisions, path checks, Ctrl-C, resuming, Dask."""
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pytest
+
+import core
+from tests.mesh_factory import icosphere, octahedron, shared_mesh_path, tetrahedron
+
+ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+SCRIPT = os.path.join(ROOT, "scripts", "meshadjust_batch.py")
+
+
+def run_batch(args, tmp_path, timeout=300):
+    env = dict(os.environ, HOME=str(tmp_path), BLENDER_USER_RESOURCES=str(tmp_path))
+    return subprocess.run([sys.executable, SCRIPT, *map(str, args)], capture_output=True,
+                          text=True, env=env, timeout=timeout, cwd=str(tmp_path))
+
+
+def bumpy_sphere(level=4):
+    V, F = icosphere(level)
+    return V * (1 + 0.02 * np.sin(11 * V[:, :1]) * np.cos(9 * V[:, 1:2])), F
+
+
+def scattered(builder, k, spacing=4.0):
+    """``k`` copies of a closed mesh side by side (same size: no debris)."""
+    V0, F0 = builder()
+    V = np.concatenate([V0 + [spacing * i, 0, 0] for i in range(k)])
+    F = np.concatenate([F0 + len(V0) * i for i in range(k)])
+    return V, F
+
+
+def rows(stdout):
+    return [ln for ln in stdout.splitlines() if ln.startswith("| ") and "---" not in ln][1:]
+
+
+def test_smf_in_smf_out_report_and_a_nan_reported_not_zeroed(tmp_path):
+    V, F = bumpy_sphere()
+    core.write_smf(tmp_path / "ball.smf", V, F)
+    (tmp_path / "nan.obj").write_text("v 0 0 0\nv 1 0 0\nv nan 1 0\nv 0 0 1\n"
+                                      "f 1 2 3\nf 1 3 4\nf 1 4 2\nf 2 4 3\n")
+    proc = run_batch(["ball.smf", "nan.obj", "--faces", "300", "--fit", "--refine", "1",
+                      "--format", "smf", "--out", "out", "--report", "rep.json"], tmp_path)
+    assert proc.returncode == 1, proc.stdout + proc.stderr
+    assert "| ball.smf | 5,120 | 300 | 300 |" in proc.stdout
+    assert ("| nan.obj |" in proc.stdout and "FAILED: nan.obj: read failed: read_obj:"
+            in proc.stdout and "line 3: 'v nan 1 0' has a coordinate that is not a finite number"
+            in proc.stdout)
+    assert "1 converted, 1 failed; output in out" in proc.stdout
+    Vc, Fc = core.read_smf(tmp_path / "out" / "ball_cage.smf")
+    Vr, Fr = core.read_smf(tmp_path / "out" / "ball_refined.smf")
+    assert Fc.shape == (300, 3) and Fr.shape == (1200, 3)
+    assert not list((tmp_path / "out").glob("nan*"))
+    rep = json.loads((tmp_path / "rep.json").read_text())
+    assert rep["exit_status"] == 1 and rep["counts"] == {"ok": 1, "warn": 0, "failed": 1,
+                                                         "skipped": 0, "cancelled": 0}
+    ball, nan = rep["files"]
+    assert ball["input"] == str(tmp_path / "ball.smf") and ball["status"] == "ok"
+    assert (ball["faces_in"], ball["faces_out"], ball["target_faces"]) == (5120, 300, 300)
+    assert ball["stopped_because"] == "target" and ball["message"]
+    assert 0 < ball["mean_deviation_pct"] <= ball["deviation_pct"] < 2
+    assert ball["fit"]["mean_after_pct"] < ball["fit"]["mean_before_pct"]
+    assert list(ball["phases_s"]) == ["read", "simplify", "measure", "fit", "write cage", "bind",
+                                      "refine", "write refined"]
+    assert all(t >= 0 for t in ball["phases_s"].values())
+    assert ball["outputs"] == [str(tmp_path / "out" / "ball_cage.smf"),
+                               str(tmp_path / "out" / "ball_refined.smf")]
+    assert ball["refined_faces"] == 1200 and ball["warnings"] == []
+    assert "cleaning" in ball
+    assert nan["status"] == "failed" and nan["failed_step"] == "read" and nan["outputs"] == []
+
+
+def test_same_named_inputs_all_survive(tmp_path):
+    V, F = bumpy_sphere(3)
+    (tmp_path / "a").mkdir()
+    core.write_obj(tmp_path / "scan.obj", V, F)
+    core.write_smf(tmp_path / "scan.smf", V * 1.5, F)
+    core.write_obj(tmp_path / "a" / "scan.obj", V * 2.0, F)
+    proc = run_batch(["scan.obj", "scan.smf", "a/scan.obj", "scan.obj", "--faces", "100",
+                      "--format", "obj", "--out", "out"], tmp_path)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    assert sorted(os.listdir(tmp_path / "out")) == ["scan_obj_2_cage.obj", "scan_obj_cage.obj",
+                                                   "scan_smf_cage.obj"]
+    scale = {n: np.abs(core.read_obj(tmp_path / "out" / n)[0]).max()
+             for n in os.listdir(tmp_path / "out")}
+    assert scale["scan_obj_cage.obj"] < scale["scan_smf_cage.obj"] < scale["scan_obj_2_cage.obj"]
+    assert len(rows(proc.stdout)) == 3          # scan.obj named twice is converted once
+    assert "| a/scan.obj |" in proc.stdout and "| scan.smf |" in proc.stdout
+    assert "3 converted, 0 failed" in proc.stdout
+
+
+def test_out_is_checked_before_any_compute(tmp_path):
+    V, F = bumpy_sphere(5)                      # 20k faces: seconds, were it computed
+    core.write_obj(tmp_path / "big.obj", V, F)
+    (tmp_path / "out").write_text("a file in the way\n")
+    t = time.perf_counter()
+    proc = run_batch(["big.obj", "--faces", "100", "--out", "out"], tmp_path)
+    assert proc.returncode == 2 and "--out out is a file, not a folder" in proc.stderr
+    assert proc.stdout == "" and time.perf_counter() - t < 10
+    proc = run_batch(["big.obj", "--faces", "100", "--out", "o", "--report", "no/such/r.json"],
+                     tmp_path)
+    assert proc.returncode == 2 and "--report no/such/r.json: no folder" in proc.stderr
+    assert not (tmp_path / "o" / "big_cage.obj").exists()
+
+
+def test_one_row_per_file_whatever_the_error_text(tmp_path):
+    bad = tmp_path / "two\nlines | pipe.obj"
+    bad.write_text("v 0 0 0\nv 1 x 0\n")
+    (tmp_path / "empty.smf").write_text("# no faces\nv 0 0 0\n")
+    proc = run_batch([bad.name, "empty.smf", "missing.obj", "--faces", "10"], tmp_path)
+    assert proc.returncode == 1
+    body = rows(proc.stdout)
+    assert len(body) == 3, proc.stdout
+    assert body[0].startswith("| two\\nlines \\| pipe.obj |") and "is not a number" in body[0]
+    assert "empty.smf: read failed: no faces in the file" in body[1]
+    assert "missing.obj: read failed: no such file" in body[2]
+    assert all(r.count(" | ") == 7 for r in body)   # 8 cells: no separator from the texts
+    assert "0 converted, 3 failed" in proc.stdout
+
+
+def test_missed_target_and_unchanged_cage_warn_and_strict_fails(tmp_path):
+    core.write_obj(tmp_path / "octs.obj", *scattered(octahedron, 10))      # 80 faces, floor 40
+    core.write_obj(tmp_path / "tets.obj", *scattered(tetrahedron, 10))     # 40 faces, floor 40
+    args = ["octs.obj", "tets.obj", "--faces", "10", "--out", "out", "--report", "r.json"]
+    proc = run_batch(args, tmp_path)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    octs, tets = rows(proc.stdout)
+    assert "| 80 | 40 | 10 |" in octs and "| warn: target 10 missed by 300%" in octs
+    assert "| warn: the cage came back unchanged (40 faces; stopped because:" in tets
+    assert "2 converted (2 with warnings), 0 failed" in proc.stdout
+    rep = json.loads((tmp_path / "r.json").read_text())
+    assert [f["status"] for f in rep["files"]] == ["warn", "warn"]
+    assert rep["files"][0]["warnings"][0].startswith("target 10 missed by 300%: ")
+    assert (tmp_path / "out" / "octs_cage.obj").exists()       # a warning still writes
+    proc = run_batch(args + ["--strict"], tmp_path)
+    assert proc.returncode == 1
+
+
+def test_skip_existing_resumes_a_batch(tmp_path):
+    for k in range(2):
+        core.write_obj(tmp_path / f"s{k}.obj", *bumpy_sphere(3))
+    proc = run_batch(["s0.obj", "--faces", "100", "--out", "out"], tmp_path)
+    assert proc.returncode == 0
+    cage = tmp_path / "out" / "s0_cage.obj"
+    before = cage.stat().st_mtime_ns
+    proc = run_batch(["s0.obj", "s1.obj", "--faces", "100", "--out", "out", "--skip-existing"],
+                     tmp_path)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    s0, s1 = rows(proc.stdout)
+    assert s0.endswith("| skipped: outputs exist |") and s1.endswith("| ok |")
+    assert cage.stat().st_mtime_ns == before
+    assert "1 converted, 0 failed, 1 skipped" in proc.stdout
+
+
+def test_fit_or_refine_failing_after_the_simplify_keeps_the_cage(tmp_path):
+    """Issue 12 item 7: the cage already computed is written, the file fails
+    in the later step, the message names the file and the cause."""
+    core.write_obj(tmp_path / "ball.obj", *bumpy_sphere(3))
+    code = f"""
+import sys
+sys.path.insert(0, {os.path.join(ROOT, 'scripts')!r})
+import meshadjust_batch
+pkg = meshadjust_batch.checkout_package()
+from meshadjust import core
+from meshadjust.cli import batch
+def broken(*a, **k):
+    raise core.InvalidMeshError("subdivision_operator: 3 non-manifold vertices")
+setattr(core, sys.argv[1], broken)
+sys.exit(batch.main(sys.argv[2:]))
+"""
+    for step, extra in (("fit_cage", ["--fit"]), ("bind", ["--refine", "1"])):
+        proc = subprocess.run([sys.executable, "-c", code, step, "ball.obj", "--faces", "100",
+                               "--out", step, "--report", f"{step}.json", *extra],
+                              capture_output=True, text=True, cwd=tmp_path, timeout=120)
+        assert proc.returncode == 1, proc.stdout + proc.stderr
+        assert (tmp_path / step / "ball_cage.obj").exists()
+        assert not (tmp_path / step / "ball_refined.obj").exists()
+        r = json.loads((tmp_path / f"{step}.json").read_text())["files"][0]
+        want = ("ball.obj: fit failed (the cage was written without the fit): "
+                if step == "fit_cage" else "ball.obj: bind failed (the cage was written): ")
+        assert r["error"] == want + "subdivision_operator: 3 non-manifold vertices"
+        assert r["outputs"] == [str(tmp_path / step / "ball_cage.obj")]
+        assert r["faces_out"] == 100 and r["status"] == "failed"
+
+
+def _start(args, tmp_path):
+    env = dict(os.environ, HOME=str(tmp_path))
+    return subprocess.Popen([sys.executable, SCRIPT, *args], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True, env=env, cwd=str(tmp_path))
+
+
+@pytest.mark.parametrize("jobs", [2, 1])
+def test_ctrl_c_stops_the_workers_prints_the_summary_and_exits_130(tmp_path, jobs):
+    V, F = core.read_obj(shared_mesh_path("stanford-bunny.obj"))   # ~5 s each with fit + refine
+    for k in range(4):
+        core.write_obj(tmp_path / f"b{k}.obj", V, F)
+    proc = _start([f"b{k}.obj" for k in range(4)] + ["--faces", "1000", "--fit", "--refine", "2",
+                  "--jobs", str(jobs), "--out", "out", "--report", "r.json"], tmp_path)
+    time.sleep(2.5)
+    t = time.perf_counter()
+    proc.send_signal(signal.SIGINT)
+    out, err = proc.communicate(timeout=60)
+    assert proc.returncode == 130, out + err
+    assert time.perf_counter() - t < 15
+    assert "Traceback" not in err and "interrupted" in err
+    body = rows(out)
+    assert len(body) == 4 and sum(r.endswith("| cancelled |") for r in body) >= 2
+    assert "cancelled; output in out" in out
+    rep = json.loads((tmp_path / "r.json").read_text())
+    assert rep["interrupted"] and rep["exit_status"] == 130
+    assert not [n for n in os.listdir(tmp_path / "out") if ".part" in n]   # no half-written file
+    for r in rep["files"]:
+        for path in r["outputs"]:
+            assert core.read_obj(path)[1].shape[0] > 0
+
+
+def test_dask_local_cluster_batch_with_a_broken_file(tmp_path):
+    pytest.importorskip("distributed", reason="dask.distributed is not installed "
+                                              "(scripts/setup installs it into .venv)")
+    for k in range(3):
+        core.write_obj(tmp_path / f"s{k}.obj", *bumpy_sphere(3))
+    (tmp_path / "broken.obj").write_text("v 0 0 0\nf 1 2 3\n")
+    proc = run_batch([".", "--faces", "100", "--dask", "local", "--jobs", "2", "--out", "out",
+                      "--report", "r.json"], tmp_path)
+    assert proc.returncode == 1, proc.stdout + proc.stderr
+    body = rows(proc.stdout)
+    assert [r.split(" | ")[0] for r in body] == ["| broken.obj", "| s0.obj", "| s1.obj", "| s2.obj"]
+    assert "refers to a missing vertex" in body[0] and all(r.endswith("| ok |") for r in body[1:])
+    assert "3 converted, 1 failed" in proc.stdout
+    assert "4/4" in proc.stderr                          # the progress bar reached the end
+    assert sorted(os.listdir(tmp_path / "out")) == [f"s{k}_cage.obj" for k in range(3)]
+    rep = json.loads((tmp_path / "r.json").read_text())
+    assert [f["status"] for f in rep["files"]] == ["failed", "ok", "ok", "ok"]
+
+
+def test_help_and_bad_arguments(tmp_path):
+    proc = run_batch(["--help"], tmp_path)
+    assert proc.returncode == 0
+    for opt in ("--faces", "--ratio", "--max-error", "--fit", "--refine", "--scheme", "--out",
+                "--format", "--jobs", "--dask", "--report", "--log", "--skip-existing",
+                "--strict", ".smf"):
+        assert opt in proc.stdout, opt
+    proc = run_batch(["x.obj", "--ratio", "2"], tmp_path)
+    assert proc.returncode == 2 and "--ratio" in proc.stderr
+    proc = run_batch(["x.obj", "--faces", "10", "--format", "fbx"], tmp_path)
+    assert proc.returncode == 2 and "--format" in proc.stderr
