@@ -11,6 +11,8 @@ from typing import NamedTuple
 import bpy
 import numpy as np
 
+from .. import core
+
 
 class MeshArrays(NamedTuple):
     """A Blender mesh as core arrays, in the object's local space."""
@@ -39,8 +41,8 @@ def write_positions(mesh, V):
     """Overwrite the vertex positions of ``mesh`` (same vertex count)."""
     V = np.ascontiguousarray(V, dtype=np.float32).reshape(-1)
     if V.size != 3 * len(mesh.vertices):
-        raise ValueError(f"write_positions: {V.size // 3} positions for a mesh of "
-                         f"{len(mesh.vertices)} vertices")
+        raise core.TopologyMismatchError(f"write_positions: {V.size // 3} positions for "
+                                         f"'{mesh.name}', which has {len(mesh.vertices)} vertices")
     if V.size:
         mesh.attributes["position"].data.foreach_set("vector", V)
     mesh.update()
@@ -85,7 +87,7 @@ def read_object(obj, *, depsgraph=None, evaluated=None):
     """
     if obj is None or obj.type != 'MESH':
         kind = "nothing" if obj is None else obj.type.lower()
-        raise ValueError(f"expected a mesh object, got {kind}")
+        raise core.InvalidMeshError(f"expected a mesh object, got {kind}")
     use_eval = has_deformers(obj) if evaluated is None else evaluated
     if use_eval:
         depsgraph = depsgraph or bpy.context.evaluated_depsgraph_get()
@@ -170,13 +172,14 @@ def vertex_group_weights(obj, group_name):
 
     Raises
     ------
-    ValueError
+    core.InvalidArgumentError
         Unknown group name.
     """
     if not group_name:
         return None
     if obj.vertex_groups.get(group_name) is None:
-        raise ValueError(f"vertex group '{group_name}' not found on '{obj.name}'")
+        raise core.InvalidArgumentError(f"vertex group '{group_name}' not found on "
+                                        f"'{obj.name}'")
     tmp_name = "meshadjust_tmp_weights"
     ng = bpy.data.node_groups.new(tmp_name, 'GeometryNodeTree')
     tmp_obj = bpy.data.objects.new(tmp_name, obj.data)

@@ -1,23 +1,29 @@
 """MeshAdjust operators: thin wrappers over :mod:`.api`.
 
-Each catches the core's own errors (``core.MeshAdjustError``) and Blender-side
-input errors and turns them into ``self.report({'ERROR'}, ...)`` plus
-``{'CANCELLED'}``; nothing is changed in the scene before the compute part has
-succeeded. ``meshadjust.simplify`` runs modal from the UI (work in a worker
-thread, a progress bar, Esc cancels) and synchronously from scripts and in
-background mode.
+Each catches the core's own errors (``core.MeshAdjustError``, which the
+add-on's Blender layer raises too) and turns them into
+``self.report({'ERROR'}, ...)`` plus ``{'CANCELLED'}``; any other exception
+is a bug and surfaces as one. Nothing is changed in the scene before the
+compute part has succeeded. Simplify, Fit and Bind run modal from the UI
+(work in a worker thread, a progress bar, Esc cancels) and synchronously
+from scripts and in background mode. Their properties are declared once, in
+``settings.py``.
 """
 
 import threading
 
 import bpy
-from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty, StringProperty
 
 from .. import core
-from . import api
-from .properties import OUTPUTS, SCHEMES, TARGET_MODES
+from . import api, settings, staleness
 
-USER_ERRORS = (core.MeshAdjustError, ValueError)
+USER_ERRORS = (core.MeshAdjustError,)
+
+SimplifyProps = settings.mixin("SimplifyProps", settings.SIMPLIFY)
+FitProps = settings.mixin("FitProps", settings.FIT)
+BindProps = settings.mixin("BindProps", settings.BIND)
+RefineProps = settings.mixin("RefineProps", settings.REFINE)
+SubdivideProps = settings.mixin("SubdivideProps", settings.SUBDIVIDE)
 
 
 def cage_of(obj):
@@ -70,11 +76,26 @@ def cage_unavailable(context, need_binding=False):
         edited = cage.meshadjust.edited
         if edited is None:
             return f"'{cage.name}' is not bound: use Bind"
-        counts = tuple(edited.meshadjust.cage_counts)
-        if cage.mode != 'EDIT' and counts != (len(cage.data.vertices), len(cage.data.polygons)):
-            return (f"'{cage.name}' changed topology since it was bound "
-                    f"({counts[0]} -> {len(cage.data.vertices)} vertices): Bind to re-bind")
+        what = staleness.cage_change(cage, edited)
+        if what:
+            return f"'{cage.name}' changed topology since it was bound ({what}): re-bind it"
     return None
+
+
+def binding_warnings(cage):
+    """What is out of date about a bound cage, beside its topology (the
+    source changed since the bind): a list of sentences, each fixed by Re-bind."""
+    edited = cage.meshadjust.edited if cage is not None else None
+    source = cage.meshadjust.source if cage is not None else None
+    if edited is None or source is None:
+        return []
+    stale = staleness.source_change(source, edited.meshadjust.source_fingerprint)
+    return [stale] if stale else []
+
+
+def report_level(reports):
+    """'WARNING' when any of the api reports is one, else 'INFO'."""
+    return 'WARNING' if any(r.level == 'WARNING' for r in reports) else 'INFO'
 
 
 class _Background:
@@ -147,7 +168,7 @@ class _Background:
             if isinstance(self._error, USER_ERRORS):
                 self.report({'ERROR'}, str(self._error))
                 return {'CANCELLED'}
-            raise self._error
+            raise self._error   # a bug: let it show as one
         if self._cancel or getattr(self._job, "cancelled", False):
             self.report({'WARNING'}, f"{self.bl_label} cancelled: nothing was changed")
             return {'CANCELLED'}
@@ -158,34 +179,7 @@ class _Background:
             return {'CANCELLED'}
 
 
-class _TargetProps:
-    target_mode: EnumProperty(name="Target", items=TARGET_MODES, default='FACES')
-    target_faces: IntProperty(name="Faces", default=2000, min=4, soft_max=50000)
-    ratio: FloatProperty(name="Ratio", default=0.02, min=1e-5, max=1.0, subtype='FACTOR')
-    max_error_pct: FloatProperty(name="Max error %", default=0.5, min=0.0, soft_max=5.0)
-    preserve_boundary: BoolProperty(name="Preserve boundary", default=True)
-    preserve_topology: BoolProperty(name="Keep topology", default=True)
-    feature_angle_deg: FloatProperty(name="Feature angle", default=60.0, min=0.0, max=180.0)
-    weight_group: StringProperty(name="Importance group", default="")
-    lock_group: StringProperty(name="Locked group", default="")
-    fit: BoolProperty(name="Fit cage", default=True)
-    bind: BoolProperty(name="Bind source", default=True)
-    levels: IntProperty(name="Levels", default=2, min=1, max=5)
-    scheme: EnumProperty(name="Scheme", items=SCHEMES, default='butterfly')
-    hide_source: BoolProperty(name="Hide source", default=False)
-
-    def params(self):
-        return api.SimplifyParams(
-            target_faces=self.target_faces if self.target_mode == 'FACES' else None,
-            ratio=self.ratio if self.target_mode == 'RATIO' else None,
-            max_error_pct=self.max_error_pct if self.target_mode == 'ERROR' else None,
-            preserve_boundary=self.preserve_boundary, preserve_topology=self.preserve_topology,
-            feature_angle_deg=None if self.feature_angle_deg >= 180.0 else self.feature_angle_deg,
-            weight_group=self.weight_group, lock_group=self.lock_group, fit=self.fit,
-            bind=self.bind, levels=self.levels, scheme=self.scheme, hide_source=self.hide_source)
-
-
-class MESHADJUST_OT_simplify(_Background, _TargetProps, bpy.types.Operator):
+class MESHADJUST_OT_simplify(_Background, SimplifyProps, bpy.types.Operator):
     """Simplify the selected dense meshes into coarse cages (QEM edge collapse); the sources are never modified"""
 
     bl_idname = "meshadjust.simplify"
@@ -199,6 +193,9 @@ class MESHADJUST_OT_simplify(_Background, _TargetProps, bpy.types.Operator):
             cls.poll_message_set(why)
         return why is None
 
+    def params(self):
+        return api.SimplifyParams.from_settings(self)
+
     def _targets(self, context):
         objs = [o for o in context.selected_objects if o.type == 'MESH'
                 and o.meshadjust.role != 'CAGE']
@@ -208,20 +205,21 @@ class MESHADJUST_OT_simplify(_Background, _TargetProps, bpy.types.Operator):
         return objs
 
     def execute(self, context):
-        messages = []
+        reports, cage = [], None
         for obj in self._targets(context):
             try:
-                cage, report = api.simplify_object(obj, **vars_of(self.params()))
+                cage, report = api.simplify_object(obj, **self.params().keywords())
             except USER_ERRORS as exc:
                 self.report({'ERROR'}, f"{obj.name}: {exc}")
                 return {'CANCELLED'}
-            messages.append(f"{obj.name}: {report.message}")
+            reports.append((obj.name, report))
         for obj in context.selected_objects:
             obj.select_set(False)
-        if messages:
+        if cage is not None:
             cage.select_set(True)
             context.view_layer.objects.active = cage
-        self.report({'INFO'}, " | ".join(messages))
+        self.report({report_level([r for _, r in reports])},
+                    " | ".join(f"{name}: {r.message}" for name, r in reports))
         return {'FINISHED'}
 
     # --- interactive path: compute in a worker thread, Esc cancels
@@ -245,7 +243,7 @@ class MESHADJUST_OT_simplify(_Background, _TargetProps, bpy.types.Operator):
             o.select_set(False)
         cage.select_set(True)
         context.view_layer.objects.active = cage
-        self.report({'INFO'}, report.message)
+        self.report({report.level}, report.message)
         return {'FINISHED'}
 
 
@@ -268,20 +266,38 @@ def vars_of(params):
     return {k: getattr(params, k) for k in params.__dataclass_fields__}
 
 
+def _object_mode(obj):
+    """Leave Edit Mode on ``obj`` (its edits reach its mesh)."""
+    if obj.mode == 'EDIT':
+        try:
+            with bpy.context.temp_override(active_object=obj, object=obj):
+                bpy.ops.object.mode_set(mode='OBJECT')
+        except RuntimeError as exc:   # Blender's own refusal, e.g. another object's mode
+            raise core.MeshAdjustError(f"could not leave Edit Mode on '{obj.name}': {exc}") from exc
+
+
 class _CageJobStep(_Background, _CageStep):
     """Mixin for the long cage steps (fit, bind): every selected cage in turn
     from ``execute()``; a single cage runs in the background from ``invoke()``.
     Subclasses implement ``_prepare(cage) -> job`` (main thread),
-    ``_compute(job, progress) -> job`` (any thread) and ``_commit() -> message``."""
+    ``_compute(job, progress) -> job`` (any thread) and ``_commit() -> message``.
+    A cage that fails stops the run; cages already done stay done and the
+    report says which."""
 
     def execute(self, context):
         messages = []
         for cage in selected_cages(context):
             try:
                 self._job = self._compute(self._prepare(cage))
+                if self._job.cancelled:
+                    self.report({'WARNING'}, f"{self.bl_label} cancelled: '{cage.name}' was not "
+                                             "changed" + (f" ({' | '.join(messages)})"
+                                                          if messages else ""))
+                    return {'CANCELLED'}
                 messages.append(self._commit())
             except USER_ERRORS as exc:
-                self.report({'ERROR'}, f"{cage.name}: {exc}")
+                done = f" (done before it: {' | '.join(messages)})" if messages else ""
+                self.report({'ERROR'}, f"{cage.name}: {exc}{done}")
                 return {'CANCELLED'}
         self.report({'INFO'}, " | ".join(messages))
         return {'FINISHED'}
@@ -293,8 +309,9 @@ class _CageJobStep(_Background, _CageStep):
         try:
             job = self._prepare(cages[0])
         except USER_ERRORS as exc:
-            self.report({'ERROR'}, str(exc))
+            self.report({'ERROR'}, f"{cages[0].name}: {exc}")
             return {'CANCELLED'}
+        self._job = job
         return self.start_background(context, f"{self.bl_label}: {cages[0].name}",
                                      lambda progress: self._compute(job, progress))
 
@@ -303,58 +320,49 @@ class _CageJobStep(_Background, _CageStep):
         return {'FINISHED'}
 
 
-class MESHADJUST_OT_fit_cage(_CageJobStep, bpy.types.Operator):
-    """Move the cage's vertices so that its subdivision surface matches the source (undoes the shrinkage of simplification)"""
+def _edit_note(job):
+    n = job.n_moved
+    return f"; the edit ({n:,} cage vertices moved) kept on top" if n else ""
+
+
+class MESHADJUST_OT_fit_cage(FitProps, _CageJobStep, bpy.types.Operator):
+    """Move the cage's rest shape so that its subdivision surface matches the source (undoes the shrinkage of simplification); an edit is kept on top"""
 
     bl_idname = "meshadjust.fit_cage"
     bl_label = "Fit Cage"
     bl_options = {'REGISTER', 'UNDO'}
 
-    rebind: BoolProperty(name="Re-bind", default=True,
-                         description="Bind the source again to the fitted cage")
-
     def _prepare(self, cage):
-        if cage.mode == 'EDIT':
-            bpy.ops.object.mode_set(mode='OBJECT')
-        job = api.prepare_cage_job(cage)
-        job.rebind = self.rebind and cage.meshadjust.edited is not None
-        return job
+        _object_mode(cage)
+        return api.prepare_fit(cage, rebind=self.rebind)
 
     def _compute(self, job, progress=None):
-        api.compute_fit(job, progress=progress)
-        if job.rebind and not job.cancelled:
-            job.V_cage = job.fit.V
-            api.compute_bind(job)
-        return job
+        return api.compute_fit(job, progress=progress)
 
     def _commit(self):
         cage = bpy.data.objects[self._job.cage_name]
         fit = api.commit_fit(cage, self._job)
-        if self._job.binding is not None:
-            api.commit_bind(cage, self._job)
         d = fit.mean_distance
-        return (f"fitted '{cage.name}': mean distance {100 * d[0] / fit.diagonal:.3f}% -> "
-                f"{100 * d[-1] / fit.diagonal:.3f}% of size"
-                + ("; re-bound" if self._job.binding is not None else ""))
+        msg = (f"fitted '{cage.name}': mean distance {100 * d[0] / fit.diagonal:.3f}% -> "
+               f"{100 * d[-1] / fit.diagonal:.3f}% of size")
+        if self._job.binding is not None:
+            msg += f"; re-bound '{cage.meshadjust.edited.name}'"
+        elif cage.meshadjust.edited is not None:
+            msg += "; not re-bound: the fit counts as an edit of the bound rest shape"
+        return msg + _edit_note(self._job) + (f"; {self._job.note}" if self._job.note else "")
 
 
-class MESHADJUST_OT_bind(_CageJobStep, bpy.types.Operator):
-    """Bind (a copy of) the source to the cage as it is now: its current shape becomes the rest shape"""
+class MESHADJUST_OT_bind(BindProps, _CageJobStep, bpy.types.Operator):
+    """Bind (a copy of) the source to the cage: its rest shape (the edit kept on top) or, with Keep edit off, its current shape"""
 
     bl_idname = "meshadjust.bind"
     bl_label = "Bind"
     bl_options = {'REGISTER', 'UNDO'}
 
-    levels: IntProperty(name="Levels", default=2, min=1, max=5,
-                        description="Subdivision levels (unset: the cage's current ones)")
-    scheme: EnumProperty(name="Scheme", items=SCHEMES, default='butterfly',
-                         description="Subdivision scheme (unset: the cage's current one)")
-
     def _prepare(self, cage):
-        """A bind job; unset levels / scheme keep the cage's current ones."""
-        levels = self.levels if self.properties.is_property_set("levels") else None
-        scheme = self.scheme if self.properties.is_property_set("scheme") else None
-        return api.prepare_cage_job(cage, levels=levels, scheme=scheme)
+        """A bind job; levels 0 / scheme 'As bound' keep the cage's current ones."""
+        return api.prepare_cage_job(cage, levels=self.levels, scheme=self.scheme,
+                                    keep_edit=self.keep_edit)
 
     def _compute(self, job, progress=None):
         return api.compute_bind(job, progress=progress)
@@ -362,55 +370,44 @@ class MESHADJUST_OT_bind(_CageJobStep, bpy.types.Operator):
     def _commit(self):
         cage = bpy.data.objects[self._job.cage_name]
         edited = api.commit_bind(cage, self._job)
-        return (f"bound '{edited.name}' ({len(edited.data.vertices):,} vertices) to "
-                f"'{cage.name}' ({self._job.scheme}, {self._job.levels} levels)")
+        job = self._job
+        msg = (f"bound '{edited.name}' ({len(edited.data.vertices):,} vertices) to "
+               f"'{cage.name}' ({job.scheme}, {job.levels} levels)")
+        if job.old_levels and (job.old_levels, job.old_scheme) != (job.levels, job.scheme):
+            msg += f", was {job.old_scheme} x{job.old_levels}"
+        return msg + _edit_note(job) + (f"; {job.note}" if job.note else "")
 
 
-class MESHADJUST_OT_refine(_CageStep, bpy.types.Operator):
-    """Refine the edited cage: deform the bound copy of the source and/or build the subdivided cage with the source's detail"""
+class MESHADJUST_OT_refine(RefineProps, _CageStep, bpy.types.Operator):
+    """Refine the edited cage: deform the bound copy of the source, write the edit as a shape key of the source, and/or build the subdivided cage with the source's detail"""
 
     bl_idname = "meshadjust.refine"
     bl_label = "Refine"
     bl_options = {'REGISTER', 'UNDO'}
 
-    output: EnumProperty(name="Output", items=OUTPUTS, default='EDITED')
-    levels: IntProperty(name="Levels", default=0, min=0, max=5,
-                        description="Subdivision levels (0: those of the binding); other "
-                                    "values re-bind from the rest shape, keeping the edit")
-    scheme: EnumProperty(name="Scheme", items=[('BOUND', "As bound", "The binding's scheme")]
-                         + SCHEMES, default='BOUND')
     _needs_binding = True
 
     def execute(self, context):
-        messages = []
+        reports = []
         for cage in selected_cages(context):
             if cage.meshadjust.edited is None:
                 continue
             try:
-                report = api.refine_object(cage, output=self.output, levels=self.levels or None,
-                                           scheme=None if self.scheme == 'BOUND' else self.scheme)
-            except core.TopologyMismatchError as exc:
-                self.report({'ERROR'}, f"{exc} (Bind re-binds the changed cage)")
-                return {'CANCELLED'}
+                reports.append(api.refine_object(cage, output=self.output,
+                                                 levels=self.levels or None, scheme=self.scheme))
             except USER_ERRORS as exc:
                 self.report({'ERROR'}, f"{cage.name}: {exc}")
                 return {'CANCELLED'}
-            messages.append(report.message)
-        self.report({'INFO'}, " | ".join(messages))
+        self.report({report_level(reports)}, " | ".join(r.message for r in reports))
         return {'FINISHED'}
 
 
-class MESHADJUST_OT_subdivide(bpy.types.Operator):
+class MESHADJUST_OT_subdivide(SubdivideProps, bpy.types.Operator):
     """Subdivide the selected meshes with modified butterfly (interpolating) or Loop (approximating); edges marked sharp stay creases"""
 
     bl_idname = "meshadjust.subdivide"
     bl_label = "Subdivide (Butterfly / Loop)"
     bl_options = {'REGISTER', 'UNDO'}
-
-    levels: IntProperty(name="Levels", default=1, min=1, max=5)
-    scheme: EnumProperty(name="Scheme", items=SCHEMES, default='butterfly')
-    in_place: BoolProperty(name="In place", default=False,
-                           description="Replace the object's mesh instead of adding a new object")
 
     @classmethod
     def poll(cls, context):
@@ -429,11 +426,12 @@ class MESHADJUST_OT_subdivide(bpy.types.Operator):
         act = context.active_object
         if act is not None and act.type == 'MESH' and act not in objs:
             objs.insert(0, act)
+        empty = [o.name for o in objs if len(o.data.polygons) == 0]
+        if empty:
+            self.report({'ERROR'}, f"{empty[0]}: the mesh has no faces")
+            return {'CANCELLED'}
         messages = []
         for obj in objs:
-            if len(obj.data.polygons) == 0:
-                self.report({'ERROR'}, f"{obj.name}: the mesh has no faces")
-                return {'CANCELLED'}
             try:
                 _, report = api.subdivide_object(obj, levels=self.levels, scheme=self.scheme,
                                                  in_place=self.in_place)
@@ -465,24 +463,21 @@ class MESHADJUST_OT_edit_cage(_CageStep, bpy.types.Operator):
         return {'FINISHED'}
 
 
-CLASSES = (MESHADJUST_OT_simplify, MESHADJUST_OT_fit_cage, MESHADJUST_OT_bind,
-           MESHADJUST_OT_refine, MESHADJUST_OT_subdivide, MESHADJUST_OT_edit_cage)
-
-
 class MESHADJUST_OT_apply_defaults(bpy.types.Operator):
-    """Copy the add-on preferences' defaults (faces, levels, scheme, fit) into this scene's MeshAdjust settings"""
+    """Set this scene's MeshAdjust settings back to the add-on preferences' values (new scenes get them on their own)"""
 
     bl_idname = "meshadjust.apply_defaults"
-    bl_label = "Apply Preference Defaults"
+    bl_label = "Reset Settings to Preferences"
     bl_options = {'REGISTER', 'UNDO'}
 
     def execute(self, context):
         from .properties import apply_preferences
-        context.scene.meshadjust.initialized = False
-        if not apply_preferences(context.scene, context):
+        if not apply_preferences(context.scene, context, force=True):
             self.report({'WARNING'}, "the add-on preferences are not available")
             return {'CANCELLED'}
         return {'FINISHED'}
 
 
-CLASSES = CLASSES + (MESHADJUST_OT_apply_defaults,)
+CLASSES = (MESHADJUST_OT_simplify, MESHADJUST_OT_fit_cage, MESHADJUST_OT_bind,
+           MESHADJUST_OT_refine, MESHADJUST_OT_subdivide, MESHADJUST_OT_edit_cage,
+           MESHADJUST_OT_apply_defaults)

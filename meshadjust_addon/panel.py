@@ -1,14 +1,22 @@
 """The "MeshAdjust" tab of the 3D Viewport sidebar (N-panel).
 
-Three steps on the active object: Simplify, Edit cage, Refine. A step that
-cannot run is drawn disabled (not hidden) with the reason under it. The
-decisions are made by :func:`panel_state`, a plain function, so tests can
-check them headless (``draw()`` never runs without a window).
+A parent panel (the progress bar of a running step) and one sub-panel per
+step (``bl_parent_id``, each collapsible): Simplify, Edit Cage, Refine, and
+Subdivide Any Mesh. A step that cannot run is drawn disabled (not hidden)
+with the reason under it; a binding that is out of date (the cage's topology
+or the source changed) says what changed and offers Re-bind.
+
+The decisions are plain functions (:func:`panel_state`, :func:`simplify_fields`,
+:func:`refine_messages`) so tests can check them headless (``draw()`` never
+runs without a window). The properties drawn are the scene settings declared
+in ``settings.py``, and the buttons get them through
+:func:`settings.copy_to_operator`.
 """
 
 import bpy
 
-from .operators import cage_of, cage_unavailable, simplify_unavailable
+from . import settings
+from .operators import binding_warnings, cage_of, cage_unavailable, simplify_unavailable
 
 
 def panel_state(context):
@@ -25,104 +33,139 @@ def panel_state(context):
     return state
 
 
-def _step(layout, enabled, reason):
-    col = layout.column(align=True)
-    col.enabled = enabled
-    return col, reason
+def simplify_fields(s):
+    """The scene settings the Simplify panel shows, in order (the target
+    field follows the target mode; the vertex groups are drawn apart)."""
+    target = {'FACES': "target_faces", 'RATIO': "ratio", 'ERROR': "max_error_pct"}[s.target_mode]
+    return [target, "preserve_boundary", "preserve_topology", "feature_angle_deg", "fit",
+            "bind", "levels", "scheme", "hide_source"]
 
 
-class MESHADJUST_PT_main(bpy.types.Panel):
-    bl_label = "MeshAdjust"
-    bl_idname = "MESHADJUST_PT_main"
+def refine_messages(context):
+    """``[(text, offer_rebind)]`` for the Refine panel: why it cannot run,
+    what is out of date, and the last report."""
+    out = []
+    enabled, reason = panel_state(context)["refine"]
+    if reason:
+        out.append((reason, "re-bind" in reason))
+    cage = cage_of(context.active_object)
+    if cage is not None:
+        out.extend((text + ": re-bind to use it", True) for text in binding_warnings(cage))
+        if cage.meshadjust.last_report:
+            out.append((cage.meshadjust.last_report[:160], False))
+    return out
+
+
+class _Panel:
     bl_space_type = 'VIEW_3D'
     bl_region_type = 'UI'
     bl_category = "MeshAdjust"
 
+
+class MESHADJUST_PT_main(_Panel, bpy.types.Panel):
+    """MeshAdjust: simplify a dense mesh into a cage, edit the cage, refine"""
+
+    bl_label = "MeshAdjust"
+    bl_idname = "MESHADJUST_PT_main"
+
+    def draw(self, context):
+        s = context.scene.meshadjust
+        if s.running:
+            self.layout.progress(factor=s.progress, type='BAR', text=s.progress_text or "Working")
+            self.layout.label(text="Esc cancels", icon='INFO')
+
+
+class MESHADJUST_PT_simplify(_Panel, bpy.types.Panel):
+    bl_label = "1. Simplify"
+    bl_idname = "MESHADJUST_PT_simplify"
+    bl_parent_id = "MESHADJUST_PT_main"
+
     def draw(self, context):
         layout = self.layout
         s = context.scene.meshadjust
-        state = panel_state(context)
-        if not s.initialized:
-            layout.operator("meshadjust.apply_defaults", icon='PREFERENCES')
-        obj = context.active_object
-
-        box = layout.box()
-        box.label(text="1. Simplify", icon='MOD_DECIM')
-        col = box.column(align=True)
+        enabled, reason = panel_state(context)["simplify"]
+        col = layout.column(align=True)
         col.prop(s, "target_mode", expand=True)
-        if s.target_mode == 'FACES':
-            col.prop(s, "target_faces")
-        elif s.target_mode == 'RATIO':
-            col.prop(s, "ratio")
-        else:
-            col.prop(s, "max_error_pct")
-        col = box.column(align=True)
-        col.prop(s, "preserve_boundary")
-        col.prop(s, "preserve_topology")
-        col.prop(s, "feature_angle_deg")
+        fields = simplify_fields(s)
+        col.prop(s, fields[0])
+        col = layout.column(align=True)
+        for name in fields[1:]:
+            col.prop(s, name)
+        obj = context.active_object
         if obj is not None and obj.type == 'MESH':
             col.prop_search(s, "weight_group", obj, "vertex_groups")
             col.prop_search(s, "lock_group", obj, "vertex_groups")
-        row = box.row(align=True)
-        row.prop(s, "fit")
-        row.prop(s, "bind")
-        box.prop(s, "hide_source")
-        if s.running:
-            box.progress(factor=s.progress, type='BAR', text=s.progress_text or "Working")
-            box.label(text="Esc cancels", icon='INFO')
-        sub = box.column()
-        sub.enabled = state["simplify"][0]
+        sub = layout.column()
+        sub.enabled = enabled
         op = sub.operator("meshadjust.simplify", icon='MOD_DECIM')
-        for name in ("target_mode", "target_faces", "ratio", "max_error_pct", "preserve_boundary",
-                     "preserve_topology", "feature_angle_deg", "weight_group", "lock_group",
-                     "fit", "bind", "levels", "scheme", "hide_source"):
-            setattr(op, name, getattr(s, name))
-        if state["simplify"][1]:
-            box.label(text=state["simplify"][1], icon='INFO')
+        settings.copy_to_operator(s, op, settings.SIMPLIFY)
+        if reason:
+            layout.label(text=reason, icon='INFO')
 
-        box = layout.box()
-        box.label(text="2. Edit cage", icon='EDITMODE_HLT')
-        row = box.row(align=True)
-        row.enabled = state["edit"][0]
+
+class MESHADJUST_PT_edit(_Panel, bpy.types.Panel):
+    bl_label = "2. Edit Cage"
+    bl_idname = "MESHADJUST_PT_edit"
+    bl_parent_id = "MESHADJUST_PT_main"
+
+    def draw(self, context):
+        layout = self.layout
+        enabled, reason = panel_state(context)["edit"]
+        row = layout.row(align=True)
+        row.enabled = enabled
         row.operator("meshadjust.edit_cage", icon='EDITMODE_HLT')
         row.operator("meshadjust.fit_cage", icon='SNAP_ON')
         row.operator("meshadjust.bind", icon='LINKED')
-        if state["edit"][1]:
-            box.label(text=state["edit"][1], icon='INFO')
+        if reason:
+            layout.label(text=reason, icon='INFO')
 
-        box = layout.box()
-        box.label(text="3. Refine", icon='MOD_SUBSURF')
-        col = box.column(align=True)
-        col.prop(s, "output", text="")
-        cage = cage_of(obj)
+
+class MESHADJUST_PT_refine(_Panel, bpy.types.Panel):
+    bl_label = "3. Refine"
+    bl_idname = "MESHADJUST_PT_refine"
+    bl_parent_id = "MESHADJUST_PT_main"
+
+    def draw(self, context):
+        layout = self.layout
+        s = context.scene.meshadjust
+        enabled, _ = panel_state(context)["refine"]
+        col = layout.column(align=True)
+        col.prop(s, "output")
+        row = col.row(align=True)
+        row.prop(s, "refine_scheme", text="")
+        row.prop(s, "levels")
+        cage = cage_of(context.active_object)
         if cage is not None:
             col.prop(cage.meshadjust, "live", toggle=True, icon='PLAY')
-        sub = box.column()
-        sub.enabled = state["refine"][0]
-        row = box.row(align=True)
-        row.prop(s, "scheme", text="")
-        row.prop(s, "levels")
+        sub = layout.column()
+        sub.enabled = enabled
         op = sub.operator("meshadjust.refine", icon='MOD_SUBSURF')
-        op.output = s.output
-        op.levels = s.levels
-        op.scheme = s.scheme
+        settings.copy_to_operator(s, op, settings.REFINE)
         if cage is not None and cage.meshadjust.edited is not None:
-            box.label(text=f"Bound: {cage.meshadjust.scheme}, {cage.meshadjust.levels} levels")
-        if state["refine"][1]:
-            box.label(text=state["refine"][1], icon='INFO')
-            if "re-bind" in state["refine"][1]:
-                box.operator("meshadjust.bind", text="Re-bind", icon='LINKED')
-        if cage is not None and cage.meshadjust.last_report:
-            box.label(text=cage.meshadjust.last_report[:120])
-
-        box = layout.box()
-        box.label(text="Subdivide any mesh")
-        row = box.row(align=True)
-        row.prop(s, "scheme", text="")
-        row.prop(s, "levels")
-        op = box.operator("meshadjust.subdivide")
-        op.scheme = s.scheme
-        op.levels = s.levels
+            layout.label(text=f"Bound: {cage.meshadjust.scheme}, {cage.meshadjust.levels} levels")
+        offered = False
+        for text, rebind in refine_messages(context):
+            layout.label(text=text, icon='ERROR' if rebind else 'INFO')
+            if rebind and not offered:
+                layout.operator("meshadjust.bind", text="Re-bind", icon='LINKED')
+                offered = True
 
 
-CLASSES = (MESHADJUST_PT_main,)
+class MESHADJUST_PT_subdivide(_Panel, bpy.types.Panel):
+    bl_label = "Subdivide Any Mesh"
+    bl_idname = "MESHADJUST_PT_subdivide"
+    bl_parent_id = "MESHADJUST_PT_main"
+    bl_options = {'DEFAULT_CLOSED'}
+
+    def draw(self, context):
+        layout = self.layout
+        s = context.scene.meshadjust
+        row = layout.row(align=True)
+        row.prop(s, "subdivide_scheme", text="")
+        row.prop(s, "subdivide_levels")
+        op = layout.operator("meshadjust.subdivide")
+        settings.copy_to_operator(s, op, settings.SUBDIVIDE)
+
+
+CLASSES = (MESHADJUST_PT_main, MESHADJUST_PT_simplify, MESHADJUST_PT_edit, MESHADJUST_PT_refine,
+           MESHADJUST_PT_subdivide)

@@ -1,32 +1,20 @@
 """Add-on state: per-object links and parameters, panel inputs, preferences.
 
 Small state lives in PropertyGroups (pointers survive save and reload); large
-per-vertex data (the binding) lives in mesh attributes, see ``store.py``.
+per-vertex data (the binding) lives in mesh attributes, see ``store.py``. The
+user settings themselves are declared once, in ``settings.py``: the scene
+settings and the preferences are built from that table.
 """
 
 import bpy
 from bpy.props import (BoolProperty, EnumProperty, FloatProperty, IntProperty, IntVectorProperty,
                        PointerProperty, StringProperty)
 
-SCHEMES = [
-    ('butterfly', "Butterfly", "Modified butterfly (Zorin et al. 1996): interpolating, the cage "
-                               "vertices stay where they are"),
-    ('loop', "Loop", "Loop (1987): approximating, smoother, shrinks slightly"),
-]
-TARGET_MODES = [
-    ('FACES', "Faces", "Stop at a face count"),
-    ('RATIO', "Ratio", "Stop at a fraction of the input's faces"),
-    ('ERROR', "Max error", "Stop before any collapse whose error exceeds a percentage of the "
-                           "mesh size (bounding-box diagonal)"),
-]
-OUTPUTS = [
-    ('EDITED', "Edited original", "The source mesh deformed by the cage edit: same topology, "
-                                  "UVs and attributes kept"),
-    ('REFINED', "Refined mesh", "The subdivided edited cage with the source's detail added"),
-    ('BOTH', "Both", "Update both results"),
-]
+from . import settings as _settings
+from .settings import OUTPUTS, SCHEMES, TARGET_MODES  # noqa: F401  (re-exported)
+
 ROLES = [
-    ('NONE', "None", ""),
+    ('NONE', "None", "Not part of a MeshAdjust workflow"),
     ('SOURCE', "Source", "A dense mesh that has a cage"),
     ('CAGE', "Cage", "A coarse cage made by Simplify"),
     ('EDITED', "Edited original", "A copy of the source, bound to the cage and deformed by it"),
@@ -41,7 +29,8 @@ def _poll_mesh(self, obj):
 class MeshAdjustObjectState(bpy.types.PropertyGroup):
     """What an object is in the MeshAdjust workflow and what it is linked to."""
 
-    role: EnumProperty(name="Role", items=ROLES, default='NONE')
+    role: EnumProperty(name="Role", items=ROLES, default='NONE',
+                       description="What this object is in the MeshAdjust workflow")
     source: PointerProperty(name="Source", type=bpy.types.Object, poll=_poll_mesh,
                             description="The dense mesh this cage or result was made from")
     cage: PointerProperty(name="Cage", type=bpy.types.Object, poll=_poll_mesh,
@@ -57,72 +46,55 @@ class MeshAdjustObjectState(bpy.types.PropertyGroup):
     cage_counts: IntVectorProperty(name="Cage counts", size=2, default=(0, 0),
                                    description="Vertices and faces of the cage at bind time "
                                                "(a cheap staleness check for the panel)")
-    levels: IntProperty(name="Levels", default=2, min=0, max=6)
-    scheme: EnumProperty(name="Scheme", items=SCHEMES, default='butterfly')
+    cage_edges: IntProperty(name="Cage edges", default=0, min=0,
+                            description="Edges of the cage at bind time")
+    cage_topology: StringProperty(name="Cage topology key", default="",
+                                  description="Checksum of the cage's half-edges at bind time "
+                                              "(tells a re-connection from an edit)")
+    source_fingerprint: StringProperty(name="Source fingerprint", default="",
+                                       description="Checksum of the source (mesh, shape keys, "
+                                                   "modifiers) at bind time")
+    dense_faces: IntProperty(name="Source faces", default=0, min=0,
+                             description="Triangles of the source at bind time")
+    levels: IntProperty(name="Levels", default=2, min=0, max=6,
+                        description="Subdivision levels of the binding")
+    scheme: EnumProperty(name="Scheme", items=SCHEMES, default='butterfly',
+                         description="Subdivision scheme of the binding")
     live: BoolProperty(name="Live", default=False,
                        description="Update the results while the cage is edited")
-    last_report: StringProperty(name="Last report", default="")
+    last_report: StringProperty(name="Last report", default="",
+                                description="What the last MeshAdjust step on this cage did")
 
 
-class MeshAdjustSettings(bpy.types.PropertyGroup):
-    """Inputs of the N-panel (per scene), mirrored by each operator's own
-    properties for the redo panel."""
+SceneSettings = _settings.mixin("SceneSettings", _settings.SCENE)
+PreferenceSettings = _settings.mixin("PreferenceSettings", _settings.PREFERENCES)
 
-    target_mode: EnumProperty(name="Target", items=TARGET_MODES, default='FACES')
-    target_faces: IntProperty(name="Faces", default=2000, min=4, soft_max=50000,
-                              description="Number of triangles of the cage")
-    ratio: FloatProperty(name="Ratio", default=0.02, min=1e-5, max=1.0, subtype='FACTOR',
-                         description="Cage faces as a fraction of the source's")
-    max_error_pct: FloatProperty(name="Max error %", default=0.5, min=0.0, soft_max=5.0,
-                                 description="Largest allowed deviation, % of the bounding-box "
-                                             "diagonal")
-    preserve_boundary: BoolProperty(name="Preserve boundary", default=True)
-    preserve_topology: BoolProperty(name="Keep topology", default=True,
-                                    description="Keep genus, holes and components. Off: once "
-                                                "nothing else can collapse, holes of three edges "
-                                                "close and tiny pieces that cannot shrink go")
-    feature_angle_deg: FloatProperty(name="Feature angle", default=60.0, min=0.0, max=180.0,
-                                     description="Edges sharper than this are kept as creases "
-                                                 "(180 turns it off)")
-    weight_group: StringProperty(name="Importance", default="",
-                                 description="Vertex group whose weights make areas more important")
-    lock_group: StringProperty(name="Locked", default="",
-                               description="Vertex group of vertices that must not move")
-    fit: BoolProperty(name="Fit cage", default=True,
-                      description="Move the cage so its subdivision matches the source "
-                                  "(undoes QEM's shrinkage)")
-    bind: BoolProperty(name="Bind source", default=True,
-                       description="Bind a copy of the source to the cage so cage edits deform it")
-    hide_source: BoolProperty(name="Hide source", default=True)
-    scheme: EnumProperty(name="Scheme", items=SCHEMES, default='butterfly')
-    levels: IntProperty(name="Levels", default=2, min=1, max=5)
-    output: EnumProperty(name="Output", items=OUTPUTS, default='EDITED')
-    progress: FloatProperty(name="Progress", default=0.0, min=0.0, max=1.0, subtype='FACTOR')
-    progress_text: StringProperty(name="Progress text", default="")
-    running: BoolProperty(name="Running", default=False)
+
+class MeshAdjustSettings(SceneSettings, bpy.types.PropertyGroup):
+    """Inputs of the N-panel (per scene), declared in ``settings.py``; the
+    panel copies them onto the operators it calls."""
+
+    progress: FloatProperty(name="Progress", default=0.0, min=0.0, max=1.0, subtype='FACTOR',
+                            description="Progress of the running background step")
+    progress_text: StringProperty(name="Progress text", default="",
+                                  description="What the running background step does")
+    running: BoolProperty(name="Running", default=False,
+                          description="A background step is running")
     initialized: BoolProperty(name="Defaults applied", default=False,
-                              description="The add-on preferences' defaults were copied here")
+                              description="The add-on preferences' values were copied here")
 
 
-class MeshAdjustPreferences(bpy.types.AddonPreferences):
-    """Defaults for new scenes' MeshAdjust settings."""
+class MeshAdjustPreferences(PreferenceSettings, bpy.types.AddonPreferences):
+    """Defaults of every scene's MeshAdjust settings (copied into a scene the
+    first time it is seen), and the live update interval."""
 
     bl_idname = __package__.rpartition(".")[0] or __package__
 
-    default_faces: IntProperty(name="Default cage faces", default=2000, min=4)
-    default_levels: IntProperty(name="Default levels", default=2, min=1, max=5)
-    default_scheme: EnumProperty(name="Default scheme", items=SCHEMES, default='butterfly')
-    default_fit: BoolProperty(name="Fit cages by default", default=True)
-    live_interval: FloatProperty(name="Live update interval (s)", default=0.15, min=0.02, max=2.0,
-                                 description="Minimum time between live refines while editing")
-
     def draw(self, context):
         col = self.layout.column()
-        col.prop(self, "default_faces")
-        col.prop(self, "default_levels")
-        col.prop(self, "default_scheme")
-        col.prop(self, "default_fit")
-        col.prop(self, "live_interval")
+        col.use_property_split = True
+        for key in _settings.PREFERENCES:
+            col.prop(self, key)
 
 
 def preferences(context=None):
@@ -132,27 +104,43 @@ def preferences(context=None):
     return addon.preferences if addon else None
 
 
-def apply_preferences(scene, context=None):
-    """Copy the preferences' defaults into a scene's settings, once per scene."""
+def apply_preferences(scene, context=None, *, force=False):
+    """Copy the preferences' values into a scene's settings, once per scene
+    (``force``: again). Returns True when they were copied."""
     settings = scene.meshadjust
     prefs = preferences(context)
-    if settings.initialized or prefs is None:
+    if (settings.initialized and not force) or prefs is None:
         return False
-    settings.target_faces = prefs.default_faces
-    settings.levels = prefs.default_levels
-    settings.scheme = prefs.default_scheme
-    settings.fit = prefs.default_fit
+    _settings.seed(settings, prefs)
     settings.initialized = True
     return True
 
 
+def seed_scenes():
+    """Seed every scene not seeded yet (load, register, new scenes)."""
+    data = bpy.data
+    if not hasattr(data, "scenes"):   # restricted while Blender starts
+        return
+    for scene in data.scenes:
+        if not scene.meshadjust.initialized:
+            apply_preferences(scene)
+
+
 @bpy.app.handlers.persistent
 def _on_load_post(*_args):
-    for scene in bpy.data.scenes:
+    seed_scenes()
+
+
+@bpy.app.handlers.persistent
+def _on_depsgraph_update(scene, _depsgraph):
+    # a scene created after load (Scene > New) gets the preferences too
+    if not scene.meshadjust.initialized:
         apply_preferences(scene)
 
 
 CLASSES = (MeshAdjustObjectState, MeshAdjustSettings, MeshAdjustPreferences)
+_HANDLERS = ((bpy.app.handlers.load_post, _on_load_post),
+             (bpy.app.handlers.depsgraph_update_post, _on_depsgraph_update))
 
 
 def register():
@@ -160,12 +148,16 @@ def register():
         bpy.utils.register_class(cls)
     bpy.types.Object.meshadjust = PointerProperty(type=MeshAdjustObjectState)
     bpy.types.Scene.meshadjust = PointerProperty(type=MeshAdjustSettings)
-    bpy.app.handlers.load_post.append(_on_load_post)
+    for handlers, fn in _HANDLERS:
+        if fn not in handlers:
+            handlers.append(fn)
+    seed_scenes()
 
 
 def unregister():
-    if _on_load_post in bpy.app.handlers.load_post:
-        bpy.app.handlers.load_post.remove(_on_load_post)
+    for handlers, fn in _HANDLERS:
+        if fn in handlers:
+            handlers.remove(fn)
     del bpy.types.Scene.meshadjust
     del bpy.types.Object.meshadjust
     for cls in reversed(CLASSES):

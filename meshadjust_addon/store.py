@@ -23,7 +23,7 @@ import bpy
 import numpy as np
 
 from .. import core
-from . import mesh_io
+from . import mesh_io, staleness
 
 FACE = "meshadjust_face"
 BARY = "meshadjust_bary"
@@ -116,13 +116,19 @@ def save_binding(edited, binding):
     _set_point_attr(mesh, BARY, 'FLOAT_VECTOR', binding.bary)
     _set_point_attr(mesh, OFFSET, 'FLOAT_VECTOR', binding.offset)
     state = edited.meshadjust
-    old = state.detail_mesh
-    detail = mesh_io.new_mesh(f"{edited.name}.detail", binding.fine_detail,
-                              np.zeros((0, 3), np.int64))
-    detail.use_fake_user = True
-    state.detail_mesh = detail
-    if old is not None:
-        bpy.data.meshes.remove(old)
+    detail = state.detail_mesh
+    name = f"{edited.name}.detail"
+    if detail is not None and len(detail.vertices) == binding.fine_detail.shape[0]:
+        mesh_io.write_positions(detail, binding.fine_detail)     # in place: no new data-block
+    else:
+        old = detail
+        detail = mesh_io.new_mesh(name + ".new", binding.fine_detail, np.zeros((0, 3), np.int64))
+        detail.use_fake_user = True
+        state.detail_mesh = detail
+        if old is not None:
+            bpy.data.meshes.remove(old)
+    if detail.name != name and name not in bpy.data.meshes:
+        detail.name = name
     state.fingerprint = binding.fingerprint
     state.cage_counts = (binding.n_cage, binding.F_cage.shape[0])
     state.levels = binding.levels
@@ -162,10 +168,10 @@ def load_binding(edited, cage):
     try:
         binding = core.Binding.from_arrays(arrays)
     except core.TopologyMismatchError as exc:
+        what = staleness.cage_change(cage, edited, fresh=True) or "its topology changed"
         raise core.TopologyMismatchError(
-            f"the cage '{cage.name}' no longer has the topology '{edited.name}' was bound to "
-            f"(vertices or faces were added or removed): re-bind to use it as the new rest "
-            f"shape") from exc
+            f"the cage '{cage.name}' changed since '{edited.name}' was bound to it ({what}): "
+            f"re-bind to use its new topology (the edit is kept)") from exc
     _cache[edited.session_uid] = binding
     return binding
 

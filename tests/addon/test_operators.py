@@ -300,21 +300,29 @@ def test_panel_offers_rebind_after_topology_change(dense):
     assert bpy.ops.meshadjust.refine(output='EDITED') == {'FINISHED'}
 
 
-def test_preferences_defaults_reach_new_scenes(addon, scene):
+def test_preferences_seed_new_scenes_without_a_button(addon, scene):
     prefs = bpy.context.preferences.addons[MODULE].preferences
-    saved = (prefs.default_faces, prefs.default_levels, prefs.default_scheme)
+    saved = (prefs.target_faces, prefs.levels, prefs.scheme, prefs.hide_source)
     try:
-        prefs.default_faces = 1234
-        prefs.default_levels = 3
-        prefs.default_scheme = 'loop'
-        assert bpy.ops.meshadjust.apply_defaults() == {'FINISHED'}
+        prefs.target_faces = 1234
+        prefs.levels = 3
+        prefs.scheme = 'loop'
+        prefs.hide_source = True
+        bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)   # load_post seeds
         s = bpy.context.scene.meshadjust
-        assert (s.target_faces, s.levels, s.scheme, s.initialized) == (1234, 3, 'loop', True)
-        bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)   # load_post applies them
-        s = bpy.context.scene.meshadjust
-        assert (s.target_faces, s.levels, s.initialized) == (1234, 3, True)
+        assert (s.target_faces, s.levels, s.scheme, s.hide_source, s.initialized) == \
+            (1234, 3, 'loop', True, True)
+        new = bpy.data.scenes.new("other")                  # a scene made later: seeded by
+        props = sys.modules[MODULE + ".meshadjust_addon.properties"]
+        props._on_depsgraph_update(new, None)               # the depsgraph handler
+        assert (new.meshadjust.target_faces, new.meshadjust.initialized) == (1234, True)
+        s.target_faces = 99                                 # a scene's own value is kept...
+        props.seed_scenes()
+        assert s.target_faces == 99
+        assert bpy.ops.meshadjust.apply_defaults() == {'FINISHED'}   # ...unless reset
+        assert bpy.context.scene.meshadjust.target_faces == 1234
     finally:
-        prefs.default_faces, prefs.default_levels, prefs.default_scheme = saved
+        prefs.target_faces, prefs.levels, prefs.scheme, prefs.hide_source = saved
 
 
 def test_refine_with_other_levels_and_scheme_keeps_the_edit(dense):
@@ -421,7 +429,8 @@ def _draw_panel():
     panel = sys.modules[MODULE + ".meshadjust_addon.panel"]
     log = []
     fake = type("P", (), {"layout": _FakeLayout(log)})()
-    panel.MESHADJUST_PT_main.draw(fake, bpy.context)
+    for cls in panel.CLASSES:
+        cls.draw(fake, bpy.context)
     return log
 
 

@@ -1,0 +1,176 @@
+"""Where an edit lands: the edited original, the refined mesh, a shape key.
+
+* The **edited original** is a copy of the source's evaluated mesh (UVs,
+  attributes, materials), bound to the cage and deformed by it.
+* The **refined mesh** is the subdivided edited cage with the source's detail.
+* The **shape key** is the edit written onto the source itself: a key named
+  after the cage (value 1.0, relative to the reference key), the reference
+  key ("Basis", created from the mesh when the source had no keys) never
+  touched. Its positions are the reference key's plus the displacement of
+  the edited original from the mesh that was bound, so they equal the edited
+  original exactly when the source has no other keys and no modifiers.
+
+Every result is created once and updated in place afterwards; a mesh that
+is replaced is removed when nothing else uses it (no orphans).
+"""
+
+import contextlib
+
+import bpy
+import numpy as np
+
+from .. import core
+from . import mesh_io
+from .staleness import own_key_names
+
+
+def link_like(obj, like):
+    """Link ``obj`` into the collections of ``like`` (or the scene's)."""
+    cols = list(like.users_collection) if like is not None else []
+    if not cols:
+        cols = [bpy.context.scene.collection]
+    for col in cols:
+        col.objects.link(obj)
+
+
+@contextlib.contextmanager
+def own_keys_muted(source):
+    """Mute the shape keys MeshAdjust wrote on ``source`` for the block, so
+    its evaluated mesh is the artist's (a re-bind must not bind the edit)."""
+    keys = source.data.shape_keys if source is not None and source.type == 'MESH' else None
+    muted = []
+    if keys is not None:
+        own = own_key_names(source)
+        muted = [kb for kb in keys.key_blocks if kb.name in own and not kb.mute]
+    for kb in muted:
+        kb.mute = True
+    try:
+        yield
+    finally:
+        for kb in muted:
+            kb.mute = False
+
+
+def _new_source_copy(source, name):
+    with own_keys_muted(source):
+        depsgraph = bpy.context.evaluated_depsgraph_get()
+        mesh = bpy.data.meshes.new_from_object(source.evaluated_get(depsgraph))
+    mesh.name = name
+    return mesh
+
+
+def edited_copy(source, cage, n_vertices):
+    """The edited-original object of ``cage`` with ``n_vertices`` vertices:
+    the existing one, its mesh re-made from the source when the source's
+    vertex count changed, or a new copy. Returns ``(edited, note)``, the note
+    saying what was re-made (empty otherwise)."""
+    edited = cage.meshadjust.edited
+    name = f"{source.name}_edited"
+    if edited is not None and edited.name in bpy.data.objects:
+        old = edited.data
+        if len(old.vertices) == n_vertices:
+            return edited, ""
+        mesh = _new_source_copy(source, old.name + ".new")
+        keep_name, n_old = old.name, len(old.vertices)
+        edited.data = mesh
+        if old.users == 0:
+            bpy.data.meshes.remove(old)
+            mesh.name = keep_name
+        return edited, (f"'{edited.name}' re-made from '{source.name}' ({n_old:,} -> "
+                        f"{n_vertices:,} vertices)")
+    mesh = _new_source_copy(source, name)
+    edited = bpy.data.objects.new(name, mesh)
+    edited.matrix_world = source.matrix_world.copy()
+    link_like(edited, source)
+    for slot, src_slot in enumerate(source.material_slots[:len(edited.material_slots)]):
+        edited.material_slots[slot].material = src_slot.material
+    st = edited.meshadjust
+    st.role = 'EDITED'
+    st.source = source
+    st.cage = cage
+    cage.meshadjust.edited = edited
+    return edited, ""
+
+
+def write_refined(cage, source, Vr, Fr):
+    """Create or update the refined-mesh object of ``cage``."""
+    cs = cage.meshadjust
+    refined = cs.refined
+    if refined is not None and len(refined.data.vertices) == Vr.shape[0] \
+            and len(refined.data.polygons) == Fr.shape[0]:
+        mesh_io.write_positions(refined.data, Vr)
+        return refined
+    name = f"{source.name}_refined"
+    mesh = mesh_io.new_mesh(name, Vr, Fr)
+    if refined is None:
+        refined = bpy.data.objects.new(name, mesh)
+        refined.matrix_world = source.matrix_world.copy()
+        link_like(refined, source)
+        refined.meshadjust.role = 'REFINED'
+        refined.meshadjust.source = source
+        refined.meshadjust.cage = cage
+        cs.refined = refined
+    else:
+        old = refined.data
+        keep_name = old.name
+        refined.data = mesh
+        if old.users == 0:
+            bpy.data.meshes.remove(old)
+            mesh.name = keep_name
+    return refined
+
+
+def shape_key_unavailable(source, n_dense):
+    """Why the edit cannot be a shape key of ``source`` (None when it can)."""
+    if len(source.data.vertices) != n_dense:
+        return (f"'{source.name}' has {len(source.data.vertices):,} vertices in its mesh but "
+                f"{n_dense:,} were bound (its modifiers change the vertex count): the edit "
+                f"cannot be a shape key of it; use the edited original")
+    return None
+
+
+def shape_key_of(source, cage):
+    """The shape key ``cage`` writes on ``source``, or None."""
+    keys = source.data.shape_keys
+    return None if keys is None else keys.key_blocks.get(cage.name)
+
+
+def write_shape_key(source, cage, V_edited, V_bound):
+    """Write the edit as the shape key named after ``cage`` on ``source``.
+
+    ``V_edited`` (n,3): the edited original's positions; ``V_bound`` (n,3):
+    the positions that were bound (the source's evaluated mesh at bind time),
+    or None when they are the reference key's (no other keys, no modifiers).
+    """
+    why = shape_key_unavailable(source, V_edited.shape[0])
+    if why:
+        raise core.MeshAdjustError(f"Refine: {why}")
+    if source.data.shape_keys is None:
+        source.shape_key_add(name="Basis", from_mix=False)
+    keys = source.data.shape_keys
+    key = keys.key_blocks.get(cage.name)
+    if key is None:
+        key = source.shape_key_add(name=cage.name, from_mix=False)
+        key.relative_key = keys.reference_key
+        key.value = 1.0
+    if V_bound is None:
+        co = V_edited
+    else:
+        ref = np.empty(3 * len(source.data.vertices), np.float32)
+        keys.reference_key.data.foreach_get("co", ref)
+        co = ref.reshape(-1, 3).astype(np.float64) + (V_edited - V_bound)
+    key.data.foreach_set("co", np.ascontiguousarray(co, dtype=np.float32).ravel())
+    source.data.update()
+    return key
+
+
+def only_own_keys_and_no_modifiers(source):
+    """True when the source's evaluated mesh (own keys muted) is its reference key."""
+    if source.modifiers:
+        return False
+    keys = source.data.shape_keys
+    if keys is None:
+        return True
+    own = own_key_names(source)
+    return all(kb.name in own or kb == keys.reference_key or kb.mute or kb.value == 0.0
+               for kb in keys.key_blocks)

@@ -1,0 +1,215 @@
+"""Is a binding still about the meshes it was made from? Cheap checks.
+
+Two fingerprints are stored with a binding (on the edited original's state)
+and compared with the objects as they are now:
+
+* the **source fingerprint**: vertex and face counts, a CRC-32 of the base
+  mesh's positions and corners, and of every shape key (other than the ones
+  MeshAdjust writes itself, named after a cage) with its value, and of every
+  modifier with its settings. It changes when the evaluated mesh the binding
+  was made from can have changed: the mesh edited, a shape key's value or a
+  modifier's level changed. (A modifier that follows another object, such as
+  a lattice, is not followed.)
+* the **cage topology key**: vertex, edge and face counts and a CRC-32 of
+  the cage's sorted directed half-edges (independent of face order and of
+  each face's first corner), so a message can tell a deleted vertex from a
+  rotated edge. It works in Edit Mode (read from the BMesh).
+
+Both are recomputed only when the object changed: a ``depsgraph_update_post``
+handler counts geometry updates per object, and the results are memoised
+against that count, so the panel can ask on every redraw.
+"""
+
+import zlib
+
+import bmesh
+import bpy
+import numpy as np
+
+_generation = {}      #: object session_uid -> geometry updates seen
+_memo = {}            #: (what, session_uid) -> (generation, value)
+
+
+def _crc(*arrays, start=0):
+    c = start
+    for a in arrays:
+        c = zlib.crc32(np.ascontiguousarray(a).tobytes(), c)
+    return c
+
+
+def _generation_of(obj):
+    return _generation.get(obj.session_uid, 0)
+
+
+def _memoised(what, obj, compute):
+    key = (what, obj.session_uid)
+    gen = _generation_of(obj)
+    hit = _memo.get(key)
+    if hit is not None and hit[0] == gen:
+        return hit[1]
+    value = compute(obj)
+    _memo[key] = (gen, value)
+    return value
+
+
+# ------------------------------------------------------------------ source
+def _rna_values(struct):
+    """The simple (non-pointer, non-collection) RNA values of a struct, as text."""
+    out = []
+    for prop in struct.bl_rna.properties:
+        if prop.type in ('POINTER', 'COLLECTION') or prop.identifier == "rna_type":
+            continue
+        try:
+            value = getattr(struct, prop.identifier)
+        except AttributeError:
+            continue
+        if prop.type in ('INT', 'FLOAT', 'BOOLEAN') and getattr(prop, "array_length", 0):
+            value = tuple(value)
+        out.append(f"{prop.identifier}={value!r}")
+    return ";".join(out)
+
+
+def own_key_names(source):
+    """Names of the shape keys MeshAdjust wrote on ``source`` (one per cage)."""
+    return {o.name for o in bpy.data.objects
+            if o.type == 'MESH' and o.meshadjust.role == 'CAGE' and o.meshadjust.source == source}
+
+
+def source_fingerprint(source):
+    """The source fingerprint of ``source`` now (a short string)."""
+    mesh = source.data
+    if mesh.is_editmode:   # its mesh arrays are stale until it leaves Edit Mode
+        return None
+    n, m = len(mesh.vertices), len(mesh.polygons)
+    pos = np.empty(3 * n, np.float32)
+    corners = np.empty(len(mesh.loops), np.int32)
+    if n:
+        mesh.attributes["position"].data.foreach_get("vector", pos)
+    if len(corners):
+        mesh.attributes[".corner_vert"].data.foreach_get("value", corners)
+    c = _crc(pos, corners)
+    keys = mesh.shape_keys
+    if keys is not None:
+        own = own_key_names(source)
+        for kb in keys.key_blocks:
+            if kb.name in own:
+                continue
+            co = np.empty(3 * len(kb.data), np.float32)
+            kb.data.foreach_get("co", co)
+            c = _crc(co, start=zlib.crc32(f"{kb.name}|{kb.value}|{kb.mute}|"
+                                          f"{kb.relative_key.name}".encode(), c))
+    for mod in source.modifiers:
+        c = zlib.crc32(f"{mod.type}|{_rna_values(mod)}".encode(), c)
+    return f"{n}:{m}:{c:08x}"
+
+
+def source_change(source, stored, *, fresh=False):
+    """What changed in ``source`` since its fingerprint was ``stored``: a
+    sentence, or None when nothing did (or nothing was stored, or the source
+    is in Edit Mode). ``fresh`` recomputes instead of using the memo."""
+    if not stored:
+        return None
+    now = source_fingerprint(source) if fresh else _memoised("source", source, source_fingerprint)
+    if now is None or now == stored:
+        return None
+    n0, m0, _ = stored.split(":")
+    n1, m1, _ = now.split(":")
+    if (n0, m0) != (n1, m1):
+        return (f"'{source.name}' changed since it was bound: {int(n0):,} -> {int(n1):,} "
+                f"vertices, {int(m0):,} -> {int(m1):,} faces")
+    return (f"'{source.name}' changed since it was bound (its mesh, shape keys or modifiers): "
+            f"re-bind to use it")
+
+
+# ------------------------------------------------------------------ cage
+def _half_edges_of_mesh(mesh):
+    n_l = len(mesh.loops)
+    corners = np.empty(n_l, np.int32)
+    start = np.empty(len(mesh.polygons), np.int32)
+    total = np.empty(len(mesh.polygons), np.int32)
+    if n_l:
+        mesh.attributes[".corner_vert"].data.foreach_get("value", corners)
+    mesh.polygons.foreach_get("loop_start", start)
+    mesh.polygons.foreach_get("loop_total", total)
+    c = np.arange(n_l, dtype=np.int64)
+    s = np.repeat(start.astype(np.int64), total)
+    t = np.repeat(total.astype(np.int64), total)
+    nxt = s + (c - s + 1) % np.maximum(t, 1)
+    return corners.astype(np.int64), corners[nxt].astype(np.int64)
+
+
+def topology_key(cage):
+    """``(vertices, edges, faces, checksum)`` of the cage as it is now (also
+    in Edit Mode, from its BMesh)."""
+    mesh = cage.data
+    if mesh.is_editmode:
+        bm = bmesh.from_edit_mesh(mesh)
+        bm.verts.index_update()
+        pairs = np.array([(lp.vert.index, lp.link_loop_next.vert.index)
+                          for f in bm.faces for lp in f.loops], dtype=np.int64).reshape(-1, 2)
+        counts = (len(bm.verts), len(bm.edges), len(bm.faces))
+        a, b = pairs[:, 0], pairs[:, 1]
+    else:
+        counts = (len(mesh.vertices), len(mesh.edges), len(mesh.polygons))
+        a, b = _half_edges_of_mesh(mesh)
+    keys = np.sort(a * max(counts[0], 1) + b)
+    return counts + (f"{_crc(keys):08x}",)
+
+
+def cage_topology_key(cage):
+    """:func:`topology_key`, memoised against the cage's geometry updates."""
+    return _memoised("cage", cage, topology_key)
+
+
+def describe_change(before, after):
+    """A sentence saying how topology ``after`` differs from ``before``
+    (both :func:`topology_key` tuples), or None when it does not."""
+    if tuple(before) == tuple(after):
+        return None
+    parts = []
+    for k, noun in enumerate(("vertex", "edge", "face")):
+        d = after[k] - before[k]
+        if d:
+            plural = noun + ("es" if noun == "vertex" else "s")
+            parts.append(f"{abs(d):,} {noun if abs(d) == 1 else plural} "
+                         f"{'added' if d > 0 else 'removed'}")
+    if parts:
+        return ", ".join(parts)
+    return ("the same vertices, edges and faces connected differently (an edge rotated, faces "
+            "flipped or re-filled)")
+
+
+def cage_change(cage, edited, *, fresh=False):
+    """How ``cage``'s topology changed since ``edited`` was bound to it: a
+    sentence, or None. ``fresh`` recomputes instead of using the memo."""
+    st = edited.meshadjust
+    if not st.cage_topology:
+        return None
+    before = (st.cage_counts[0], st.cage_edges, st.cage_counts[1], st.cage_topology)
+    return describe_change(before, topology_key(cage) if fresh else cage_topology_key(cage))
+
+
+# ------------------------------------------------------------------ updates
+@bpy.app.handlers.persistent
+def _on_depsgraph_update(_scene, depsgraph):
+    for update in depsgraph.updates:
+        if update.is_updated_geometry and isinstance(update.id, bpy.types.Object):
+            uid = update.id.original.session_uid
+            _generation[uid] = _generation.get(uid, 0) + 1
+
+
+def touched(obj):
+    """Forget what is known about ``obj`` (after MeshAdjust changed it)."""
+    _generation[obj.session_uid] = _generation.get(obj.session_uid, 0) + 1
+
+
+def register():
+    if _on_depsgraph_update not in bpy.app.handlers.depsgraph_update_post:
+        bpy.app.handlers.depsgraph_update_post.append(_on_depsgraph_update)
+
+
+def unregister():
+    if _on_depsgraph_update in bpy.app.handlers.depsgraph_update_post:
+        bpy.app.handlers.depsgraph_update_post.remove(_on_depsgraph_update)
+    _generation.clear()
+    _memo.clear()
