@@ -67,6 +67,9 @@ _DETAIL_SEARCHES = ("auto", "exact", "local")
 #: worker-thread task)
 _BIND_BLOCK = 131_072
 
+#: fine vertices per block of the local detail search (``detail_search="local"``)
+_DETAIL_BLOCK = 16_384
+
 #: keys of :meth:`Binding.to_arrays`
 _ARRAY_KEYS = ("fine_face", "bary", "offset", "fine_detail", "F_cage", "n_cage", "levels",
                "scheme", "creases", "fingerprint")
@@ -239,12 +242,17 @@ class Binding:
         -------
         (r,) int64 ndarray, sorted, distinct
 
+        The first call (also with an empty list) builds the indices the
+        incremental deform uses (fine face -> dense vertices, the composed
+        operator's rows), so a caller can pay for them up front.
+
         Raises
         ------
         InvalidArgumentError
             An index is out of range or not an integer.
         """
         ids = _check_moved(self, cage_vertex_ids, "Binding.influenced")
+        _incremental_index(self)       # built on first use, also for an empty list
         if ids.size == 0:
             return np.zeros(0, dtype=np.int64)
         return np.sort(_influenced_dense(self, ids)[0])
@@ -701,38 +709,49 @@ def _dense_points_near(V_dense, F_dense, fine_face, F_fine, P):
     # dense vertices grouped by fine face; (fine vertex, incident fine face) sorted by vertex
     by_face = np.argsort(fine_face, kind="stable")
     cnt_f = np.bincount(fine_face, minlength=m_f)
+    start_f = np.cumsum(cnt_f) - cnt_f
     inc = np.argsort(F_fine.ravel(), kind="stable")
     inc_j, inc_f = F_fine.ravel()[inc], inc // 3
-    idx, owner = ragged_ranges(np.cumsum(cnt_f)[inc_f] - cnt_f[inc_f], cnt_f[inc_f])
-    pj, pk = inc_j[owner], by_face[idx]
-    keep = degree[pk] > 0
-    pj, pk = pj[keep], pk[keep]
-    d = V_dense[pk] - P[pj]
-    cnt_j = np.bincount(pj, minlength=n_f)
-    has = np.flatnonzero(cnt_j)
-    nearest = pk[group_argmin(_dot(d, d), cnt_j[has])]
-    # closest point on the triangle fan of the nearest vertex; where it lands
-    # on the fan's rim (zero weight on the centre), look in the two-ring
-    flat = F_dense.ravel()
-    by_vertex = np.argsort(flat, kind="stable") // 3
+    by_vertex = np.argsort(F_dense.ravel(), kind="stable") // 3
     start_v = np.cumsum(degree) - degree
-    idx, owner = ragged_ranges(start_v[nearest], degree[nearest])
-    fan_f = by_vertex[idx]
-    point, corners, bary = _closest_in_groups(V_dense, F_dense, P, has[owner], fan_f,
-                                              degree[nearest])
-    q[has] = point
-    centre_weight = (bary * (corners == nearest[:, None])).sum(axis=1)
-    rim = centre_weight <= 0.0
-    if rim.any():
-        keep = rim[owner]
-        ring_j, ring_v = _unique_pairs(np.repeat(has[owner][keep], 3), F_dense[fan_f[keep]].ravel(),
-                                       n_d)
-        idx, owner2 = ragged_ranges(start_v[ring_v], degree[ring_v])
-        cand_j, cand_f = _unique_pairs(ring_j[owner2], by_vertex[idx], F_dense.shape[0])
-        counts = np.bincount(cand_j, minlength=n_f)
-        js = np.flatnonzero(counts)
-        q[js] = _closest_in_groups(V_dense, F_dense, P, cand_j, cand_f, counts[js])[0]
-    missing = np.flatnonzero(cnt_j == 0)
+    has_none = np.zeros(n_f, dtype=bool)
+
+    def near(s, e):
+        # fine vertices s..e-1 (results depend on the vertex alone, not on the block)
+        lo, hi = np.searchsorted(inc_j, [s, e])
+        jj, ff = inc_j[lo:hi], inc_f[lo:hi]
+        idx, owner = ragged_ranges(start_f[ff], cnt_f[ff])
+        pj, pk = jj[owner], by_face[idx]
+        keep = degree[pk] > 0
+        pj, pk = pj[keep], pk[keep]
+        d = V_dense[pk] - P[pj]
+        cnt_j = np.bincount(pj - s, minlength=e - s)
+        has_none[s:e] = cnt_j == 0
+        has = np.flatnonzero(cnt_j) + s
+        if has.size == 0:
+            return
+        nearest = pk[group_argmin(_dot(d, d), cnt_j[has - s])]
+        # closest point on the triangle fan of the nearest vertex; where it lands
+        # on the fan's rim (zero weight on the centre), look in the two-ring
+        idx, owner = ragged_ranges(start_v[nearest], degree[nearest])
+        fan_f = by_vertex[idx]
+        point, corners, bary = _closest_in_groups(V_dense, F_dense, P, has[owner], fan_f,
+                                                  degree[nearest])
+        q[has] = point
+        centre_weight = (bary * (corners == nearest[:, None])).sum(axis=1)
+        rim = centre_weight <= 0.0
+        if rim.any():
+            keep = rim[owner]
+            ring_j, ring_v = _unique_pairs(np.repeat(has[owner][keep], 3),
+                                           F_dense[fan_f[keep]].ravel(), n_d)
+            idx, owner2 = ragged_ranges(start_v[ring_v], degree[ring_v])
+            cand_j, cand_f = _unique_pairs(ring_j[owner2], by_vertex[idx], F_dense.shape[0])
+            counts = np.bincount(cand_j - s, minlength=e - s)
+            js = np.flatnonzero(counts)
+            q[js + s] = _closest_in_groups(V_dense, F_dense, P, cand_j, cand_f, counts[js])[0]
+
+    run_blocks(near, blocks(n_f, _DETAIL_BLOCK))
+    missing = np.flatnonzero(has_none)
     if missing.size:
         q[missing] = TriangleIndex(V_dense, F_dense).closest(P[missing]).point
     return q

@@ -109,6 +109,7 @@ def update_edited(cage):
     t2 = time.perf_counter()
     if moved is None:
         D = core.deform(binding, V)
+        binding.influenced([])      # builds the incremental indices now, not on the first edit
         t3 = time.perf_counter()
         buf = D.astype(np.float32)
         state = _State(binding, V, D, buf)
