@@ -23,6 +23,7 @@ workers are stopped, the summary and the report still written).
 
 import argparse
 import datetime
+import importlib.util
 import json
 import math
 import os
@@ -31,6 +32,7 @@ import time
 from collections import Counter
 from dataclasses import asdict
 
+from . import blender_io
 from . import convert as _convert
 from . import runners
 
@@ -164,6 +166,10 @@ def check_paths(args):
             problems.append(f"{opt} {path}: no folder {folder}")
         elif not os.access(folder, os.W_OK):
             problems.append(f"{opt} {path}: {folder} is not writable")
+    if (args.format in blender_io.BLENDER_EXPORT and args.dask is None
+            and "bpy" not in sys.modules and importlib.util.find_spec("bpy") is None):
+        problems.append(f"--format {args.format} needs Blender (the bpy module); "
+                        f"obj and smf need only NumPy")
     if args.dask is not None:
         try:
             import distributed  # noqa: F401

@@ -136,8 +136,10 @@ def _dask_task(entry, payload_json, cancel_event):
     cancel event while it runs."""
     from distributed import Event
     task = json.loads(payload_json)["task"]
-    w = WorkerProcess([sys.executable, *entry, "--worker", payload_json])
     event = Event(cancel_event)
+    if event.is_set():         # queued on this worker when the batch was cancelled
+        return cancelled_report(task)
+    w = WorkerProcess([sys.executable, *entry, "--worker", payload_json])
     while w.poll() is None:
         try:
             w.proc.wait(timeout=0.5)

@@ -196,13 +196,16 @@ def _start(args, tmp_path):
                             stderr=subprocess.PIPE, text=True, env=env, cwd=str(tmp_path))
 
 
-@pytest.mark.parametrize("jobs", [2, 1])
-def test_ctrl_c_stops_the_workers_prints_the_summary_and_exits_130(tmp_path, jobs):
+@pytest.mark.parametrize("mode", [["--jobs", "2"], ["--jobs", "1"], ["--dask", "local", "--jobs", "2"]],
+                         ids=["jobs2", "serial", "dask"])
+def test_ctrl_c_stops_the_workers_prints_the_summary_and_exits_130(tmp_path, mode):
+    if "--dask" in mode:
+        pytest.importorskip("distributed", reason="dask.distributed is not installed")
     V, F = core.read_obj(shared_mesh_path("stanford-bunny.obj"))   # ~5 s each with fit + refine
     for k in range(4):
         core.write_obj(tmp_path / f"b{k}.obj", V, F)
     proc = _start([f"b{k}.obj" for k in range(4)] + ["--faces", "1000", "--fit", "--refine", "2",
-                  "--jobs", str(jobs), "--out", "out", "--report", "r.json"], tmp_path)
+                  *mode, "--out", "out", "--report", "r.json"], tmp_path)
     time.sleep(2.5)
     t = time.perf_counter()
     proc.send_signal(signal.SIGINT)
