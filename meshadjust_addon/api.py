@@ -265,6 +265,9 @@ def compute_simplify(job, *, progress=None):
                 return job
             job.fit = fit
             job.V_cage = fit.V
+    # the cage as its mesh will hold it (float32), so the binding is the one a
+    # re-bind of the unedited cage makes
+    job.V_cage = job.V_cage.astype(np.float32).astype(np.float64)
     if p.bind:
         if cancelled_at(0.93):
             return job

@@ -4,9 +4,9 @@ Two fingerprints are stored with a binding (on the edited original's state)
 and compared with the objects as they are now:
 
 * the **source fingerprint**: vertex and face counts, a CRC-32 of the base
-  mesh's positions and corners, and of every shape key (other than the ones
-  MeshAdjust writes itself, named after a cage) with its value, and of every
-  modifier with its settings. It changes when the evaluated mesh the binding
+  mesh's positions and corners, one of every shape key (other than the ones
+  MeshAdjust writes itself, named after a cage) with its value, and one of
+  every modifier with its settings, so a message can say which changed. It changes when the evaluated mesh the binding
   was made from can have changed: the mesh edited, a shape key's value or a
   modifier's level changed. (A modifier that follows another object, such as
   a lattice, is not followed.)
@@ -87,7 +87,8 @@ def source_fingerprint(source):
         mesh.attributes["position"].data.foreach_get("vector", pos)
     if len(corners):
         mesh.attributes[".corner_vert"].data.foreach_get("value", corners)
-    c = _crc(pos, corners)
+    c_mesh = _crc(pos, corners)
+    c_keys = 0
     keys = mesh.shape_keys
     if keys is not None:
         own = own_key_names(source)
@@ -96,11 +97,12 @@ def source_fingerprint(source):
                 continue
             co = np.empty(3 * len(kb.data), np.float32)
             kb.data.foreach_get("co", co)
-            c = _crc(co, start=zlib.crc32(f"{kb.name}|{kb.value}|{kb.mute}|"
-                                          f"{kb.relative_key.name}".encode(), c))
+            c_keys = _crc(co, start=zlib.crc32(f"{kb.name}|{kb.value}|{kb.mute}|"
+                                               f"{kb.relative_key.name}".encode(), c_keys))
+    c_mods = 0
     for mod in source.modifiers:
-        c = zlib.crc32(f"{mod.type}|{_rna_values(mod)}".encode(), c)
-    return f"{n}:{m}:{c:08x}"
+        c_mods = zlib.crc32(f"{mod.type}|{_rna_values(mod)}".encode(), c_mods)
+    return f"{n}:{m}:{c_mesh:08x}:{c_keys:08x}:{c_mods:08x}"
 
 
 def source_change(source, stored, *, fresh=False):
@@ -112,13 +114,21 @@ def source_change(source, stored, *, fresh=False):
     now = source_fingerprint(source) if fresh else _memoised("source", source, source_fingerprint)
     if now is None or now == stored:
         return None
-    n0, m0, _ = stored.split(":")
-    n1, m1, _ = now.split(":")
-    if (n0, m0) != (n1, m1):
-        return (f"'{source.name}' changed since it was bound: {int(n0):,} -> {int(n1):,} "
-                f"vertices, {int(m0):,} -> {int(m1):,} faces")
-    return (f"'{source.name}' changed since it was bound (its mesh, shape keys or modifiers): "
-            f"re-bind to use it")
+    was, new = stored.split(":"), now.split(":")
+    if len(was) != len(new):
+        return f"'{source.name}' may have changed since it was bound"
+    what = []
+    if was[:3] != new[:3]:
+        if was[:2] != new[:2]:
+            what.append(f"its mesh was edited ({int(was[0]):,} -> {int(new[0]):,} vertices, "
+                        f"{int(was[1]):,} -> {int(new[1]):,} faces)")
+        else:
+            what.append("its mesh was edited (vertices moved)")
+    if was[3] != new[3]:
+        what.append("its shape keys changed")
+    if was[4] != new[4]:
+        what.append("its modifiers changed")
+    return f"'{source.name}' changed since it was bound: " + ", ".join(what)
 
 
 # ------------------------------------------------------------------ cage

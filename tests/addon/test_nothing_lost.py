@@ -1,0 +1,266 @@
+"""Nothing lost silently: Fit and Re-bind keep the artist's edit, failed or
+cancelled steps leave every object and mesh as it was, stale bindings are
+detected and say what changed, no orphan data-blocks."""
+
+import sys
+
+import bmesh
+import bpy
+import numpy as np
+import pytest
+
+from tests.addon.conftest import MODULE, make_object
+from tests.addon.test_operators import bumpy_sphere, delete_cage_vertex, simplify
+
+
+def mod(name):
+    return sys.modules[MODULE + ".meshadjust_addon." + name]
+
+
+def pos(obj):
+    return mod("mesh_io").read_positions(obj.data)
+
+
+def scene_snapshot():
+    """Every object's and mesh's name, every mesh's positions and shape keys."""
+    meshes = {}
+    for m in bpy.data.meshes:
+        keys = () if m.shape_keys is None else tuple(
+            (kb.name, kb.value) for kb in m.shape_keys.key_blocks)
+        meshes[m.name] = (mod("mesh_io").read_positions(m), keys)
+    objects = {o.name: (o.data.name if o.data is not None else None) for o in bpy.data.objects}
+    return objects, meshes
+
+
+def assert_unchanged(before):
+    objects, meshes = scene_snapshot()
+    assert objects == before[0]
+    assert set(meshes) == set(before[1])
+    for name, (V, keys) in before[1].items():
+        assert np.array_equal(meshes[name][0], V), f"{name} moved"
+        assert meshes[name][1] == keys, f"{name}'s shape keys changed"
+
+
+def orphans():
+    return [m.name for m in bpy.data.meshes if m.users == 0] + \
+        [m.name for m in bpy.data.meshes if m.name.endswith(".001")]
+
+
+@pytest.fixture()
+def bound(scene):
+    V, F = bumpy_sphere(4)
+    dense = make_object("dense", V, F)
+    assert simplify(300, fit=False) == {'FINISHED'}
+    return dense, dense.meshadjust.cage
+
+
+def lift_top(cage, dz=0.2):
+    V = pos(cage)
+    top = int(np.argmax(V[:, 2]))
+    V[top, 2] += dz
+    mod("mesh_io").write_positions(cage.data, V)
+    return top
+
+
+def test_fit_on_an_edited_cage_fits_the_rest_shape_and_keeps_the_edit(bound):
+    dense, cage = bound
+    store = mod("store")
+    rest0 = store.load_rest(cage)
+    top = lift_top(cage)
+    assert bpy.ops.meshadjust.fit_cage() == {'FINISHED'}
+    rest1 = store.load_rest(cage)
+    assert np.abs(rest1 - rest0).max() > 1e-4                    # the rest shape was fitted
+    offset = pos(cage) - rest1
+    assert offset[top, 2] == pytest.approx(0.2, abs=1e-5)        # edited = fitted rest + edit
+    offset[top] = 0
+    assert np.abs(offset).max() < 1e-5
+    edited = cage.meshadjust.edited
+    lifted = pos(edited)[:, 2] - pos(dense)[:, 2]
+    assert lifted.max() > 0.05                                  # the edited original kept it
+    # and it is exactly what a refine of the cage as it is gives
+    before = pos(edited)
+    assert bpy.ops.meshadjust.refine(output='EDITED') == {'FINISHED'}
+    assert np.abs(pos(edited) - before).max() < 1e-6
+    # unedited cage: refining the fitted rest gives the source back
+    mod("mesh_io").write_positions(cage.data, rest1)
+    bpy.ops.meshadjust.refine(output='EDITED')
+    assert np.abs(pos(edited) - pos(dense)).max() < 1e-5
+    assert orphans() == []
+
+
+def test_rebind_keeps_the_edit_unless_asked(bound):
+    dense, cage = bound
+    lift_top(cage)
+    bpy.ops.meshadjust.refine(output='EDITED')
+    edited = cage.meshadjust.edited
+    with_edit = pos(edited)
+    assert bpy.ops.meshadjust.bind() == {'FINISHED'}
+    assert np.abs(pos(edited) - with_edit).max() < 1e-5
+    assert bpy.ops.meshadjust.bind(keep_edit=False) == {'FINISHED'}   # current shape = new rest
+    assert np.abs(pos(edited) - pos(dense)).max() < 1e-5
+    assert np.allclose(mod("store").load_rest(cage), pos(cage), atol=1e-6)
+    assert orphans() == []
+
+
+def test_rebind_after_a_topology_change_keeps_the_edit(bound):
+    dense, cage = bound
+    top = lift_top(cage, 0.3)
+    far = int(np.argmin(pos(cage)[:, 2]))          # delete a vertex away from the edit
+    delete_cage_vertex(cage, far)
+    assert bpy.ops.meshadjust.bind() == {'FINISHED'}
+    assert pos(cage.meshadjust.edited)[:, 2].max() > pos(dense)[:, 2].max() + 0.05
+    assert top != far
+
+
+def _boom(*args, **kwargs):
+    core = sys.modules[MODULE + ".core"]
+    raise core.MeshAdjustError("boom: a core failure")
+
+
+@pytest.mark.parametrize("step", ["fit", "bind", "refine_rebind", "refine_deform"])
+def test_a_failed_step_leaves_every_object_and_mesh_as_it_was(bound, monkeypatch, step):
+    dense, cage = bound
+    lift_top(cage)
+    bpy.ops.meshadjust.refine(output='BOTH')
+    before = scene_snapshot()
+    core = sys.modules[MODULE + ".core"]
+    if step == "refine_deform":
+        monkeypatch.setattr(core, "refine", _boom)     # after the edited original was written
+    else:
+        monkeypatch.setattr(core, "bind", _boom)
+    with pytest.raises(RuntimeError, match="boom"):
+        if step == "fit":
+            bpy.ops.meshadjust.fit_cage()
+        elif step == "bind":
+            bpy.ops.meshadjust.bind(levels=1)
+        elif step == "refine_rebind":
+            bpy.ops.meshadjust.refine(output='BOTH', levels=1)
+        else:
+            bpy.ops.meshadjust.refine(output='BOTH')
+    assert_unchanged(before)
+    assert (cage.meshadjust.levels, cage.meshadjust.scheme) == (2, 'butterfly')
+
+
+@pytest.mark.parametrize("step", ["fit", "bind"])
+def test_a_cancelled_step_leaves_every_object_and_mesh_as_it_was(bound, step):
+    dense, cage = bound
+    api = mod("api")
+    lift_top(cage)
+    before = scene_snapshot()
+    stop = lambda f: False   # noqa: E731  (Esc at the first progress call)
+    if step == "fit":
+        job = api.compute_fit(api.prepare_fit(cage), progress=stop)
+    else:
+        job = api.compute_bind(api.prepare_cage_job(cage, levels=1), progress=stop)
+    assert job.cancelled
+    assert_unchanged(before)
+
+
+def test_simplify_keeps_the_cage_when_the_bind_fails_and_warns(scene, monkeypatch):
+    V, F = bumpy_sphere(3)
+    make_object("dense", V, F)
+    core = sys.modules[MODULE + ".core"]
+    monkeypatch.setattr(core, "bind", _boom)
+    assert simplify(200) == {'FINISHED'}            # a warning, not a cancel
+    dense = bpy.data.objects["dense"]
+    cage = dense.meshadjust.cage
+    assert cage is not None and cage.meshadjust.edited is None
+    rep = cage.meshadjust.last_report
+    assert "WARNING" in rep and "binding 'dense' to 'dense_cage' failed" in rep
+    assert "kept" in rep and "fitted" in rep        # the fit was done and is kept
+
+
+def test_non_manifold_failures_name_the_object_and_the_cause(addon):
+    api = mod("api")
+    core = sys.modules[MODULE + ".core"]
+    exc = core.InvalidMeshError("subdivision_operator: 3 non-manifold vertices, e.g. vertex 748")
+    msg = api.user_cause(exc, "binding 'scan' to", "scan_cage")
+    assert msg.startswith("binding 'scan' to 'scan_cage' failed: the cage has non-manifold")
+    assert "Keep topology off" in msg
+
+
+def test_stale_source_is_detected_shown_and_fixed_by_rebind(bound):
+    dense, cage = bound
+    panel = mod("panel")
+    bpy.context.view_layer.objects.active = cage
+    assert panel.refine_messages(bpy.context) == [(cage.meshadjust.last_report[:160], False)]
+    dense.modifiers.new("sub", 'SUBSURF').levels = 1
+    bpy.context.view_layer.update()
+    msgs = panel.refine_messages(bpy.context)
+    assert any(rebind and "'dense' changed since it was bound: its modifiers changed" in text
+               for text, rebind in msgs)
+    assert bpy.ops.meshadjust.refine(output='EDITED') == {'FINISHED'}
+    assert "WARNING" in cage.meshadjust.last_report
+    assert bpy.ops.meshadjust.bind() == {'FINISHED'}             # Re-bind
+    edited = cage.meshadjust.edited
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    assert len(edited.data.vertices) == len(dense.evaluated_get(depsgraph).data.vertices)
+    bpy.context.view_layer.update()
+    assert all(not rebind for _, rebind in panel.refine_messages(bpy.context))
+    assert bpy.ops.meshadjust.refine(output='EDITED') == {'FINISHED'}
+    assert "WARNING" not in cage.meshadjust.last_report
+    assert orphans() == []
+
+
+def test_a_shape_key_value_change_makes_the_binding_stale(scene):
+    V, F = bumpy_sphere(3)
+    dense = make_object("dense", V, F)
+    dense.shape_key_add(name="Basis", from_mix=False)
+    key = dense.shape_key_add(name="pose", from_mix=False)
+    key.value = 0.0
+    assert simplify(200) == {'FINISHED'}
+    cage = dense.meshadjust.cage
+    ops = mod("operators")
+    assert ops.binding_warnings(cage) == []
+    key.value = 0.5
+    bpy.context.view_layer.update()
+    (msg,) = ops.binding_warnings(cage)
+    assert msg == "'dense' changed since it was bound: its shape keys changed"
+
+
+def rotate_an_edge(cage):
+    bpy.context.view_layer.objects.active = cage
+    bpy.ops.object.mode_set(mode='EDIT')
+    bm = bmesh.from_edit_mesh(cage.data)
+    edge = next(e for e in bm.edges if len(e.link_faces) == 2)
+    bmesh.ops.rotate_edges(bm, edges=[edge], use_ccw=False)
+    bmesh.update_edit_mesh(cage.data)
+
+
+def test_messages_say_what_changed_in_the_cage(bound):
+    dense, cage = bound
+    ops = mod("operators")
+    rotate_an_edge(cage)
+    bpy.context.view_layer.update()
+    why = ops.cage_unavailable(bpy.context, need_binding=True)    # still in Edit Mode
+    assert why is not None and "connected differently" in why and "re-bind" in why
+    bpy.ops.object.mode_set(mode='OBJECT')
+    with pytest.raises(RuntimeError, match="connected differently"):
+        bpy.ops.meshadjust.refine(output='EDITED')
+    assert bpy.ops.meshadjust.bind() == {'FINISHED'}
+    delete_cage_vertex(cage, 5)
+    why = ops.cage_unavailable(bpy.context, need_binding=True)
+    assert "1 vertex" in why and "removed" in why
+
+
+def test_rebinds_inside_refine_are_reported(bound):
+    dense, cage = bound
+    assert bpy.ops.meshadjust.refine(output='EDITED', levels=1, scheme='loop') == {'FINISHED'}
+    rep = cage.meshadjust.last_report
+    assert "re-bound" in rep and "butterfly x2 -> loop x1" in rep
+    assert orphans() == []
+
+
+def test_no_orphans_after_a_whole_session(bound):
+    dense, cage = bound
+    lift_top(cage)
+    for op in (lambda: bpy.ops.meshadjust.refine(output='BOTH'),
+               lambda: bpy.ops.meshadjust.fit_cage(),
+               lambda: bpy.ops.meshadjust.bind(levels=1),
+               lambda: bpy.ops.meshadjust.refine(output='BOTH', levels=2),
+               lambda: bpy.ops.meshadjust.bind(keep_edit=False)):
+        assert op() == {'FINISHED'}
+        assert orphans() == []
+    names = sorted(m.name for m in bpy.data.meshes)
+    assert names == sorted(["dense", "dense_cage", "dense_edited", "dense_edited.detail",
+                            "dense_refined"])
