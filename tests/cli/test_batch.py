@@ -254,3 +254,23 @@ def test_help_and_bad_arguments(tmp_path):
     assert proc.returncode == 2 and "--ratio" in proc.stderr
     proc = run_batch(["x.obj", "--faces", "10", "--format", "fbx"], tmp_path)
     assert proc.returncode == 2 and "--format" in proc.stderr
+
+
+def test_real_meshes_through_smf_with_fit_and_refine(tmp_path):
+    for name in ("cow.obj", "spot.obj"):
+        V, F = core.read_obj(shared_mesh_path(name))
+        core.write_smf(tmp_path / name.replace(".obj", ".smf"), V, F)
+    proc = run_batch(["cow.smf", "spot.smf", shared_mesh_path("beetle.obj"), "--ratio", "0.1",
+                      "--fit", "--refine", "1", "--out", "out", "--report", "r.json"], tmp_path)
+    files = json.loads((tmp_path / "r.json").read_text())["files"]
+    cow, spot, beetle = files
+    assert (cow["faces_in"], cow["target_faces"]) == (5804, 580) and cow["status"] == "ok"
+    assert (spot["faces_in"], spot["target_faces"]) == (5856, 586) and spot["status"] == "ok"
+    for f in (cow, spot):
+        assert abs(f["faces_out"] - f["target_faces"]) <= 1 and f["refined_faces"] == 4 * f["faces_out"]
+        assert f["fit"]["mean_after_pct"] < f["fit"]["mean_before_pct"]
+        assert len(f["outputs"]) == 2 and all(os.path.exists(p) for p in f["outputs"])
+    # beetle: converted, or failed in a step after the simplify with its cage written
+    assert beetle["faces_in"] == 2053 and os.path.exists(tmp_path / "out" / "beetle_cage.obj")
+    assert beetle["status"] in ("ok", "warn") or beetle["failed_step"] in ("fit", "bind", "refine")
+    assert proc.returncode == (1 if beetle["status"] == "failed" else 0), proc.stdout + proc.stderr
