@@ -102,14 +102,23 @@ def options(args):
                             feature_angle_deg=args.feature_angle, format=args.format)
 
 
-def collect_inputs(paths):
+def _is_output(name):
+    stem = os.path.splitext(name)[0]
+    return stem.endswith("_cage") or stem.endswith("_refined")
+
+
+def collect_inputs(paths, out=None):
     """Files to convert, in the order given (folders: their mesh files,
-    sorted); the same file named twice is converted once."""
+    sorted; in the output folder itself, not the cages and refined meshes a
+    run wrote there); the same file named twice is converted once."""
     files, seen = [], set()
+    out = os.path.realpath(out) if out is not None else None
     for path in paths:
         if os.path.isdir(path):
+            own = os.path.realpath(path) == out
             found = sorted(os.path.join(path, f) for f in os.listdir(path)
-                           if os.path.splitext(f)[1].lower() in _convert.INPUT_EXTENSIONS)
+                           if os.path.splitext(f)[1].lower() in _convert.INPUT_EXTENSIONS
+                           and not (own and _is_output(f)))
         else:
             found = [path]
         for f in found:
@@ -286,7 +295,7 @@ def main(argv=None, *, entry=None, prog=PROG):
         for msg in problems:
             print(f"{prog}: {msg}", file=sys.stderr)
         return 2
-    files = collect_inputs(args.inputs)
+    files = collect_inputs(args.inputs, args.out)
     if not files:
         print(f"{prog}: no input files found", file=sys.stderr)
         return 2

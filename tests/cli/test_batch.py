@@ -157,6 +157,11 @@ def test_skip_existing_resumes_a_batch(tmp_path):
     assert s0.endswith("| skipped: outputs exist |") and s1.endswith("| ok |")
     assert cage.stat().st_mtime_ns == before
     assert "1 converted, 0 failed, 1 skipped" in proc.stdout
+    # the output folder as the input folder: its own cages are not inputs
+    proc = run_batch([".", "--faces", "100", "--out", ".", "--skip-existing"], tmp_path)
+    assert proc.returncode == 0 and len(rows(proc.stdout)) == 2, proc.stdout
+    proc = run_batch([".", "--faces", "100", "--out", ".", "--skip-existing"], tmp_path)
+    assert proc.returncode == 0 and "0 converted, 0 failed, 2 skipped" in proc.stdout
 
 
 def test_fit_or_refine_failing_after_the_simplify_keeps_the_cage(tmp_path):
