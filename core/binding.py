@@ -311,9 +311,14 @@ def bind(V_dense, F_dense, V_cage, F_cage, *, levels=2, scheme="butterfly", crea
     Vf = op.apply(V_cage)
     Nf = vertex_normals(Vf, op.F_fine)
     fine_face, bary = _closest_on(TriangleIndex(Vf, op.F_fine), V_dense)
-    corners = np.ascontiguousarray(op.F_fine[fine_face])
-    fr = frames(Vf, Nf, corners, bary)
-    offset = _to_frame(V_dense - fr.point, fr)
+    # the frames in the transposed layout of deform (bit-identical to frames())
+    p, t, bt, n = _frames_t(np.ascontiguousarray(Vf.T), np.ascontiguousarray(Nf.T),
+                            np.ascontiguousarray(op.F_fine[fine_face].T),
+                            np.ascontiguousarray(bary.T))
+    d = np.ascontiguousarray(V_dense.T)
+    d -= p
+    offset = np.stack([_dot_t(d, t), _dot_t(d, bt), _dot_t(d, n)], axis=1)
+    del p, t, bt, n, d
     d_face, d_bary = _vertex_corners(op.F_fine, op.n_fine)
     fine_detail = np.zeros((op.n_fine, 3))
     if F_dense.shape[0]:
@@ -355,8 +360,10 @@ def deform(binding, V_cage_edited, *, F_cage=None, moved=None, out=None):
     -------
     (n_dense,3) float64 ndarray
         ``out`` when given, else a new array. An incremental update equals a
-        full deform of ``V_cage_edited`` (each dense vertex is computed by
-        the same row-wise operations on the same fine positions and normals).
+        full deform of ``V_cage_edited`` to rounding (the same row-wise frame
+        rebuild; its fine positions come from the composed operator's rows,
+        which sum in another order than the level-by-level apply: about
+        1e-16 of the diagonal).
 
     Raises
     ------
