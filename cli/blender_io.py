@@ -10,8 +10,9 @@ report, and an importer's error is quoted with the cause from its log.
 
 Blender's importers also repair silently: a face that indexes a missing
 vertex is dropped, a NaN coordinate becomes 0. OBJ and SMF therefore never
-come here (the core's reader refuses them, naming the line); for PLY and STL
-the face count in the file's header is compared with what was imported.
+come here (the core's reader refuses them, naming the line); PLY and STL
+coordinates are checked in the file before Blender reads it, and the face
+count in the file's header is compared with what was imported.
 """
 
 import contextlib
@@ -100,30 +101,103 @@ def _mesh_io():
     return mesh_io
 
 
+_PLY_TYPES = {"char": "i1", "int8": "i1", "uchar": "u1", "uint8": "u1", "short": "i2",
+              "int16": "i2", "ushort": "u2", "uint16": "u2", "int": "i4", "int32": "i4",
+              "uint": "u4", "uint32": "u4", "float": "f4", "float32": "f4", "double": "f8",
+              "float64": "f8"}
+
+
+def _ply_header(path):
+    """``(format, header length in bytes, [(element, count, [(type, name)])])``
+    of a PLY file (list properties have the type ``"list"``), or None."""
+    with open(path, "rb") as fh:
+        head = fh.read(1 << 16)
+    end = head.find(b"end_header")
+    if not head.startswith(b"ply") or end < 0:
+        return None
+    length = head.index(b"\n", end) + 1
+    fmt, elements = None, []
+    for line in head[:end].decode("ascii", "replace").splitlines():
+        parts = line.split()
+        if parts[:1] == ["format"] and len(parts) > 1:
+            fmt = parts[1]
+        elif parts[:1] == ["element"] and len(parts) == 3 and parts[2].isdigit():
+            elements.append((parts[1], int(parts[2]), []))
+        elif parts[:1] == ["property"] and elements and len(parts) >= 3:
+            elements[-1][2].append(("list" if parts[1] == "list" else parts[1], parts[-1]))
+    return fmt, length, elements
+
+
 def header_face_count(path):
     """Faces the file says it holds (PLY header, STL count), or None."""
     ext = os.path.splitext(path)[1].lower()
     try:
-        with open(path, "rb") as fh:
-            head = fh.read(1 << 16)
-            size = os.fstat(fh.fileno()).st_size
+        if ext == ".ply":
+            header = _ply_header(path)
+            counts = {name: n for name, n, _ in header[2]} if header else {}
+            return counts.get("face")
+        if ext == ".stl":
+            with open(path, "rb") as fh:
+                head = fh.read(84)
+                size = os.fstat(fh.fileno()).st_size
+            if len(head) == 84 and 84 + 50 * struct.unpack("<I", head[80:84])[0] == size:
+                return struct.unpack("<I", head[80:84])[0]           # binary STL
+            if head.lstrip().lower().startswith(b"solid"):
+                with open(path, "rb") as fh:
+                    return sum(line.lstrip().startswith(b"facet") for line in fh)
     except OSError:
         return None
-    if ext == ".ply":
-        end = head.find(b"end_header")
-        for line in head[:end if end >= 0 else len(head)].splitlines():
-            parts = line.split()
-            if len(parts) == 3 and parts[:2] == [b"element", b"face"] and parts[2].isdigit():
-                return int(parts[2])
-    elif ext == ".stl":
-        if len(head) >= 84:
-            (n,) = struct.unpack("<I", head[80:84])
-            if 84 + 50 * n == size:          # binary STL
-                return n
-        if head.lstrip().lower().startswith(b"solid"):
-            with open(path, "rb") as fh:
-                return sum(line.lstrip().startswith(b"facet") for line in fh)
     return None
+
+
+def count_nonfinite(path):
+    """Vertices (PLY) or facets (STL) with a coordinate that is NaN or
+    infinite, read from the file itself (Blender's importers turn those into
+    0); None when the layout is not one read here (vertices not the first
+    PLY element, list properties on them)."""
+    import numpy as np
+    ext = os.path.splitext(path)[1].lower()
+    if ext == ".stl":
+        n = header_face_count(path)
+        with open(path, "rb") as fh:
+            binary = len(fh.read(84)) == 84 and 84 + 50 * (n or 0) == os.fstat(fh.fileno()).st_size
+        if binary:
+            rec = np.dtype([("normal", "<f4", 3), ("v", "<f4", (3, 3)), ("attr", "<u2")])
+            v = np.fromfile(path, dtype=rec, count=n, offset=84)["v"]
+            return int((~np.isfinite(v).all(axis=(1, 2))).sum())
+        with open(path, "rb") as fh:
+            rows = [ln.split()[1:4] for ln in fh if ln.lstrip().startswith(b"vertex")]
+        try:
+            V = np.array(rows, dtype=np.float64).reshape(-1, 3)
+        except ValueError:
+            return None
+        return int((~np.isfinite(V).all(axis=1).reshape(-1, 3).all(axis=1)).sum()) \
+            if V.shape[0] % 3 == 0 else None
+    header = _ply_header(path) if ext == ".ply" else None
+    if not header or not header[2] or header[2][0][0] != "vertex":
+        return None
+    fmt, length, ((_, n, props), *_) = header
+    if any(t not in _PLY_TYPES for t, _ in props) or not {"x", "y", "z"} <= {p for _, p in props}:
+        return None
+    if fmt == "ascii":
+        with open(path, "rb") as fh:
+            fh.seek(length)
+            rows = [fh.readline().split() for _ in range(n)]
+        try:
+            table = np.array(rows, dtype=np.float64).reshape(n, len(props))
+        except ValueError:
+            return None
+        cols = [k for k, (_, name) in enumerate(props) if name in ("x", "y", "z")]
+        return int((~np.isfinite(table[:, cols]).all(axis=1)).sum())
+    order = {"binary_little_endian": "<", "binary_big_endian": ">"}.get(fmt)
+    if order is None:
+        return None
+    rec = np.dtype([(name, order + _PLY_TYPES[t]) for t, name in props])
+    table = np.fromfile(path, dtype=rec, count=n, offset=length)
+    if table.shape[0] < n:
+        return None     # truncated: the importer says so
+    xyz = np.stack([table[c].astype(np.float64) for c in ("x", "y", "z")], axis=1)
+    return int((~np.isfinite(xyz).all(axis=1)).sum())
 
 
 def import_mesh(path, log=None):
@@ -174,6 +248,13 @@ def read_with_blender(path, log):
     """``(V, F, n_polygons, warnings)`` of a file read by Blender's importer
     into an empty scene; ``warnings`` names faces the importer dropped and
     quotes the warnings in its log."""
+    bad = count_nonfinite(path) if os.path.isfile(path) else None
+    if bad:
+        what = (("vertex", "vertices") if path.lower().endswith(".ply") else
+                ("facet", "facets"))[bad != 1]
+        raise BlenderIOError(f"{os.path.basename(path)}: {bad:,} {what} with a coordinate that "
+                             f"is not a finite number (NaN or infinity; Blender's importer would "
+                             f"read them as 0)")
     bpy = _bpy(log)
     with captured_output(log):
         bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)

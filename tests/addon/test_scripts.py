@@ -76,14 +76,18 @@ def test_batch_quotes_blender_importer_errors_and_keeps_its_log_out_of_stdout(tm
     write_ascii_ply(tmp_path / "cut.ply", V, F, truncate=True)
     bad_face = np.vstack([F, [[0, 1, len(V) + 5]]])          # Blender drops this face
     write_ascii_ply(tmp_path / "dropped.ply", V, bad_face)
+    V_nan = V.copy()
+    V_nan[[3, 7], 1] = [np.nan, np.inf]                       # Blender reads both as 0
+    write_ascii_ply(tmp_path / "nan.ply", V_nan, F)
     out, log = tmp_path / "out", tmp_path / "blender.log"
     proc = run_script(["scripts/meshadjust_batch.py", str(tmp_path / "good.ply"),
-                       str(tmp_path / "cut.ply"), str(tmp_path / "dropped.ply"), "--faces", "100",
+                       str(tmp_path / "cut.ply"), str(tmp_path / "dropped.ply"),
+                       str(tmp_path / "nan.ply"), "--faces", "100",
                        "--out", str(out), "--log", str(log), "--report", str(tmp_path / "r.json")],
                       tmp_path)
     assert proc.returncode == 1, proc.stdout + proc.stderr
     lines = proc.stdout.splitlines()
-    assert len(lines) == 2 + 3 + 1, proc.stdout        # table, three rows, summary: nothing else
+    assert len(lines) == 2 + 4 + 1, proc.stdout        # table, four rows, summary: nothing else
     assert "| good.ply | 1,280 | 100 | 100 |" in proc.stdout
     cut = next(ln for ln in lines if ln.startswith("| cut.ply"))
     assert ("FAILED: cut.ply: read failed: Blender's importer failed on cut.ply: "
@@ -91,12 +95,14 @@ def test_batch_quotes_blender_importer_errors_and_keeps_its_log_out_of_stdout(tm
     assert "ERROR PLY Importer: failed importing cut: " in cut     # the cause, from its log
     dropped = next(ln for ln in lines if ln.startswith("| dropped.ply"))
     assert "| warn: Blender's PLY importer kept 1,280 of the file's 1,281 faces" in dropped
+    assert ("| FAILED: nan.ply: read failed: nan.ply: 2 vertices with a coordinate that is not a "
+            "finite number (NaN or infinity; Blender's importer would read them as 0) |") in proc.stdout
     assert "PLY import of" not in proc.stdout + proc.stderr
     assert "PLY import of 'good.ply'" in log.read_text()
     assert sorted(os.listdir(out)) == ["dropped_cage.ply", "good_cage.ply"]
     import json
     files = json.loads((tmp_path / "r.json").read_text())["files"]
-    assert [f["status"] for f in files] == ["ok", "failed", "warn"]
+    assert [f["status"] for f in files] == ["ok", "failed", "warn", "failed"]
     assert all(f["log"] is None for f in files)           # it went to --log
 
 
