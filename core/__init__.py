@@ -8,6 +8,7 @@ extension (``bl_ext.<repo>.meshadjust.core``).
 The public API (one module per algorithm family):
 
 ==========================  ==============================================
+``clean_mesh``              any mesh as scans arrive -> a clean manifold
 ``simplify``                QEM edge collapse to a clean manifold cage
 ``subdivide``               modified butterfly / Loop subdivision
 ``subdivision_operator``    the same as a reusable linear operator
@@ -27,6 +28,7 @@ from .io_mesh import MeshFile, read_mesh, read_obj, read_smf, write_mesh, write_
 from .spatial import ClosestPoints, TriangleIndex, closest_points
 from .metrics import SurfaceDistance, sample_surface, surface_distance
 from .subdivide import SubdivisionOperator, SubdivisionResult, subdivide, subdivision_operator
+from .clean import CleanReport, CleanResult, clean_mesh
 from .simplify import SimplifyResult, simplify
 from .fit import FitResult, fit_cage
 from .binding import Binding, RefineResult, bind, deform, refine
@@ -40,6 +42,6 @@ __all__ = [
     "TriangleIndex", "ClosestPoints", "closest_points",
     "surface_distance", "SurfaceDistance", "sample_surface",
     "subdivide", "subdivision_operator", "SubdivisionOperator", "SubdivisionResult",
-    "simplify", "SimplifyResult", "fit_cage", "FitResult",
+    "clean_mesh", "CleanResult", "CleanReport", "simplify", "SimplifyResult", "fit_cage", "FitResult",
     "bind", "deform", "refine", "Binding", "RefineResult",
 ]

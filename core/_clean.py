@@ -1,4 +1,5 @@
-"""Input cleaning and the half-edge twin table used by :mod:`.simplify`.
+"""The half-edge twin table, face keys and fan counts (used by :mod:`.clean`
+and :mod:`.simplify`).
 
 Half-edge convention: half-edge ``h = 3 f + c`` is the edge of face ``f``
 opposite corner ``c``, from ``F[f, (c+1)%3]`` to ``F[f, (c+2)%3]`` (the same
@@ -22,8 +23,6 @@ counts leave room for a second fan, and it stops as soon as fewer than 3
 faces are left unseen; all walks advance in lock-step.
 """
 
-from typing import NamedTuple
-
 import numpy as np
 
 from .mesh import bounding_box
@@ -42,22 +41,10 @@ _MAX_WALK = 64
 _WALK_CHUNK = 1 << 15
 
 
-class CleanMesh(NamedTuple):
-    """A mesh with duplicate/degenerate faces and unreferenced vertices removed."""
-
-    V: np.ndarray                 #: (n,3) float64 referenced vertices
-    F: np.ndarray                 #: (m,3) int64
-    vertex_to_clean: np.ndarray   #: (n_in,) int64, index in V of each input vertex, -1 if dropped
-    clean_to_vertex: np.ndarray   #: (n,) int64, input index of each kept vertex
-    n_degenerate_faces: int       #: faces with a repeated vertex index
-    n_duplicate_faces: int        #: faces with the vertex set of an earlier face
-    n_unreferenced_vertices: int  #: vertices no kept face uses
-
-
 _KEY_MAX_N = 2_097_151  # (n + 1)^3 <= 2^63: ``(lo n + mid) n + hi`` fits in an int64
 
 
-def _face_keys(F, n_in):
+def face_keys(F, n_in):
     """Key of each face's vertex set: equal keys for equal sets.
 
     ``(lo n + mid) n + hi`` of the sorted row when that fits in an int64
@@ -78,106 +65,6 @@ def _face_keys(F, n_in):
     key = np.empty(order.size, dtype=np.int64)
     key[order] = np.cumsum(new) - 1
     return key
-
-
-def _first_of_keys(key):
-    """Mask of the first face of each key (the faces ``clean_mesh`` keeps)."""
-    _, first = np.unique(key, return_index=True)
-    keep = np.zeros(key.size, dtype=bool)
-    keep[first] = True
-    return keep
-
-
-def _drop_unreferenced(V, F, n_in, n_deg, n_dup):
-    """Compact the vertices to those ``F`` uses and build the CleanMesh."""
-    used = np.zeros(n_in, dtype=bool)
-    used[F.ravel()] = True
-    if used.all():  # common case: the identity map
-        ident = np.arange(n_in, dtype=np.int64)
-        return CleanMesh(V.copy(), F.copy(), ident, ident.copy(), n_deg, n_dup, 0)
-    clean_to_vertex = np.flatnonzero(used)
-    vertex_to_clean = np.full(n_in, -1, dtype=np.int64)
-    vertex_to_clean[clean_to_vertex] = np.arange(clean_to_vertex.size)
-    return CleanMesh(V[clean_to_vertex], vertex_to_clean[F], vertex_to_clean, clean_to_vertex,
-                     n_deg, n_dup, int(n_in - clean_to_vertex.size))
-
-
-def _degenerate(F):
-    return (F[:, 0] == F[:, 1]) | (F[:, 1] == F[:, 2]) | (F[:, 0] == F[:, 2])
-
-
-def clean_mesh(V, F):
-    """Drop degenerate and duplicate faces and unreferenced vertices.
-
-    Kept faces stay in their input order; of faces with the same vertex set
-    the first is kept. Kept vertices keep their relative order.
-
-    Parameters
-    ----------
-    V : (n,3) float64, F : (m,3) int64 (already checked by ``check_mesh``).
-
-    Returns
-    -------
-    CleanMesh
-    """
-    n_in = V.shape[0]
-    degenerate = _degenerate(F)
-    n_deg = int(degenerate.sum())
-    if n_deg:
-        F = F[~degenerate]
-    n_dup = 0
-    if F.shape[0]:
-        key = _face_keys(F, n_in)
-        sk = np.sort(key)
-        if (sk[1:] == sk[:-1]).any():
-            keep = _first_of_keys(key)
-            n_dup = int(F.shape[0] - np.count_nonzero(keep))
-            F = F[keep]  # boolean mask keeps the original face order
-    return _drop_unreferenced(V, F, n_in, n_deg, n_dup)
-
-
-def clean_with_twins(V, F):
-    """``clean_mesh(V, F)`` together with the twin table and half-edge ends
-    of the cleaned faces, sharing one sort of the edge keys.
-
-    A face with the vertex set of another shares all three edges with it, so
-    it either meets the same face across two of its edges or lies on a
-    non-manifold edge; only those candidates are compared by face key.
-
-    Returns
-    -------
-    clean : CleanMesh, as :func:`clean_mesh`.
-    twin : (3m,) int64, ``twin_table(clean.F, n)``.
-    U, W : (3m,) int64, ``half_edge_ends(clean.F)``.
-    """
-    n_in = V.shape[0]
-    degenerate = _degenerate(F)
-    n_deg = int(degenerate.sum())
-    if n_deg:
-        F = F[~degenerate]
-    U, W = half_edge_ends(F)
-    twin = twin_table(F, n_in, ends=(U, W))
-    n_dup = 0
-    if F.shape[0]:
-        t = twin.reshape(-1, 3)
-        g = np.where(t >= 0, t // 3, -1 - np.arange(3))  # distinct negatives never match
-        cand = (g[:, 0] == g[:, 1]) | (g[:, 1] == g[:, 2]) | (g[:, 0] == g[:, 2])
-        cand |= (t == NON_MANIFOLD).any(axis=1)
-        ci = np.flatnonzero(cand)
-        if ci.size:
-            keep_c = _first_of_keys(_face_keys(F[ci], n_in))
-            if not keep_c.all():
-                keep = np.ones(F.shape[0], dtype=bool)
-                keep[ci[~keep_c]] = False
-                n_dup = int(F.shape[0] - np.count_nonzero(keep))
-                F = F[keep]
-                U, W = half_edge_ends(F)
-                twin = twin_table(F, n_in, ends=(U, W))
-    clean = _drop_unreferenced(V, F, n_in, n_deg, n_dup)
-    if clean.n_unreferenced_vertices:
-        # relabelling is monotone: the same edges pair up, only the ends change
-        U, W = clean.vertex_to_clean[U], clean.vertex_to_clean[W]
-    return clean, twin, U, W
 
 
 def renumber_twins(t, new_f):
@@ -285,9 +172,16 @@ def twin_table(F, n_vertices, *, ends=None):
     return twin
 
 
-def _fans_union_find(F, twin, U, W, vertices, n_vertices):
-    """Number of fans of each vertex in ``vertices`` (the rest 0), by a
-    union-find of their corners across manifold interior edges."""
+def corner_fans(F, twin, U, W, vertices, n_vertices):
+    """Fan of every corner of the vertices in ``vertices``: the corners of a
+    vertex are joined across its manifold interior edges (``twin >= 0``) by a
+    union-find.
+
+    Returns
+    -------
+    nodes : (k,) int64, the corners (``3 f + c``) of the selected vertices.
+    roots : (k,) int64, for each, the smallest corner of its fan.
+    """
     sel = np.zeros(n_vertices, dtype=bool)
     sel[vertices] = True
     h = np.flatnonzero(twin > np.arange(twin.size))
@@ -309,8 +203,13 @@ def _fans_union_find(F, twin, U, W, vertices, n_vertices):
     local = np.full(Fr.size, -1, dtype=np.int64)
     local[nodes] = np.arange(nodes.size)
     labels = connected_labels(nodes.size, local[pairs])
-    roots = labels == np.arange(nodes.size)
-    return np.bincount(Fr[nodes[roots]], minlength=n_vertices)
+    return nodes, nodes[labels]
+
+
+def _fans_union_find(F, twin, U, W, vertices, n_vertices):
+    """Number of fans of each vertex in ``vertices`` (the rest 0)."""
+    nodes, roots = corner_fans(F, twin, U, W, vertices, n_vertices)
+    return np.bincount(F.ravel()[nodes[roots == nodes]], minlength=n_vertices)
 
 
 def _walk_fans(twin, U, v, e, corners):
@@ -342,7 +241,7 @@ def non_manifold_vertices(F, n_vertices, twin, *, ends=None):
     more than one fan (bow-tie vertices), (n,) bool.
 
     ``F`` must be clean (no degenerate or duplicate faces, as after
-    :func:`clean_mesh`); ``twin`` is ``twin_table(F, n_vertices)`` and
+    :func:`core.clean.clean_mesh`); ``twin`` is ``twin_table(F, n_vertices)`` and
     ``ends`` may pass ``half_edge_ends(F)``. Fans are counted as described in
     the module docstring: from the corner and open-edge counts, walking only
     around the vertices where a second closed fan could hide.

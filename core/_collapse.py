@@ -65,7 +65,7 @@ class State:
             self.is_bnd[ub] = True
             self.is_bnd[wb] = True
         self.F, self.twin, self.feat = F, twin, feat
-        # input face each face descends from (the output keeps input order); caps: _BIG
+        # input face each face descends from (the output keeps input order); caps: a rim face's
         self.forig = np.arange(F.shape[0], dtype=np.int64) if forig is None else forig
         # per half-edge cache (on representatives): survivor is the half-edge's second
         # end (swap), pass of the remembered rejection and its value (blk_pass, c_blk),

@@ -13,8 +13,8 @@ They work on a compact :class:`core._collapse.State` and leave it compact.
 
 import numpy as np
 
-from ._clean import BOUNDARY, _face_keys
-from ._collapse import _BIG, HALF_EDGE_CACHE, _compact, _ends, _survivors
+from ._clean import BOUNDARY, face_keys
+from ._collapse import HALF_EDGE_CACHE, _compact, _ends, _survivors
 from .topology import face_components
 
 
@@ -38,7 +38,7 @@ def close_triangular_holes(st):
         return 0
     hb, u, w, z = hb[loop], u[loop], w[loop], z[loop]
     # one cap per loop (each loop was found from its three edges) ...
-    keys = _face_keys(np.concatenate([np.stack([u, w, z], axis=1), F]), n)
+    keys = face_keys(np.concatenate([np.stack([u, w, z], axis=1), F]), n)
     key, fkey = keys[:u.size], np.sort(keys[u.size:])
     _, first = np.unique(key, return_index=True)
     hb, u, w, z, key = hb[first], u[first], w[first], z[first], key[first]
@@ -66,7 +66,7 @@ def close_triangular_holes(st):
     hc = 3 * (m + np.arange(k, dtype=np.int64))
     pairs = [(hc + 0, rim(u, z)), (hc + 1, rim(z, w)), (hc + 2, hb)]  # edge c is opposite corner c
     st.F = np.concatenate([F, caps])
-    st.forig = np.concatenate([st.forig, np.full(k, _BIG)])
+    st.forig = np.concatenate([st.forig, st.forig[hb // 3]])  # a cap descends from a rim face
     for name, fill in {"twin": BOUNDARY, "feat": False, **HALF_EDGE_CACHE}.items():
         setattr(st, name, np.concatenate([getattr(st, name), np.full(3 * k, fill)]))
     st.c_x = [np.concatenate([c, np.zeros(3 * k)]) for c in st.c_x]

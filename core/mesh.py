@@ -92,8 +92,17 @@ def bbox_diagonal(V):
     Every tolerance in ``core`` is expressed relative to this length, so that
     results do not depend on the mesh's units.
     """
-    lo, hi = bounding_box(V)
-    return float(np.linalg.norm(hi - lo))
+    return diagonal_length(*bounding_box(V))
+
+
+def diagonal_length(lo, hi):
+    """Length of the box diagonal from corner ``lo`` to ``hi`` (each (3,)),
+    scaled so that coordinates near the float limits (1e200) do not overflow."""
+    d = np.abs(np.asarray(hi, dtype=np.float64) - lo)
+    s = float(d.max()) if d.size else 0.0
+    if not s > 0 or not np.isfinite(s):
+        return s if np.isfinite(s) else float("inf")
+    return s * float(np.sqrt(np.sum((d / s) ** 2)))
 
 
 def face_normals(V, F, *, normalize=True):

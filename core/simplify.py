@@ -39,15 +39,19 @@ diagonal before anything else, so the result does not depend on the units.
 """
 
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
-from ._clean import BOUNDARY, clean_with_twins, non_manifold_vertices, spatial_order
+from ._clean import BOUNDARY, NON_MANIFOLD, half_edge_ends, spatial_order
 from ._collapse import State, _ends, run
 from ._relax import close_triangular_holes, drop_stuck_components
 from ._relocate import relocate, segment_triangles
-from .errors import InvalidArgumentError
-from .mesh import bounding_box, check_mesh
+from .clean import MIN_COMPONENT_AREA, WELD_DISTANCE, CleanReport, clean_mesh
+from .errors import InvalidArgumentError, InvalidMeshError, MeshAdjustError
+from .mesh import bounding_box, check_mesh, diagonal_length
+from .metrics import surface_distance
+from .topology import boundary_loops_count, collapsible_edges, face_components
 from .quadrics import _accumulate_T, _vertex_face_quadrics, edge_constraint_quadrics
 from .spatial import TriangleIndex
 
@@ -98,6 +102,13 @@ TUNING = Tuning()
 
 
 
+#: how often ``max_error`` is re-run with a tighter collapse bound before the
+#: cleaned input itself is returned (its distance is 0)
+MAX_ERROR_TRIES = 6
+
+STOP_REASONS = ("target", "max_error", "topology_floor", "no_valid_collapse", "cancelled")
+
+
 @dataclass(frozen=True)
 class SimplifyResult:
     """What :func:`simplify` returns.
@@ -105,37 +116,72 @@ class SimplifyResult:
     Attributes
     ----------
     V : (n,3) float64, the cage's vertices.
-    F : (m,3) int64, the cage's faces.
+    F : (m,3) int64, the cage's faces: always an edge- and vertex-manifold
+        mesh (the input is cleaned first, see :mod:`core.clean`).
     vertex_map : (n_input,) int64, the cage vertex each input vertex was merged
-        into (``-1`` for input vertices no face used, and for those of
-        components removed with ``preserve_topology=False``).
+        into (``-1`` for input vertices no kept face used: unreferenced ones,
+        debris, components removed with ``preserve_topology=False``). A
+        bow-tie vertex split by the cleaning maps to one of its copies.
+    face_map : (m,) int64, for every cage face an input face it descends from.
     max_error : float, largest error of an accepted collapse, as a distance in
         mesh units (``sqrt(quadric error / quadric area)``, see ``core.quadrics``);
         the final relocation only moves vertices closer to the input and is
         not counted in it.
-    stopped_because : str, ``"target"``, ``"max_error"``, ``"no_valid_collapse"``
-        or ``"cancelled"``.
+    stopped_because : str, one of ``STOP_REASONS``: ``"target"``,
+        ``"max_error"`` (the next collapse would exceed it, or the measured
+        distance did), ``"topology_floor"`` (short of the target, every edge
+        left would change the topology: border loops, genus, components or
+        locked vertices are kept), ``"no_valid_collapse"`` (short of the
+        target, the geometric checks refuse the rest) or ``"cancelled"``
+        (the cleaned input is returned unchanged).
     feature_edges : (k,2) int64, cage edges (sorted rows) that descend from the
         input's sharp edges (dihedral angle above ``feature_angle_deg``):
         pass them as ``creases`` to subdivision.
-    n_degenerate_faces, n_duplicate_faces, n_unreferenced_vertices : int,
-        what cleaning dropped from the input.
-    n_frozen_vertices : int, vertices on non-manifold edges or with several
-        fans, kept in place.
+    cleaning : CleanReport, what cleaning the input did (welds, splits,
+        sheets and debris removed, ...).
+    n_input_faces : int, faces of the input as given.
+    target : int or None, the face count asked for.
+    hausdorff : float or None, with ``max_error``: the two-sided Hausdorff
+        distance of the cage to the cleaned input (``core.surface_distance``),
+        at most ``max_error``.
+    n_boundary_loops, n_components : int, of the cage.
     n_passes : int, batches applied.
     """
 
     V: np.ndarray
     F: np.ndarray
     vertex_map: np.ndarray
+    face_map: np.ndarray
     max_error: float
     stopped_because: str
     feature_edges: np.ndarray
-    n_degenerate_faces: int = 0
-    n_duplicate_faces: int = 0
-    n_unreferenced_vertices: int = 0
-    n_frozen_vertices: int = 0
+    cleaning: CleanReport = CleanReport()
+    n_input_faces: int = 0
+    target: int = None
+    hausdorff: float = None
+    n_boundary_loops: int = 0
+    n_components: int = 0
     n_passes: int = 0
+
+    @property
+    def message(self):
+        """One sentence of what happened, e.g. ``"69,451 → 1,400 faces"`` or
+        ``"stopped at 216 faces of 205 asked: the topology floor (23 border
+        loops, 1 component kept)"``, with the cleaning's summary after it."""
+        m = self.F.shape[0]
+        asked = f" of {self.target:,} asked" if self.target is not None else ""
+        kept = (f"{self.n_boundary_loops:,} border loop{'s' * (self.n_boundary_loops != 1)}, "
+                f"{self.n_components:,} component{'s' * (self.n_components != 1)} kept")
+        text = {
+            "target": f"{self.n_input_faces:,} → {m:,} faces",
+            "max_error": f"{self.n_input_faces:,} → {m:,} faces, where the error bound stopped it",
+            "topology_floor": f"stopped at {m:,} faces{asked}: the topology floor ({kept})",
+            "no_valid_collapse": f"stopped at {m:,} faces{asked}: every collapse left would fold "
+                                 f"or squash a face",
+            "cancelled": f"cancelled: the cleaned input returned unchanged ({m:,} faces)",
+        }[self.stopped_because]
+        done = self.cleaning.summary()
+        return f"{text}; {done}" if done else text
 
 
 def _check_args(n, target_faces, ratio, max_error, feature_angle_deg, vertex_weights, locked, progress):
@@ -267,10 +313,155 @@ def _relocate_cage(mesh, Vn, creases, Eb_in, surface, tun):
     mesh.V = Vnew
 
 
+class _Cage(NamedTuple):
+    """A cage in terms of the cleaned input (what one collapse run gives)."""
+
+    V: np.ndarray
+    F: np.ndarray
+    of_clean: np.ndarray      #: (n_clean,) cage vertex of each clean vertex, -1 if removed
+    face_from: np.ndarray     #: (m,) clean face each cage face descends from
+    feature_edges: np.ndarray
+    worst: float
+    stopped: str
+    passes: int
+
+
+def _unchanged(clean):
+    """The cleaned input as a cage (nothing collapsed)."""
+    n, m = clean.V.shape[0], clean.F.shape[0]
+    return _Cage(clean.V.copy(), clean.F.copy(), np.arange(n, dtype=np.int64),
+                 np.arange(m, dtype=np.int64), np.zeros((0, 2), np.int64), 0.0, "cancelled", 0)
+
+
+def _collapse(clean, target, max_error, opts, progress):
+    """Set up the engine on the cleaned (manifold) mesh, run it, relocate the
+    cage and return it in the clean mesh's order (see :class:`_Cage`)."""
+    tun = opts["tuning"]
+    if (clean.twin == NON_MANIFOLD).any():
+        raise MeshAdjustError(f"{_WHERE}: cleaning left a non-manifold edge (a bug)")
+    lo, hi = bounding_box(clean.V)
+    Vc, Fc, twin, U, W, order, forder = spatial_order(clean.V, clean.F, clean.twin, box=(lo, hi))
+    n, m0 = Vc.shape[0], Fc.shape[0]
+    lock = np.zeros(n, dtype=bool) if opts["locked"] is None else opts["locked"][order]
+    # unit-free working coordinates: centred, unit diagonal, snapped to a grid
+    centre = 0.5 * (lo + hi)
+    scale = diagonal_length(lo, hi) or 1.0
+    grid = float(2 ** tun.snap_bits)
+    Vn = (Vc - centre) / scale
+    Vn *= grid
+    np.round(Vn, out=Vn)
+    Vn /= grid
+    Q, feat, Nf = _initial_quadrics(Vn, Fc, twin, U, W, opts["preserve_boundary"],
+                                    opts["feature_angle_deg"], tun)
+    # for the final relocation: the input's border edges and crease vertices, and its
+    # faces when small enough for the backward pull (the engine rewrites Fc)
+    hb = np.flatnonzero(twin == BOUNDARY)
+    Eb_in = np.stack([U[hb], W[hb]], axis=1)
+    creases = np.unique(np.concatenate([U[feat], W[feat]]))
+    Fin = Fc.copy() if m0 <= tun.relocate_back_max_faces else None
+    del U, W  # (3m,) each: not needed past the set-up
+    if opts["weights"] is not None:
+        Q *= opts["weights"][order][:, None]
+    Nref = _normal_sums(Fc, Nf, n)
+    del Nf
+    mesh = State(Vn, Fc, twin, Q, lock, feat, Nref, forig=forder)  # Fc is spatial_order's own array
+    max_err_n = None if max_error is None else float(max_error) / scale
+    stopped, passes = _run_all(mesh, target, max_err_n, opts, progress, m0)
+    if stopped == "cancelled":
+        return _unchanged(clean)
+    if (tun.relocate_iters > 0 and passes > 0
+            and mesh.F.shape[0] <= min(tun.relocate_max_faces, tun.relocate_max_share * m0)):
+        _relocate_cage(mesh, Vn, creases, Eb_in, Fin, tun)
+    # back to the caller's units; vertices never moved keep their exact input position
+    Vout = mesh.V * scale + centre
+    still = ~mesh.moved
+    Vout[still] = Vc[mesh.orig[still]]
+    # back to the clean mesh's order: cage vertices in the order of the clean vertices
+    # they keep, faces in the order of the clean faces they descend from
+    vorder = np.argsort(order[mesh.orig])  # (distinct keys)
+    new_v = np.empty(vorder.size, dtype=np.int64)
+    new_v[vorder] = np.arange(vorder.size, dtype=np.int64)
+    cur = mesh.cur_of_clean
+    of_clean = np.empty(n, dtype=np.int64)
+    of_clean[order] = np.where(cur >= 0, new_v[np.maximum(cur, 0)], -1)
+    hf = np.flatnonzero(mesh.feat)
+    tf = mesh.twin[hf]
+    hf = hf[(tf > hf) | (tf == BOUNDARY)]  # one half-edge per feature edge
+    a, b = (new_v[e] for e in _ends(mesh.F, hf))
+    fe = np.stack([np.minimum(a, b), np.maximum(a, b)], axis=1)
+    fe = fe[np.lexsort((fe[:, 1], fe[:, 0]))]
+    forder_out = np.argsort(mesh.forig, kind="stable")
+    return _Cage(Vout[vorder], new_v[mesh.F[forder_out]], of_clean, mesh.forig[forder_out],
+                 fe.astype(np.int64), float(mesh.worst * scale), stopped, passes)
+
+
+def _run_all(mesh, target, max_err_n, opts, progress, m0):
+    """The collapse loop, and with ``preserve_topology=False`` the topology
+    changes that let it go on (see ``core._relax``)."""
+    tun = opts["tuning"]
+    if target is not None and m0 <= target:
+        return "target", 0
+    stopped, passes = run(mesh, target, max_err_n, opts["preserve_boundary"], progress, m0, tun)
+    while not opts["preserve_topology"] and stopped == "no_valid_collapse":
+        # the link condition stopped every collapse: close 3-edge holes, drop
+        # components that cannot shrink, and go on
+        need = mesh.F.shape[0] - target if target is not None else mesh.F.shape[0]
+        changed = close_triangular_holes(mesh)
+        if not changed:
+            size = tun.relax_max_size if max_err_n is None else min(tun.relax_max_size, max_err_n)
+            changed = drop_stuck_components(mesh, need, size)
+        if not changed:
+            break
+        stopped, more = run(mesh, target, max_err_n, opts["preserve_boundary"], progress, m0, tun)
+        passes += more
+    return stopped, passes
+
+
+def _stop_reason(cage, target, opts):
+    """``"topology_floor"`` instead of ``"no_valid_collapse"`` when every
+    edge left would change the topology or touch only locked vertices."""
+    if cage.stopped != "no_valid_collapse" or target is None or cage.F.shape[0] <= target:
+        return cage.stopped
+    if not opts["preserve_topology"]:
+        return cage.stopped
+    em, ok = collapsible_edges(cage.F, cage.V.shape[0])
+    if opts["locked"] is not None:
+        locked = np.zeros(cage.V.shape[0], dtype=bool)
+        kept = cage.of_clean >= 0
+        locked[cage.of_clean[kept]] = opts["locked"][kept]
+        ok &= ~(locked[em.E[:, 0]] & locked[em.E[:, 1]])
+    return "topology_floor" if not ok.any() else cage.stopped
+
+
+def _within_max_error(clean, target, max_error, opts, progress):
+    """Collapse with ``max_error`` as a guarantee: the cage's two-sided
+    Hausdorff distance to the cleaned input, as ``surface_distance`` measures
+    it, is at most ``max_error``. The collapse bound is an RMS distance to
+    the planes of the faces a vertex stands for, which the worst point can
+    exceed: when the measure does, the run is repeated with the bound scaled
+    down by the overshoot (at most ``MAX_ERROR_TRIES`` runs; the cleaned
+    input itself, at distance 0, is the last resort)."""
+    bound = float(max_error)
+    for _ in range(MAX_ERROR_TRIES):
+        cage = _collapse(clean, target, bound, opts, progress)
+        if cage.stopped == "cancelled" or cage.F.shape[0] == clean.F.shape[0]:
+            return cage, 0.0
+        d = surface_distance(clean.V, clean.F, cage.V, cage.F).hausdorff
+        if d <= max_error:
+            return cage, d
+        bound *= min(0.7, 0.9 * max_error / d)
+    return _unchanged(clean)._replace(stopped="max_error"), 0.0
+
+
 def simplify(V, F, *, target_faces=None, ratio=None, max_error=None, preserve_boundary=True,
              preserve_topology=True, feature_angle_deg=60.0, vertex_weights=None, locked=None,
-             progress=None):
+             weld_distance=WELD_DISTANCE, min_component_area=MIN_COMPONENT_AREA, progress=None):
     """Simplify a triangle mesh to a coarse, clean manifold cage (QEM).
+
+    The input is cleaned first (:func:`core.clean.clean_mesh`: welded,
+    bow-ties and non-manifold edges split, double-sided sheets and debris
+    removed, oriented), so the cage is always an edge- and vertex-manifold
+    mesh, whatever arrives; ``cleaning`` in the result says what was done.
 
     Parameters
     ----------
@@ -279,28 +470,31 @@ def simplify(V, F, *, target_faces=None, ratio=None, max_error=None, preserve_bo
     target_faces : int >= 0, optional
         Stop once the cage has at most this many faces.
     ratio : float in (0, 1], optional
-        Target as a share of the (cleaned) input's faces, ``round(ratio * m)``.
+        Target as a share of the cleaned input's faces, ``round(ratio * m)``.
     max_error : float >= 0, optional
-        Never accept a collapse whose error exceeds this distance, in the
-        mesh's units. The error of a collapse is ``sqrt(E / W)``: ``E`` the
-        quadric error of the merged vertex (area-weighted squared distances to
-        the planes of the input faces it stands for) and ``W`` their total
-        area, i.e. the RMS distance of the new vertex to those planes.
-        At least one of ``target_faces``, ``ratio``, ``max_error`` is needed;
-        the run stops at whichever is reached first.
+        A guarantee, in the mesh's units: the cage's two-sided Hausdorff
+        distance to the cleaned input, as :func:`core.surface_distance`
+        measures it (default samples and seed), is at most this. Collapses
+        whose error (the RMS distance of the new vertex to the planes of the
+        input faces it stands for) exceeds the bound are refused, and when the
+        measured distance still exceeds it the run is repeated with a tighter
+        bound (see ``MAX_ERROR_TRIES``). At least one of ``target_faces``,
+        ``ratio``, ``max_error`` is needed; the run stops at whichever is
+        reached first.
     preserve_boundary : bool
         Add heavy constraint planes on open borders so they keep their shape;
         an interior edge with one boundary endpoint collapses onto it.
     preserve_topology : bool
         Enforce the link condition: genus, boundary loops and components
-        kept, never a non-manifold edge or vertex. With ``False``, once the
+        kept; a target below what that allows stops at the topology floor
+        (``stopped_because == "topology_floor"``). With ``False``, once the
         link condition stops every collapse before the target, holes bounded
         by three edges are closed with a triangle and components that cannot
         shrink any further (a tetrahedron, a lone triangle; at most a quarter
         of the mesh's size and no larger than ``max_error`` when it is given;
         never the largest component or one with locked vertices) are
-        removed, smallest first, and simplification goes on. The output is still a
-        clean manifold; input vertices of removed components map to ``-1``.
+        removed, smallest first, and simplification goes on. The output is
+        still a clean manifold; input vertices of removed components map to ``-1``.
     feature_angle_deg : float in (0, 180] or None
         Edges whose faces meet at more than this angle get constraint planes
         (creases and corners survive) and are reported in ``feature_edges``.
@@ -308,9 +502,16 @@ def simplify(V, F, *, target_faces=None, ratio=None, max_error=None, preserve_bo
         Importance of each input vertex: scales its quadric.
     locked : (n,) bool, optional
         Locked vertices are never moved or removed.
+    weld_distance, min_component_area : float >= 0
+        Cleaning tolerances, see :func:`core.clean.clean_mesh` (shares of the
+        bounding-box diagonal and of the largest component's area). With a
+        target and no ``max_error``, components too small for one face of
+        the target (by their share of the area) are dropped as debris too,
+        and reported; never one with a locked vertex.
     progress : callable(float) -> bool or None, optional
         Called after every pass with the fraction done (0..1); returning
-        ``False`` stops cleanly with ``stopped_because == "cancelled"``.
+        ``False`` stops with ``stopped_because == "cancelled"`` and the
+        cleaned input, unchanged, as the cage.
 
     Returns
     -------
@@ -319,7 +520,8 @@ def simplify(V, F, *, target_faces=None, ratio=None, max_error=None, preserve_bo
     Raises
     ------
     InvalidMeshError
-        NaN/inf coordinates, indices out of range, wrong shapes or dtypes.
+        NaN/inf coordinates, indices out of range, wrong shapes or dtypes,
+        or nothing left after cleaning (every face degenerate or duplicate).
     InvalidArgumentError
         No target given, ``target_faces < 0``, ``ratio`` outside (0, 1],
         negative ``max_error``, badly shaped weights or lock mask.
@@ -332,101 +534,48 @@ def simplify(V, F, *, target_faces=None, ratio=None, max_error=None, preserve_bo
     >>> r.F.shape[0] <= 100, r.stopped_because
     (True, 'target')
     """
-    tun = TUNING
     V, F = check_mesh(V, F, where=_WHERE)
     n_in = V.shape[0]
     weights, lk = _check_args(n_in, target_faces, ratio, max_error, feature_angle_deg, vertex_weights,
                               locked, progress)
-    clean, twin, U, W = clean_with_twins(V, F)
-    # working order: neighbours near each other in memory; to_input[i] is the
-    # input vertex of working vertex i
-    lo, hi = bounding_box(clean.V)
-    Vc, Fc, twin, U, W, order, forder = spatial_order(clean.V, clean.F, twin, box=(lo, hi))
-    to_input = clean.clean_to_vertex[order]
-    dropped = {k: getattr(clean, k) for k in ("n_degenerate_faces", "n_duplicate_faces",
-                                              "n_unreferenced_vertices")}
-    del order, clean  # the reordered copies replace the cleaned mesh
-    n, m0 = Vc.shape[0], Fc.shape[0]
-
+    # components too small for one face of the target are debris (not with max_error:
+    # dropping one could break its bound)
+    budget = None
+    if max_error is None:
+        budget = target_faces if ratio is None else max(target_faces or 0, round(ratio * F.shape[0]))
+    clean = clean_mesh(V, F, weld_distance=weld_distance, min_component_area=min_component_area,
+                       face_budget=budget or None, protected=lk)
+    if clean.F.shape[0] == 0 and F.shape[0] > 0:
+        raise InvalidMeshError(
+            f"{_WHERE}: nothing is left after cleaning the {F.shape[0]:,} faces "
+            f"({clean.report.summary() or 'no faces'}): no cage can be made")
+    m0 = clean.F.shape[0]
     target = None
     if target_faces is not None:
         target = int(target_faces)
     if ratio is not None:
         t = int(round(float(ratio) * m0))
         target = t if target is None else max(target, t)
-
-    frozen = non_manifold_vertices(Fc, n, twin, ends=(U, W)) if m0 else np.zeros(n, dtype=bool)
-    lock = frozen.copy()
-    if lk is not None:
-        lock |= lk[to_input]
-
-    # unit-free working coordinates: centred, unit diagonal, snapped to a grid
-    centre = 0.5 * (lo + hi)
-    scale = float(np.linalg.norm(hi - lo)) or 1.0
-    grid = float(2 ** tun.snap_bits)
-    Vn = Vc - centre
-    Vn /= scale
-    Vn *= grid
-    np.round(Vn, out=Vn)
-    Vn /= grid
-
-    Q, feat, Nf = _initial_quadrics(Vn, Fc, twin, U, W, preserve_boundary, feature_angle_deg, tun)
-    # for the final relocation: the input's border edges and crease vertices, and its
-    # faces when small enough for the backward pull (the engine rewrites Fc)
-    hb = np.flatnonzero(twin == BOUNDARY)
-    Eb_in = np.stack([U[hb], W[hb]], axis=1)
-    creases = np.unique(np.concatenate([U[feat], W[feat]]))
-    Fin = Fc.copy() if m0 <= tun.relocate_back_max_faces else None
-    del U, W  # (3m,) each: not needed past the set-up
-    if weights is not None:
-        Q *= weights[to_input][:, None]
-    Nref = _normal_sums(Fc, Nf, n)
-    del Nf
-    mesh = State(Vn, Fc, twin, Q, lock, feat, Nref, forig=forder)  # Fc is spatial_order's own array
-    max_err_n = None if max_error is None else float(max_error) / scale
-
-    stopped = "target"
-    passes = 0
-    if target is None or m0 > target:
-        stopped, passes = run(mesh, target, max_err_n, preserve_boundary, progress, m0, tun)
-        while not preserve_topology and stopped == "no_valid_collapse":
-            # the link condition stopped every collapse: close 3-edge holes, drop
-            # components that cannot shrink, and go on
-            need = mesh.F.shape[0] - target if target is not None else mesh.F.shape[0]
-            changed = close_triangular_holes(mesh)
-            if not changed:
-                size = tun.relax_max_size if max_err_n is None else min(tun.relax_max_size, max_err_n)
-                changed = drop_stuck_components(mesh, need, size)
-            if not changed:
-                break
-            stopped, more = run(mesh, target, max_err_n, preserve_boundary, progress, m0, tun)
-            passes += more
-    worst = mesh.worst
-    if (tun.relocate_iters > 0 and passes > 0 and stopped != "cancelled"
-            and mesh.F.shape[0] <= min(tun.relocate_max_faces, tun.relocate_max_share * m0)):
-        _relocate_cage(mesh, Vn, creases, Eb_in, Fin, tun)
-
-    # back to the caller's units; vertices never moved keep their exact input position
-    Vout = mesh.V * scale + centre
-    still = ~mesh.moved
-    Vout[still] = Vc[mesh.orig[still]]
-    # back to the input's order: cage vertices in the order of the input vertices
-    # they keep, faces in the order of the input faces they descend from
-    vorder = np.argsort(to_input[mesh.orig])  # (distinct keys)
-    new_v = np.empty(vorder.size, dtype=np.int64)
-    new_v[vorder] = np.arange(vorder.size, dtype=np.int64)
-    cur = mesh.cur_of_clean
+    to_input = clean.clean_to_input
+    opts = dict(tuning=TUNING, preserve_boundary=preserve_boundary,
+                preserve_topology=preserve_topology, feature_angle_deg=feature_angle_deg,
+                weights=None if weights is None else weights[to_input],
+                locked=None if lk is None else lk[to_input])
+    hausdorff = None
+    if m0 == 0:
+        cage = _unchanged(clean)._replace(stopped="target")
+    elif max_error is None:
+        cage = _collapse(clean, target, None, opts, progress)
+    else:
+        cage, hausdorff = _within_max_error(clean, target, max_error, opts, progress)
+    stopped = _stop_reason(cage, target, opts)
+    kept = clean.input_to_clean >= 0
     vertex_map = np.full(n_in, -1, dtype=np.int64)
-    vertex_map[to_input] = np.where(cur >= 0, new_v[np.maximum(cur, 0)], -1)
-    hf = np.flatnonzero(mesh.feat)
-    tf = mesh.twin[hf]
-    hf = hf[(tf > hf) | (tf == BOUNDARY)]  # one half-edge per feature edge
-    a, b = (new_v[e] for e in _ends(mesh.F, hf))
-    fe = np.stack([np.minimum(a, b), np.maximum(a, b)], axis=1)
-    fe = fe[np.lexsort((fe[:, 1], fe[:, 0]))]
-    Fo = new_v[mesh.F[np.argsort(mesh.forig, kind="stable")]]
+    vertex_map[kept] = cage.of_clean[clean.input_to_clean[kept]]
+    _, n_comp = face_components(cage.F, cage.V.shape[0])
     return SimplifyResult(
-        V=Vout[vorder], F=Fo, vertex_map=vertex_map, max_error=float(worst * scale),
-        stopped_because=stopped, feature_edges=fe.astype(np.int64),
-        **dropped, n_frozen_vertices=int(frozen.sum()),
-        n_passes=passes)
+        V=cage.V, F=cage.F, vertex_map=vertex_map, face_map=clean.face_to_input[cage.face_from],
+        max_error=cage.worst, stopped_because=stopped, feature_edges=cage.feature_edges,
+        cleaning=clean.report, n_input_faces=int(F.shape[0]), target=target, hausdorff=hausdorff,
+        n_boundary_loops=boundary_loops_count(cage.F, cage.V.shape[0]), n_components=n_comp,
+        n_passes=cage.passes)

@@ -269,3 +269,60 @@ def topology_summary(F, n_vertices):
         non_manifold_edges=int(rep.non_manifold_edges.shape[0]),
         non_manifold_vertices=int(rep.non_manifold_vertices.shape[0]),
     )
+
+
+def collapsible_edges(F, n_vertices, em=None):
+    """Edges of a manifold mesh whose collapse keeps its topology (the link
+    condition of Dey et al., 1999, as ``simplify`` enforces it).
+
+    Edge ``(a, b)`` passes when the vertices adjacent to both ``a`` and ``b``
+    are exactly its opposite vertices (two inside, one on a border), an inside
+    edge does not join two border vertices (that would pinch the surface), a
+    border edge's loop has more than three edges, and its component is not a
+    tetrahedron.
+
+    Returns
+    -------
+    em : EdgeMap, the edges tested (``em.E``).
+    ok : (e,) bool, edge ``k`` can collapse.
+    """
+    F = np.asarray(F, dtype=np.int64)
+    em = edge_map(F, n_vertices) if em is None else em
+    E, count = em.E, em.edge_face_count
+    e = E.shape[0]
+    if e == 0:
+        return em, np.zeros(0, dtype=bool)
+    n = np.int64(max(n_vertices, 1))
+    key = E[:, 0] * n + E[:, 1]                       # sorted (edge_map's order)
+    # adjacency lists: both directions of every edge, grouped by vertex
+    src = np.concatenate([E[:, 0], E[:, 1]])
+    dst = np.concatenate([E[:, 1], E[:, 0]])
+    order = np.argsort(src, kind="stable")
+    src, dst = src[order], dst[order]
+    start = np.searchsorted(src, np.arange(n_vertices))
+    valence = np.bincount(src, minlength=n_vertices)
+    # for every edge (a, b) and every neighbour c of a: is (b, c) an edge?
+    a, b = E[:, 0], E[:, 1]
+    reps = valence[a]
+    owner = np.repeat(np.arange(e), reps)
+    c = dst[np.repeat(start[a] - np.cumsum(reps) + reps, reps) + np.arange(int(reps.sum()))]
+    bb = b[owner]
+    q = np.minimum(bb, c) * n + np.maximum(bb, c)
+    pos = np.minimum(np.searchsorted(key, q), e - 1)
+    common = np.bincount(owner, weights=(key[pos] == q) & (c != bb), minlength=e)
+    border = count == 1
+    on_border = np.zeros(n_vertices, dtype=bool)
+    on_border[E[border].ravel()] = True
+    ok = np.where(border, common == 1, (common == 2) & ~(on_border[a] & on_border[b]))
+    if border.any():
+        # border loops of three edges would close up
+        B = E[border]
+        used, rel = np.unique(B, return_inverse=True)
+        loop = connected_labels(used.size, rel.reshape(-1, 2))
+        loop_edges = np.bincount(loop[rel.reshape(-1, 2)[:, 0]], minlength=used.size)
+        ok[np.flatnonzero(border)[loop_edges[loop[rel.reshape(-1, 2)[:, 0]]] <= 3]] = False
+    comp, k = face_components(F, n_vertices)
+    faces_per_comp = np.bincount(comp, minlength=k)
+    tetra = faces_per_comp[comp] <= 4
+    ok[np.unique(em.face_edge[tetra].ravel())] = False
+    return em, ok

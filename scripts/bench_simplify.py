@@ -116,7 +116,7 @@ def synthetic(levels, noise=1e-4):
     """The bunny midpoint-subdivided ``levels`` times with small noise (fixed seed)."""
     from tests.mesh_factory import midpoint_split
     V, F = read_obj(os.path.join(MESHES, "stanford-bunny.obj"))
-    from core._clean import clean_mesh
+    from core.clean import clean_mesh
     c = clean_mesh(V, F)
     V, F = c.V, c.F
     for _ in range(levels):

@@ -1,4 +1,4 @@
-"""Cleaning, the half-edge twin table and fan counting (``core._clean``).
+"""The half-edge twin table, face keys and fan counting (``core._clean``).
 
 Every fast path is checked against a plain reference: the argsort twin
 table and the corner union-find fan count the simplifier used before."""
@@ -6,8 +6,9 @@ table and the corner union-find fan count the simplifier used before."""
 import numpy as np
 import pytest
 
-from core._clean import (BOUNDARY, NON_MANIFOLD, _MAX_WALK, clean_mesh, clean_with_twins, half_edge_ends,
-                         non_manifold_vertices, spatial_order, twin_table)
+from core._clean import (BOUNDARY, NON_MANIFOLD, _MAX_WALK, half_edge_ends, non_manifold_vertices,
+                         spatial_order, twin_table)
+from core.clean import clean_mesh
 from core.topology import connected_labels
 from tests.mesh_factory import icosphere, load_shared, regular_grid, shared_mesh_names, torus
 
@@ -168,80 +169,25 @@ def test_twin_table_without_room_to_pack_uses_the_argsort():
     np.testing.assert_array_equal(twin_table(F, big), twin_table(F, n))
 
 
-# --- cleaning ----------------------------------------------------------------------------------
+# --- face keys -------------------------------------------------------------------------------
 
-def messy_mesh():
-    V, F = icosphere(2)
-    n = V.shape[0]
-    F = np.concatenate([F[:40], F[[3, 7]], F[[5]][:, ::-1], [[0, 0, 1], [4, 5, 4]], F[40:],
-                        [[n + 1, n + 2, n + 3]], F[[7]][:, [1, 2, 0]]])
-    V = np.concatenate([V, [[5.0, 5, 5]], np.eye(3) * 3])  # vertex n is unreferenced
-    return V, F
-
-
-def test_clean_mesh_drops_degenerate_duplicate_and_unreferenced():
-    V, F = messy_mesh()
-    c = clean_mesh(V, F)
-    assert (c.n_degenerate_faces, c.n_duplicate_faces, c.n_unreferenced_vertices) == (2, 4, 1)
-    assert c.F.shape[0] == F.shape[0] - 6
-    # first copies are kept, in order; vertex maps are inverse to each other
-    Fi = icosphere(2)[1]
-    np.testing.assert_array_equal(c.clean_to_vertex[c.F[:Fi.shape[0]]], Fi)
-    np.testing.assert_array_equal(c.vertex_to_clean[c.clean_to_vertex], np.arange(c.V.shape[0]))
-    np.testing.assert_array_equal(c.V, V[c.clean_to_vertex])
-
-
-@pytest.mark.parametrize("case", ["messy", "clean", "empty", "dup_on_nm_edge"])
-def test_clean_with_twins_equals_the_separate_steps(case):
-    if case == "messy":
-        V, F = messy_mesh()
-    elif case == "clean":
-        V, F = torus()
-    elif case == "empty":
-        V, F = np.zeros((3, 3)), np.zeros((0, 3), dtype=np.int64)
-    else:  # a duplicated face on an edge that is non-manifold anyway
-        V = np.zeros((6, 3))
-        F = np.array([[0, 1, 2], [1, 0, 3], [0, 1, 4], [2, 1, 5], [4, 1, 0]])
-    c = clean_mesh(V, F)
-    cw, twin, U, W = clean_with_twins(V, F)
-    for a, b in zip(c, cw):
-        np.testing.assert_array_equal(a, b)
-    n = c.V.shape[0]
-    np.testing.assert_array_equal(twin, ref_twin_table(c.F, n))
-    Ue, We = half_edge_ends(c.F)
-    np.testing.assert_array_equal(U, Ue)
-    np.testing.assert_array_equal(W, We)
-
-
-def test_clean_mesh_does_not_modify_or_alias_its_inputs():
-    V, F = torus()
-    V0, F0 = V.copy(), F.copy()
-    c = clean_mesh(V, F)
-    cw = clean_with_twins(V, F)[0]
-    for out in (c, cw):
-        assert not np.shares_memory(out.V, V) and not np.shares_memory(out.F, F)
-    np.testing.assert_array_equal(V, V0)
-    np.testing.assert_array_equal(F, F0)
-
-
-def test_duplicate_faces_found_beyond_the_packed_key_range(monkeypatch):
+def test_face_keys_beyond_the_packed_key_range(monkeypatch):
     # above ~2.1M vertices (lo n + mid) n + hi overflows an int64; the keys fall back
-    # to ranks of the sorted rows: check both paths agree, and a real index that large
+    # to ranks of the sorted rows: both paths group the same faces
     import importlib
     clean = importlib.import_module("core._clean")
     V, F = icosphere(2)
-    F = np.concatenate([F, F[[3, 7]][:, [1, 2, 0]], F[[5]][:, ::-1]])   # 3 duplicates, any order
-    ref = clean_mesh(V, F)
+    F = np.concatenate([F, F[[3, 7]][:, [1, 2, 0]], F[[5]][:, ::-1]])   # 3 repeated sets, any order
+    packed = clean.face_keys(F, V.shape[0])
     monkeypatch.setattr(clean, "_KEY_MAX_N", 0)
-    fast = clean_mesh(V, F)
-    both = clean.clean_with_twins(V, F)[0]
-    for got in (fast, both):
-        assert got.n_duplicate_faces == 3 == ref.n_duplicate_faces
-        assert np.array_equal(got.F, ref.F)
+    ranked = clean.face_keys(F, V.shape[0])
+    for keys in (packed, ranked):
+        assert np.unique(keys).size == F.shape[0] - 3
+        assert keys[-3] == keys[3] and keys[-2] == keys[7] and keys[-1] == keys[5]
     monkeypatch.undo()
     big = 3_000_000
     Fb = np.array([[0, 1, big], [big, 0, 1], [1, 2, big], [0, 2, big - 1]], dtype=np.int64)
-    keys = clean._face_keys(Fb, big + 1)
+    keys = clean.face_keys(Fb, big + 1)
     assert keys[0] == keys[1] and len(set(keys.tolist())) == 3
 
 

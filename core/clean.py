@@ -1,0 +1,537 @@
+"""Turn a mesh as scans arrive into a clean manifold surface, and map back.
+
+Real scans come unwelded (STL, PLY/glTF split at seams), with bow-tie
+vertices, edges shared by three or more faces, double-sided sheets, specks of
+debris and degenerate clusters. :func:`clean_mesh` turns any of them into an
+edge- and vertex-manifold triangle mesh that :func:`~.simplify.simplify`,
+:func:`~.subdivide.subdivide`, :func:`~.fit.fit_cage` and
+:func:`~.binding.bind` accept, and says what it did::
+
+    drop faces with a repeated vertex index
+    weld   vertices on open or non-manifold edges that coincide (exactly, or
+           within weld_distance of the bounding-box diagonal: soups, seams)
+    drop   faces degenerate after welding; of faces on the same three
+           vertices keep one, or none when both orientations are there
+           (a double-sided sheet)
+    pair   the faces around every non-manifold edge into manifold sheets
+           (consistent orientation first, then the flattest pair); the faces
+           left over see the edge as a border
+    split  every vertex whose faces form several fans (bow-ties, and the
+           ends of the edges just cut) into one vertex per fan
+    orient each component consistently (the majority's orientation wins)
+    drop   debris: components whose area is below min_component_area of the
+           largest component's
+    drop   unreferenced vertices
+
+Nothing is averaged or moved: every output vertex sits exactly on an input
+vertex (``clean_to_input``), and every output face is an input face
+(``face_to_input``), possibly flipped and with split vertices. A mesh that is
+already clean comes back with the same vertices and faces in the same order.
+
+Welding looks at four grids of cell ``4 weld_distance``, each shifted by a
+quarter cell along the diagonal: two vertices closer than ``weld_distance``
+along every axis share a cell in at least one grid (each axis can separate
+them in at most one grid), and vertices merge through shared cells. So every
+pair within ``weld_distance`` is welded, and no pair farther apart than
+``4 weld_distance`` per axis is welded directly (chains can reach farther in
+clusters denser than that, which is what a degenerate cluster is).
+"""
+
+from dataclasses import asdict, dataclass, fields
+from typing import NamedTuple
+
+import numpy as np
+
+from ._clean import (BOUNDARY, NON_MANIFOLD, corner_fans, face_keys, half_edge_ends,
+                     non_manifold_vertices, renumber_twins, twin_table)
+from .errors import InvalidArgumentError
+from .mesh import bounding_box, check_mesh, diagonal_length, face_normals
+from .topology import connected_labels
+
+_WHERE = "clean_mesh"
+
+#: defaults of :func:`clean_mesh` (relative to the bounding-box diagonal / the
+#: largest component's area)
+WELD_DISTANCE = 1e-6
+MIN_COMPONENT_AREA = 1e-4
+#: cells per axis above which the weld grid's key would not fit in 21 bits
+_GRID_BITS = 21
+
+
+@dataclass(frozen=True)
+class CleanReport:
+    """What :func:`clean_mesh` changed, as counts (all 0 for a clean mesh)."""
+
+    n_welded_vertices: int = 0        #: input vertices merged into another one
+    n_degenerate_faces: int = 0       #: faces with a repeated vertex (also after welding)
+    n_duplicate_faces: int = 0        #: faces on the same vertices as a kept one
+    n_double_sided_sheets: int = 0    #: face sets with both orientations, all removed ...
+    n_double_sided_faces: int = 0     #: ... with this many faces
+    n_non_manifold_edges: int = 0     #: edges with more than two faces, cut into sheets
+    n_split_vertices: int = 0         #: bow-tie vertices split, one vertex per fan ...
+    n_added_vertices: int = 0         #: ... adding this many vertices
+    n_detached_faces: int = 0         #: faces cut loose where pairing could not resolve an edge
+    n_flipped_faces: int = 0          #: faces turned to agree with their component
+    n_non_orientable_components: int = 0  #: components with no consistent orientation (kept)
+    n_debris_components: int = 0      #: tiny components dropped ...
+    n_debris_faces: int = 0           #: ... with this many faces
+    n_unreferenced_vertices: int = 0  #: vertices no kept face uses
+
+    def to_dict(self):
+        """The counts as a plain ``dict`` (for JSON reports)."""
+        return asdict(self)
+
+    def __bool__(self):
+        return any(getattr(self, f.name) for f in fields(self))
+
+    def summary(self):
+        """One line of what was done, e.g. ``"welded 4,012 vertices, split 3
+        bow-tie vertices, removed 2 double-sided sheets (4 faces)"``; empty when
+        nothing was."""
+        parts = []
+
+        def add(count, text, extra=""):
+            if count:
+                parts.append(f"{text.format(f'{count:,}')}{extra}")
+
+        add(self.n_welded_vertices, "welded {} vertices")
+        add(self.n_non_manifold_edges, "cut {} non-manifold edges into sheets")
+        add(self.n_split_vertices, "split {} bow-tie vertices")
+        add(self.n_double_sided_sheets, "removed {} double-sided sheets",
+            f" ({self.n_double_sided_faces:,} faces)")
+        add(self.n_debris_components, "dropped {} debris components",
+            f" ({self.n_debris_faces:,} faces)")
+        add(self.n_degenerate_faces, "removed {} degenerate faces")
+        add(self.n_duplicate_faces, "removed {} duplicate faces")
+        add(self.n_detached_faces, "detached {} faces")
+        add(self.n_flipped_faces, "flipped {} faces to a consistent orientation")
+        add(self.n_non_orientable_components, "kept {} non-orientable components as they are")
+        add(self.n_unreferenced_vertices, "dropped {} unreferenced vertices")
+        return ", ".join(parts)
+
+
+class CleanResult(NamedTuple):
+    """What :func:`clean_mesh` returns.
+
+    ``input_to_clean[i]`` is a clean vertex at input vertex ``i``'s position
+    (``-1`` when no kept face uses it; a split vertex maps to its first fan's
+    copy); ``clean_to_input[j]`` the input vertex clean vertex ``j`` sits on;
+    ``face_to_input[f]`` the input face clean face ``f`` comes from. ``twin``
+    is the clean faces' half-edge twin table (``core._clean.twin_table``,
+    never ``NON_MANIFOLD``).
+    """
+
+    V: np.ndarray               #: (n,3) float64
+    F: np.ndarray               #: (m,3) int64
+    input_to_clean: np.ndarray  #: (n_in,) int64
+    clean_to_input: np.ndarray  #: (n,) int64
+    face_to_input: np.ndarray   #: (m,) int64
+    twin: np.ndarray            #: (3m,) int64
+    report: CleanReport
+
+
+def clean_mesh(V, F, *, weld_distance=WELD_DISTANCE, min_component_area=MIN_COMPONENT_AREA,
+               face_budget=None, protected=None):
+    """Clean a triangle mesh into an edge- and vertex-manifold surface.
+
+    Parameters
+    ----------
+    V : (n,3) float array_like
+    F : (m,3) int array_like
+    weld_distance : float >= 0
+        Vertices on open or non-manifold edges closer than this share of the
+        bounding-box diagonal (along every axis) are welded; exact duplicates
+        always are (also with 0). Vertices inside a closed surface are never
+        welded: two of them at one place are two sheets touching, which is
+        already manifold.
+    min_component_area : float >= 0
+        Components whose area is below this share of the largest
+        component's area are debris and dropped (0 keeps everything).
+    face_budget : int, optional
+        The face count the mesh is meant for (``simplify``'s target):
+        components too small to get one face of it, by their share of the
+        total area, are debris too (they cannot be represented, and each
+        would take at least one face, four when closed).
+    protected : (n,) bool, optional
+        Components with a protected vertex (e.g. a locked one) are never debris.
+
+    Returns
+    -------
+    CleanResult
+
+    Raises
+    ------
+    InvalidMeshError
+        Malformed input (shapes, NaN coordinates, indices out of range).
+    InvalidArgumentError
+        A negative or non-finite tolerance.
+
+    Examples
+    --------
+    >>> V = [[0, 0, 0], [1, 0, 0], [0, 1, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]]
+    >>> r = clean_mesh(V, [[0, 1, 2], [3, 4, 5]])          # two unwelded triangles
+    >>> r.F.tolist(), r.report.summary()
+    ([[0, 1, 2], [1, 3, 2]], 'welded 2 vertices')
+    """
+    V, F = check_mesh(V, F, where=_WHERE)
+    for name, value in (("weld_distance", weld_distance),
+                        ("min_component_area", min_component_area)):
+        if not (isinstance(value, (int, float, np.number)) and np.isfinite(value) and value >= 0):
+            raise InvalidArgumentError(
+                f"{_WHERE}: {name} must be a finite number >= 0, got {value!r}")
+    n_in = V.shape[0]
+    counts = {"n_unreferenced_vertices": int(n_in - np.count_nonzero(
+        np.bincount(F.ravel(), minlength=n_in)))}
+    faces = np.arange(F.shape[0], dtype=np.int64)          # input face of each current face
+    bad = _degenerate(F)
+    n_degenerate = int(np.count_nonzero(bad))
+    F, faces = F[~bad], faces[~bad]
+    twin = twin_table(F, n_in)
+    rep = _weld_map(V, F, twin, float(weld_distance))
+    counts["n_welded_vertices"] = int(np.count_nonzero(rep != np.arange(n_in)))
+    if counts["n_welded_vertices"]:
+        F = rep[F]
+        bad = _degenerate(F)
+        n_degenerate += int(np.count_nonzero(bad))
+        F, faces = F[~bad], faces[~bad]
+        twin = twin_table(F, n_in)
+    counts["n_degenerate_faces"] = n_degenerate
+    keep, found = _unique_faces(F, twin, n_in)
+    counts.update(found)
+    if not keep.all():
+        F, faces = F[keep], faces[keep]
+        twin = twin_table(F, n_in)
+    V, F, twin, to_input, found = _make_manifold(V, F, twin)
+    counts.update(found)
+    F, twin, found = _orient(F, twin)
+    counts.update(found)
+    if protected is not None:
+        protected = np.asarray(protected, dtype=bool)[to_input]
+    keep, found = _debris(V, F, twin, float(min_component_area), face_budget, protected)
+    counts.update(found)
+    if not keep.all():
+        F, faces, twin = F[keep], faces[keep], _keep_twins(twin, keep)
+    V, F, input_to_clean, clean_to_input = _compact(V, F, to_input, rep)
+    return CleanResult(V, F, input_to_clean, clean_to_input, faces, twin, CleanReport(**counts))
+
+
+def _degenerate(F):
+    """Faces with a repeated vertex index, (m,) bool."""
+    return (F[:, 0] == F[:, 1]) | (F[:, 1] == F[:, 2]) | (F[:, 0] == F[:, 2])
+
+
+def _weld_map(V, F, twin, weld_distance):
+    """Representative of every vertex, (n,) int64: vertices on an open or
+    non-manifold edge (``twin < 0``) that coincide, exactly or within
+    ``weld_distance`` of the diagonal (see the module docstring), map to the
+    smallest index of their group; every other vertex to itself."""
+    n = V.shape[0]
+    rep = np.arange(n, dtype=np.int64)
+    h = np.flatnonzero(twin < 0)
+    if h.size == 0:
+        return rep
+    U, W = half_edge_ends(F)
+    cand = np.unique(np.concatenate([U[h], W[h]]))
+    P = V[cand] + 0.0                          # -0.0 and 0.0 are the same place
+    lo, hi = bounding_box(V[F.ravel()])
+    extent = float(np.max(hi - lo))
+    cell = 4.0 * weld_distance * diagonal_length(lo, hi)
+    if cell > 0 and extent / cell + 2 < 2 ** _GRID_BITS:
+        pairs = [_same_cell_pairs(np.floor((P - lo) / cell + k / 4.0).astype(np.int64))
+                 for k in range(4)]
+    else:
+        pairs = [_same_cell_pairs(None, P)]
+    pairs = np.concatenate(pairs)
+    if pairs.shape[0] == 0:
+        return rep
+    labels = connected_labels(cand.size, pairs)
+    rep[cand] = cand[labels]
+    return rep
+
+
+def _same_cell_pairs(Q, P=None):
+    """Pairs (k,2) of row indices that are neighbours in sorted order and
+    equal: integer cells ``Q`` (k,3) packed into one key, or exact points ``P``."""
+    if Q is not None:
+        key = (Q[:, 0] << 2 * _GRID_BITS) | (Q[:, 1] << _GRID_BITS) | Q[:, 2]
+        order = np.argsort(key, kind="stable")
+        same = key[order[1:]] == key[order[:-1]]
+    else:
+        order = np.lexsort((P[:, 2], P[:, 1], P[:, 0]))
+        S = P[order]
+        same = (S[1:] == S[:-1]).all(axis=1)
+    i = np.flatnonzero(same)
+    return np.stack([order[i], order[i + 1]], axis=1)
+
+
+def _orientation_sign(F):
+    """True where a face runs lo -> mid -> hi (its sorted vertices) around."""
+    a, b, c = F[:, 0], F[:, 1], F[:, 2]
+    lo = np.minimum(np.minimum(a, b), c)
+    hi = np.maximum(np.maximum(a, b), c)
+    mid = a + b + c - lo - hi
+    after_lo = np.where(a == lo, b, np.where(b == lo, c, a))
+    return after_lo == mid
+
+
+def _unique_faces(F, twin, n):
+    """Faces to keep among those on the same three vertices: one of a set
+    with one orientation, none of a set with both (a double-sided sheet;
+    unless that would remove every face, then one of each set).
+
+    Such faces share all three edges, so they meet the same face across two
+    edges or sit on a non-manifold edge: only those are compared by key.
+    """
+    keep = np.ones(F.shape[0], dtype=bool)
+    found = {"n_duplicate_faces": 0, "n_double_sided_sheets": 0, "n_double_sided_faces": 0}
+    if F.shape[0] == 0:
+        return keep, found
+    t = twin.reshape(-1, 3)
+    g = np.where(t >= 0, t // 3, -1 - np.arange(3))   # distinct negatives never match
+    cand = (g[:, 0] == g[:, 1]) | (g[:, 1] == g[:, 2]) | (g[:, 0] == g[:, 2])
+    cand |= (t == NON_MANIFOLD).any(axis=1)
+    ci = np.flatnonzero(cand)
+    if ci.size < 2:
+        return keep, found
+    _, first, group, size = np.unique(face_keys(F[ci], n), return_index=True,
+                                      return_inverse=True, return_counts=True)
+    group = group.ravel()
+    forward = np.bincount(group, weights=_orientation_sign(F[ci]), minlength=size.size)
+    sheet = (forward > 0) & (forward < size)
+    drop = ci[size[group] > 1]
+    keep[drop] = False
+    if sheet.any() and not keep.any() and not (size == 1).any():
+        sheet[:] = False                           # only sheets: keep one side of each
+    keep[ci[first[~sheet & (size > 1)]]] = True
+    found["n_double_sided_sheets"] = int(np.count_nonzero(sheet))
+    found["n_double_sided_faces"] = int(size[sheet].sum())
+    found["n_duplicate_faces"] = int(drop.size - found["n_double_sided_faces"]
+                                     - np.count_nonzero(~sheet & (size > 1)))
+    return keep, found
+
+
+#: non-manifold edges with more faces than this pair them in index order
+#: instead of scoring every pair
+_MAX_SCORED_FAN = 16
+#: rounds of cutting open the non-manifold edges whose pairings disagree
+_MAX_RECUTS = 16
+
+
+def _pair_sheets(V, F, twin):
+    """Twin table with every non-manifold edge resolved: its faces paired
+    (consistent orientation first, then the flattest pair: largest dot
+    product of the unit normals), the unpaired ones left as borders.
+
+    Returns the new twin table and the number of non-manifold edges.
+    """
+    hn = np.flatnonzero(twin == NON_MANIFOLD)
+    if hn.size == 0:
+        return twin, 0
+    twin = twin.copy()
+    U, W = half_edge_ends(F)
+    key = np.minimum(U[hn], W[hn]) * np.int64(max(V.shape[0], 1)) + np.maximum(U[hn], W[hn])
+    order = np.argsort(key, kind="stable")
+    hn, key = hn[order], key[order]
+    start = np.flatnonzero(np.r_[True, key[1:] != key[:-1]])
+    size = np.diff(np.r_[start, key.size])
+    group = np.repeat(np.arange(start.size), size)
+    pos = np.arange(hn.size) - start[group]
+    big = size[group] > _MAX_SCORED_FAN
+    # every pair (i, j > i) of a small group; consecutive pairs of a big one
+    n_after = np.where(big, (pos % 2 == 0) & (pos + 1 < size[group]), size[group] - pos - 1)
+    n_after = n_after.astype(np.int64)
+    i = np.repeat(np.arange(hn.size), n_after)
+    j = i + 1 + (np.arange(i.size) - np.repeat(np.cumsum(n_after) - n_after, n_after))
+    N = face_normals(V, F)
+    hi, hj = hn[i], hn[j]
+    score = 2.0 * (U[hi] == W[hj]) + np.einsum("ij,ij->i", N[hi // 3], N[hj // 3])
+    by = np.lexsort((-score, group[i]))
+    i, j = i[by], j[by]
+    matched = np.zeros(hn.size, dtype=bool)
+    while True:
+        alive = np.flatnonzero(~matched[i] & ~matched[j])
+        if alive.size == 0:
+            break
+        _, best = np.unique(group[i[alive]], return_index=True)
+        a, b = i[alive[best]], j[alive[best]]
+        matched[a] = matched[b] = True
+        twin[hn[a]] = hn[b]
+        twin[hn[b]] = hn[a]
+    twin[hn[~matched]] = BOUNDARY
+    return twin, int(start.size)
+
+
+def _split_fans(V, F, twin, to_input):
+    """One vertex per fan: every vertex whose faces form several fans (across
+    ``twin``) keeps its index for the fan of its smallest corner and gets a
+    new vertex, at the same position, for each other fan.
+
+    Returns the new V, F, to_input (vertex -> input vertex) and the numbers of
+    vertices split and added.
+    """
+    n = V.shape[0]
+    U, W = half_edge_ends(F)
+    bad = np.flatnonzero(non_manifold_vertices(F, n, twin, ends=(U, W)))
+    if bad.size == 0:
+        return V, F, to_input, 0, 0
+    nodes, roots = corner_fans(F, twin, U, W, bad, n)
+    Fr = F.ravel()
+    owner = Fr[nodes]
+    # fans of one vertex in order of their smallest corner: the first keeps the vertex
+    fan_key = owner * np.int64(Fr.size) + roots
+    fans, fan_of = np.unique(fan_key, return_inverse=True)
+    fan_owner = fans // Fr.size
+    first = np.r_[True, fan_owner[1:] != fan_owner[:-1]]
+    new_id = np.where(first, fan_owner, 0)
+    extra = np.flatnonzero(~first)
+    new_id[extra] = n + np.arange(extra.size)
+    F = Fr.copy()
+    F[nodes] = new_id[fan_of.ravel()]
+    from_vertex = np.r_[np.arange(n), fan_owner[extra]]
+    return (V[from_vertex], F.reshape(-1, 3), to_input[from_vertex],
+            int(np.unique(fan_owner[extra]).size), int(extra.size))
+
+
+def _make_manifold(V, F, twin):
+    """Pair the faces of non-manifold edges into sheets and split every
+    vertex into its fans (see :func:`_pair_sheets`, :func:`_split_fans`).
+
+    Pairings are made edge by edge, so along a chain of non-manifold edges
+    they may disagree: the sheets then still meet in one fan at a chain
+    vertex and an edge stays shared by three faces. Such an edge is cut open
+    (its pairs too) and the fans split again, until none is left; a face that
+    still shares a cut edge with two others (a surface touching itself along
+    the edge) is detached (three vertices of its own). Returns V, F, the twin
+    table, the input vertex of every vertex and the counts.
+    """
+    pairing, n_nm = _pair_sheets(V, F, twin)
+    ident = np.arange(V.shape[0], dtype=np.int64)
+    for _ in range(_MAX_RECUTS):
+        V2, F2, to_input, n_split, n_added = _split_fans(V, F, pairing, ident)
+        twin = twin_table(F2, V2.shape[0])
+        left = np.flatnonzero(twin == NON_MANIFOLD)
+        if left.size == 0 or not (pairing[left] >= 0).any():
+            break
+        partner = pairing[left]
+        pairing = pairing.copy()
+        pairing[left] = BOUNDARY
+        pairing[partner[partner >= 0]] = BOUNDARY
+    V, F = V2, F2
+    n_detached = 0
+    if left.size:
+        faces = np.unique(left // 3)
+        n = V.shape[0]
+        corners = (3 * faces[:, None] + np.arange(3)).ravel()
+        Fr = F.ravel().copy()
+        from_vertex = np.r_[np.arange(n), Fr[corners]]
+        Fr[corners] = n + np.arange(corners.size)
+        V, F, to_input = V[from_vertex], Fr.reshape(-1, 3), to_input[from_vertex]
+        n_detached = int(faces.size)
+        twin = twin_table(F, V.shape[0])
+        V, F, to_input, s, a = _split_fans(V, F, twin, to_input)
+        n_split, n_added = n_split + s, n_added + a
+        twin = twin_table(F, V.shape[0])
+    return V, F, twin, to_input, {"n_non_manifold_edges": n_nm, "n_split_vertices": n_split,
+                                  "n_added_vertices": n_added, "n_detached_faces": n_detached}
+
+
+def _orient(F, twin):
+    """Flip faces so that every orientable component is consistent, keeping
+    the orientation most of its faces have.
+
+    The faces' orientations are the components of a double cover: node
+    ``2f`` is face ``f`` as it is, ``2f+1`` flipped; two faces on an edge
+    that agree join (as is, as is) and (flipped, flipped), two that disagree
+    (as is, flipped) and (flipped, as is). A component whose face meets
+    itself flipped is non-orientable (left as it is).
+    """
+    found = {"n_flipped_faces": 0, "n_non_orientable_components": 0}
+    h = np.flatnonzero(twin > np.arange(twin.size))
+    if h.size == 0:
+        return F, twin, found
+    t = twin[h]
+    U, W = half_edge_ends(F)
+    agree = U[h] == W[t]
+    if agree.all():
+        return F, twin, found
+    m = F.shape[0]
+    fh, ft = 2 * (h // 3), 2 * (t // 3)
+    other = np.where(agree, 0, 1)
+    pairs = np.concatenate([np.stack([fh, ft + other], axis=1),
+                            np.stack([fh + 1, ft + 1 - other], axis=1)])
+    labels = connected_labels(2 * m, pairs)
+    as_is, flipped = labels[0::2], labels[1::2]
+    orientable = as_is != flipped
+    comp = np.minimum(as_is, flipped)
+    # faces of each component on the side of its smallest label: the side with most faces stays
+    on_low = as_is == comp
+    n_low = np.bincount(comp, weights=orientable & on_low, minlength=2 * m)
+    n_all = np.bincount(comp, weights=orientable, minlength=2 * m)
+    flip = orientable & (on_low != (n_low[comp] * 2 >= n_all[comp]))
+    if not flip.any() and orientable.all():
+        return F, twin, found
+    found["n_flipped_faces"] = int(np.count_nonzero(flip))
+    found["n_non_orientable_components"] = int(np.unique(comp[~orientable]).size)
+    F = F.copy()
+    F[flip, 1], F[flip, 2] = F[flip, 2], F[flip, 1].copy()
+    # a flipped face's half-edges 1 and 2 swap places (0 stays: corners 1 and 2 swapped)
+    perm = np.arange(twin.size, dtype=np.int64).reshape(-1, 3)
+    perm[flip, 1], perm[flip, 2] = perm[flip, 2], perm[flip, 1].copy()
+    perm = perm.ravel()
+    new_twin = np.empty_like(twin)
+    new_twin[perm] = np.where(twin >= 0, perm[np.maximum(twin, 0)], twin)
+    return F, new_twin, found
+
+
+def _debris(V, F, twin, min_component_area, face_budget, protected):
+    """Faces to keep: all but those of components (joined across manifold
+    edges) whose area is below ``min_component_area`` times the largest's,
+    or below the total over ``face_budget`` (never the largest, nor one with
+    a ``protected`` vertex)."""
+    keep = np.ones(F.shape[0], dtype=bool)
+    found = {"n_debris_components": 0, "n_debris_faces": 0}
+    if (min_component_area <= 0 and not face_budget) or F.shape[0] == 0:
+        return keep, found
+    h = np.flatnonzero(twin > np.arange(twin.size))
+    labels = connected_labels(F.shape[0], np.stack([h // 3, twin[h] // 3], axis=1))
+    lo, hi = bounding_box(V)
+    scale = max(diagonal_length(lo, hi), np.finfo(float).tiny)
+    area = 0.5 * np.linalg.norm(face_normals((V - lo) / scale, F, normalize=False), axis=1)
+    comp_area = np.bincount(labels, weights=area, minlength=F.shape[0])
+    roots = np.flatnonzero(labels == np.arange(F.shape[0]))
+    tiny = comp_area < min_component_area * comp_area.max()
+    if face_budget:
+        tiny |= comp_area < comp_area.sum() / face_budget
+    tiny[np.argmax(comp_area)] = False
+    if protected is not None:
+        tiny[labels[protected[F].any(axis=1)]] = False
+    keep = ~tiny[labels]
+    found["n_debris_components"] = int(np.count_nonzero(tiny[roots]))
+    found["n_debris_faces"] = int(np.count_nonzero(~keep))
+    return keep, found
+
+
+def _keep_twins(twin, keep):
+    """The twin table of ``F[keep]`` when the removed faces are whole
+    components (no kept face has a twin among them)."""
+    new_f = np.cumsum(keep) - 1
+    t = twin.reshape(-1, 3)[keep].ravel()
+    return renumber_twins(t, new_f)
+
+
+def _compact(V, F, to_input, rep):
+    """Drop the vertices no face uses and build the maps back to the input
+    (``rep``: the weld's representative of every input vertex)."""
+    n = V.shape[0]
+    used = np.zeros(n, dtype=bool)
+    used[F.ravel()] = True
+    kept = np.flatnonzero(used)
+    new = np.full(n, -1, dtype=np.int64)
+    new[kept] = np.arange(kept.size)
+    clean_to_input = to_input[kept]
+    input_to_clean = np.full(rep.size, -1, dtype=np.int64)
+    input_to_clean[clean_to_input[::-1]] = np.arange(kept.size - 1, -1, -1)  # first copy wins
+    input_to_clean = input_to_clean[rep]
+    if kept.size == n:
+        return V, F, input_to_clean, clean_to_input
+    return V[kept], new[F], input_to_clean, clean_to_input
