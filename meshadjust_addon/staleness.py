@@ -4,8 +4,9 @@ Two fingerprints are stored with a binding (on the edited original's state)
 and compared with the objects as they are now:
 
 * the **source fingerprint**: vertex and face counts, a CRC-32 of the base
-  mesh's positions and corners, one of every shape key (other than the ones
-  MeshAdjust writes itself, named after a cage) with its value, and one of
+  mesh's positions (its reference key's when it has keys) and corners, one of
+  every other shape key (but the ones MeshAdjust writes itself, named after a
+  cage) with its value, and one of
   every modifier with its settings, so a message can say which changed. It changes when the evaluated mesh the binding
   was made from can have changed: the mesh edited, a shape key's value or a
   modifier's level changed. (A modifier that follows another object, such as
@@ -87,13 +88,15 @@ def source_fingerprint(source):
         mesh.attributes["position"].data.foreach_get("vector", pos)
     if len(corners):
         mesh.attributes[".corner_vert"].data.foreach_get("value", corners)
+    keys = mesh.shape_keys
+    if keys is not None:   # the reference key is the base shape (the mesh follows it)
+        keys.reference_key.data.foreach_get("co", pos)
     c_mesh = _crc(pos, corners)
     c_keys = 0
-    keys = mesh.shape_keys
     if keys is not None:
         own = own_key_names(source)
         for kb in keys.key_blocks:
-            if kb.name in own:
+            if kb.name in own or kb == keys.reference_key:
                 continue
             co = np.empty(3 * len(kb.data), np.float32)
             kb.data.foreach_get("co", co)
