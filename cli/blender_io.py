@@ -28,6 +28,7 @@ BLENDER_IMPORT = {".ply": "PLY", ".stl": "STL", ".gltf": "glTF", ".glb": "glTF"}
 BLENDER_EXPORT = {"ply", "stl", "glb"}
 _LOG_LIMIT = 20_000    #: characters of Blender's log kept per file
 _LOG_PREFIX = re.compile(r"^\s*\d+:\d+\.\d+\s+\S+\s+\|\s*")
+_TIMING = re.compile(r"(import|export) of .* took ")
 
 
 class BlenderIOError(Exception):
@@ -48,11 +49,13 @@ class Capture:
     def __init__(self):
         self.text = ""
 
-    def lines(self, *words):
-        """Log lines containing any of ``words``, without the time stamp and
-        channel Blender's log puts first (``00:00.372  io.ply  | ``)."""
-        return [_LOG_PREFIX.sub("", ln).strip() for ln in self.text.splitlines()
-                if any(w in ln for w in words)]
+    def causes(self, failure):
+        """What the log says besides ``failure`` and timings: its lines
+        without the time stamp and channel Blender's log puts first
+        (``00:00.372  io.ply  | ``)."""
+        lines = (_LOG_PREFIX.sub("", ln).strip() for ln in self.text.splitlines())
+        return [ln for ln in dict.fromkeys(lines)
+                if ln and ln not in failure and not _TIMING.search(ln)]
 
 
 @contextlib.contextmanager
@@ -226,7 +229,7 @@ def import_mesh(path, log=None):
         else:
             failure = None
     if failure is not None:
-        causes = [c for c in cap.lines("ERROR", "Error", "error") if c not in failure]
+        causes = cap.causes(failure)
         cause = f' (Blender\'s log: "{"; ".join(causes)[:400]}")' if causes else ""
         raise BlenderIOError(f"Blender's importer failed on {name}: {failure}{cause}")
     meshes = [o for o in bpy.data.objects if o not in before and o.type == 'MESH'
@@ -306,7 +309,7 @@ def write_with_blender(path, V, F, log):
             else:
                 failure = None
         if failure is not None:
-            causes = cap.lines("ERROR", "Error")
+            causes = cap.causes(failure)
             raise BlenderIOError(f"Blender's exporter failed on {os.path.basename(path)}: "
                                  f"{failure}" + (f" ({'; '.join(causes)[:400]})" if causes else ""))
     finally:
