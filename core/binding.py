@@ -441,26 +441,37 @@ def _influenced_dense(binding, ids):
     they read: ``(rows, needed)``, ``needed`` an (n_fine,) bool mask.
 
     The chain, all on index sets of the fine mesh (O(fine support + result),
-    never O(dense mesh)): fine vertices in the operator's support of ``ids``
-    (positions change) -> every corner of a fine face touching them (normals
+    never O(dense mesh)): fine vertices the composed operator reaches from
+    ``ids`` with a nonzero weight (positions change) -> every corner of a fine face touching them (normals
     change) -> the fine faces with such a corner (their bound dense vertices
     move) -> the corners of those faces (``needed``). The fine face -> dense
     vertices and fine vertex -> fine faces indices are built on first use
-    and cached in the binding.
+    and cached in the binding, with the last answer (so
+    :meth:`Binding.influenced` followed by the deform of the same ids
+    searches once).
     """
     op = binding._operator
     idx = _incremental_index(binding)
+    key = ids.tobytes()
+    last = idx.get("last")
+    if last is not None and last[0] == key:    # Binding.influenced, then deform, same ids
+        return last[1]
     Ff = op.F_fine
     m_fine = Ff.shape[0]
-    pos_changed = np.flatnonzero(op.support(ids))
-    touched = _faces_around(idx, pos_changed, m_fine)
+    cols = idx["cols"]
+    k, _ = ragged_ranges(cols.indptr[ids], cols.indptr[ids + 1] - cols.indptr[ids])
+    pos_changed = np.zeros(op.n_fine, dtype=bool)
+    pos_changed[cols.cols[k]] = True
+    touched = _faces_around(idx, np.flatnonzero(pos_changed), m_fine)
     normal_changed = np.zeros(op.n_fine, dtype=bool)
     normal_changed[Ff[touched].ravel()] = True
     faces = _faces_around(idx, np.flatnonzero(normal_changed), m_fine)
     needed = np.zeros(op.n_fine, dtype=bool)
     needed[Ff[faces].ravel()] = True
     k, _ = ragged_ranges(idx["dense_start"][faces], idx["dense_count"][faces])
-    return idx["dense_by_face"][k], needed
+    result = (idx["dense_by_face"][k], needed)
+    idx["last"] = (key, result)
+    return result
 
 
 def _incremental_index(binding):
@@ -478,16 +489,22 @@ def _incremental_index(binding):
             "dense_count": d_count, "dense_start": np.cumsum(d_count) - d_count,
             "faces_by_vertex": np.argsort(flat, kind="stable") // 3,
             "vertex_count": v_count, "vertex_start": np.cumsum(v_count) - v_count,
-            "rows": _composed_rows(op),
         }
+        c["incremental"]["rows"], c["incremental"]["cols"] = _composed_rows(op)
     return c["incremental"]
 
 
 def _composed_rows(op):
+    """The composed operator by fine vertex (its rows) and by coarse vertex
+    (the fine vertices each one reaches with a nonzero weight, weights
+    unused), both as :class:`_Rows`."""
     r, cols, w = op.triplets()
     indptr = np.zeros(op.n_fine + 1, dtype=np.int64)
     np.cumsum(np.bincount(r, minlength=op.n_fine), out=indptr[1:])
-    return _Rows(indptr, cols, w)
+    order = np.argsort(cols, kind="stable")
+    c_indptr = np.zeros(op.n_coarse + 1, dtype=np.int64)
+    np.cumsum(np.bincount(cols, minlength=op.n_coarse), out=c_indptr[1:])
+    return _Rows(indptr, cols, w), _Rows(c_indptr, r[order], w[order])
 
 
 def _faces_around(idx, vertices, m_fine):
@@ -663,18 +680,24 @@ def _fine_geometry_at(binding, Vc, needed):
     rows = idx["rows"]
     k, owner = ragged_ranges(rows.indptr[verts], rows.indptr[verts + 1] - rows.indptr[verts])
     w, cols = rows.weights[k], rows.cols[k]
-    Vf = np.zeros((op.n_fine, 3))
+    local = np.empty(op.n_fine, dtype=np.int64)
+    local[verts] = np.arange(verts.shape[0])
+    V_at = np.empty((verts.shape[0], 3))
     for d in range(3):
-        Vf[verts, d] = np.bincount(owner, weights=w * Vc[cols, d], minlength=verts.shape[0])
-    Nf = vertex_normals(Vf, Fs)
-    return np.ascontiguousarray(Vf.T), np.ascontiguousarray(Nf.T)
+        V_at[:, d] = np.bincount(owner, weights=w * Vc[cols, d], minlength=verts.shape[0])
+    N_at = vertex_normals(V_at, local[Fs])     # same faces, same order: same sums
+    VfT = np.zeros((3, op.n_fine))
+    NfT = np.zeros((3, op.n_fine))
+    VfT[:, verts] = V_at.T
+    NfT[:, verts] = N_at.T
+    return VfT, NfT
 
 
 class _Rows(NamedTuple):
-    """The composed coarse-to-fine operator as CSR rows."""
+    """The composed coarse-to-fine operator as CSR rows (or its transpose)."""
 
-    indptr: np.ndarray  #: (n_fine + 1,) int64
-    cols: np.ndarray    #: (nnz,) int64 coarse vertices
+    indptr: np.ndarray  #: (n_rows + 1,) int64
+    cols: np.ndarray    #: (nnz,) int64
     weights: np.ndarray  #: (nnz,) float64
 
 
