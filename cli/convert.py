@@ -145,29 +145,19 @@ def _read(path, log):
     return V, F, n_poly, [], warnings
 
 
-def _target(opts, m):
-    if opts.faces is not None:
-        return opts.faces
-    if opts.ratio is not None:
-        return int(round(opts.ratio * m))
-    return None
-
-
-def _stop_message(res, faces_in):
-    """One sentence on how the simplify ended."""
-    return (f"{faces_in:,} -> {res.F.shape[0]:,} faces, stopped because: "
-            f"{res.stopped_because.replace('_', ' ')}")
-
-
-def _check_target(r, res, faces_in):
-    """Warnings for a missed target or an unchanged cage."""
+def _check_target(r, res):
+    """Warnings for an unchanged cage or a target missed by more than
+    :data:`TARGET_SLACK`, with the simplify's own sentence as the reason."""
     out, target = r["faces_out"], r["target_faces"]
-    if out >= faces_in and (target is None or target < faces_in):
-        r["warnings"].append(f"the cage came back unchanged ({out:,} faces; stopped because: "
-                             f"{res.stopped_because.replace('_', ' ')})")
+    c = res.cleaning
+    cleaned = res.n_input_faces - (c.n_degenerate_faces + c.n_duplicate_faces
+                                   + c.n_double_sided_faces + c.n_debris_faces)
+    if out >= cleaned and res.stopped_because != "target":
+        r["warnings"].append(f"the cage came back unchanged, no collapse possible "
+                             f"({res.stopped_because.replace('_', ' ')}): {res.message}")
     elif target is not None and out > (1 + TARGET_SLACK) * target:
         r["warnings"].append(f"target {target:,} missed by {100 * (out / max(target, 1) - 1):.0f}%"
-                             f": {r['message']}")
+                             f": {res.message}")
 
 
 def convert(task, opts):
@@ -191,7 +181,6 @@ def convert(task, opts):
             r["notes"].append(f"triangulated {n_poly:,} polygons into {F.shape[0]:,} triangles")
         if F.shape[0] == 0:
             raise StepFailed("read", "no faces in the file")
-        r["target_faces"] = _target(opts, F.shape[0])
         diag = core.bbox_diagonal(V)
         max_error = None
         if opts.max_error_pct is not None:
@@ -201,9 +190,13 @@ def convert(task, opts):
                        ratio=opts.ratio, max_error=max_error,
                        feature_angle_deg=opts.feature_angle_deg)
         r["faces_out"] = int(res.F.shape[0])
+        r["target_faces"] = res.target
         r["stopped_because"] = res.stopped_because
-        r["message"] = _stop_message(res, F.shape[0])
-        _check_target(r, res, F.shape[0])
+        r["message"] = res.message
+        r["cleaning"] = res.cleaning.to_dict()
+        if res.cleaning:
+            r["notes"].append(f"cleaning: {res.cleaning.summary()}")
+        _check_target(r, res)
         dist = run.step("measure", core.surface_distance, V, F, res.V, res.F,
                         samples=MEASURE_SAMPLES)
         r["deviation_pct"] = 100.0 * dist.hausdorff / max(diag, 1e-300)

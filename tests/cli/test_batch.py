@@ -128,16 +128,17 @@ def test_one_row_per_file_whatever_the_error_text(tmp_path):
 def test_missed_target_and_unchanged_cage_warn_and_strict_fails(tmp_path):
     core.write_obj(tmp_path / "octs.obj", *scattered(octahedron, 10))      # 80 faces, floor 40
     core.write_obj(tmp_path / "tets.obj", *scattered(tetrahedron, 10))     # 40 faces, floor 40
-    args = ["octs.obj", "tets.obj", "--faces", "10", "--out", "out", "--report", "r.json"]
+    args = ["octs.obj", "tets.obj", "--faces", "20", "--out", "out", "--report", "r.json"]
     proc = run_batch(args, tmp_path)
     assert proc.returncode == 0, proc.stdout + proc.stderr
     octs, tets = rows(proc.stdout)
-    assert "| 80 | 40 | 10 |" in octs and "| warn: target 10 missed by 300%" in octs
-    assert "| warn: the cage came back unchanged (40 faces; stopped because:" in tets
+    assert "| 80 | 40 | 20 |" in octs and "| warn: target 20 missed by 100%: stopped at 40" in octs
+    assert "| warn: the cage came back unchanged, no collapse possible (topology floor): " in tets
     assert "2 converted (2 with warnings), 0 failed" in proc.stdout
     rep = json.loads((tmp_path / "r.json").read_text())
     assert [f["status"] for f in rep["files"]] == ["warn", "warn"]
-    assert rep["files"][0]["warnings"][0].startswith("target 10 missed by 300%: ")
+    assert rep["files"][0]["warnings"][0] == "target 20 missed by 100%: " + rep["files"][0]["message"]
+    assert rep["files"][0]["stopped_because"] == "topology_floor"
     assert (tmp_path / "out" / "octs_cage.obj").exists()       # a warning still writes
     proc = run_batch(args + ["--strict"], tmp_path)
     assert proc.returncode == 1
