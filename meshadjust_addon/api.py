@@ -142,6 +142,7 @@ class Report:
     seconds: float = 0.0
     level: str = 'INFO'
     warnings: tuple = ()
+    cleaning: dict = field(default_factory=dict)   #: ``core.CleanReport.to_dict()`` of a simplify
 
 
 def _diag(V):
@@ -286,40 +287,31 @@ def compute_simplify(job, *, progress=None):
 
 
 def _cleaning_notes(res):
-    """What the core's cleaning did and why it stopped where it did."""
-    notes = []
+    """What the core's cleaning of the input did (``core.CleanReport``)."""
     cleaning = getattr(res, "cleaning", None)
-    if cleaning is not None:
-        summary = cleaning.summary()
-        if summary:
-            notes.append(f"cleaned the input: {summary}")
-    else:
-        dropped = [(getattr(res, k, 0), what) for k, what in (
-            ("n_degenerate_faces", "degenerate faces"), ("n_duplicate_faces", "duplicate faces"),
-            ("n_unreferenced_vertices", "unused vertices"))]
-        dropped = [f"{n:,} {what}" for n, what in dropped if n]
-        if dropped:
-            notes.append("cleaned the input: removed " + ", ".join(dropped))
-    return notes
+    summary = cleaning.summary() if cleaning is not None else ""
+    return [f"cleaned the input: {summary}"] if summary else []
 
 
 def _target_note(job):
-    """``(sentence, missed)``: how the cage's size compares to the target."""
+    """``(sentence, missed)``: why the cage stopped short of its target, when
+    it did (the core's own sentence, e.g. "stopped at 216 faces of 205 asked:
+    the topology floor (23 border loops, 1 component kept)"), and whether it
+    missed the target by more than ``TARGET_TOLERANCE``."""
     res, p = job.result, job.params
     m = res.F.shape[0]
-    message = getattr(res, "message", "") or ""
-    target = p.target_faces
-    if p.ratio is not None:
-        target = max(target or 0, int(round(p.ratio * job.F.shape[0])))
+    target = getattr(res, "target", None)
+    if target is None and (p.target_faces is not None or p.ratio is not None):
+        target = p.target_faces
+        if p.ratio is not None:
+            target = max(target or 0, int(round(p.ratio * job.F.shape[0])))
     missed = target is not None and m > target * (1.0 + TARGET_TOLERANCE)
-    if res.stopped_because == "topology_floor" or (missed and message):
-        return (message or f"stopped at {m:,} faces: the topology kept allows no fewer"), missed
-    if missed:
-        why = {"no_valid_collapse": "no collapse left that keeps the surface valid",
-               "max_error": "the max error was reached first"}.get(res.stopped_because,
-                                                                  res.stopped_because)
-        return f"stopped at {m:,} faces for a target of {target:,}: {why}", True
-    return "", False
+    if res.stopped_because not in ("topology_floor", "no_valid_collapse") and not missed:
+        return "", False
+    message = getattr(res, "message", "")
+    head = message.split("; ")[0] if message else (
+        f"stopped at {m:,} faces" + (f" of {target:,} asked" if target is not None else ""))
+    return head, missed
 
 
 def commit_simplify(source, job):
@@ -378,7 +370,8 @@ def commit_simplify(source, job):
                            p.scheme, binding=job.binding, V_now=job.V_cage, V_edited=job.V,
                            source_fingerprint=job.source_fingerprint)
             commit_bind(cage, bjob)
-            msg += f"; bound '{source.name}' (levels {job.levels}, {p.scheme})"
+            auto = ", automatic: closest to the source's faces" if not p.levels else ""
+            msg += f"; bound '{source.name}' (levels {job.levels}{auto}, {p.scheme})"
         elif job.bind_error:
             warnings.append(f"{job.bind_error}; the cage is kept, not bound")
         if notes:
@@ -388,8 +381,9 @@ def commit_simplify(source, job):
         if p.hide_source:
             source.hide_set(True)
         cs.last_report = msg
+    cleaning = res.cleaning.to_dict() if getattr(res, "cleaning", None) is not None else {}
     return cage, Report(msg, faces_in, res.F.shape[0], dev, job.seconds,
-                        'WARNING' if warnings else 'INFO', tuple(warnings))
+                        'WARNING' if warnings else 'INFO', tuple(warnings), cleaning)
 
 
 def simplify_object(source, *, progress=None, **kwargs):

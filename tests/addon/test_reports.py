@@ -1,0 +1,133 @@
+"""What the reports say: the core's cleaning, a missed target or the topology
+floor (a warning beyond 5%), the automatic levels and the refined count; only
+the core's errors become reports, anything else surfaces as a bug; the
+background steps (Simplify, Fit, Bind) commit only after their worker."""
+
+import sys
+import threading
+from types import SimpleNamespace
+
+import bpy
+import numpy as np
+import pytest
+
+from tests.addon.conftest import MODULE, make_object
+from tests.addon.test_nothing_lost import assert_unchanged, mod, scene_snapshot
+from tests.addon.test_operators import bumpy_sphere, simplify
+from tests.mesh_factory import icosphere, torus
+
+
+def test_simplify_report_says_what_the_cleaning_did(scene):
+    V, F = icosphere(3)
+    soup = make_object("soup", V[F].reshape(-1, 3), np.arange(3 * len(F)).reshape(-1, 3))
+    cage, report = mod("api").simplify_object(soup, target_faces=100, fit=False, bind=False)
+    assert "cleaned the input: welded" in report.message
+    assert report.cleaning["n_welded_vertices"] > 0 and report.level == 'INFO'
+    assert len(cage.data.polygons) == 100
+
+
+def test_a_missed_target_is_a_warning_with_the_cores_reason(scene):
+    V, F = torus()
+    obj = make_object("torus", V, F)
+    cage, report = mod("api").simplify_object(obj, target_faces=4, fit=False, bind=False)
+    assert report.level == 'WARNING' and len(cage.data.polygons) > 4
+    assert f"stopped at {len(cage.data.polygons)} faces of 4 asked" in report.message
+    assert report.warnings and "WARNING" in cage.meshadjust.last_report
+
+
+def _job(stopped, m, target, message):
+    res = SimpleNamespace(F=np.zeros((m, 3)), stopped_because=stopped, target=target,
+                          message=message)
+    return SimpleNamespace(result=res, params=SimpleNamespace(target_faces=target, ratio=None),
+                           F=np.zeros((2053, 3)))
+
+
+def test_topology_floor_is_said_and_a_warning_only_beyond_five_percent(addon):
+    api = mod("api")
+    msg = ("stopped at 216 faces of 205 asked: the topology floor (23 border loops, 1 component "
+           "kept); welded 3 vertices")
+    note, missed = api._target_note(_job("topology_floor", 216, 205, msg))
+    assert note == ("stopped at 216 faces of 205 asked: the topology floor (23 border loops, "
+                    "1 component kept)") and missed
+    note, missed = api._target_note(_job("topology_floor", 216, 210, msg))
+    assert note.startswith("stopped at 216") and not missed          # 2.9% over: info
+    assert api._target_note(_job("target", 205, 205, "2,053 -> 205 faces")) == ("", False)
+
+
+def test_automatic_levels_and_the_refined_count_in_the_report(scene):
+    V, F = bumpy_sphere(4)                          # 5,120 faces
+    dense = make_object("dense", V, F)
+    assert bpy.ops.meshadjust.simplify(target_mode='FACES', target_faces=300) == {'FINISHED'}
+    cage = dense.meshadjust.cage
+    assert cage.meshadjust.levels == 2             # 300 * 16 = 4,800: closest to 5,120
+    assert "levels 2, automatic" in cage.meshadjust.last_report
+    assert bpy.ops.meshadjust.refine(output='REFINED') == {'FINISHED'}
+    assert "refined: 4,800 faces, butterfly x2, about the source's 5,120" in \
+        cage.meshadjust.last_report
+
+
+def test_a_bug_is_not_reported_as_the_users_mistake(scene, monkeypatch):
+    V, F = bumpy_sphere(3)
+    dense = make_object("dense", V, F)
+    assert simplify(200) == {'FINISHED'}
+    core = sys.modules[MODULE + ".core"]
+
+    def bug(*args, **kwargs):
+        return 1 / 0
+
+    monkeypatch.setattr(core, "bind", bug)
+    before = scene_snapshot()
+    with pytest.raises(RuntimeError, match="ZeroDivisionError"):   # a traceback, not a report
+        bpy.ops.meshadjust.bind(levels=1)
+    assert_unchanged(before)
+    bpy.context.view_layer.objects.active = dense
+    dense.hide_set(False)
+    with pytest.raises(RuntimeError, match="ZeroDivisionError"):
+        simplify(150)
+
+
+class _WM:
+    def __init__(self):
+        self.calls = []
+
+    def event_timer_remove(self, timer):
+        self.calls.append("timer_remove")
+
+    def progress_update(self, value):
+        self.calls.append(("progress", value))
+
+    def progress_end(self):
+        self.calls.append("progress_end")
+
+
+def _drive_modal(job=None, error=None, cancel=False):
+    """Run ``_Background.modal`` on a fake operator (modal never runs headless)."""
+    ops = mod("operators")
+    reports, finished = [], []
+    worker = threading.Thread(target=lambda: None)
+    worker.start()
+    worker.join()
+    fake = SimpleNamespace(_thread=worker, _timer=object(), _job=job, _error=error,
+                           _cancel=cancel, _fraction=0.5, bl_label="Bind",
+                           report=lambda level, msg: reports.append((level, msg)),
+                           finish=lambda context: finished.append(True) or {'FINISHED'})
+    wm = _WM()
+    context = SimpleNamespace(window_manager=wm, scene=bpy.context.scene, screen=None)
+    result = ops._Background.modal(fake, context, SimpleNamespace(type='TIMER'))
+    return result, reports, finished, wm
+
+
+def test_the_background_path_commits_only_a_finished_worker(scene):
+    core = sys.modules[MODULE + ".core"]
+    result, reports, finished, wm = _drive_modal(job=SimpleNamespace(cancelled=False))
+    assert result == {'FINISHED'} and finished and "progress_end" in wm.calls
+    assert bpy.context.scene.meshadjust.running is False
+    result, reports, finished, _ = _drive_modal(job=SimpleNamespace(cancelled=False), cancel=True)
+    assert result == {'CANCELLED'} and not finished and reports[0][0] == {'WARNING'}
+    result, reports, finished, _ = _drive_modal(error=core.MeshAdjustError("bad cage"))
+    assert result == {'CANCELLED'} and reports == [({'ERROR'}, "bad cage")] and not finished
+    with pytest.raises(ZeroDivisionError):
+        _drive_modal(error=ZeroDivisionError("a bug"))
+    ops = mod("operators")
+    for cls in (ops.MESHADJUST_OT_simplify, ops.MESHADJUST_OT_fit_cage, ops.MESHADJUST_OT_bind):
+        assert issubclass(cls, ops._Background) and hasattr(cls, "invoke")
