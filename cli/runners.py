@@ -157,8 +157,13 @@ def run_dask(tasks, payload, entry, address, jobs, on_done):
     so threads are enough here)."""
     import cloudpickle
     from distributed import Client, Event, LocalCluster, as_completed
-    # the task function travels by value: workers need not import this module
+    # The task travels by value, so the scheduler and the workers need not
+    # import this module (only run the tool): Dask pickles an importable
+    # function by reference and uses cloudpickle only for what plain pickle
+    # refuses, such as this lambda, whose globals cloudpickle then sends by
+    # value because the module is registered.
     cloudpickle.register_pickle_by_value(sys.modules[__name__])
+    task_fn = lambda *a: _dask_task(*a)  # noqa: E731
     cluster = None
     if address == "local":
         cluster = LocalCluster(n_workers=jobs, threads_per_worker=1, processes=False,
@@ -168,7 +173,7 @@ def run_dask(tasks, payload, entry, address, jobs, on_done):
         client = Client(address, timeout="20s")
     cancel_event = f"meshadjust-cancel-{uuid.uuid4().hex}"
     try:
-        futures = [client.submit(_dask_task, entry, payload(task), cancel_event, pure=False,
+        futures = [client.submit(task_fn, entry, payload(task), cancel_event, pure=False,
                                  key=f"meshadjust-{i}-{uuid.uuid4().hex[:8]}")
                    for i, task in enumerate(tasks)]
         index = {f.key: i for i, f in enumerate(futures)}

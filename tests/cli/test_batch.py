@@ -280,3 +280,40 @@ def test_real_meshes_through_smf_with_fit_and_refine(tmp_path):
     assert beetle["faces_in"] == 2053 and os.path.exists(tmp_path / "out" / "beetle_cage.obj")
     assert beetle["status"] in ("ok", "warn") or beetle["failed_step"] in ("fit", "bind", "refine")
     assert proc.returncode == (1 if beetle["status"] == "failed" else 0), proc.stdout + proc.stderr
+
+
+def test_dask_scheduler_and_worker_processes(tmp_path):
+    """--dask ADDRESS with a scheduler and a worker in processes of their own
+    that cannot import meshadjust: the task travels by value and runs the
+    checkout's script through the shared path."""
+    pytest.importorskip("distributed", reason="dask.distributed is not installed")
+    import socket
+    from distributed import Client
+    dask = os.path.join(os.path.dirname(sys.executable), "dask")
+    if not os.path.exists(dask):
+        pytest.skip("the dask command is not installed beside this Python")
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    address = f"tcp://127.0.0.1:{port}"
+    env = dict(os.environ, PYTHONPATH="")          # the cluster sees no checkout on its path
+    procs = [subprocess.Popen([dask, "scheduler", "--host", "127.0.0.1", "--port", str(port),
+                               "--no-dashboard"], cwd=tmp_path, env=env,
+                              stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)]
+    try:
+        procs.append(subprocess.Popen([dask, "worker", address, "--no-nanny", "--nthreads",
+                                       "2", "--no-dashboard"], cwd=tmp_path, env=env,
+                                      stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL))
+        with Client(address, timeout="30s") as client:
+            client.wait_for_workers(1, timeout=60)
+        core.write_obj(tmp_path / "a.obj", *bumpy_sphere(3))
+        core.write_smf(tmp_path / "b.smf", *bumpy_sphere(3))
+        proc = run_batch(["a.obj", "b.smf", "--faces", "100", "--dask", address, "--out", "out"],
+                         tmp_path)
+        assert proc.returncode == 0, proc.stdout + proc.stderr
+        assert "2 converted, 0 failed" in proc.stdout
+        assert sorted(os.listdir(tmp_path / "out")) == ["a_cage.obj", "b_cage.smf"]
+    finally:
+        for p in reversed(procs):
+            p.terminate()
+            p.wait(timeout=30)
