@@ -101,3 +101,25 @@ def test_the_console_script_converts_obj_and_smf_without_blender(bare_venv, tmp_
     proc = subprocess.run([exe, "ball.obj", "--faces", "100", "--format", "ply", "--out", "o2"],
                           capture_output=True, text=True, cwd=tmp_path, timeout=300)
     assert proc.returncode == 2 and "--format ply needs Blender (the bpy module" in proc.stderr
+
+
+def test_the_dask_extra_runs_a_batch_on_a_local_cluster(bare_venv, tmp_path):
+    """`pip install <checkout>[dask]`, then --dask local: the tasks' worker
+    processes run `python -m meshadjust.cli.batch` from the installed package."""
+    src = os.path.join(os.path.dirname(bare_venv), "meshadjust-src")
+    proc = subprocess.run([_venv_bin(bare_venv, "python"), "-m", "pip", "install", "--quiet",
+                           f"{src}[dask]"], capture_output=True, text=True, timeout=900,
+                          env=dict(os.environ, PIP_DISABLE_PIP_VERSION_CHECK="1"))
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    sys.path.insert(0, ROOT)
+    import core
+    from tests.mesh_factory import icosphere
+    V, F = icosphere(3)
+    core.write_smf(tmp_path / "ball.smf", V, F)
+    (tmp_path / "bad.obj").write_text("v 0 0 0\nf 1 2 3\n")
+    proc = subprocess.run([_venv_bin(bare_venv, "meshadjust-batch"), ".", "--faces", "100",
+                           "--dask", "local", "--jobs", "2", "--out", "out"],
+                          capture_output=True, text=True, cwd=tmp_path, timeout=300)
+    assert proc.returncode == 1, proc.stdout + proc.stderr
+    assert "1 converted, 1 failed" in proc.stdout and "refers to a missing vertex" in proc.stdout
+    assert os.listdir(tmp_path / "out") == ["ball_cage.smf"]
