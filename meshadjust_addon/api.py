@@ -341,8 +341,6 @@ def commit_simplify(source, job):
         cs.source = source
         cs.levels = job.levels
         cs.scheme = p.scheme
-        source.meshadjust.role = 'SOURCE'
-        source.meshadjust.cage = cage
         faces_in = job.F.shape[0]
         dev = float("nan")
         msg = f"{faces_in:,} -> {res.F.shape[0]:,} faces"
@@ -378,6 +376,9 @@ def commit_simplify(source, job):
             msg += "; " + "; ".join(notes)
         if warnings:
             msg += "; WARNING: " + "; ".join(warnings)
+        # the source's own state last: a failure above leaves it as it was
+        source.meshadjust.role = 'SOURCE'
+        source.meshadjust.cage = cage
         if p.hide_source:
             source.hide_set(True)
         cs.last_report = msg

@@ -98,6 +98,32 @@ def report_level(reports):
     return 'WARNING' if any(r.level == 'WARNING' for r in reports) else 'INFO'
 
 
+def run_each(op, items, step):
+    """Run ``step(item) -> api.Report`` on every item (objects or cages).
+
+    An item that fails with the core's error is reported and the others
+    still run: a single item that fails is an ERROR and ``{'CANCELLED'}``
+    (nothing was changed), several of which some succeeded a WARNING naming
+    the failed ones and ``{'FINISHED'}`` (what was done is kept, and undo can
+    take it back)."""
+    reports, failed = [], []
+    for item in items:
+        try:
+            reports.append((item.name, step(item)))
+        except USER_ERRORS as exc:
+            failed.append(f"{item.name}: {exc}")
+    text = " | ".join(f"{name}: {r.message}" if len(items) > 1 else r.message
+                      for name, r in reports)
+    if failed and not reports:
+        op.report({'ERROR'}, " | ".join(failed))
+        return {'CANCELLED'}
+    if failed:
+        op.report({'WARNING'}, f"failed: {' | '.join(failed)} (done: {text})")
+        return {'FINISHED'}
+    op.report({report_level([r for _, r in reports])}, text)
+    return {'FINISHED'}
+
+
 class _Background:
     """Mixin for long operators: the pure-NumPy compute half runs in a worker
     thread while a modal timer shows progress (``wm.progress_*`` and the
@@ -205,22 +231,20 @@ class MESHADJUST_OT_simplify(_Background, SimplifyProps, bpy.types.Operator):
         return objs
 
     def execute(self, context):
-        reports, cage = [], None
-        for obj in self._targets(context):
-            try:
-                cage, report = api.simplify_object(obj, **self.params().keywords())
-            except USER_ERRORS as exc:
-                self.report({'ERROR'}, f"{obj.name}: {exc}")
-                return {'CANCELLED'}
-            reports.append((obj.name, report))
-        for obj in context.selected_objects:
-            obj.select_set(False)
-        if cage is not None:
-            cage.select_set(True)
-            context.view_layer.objects.active = cage
-        self.report({report_level([r for _, r in reports])},
-                    " | ".join(f"{name}: {r.message}" for name, r in reports))
-        return {'FINISHED'}
+        cages = []
+
+        def step(obj):
+            cage, report = api.simplify_object(obj, **self.params().keywords())
+            cages.append(cage)
+            return report
+
+        result = run_each(self, self._targets(context), step)
+        if cages:
+            for obj in context.selected_objects:
+                obj.select_set(False)
+            cages[-1].select_set(True)
+            context.view_layer.objects.active = cages[-1]
+        return result
 
     # --- interactive path: compute in a worker thread, Esc cancels
     def invoke(self, context, event):
@@ -285,22 +309,13 @@ class _CageJobStep(_Background, _CageStep):
     report says which."""
 
     def execute(self, context):
-        messages = []
-        for cage in selected_cages(context):
-            try:
-                self._job = self._compute(self._prepare(cage))
-                if self._job.cancelled:
-                    self.report({'WARNING'}, f"{self.bl_label} cancelled: '{cage.name}' was not "
-                                             "changed" + (f" ({' | '.join(messages)})"
-                                                          if messages else ""))
-                    return {'CANCELLED'}
-                messages.append(self._commit())
-            except USER_ERRORS as exc:
-                done = f" (done before it: {' | '.join(messages)})" if messages else ""
-                self.report({'ERROR'}, f"{cage.name}: {exc}{done}")
-                return {'CANCELLED'}
-        self.report({'INFO'}, " | ".join(messages))
-        return {'FINISHED'}
+        def step(cage):
+            self._job = self._compute(self._prepare(cage))
+            if self._job.cancelled:
+                raise core.MeshAdjustError(f"{self.bl_label} cancelled: nothing was changed")
+            return api.Report(self._commit())
+
+        return run_each(self, selected_cages(context), step)
 
     def invoke(self, context, event):
         cages = selected_cages(context)
@@ -388,18 +403,9 @@ class MESHADJUST_OT_refine(RefineProps, _CageStep, bpy.types.Operator):
     _needs_binding = True
 
     def execute(self, context):
-        reports = []
-        for cage in selected_cages(context):
-            if cage.meshadjust.edited is None:
-                continue
-            try:
-                reports.append(api.refine_object(cage, output=self.output,
-                                                 levels=self.levels or None, scheme=self.scheme))
-            except USER_ERRORS as exc:
-                self.report({'ERROR'}, f"{cage.name}: {exc}")
-                return {'CANCELLED'}
-        self.report({report_level(reports)}, " | ".join(r.message for r in reports))
-        return {'FINISHED'}
+        cages = [c for c in selected_cages(context) if c.meshadjust.edited is not None]
+        return run_each(self, cages, lambda cage: api.refine_object(
+            cage, output=self.output, levels=self.levels or None, scheme=self.scheme))
 
 
 class MESHADJUST_OT_subdivide(SubdivideProps, bpy.types.Operator):
@@ -430,17 +436,8 @@ class MESHADJUST_OT_subdivide(SubdivideProps, bpy.types.Operator):
         if empty:
             self.report({'ERROR'}, f"{empty[0]}: the mesh has no faces")
             return {'CANCELLED'}
-        messages = []
-        for obj in objs:
-            try:
-                _, report = api.subdivide_object(obj, levels=self.levels, scheme=self.scheme,
-                                                 in_place=self.in_place)
-            except USER_ERRORS as exc:
-                self.report({'ERROR'}, f"{obj.name}: {exc}")
-                return {'CANCELLED'}
-            messages.append(f"{obj.name}: {report.message}")
-        self.report({'INFO'}, " | ".join(messages))
-        return {'FINISHED'}
+        return run_each(self, objs, lambda obj: api.subdivide_object(
+            obj, levels=self.levels, scheme=self.scheme, in_place=self.in_place)[1])
 
 
 class MESHADJUST_OT_edit_cage(_CageStep, bpy.types.Operator):

@@ -264,3 +264,30 @@ def test_no_orphans_after_a_whole_session(bound):
     names = sorted(m.name for m in bpy.data.meshes)
     assert names == sorted(["dense", "dense_cage", "dense_edited", "dense_edited.detail",
                             "dense_refined"])
+
+
+def test_a_simplify_whose_commit_fails_leaves_the_scene_and_the_source_as_they_were(
+        scene, monkeypatch):
+    V, F = bumpy_sphere(3)
+    dense = make_object("dense", V, F)
+    before = scene_snapshot()
+    monkeypatch.setattr(mod("api"), "commit_bind", _boom)
+    with pytest.raises(RuntimeError, match="boom"):
+        simplify(200)
+    assert_unchanged(before)
+    assert (dense.meshadjust.role, dense.meshadjust.cage) == ('NONE', None)
+
+
+def test_several_objects_one_fails_the_others_are_kept_and_named(scene):
+    objs = []
+    for k in range(2):
+        V, F = bumpy_sphere(3)
+        objs.append(make_object(f"dense{k}", V + [3.0 * k, 0, 0], F))
+    vg = objs[0].vertex_groups.new(name="w")
+    vg.add(list(range(10)), 1.0, 'REPLACE')
+    for o in objs:
+        o.select_set(True)
+    bpy.context.view_layer.objects.active = objs[0]
+    assert bpy.ops.meshadjust.simplify(target_mode='FACES', target_faces=200, weight_group="w",
+                                       fit=False, bind=False) == {'FINISHED'}
+    assert objs[0].meshadjust.cage is not None and objs[1].meshadjust.cage is None

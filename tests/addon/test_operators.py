@@ -338,7 +338,7 @@ def test_refine_with_other_levels_and_scheme_keeps_the_edit(dense):
     assert np.allclose(dz, 0.2, atol=1e-4)   # re-bound from the rest shape: the edit survives
 
 
-@pytest.mark.parametrize("stop_at", [0.3, 0.75, 0.85])   # in simplify, measuring, fitting
+@pytest.mark.parametrize("stop_at", [0.3, 0.75, 0.85, 0.95])   # simplify, measure, fit, bind
 def test_cancelled_simplify_leaves_the_scene_unchanged(dense, stop_at):
     api = sys.modules[MODULE + ".meshadjust_addon.api"]
     objects = set(bpy.data.objects)
