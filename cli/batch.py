@@ -301,6 +301,11 @@ def main(argv=None, *, entry=None, prog=PROG):
         return 2
     opts = options(args)
     tasks = plan(files, opts, os.path.abspath(args.out))
+    blocked = [p for t in tasks for p in (t["cage"], t["refined"]) if p and os.path.isdir(p)]
+    if blocked:
+        print(f"{prog}: {len(blocked)} output path(s) are folders, e.g. {blocked[0]}",
+              file=sys.stderr)
+        return 2
     results = [None] * len(tasks)
     todo = []
     for i, task in enumerate(tasks):

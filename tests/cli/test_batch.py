@@ -108,6 +108,9 @@ def test_out_is_checked_before_any_compute(tmp_path):
                      tmp_path)
     assert proc.returncode == 2 and "--report no/such/r.json: no folder" in proc.stderr
     assert not (tmp_path / "o" / "big_cage.obj").exists()
+    (tmp_path / "o" / "big_cage.obj").mkdir()
+    proc = run_batch(["big.obj", "--faces", "100", "--out", "o"], tmp_path)
+    assert proc.returncode == 2 and "1 output path(s) are folders, e.g. " in proc.stderr
 
 
 def test_one_row_per_file_whatever_the_error_text(tmp_path):
