@@ -57,6 +57,14 @@ class WorkerProcess:
     def poll(self):
         return self.proc.poll()
 
+    def terminate(self):
+        """SIGTERM to the worker's session, without waiting."""
+        if self.proc.poll() is None:
+            try:
+                os.killpg(self.proc.pid, signal.SIGTERM)
+            except ProcessLookupError:     # it ended in between
+                pass
+
     def stop(self):
         """SIGTERM, then SIGKILL after the grace period."""
         for sig, wait in ((signal.SIGTERM, STOP_GRACE_S), (signal.SIGKILL, 5.0)):
@@ -120,9 +128,8 @@ def run_processes(tasks, payload, command, jobs, on_done):
     except KeyboardInterrupt:
         old = signal.signal(signal.SIGINT, signal.SIG_IGN)   # a second Ctrl-C must not cut this short
         try:
-            for w in running.values():
-                if w.poll() is None:
-                    os.killpg(w.proc.pid, signal.SIGTERM)
+            for w in running.values():      # all at once, then wait for each
+                w.terminate()
             for i, w in running.items():
                 w.stop()
                 on_done(i, w.report(tasks[i], stopped=True))
