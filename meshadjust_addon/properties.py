@@ -126,6 +126,11 @@ def seed_scenes():
             apply_preferences(scene)
 
 
+def _seed_soon():
+    seed_scenes()
+    return None   # once
+
+
 @bpy.app.handlers.persistent
 def _on_load_post(*_args):
     seed_scenes()
@@ -151,10 +156,15 @@ def register():
     for handlers, fn in _HANDLERS:
         if fn not in handlers:
             handlers.append(fn)
-    seed_scenes()
+    # register() runs with bpy.data restricted: seed the open scenes just after
+    # (timers fire in a UI session; headless, load_post and the handler do it)
+    if not bpy.app.timers.is_registered(_seed_soon):
+        bpy.app.timers.register(_seed_soon, first_interval=0.0)
 
 
 def unregister():
+    if bpy.app.timers.is_registered(_seed_soon):
+        bpy.app.timers.unregister(_seed_soon)
     for handlers, fn in _HANDLERS:
         if fn in handlers:
             handlers.remove(fn)

@@ -43,7 +43,7 @@ def _job(stopped, m, target, message):
 
 
 def test_topology_floor_is_said_and_a_warning_only_beyond_five_percent(addon):
-    api = mod("api")
+    api = mod("simplify_step")
     msg = ("stopped at 216 faces of 205 asked: the topology floor (23 border loops, 1 component "
            "kept); welded 3 vertices")
     note, missed = api._target_note(_job("topology_floor", 216, 205, msg))

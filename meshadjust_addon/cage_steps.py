@@ -1,0 +1,343 @@
+"""Steps on a cage: bind, fit and refine (the compute / commit split).
+
+An edit is the difference between the cage's current shape and its *rest
+shape* (the point attribute ``meshadjust_rest``, saved at bind time). Fit and
+re-bind work on the rest shape and carry the edit over on top of the result,
+so an artist's edit is never reset without being asked to. Everything that
+can fail is computed or checked before a commit writes anything; the commits
+run inside :func:`.rollback.all_or_nothing`.
+"""
+
+import time
+from dataclasses import dataclass
+
+import bpy
+import numpy as np
+
+from .. import core
+from . import mesh_io, results, settings, staleness, store
+from .report import Report, about
+from .rollback import all_or_nothing
+
+#: most levels the automatic choice picks
+MAX_AUTO_LEVELS = 5
+OUTPUT_NAMES = tuple(item[0] for item in settings.OUTPUTS)
+
+
+def auto_levels(cage_faces, source_faces, *, max_levels=MAX_AUTO_LEVELS):
+    """The subdivision levels (1..max_levels) whose refined face count,
+    ``cage_faces * 4**levels``, is closest to ``source_faces``."""
+    cage_faces = max(int(cage_faces), 1)
+    counts = cage_faces * 4 ** np.arange(1, max_levels + 1)
+    return int(np.argmin(np.abs(counts - int(source_faces)))) + 1
+
+
+def _diag(V):
+    return core.bbox_diagonal(V)
+
+
+def read_source(source):
+    """The source's mesh as the artist made it (MeshAdjust's own shape keys
+    muted): ``(MeshArrays, fingerprint)``."""
+    with results.own_keys_muted(source):
+        depsgraph = bpy.context.evaluated_depsgraph_get()
+        arrays = mesh_io.read_object(source, depsgraph=depsgraph)
+    return arrays, staleness.source_fingerprint(source) or ""
+
+
+def _cage_in_source_space(cage, source):
+    """Cage positions in the source's local space (object transforms respected)."""
+    if cage.mode == 'EDIT':
+        cage.update_from_editmode()
+    V = mesh_io.read_positions(cage.data)
+    M = np.array(source.matrix_world.inverted() @ cage.matrix_world)
+    return V @ M[:3, :3].T + M[:3, 3]
+
+
+def _source_to_cage(cage, source, V):
+    M = np.array(cage.matrix_world.inverted() @ source.matrix_world)
+    return V @ M[:3, :3].T + M[:3, 3]
+
+
+@dataclass
+class CageJob:
+    """The compute half of a bind or a fit: source and cage read from Blender.
+
+    ``V_cage`` is the shape bound or fitted (the rest shape); ``V_now`` the
+    cage as the artist left it, so ``V_now - V_cage`` is the edit, carried
+    over onto the result."""
+
+    cage_name: str
+    V: np.ndarray                #: source positions (its local space)
+    F: np.ndarray                #: source triangles
+    V_cage: np.ndarray           #: cage rest positions in the source's space
+    F_cage: np.ndarray
+    creases: object
+    levels: int
+    scheme: str
+    from_rest: bool = False      #: V_cage is the saved rest shape
+    rebind: bool = False         #: a fit also re-binds (the cage was bound)
+    binding: object = None       #: core.Binding, after compute_bind
+    fit: object = None           #: core.FitResult, after compute_fit
+    cancelled: bool = False
+    V_now: np.ndarray = None     #: the cage's current positions (source space)
+    V_edited: np.ndarray = None  #: the edited original's positions, after compute_bind
+    source_fingerprint: str = ""
+    old_levels: int = 0          #: the binding's levels and scheme before (0: unbound)
+    old_scheme: str = ""
+    note: str = ""               #: what the commit re-made, for the report
+
+    @property
+    def n_moved(self):
+        """Cage vertices the edit moves (beyond float32 rounding)."""
+        if self.V_now is None or self.V_now.shape != self.V_cage.shape:
+            return 0
+        tol = 1e-6 * max(_diag(self.V_cage), 1e-300)
+        return int(np.count_nonzero(np.abs(self.V_now - self.V_cage).max(axis=1) > tol))
+
+
+def _rest_of(cage, n):
+    """The cage's saved rest shape (source space) when it has one for ``n``
+    vertices, else None."""
+    if cage.data.attributes.get(store.REST) is None and not cage.data.is_editmode:
+        return None
+    try:
+        V_rest = store.load_rest(cage)
+    except core.MeshAdjustError:
+        return None
+    return V_rest if V_rest.shape[0] == n else None
+
+
+def prepare_cage_job(cage, *, levels=None, scheme=None, from_rest=False, keep_edit=False):
+    """Read what a bind or a fit of ``cage`` needs (main thread).
+
+    ``levels`` / ``scheme`` None (or 0 / ``'BOUND'``) keep the cage's. With
+    ``keep_edit`` (or the older name ``from_rest``), the cage's saved rest
+    shape is bound or fitted and the edit (current - rest) carried over; a
+    cage without a rest shape counts as unedited."""
+    cs = cage.meshadjust
+    source = cs.source
+    if source is None:
+        raise core.MeshAdjustError(f"'{cage.name}' is not a MeshAdjust cage (no source linked)")
+    V_now = _cage_in_source_space(cage, source)
+    V_rest = _rest_of(cage, V_now.shape[0]) if (keep_edit or from_rest) else None
+    F_cage, _, creases = store.cage_topology(cage)
+    src, fp = read_source(source)
+    if levels in (None, 0):
+        levels = cs.levels or auto_levels(F_cage.shape[0], src.F.shape[0])
+    if scheme in (None, 'BOUND'):
+        scheme = cs.scheme
+    bound = cs.edited is not None
+    return CageJob(cage.name, src.V, src.F, V_now if V_rest is None else V_rest, F_cage, creases,
+                   levels, scheme, V_rest is not None, V_now=V_now, source_fingerprint=fp,
+                   old_levels=cs.levels if bound else 0, old_scheme=cs.scheme if bound else "")
+
+
+def compute_bind(job, *, progress=None):
+    """Bind the source to the cage's rest shape and deform it by the edit
+    (pure NumPy, any thread). ``progress`` is only asked whether to go on,
+    at the end."""
+    if progress is not None and progress(0.0) is False:
+        job.cancelled = True
+        return job
+    job.binding = core.bind(job.V, job.F, job.V_cage, job.F_cage, levels=job.levels,
+                            scheme=job.scheme, creases=job.creases)
+    if progress is not None and progress(0.9) is False:
+        job.cancelled = True
+        return job
+    if job.V_now is not None and job.n_moved:
+        job.V_edited = core.deform(job.binding, job.V_now)
+    else:
+        job.V_edited = job.V
+    if progress is not None and progress(1.0) is False:
+        job.cancelled = True
+    return job
+
+
+def commit_bind(cage, job):
+    """Write a computed binding: the edited-original copy (created on first
+    use, re-made when the source's vertex count changed), deformed by the
+    edit; its binding attributes and fingerprints; the cage's rest shape;
+    the other results that exist, updated. Returns the edited-original
+    object (``job.notes`` gets what was re-made)."""
+    cs = cage.meshadjust
+    source = cs.source
+    with all_or_nothing() as rb:
+        if cs.edited is not None:
+            rb.keep(cs.edited.data)
+        rb.keep(cage.data)
+        edited, note = results.edited_copy(source, cage, job.V.shape[0])
+        job.note = note
+        mesh_io.write_positions(edited.data, job.V_edited if job.V_edited is not None else job.V)
+        store.save_binding(edited, job.binding)
+        store.save_rest(cage, job.V_cage)
+        st = edited.meshadjust
+        key = staleness.topology_key(cage)
+        st.cage_counts = (key[0], key[2])
+        st.cage_edges = key[1]
+        st.cage_topology = key[3]
+        st.source_fingerprint = job.source_fingerprint
+        st.dense_faces = job.F.shape[0]
+        cs.levels = job.levels
+        cs.scheme = job.scheme
+        cs.fingerprint = job.binding.fingerprint
+        V_now = job.V_now if job.V_now is not None else job.V_cage
+        if cs.refined is not None:
+            results.write_refined(cage, source, *core.refine(job.binding, V_now))
+        if results.shape_key_of(source, cage) is not None:
+            _write_key(source, cage, edited, job.binding, job.V_edited, V_rest=job.V_cage)
+        staleness.touched(cage)
+        staleness.touched(source)
+    return edited
+
+
+def bind_object(cage, *, levels=None, scheme=None, from_rest=False, keep_edit=None):
+    """(Re-)bind the cage's source to the cage (the synchronous path).
+
+    ``keep_edit`` (default: the setting's, True; ``from_rest`` is its older
+    name): the rest shape saved at the last bind is bound again and the edit
+    kept on top; False: the cage's current shape becomes the rest shape.
+    Returns the edited-original object.
+    """
+    if keep_edit is None:
+        keep_edit = settings.default("keep_edit") or from_rest
+    job = prepare_cage_job(cage, levels=levels, scheme=scheme, keep_edit=keep_edit)
+    return commit_bind(cage, compute_bind(job))
+
+
+def prepare_fit(cage, *, rebind=True, levels=None, scheme=None):
+    """A fit job: the rest shape is fitted and the edit carried over (a cage
+    that was never bound is its own rest shape)."""
+    job = prepare_cage_job(cage, levels=levels, scheme=scheme, keep_edit=True)
+    job.rebind = rebind and cage.meshadjust.edited is not None
+    return job
+
+
+def compute_fit(job, *, progress=None):
+    """Fit the cage's rest shape to the source (pure NumPy, any thread;
+    cancellable); with ``job.rebind``, bind the fitted rest shape and deform
+    by the edit too."""
+    fit_progress = progress
+    if job.rebind and progress is not None:
+        fit_progress = lambda f: progress(0.8 * f)   # noqa: E731
+    job.fit = core.fit_cage(job.V, job.F, job.V_cage, job.F_cage, levels=job.levels,
+                            scheme=job.scheme, creases=job.creases, progress=fit_progress)
+    job.cancelled = job.fit.cancelled
+    if job.cancelled:
+        return job
+    edit = None if job.V_now is None else job.V_now - job.V_cage
+    job.V_cage = job.fit.V
+    job.V_now = job.fit.V if edit is None else job.fit.V + edit
+    if job.rebind:
+        compute_bind(job, progress=None if progress is None else (lambda f: progress(0.8 + 0.2 * f)))
+    return job
+
+
+def commit_fit(cage, job):
+    """Move the cage to the fitted rest shape plus the edit (and write the
+    new binding when the job re-bound). Returns the core's ``FitResult``."""
+    source = cage.meshadjust.source
+    if cage.mode == 'EDIT':
+        raise core.MeshAdjustError(f"leave Edit Mode on '{cage.name}' to fit it")
+    with all_or_nothing() as rb:
+        rb.keep(cage.data)
+        mesh_io.write_positions(cage.data, _source_to_cage(cage, source, job.V_now))
+        if job.binding is not None:
+            commit_bind(cage, job)
+        staleness.touched(cage)
+    return job.fit
+
+
+def fit_cage_object(cage, *, levels=None, scheme=None, rebind=settings.default("rebind")):
+    """Fit the cage (the synchronous path): its rest shape moves so its
+    subdivision matches the source, the edit stays on top. Returns the
+    core's ``FitResult``."""
+    job = prepare_fit(cage, rebind=rebind, levels=levels, scheme=scheme)
+    return commit_fit(cage, compute_fit(job))
+
+
+_rest_dense = {}   #: edited session_uid -> (binding id, dense positions of the rest shape)
+
+
+def _write_key(source, cage, edited, binding, V_edited, *, V_rest=None):
+    """The shape-key output: relative to the mesh that was bound."""
+    V_bound = None
+    if not results.only_own_keys_and_no_modifiers(source):
+        hit = _rest_dense.get(edited.session_uid)
+        if hit is None or hit[0] != id(binding):
+            if V_rest is None:
+                V_rest = store.load_rest(cage)
+            hit = (id(binding), core.deform(binding, V_rest))
+            _rest_dense[edited.session_uid] = hit
+        V_bound = hit[1]
+    return results.write_shape_key(source, cage, V_edited, V_bound)
+
+
+def refine_object(cage, *, output='EDITED', levels=None, scheme=None):
+    """Update the results of an edited cage; returns a :class:`Report`.
+
+    ``output``: ``'EDITED'`` (the bound copy of the source, deformed; same
+    topology, UVs and attributes), ``'SHAPE_KEY'`` (the edit as a shape key
+    of the source named after the cage), ``'REFINED'`` (the subdivided cage
+    with the source's detail) or ``'BOTH'`` (edited and refined). Results
+    are created once and updated in place afterwards. Other ``levels`` /
+    ``scheme`` than the binding's re-bind from the rest shape, keeping the
+    edit (and the report says so). A source changed since the bind makes the
+    report a warning.
+    """
+    if output not in OUTPUT_NAMES:
+        raise core.InvalidArgumentError(f"refine: output must be one of {OUTPUT_NAMES}, "
+                                        f"got {output!r}")
+    t0 = time.perf_counter()
+    cs = cage.meshadjust
+    source = cs.source
+    if source is None:
+        raise core.MeshAdjustError(f"'{cage.name}' is not a MeshAdjust cage (no source linked)")
+    edited = cs.edited
+    if edited is None:
+        raise core.MeshAdjustError(f"'{cage.name}' is not bound yet: bind it first")
+    if scheme == 'BOUND':
+        scheme = None
+    parts, warnings = [], []
+    with all_or_nothing() as rb:
+        if (levels and levels != cs.levels) or (scheme is not None and scheme != cs.scheme):
+            job = prepare_cage_job(cage, levels=levels, scheme=scheme, keep_edit=True)
+            commit_bind(cage, compute_bind(job))
+            parts.append(f"re-bound from the rest shape ({job.old_scheme} x{job.old_levels} -> "
+                         f"{job.scheme} x{job.levels}), the edit kept")
+        binding = store.load_binding(edited, cage)
+        V_cage = _cage_in_source_space(cage, source)
+        if output == 'SHAPE_KEY':
+            why = results.shape_key_unavailable(source, binding.n_dense)
+            if why:
+                raise core.MeshAdjustError(f"Refine: {why}")
+        V_edited = None
+        if output in ('EDITED', 'BOTH', 'SHAPE_KEY'):
+            V_edited = core.deform(binding, V_cage)
+        if output in ('EDITED', 'BOTH'):
+            rb.keep(edited.data)
+            mesh_io.write_positions(edited.data, V_edited)
+            parts.append(f"'{edited.name}' deformed ({binding.n_dense:,} vertices)")
+        if output == 'SHAPE_KEY':
+            rb.keep(source.data)
+            key = _write_key(source, cage, edited, binding, V_edited)
+            parts.append(f"shape key '{key.name}' of '{source.name}' updated "
+                         f"({binding.n_dense:,} vertices)")
+        if output in ('REFINED', 'BOTH'):
+            Vr, Fr = core.refine(binding, V_cage)
+            refined = results.write_refined(cage, source, Vr, Fr)
+            n_about = edited.meshadjust.dense_faces
+            parts.append(f"'{refined.name}' refined: {Fr.shape[0]:,} faces, {binding.scheme} x"
+                         f"{binding.levels}" + (f", about the source's {about(n_about)}"
+                                                if n_about else ""))
+    stale = staleness.source_change(source, edited.meshadjust.source_fingerprint, fresh=True)
+    if stale:
+        warnings.append(f"{stale}: the result uses the mesh that was bound; re-bind to use the "
+                        f"new one")
+    dt = time.perf_counter() - t0
+    msg = "; ".join(parts) + f", {dt:.2f} s"
+    if warnings:
+        msg += "; WARNING: " + "; ".join(warnings)
+    cs.last_report = msg
+    return Report(msg, seconds=dt, level='WARNING' if warnings else 'INFO',
+                  warnings=tuple(warnings))

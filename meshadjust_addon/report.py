@@ -1,0 +1,43 @@
+"""What a step says: the :class:`Report` every step returns, and the
+sentences for a failure (:func:`user_cause`) and a face count (:func:`about`)."""
+
+from dataclasses import dataclass, field
+
+from .. import core
+
+
+@dataclass(frozen=True)
+class Report:
+    """What a step did, for the UI and logs. ``level`` is ``'INFO'`` or
+    ``'WARNING'`` (something was not done, or not as asked: see
+    ``warnings``)."""
+
+    message: str
+    faces_in: int = 0
+    faces_out: int = 0
+    deviation_pct: float = float("nan")
+    seconds: float = 0.0
+    level: str = 'INFO'
+    warnings: tuple = ()
+    cleaning: dict = field(default_factory=dict)   #: ``core.CleanReport.to_dict()`` of a simplify
+
+
+def user_cause(exc, what, obj_name):
+    """A message for a failed step that names the object and the cause the
+    user can act on, with the core's evidence after it."""
+    text = str(exc)
+    if "non-manifold" in text:
+        cause = ("the cage has non-manifold vertices or edges (bowties, edges shared by more "
+                 "than two faces), which subdivision cannot refine; clean the source "
+                 "(Mesh > Clean Up) or simplify it with Keep topology off")
+    elif isinstance(exc, core.TopologyMismatchError):
+        cause = "the cage's topology no longer matches its binding"
+    else:
+        cause = text
+        text = ""
+    return f"{what} '{obj_name}' failed: {cause}" + (f" ({text})" if text else "")
+
+
+def about(n):
+    """A face count as a reader says it: 5,120 or 252k."""
+    return f"{n / 1000:.0f}k" if n >= 10_000 else f"{n:,}"

@@ -1,0 +1,328 @@
+"""The Simplify step: a dense mesh into a cage (the compute / commit split).
+
+``prepare_simplify`` reads the source (main thread), ``compute_simplify``
+runs the core's simplify, measure, fit and bind (pure NumPy, any thread,
+cancellable), ``commit_simplify`` creates the cage and the bound copy. A fit
+or bind that fails after the simplify succeeded keeps the cage and says why.
+"""
+
+import time
+from dataclasses import dataclass, field, fields, replace
+
+import bpy
+import numpy as np
+
+from .. import core
+from . import cage_steps, mesh_io, results, settings, store
+from .cage_steps import CageJob, auto_levels, read_source
+from .report import Report, user_cause
+from .rollback import all_or_nothing
+
+CREASE = store.CREASE
+#: samples per surface for the deviation shown after a simplify (enough for a
+#: stable Hausdorff estimate in about a second on 250k triangles)
+MEASURE_SAMPLES = 60_000
+#: a target missed by more than this share makes the simplify report a warning
+TARGET_TOLERANCE = 0.05
+
+
+def _diag(V):
+    return core.bbox_diagonal(V)
+
+
+def _d(key):
+    return field(default=settings.default(key))
+
+
+@dataclass(frozen=True)
+class SimplifyParams:
+    """Everything :func:`simplify_object` needs besides the object.
+
+    The defaults are those of ``settings.SETTINGS`` (the panel's and the
+    operator's). The target is whichever of ``target_faces``, ``ratio`` and
+    ``max_error_pct`` is given; with none, the default face count.
+    ``levels=0`` picks the levels whose refined mesh comes closest to the
+    source's face count (:func:`auto_levels`).
+    """
+
+    target_faces: int = None
+    ratio: float = None
+    max_error_pct: float = None      #: % of the bounding-box diagonal
+    preserve_boundary: bool = _d("preserve_boundary")
+    preserve_topology: bool = _d("preserve_topology")
+    feature_angle_deg: float = _d("feature_angle_deg")
+    weight_group: str = _d("weight_group")
+    lock_group: str = _d("lock_group")
+    fit: bool = _d("fit")
+    bind: bool = _d("bind")
+    levels: int = _d("levels")
+    scheme: str = _d("scheme")
+    hide_source: bool = _d("hide_source")
+    measure: bool = True
+
+    @classmethod
+    def from_settings(cls, s):
+        """The parameters held by ``s``: an operator or the scene settings
+        (anything with the properties of ``settings.SIMPLIFY``)."""
+        return cls(
+            target_faces=s.target_faces if s.target_mode == 'FACES' else None,
+            ratio=s.ratio if s.target_mode == 'RATIO' else None,
+            max_error_pct=s.max_error_pct if s.target_mode == 'ERROR' else None,
+            preserve_boundary=s.preserve_boundary, preserve_topology=s.preserve_topology,
+            feature_angle_deg=s.feature_angle_deg, weight_group=s.weight_group,
+            lock_group=s.lock_group, fit=s.fit, bind=s.bind, levels=s.levels, scheme=s.scheme,
+            hide_source=s.hide_source)
+
+    def keywords(self):
+        """The parameters as keyword arguments of :func:`simplify_object`."""
+        return {f.name: getattr(self, f.name) for f in fields(self)}
+
+
+@dataclass
+class SimplifyJob:
+    """The compute half of a simplify: inputs read from Blender, then results."""
+
+    source_name: str
+    params: SimplifyParams
+    V: np.ndarray
+    F: np.ndarray
+    weights: np.ndarray = None
+    locked: np.ndarray = None
+    notes: list = field(default_factory=list)
+    source_fingerprint: str = ""
+    result: object = None            #: core.SimplifyResult
+    V_cage: np.ndarray = None        #: fitted (or plain) cage positions
+    levels: int = 0                  #: the binding's levels (``params.levels`` resolved)
+    distance: object = None          #: core.SurfaceDistance of QEM's cage to the source
+    fit: object = None               #: core.FitResult when the cage was fitted
+    binding: object = None           #: core.Binding when the source was bound
+    fit_error: str = ""              #: why the fit failed (the cage is kept unfitted)
+    bind_error: str = ""             #: why the bind failed (the cage is kept unbound)
+    seconds: float = 0.0
+    cancelled: bool = False
+
+
+def prepare_simplify(source, params, *, depsgraph=None):
+    """Read the source object into a :class:`SimplifyJob` (main thread)."""
+    if source is None or source.type != 'MESH':
+        raise core.InvalidMeshError("simplify: the active object is not a mesh")
+    if depsgraph is None:
+        arrays, fp = read_source(source)
+    else:
+        arrays, fp = mesh_io.read_object(source, depsgraph=depsgraph), ""
+    if arrays.F.shape[0] == 0:
+        raise core.InvalidMeshError(f"simplify: '{source.name}' has no faces")
+    if params.target_faces is None and params.ratio is None and params.max_error_pct is None:
+        params = replace(params, target_faces=settings.default("target_faces"))
+    job = SimplifyJob(source.name, params, arrays.V, arrays.F, source_fingerprint=fp)
+    if arrays.evaluated:
+        job.notes.append("used the evaluated mesh (modifiers and shape keys applied)")
+    if arrays.triangulated:
+        job.notes.append(f"triangulated {arrays.n_polygons:,} polygons for the core")
+    n = arrays.V.shape[0]
+    for group, attr in ((params.weight_group, "weights"), (params.lock_group, "locked")):
+        if not group:
+            continue
+        if arrays.evaluated:
+            raise core.InvalidArgumentError(
+                f"simplify: vertex groups cannot be used together with modifiers or shape keys "
+                f"on '{source.name}' (apply them first)")
+        w = mesh_io.vertex_group_weights(source, group)
+        if w.shape[0] != n:
+            raise core.InvalidArgumentError(f"simplify: vertex group '{group}' does not match "
+                                            f"the mesh")
+        setattr(job, attr, w if attr == "weights" else w > 0.5)
+    if job.weights is not None:
+        job.weights = 1.0 + 9.0 * job.weights     # weight 1 -> 10x as important
+    return job
+
+
+def compute_simplify(job, *, progress=None):
+    """Run the core on a :class:`SimplifyJob` (pure NumPy, any thread).
+
+    ``progress(fraction)`` returning False cancels; ``job.cancelled`` says so.
+    Measure, fit and bind take the last 30% of the bar. A fit or bind that
+    fails with the core's error is recorded (``fit_error``, ``bind_error``)
+    and the cage is kept: nothing computed is thrown away.
+    """
+    p = job.params
+    t0 = time.perf_counter()
+    max_error = None
+    if p.max_error_pct is not None:
+        max_error = p.max_error_pct / 100.0 * _diag(job.V)
+
+    def simplify_progress(f):
+        return True if progress is None else progress(0.7 * f)
+
+    def cancelled_at(f):
+        if progress is not None and progress(f) is False:
+            job.cancelled = True
+        return job.cancelled
+
+    res = core.simplify(job.V, job.F, target_faces=p.target_faces, ratio=p.ratio,
+                        max_error=max_error, preserve_boundary=p.preserve_boundary,
+                        preserve_topology=p.preserve_topology,
+                        feature_angle_deg=None if p.feature_angle_deg >= 180.0
+                        else p.feature_angle_deg,
+                        vertex_weights=job.weights, locked=job.locked,
+                        progress=simplify_progress)
+    job.result = res
+    if res.stopped_because == "cancelled":
+        job.cancelled = True
+        return job
+    job.V_cage = res.V
+    job.levels = p.levels or auto_levels(res.F.shape[0], job.F.shape[0])
+    if p.measure:
+        # the deviation of the cage QEM produced (the classic measure of a
+        # simplification), before any fitting moves it
+        if cancelled_at(0.72):
+            return job
+        job.distance = core.surface_distance(job.V, job.F, res.V, res.F, samples=MEASURE_SAMPLES)
+    creases = res.feature_edges if len(res.feature_edges) else None
+    if p.fit and res.F.shape[0] >= 4:
+        if cancelled_at(0.8):
+            return job
+        fit_progress = None if progress is None else (lambda f: progress(0.8 + 0.12 * f))
+        try:
+            fit = core.fit_cage(job.V, job.F, res.V, res.F, levels=job.levels, scheme=p.scheme,
+                                creases=creases, progress=fit_progress)
+        except core.MeshAdjustError as exc:
+            job.fit_error = user_cause(exc, "fitting", f"{job.source_name}_cage")
+        else:
+            if fit.cancelled:
+                job.cancelled = True
+                return job
+            job.fit = fit
+            job.V_cage = fit.V
+    # the cage as its mesh will hold it (float32), so the binding is the one a
+    # re-bind of the unedited cage makes
+    job.V_cage = job.V_cage.astype(np.float32).astype(np.float64)
+    if p.bind:
+        if cancelled_at(0.93):
+            return job
+        try:
+            job.binding = core.bind(job.V, job.F, job.V_cage, res.F, levels=job.levels,
+                                    scheme=p.scheme, creases=creases)
+        except core.MeshAdjustError as exc:
+            job.bind_error = user_cause(exc, f"binding '{job.source_name}' to",
+                                        f"{job.source_name}_cage")
+        if cancelled_at(0.99):
+            return job
+    job.seconds = time.perf_counter() - t0
+    if progress is not None:
+        progress(1.0)
+    return job
+
+
+def _cleaning_notes(res):
+    """What the core's cleaning of the input did (``core.CleanReport``)."""
+    cleaning = getattr(res, "cleaning", None)
+    summary = cleaning.summary() if cleaning is not None else ""
+    return [f"cleaned the input: {summary}"] if summary else []
+
+
+def _target_note(job):
+    """``(sentence, missed)``: why the cage stopped short of its target, when
+    it did (the core's own sentence, e.g. "stopped at 216 faces of 205 asked:
+    the topology floor (23 border loops, 1 component kept)"), and whether it
+    missed the target by more than ``TARGET_TOLERANCE``."""
+    res, p = job.result, job.params
+    m = res.F.shape[0]
+    target = getattr(res, "target", None)
+    if target is None and (p.target_faces is not None or p.ratio is not None):
+        target = p.target_faces
+        if p.ratio is not None:
+            target = max(target or 0, int(round(p.ratio * job.F.shape[0])))
+    missed = target is not None and m > target * (1.0 + TARGET_TOLERANCE)
+    if res.stopped_because not in ("topology_floor", "no_valid_collapse") and not missed:
+        return "", False
+    message = getattr(res, "message", "")
+    head = message.split("; ")[0] if message else (
+        f"stopped at {m:,} faces" + (f" of {target:,} asked" if target is not None else ""))
+    return head, missed
+
+
+def commit_simplify(source, job):
+    """Create the cage object (and the bound copy) from a computed job.
+
+    Returns ``(cage, Report)``; the report is a warning when the fit or the
+    bind failed (the cage is kept and says so) or the target was missed by
+    more than 5%."""
+    res = job.result
+    p = job.params
+    with all_or_nothing():
+        name = f"{source.name}_cage"
+        mesh = mesh_io.new_mesh(name, job.V_cage, res.F)
+        n_creases = mesh_io.set_edge_flags(mesh, res.feature_edges, CREASE)
+        if n_creases:
+            sharp = (mesh.attributes.get("sharp_edge")
+                     or mesh.attributes.new("sharp_edge", 'BOOLEAN', 'EDGE'))
+            flags = np.zeros(len(mesh.edges), dtype=bool)
+            mesh.attributes[CREASE].data.foreach_get("value", flags)
+            sharp.data.foreach_set("value", flags)
+        cage = bpy.data.objects.new(name, mesh)
+        cage.matrix_world = source.matrix_world.copy()
+        results.link_like(cage, source)
+        cage.show_wire = True
+        cs = cage.meshadjust
+        cs.role = 'CAGE'
+        cs.source = source
+        cs.levels = job.levels
+        cs.scheme = p.scheme
+        faces_in = job.F.shape[0]
+        dev = float("nan")
+        msg = f"{faces_in:,} -> {res.F.shape[0]:,} faces"
+        if job.distance is not None:
+            dev = 100.0 * job.distance.hausdorff / max(_diag(job.V), 1e-300)
+            msg += (f", max deviation {dev:.2f}% of size (mean "
+                    f"{100.0 * job.distance.mean / max(_diag(job.V), 1e-300):.3f}%)")
+        msg += f", {job.seconds:.1f} s"
+        warnings = []
+        target_note, missed = _target_note(job)
+        if target_note:
+            msg += f"; {target_note}"
+            if missed:
+                warnings.append(target_note)
+        notes = _cleaning_notes(res) + job.notes
+        if job.fit is not None:
+            d = job.fit.mean_distance
+            msg += (f"; fitted: mean distance of the refined cage "
+                    f"{100 * d[0] / job.fit.diagonal:.3f}% -> {100 * d[-1] / job.fit.diagonal:.3f}%")
+        if job.fit_error:
+            warnings.append(f"{job.fit_error}; the cage is kept unfitted")
+        if job.binding is not None:
+            bjob = CageJob(cage.name, job.V, job.F, job.V_cage, res.F,
+                           res.feature_edges if len(res.feature_edges) else None, job.levels,
+                           p.scheme, binding=job.binding, V_now=job.V_cage, V_edited=job.V,
+                           source_fingerprint=job.source_fingerprint)
+            cage_steps.commit_bind(cage, bjob)
+            auto = ", automatic: closest to the source's faces" if not p.levels else ""
+            msg += f"; bound '{source.name}' (levels {job.levels}{auto}, {p.scheme})"
+        elif job.bind_error:
+            warnings.append(f"{job.bind_error}; the cage is kept, not bound")
+        if notes:
+            msg += "; " + "; ".join(notes)
+        if warnings:
+            msg += "; WARNING: " + "; ".join(warnings)
+        # the source's own state last: a failure above leaves it as it was
+        source.meshadjust.role = 'SOURCE'
+        source.meshadjust.cage = cage
+        if p.hide_source:
+            source.hide_set(True)
+        cs.last_report = msg
+    cleaning = res.cleaning.to_dict() if getattr(res, "cleaning", None) is not None else {}
+    return cage, Report(msg, faces_in, res.F.shape[0], dev, job.seconds,
+                        'WARNING' if warnings else 'INFO', tuple(warnings), cleaning)
+
+
+def simplify_object(source, *, progress=None, **kwargs):
+    """Simplify ``source`` into a new cage object (the synchronous path).
+
+    Keyword arguments are those of :class:`SimplifyParams`. Returns
+    ``(cage, Report)``; ``(None, Report)`` when cancelled (nothing created).
+    """
+    job = prepare_simplify(source, SimplifyParams(**kwargs))
+    compute_simplify(job, progress=progress)
+    if job.cancelled:
+        return None, Report("cancelled: nothing was changed")
+    return commit_simplify(source, job)
