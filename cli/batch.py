@@ -25,7 +25,6 @@ import argparse
 import datetime
 import importlib.util
 import json
-import math
 import os
 import sys
 import time
@@ -34,7 +33,7 @@ from dataclasses import asdict
 
 from . import blender_io
 from . import convert as _convert
-from . import runners
+from . import report, runners
 
 PROG = "meshadjust-batch"
 #: how a worker process is started from an installed package
@@ -187,78 +186,6 @@ def check_paths(args):
     return problems
 
 
-def progress_bar(done, total, name, width=28):
-    filled = int(width * done / max(total, 1))
-    sys.stderr.write(f"\r[{'#' * filled}{'.' * (width - filled)}] {done}/{total} {name[:40]:<40}")
-    if done == total:
-        sys.stderr.write("\n")
-    sys.stderr.flush()
-
-
-def _cell(text):
-    """Text safe in one Markdown table cell: one line, pipes escaped."""
-    text = str(text).replace("|", "\\|")
-    return text.replace("\r\n", "\\n").replace("\n", "\\n").replace("\r", "\\n").strip()
-
-
-def _status(r):
-    s = r["status"]
-    if s == "ok":
-        return "ok"
-    if s == "warn":
-        return "warn: " + "; ".join(r["warnings"])
-    if s == "failed":
-        return "FAILED: " + (r.get("error") or "unknown")
-    if s == "skipped":
-        return "skipped: outputs exist"
-    return s
-
-
-def summary_table(results):
-    lines = ["| file | faces in | cage faces | target | max dev % | refined faces | time s | status |",
-             "| --- | ---: | ---: | ---: | ---: | ---: | ---: | --- |"]
-
-    def num(v, fmt="{:,}"):
-        return "" if v is None else fmt.format(v)
-
-    for r in results:
-        lines.append("| " + " | ".join(_cell(c) for c in (
-            r["name"], num(r.get("faces_in")), num(r.get("faces_out")),
-            num(r.get("target_faces")), num(r.get("deviation_pct"), "{:.3f}"),
-            num(r.get("refined_faces")), num(r.get("seconds"), "{:.2f}"), _status(r))) + " |")
-    return "\n".join(lines)
-
-
-def _counts(results):
-    c = Counter(r["status"] for r in results)
-    return {k: c.get(k, 0) for k in ("ok", "warn", "failed", "skipped", "cancelled")}
-
-
-def summary_line(results, out):
-    c = _counts(results)
-    line = f"{c['ok'] + c['warn']} converted"
-    if c["warn"]:
-        line += f" ({c['warn']} with warnings)"
-    line += f", {c['failed']} failed"
-    for k in ("skipped", "cancelled"):
-        if c[k]:
-            line += f", {c[k]} {k}"
-    return line + f"; output in {out}"
-
-
-def _write_json(path, data):
-    tmp = f"{path}.part-{os.getpid()}"
-    with open(tmp, "w", encoding="utf-8") as fh:
-        json.dump(data, fh, indent=1, allow_nan=False, default=str)
-        fh.write("\n")
-    os.replace(tmp, path)
-
-
-def _json_safe(r):
-    """NaN and infinity are not JSON: None instead."""
-    return {k: None if isinstance(v, float) and not math.isfinite(v) else v for k, v in r.items()}
-
-
 def worker_main(payload_json):
     """A worker process: convert one file, print its report on one line."""
     import signal
@@ -270,10 +197,10 @@ def worker_main(payload_json):
     payload = json.loads(payload_json)
     task = payload["task"]
     try:
-        report = _convert.convert(task, _convert.Options(**payload["options"]))
+        result = _convert.convert(task, _convert.Options(**payload["options"]))
     except KeyboardInterrupt:
-        report = runners.cancelled_report(task)
-    print(runners.RESULT_MARK + json.dumps(_json_safe(report)), flush=True)
+        result = runners.cancelled_report(task)
+    print(runners.RESULT_MARK + json.dumps(report.json_safe(result)), flush=True)
     return 0
 
 
@@ -316,18 +243,18 @@ def main(argv=None, *, entry=None, prog=PROG):
             todo.append(i)
     log_fh = open(args.log, "w", encoding="utf-8") if args.log else None
     done = [len(tasks) - len(todo)]
-    progress_bar(done[0], len(tasks), "")
+    report.progress_bar(done[0], len(tasks), "")
 
-    def on_done(k, report):
+    def on_done(k, result):
         i = todo[k]
         if log_fh is not None:
-            if report.get("log"):
-                log_fh.write(f"==== {report['input']} ====\n{report['log']}\n")
+            if result.get("log"):
+                log_fh.write(f"==== {result['input']} ====\n{result['log']}\n")
                 log_fh.flush()
-            report["log"] = None
-        results[i] = report
+            result["log"] = None
+        results[i] = result
         done[0] += 1
-        progress_bar(done[0], len(tasks), tasks[i]["name"])
+        report.progress_bar(done[0], len(tasks), tasks[i]["name"])
 
     sub = [tasks[i] for i in todo]
 
@@ -352,16 +279,16 @@ def main(argv=None, *, entry=None, prog=PROG):
         print(f"{prog}: interrupted; the files not finished are cancelled", file=sys.stderr)
     results = [r if r is not None else runners.cancelled_report(t)
                for r, t in zip(results, tasks)]
-    print(summary_table(results))
-    print(summary_line(results, args.out))
-    c = _counts(results)
+    print(report.summary_table(results))
+    print(report.summary_line(results, args.out))
+    c = report.counts(results)
     status = 130 if interrupted else 1 if c["failed"] or (args.strict and c["warn"]) else 0
     if args.report:
-        _write_json(args.report, {
+        report.write_json(args.report, {
             "tool": prog, "started": started, "arguments": argv, "options": asdict(opts),
             "out": os.path.abspath(args.out), "log": os.path.abspath(args.log) if args.log else None,
             "seconds": round(time.perf_counter() - t0, 3), "interrupted": interrupted,
-            "exit_status": status, "counts": c, "files": [_json_safe(r) for r in results]})
+            "exit_status": status, "counts": c, "files": [report.json_safe(r) for r in results]})
     return status
 
 
