@@ -228,11 +228,14 @@ class Binding:
         normal_changed[op.F_fine[touched].ravel()] = True
         return normal_changed[self._cache["corners_t"]].any(axis=0)
 
-
     def influenced(self, cage_vertex_ids):
         """The dense vertices an incremental :func:`deform` recomputes when
         the given cage vertices move (a subset of :meth:`affected`, found
         without touching the dense mesh: O(fine support + result)).
+
+        The first call (also with an empty list) builds the indices the
+        incremental deform uses (fine face -> dense vertices, the composed
+        operator's rows), so a caller can pay for them up front.
 
         Parameters
         ----------
@@ -241,10 +244,6 @@ class Binding:
         Returns
         -------
         (r,) int64 ndarray, sorted, distinct
-
-        The first call (also with an empty list) builds the indices the
-        incremental deform uses (fine face -> dense vertices, the composed
-        operator's rows), so a caller can pay for them up front.
 
         Raises
         ------
@@ -442,9 +441,10 @@ def _influenced_dense(binding, ids):
 
     The chain, all on index sets of the fine mesh (O(fine support + result),
     never O(dense mesh)): fine vertices the composed operator reaches from
-    ``ids`` with a nonzero weight (positions change) -> every corner of a fine face touching them (normals
-    change) -> the fine faces with such a corner (their bound dense vertices
-    move) -> the corners of those faces (``needed``). The fine face -> dense
+    ``ids`` with a nonzero weight (positions change) -> every corner of a
+    fine face touching them (normals change) -> the fine faces with such a
+    corner (their bound dense vertices move) -> the corners of those faces
+    (``needed``). The fine face -> dense
     vertices and fine vertex -> fine faces indices are built on first use
     and cached in the binding, with the last answer (so
     :meth:`Binding.influenced` followed by the deform of the same ids

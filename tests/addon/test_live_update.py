@@ -55,3 +55,30 @@ def test_rebind_starts_from_a_full_deform(bound_cage):
     lu.update_edited(cage)
     assert bpy.ops.meshadjust.bind() == {'FINISHED'}
     assert lu.update_edited(cage).full
+
+
+def test_edit_mode_and_transform_changes_are_followed(bound_cage):
+    import bmesh
+    lu, mio = _mod("live_update"), _mod("mesh_io")
+    cage = bound_cage
+    edited = cage.meshadjust.edited
+    lu.update_edited(cage)
+    bpy.context.view_layer.objects.active = cage
+    bpy.ops.object.mode_set(mode='EDIT')
+    bm = bmesh.from_edit_mesh(cage.data)
+    bm.verts.ensure_lookup_table()
+    for i in (0, 1):
+        bm.verts[i].co.z += 0.05
+    bmesh.update_edit_mesh(cage.data)
+    t = lu.update_edited(cage)
+    assert not t.full and t.moved == 2
+    live = mio.read_positions(edited.data)
+    assert bpy.ops.meshadjust.refine(output='EDITED') == {'FINISHED'}
+    assert np.abs(live - mio.read_positions(edited.data)).max() <= 1e-6
+    bpy.ops.object.mode_set(mode='OBJECT')
+    # moving the cage object moves every cage vertex in the source's space: a full update
+    cage.location = (0.25, 0.0, 0.0)
+    bpy.context.view_layer.update()
+    before = mio.read_positions(edited.data)
+    assert lu.update_edited(cage).full
+    assert np.allclose(mio.read_positions(edited.data)[:, 0] - before[:, 0], 0.25, atol=1e-4)
