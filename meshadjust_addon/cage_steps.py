@@ -21,7 +21,17 @@ from .rollback import all_or_nothing
 
 #: most levels the automatic choice picks
 MAX_AUTO_LEVELS = 5
+#: most levels a fit evaluates the cage at: the fit undoes the shrinkage of
+#: simplification, which two levels already show (on the bunny, 1,400 faces:
+#: mean distance 0.0551% at 2 levels in 4.7 s, 0.0549% at 3 levels in 15 s);
+#: the binding still uses all the levels asked for
+MAX_FIT_LEVELS = 2
 OUTPUT_NAMES = tuple(item[0] for item in settings.OUTPUTS)
+
+
+def fit_levels(levels):
+    """The levels a fit uses for a binding of ``levels``."""
+    return min(int(levels), MAX_FIT_LEVELS)
 
 
 def auto_levels(cage_faces, source_faces, *, max_levels=MAX_AUTO_LEVELS):
@@ -220,7 +230,7 @@ def compute_fit(job, *, progress=None):
     fit_progress = progress
     if job.rebind and progress is not None:
         fit_progress = lambda f: progress(0.8 * f)   # noqa: E731
-    job.fit = core.fit_cage(job.V, job.F, job.V_cage, job.F_cage, levels=job.levels,
+    job.fit = core.fit_cage(job.V, job.F, job.V_cage, job.F_cage, levels=fit_levels(job.levels),
                             scheme=job.scheme, creases=job.creases, progress=fit_progress)
     job.cancelled = job.fit.cancelled
     if job.cancelled:

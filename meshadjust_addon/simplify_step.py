@@ -14,7 +14,7 @@ import numpy as np
 
 from .. import core
 from . import cage_steps, mesh_io, results, settings, store
-from .cage_steps import CageJob, auto_levels, read_source
+from .cage_steps import CageJob, auto_levels, fit_levels, read_source
 from .report import Report, user_cause
 from .rollback import all_or_nothing
 
@@ -184,8 +184,8 @@ def compute_simplify(job, *, progress=None):
             return job
         fit_progress = None if progress is None else (lambda f: progress(0.8 + 0.12 * f))
         try:
-            fit = core.fit_cage(job.V, job.F, res.V, res.F, levels=job.levels, scheme=p.scheme,
-                                creases=creases, progress=fit_progress)
+            fit = core.fit_cage(job.V, job.F, res.V, res.F, levels=fit_levels(job.levels),
+                                scheme=p.scheme, creases=creases, progress=fit_progress)
         except core.MeshAdjustError as exc:
             job.fit_error = user_cause(exc, "fitting", f"{job.source_name}_cage")
         else:
@@ -288,6 +288,8 @@ def commit_simplify(source, job):
             d = job.fit.mean_distance
             msg += (f"; fitted: mean distance of the refined cage "
                     f"{100 * d[0] / job.fit.diagonal:.3f}% -> {100 * d[-1] / job.fit.diagonal:.3f}%")
+            if fit_levels(job.levels) < job.levels:
+                msg += f" (at {fit_levels(job.levels)} levels)"
         if job.fit_error:
             warnings.append(f"{job.fit_error}; the cage is kept unfitted")
         if job.binding is not None:
