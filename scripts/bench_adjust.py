@@ -20,6 +20,20 @@ Part 2, scale: a bumpy torus of 1M vertices bound to a 10k-face cage at two
 levels (targets: bind <= 15 s, re-deform <= 0.3 s); Surface Deform on the
 same pair for reference.
 
+Part 4, folds (``--only folds``): for every mesh in ../shared/meshes and a
+1.1M-triangle synthetic scan (the bunny split twice, with noise), a QEM cage
+of 2,000 faces fitted for each scheme, and artist-like edits at two cage
+vertices: the vertex and its one-ring lifted along its normal by 1% and 3%
+of the diagonal, and a smooth 5% lift with quartic falloff over 12%. Dense
+faces turned by more than 90 degrees for ``core.deform`` with butterfly and
+with Loop, and for Surface Deform on the same cage and edit; then per case
+our bind against Surface Deform's and full against incremental deform
+(``moved=`` the one-ring, and 5 random cage vertices).
+
+Part 5, live (``--only live``): one live update of a 1M-vertex scan through
+the add-on (simplify + bind by the operator, then 5 neighbouring cage
+vertices moved and ``live_update.update_edited``), with its breakdown.
+
 Part 3, fit (when ../shared/meshes is present): the QEM cage of 2,000
 faces of the bunny, homer, rocker-arm and spot, before and after
 ``fit_cage``: two-sided mean distance and enclosed volume of the subdivided
