@@ -300,6 +300,15 @@ def _object_mode(obj):
             raise core.MeshAdjustError(f"could not leave Edit Mode on '{obj.name}': {exc}") from exc
 
 
+def _edit_mode(obj):
+    """Enter Edit Mode on ``obj`` again."""
+    try:
+        with bpy.context.temp_override(active_object=obj, object=obj):
+            bpy.ops.object.mode_set(mode='EDIT')
+    except RuntimeError as exc:
+        raise core.MeshAdjustError(f"could not enter Edit Mode on '{obj.name}': {exc}") from exc
+
+
 class _CageJobStep(_Background, _CageStep):
     """Mixin for the long cage steps (fit, bind): every selected cage in turn
     from ``execute()``; a single cage runs in the background from ``invoke()``.
@@ -348,6 +357,7 @@ class MESHADJUST_OT_fit_cage(FitProps, _CageJobStep, bpy.types.Operator):
     bl_options = {'REGISTER', 'UNDO'}
 
     def _prepare(self, cage):
+        self._edit_mode = cage.mode == 'EDIT'   # the artist's mode, given back after the fit
         _object_mode(cage)
         return api.prepare_fit(cage, rebind=self.rebind)
 
@@ -356,7 +366,10 @@ class MESHADJUST_OT_fit_cage(FitProps, _CageJobStep, bpy.types.Operator):
 
     def _commit(self):
         cage = bpy.data.objects[self._job.cage_name]
+        _object_mode(cage)          # (the artist may have entered it while the fit ran)
         fit = api.commit_fit(cage, self._job)
+        if getattr(self, "_edit_mode", False):
+            _edit_mode(cage)
         d = fit.mean_distance
         msg = (f"fitted '{cage.name}': mean distance {100 * d[0] / fit.diagonal:.3f}% -> "
                f"{100 * d[-1] / fit.diagonal:.3f}% of size")

@@ -19,6 +19,7 @@ subdivision operator).
 
 import contextlib
 
+import bmesh
 import bpy
 import numpy as np
 
@@ -93,8 +94,23 @@ def cage_topology(cage):
 
 def save_rest(cage, V_rest):
     """Keep the cage's rest positions (source space) on the cage, so a
-    binding with other levels or scheme can be made after the cage was edited."""
-    _set_point_attr(cage.data, REST, 'FLOAT_VECTOR', V_rest)
+    binding with other levels or scheme can be made after the cage was edited.
+
+    In Edit Mode the attribute is a layer of the BMesh (what the mesh gets back
+    when the mode is left), written per vertex: a cage is small."""
+    if not cage.data.is_editmode:
+        _set_point_attr(cage.data, REST, 'FLOAT_VECTOR', V_rest)
+        return
+    bm = bmesh.from_edit_mesh(cage.data)
+    if len(bm.verts) != V_rest.shape[0]:
+        raise core.TopologyMismatchError(
+            f"save_rest: '{cage.name}' has {len(bm.verts)} vertices in Edit Mode, the rest shape "
+            f"{V_rest.shape[0]}")
+    layer = bm.verts.layers.float_vector.get(REST) or bm.verts.layers.float_vector.new(REST)
+    bm.verts.ensure_lookup_table()
+    for v, co in zip(bm.verts, V_rest.tolist()):
+        v[layer] = co
+    bmesh.update_edit_mesh(cage.data, loop_triangles=False, destructive=False)
 
 
 def load_rest(cage):

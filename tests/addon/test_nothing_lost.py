@@ -291,3 +291,30 @@ def test_several_objects_one_fails_the_others_are_kept_and_named(scene):
     assert bpy.ops.meshadjust.simplify(target_mode='FACES', target_faces=200, weight_group="w",
                                        fit=False, bind=False) == {'FINISHED'}
     assert objs[0].meshadjust.cage is not None and objs[1].meshadjust.cage is None
+
+
+def test_steps_from_edit_mode_keep_the_edit_and_the_mode(bound):
+    dense, cage = bound
+    store = mod("store")
+    rest0 = store.load_rest(cage)
+    bpy.context.view_layer.objects.active = cage
+    bpy.ops.object.mode_set(mode='EDIT')
+    bm = bmesh.from_edit_mesh(cage.data)
+    for v in bm.verts:
+        v.co.z += 0.1
+    bmesh.update_edit_mesh(cage.data)
+    # a re-bind inside Refine from Edit Mode: the rest shape is kept, so is the edit
+    assert bpy.ops.meshadjust.refine(output='EDITED', levels=1) == {'FINISHED'}
+    assert cage.mode == 'EDIT' and cage.meshadjust.levels == 1
+    dz = pos(cage.meshadjust.edited)[:, 2] - pos(dense)[:, 2]
+    assert np.allclose(dz, 0.1, atol=1e-4)
+    # Bind with Keep edit off from Edit Mode: the current shape is the new rest
+    assert bpy.ops.meshadjust.bind(keep_edit=False) == {'FINISHED'}
+    bpy.ops.object.mode_set(mode='OBJECT')
+    assert np.abs(store.load_rest(cage) - pos(cage)).max() < 1e-6
+    assert np.abs(store.load_rest(cage) - rest0).max() > 0.09
+    bpy.ops.object.mode_set(mode='EDIT')
+    assert bpy.ops.meshadjust.fit_cage() == {'FINISHED'}
+    assert cage.mode == 'EDIT'                                   # given back
+    assert bpy.ops.meshadjust.refine(output='SHAPE_KEY') == {'FINISHED'}
+    assert dense.data.shape_keys.key_blocks.get("dense_cage") is not None
