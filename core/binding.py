@@ -234,8 +234,9 @@ class Binding:
         without touching the dense mesh: O(fine support + result)).
 
         The first call (also with an empty list) builds the indices the
-        incremental deform uses (fine face -> dense vertices, the composed
-        operator's rows), so a caller can pay for them up front.
+        incremental deform uses (fine face -> dense vertices, fine vertex ->
+        fine faces, each level's stencil transposed), so a caller can pay for
+        them up front.
 
         Parameters
         ----------
@@ -360,9 +361,9 @@ def deform(binding, V_cage_edited, *, F_cage=None, moved=None, out=None):
     (n_dense,3) float64 ndarray
         ``out`` when given, else a new array. An incremental update equals a
         full deform of ``V_cage_edited`` to rounding (the same row-wise frame
-        rebuild; its fine positions come from the composed operator's rows,
-        which sum in another order than the level-by-level apply: about
-        1e-16 of the diagonal).
+        rebuild; its fine positions come from each level's stencil rows,
+        summed in another order than the operator's apply plan: about 1e-16
+        of the diagonal).
 
     Raises
     ------
@@ -440,15 +441,14 @@ def _influenced_dense(binding, ids):
     they read: ``(rows, needed)``, ``needed`` an (n_fine,) bool mask.
 
     The chain, all on index sets of the fine mesh (O(fine support + result),
-    never O(dense mesh)): fine vertices the composed operator reaches from
-    ``ids`` with a nonzero weight (positions change) -> every corner of a
+    never O(dense mesh)): fine vertices the stencils reach from ``ids`` level
+    by level with nonzero weights (positions change) -> every corner of a
     fine face touching them (normals change) -> the fine faces with such a
     corner (their bound dense vertices move) -> the corners of those faces
-    (``needed``). The fine face -> dense
-    vertices and fine vertex -> fine faces indices are built on first use
-    and cached in the binding, with the last answer (so
-    :meth:`Binding.influenced` followed by the deform of the same ids
-    searches once).
+    (``needed``). The fine face -> dense vertices, fine vertex -> fine faces
+    and transposed stencil indices are built on first use and cached in the
+    binding, with the last answer (so :meth:`Binding.influenced` followed by
+    the deform of the same ids searches once).
     """
     op = binding._operator
     idx = _incremental_index(binding)
@@ -458,11 +458,14 @@ def _influenced_dense(binding, ids):
         return last[1]
     Ff = op.F_fine
     m_fine = Ff.shape[0]
-    cols = idx["cols"]
-    k, _ = ragged_ranges(cols.indptr[ids], cols.indptr[ids + 1] - cols.indptr[ids])
-    pos_changed = np.zeros(op.n_fine, dtype=bool)
-    pos_changed[cols.cols[k]] = True
-    touched = _faces_around(idx, np.flatnonzero(pos_changed), m_fine)
+    pos_changed = ids
+    for T in idx["levels_t"]:        # level by level: the rows reading a changed vertex
+        k, _ = ragged_ranges(T.indptr[pos_changed], T.indptr[pos_changed + 1]
+                             - T.indptr[pos_changed])
+        mask = np.zeros(T.n_out, dtype=bool)
+        mask[T.cols[k]] = True
+        pos_changed = np.flatnonzero(mask)
+    touched = _faces_around(idx, pos_changed, m_fine)
     normal_changed = np.zeros(op.n_fine, dtype=bool)
     normal_changed[Ff[touched].ravel()] = True
     faces = _faces_around(idx, np.flatnonzero(normal_changed), m_fine)
@@ -489,22 +492,21 @@ def _incremental_index(binding):
             "dense_count": d_count, "dense_start": np.cumsum(d_count) - d_count,
             "faces_by_vertex": np.argsort(flat, kind="stable") // 3,
             "vertex_count": v_count, "vertex_start": np.cumsum(v_count) - v_count,
+            "levels_t": [_transposed(S) for S in op.stencils],
         }
-        c["incremental"]["rows"], c["incremental"]["cols"] = _composed_rows(op)
     return c["incremental"]
 
 
-def _composed_rows(op):
-    """The composed operator by fine vertex (its rows) and by coarse vertex
-    (the fine vertices each one reaches with a nonzero weight, weights
-    unused), both as :class:`_Rows`."""
-    r, cols, w = op.triplets()
-    indptr = np.zeros(op.n_fine + 1, dtype=np.int64)
-    np.cumsum(np.bincount(r, minlength=op.n_fine), out=indptr[1:])
+def _transposed(S):
+    """The structural transpose of one level's stencil ``S``: for each input
+    vertex, the output vertices reading it with a nonzero weight."""
+    rows, cols = S.rows(), S.cols
+    keep = S.weights != 0
+    rows, cols = rows[keep], cols[keep]
     order = np.argsort(cols, kind="stable")
-    c_indptr = np.zeros(op.n_coarse + 1, dtype=np.int64)
-    np.cumsum(np.bincount(cols, minlength=op.n_coarse), out=c_indptr[1:])
-    return _Rows(indptr, cols, w), _Rows(c_indptr, r[order], w[order])
+    indptr = np.zeros(S.n_in + 1, dtype=np.int64)
+    np.cumsum(np.bincount(cols, minlength=S.n_in), out=indptr[1:])
+    return _Rows(indptr, rows[order], np.zeros(0), S.n_out)
 
 
 def _faces_around(idx, vertices, m_fine):
@@ -664,12 +666,13 @@ def _fine_geometry(binding, V_cage_edited, F_cage, where):
 
 def _fine_geometry_at(binding, Vc, needed):
     """Fine positions and normals, transposed (3, n_fine), valid where
-    ``needed`` (zero elsewhere). Positions come from the composed
-    coarse-to-fine rows of the vertices ``needed`` and the corners of the
-    faces around them; normals are summed over those faces, in the order
-    of :func:`~.mesh.vertex_normals`. Equal to the full computation to
-    rounding (the composed rows sum in another order than the level-by-level
-    apply)."""
+    ``needed`` (garbage elsewhere). Positions are evaluated level by level,
+    each level only at the vertices the next one reads (found backwards from
+    ``needed`` and the corners of the faces around them), with the level's
+    own stencil rows; normals are summed over the faces around ``needed``,
+    in the order of :func:`~.mesh.vertex_normals`. Equal to the full
+    computation to rounding (the rows sum in another order than the apply
+    plan's tables)."""
     op = binding._operator
     idx = _incremental_index(binding)
     faces = _faces_around(idx, np.flatnonzero(needed), op.F_fine.shape[0])
@@ -677,28 +680,39 @@ def _fine_geometry_at(binding, Vc, needed):
     at = np.zeros(op.n_fine, dtype=bool)
     at[Fs.ravel()] = True
     verts = np.flatnonzero(at)
-    rows = idx["rows"]
-    k, owner = ragged_ranges(rows.indptr[verts], rows.indptr[verts + 1] - rows.indptr[verts])
-    w, cols = rows.weights[k], rows.cols[k]
+    wanted = [verts]
+    for S in reversed(op.stencils[1:]):     # what each level reads of the one before
+        r = wanted[-1]
+        k, _ = ragged_ranges(S.indptr[r], S.indptr[r + 1] - S.indptr[r])
+        mask = np.zeros(S.n_in, dtype=bool)
+        mask[S.cols[k]] = True
+        wanted.append(np.flatnonzero(mask))
+    X = Vc
+    for S, r in zip(op.stencils, reversed(wanted)):
+        k, owner = ragged_ranges(S.indptr[r], S.indptr[r + 1] - S.indptr[r])
+        w, cols = S.weights[k], S.cols[k]
+        Y = np.empty((S.n_out, 3))
+        for d in range(3):
+            Y[r, d] = np.bincount(owner, weights=w * X[cols, d], minlength=r.shape[0])
+        X = Y
     local = np.empty(op.n_fine, dtype=np.int64)
     local[verts] = np.arange(verts.shape[0])
-    V_at = np.empty((verts.shape[0], 3))
-    for d in range(3):
-        V_at[:, d] = np.bincount(owner, weights=w * Vc[cols, d], minlength=verts.shape[0])
+    V_at = X[verts]
     N_at = vertex_normals(V_at, local[Fs])     # same faces, same order: same sums
-    VfT = np.zeros((3, op.n_fine))
-    NfT = np.zeros((3, op.n_fine))
+    VfT = np.empty((3, op.n_fine))
+    NfT = np.empty((3, op.n_fine))
     VfT[:, verts] = V_at.T
     NfT[:, verts] = N_at.T
     return VfT, NfT
 
 
 class _Rows(NamedTuple):
-    """The composed coarse-to-fine operator as CSR rows (or its transpose)."""
+    """A sparse map as CSR rows (here: a stencil's structural transpose)."""
 
     indptr: np.ndarray  #: (n_rows + 1,) int64
     cols: np.ndarray    #: (nnz,) int64
-    weights: np.ndarray  #: (nnz,) float64
+    weights: np.ndarray  #: (nnz,) float64 (empty when only the structure is kept)
+    n_out: int          #: number of columns (the map's outputs)
 
 
 def _closest_on(index, P):

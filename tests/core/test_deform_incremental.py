@@ -171,3 +171,19 @@ def test_influenced_lists_exactly_the_rows_the_update_writes(torus_case):
     assert b.influenced([]).shape == (0,)
     with pytest.raises(InvalidArgumentError, match="Binding.influenced: moved index -2"):
         b.influenced([-2])
+
+
+@pytest.mark.parametrize("levels", [0, 1, 3])
+@pytest.mark.parametrize("scheme", ["butterfly", "loop"])
+def test_incremental_equals_full_at_other_levels(levels, scheme):
+    Vd, Fd = _bumpy_sphere(k=3)
+    cage = simplify(Vd, Fd, target_faces=80)
+    b = bind(Vd, Fd, cage.V, cage.F, levels=levels, scheme=scheme)
+    rng = np.random.default_rng(levels)
+    D = deform(b, cage.V)
+    Ve = cage.V.copy()
+    for _ in range(3):
+        ids = rng.choice(cage.V.shape[0], 4, replace=False)
+        Ve[ids] += 0.05 * rng.standard_normal((4, 3))
+        deform(b, Ve, moved=ids, out=D)
+        assert np.abs(D - deform(b, Ve)).max() <= _tol(Vd)
