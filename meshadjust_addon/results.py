@@ -62,11 +62,11 @@ def _new_source_copy(source, name):
 def edited_copy(source, cage, n_vertices):
     """The edited-original object of ``cage`` with ``n_vertices`` vertices:
     the existing one, its mesh re-made from the source when the source's
-    vertex count changed, or a new copy. Returns ``(edited, note)``, the note
+    vertex count changed, or a new copy (also when the artist deleted it). Returns ``(edited, note)``, the note
     saying what was re-made (empty otherwise)."""
     edited = cage.meshadjust.edited
     name = f"{source.name}_edited"
-    if edited is not None and edited.name in bpy.data.objects:
+    if edited is not None and edited.name in bpy.data.objects and edited.users_collection:
         old = edited.data
         if len(old.vertices) == n_vertices:
             return edited, ""
@@ -96,6 +96,8 @@ def write_refined(cage, source, Vr, Fr):
     """Create or update the refined-mesh object of ``cage``."""
     cs = cage.meshadjust
     refined = cs.refined
+    if refined is not None and not refined.users_collection:   # deleted by the artist
+        refined = None
     if refined is not None and len(refined.data.vertices) == Vr.shape[0] \
             and len(refined.data.polygons) == Fr.shape[0]:
         mesh_io.write_positions(refined.data, Vr)

@@ -189,6 +189,9 @@ def test_stale_source_is_detected_shown_and_fixed_by_rebind(bound):
     msgs = panel.refine_messages(bpy.context)
     assert any(rebind and "'dense' changed since it was bound: its modifiers changed" in text
                for text, rebind in msgs)
+    from tests.addon.test_operators import _draw_panel
+    drawn = [e for e in _draw_panel() if e == ("operator", "meshadjust.bind")]
+    assert len(drawn) == 2                                      # Edit Cage's Bind and Re-bind
     assert bpy.ops.meshadjust.refine(output='EDITED') == {'FINISHED'}
     assert "WARNING" in cage.meshadjust.last_report
     assert bpy.ops.meshadjust.bind() == {'FINISHED'}             # Re-bind
@@ -318,3 +321,28 @@ def test_steps_from_edit_mode_keep_the_edit_and_the_mode(bound):
     assert cage.mode == 'EDIT'                                   # given back
     assert bpy.ops.meshadjust.refine(output='SHAPE_KEY') == {'FINISHED'}
     assert dense.data.shape_keys.key_blocks.get("dense_cage") is not None
+
+
+def test_simplify_keeps_the_cage_when_the_fit_fails_and_still_binds_it(scene, monkeypatch):
+    V, F = bumpy_sphere(3)
+    dense = make_object("dense", V, F)
+    core = sys.modules[MODULE + ".core"]
+    monkeypatch.setattr(core, "fit_cage", _boom)
+    assert simplify(200) == {'FINISHED'}
+    cage = dense.meshadjust.cage
+    rep = cage.meshadjust.last_report
+    assert "WARNING: fitting 'dense_cage' failed: boom" in rep and "kept unfitted" in rep
+    assert cage.meshadjust.edited is not None                     # bound all the same
+    assert bpy.ops.meshadjust.refine(output='EDITED') == {'FINISHED'}
+    assert np.abs(pos(cage.meshadjust.edited) - pos(dense)).max() < 1e-5
+
+
+def test_a_result_the_artist_deleted_is_made_again(bound):
+    dense, cage = bound
+    bpy.ops.meshadjust.refine(output='BOTH')
+    for obj in (cage.meshadjust.edited, cage.meshadjust.refined):
+        for col in list(obj.users_collection):
+            col.objects.unlink(obj)                             # deleted in the outliner
+    assert bpy.ops.meshadjust.bind() == {'FINISHED'}
+    assert bpy.ops.meshadjust.refine(output='BOTH') == {'FINISHED'}
+    assert cage.meshadjust.edited.users_collection and cage.meshadjust.refined.users_collection
