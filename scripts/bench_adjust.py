@@ -325,7 +325,7 @@ def deform_timings(b, Vc, Fc, centre, seed=0):
     return out
 
 
-def run_folds(cases, faces=2000, centres_per_mesh=2, seed=1, timings=None):
+def run_folds(cases, faces=2000, centres_per_mesh=2, seed=1, timings=None, levels=2):
     """Fold counts per edit: rows (mesh, edit, {column: folds}); columns
     butterfly / Loop (core.deform, each on its own fitted cage, two levels)
     and Surface Deform on each of those cages. ``timings`` (a list) receives
@@ -345,9 +345,11 @@ def run_folds(cases, faces=2000, centres_per_mesh=2, seed=1, timings=None):
         res = {}
         for scheme in FOLD_SCHEMES:
             try:
-                Vc = fit_cage(V, F, cage.V, cage.F, levels=2, scheme=scheme, creases=creases).V
+                # fitted at most at 2 levels, as the add-on does (MAX_FIT_LEVELS)
+                Vc = fit_cage(V, F, cage.V, cage.F, levels=min(levels, 2), scheme=scheme,
+                              creases=creases).V
                 t = time.perf_counter()
-                b = bind(V, F, Vc, cage.F, levels=2, scheme=scheme, creases=creases)
+                b = bind(V, F, Vc, cage.F, levels=levels, scheme=scheme, creases=creases)
                 t_bind = time.perf_counter() - t
             except MeshAdjustError as exc:
                 print(f"folds: {name} {scheme} skipped ({exc})")
@@ -447,6 +449,8 @@ def _fmt(x, digits=3):
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="smaller meshes, no results file")
+    ap.add_argument("--levels", type=int, default=2,
+                    help="subdivision levels of the folds part (fits use at most 2)")
     ap.add_argument("--only", choices=("bend", "scale", "fit", "folds", "live"), action="append",
                     help="run only these parts (repeatable); the results file is then not written")
     args = ap.parse_args(argv)
@@ -455,7 +459,7 @@ def main(argv=None):
     if "live" in parts:
         lines += _live_section(args.quick)
     if "folds" in parts:
-        lines += _folds_section(args.quick)
+        lines += _folds_section(args.quick, args.levels)
     if "bend" in parts:
         lines += _bend_section(args.quick)
     if "scale" in parts:
@@ -492,13 +496,13 @@ def _scale_section(quick):
     return lines
 
 
-def _folds_section(quick):
+def _folds_section(quick, levels=2):
     timings = []
-    rows = run_folds(fold_cases(quick), timings=timings)
+    rows = run_folds(fold_cases(quick), timings=timings, levels=levels)
     cols = [c for s in FOLD_SCHEMES for c in (s, f"SD {s} cage")]
     lines = ["## Folds of artist-like edits (faces turned by more than 90 degrees)", "",
              "QEM cage of 2,000 faces (a quarter of the input's faces when smaller), fitted "
-             "for each scheme, two levels; Surface Deform (bpy) on the same cage and edit",
+             f"for each scheme, {levels} levels; Surface Deform (bpy) on the same cage and edit",
              "", "| mesh | edit | " + " | ".join(cols) + " |",
              "| --- | --- | " + " | ".join("---:" for _ in cols) + " |"]
     total = dict.fromkeys(cols, 0)
