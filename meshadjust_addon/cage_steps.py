@@ -118,6 +118,19 @@ def _rest_of(cage, n):
     return V_rest if V_rest.shape[0] == n else None
 
 
+def _check_rest(cage, V_rest, V_now, F_cage):
+    """Refuse a rest shape that cannot be bound: faces made in Edit Mode after
+    the bind (an extrusion, a fill) get their vertices' rest positions from
+    the vertices they came from, so they can have no area at rest."""
+    tol = 1e-12 * max(_diag(V_now), 1e-300) ** 2
+    flat = (core.face_areas(V_rest, F_cage) <= tol) & (core.face_areas(V_now, F_cage) > tol)
+    if flat.any():
+        raise core.MeshAdjustError(
+            f"'{cage.name}': {int(flat.sum()):,} faces added in Edit Mode have no rest shape "
+            f"(e.g. an extrusion), so the edit cannot be kept on top of it: Bind with Keep edit "
+            f"off makes the current shape the rest shape")
+
+
 def prepare_cage_job(cage, *, levels=None, scheme=None, from_rest=False, keep_edit=False):
     """Read what a bind or a fit of ``cage`` needs (main thread).
 
@@ -132,6 +145,8 @@ def prepare_cage_job(cage, *, levels=None, scheme=None, from_rest=False, keep_ed
     V_now = _cage_in_source_space(cage, source)
     V_rest = _rest_of(cage, V_now.shape[0]) if (keep_edit or from_rest) else None
     F_cage, _, creases = store.cage_topology(cage)
+    if V_rest is not None:
+        _check_rest(cage, V_rest, V_now, F_cage)
     src, fp = read_source(source)
     if levels in (None, 0):
         levels = cs.levels or auto_levels(F_cage.shape[0], src.F.shape[0])

@@ -346,3 +346,25 @@ def test_a_result_the_artist_deleted_is_made_again(bound):
     assert bpy.ops.meshadjust.bind() == {'FINISHED'}
     assert bpy.ops.meshadjust.refine(output='BOTH') == {'FINISHED'}
     assert cage.meshadjust.edited.users_collection and cage.meshadjust.refined.users_collection
+
+
+def test_rebind_after_an_extrusion_refuses_to_keep_the_edit_and_says_why(bound):
+    dense, cage = bound
+    bpy.context.view_layer.objects.active = cage
+    bpy.ops.object.mode_set(mode='EDIT')
+    bm = bmesh.from_edit_mesh(cage.data)
+    bm.faces.ensure_lookup_table()
+    out = bmesh.ops.extrude_discrete_faces(bm, faces=[bm.faces[0]])
+    for v in out["faces"][0].verts:
+        v.co += 0.05 * out["faces"][0].normal
+    bmesh.update_edit_mesh(cage.data)
+    bpy.ops.object.mode_set(mode='OBJECT')
+    before = scene_snapshot()
+    with pytest.raises(RuntimeError, match="no rest shape .*Keep edit off"):
+        bpy.ops.meshadjust.bind()
+    assert_unchanged(before)
+    bpy.ops.object.mode_set(mode='EDIT')
+    bpy.ops.mesh.select_all(action='SELECT')
+    bpy.ops.mesh.quads_convert_to_tris()
+    bpy.ops.object.mode_set(mode='OBJECT')
+    assert bpy.ops.meshadjust.bind(keep_edit=False) == {'FINISHED'}
