@@ -8,8 +8,10 @@ edge- and vertex-manifold triangle mesh that :func:`~.simplify.simplify`,
 :func:`~.binding.bind` accept, and says what it did::
 
     drop faces with a repeated vertex index
-    weld   vertices on open or non-manifold edges that coincide (exactly, or
-           within weld_distance of the bounding-box diagonal: soups, seams)
+    weld   vertices on open or non-manifold edges or on collapsed faces (no
+           taller than weld_distance) that coincide (exactly, or within
+           weld_distance of the bounding-box diagonal: soups, seams, collapsed
+           clusters), and the ends of edges that short
     drop   faces degenerate after welding; of faces on the same three
            vertices keep one, or none when both orientations are there
            (a double-sided sheet)
@@ -141,9 +143,10 @@ def clean_mesh(V, F, *, weld_distance=WELD_DISTANCE, min_component_area=MIN_COMP
     weld_distance : float >= 0
         Vertices on open or non-manifold edges closer than this share of the
         bounding-box diagonal (along every axis) are welded; exact duplicates
-        always are (also with 0). Vertices inside a closed surface are never
-        welded: two of them at one place are two sheets touching, which is
-        already manifold.
+        always are (also with 0); so are the two ends of an edge that short,
+        and the corners of faces no taller than it (collapsed clusters).
+        Other vertices inside a closed surface are not welded: two of them at
+        one place are two sheets touching, which is already manifold.
     min_component_area : float >= 0
         Components whose area is below this share of the largest
         component's area are debris and dropped (0 keeps everything).
@@ -223,30 +226,47 @@ def _degenerate(F):
 def _weld_map(V, F, twin, weld_distance):
     """Representative of every vertex, (n,) int64: vertices on an open or
     non-manifold edge (``twin < 0``) that coincide, exactly or within
-    ``weld_distance`` of the diagonal (see the module docstring), map to the
-    smallest index of their group; every other vertex to itself."""
+    ``weld_distance`` of the diagonal (see the module docstring), and the two
+    ends of any edge that short (a collapsed cluster) map to the smallest
+    index of their group; every other vertex to itself."""
     n = V.shape[0]
     rep = np.arange(n, dtype=np.int64)
-    h = np.flatnonzero(twin < 0)
-    if h.size == 0:
+    if F.shape[0] == 0:
         return rep
     U, W = half_edge_ends(F)
-    cand = np.unique(np.concatenate([U[h], W[h]]))
-    P = V[cand] + 0.0                          # -0.0 and 0.0 are the same place
     lo, hi = bounding_box(V[F.ravel()])
-    extent = float(np.max(hi - lo))
-    cell = 4.0 * weld_distance * diagonal_length(lo, hi)
-    if cell > 0 and extent / cell + 2 < 2 ** _GRID_BITS:
-        pairs = [_same_cell_pairs(np.floor((P - lo) / cell + k / 4.0).astype(np.int64))
-                 for k in range(4)]
-    else:
-        pairs = [_same_cell_pairs(None, P)]
+    V = (V - lo) / (diagonal_length(lo, hi) or 1.0)    # unit diagonal (no overflow)
+    lo, hi, tol = np.zeros(3), (hi - lo) / (diagonal_length(lo, hi) or 1.0), weld_distance
+    short = np.flatnonzero(np.max(np.abs(V[U] - V[W]), axis=1) <= tol)
+    pairs = [np.stack([U[short], W[short]], axis=1)]
+    h = np.flatnonzero(twin < 0)
+    flat = _collapsed_faces(V, F, tol)
+    if h.size or flat.size:
+        cand = np.unique(np.concatenate([U[h], W[h], F[flat].ravel()]))
+        P = V[cand] + 0.0                          # -0.0 and 0.0 are the same place
+        cell = 4.0 * tol
+        if cell > 0 and float(np.max(hi - lo)) / cell + 2 < 2 ** _GRID_BITS:
+            found = [_same_cell_pairs(np.floor((P - lo) / cell + k / 4.0).astype(np.int64))
+                     for k in range(4)]
+        else:
+            found = [_same_cell_pairs(None, P)]
+        pairs += [cand[p] for p in found]
     pairs = np.concatenate(pairs)
     if pairs.shape[0] == 0:
         return rep
-    labels = connected_labels(cand.size, pairs)
-    rep[cand] = cand[labels]
+    used = np.unique(pairs)
+    labels = connected_labels(used.size, np.searchsorted(used, pairs))
+    rep[used] = used[labels]
     return rep
+
+
+def _collapsed_faces(V, F, tol):
+    """Faces whose height over their longest edge is at most ``tol`` (the
+    three corners on a line or a point): their corners are weld candidates."""
+    A, B, C = V[F[:, 0]], V[F[:, 1]], V[F[:, 2]]
+    twice_area = np.linalg.norm(np.cross(B - A, C - A), axis=1)
+    longest = np.sqrt(np.max([np.einsum("ij,ij->i", X, X) for X in (B - A, C - B, A - C)], axis=0))
+    return np.flatnonzero(twice_area <= tol * longest)
 
 
 def _same_cell_pairs(Q, P=None):
@@ -501,7 +521,7 @@ def _debris(V, F, twin, min_component_area, face_budget, protected):
     roots = np.flatnonzero(labels == np.arange(F.shape[0]))
     tiny = comp_area < min_component_area * comp_area.max()
     if face_budget:
-        tiny |= comp_area < comp_area.sum() / face_budget
+        tiny |= comp_area * face_budget < comp_area.sum() * (1 - 1e-9)  # (equal parts: none)
     tiny[np.argmax(comp_area)] = False
     if protected is not None:
         tiny[labels[protected[F].any(axis=1)]] = False

@@ -34,7 +34,8 @@ from typing import NamedTuple
 import numpy as np
 
 from .cg import conjugate_gradient
-from .errors import InvalidArgumentError
+from .clean import clean_mesh
+from .errors import InvalidArgumentError, InvalidMeshError
 from .mesh import bbox_diagonal, bounding_box, check_mesh, face_areas, vertex_normals
 from .metrics import sample_surface
 from .spatial import TriangleIndex
@@ -65,7 +66,8 @@ def fit_cage(V_dense, F_dense, V_cage, F_cage, *, levels=2, scheme="butterfly", 
     Parameters
     ----------
     V_dense, F_dense : (n,3) float, (m,3) int
-        The dense surface to match.
+        The dense surface to match, cleaned first as ``simplify`` does
+        (:func:`core.clean.clean_mesh`: any mesh as scans arrive).
     V_cage, F_cage : (n_c,3) float, (m_c,3) int
         Starting cage (e.g. :func:`~.simplify.simplify`'s output); its
         topology is kept, only positions change.
@@ -113,6 +115,13 @@ def fit_cage(V_dense, F_dense, V_cage, F_cage, *, levels=2, scheme="butterfly", 
     """
     V_dense, F_dense = check_mesh(V_dense, F_dense, where="fit_cage", allow_empty=False)
     V_cage, F_cage = check_mesh(V_cage, F_cage, where="fit_cage", allow_empty=False)
+    # the surface to match, as simplify saw it: welded (vertex normals across seams),
+    # without double-sided sheets (their normals cancel) or debris
+    dense = clean_mesh(V_dense, F_dense)
+    if dense.F.shape[0] == 0:
+        raise InvalidMeshError(f"fit_cage: nothing of the dense mesh is left after cleaning "
+                               f"({dense.report.summary()})")
+    V_dense, F_dense = dense.V, dense.F
     if int(iterations) != iterations or iterations < 0:
         raise InvalidArgumentError(f"fit_cage: iterations must be an integer >= 0, got {iterations}")
     if not smoothness >= 0:

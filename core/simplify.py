@@ -38,6 +38,7 @@ Units: the mesh is moved to its bounding-box centre and scaled to a unit
 diagonal before anything else, so the result does not depend on the units.
 """
 
+import copy
 from dataclasses import dataclass
 from typing import NamedTuple
 
@@ -102,9 +103,10 @@ TUNING = Tuning()
 
 
 
-#: how often ``max_error`` is re-run with a tighter collapse bound before the
-#: cleaned input itself is returned (its distance is 0)
-MAX_ERROR_TRIES = 6
+#: ``max_error`` raises the engine's bound in these steps (shares of it),
+#: measuring the cage after each (see ``_within_max_error``)
+MAX_ERROR_STEPS = (0.3, 0.5, 0.7, 0.85, 1.0)
+MAX_ERROR_QUICK_SAMPLES = 20_000
 
 STOP_REASONS = ("target", "max_error", "topology_floor", "no_valid_collapse", "cancelled")
 
@@ -333,9 +335,24 @@ def _unchanged(clean):
                  np.arange(m, dtype=np.int64), np.zeros((0, 2), np.int64), 0.0, "cancelled", 0)
 
 
-def _collapse(clean, target, max_error, opts, progress):
-    """Set up the engine on the cleaned (manifold) mesh, run it, relocate the
-    cage and return it in the clean mesh's order (see :class:`_Cage`)."""
+class _SetUp(NamedTuple):
+    """The engine's state at the start and what turning it back into a cage needs."""
+
+    mesh: State
+    Vc: np.ndarray         #: the clean vertices in working (spatial) order
+    Vn: np.ndarray         #: ... centred, scaled to a unit diagonal, snapped
+    order: np.ndarray      #: clean index of each working vertex
+    centre: np.ndarray
+    scale: float
+    creases: np.ndarray    #: the input's crease vertices (for the relocation)
+    Eb_in: np.ndarray      #: the input's border edges
+    Fin: np.ndarray        #: the input's faces for the backward pull, or None
+    m0: int
+
+
+def _set_up(clean, opts):
+    """The engine on the cleaned (manifold) mesh: working order, unit-free
+    coordinates, quadrics, normals (see :class:`_SetUp`)."""
     tun = opts["tuning"]
     if (clean.twin == NON_MANIFOLD).any():
         raise MeshAdjustError(f"{_WHERE}: cleaning left a non-manifold edge (a bug)")
@@ -365,25 +382,28 @@ def _collapse(clean, target, max_error, opts, progress):
     Nref = _normal_sums(Fc, Nf, n)
     del Nf
     mesh = State(Vn, Fc, twin, Q, lock, feat, Nref, forig=forder)  # Fc is spatial_order's own array
-    max_err_n = None if max_error is None else float(max_error) / scale
-    stopped, passes = _run_all(mesh, target, max_err_n, opts, progress, m0)
-    if stopped == "cancelled":
-        return _unchanged(clean)
-    if (tun.relocate_iters > 0 and passes > 0
-            and mesh.F.shape[0] <= min(tun.relocate_max_faces, tun.relocate_max_share * m0)):
-        _relocate_cage(mesh, Vn, creases, Eb_in, Fin, tun)
+    return _SetUp(mesh, Vc, Vn, order, centre, scale, creases, Eb_in, Fin, m0)
+
+
+def _cage_of(su, mesh, stopped, passes, opts, relocate=True):
+    """The engine's ``mesh`` (compact) as a cage in the clean mesh's order and
+    the caller's units, after the final relocation when ``relocate``."""
+    tun = opts["tuning"]
+    if (relocate and tun.relocate_iters > 0 and passes > 0
+            and mesh.F.shape[0] <= min(tun.relocate_max_faces, tun.relocate_max_share * su.m0)):
+        _relocate_cage(mesh, su.Vn, su.creases, su.Eb_in, su.Fin, tun)
     # back to the caller's units; vertices never moved keep their exact input position
-    Vout = mesh.V * scale + centre
+    Vout = mesh.V * su.scale + su.centre
     still = ~mesh.moved
-    Vout[still] = Vc[mesh.orig[still]]
+    Vout[still] = su.Vc[mesh.orig[still]]
     # back to the clean mesh's order: cage vertices in the order of the clean vertices
     # they keep, faces in the order of the clean faces they descend from
-    vorder = np.argsort(order[mesh.orig])  # (distinct keys)
+    vorder = np.argsort(su.order[mesh.orig])  # (distinct keys)
     new_v = np.empty(vorder.size, dtype=np.int64)
     new_v[vorder] = np.arange(vorder.size, dtype=np.int64)
     cur = mesh.cur_of_clean
-    of_clean = np.empty(n, dtype=np.int64)
-    of_clean[order] = np.where(cur >= 0, new_v[np.maximum(cur, 0)], -1)
+    of_clean = np.empty(su.order.size, dtype=np.int64)
+    of_clean[su.order] = np.where(cur >= 0, new_v[np.maximum(cur, 0)], -1)
     hf = np.flatnonzero(mesh.feat)
     tf = mesh.twin[hf]
     hf = hf[(tf > hf) | (tf == BOUNDARY)]  # one half-edge per feature edge
@@ -392,7 +412,16 @@ def _collapse(clean, target, max_error, opts, progress):
     fe = fe[np.lexsort((fe[:, 1], fe[:, 0]))]
     forder_out = np.argsort(mesh.forig, kind="stable")
     return _Cage(Vout[vorder], new_v[mesh.F[forder_out]], of_clean, mesh.forig[forder_out],
-                 fe.astype(np.int64), float(mesh.worst * scale), stopped, passes)
+                 fe.astype(np.int64), float(mesh.worst * su.scale), stopped, passes)
+
+
+def _collapse(clean, target, opts, progress):
+    """Collapse the cleaned mesh to ``target`` (see :func:`simplify`)."""
+    su = _set_up(clean, opts)
+    stopped, passes = _run_all(su.mesh, target, None, opts, progress, su.m0)
+    if stopped == "cancelled":
+        return _unchanged(clean)
+    return _cage_of(su, su.mesh, stopped, passes, opts)
 
 
 def _run_all(mesh, target, max_err_n, opts, progress, m0):
@@ -436,20 +465,48 @@ def _stop_reason(cage, target, opts):
 def _within_max_error(clean, target, max_error, opts, progress):
     """Collapse with ``max_error`` as a guarantee: the cage's two-sided
     Hausdorff distance to the cleaned input, as ``surface_distance`` measures
-    it, is at most ``max_error``. The collapse bound is an RMS distance to
-    the planes of the faces a vertex stands for, which the worst point can
-    exceed: when the measure does, the run is repeated with the bound scaled
-    down by the overshoot (at most ``MAX_ERROR_TRIES`` runs; the cleaned
-    input itself, at distance 0, is the last resort)."""
-    bound = float(max_error)
-    for _ in range(MAX_ERROR_TRIES):
-        cage = _collapse(clean, target, bound, opts, progress)
-        if cage.stopped == "cancelled" or cage.F.shape[0] == clean.F.shape[0]:
-            return cage, 0.0
-        d = surface_distance(clean.V, clean.F, cage.V, cage.F).hausdorff
-        if d <= max_error:
-            return cage, d
-        bound *= min(0.7, 0.9 * max_error / d)
+    it, is at most ``max_error``.
+
+    The collapse bound is an RMS distance to the planes of the faces a vertex
+    stands for, which the worst point can exceed, so the bound is raised in
+    steps (``MAX_ERROR_STEPS`` of ``max_error``), the engine going on from a
+    copy of where the last step left it, each step's cage measured quickly
+    (``MAX_ERROR_QUICK_SAMPLES``); the first step over the bound is undone
+    (when even the first is, smaller first steps are tried). The last step's
+    cage is then measured as ``surface_distance`` does by default, relocated
+    and not; if both are over, the step before is tried, down to the cleaned
+    input itself (distance 0). Returns the cage and its distance.
+    """
+    su = _set_up(clean, opts)
+
+    def measure(cage, samples=None):
+        return surface_distance(clean.V, clean.F, cage.V, cage.F, samples=samples).hausdorff
+
+    steps = list(MAX_ERROR_STEPS)
+    good = []                                     # (engine state, stop reason, passes) per step
+    while steps:
+        share = steps.pop(0)
+        mesh, passes = (good[-1][0], good[-1][2]) if good else (su.mesh, 0)
+        trial = copy.deepcopy(mesh)
+        st, more = _run_all(trial, target, share * max_error / su.scale, opts, progress, su.m0)
+        if st == "cancelled":
+            return _unchanged(clean), 0.0
+        quick = measure(_cage_of(su, trial, st, passes + more, opts, relocate=False),
+                        MAX_ERROR_QUICK_SAMPLES)
+        if quick > max_error:
+            if not good and share > MAX_ERROR_STEPS[0] / 16:
+                steps = [share / 2]               # even the first step is over: start lower
+                continue
+            break
+        good.append((trial, st, passes + more))
+        if st != "max_error":
+            break                                 # the target (or the floor) came first
+    for mesh, st, passes in reversed(good):
+        for relocate in (True, False):
+            cage = _cage_of(su, copy.deepcopy(mesh), st, passes, opts, relocate=relocate)
+            d = measure(cage)
+            if d <= max_error:
+                return cage, d
     return _unchanged(clean)._replace(stopped="max_error"), 0.0
 
 
@@ -477,8 +534,8 @@ def simplify(V, F, *, target_faces=None, ratio=None, max_error=None, preserve_bo
         measures it (default samples and seed), is at most this. Collapses
         whose error (the RMS distance of the new vertex to the planes of the
         input faces it stands for) exceeds the bound are refused, and when the
-        measured distance still exceeds it the run is repeated with a tighter
-        bound (see ``MAX_ERROR_TRIES``). At least one of ``target_faces``,
+        measured distance would exceed it the last step of the bound is undone
+        (see ``_within_max_error``). At least one of ``target_faces``,
         ``ratio``, ``max_error`` is needed; the run stops at whichever is
         reached first.
     preserve_boundary : bool
@@ -565,7 +622,7 @@ def simplify(V, F, *, target_faces=None, ratio=None, max_error=None, preserve_bo
     if m0 == 0:
         cage = _unchanged(clean)._replace(stopped="target")
     elif max_error is None:
-        cage = _collapse(clean, target, None, opts, progress)
+        cage = _collapse(clean, target, opts, progress)
     else:
         cage, hausdorff = _within_max_error(clean, target, max_error, opts, progress)
     stopped = _stop_reason(cage, target, opts)

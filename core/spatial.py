@@ -79,6 +79,7 @@ _CELL_FACTOR = 1.5         # grid cell size = this * mean triangle bounding-box 
 _MAX_CELLS = 1 << 23       # dense grid cap (int64 offsets: 64 MiB)
 _MAX_REFS_PER_FACE = 12    # grow the cells if triangles would be referenced more often
 _MAX_PHASE2_CELLS = 64     # queries whose ball spans more cells go to the BVH
+_MAX_SAME_CODE = 64        # more triangles than this with one Morton code: drop repeated ones
 _LEAF = 8                  # BVH leaf size (triangles)
 _BVH_STEP = 2              # BVH levels descended per traversal step (4 children per node)
 _SLAB_LEVELS = 3           # lowest BVH levels that also get cylinder bounds
@@ -345,6 +346,26 @@ def _morton(X, lo, extent):
 
 # --- the index ---------------------------------------------------------------------------------
 
+def _longest_run(x):
+    """Length of the longest run of equal values in the sorted array ``x``."""
+    if x.size == 0:
+        return 0
+    starts = np.flatnonzero(np.r_[True, x[1:] != x[:-1], True])
+    return int(np.diff(starts).max())
+
+
+def _first_of_each_triangle(V, F):
+    """Mask of the faces of ``F`` whose three positions (in any order) no
+    earlier face has: exact duplicates of a triangle's geometry are dropped."""
+    rows = np.ascontiguousarray(V + 0.0).view(np.dtype((np.void, 24))).ravel()
+    _, pos = np.unique(rows, return_inverse=True)
+    P = np.sort(pos.ravel()[F], axis=1)
+    _, first = np.unique(P, axis=0, return_index=True)
+    keep = np.zeros(F.shape[0], dtype=bool)
+    keep[first] = True
+    return keep
+
+
 class TriangleIndex:
     """Exact nearest-triangle queries on a triangle mesh (pure NumPy).
 
@@ -388,6 +409,10 @@ class TriangleIndex:
         # Morton order of the triangles (by bounding-box centre)
         codes = _morton(0.5 * (tlo + thi), lo, extent)
         order = np.argsort(codes, kind="stable")
+        if _longest_run(codes[order]) > _MAX_SAME_CODE:
+            # a degenerate cluster (faces on a few points): one of each distinct triangle,
+            # or every query would scan them all
+            order = order[_first_of_each_triangle(V, F[order])]
         self._order = order                       # internal id -> face id
         A, B, C, tlo, thi = A[order], B[order], C[order], tlo[order], thi[order]
         self._D = _triangle_rows(A, B, C)

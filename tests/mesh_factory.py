@@ -241,3 +241,59 @@ def boundary_edges(F, n):
     """(k,2) int64: the edges of ``F`` used by exactly one face."""
     em = edge_map(F, n)
     return em.E[em.edge_face_count == 1]
+
+
+# ---------------------------------------------------------------- messy variants (as scans arrive)
+def unwelded(V, F, jitter=0.0, seed=0):
+    """A triangle soup of the mesh: three vertices of its own per face, each
+    moved by ``jitter`` of the bounding-box diagonal (Gaussian)."""
+    rng = np.random.default_rng(seed)
+    d = float(np.linalg.norm(V.max(axis=0) - V.min(axis=0)))
+    S = V[F.ravel()] + rng.normal(scale=jitter * d, size=(F.size, 3)) * (jitter > 0)
+    return S, np.arange(F.size, dtype=np.int64).reshape(-1, 3)
+
+
+def pinched(V, F, k=3, seed=1):
+    """``k`` bow-tie vertices: pairs of far-apart vertices merged into one
+    index (positions kept: the second vertex becomes unreferenced)."""
+    rng = np.random.default_rng(seed)
+    F = F.copy()
+    used = np.unique(F)
+    for _ in range(k):
+        a, b = rng.choice(used, 2, replace=False)
+        F[F == b] = a
+        used = used[used != b]
+    keep = (F[:, 0] != F[:, 1]) & (F[:, 1] != F[:, 2]) & (F[:, 2] != F[:, 0])
+    return V.copy(), F[keep]
+
+
+def with_debris(V, F, k=300, size=1e-3, seed=2):
+    """``k`` closed tetrahedra of ``size`` times the diagonal scattered near
+    the surface."""
+    rng = np.random.default_rng(seed)
+    d = float(np.linalg.norm(V.max(axis=0) - V.min(axis=0)))
+    tet = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1.0]]) * size * d
+    tf = np.array([[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]])
+    c = V[rng.integers(0, len(V), k)] + rng.normal(scale=0.02 * d, size=(k, 3))
+    return (np.concatenate([V, (c[:, None, :] + tet[None]).reshape(-1, 3)]),
+            np.concatenate([F, (tf[None] + 4 * np.arange(k)[:, None, None] + len(V)).reshape(-1, 3)]))
+
+
+def with_sheets(V, F, k=5, seed=3):
+    """``k`` double-sided sheets: the faces around ``k`` vertices repeated
+    with the opposite orientation."""
+    rng = np.random.default_rng(seed)
+    faces = np.unique(np.flatnonzero(np.isin(F, rng.choice(np.unique(F), k, replace=False)).any(axis=1)))
+    return V.copy(), np.concatenate([F, F[faces][:, ::-1]])
+
+
+def with_fins(V, F, k=4, seed=4):
+    """``k`` fins: a triangle on an existing edge, sticking out (the edge then
+    has three faces)."""
+    rng = np.random.default_rng(seed)
+    f = rng.choice(F.shape[0], k, replace=False)
+    a, b = F[f, 0], F[f, 1]
+    mid = 0.5 * (V[a] + V[b])
+    tip = mid + (mid - V.mean(axis=0)) * 0.3
+    n = V.shape[0]
+    return np.concatenate([V, tip]), np.concatenate([F, np.stack([b, a, n + np.arange(k)], axis=1)])

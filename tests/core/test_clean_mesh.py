@@ -1,0 +1,313 @@
+"""core.clean: every defect class of real scans in, a clean manifold out, maps back.
+
+Built meshes for each defect (soups, bow-ties, non-manifold edges, fins and
+double-sided sheets, debris, collapsed clusters, huge and tiny coordinates),
+hypothesis properties over random defects injected into spheres and tori, and
+the whole chain (simplify -> fit_cage -> bind -> deform) on the shared meshes
+and messy variants of them.
+"""
+
+import time
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+import core
+from core.clean import CleanReport, clean_mesh
+from core.errors import InvalidArgumentError, InvalidMeshError
+from core.topology import manifold_report, topology_summary
+from tests.mesh_factory import (icosphere, load_shared, pinched, shared_mesh_names, torus, unwelded,
+                                with_debris, with_fins, with_sheets)
+
+
+def assert_manifold(V, F):
+    rep = manifold_report(F, V.shape[0])
+    assert rep.is_oriented_manifold, rep
+    assert np.array_equal(np.unique(F), np.arange(V.shape[0]))     # no unreferenced vertex
+
+
+def summary(F, n):
+    s = topology_summary(F, n)
+    return s.euler, s.components, s.boundary_loops
+
+
+def assert_maps(r, V, F):
+    """Every clean vertex sits on its input vertex; every clean face is an input face
+    (as a set of positions); every used input vertex maps to a clean vertex there."""
+    tol = 1e-5 * core.bbox_diagonal(V)               # welds move a vertex by their distance
+    np.testing.assert_array_equal(r.V, V[r.clean_to_input])
+    np.testing.assert_allclose(np.sort(V[F[r.face_to_input]], axis=1),
+                               np.sort(r.V[r.F], axis=1), rtol=0, atol=tol)
+    hit = r.input_to_clean >= 0
+    np.testing.assert_allclose(r.V[r.input_to_clean[hit]], V[hit], rtol=0, atol=tol)
+
+
+# ---------------------------------------------------------------- defect classes
+def test_a_clean_mesh_comes_back_unchanged():
+    V, F = torus(20, 10)
+    r = clean_mesh(V, F)
+    assert np.array_equal(r.V, V) and np.array_equal(r.F, F) and not r.report
+    assert r.report.summary() == ""
+    np.testing.assert_array_equal(r.twin, core._clean.twin_table(F, V.shape[0]))
+
+
+@pytest.mark.parametrize("jitter", [0.0, 1e-7])
+def test_soups_weld_back_to_the_mesh(jitter):
+    V, F = icosphere(3)
+    S, FS = unwelded(V, F, jitter)
+    r = clean_mesh(S, FS)
+    assert r.report.n_welded_vertices == FS.size - V.shape[0]
+    assert r.F.shape == F.shape and summary(r.F, r.V.shape[0]) == (2, 1, 0)
+    assert_manifold(r.V, r.F)
+    assert_maps(r, S, FS)
+    assert r.report.summary() == f"welded {FS.size - V.shape[0]:,} vertices"
+
+
+def test_weld_distance_is_relative_to_the_diagonal_and_zero_welds_exact_duplicates_only():
+    V, F = icosphere(2)
+    S, FS = unwelded(V, F, 1e-4)
+    assert clean_mesh(S, FS).report.n_welded_vertices == 0          # 1e-4 >> 1e-6: a soup still
+    assert clean_mesh(S, FS, weld_distance=1e-2).F.shape == F.shape
+    assert clean_mesh(S * 1e4, FS, weld_distance=1e-2).F.shape == F.shape
+    E, FE = unwelded(V, F, 0.0)
+    assert clean_mesh(E, FE, weld_distance=0.0).report.n_welded_vertices == FE.size - V.shape[0]
+
+
+def test_bowties_are_split_one_vertex_per_fan():
+    V, F = icosphere(3)
+    Vp, Fp = pinched(V, F, k=3)
+    assert manifold_report(Fp, Vp.shape[0]).non_manifold_vertices.shape[0] == 3
+    r = clean_mesh(Vp, Fp)
+    assert r.report.n_split_vertices == 3 and r.report.n_added_vertices == 3
+    assert r.report.n_unreferenced_vertices == 3
+    assert r.F.shape == Fp.shape and r.V.shape[0] == V.shape[0]
+    assert_manifold(r.V, r.F)
+    assert summary(r.F, r.V.shape[0]) == (2, 1, 0)
+    assert_maps(r, Vp, Fp)
+
+
+def test_a_fin_is_cut_into_its_own_sheet():
+    V, F = icosphere(2)
+    Vf, Ff = with_fins(V, F, k=4)
+    r = clean_mesh(Vf, Ff, min_component_area=0)
+    assert r.report.n_non_manifold_edges == 4
+    assert_manifold(r.V, r.F)
+    # the sphere is whole (its two faces paired on each edge), each fin a lone triangle
+    assert summary(r.F, r.V.shape[0]) == (2 + 4, 5, 4)
+    assert r.F.shape[0] == Ff.shape[0]
+    # as debris (small against the sphere) they go
+    d = clean_mesh(Vf, Ff, min_component_area=0.01)
+    assert d.report.n_debris_components == 4 and summary(d.F, d.V.shape[0]) == (2, 1, 0)
+
+
+def test_double_sided_sheets_are_removed_both_sides():
+    V, F = icosphere(2)
+    Vs, Fs = with_sheets(V, F, k=5)
+    r = clean_mesh(Vs, Fs)
+    assert r.report.n_double_sided_faces == 2 * (Fs.shape[0] - F.shape[0])
+    # the sphere's own faces had their reversed copies: the surface is gone there, but
+    # what is left is still a clean manifold
+    assert_manifold(r.V, r.F)
+    # the issue's case: a pair folded over the surface (two of its edges are the sphere's)
+    a, b, c = F[0]
+    d = [v for v in F[np.any(F == b, axis=1) & np.any(F == c, axis=1)].ravel() if v not in (a, b, c)][0]
+    Fx = np.concatenate([F, [[a, b, d], [a, d, b]]])
+    r = clean_mesh(V, Fx)
+    assert r.report.n_double_sided_sheets == 1 and r.F.shape == F.shape
+    assert summary(r.F, r.V.shape[0]) == (2, 1, 0)
+    assert_manifold(r.V, r.F)
+
+
+def test_a_mesh_that_is_only_a_double_sided_sheet_keeps_one_side():
+    V = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [1, 1, 0.0]])
+    F = np.array([[0, 1, 2], [1, 3, 2], [0, 2, 1], [1, 2, 3]])
+    r = clean_mesh(V, F)
+    assert r.F.shape[0] == 2 and r.report.n_duplicate_faces == 2
+    assert_manifold(r.V, r.F)
+
+
+def test_inconsistent_orientation_is_fixed_by_the_majority():
+    V, F = icosphere(2)
+    Fx = F.copy()
+    flip = np.arange(0, F.shape[0], 7)
+    Fx[flip] = Fx[flip][:, ::-1]
+    r = clean_mesh(V, Fx)
+    assert r.report.n_flipped_faces == flip.size
+    np.testing.assert_array_equal(np.sort(r.F, axis=1), np.sort(F, axis=1))
+    assert core.enclosed_volume(r.V, r.F) > 0
+    assert_manifold(r.V, r.F)
+
+
+def test_debris_is_dropped_by_area_and_by_face_budget():
+    V, F = icosphere(3)
+    Vd, Fd = with_debris(V, F, k=3000)
+    r = clean_mesh(Vd, Fd)
+    assert r.report.n_debris_components == 3000 and r.report.n_debris_faces == 12000
+    assert r.F.shape == F.shape and summary(r.F, r.V.shape[0]) == (2, 1, 0)
+    assert np.all(r.input_to_clean[V.shape[0]:] == -1)
+    # ten equal shells: each gets a tenth of a 10-face budget, none is debris
+    T, FT = icosphere(0)
+    Vm = np.concatenate([T + [3.0 * k, 0, 0] for k in range(10)])
+    Fm = np.concatenate([FT + 12 * k for k in range(10)])
+    assert clean_mesh(Vm, Fm, face_budget=10).report.n_debris_components == 0
+    assert clean_mesh(Vm, Fm, face_budget=9).report.n_debris_components == 9
+    # a protected vertex keeps its component
+    prot = np.zeros(Vm.shape[0], dtype=bool)
+    prot[-1] = True
+    assert clean_mesh(Vm, Fm, face_budget=9, protected=prot).report.n_debris_components == 8
+
+
+def test_collapsed_clusters_answer_quickly():
+    rng = np.random.default_rng(0)
+    pts = rng.normal(size=(5, 3))
+    V = pts[rng.integers(0, 5, 30000)]
+    F = rng.integers(0, 30000, (20000, 3))
+    t = time.perf_counter()
+    r = clean_mesh(V, F)
+    assert time.perf_counter() - t < 10
+    assert_manifold(r.V, r.F)
+    # every face left is one of the ten triangles of the five points
+    assert r.F.shape[0] <= 10 and np.unique(r.V, axis=0).shape[0] <= 5
+    # a sphere whose vertices sit on a few points simplifies in seconds, to a manifold
+    Vs, Fs = icosphere(5)
+    t = time.perf_counter()
+    s = core.simplify(pts[rng.integers(0, 5, Vs.shape[0])], Fs, target_faces=100)
+    assert time.perf_counter() - t < 60
+    assert manifold_report(s.F, s.V.shape[0]).is_manifold
+
+
+def test_everything_degenerate_is_a_clear_error():
+    V = np.zeros((30, 3))
+    F = np.arange(30).reshape(-1, 3)
+    assert clean_mesh(V, F).F.shape == (0, 3)
+    with pytest.raises(InvalidMeshError, match="nothing is left after cleaning the 10 faces"):
+        core.simplify(V, F, target_faces=4)
+
+
+@pytest.mark.parametrize("scale", [1e-200, 1e200])
+def test_huge_and_tiny_coordinates_clean_and_simplify_like_unit_ones(scale):
+    V, F = icosphere(3)
+    S, FS = unwelded(V, F, 1e-7)
+    ref = clean_mesh(S, FS)
+    r = clean_mesh(S * scale, FS)
+    np.testing.assert_array_equal(r.F, ref.F)
+    a, b = core.simplify(S, FS, target_faces=200), core.simplify(S * scale, FS, target_faces=200)
+    assert np.array_equal(a.F, b.F) and np.all(np.isfinite(b.V)) and np.isfinite(b.max_error)
+    np.testing.assert_allclose(b.V / scale, a.V, rtol=1e-9, atol=1e-12)
+
+
+def test_inputs_are_not_modified():
+    V, F = pinched(*icosphere(2))
+    V0, F0 = V.copy(), F.copy()
+    r = clean_mesh(V, F)
+    assert np.array_equal(V, V0) and np.array_equal(F, F0)
+    assert not np.shares_memory(r.V, V) and not np.shares_memory(r.F, F)
+
+
+@pytest.mark.parametrize("kwargs, match", [
+    (dict(weld_distance=-1.0), "weld_distance must be a finite number >= 0"),
+    (dict(weld_distance=float("nan")), "weld_distance"),
+    (dict(min_component_area=-0.1), "min_component_area must be"),
+])
+def test_bad_tolerances_raise(kwargs, match):
+    with pytest.raises(InvalidArgumentError, match=match):
+        clean_mesh(*icosphere(1), **kwargs)
+
+
+def test_report_summary_reads_as_a_sentence():
+    r = CleanReport(n_welded_vertices=4012, n_split_vertices=3, n_double_sided_sheets=2,
+                    n_double_sided_faces=4)
+    assert r.summary() == ("welded 4,012 vertices, split 3 bow-tie vertices, removed 2 "
+                           "double-sided sheets (4 faces)")
+    assert r.to_dict()["n_welded_vertices"] == 4012 and bool(r) and not CleanReport()
+
+
+# ---------------------------------------------------------------- properties
+def _inject(V, F, rng, kinds):
+    """Random defects of the given kinds injected into a clean mesh."""
+    for kind in kinds:
+        seed = int(rng.integers(1 << 30))
+        if kind == "soup":
+            V, F = unwelded(V, F, float(rng.choice([0.0, 1e-8])), seed=seed)
+        elif kind == "bowtie":
+            V, F = pinched(V, F, k=int(rng.integers(1, 4)), seed=seed)
+        elif kind == "fin":
+            V, F = with_fins(V, F, k=int(rng.integers(1, 4)), seed=seed)
+        elif kind == "sheet":
+            V, F = with_sheets(V, F, k=int(rng.integers(1, 3)), seed=seed)
+        elif kind == "debris":
+            V, F = with_debris(V, F, k=int(rng.integers(1, 50)), seed=seed)
+        elif kind == "flip":
+            F = F.copy()
+            f = rng.choice(F.shape[0], F.shape[0] // 10, replace=False)
+            F[f] = F[f][:, ::-1]
+    return V, F
+
+
+@settings(max_examples=30, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(seed=st.integers(0, 10_000), shape=st.sampled_from(["sphere", "torus"]),
+       kinds=st.lists(st.sampled_from(["soup", "bowtie", "fin", "sheet", "debris", "flip"]),
+                      min_size=1, max_size=3, unique=True),
+       frac=st.floats(0.02, 0.5))
+def test_random_defects_give_a_manifold_cage_and_an_exact_identity(seed, shape, kinds, frac):
+    rng = np.random.default_rng(seed)
+    V, F = icosphere(2) if shape == "sphere" else torus(16, 8)
+    Vm, Fm = _inject(V, F, rng, kinds)
+    c = clean_mesh(Vm, Fm)
+    assert_manifold(c.V, c.F)
+    assert_maps(c, Vm, Fm)
+    target = max(30, int(frac * c.F.shape[0]))      # (a torus's floor is 14 faces)
+    r = core.simplify(Vm, Fm, target_faces=target)
+    assert manifold_report(r.F, r.V.shape[0]).is_oriented_manifold
+    # the cage has no border loop the cleaned input did not have
+    assert topology_summary(r.F, r.V.shape[0]).boundary_loops <= \
+        topology_summary(c.F, c.V.shape[0]).boundary_loops
+    assert r.F.shape[0] <= target or r.stopped_because == "topology_floor"
+    # the dense mesh keeps its own topology: binding and identity on the input as it came
+    b = core.bind(Vm, Fm, r.V, r.F, levels=1)
+    d = core.bbox_diagonal(Vm)
+    assert np.abs(core.deform(b, r.V) - Vm).max() <= 1e-9 * d
+
+
+# ---------------------------------------------------------------- the whole chain, real meshes
+MESSY = ["as is", "soup", "jittered soup", "bowties", "debris", "sheets"]
+
+
+def _messy(V, F, how):
+    if how == "soup":
+        return unwelded(V, F)
+    if how == "jittered soup":
+        return unwelded(V, F, 1e-7)
+    if how == "bowties":
+        return pinched(V, F)
+    if how == "debris":
+        return with_debris(V, F)
+    if how == "sheets":
+        return with_sheets(V, F)
+    return V, F
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("how", MESSY)
+@pytest.mark.parametrize("name", shared_mesh_names())
+def test_every_shared_mesh_and_messy_variant_goes_through_the_chain(name, how):
+    V, F = load_shared(name)
+    if name == "stanford-bunny.obj" and how != "as is":
+        pytest.skip("the bunny's variants take minutes; its messy bench row covers them")
+    Vm, Fm = _messy(V, F, how)
+    clean = clean_mesh(Vm, Fm)
+    target = max(100, clean.F.shape[0] // 10)
+    r = core.simplify(Vm, Fm, target_faces=target)
+    assert manifold_report(r.F, r.V.shape[0]).is_oriented_manifold
+    assert topology_summary(r.F, r.V.shape[0]).boundary_loops <= \
+        topology_summary(clean.F, clean.V.shape[0]).boundary_loops
+    assert abs(r.F.shape[0] - target) <= 0.05 * target or r.stopped_because == "topology_floor", \
+        r.message
+    creases = r.feature_edges if len(r.feature_edges) else None
+    fit = core.fit_cage(Vm, Fm, r.V, r.F, levels=2, creases=creases, iterations=2)
+    b = core.bind(Vm, Fm, fit.V, r.F, levels=2, creases=creases)
+    assert b.n_dense == Vm.shape[0]          # the source's own vertices, bow-ties and all
+    d = core.bbox_diagonal(Vm)
+    assert np.abs(core.deform(b, fit.V) - Vm).max() <= 1e-9 * d
