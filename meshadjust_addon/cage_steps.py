@@ -49,9 +49,11 @@ def _diag(V):
 def read_source(source):
     """The source's mesh as the artist made it (MeshAdjust's own shape keys
     muted): ``(MeshArrays, fingerprint)``."""
+    # only MeshAdjust's keys (or keys at 0): the mesh itself, vertex groups usable
+    plain = False if results.only_own_keys_and_no_modifiers(source) else None
     with results.own_keys_muted(source):
         depsgraph = bpy.context.evaluated_depsgraph_get()
-        arrays = mesh_io.read_object(source, depsgraph=depsgraph)
+        arrays = mesh_io.read_object(source, depsgraph=depsgraph, evaluated=plain)
     return arrays, staleness.source_fingerprint(source) or ""
 
 

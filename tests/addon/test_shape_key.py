@@ -111,3 +111,18 @@ def test_shape_key_refused_when_modifiers_change_the_vertex_count(scene):
         bpy.ops.meshadjust.refine(output='SHAPE_KEY')
     assert_unchanged(before)
     assert dense.data.shape_keys is None
+
+
+def test_a_source_with_only_its_meshadjust_key_simplifies_as_a_plain_mesh(bound):
+    dense, cage = bound
+    lift_top(cage, 0.2)
+    bpy.ops.meshadjust.refine(output='SHAPE_KEY')
+    vg = dense.vertex_groups.new(name="lock")
+    vg.add(list(range(20)), 1.0, 'REPLACE')
+    bpy.context.view_layer.objects.active = dense
+    for o in bpy.data.objects:
+        o.select_set(o is dense)
+    assert bpy.ops.meshadjust.simplify(target_mode='FACES', target_faces=200, lock_group="lock",
+                                       fit=False, bind=False) == {'FINISHED'}
+    second = dense.meshadjust.cage
+    assert second != cage and "evaluated mesh" not in second.meshadjust.last_report
