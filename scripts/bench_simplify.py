@@ -5,6 +5,7 @@ Run with the bpy venv's Python (Blender as a module, NumPy 1.26)::
     python scripts/bench_simplify.py            # every shared mesh at 10%, 2%, 1,000 faces + 1M -> 10k
     python scripts/bench_simplify.py --quick    # a few small cases
     python scripts/bench_simplify.py --big      # also 4M -> 40k
+    python scripts/bench_simplify.py --messy-only   # only the messy section
 
 For every case Decimate runs first; ``core.simplify`` then gets Decimate's
 output face count as ``target_faces`` so both end at the same size. Errors
@@ -14,6 +15,13 @@ on both surfaces plus the vertices, exact point-to-triangle distances), in
 boundary edges and Euler characteristic (input -> output), flipped faces
 (normal against the input's nearest face), the minimum angle, and the peak
 memory of our run (peak RSS above the RSS before it). The table goes to bench_results/simplify.md.
+
+The messy section runs every shared mesh as real scans arrive (an exact soup,
+a soup jittered by 1e-7 of the diagonal, 300 specks of debris, 3 pinched
+bow-tie vertices, double-sided sheets; built by ``tests/mesh_factory``) at
+1,000 faces (10% for the small ones): ours and Decimate on the messy mesh,
+both measured against the clean mesh (the scan alone), beside our cage of
+the clean mesh; whether each result is a manifold, and what our cleaning did.
 """
 
 import argparse
@@ -157,6 +165,65 @@ def run_case(name, V, F, target, use_blender=True):
     return row
 
 
+MESSY = ("soup", "jittered soup", "debris", "bowties", "sheets")
+
+
+def messy_variant(V, F, how):
+    """The mesh as a scan may arrive (see ``tests/mesh_factory``)."""
+    from tests import mesh_factory as mf
+    return {"soup": lambda: mf.unwelded(V, F), "jittered soup": lambda: mf.unwelded(V, F, 1e-7),
+            "debris": lambda: mf.with_debris(V, F), "bowties": lambda: mf.pinched(V, F),
+            "sheets": lambda: mf.with_sheets(V, F)}[how]()
+
+
+def run_messy(name, V, F, target, use_blender=True):
+    """Rows of the messy section for one shared mesh (see the module docstring)."""
+    from core.clean import clean_mesh
+    clean = clean_mesh(V, F)
+    Vc, Fc = clean.V, clean.F
+    diag = bbox_diagonal(Vc)
+    ref = simplify(Vc, Fc, target_faces=target)
+    _, ref_mean = surface_distance(Vc, Fc, ref.V, ref.F)
+    rows = []
+    for how in MESSY:
+        Vm, Fm = messy_variant(V, F, how)
+        row = dict(mesh=name, how=how, faces=Fm.shape[0], target=target,
+                   ref_mean=100 * ref_mean / diag)
+        t0 = time.perf_counter()
+        r = simplify(Vm, Fm, target_faces=target)
+        row.update(time=time.perf_counter() - t0, out=r.F.shape[0], stop=r.stopped_because,
+                   manifold=manifold_report(r.F, r.V.shape[0]).is_oriented_manifold,
+                   cleaning=r.cleaning.summary())
+        h, mn = surface_distance(Vc, Fc, r.V, r.F)
+        row.update(haus=100 * h / diag, mean=100 * mn / diag)
+        if use_blender:
+            Vb, Fb, tb = blender_decimate(Vm, Fm, target)
+            hb, mb = surface_distance(Vc, Fc, Vb, Fb)
+            row.update(b_time=tb, b_out=Fb.shape[0], b_haus=100 * hb / diag, b_mean=100 * mb / diag,
+                       b_manifold=manifold_report(Fb, Vb.shape[0]).is_manifold)
+        rows.append(row)
+    return rows
+
+
+def fmt_messy(rows, blender):
+    head = ["mesh", "as it arrives", "faces", "target", "ours faces", "ours s", "ours mean %",
+            "ours haus %", "clean-mesh cage mean %", "ours manifold"]
+    if blender:
+        head += ["Dec faces", "Dec s", "Dec mean %", "Dec haus %", "Dec manifold", "t ratio"]
+    head += ["what our cleaning did"]
+    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    for r in rows:
+        cells = [r["mesh"], r["how"], f"{r['faces']:,}", f"{r['target']:,}", f"{r['out']:,}",
+                 f"{r['time']:.2f}", f"{r['mean']:.4f}", f"{r['haus']:.3f}", f"{r['ref_mean']:.4f}",
+                 "yes" if r["manifold"] else "NO"]
+        if blender:
+            cells += [f"{r['b_out']:,}", f"{r['b_time']:.2f}", f"{r['b_mean']:.4f}", f"{r['b_haus']:.3f}",
+                      "yes" if r["b_manifold"] else "no", f"{r['time'] / r['b_time']:.2f}"]
+        cells += [r["cleaning"] or "-"]
+        lines.append("| " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
 def fmt_table(rows, blender):
     head = ["mesh", "faces", "target / ours", "ours s", "mean %", "haus %"]
     if blender:
@@ -192,6 +259,8 @@ def main():
     ap.add_argument("--no-blender", action="store_true", help="ours only")
     ap.add_argument("--meshes", nargs="*", help="only these shared meshes (file names)")
     ap.add_argument("--no-synthetic", action="store_true", help="skip the 1M mesh")
+    ap.add_argument("--no-messy", action="store_true", help="skip the messy section")
+    ap.add_argument("--messy-only", action="store_true", help="only the messy section")
     args = ap.parse_args()
     blender = not args.no_blender
     if blender:
@@ -202,6 +271,15 @@ def main():
     if args.quick:
         names = [n for n in names if n in ("fandisk.obj", "cow.obj", "beetle.obj")]
     rows = []
+    messy = []
+    if not args.no_messy:
+        for name in names:
+            V, F = read_obj(os.path.join(MESHES, name))
+            target = min(1000, int(round(0.1 * F.shape[0])))
+            messy += run_messy(name[:-4], V, F, target, blender)
+            print(fmt_messy(messy[-len(MESSY):], blender), flush=True)
+    if args.messy_only:
+        names = []
     for name in names:
         V, F = read_obj(os.path.join(MESHES, name))
         m = F.shape[0]
@@ -221,7 +299,10 @@ def main():
             row = run_case(label, V, F, tgt, blender)
             rows.append(row)
             print(fmt_table([row], blender).splitlines()[-1], flush=True)
-    text = fmt_table(rows, blender)
+    text = fmt_table(rows, blender) if rows else ""
+    if messy:
+        text += ("\n\n## Messy inputs\n\nDistances to the clean mesh (the scan alone), "
+                 "% of its diagonal.\n\n" + fmt_messy(messy, blender))
     if blender and real:
         gm = geomean([r["mean"] / r["b_mean"] for r in real])
         gh = geomean([r["haus"] / r["b_haus"] for r in real])
