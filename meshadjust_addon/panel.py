@@ -147,7 +147,10 @@ class MESHADJUST_PT_refine(_Panel, bpy.types.Panel):
         for text, rebind in refine_messages(context):
             layout.label(text=text, icon='ERROR' if rebind else 'INFO')
             if rebind and not offered:
-                layout.operator("meshadjust.bind", text="Re-bind", icon='LINKED')
+                row = layout.row(align=True)
+                row.operator("meshadjust.bind", text="Re-bind", icon='LINKED').keep_edit = True
+                # when the edit cannot be kept (faces without a rest shape)
+                row.operator("meshadjust.bind", text="Re-bind as Is").keep_edit = False
                 offered = True
 
 

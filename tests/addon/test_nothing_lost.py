@@ -191,7 +191,7 @@ def test_stale_source_is_detected_shown_and_fixed_by_rebind(bound):
                for text, rebind in msgs)
     from tests.addon.test_operators import _draw_panel
     drawn = [e for e in _draw_panel() if e == ("operator", "meshadjust.bind")]
-    assert len(drawn) == 2                                      # Edit Cage's Bind and Re-bind
+    assert len(drawn) == 3                  # Edit Cage's Bind, Re-bind and Re-bind as Is
     assert bpy.ops.meshadjust.refine(output='EDITED') == {'FINISHED'}
     assert "WARNING" in cage.meshadjust.last_report
     assert bpy.ops.meshadjust.bind() == {'FINISHED'}             # Re-bind
