@@ -43,6 +43,7 @@ dense vertices returned by :meth:`Binding.affected` (bit-for-bit elsewhere);
 an incremental deform equals the full one to rounding.
 """
 
+import threading
 from dataclasses import dataclass, field
 from typing import NamedTuple
 
@@ -252,10 +253,11 @@ class Binding:
             An index is out of range or not an integer.
         """
         ids = _check_moved(self, cage_vertex_ids, "Binding.influenced")
-        _incremental_index(self)       # built on first use, also for an empty list
+        index = _incremental_index(self)    # built on first use, also for an empty list
         if ids.size == 0:
             return np.zeros(0, dtype=np.int64)
-        return np.sort(_influenced_dense(self, ids)[0])
+        with index["lock"]:
+            return np.sort(_influenced_dense(self, ids)[0])
 
 
 def bind(V_dense, F_dense, V_cage, F_cage, *, levels=2, scheme="butterfly", creases=None,
@@ -391,13 +393,14 @@ def deform(binding, V_cage_edited, *, F_cage=None, moved=None, out=None):
         ids = _check_moved(binding, moved)
         Vc = _check_cage(binding, V_cage_edited, F_cage, "deform")
         if ids.size:
-            rows, needed = _influenced_dense(binding, ids)
-            if rows.size:
-                Vf, Nf = _fine_geometry_at(binding, Vc, needed)
-                c = binding._cache
-                fr = _frames_t(Vf, Nf, np.take(c["corners_t"], rows, axis=1),
-                               np.take(c["bary_t"], rows, axis=1))
-                out[rows] = _from_frame_t(np.take(c["offset_t"], rows, axis=1), *fr)
+            with _incremental_index(binding)["lock"]:
+                rows, needed = _influenced_dense(binding, ids)
+                if rows.size:
+                    lut, P, N = _fine_geometry_at(binding, Vc, needed)
+                    c = binding._cache
+                    corners = lut[np.take(c["corners_t"], rows, axis=1)]
+                    fr = _frames_t(P, N, corners, np.take(c["bary_t"], rows, axis=1))
+                    out[rows] = _from_frame_t(np.take(c["offset_t"], rows, axis=1), *fr)
         return out
     Vf, Nf = _fine_geometry(binding, V_cage_edited, F_cage, "deform")
     c = binding._cache
@@ -493,6 +496,10 @@ def _incremental_index(binding):
             "faces_by_vertex": np.argsort(flat, kind="stable") // 3,
             "vertex_count": v_count, "vertex_start": np.cumsum(v_count) - v_count,
             "levels_t": [_transposed(S) for S in op.stencils],
+            # per level, a fine-id -> compact-position table, written only where used;
+            # the lock serialises incremental deforms of one binding (they share it)
+            "lut": [np.empty(S.n_out, dtype=np.int64) for S in op.stencils],
+            "lock": threading.RLock(),
         }
     return c["incremental"]
 
@@ -665,14 +672,18 @@ def _fine_geometry(binding, V_cage_edited, F_cage, where):
 
 
 def _fine_geometry_at(binding, Vc, needed):
-    """Fine positions and normals, transposed (3, n_fine), valid where
-    ``needed`` (garbage elsewhere). Positions are evaluated level by level,
-    each level only at the vertices the next one reads (found backwards from
-    ``needed`` and the corners of the faces around them), with the level's
-    own stencil rows; normals are summed over the faces around ``needed``,
-    in the order of :func:`~.mesh.vertex_normals`. Equal to the full
-    computation to rounding (the rows sum in another order than the apply
-    plan's tables)."""
+    """Fine positions and normals at the vertices ``needed`` and the corners
+    of the faces around them: ``(lut, P, N)``, ``P`` and ``N`` transposed
+    (3, k), column ``lut[v]`` for fine vertex ``v`` (``lut`` is valid at
+    those vertices only; it is the binding's scratch table, so callers hold
+    the incremental lock).
+
+    Positions are evaluated level by level, each level only at the vertices
+    the next one reads (found backwards), with the level's own stencil rows,
+    on compact arrays (no fine-sized array is written); normals are summed
+    over the faces around ``needed``, in the order of
+    :func:`~.mesh.vertex_normals`. Equal to the full computation to rounding
+    (the rows sum in another order than the apply plan's tables)."""
     op = binding._operator
     idx = _incremental_index(binding)
     faces = _faces_around(idx, np.flatnonzero(needed), op.F_fine.shape[0])
@@ -687,23 +698,23 @@ def _fine_geometry_at(binding, Vc, needed):
         mask = np.zeros(S.n_in, dtype=bool)
         mask[S.cols[k]] = True
         wanted.append(np.flatnonzero(mask))
-    X = Vc
-    for S, r in zip(op.stencils, reversed(wanted)):
+    X, lut = Vc, None                       # lut: fine id -> row of X (None: the identity)
+    for S, r, table in zip(op.stencils, reversed(wanted), idx["lut"]):
         k, owner = ragged_ranges(S.indptr[r], S.indptr[r + 1] - S.indptr[r])
         w, cols = S.weights[k], S.cols[k]
-        Y = np.empty((S.n_out, 3))
+        if lut is not None:
+            cols = lut[cols]
+        Y = np.empty((r.shape[0], 3))
         for d in range(3):
-            Y[r, d] = np.bincount(owner, weights=w * X[cols, d], minlength=r.shape[0])
-        X = Y
-    local = np.empty(op.n_fine, dtype=np.int64)
-    local[verts] = np.arange(verts.shape[0])
-    V_at = X[verts]
-    N_at = vertex_normals(V_at, local[Fs])     # same faces, same order: same sums
-    VfT = np.empty((3, op.n_fine))
-    NfT = np.empty((3, op.n_fine))
-    VfT[:, verts] = V_at.T
-    NfT[:, verts] = N_at.T
-    return VfT, NfT
+            Y[:, d] = np.bincount(owner, weights=w * X[cols, d], minlength=r.shape[0])
+        table[r] = np.arange(r.shape[0])
+        X, lut = Y, table
+    if lut is None:                         # no levels: the cage itself
+        lut = np.empty(op.n_fine, dtype=np.int64)
+        X = X[verts]
+        lut[verts] = np.arange(verts.shape[0])
+    N = vertex_normals(X, lut[Fs])          # same faces, same order: same sums
+    return lut, np.ascontiguousarray(X.T), np.ascontiguousarray(N.T)
 
 
 class _Rows(NamedTuple):
