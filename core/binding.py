@@ -71,6 +71,10 @@ _BIND_BLOCK = 131_072
 #: fine vertices per block of the local detail search (``detail_search="local"``)
 _DETAIL_BLOCK = 16_384
 
+#: serialises incremental deforms (they share scratch tables in the binding's
+#: cache; a module lock, not one per binding, so a Binding stays picklable)
+_INCREMENTAL_LOCK = threading.RLock()
+
 #: keys of :meth:`Binding.to_arrays`
 _ARRAY_KEYS = ("fine_face", "bary", "offset", "fine_detail", "F_cage", "n_cage", "levels",
                "scheme", "creases", "fingerprint")
@@ -253,10 +257,10 @@ class Binding:
             An index is out of range or not an integer.
         """
         ids = _check_moved(self, cage_vertex_ids, "Binding.influenced")
-        index = _incremental_index(self)    # built on first use, also for an empty list
+        _incremental_index(self)            # built on first use, also for an empty list
         if ids.size == 0:
             return np.zeros(0, dtype=np.int64)
-        with index["lock"]:
+        with _INCREMENTAL_LOCK:
             return np.sort(_influenced_dense(self, ids)[0])
 
 
@@ -393,7 +397,7 @@ def deform(binding, V_cage_edited, *, F_cage=None, moved=None, out=None):
         ids = _check_moved(binding, moved)
         Vc = _check_cage(binding, V_cage_edited, F_cage, "deform")
         if ids.size:
-            with _incremental_index(binding)["lock"]:
+            with _INCREMENTAL_LOCK:
                 rows, needed = _influenced_dense(binding, ids)
                 if rows.size:
                     lut, P, N = _fine_geometry_at(binding, Vc, needed)
@@ -496,10 +500,9 @@ def _incremental_index(binding):
             "faces_by_vertex": np.argsort(flat, kind="stable") // 3,
             "vertex_count": v_count, "vertex_start": np.cumsum(v_count) - v_count,
             "levels_t": [_transposed(S) for S in op.stencils],
-            # per level, a fine-id -> compact-position table, written only where used;
-            # the lock serialises incremental deforms of one binding (they share it)
+            # per level, a fine-id -> compact-position table, written only where
+            # used (incremental deforms share it: they run under _INCREMENTAL_LOCK)
             "lut": [np.empty(S.n_out, dtype=np.int64) for S in op.stencils],
-            "lock": threading.RLock(),
         }
     return c["incremental"]
 
@@ -676,7 +679,7 @@ def _fine_geometry_at(binding, Vc, needed):
     of the faces around them: ``(lut, P, N)``, ``P`` and ``N`` transposed
     (3, k), column ``lut[v]`` for fine vertex ``v`` (``lut`` is valid at
     those vertices only; it is the binding's scratch table, so callers hold
-    the incremental lock).
+    ``_INCREMENTAL_LOCK``).
 
     Positions are evaluated level by level, each level only at the vertices
     the next one reads (found backwards), with the level's own stencil rows,

@@ -187,3 +187,12 @@ def test_incremental_equals_full_at_other_levels(levels, scheme):
         Ve[ids] += 0.05 * rng.standard_normal((4, 3))
         deform(b, Ve, moved=ids, out=D)
         assert np.abs(D - deform(b, Ve)).max() <= _tol(Vd)
+
+
+def test_binding_stays_picklable_after_an_incremental_deform(case):
+    import pickle
+    Vd, Vc, b = case
+    D = deform(b, Vc)
+    deform(b, Vc + 0.01, moved=[0, 1], out=D)
+    b2 = pickle.loads(pickle.dumps(b))
+    assert np.array_equal(deform(b2, Vc + 0.01), deform(b, Vc + 0.01))
