@@ -31,7 +31,6 @@ from . import mesh_io, results, store
 from .cage_steps import (MAX_AUTO_LEVELS, OUTPUT_NAMES, CageJob, auto_levels, bind_object,  # noqa: F401
                          commit_bind, commit_fit, compute_bind, compute_fit, fit_cage_object,
                          prepare_cage_job, prepare_fit, read_source, refine_object)
-from .cage_steps import _cage_in_source_space  # noqa: F401  (used by scripts)
 from .report import Report, about, user_cause  # noqa: F401
 from .rollback import all_or_nothing
 from .simplify_step import (MEASURE_SAMPLES, TARGET_TOLERANCE, SimplifyJob,  # noqa: F401
@@ -39,12 +38,6 @@ from .simplify_step import (MEASURE_SAMPLES, TARGET_TOLERANCE, SimplifyJob,  # n
                             simplify_object)
 
 CREASE = store.CREASE
-_link_like = results.link_like   # kept for callers of the old private name
-
-
-def _edited_copy(source, cage):
-    """The edited-original object of ``cage`` (created once)."""
-    return results.edited_copy(source, cage, len(source.data.vertices))[0]
 
 
 def subdivide_object(obj, *, levels=1, scheme="butterfly", in_place=False):

@@ -285,11 +285,6 @@ class _CageStep:
         return why is None
 
 
-def vars_of(params):
-    """A frozen dataclass as keyword arguments."""
-    return {k: getattr(params, k) for k in params.__dataclass_fields__}
-
-
 def _object_mode(obj):
     """Leave Edit Mode on ``obj`` (its edits reach its mesh)."""
     if obj.mode == 'EDIT':
