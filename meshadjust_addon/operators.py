@@ -309,8 +309,8 @@ class _CageJobStep(_Background, _CageStep):
     from ``execute()``; a single cage runs in the background from ``invoke()``.
     Subclasses implement ``_prepare(cage) -> job`` (main thread),
     ``_compute(job, progress) -> job`` (any thread) and ``_commit() -> message``.
-    A cage that fails stops the run; cages already done stay done and the
-    report says which."""
+    Several cages run as :func:`run_each` says: a cage that fails is named,
+    the others still run."""
 
     def execute(self, context):
         def step(cage):
