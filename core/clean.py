@@ -14,7 +14,7 @@ edge- and vertex-manifold triangle mesh that :func:`~.simplify.simplify`,
            clusters), and the ends of edges that short
     drop   faces degenerate after welding; of faces on the same three
            vertices keep one, or none when both orientations are there
-           (a double-sided sheet)
+           (a double-sided sheet) unless one side is what mends the surface
     pair   the faces around every non-manifold edge into manifold sheets
            (consistent orientation first, then the flattest pair); the faces
            left over see the edge as a border
@@ -296,8 +296,9 @@ def _orientation_sign(F):
 
 def _unique_faces(F, twin, n):
     """Faces to keep among those on the same three vertices: one of a set
-    with one orientation, none of a set with both (a double-sided sheet;
-    unless that would remove every face, then one of each set).
+    with one orientation, none of a set with both (a double-sided sheet),
+    unless one side mends the surface (see :func:`_one_side_mends`) or
+    removing them would leave no face at all.
 
     Such faces share all three edges, so they meet the same face across two
     edges or sit on a non-manifold edge: only those are compared by key.
@@ -318,9 +319,10 @@ def _unique_faces(F, twin, n):
     group = group.ravel()
     forward = np.bincount(group, weights=_orientation_sign(F[ci]), minlength=size.size)
     sheet = (forward > 0) & (forward < size)
+    sheet[sheet] = ~_one_side_mends(F, twin, n, ci[first[sheet]], size[sheet])
     drop = ci[size[group] > 1]
     keep[drop] = False
-    if sheet.any() and not keep.any() and not (size == 1).any():
+    if sheet.any() and not keep.any():
         sheet[:] = False                           # only sheets: keep one side of each
     keep[ci[first[~sheet & (size > 1)]]] = True
     found["n_double_sided_sheets"] = int(np.count_nonzero(sheet))
@@ -328,6 +330,53 @@ def _unique_faces(F, twin, n):
     found["n_duplicate_faces"] = int(drop.size - found["n_double_sided_faces"]
                                      - np.count_nonzero(~sheet & (size > 1)))
     return keep, found
+
+
+def _one_side_mends(F, twin, n, faces, size):
+    """For sets of ``size`` faces on the vertices of ``faces`` (sets with
+    both orientations), whether to keep one face of each rather than none.
+
+    Sets sharing edges form regions, decided as a whole: the choice that
+    leaves fewer broken edges wins, keeping one side on a tie (nothing is
+    lost). An edge is broken when it ends with more than two faces, or with
+    one face next to faces that are not the set's (a new hole). So a reversed
+    copy of a patch of the surface keeps one side, a pair folded on top of a
+    closed surface goes, and a free double-sided sheet keeps one side.
+    """
+    g = faces.size
+    h = (3 * faces[:, None] + np.arange(3)).ravel()
+    U, W = half_edge_ends(F)
+    nn = np.int64(max(n, 1))
+    key = np.minimum(U[h], W[h]) * nn + np.maximum(U[h], W[h])
+    t = twin[h]
+    count = np.where(t >= 0, 2, 1)
+    nm = t == NON_MANIFOLD
+    if nm.any():
+        hn = np.flatnonzero(twin == NON_MANIFOLD)
+        keys = np.sort(np.minimum(U[hn], W[hn]) * nn + np.maximum(U[hn], W[hn]))
+        count[nm] = np.searchsorted(keys, key[nm], side="right") - np.searchsorted(keys, key[nm])
+    edges, e_of, e_first = _unique_inverse_first(key)
+    owner = np.repeat(np.arange(g), 3)
+    in_sets = np.bincount(e_of, weights=np.repeat(size, 3), minlength=edges.size)
+    k = np.bincount(e_of, minlength=edges.size)
+    rest = count[e_first] - in_sets                   # faces of each edge outside the sets
+    broken_if_removed = (rest == 1) | (rest > 2)
+    broken_if_kept = (rest + k > 2) | ((rest + k == 1) & (rest > 0))
+    # regions: sets joined through shared edges
+    order = np.argsort(e_of, kind="stable")
+    same = e_of[order[1:]] == e_of[order[:-1]]
+    region = connected_labels(g, np.stack([owner[order[1:]][same], owner[order[:-1]][same]], axis=1))
+    edge_region = region[owner[e_first]]
+    removed = np.bincount(edge_region, weights=broken_if_removed, minlength=g)
+    kept = np.bincount(edge_region, weights=broken_if_kept, minlength=g)
+    return (kept <= removed)[region]
+
+
+def _unique_inverse_first(key):
+    """``np.unique(key)`` with each entry's index into it and the first
+    entry of each unique value."""
+    edges, first, inverse = np.unique(key, return_index=True, return_inverse=True)
+    return edges, inverse.ravel(), first
 
 
 #: non-manifold edges with more faces than this pair them in index order

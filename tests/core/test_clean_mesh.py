@@ -102,13 +102,14 @@ def test_a_fin_is_cut_into_its_own_sheet():
     assert d.report.n_debris_components == 4 and summary(d.F, d.V.shape[0]) == (2, 1, 0)
 
 
-def test_double_sided_sheets_are_removed_both_sides():
+def test_double_sided_sheets_go_both_sides_or_keep_the_side_that_mends():
     V, F = icosphere(2)
+    # reversed copies of patches of the sphere: one side of each is the sphere itself
     Vs, Fs = with_sheets(V, F, k=5)
     r = clean_mesh(Vs, Fs)
-    assert r.report.n_double_sided_faces == 2 * (Fs.shape[0] - F.shape[0])
-    # the sphere's own faces had their reversed copies: the surface is gone there, but
-    # what is left is still a clean manifold
+    assert r.report.n_duplicate_faces == Fs.shape[0] - F.shape[0]
+    assert r.report.n_double_sided_sheets == 0
+    assert r.F.shape == F.shape and summary(r.F, r.V.shape[0]) == (2, 1, 0)
     assert_manifold(r.V, r.F)
     # the case: a pair folded over the surface (two of its edges are the sphere's)
     a, b, c = F[0]
