@@ -283,7 +283,7 @@ def fit_cage_object(cage, *, levels=None, scheme=None, rebind=settings.default("
     return commit_fit(cage, compute_fit(job))
 
 
-_rest_dense = {}   #: edited session_uid -> (binding id, dense positions of the rest shape)
+_rest_dense = {}   #: edited session_uid -> (binding, dense positions of its rest shape)
 
 
 def _write_key(source, cage, edited, binding, V_edited, *, V_rest=None):
@@ -291,10 +291,10 @@ def _write_key(source, cage, edited, binding, V_edited, *, V_rest=None):
     V_bound = None
     if not results.only_own_keys_and_no_modifiers(source):
         hit = _rest_dense.get(edited.session_uid)
-        if hit is None or hit[0] != id(binding):
+        if hit is None or hit[0] is not binding:
             if V_rest is None:
                 V_rest = store.load_rest(cage)
-            hit = (id(binding), core.deform(binding, V_rest))
+            hit = (binding, core.deform(binding, V_rest))
             _rest_dense[edited.session_uid] = hit
         V_bound = hit[1]
     return results.write_shape_key(source, cage, V_edited, V_bound)
