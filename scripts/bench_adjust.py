@@ -377,10 +377,10 @@ def fold_cases(quick):
 
 
 # ------------------------------------------------------------------ live update
-def run_live(quick, updates=5, seed=0):
+def run_live(quick, updates=5, seed=0, levels=2):
     """One live update of a bound scan through the add-on, in Blender: a
     bumpy torus (1M vertices; 62.5k with --quick) simplified to a 2,000-face
-    cage and bound (two Loop levels) by the add-on's own operator; then, per
+    cage and bound (Loop, ``levels``, default 2) by the add-on's own operator; then, per
     update, a cage vertex and 4 of its neighbours are moved and
     ``live_update.update_edited`` brings the edited original up to date.
     Returns (info, list of LiveTiming, seconds of the depsgraph evaluation
@@ -393,7 +393,7 @@ def run_live(quick, updates=5, seed=0):
     dense.select_set(True)
     t = time.perf_counter()
     bpy.ops.meshadjust.simplify(target_mode='FACES', target_faces=2000, fit=False, bind=True,
-                                levels=2, scheme='loop')
+                                levels=levels, scheme='loop')
     t_setup = time.perf_counter() - t
     cage = dense.meshadjust.cage
     edited = cage.meshadjust.edited
@@ -421,13 +421,13 @@ def run_live(quick, updates=5, seed=0):
     V_src = lu.cage_in_source_space(cage, dense)
     err = float(np.abs(got - package.core.deform(binding, V_src)).max())
     info = (f"bumpy torus {Vd.shape[0]:,} vertices / {Fd.shape[0]:,} faces, cage "
-            f"{Fc.shape[0]:,} faces, Loop x2 (simplify + bind through the operator "
+            f"{Fc.shape[0]:,} faces, Loop x{levels} (simplify + bind through the operator "
             f"{t_setup:.1f} s; first update, a full deform: {1e3 * first.total:.0f} ms)")
     return info, timings, evals, err
 
 
-def _live_section(quick):
-    info, timings, evals, err = run_live(quick)
+def _live_section(quick, levels=2):
+    info, timings, evals, err = run_live(quick, levels=levels)
     lines = ["## Live update (add-on, bpy): 5 neighbouring cage vertices moved", "", info, "",
              "| update | moved | dense rows | read cage ms | compare ms | deform ms | "
              "convert ms | write ms | total ms | depsgraph eval after ms |",
@@ -450,14 +450,14 @@ def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="smaller meshes, no results file")
     ap.add_argument("--levels", type=int, default=2,
-                    help="subdivision levels of the folds part (fits use at most 2)")
+                    help="subdivision levels of the folds and live parts (fits use at most 2)")
     ap.add_argument("--only", choices=("bend", "scale", "fit", "folds", "live"), action="append",
                     help="run only these parts (repeatable); the results file is then not written")
     args = ap.parse_args(argv)
     parts = set(args.only or ("bend", "scale", "fit", "folds", "live"))
     lines = []
     if "live" in parts:
-        lines += _live_section(args.quick)
+        lines += _live_section(args.quick, args.levels)
     if "folds" in parts:
         lines += _folds_section(args.quick, args.levels)
     if "bend" in parts:
