@@ -50,7 +50,7 @@ from typing import NamedTuple
 import numpy as np
 
 from .errors import InvalidArgumentError, InvalidMeshError, TopologyMismatchError
-from .mesh import check_mesh, vertex_normals
+from .mesh import check_mesh
 from .spatial import TriangleIndex, point_triangle_closest
 from .subdivide import subdivision_operator
 from ._groups import group_argmin, ragged_ranges
@@ -315,11 +315,12 @@ def bind(V_dense, F_dense, V_cage, F_cage, *, levels=2, scheme="butterfly", crea
     op = subdivision_operator(F_cage, V_cage.shape[0], levels=levels, scheme=scheme,
                               creases=creases)
     Vf = op.apply(V_cage)
-    Nf = vertex_normals(Vf, op.F_fine)
+    VfT = np.ascontiguousarray(Vf.T)
+    NfT = _vertex_normals_t(VfT, op.F_fine)
+    Nf = NfT.T
     fine_face, bary = _closest_on(TriangleIndex(Vf, op.F_fine), V_dense)
     # the frames in the transposed layout of deform (bit-identical to frames())
-    p, t, bt, n = _frames_t(np.ascontiguousarray(Vf.T), np.ascontiguousarray(Nf.T),
-                            np.ascontiguousarray(op.F_fine[fine_face].T),
+    p, t, bt, n = _frames_t(VfT, NfT, np.ascontiguousarray(op.F_fine[fine_face].T),
                             np.ascontiguousarray(bary.T))
     d = np.ascontiguousarray(V_dense.T)
     d -= p
@@ -669,9 +670,33 @@ def _fine_geometry(binding, V_cage_edited, F_cage, where):
     normals, transposed (3, n_fine)."""
     Vc = _check_cage(binding, V_cage_edited, F_cage, where)
     op = binding._operator
-    Vf = op.apply(Vc)
-    Nf = vertex_normals(Vf, op.F_fine)
-    return np.ascontiguousarray(Vf.T), np.ascontiguousarray(Nf.T)
+    VfT = np.ascontiguousarray(op.apply(Vc).T)
+    return VfT, _vertex_normals_t(VfT, op.F_fine)
+
+
+def _vertex_normals_t(PT, F):
+    """:func:`~.mesh.vertex_normals` in the transposed layout: positions
+    (3, n) -> unit normals (3, n), area-weighted, zero where no face (or
+    only degenerate ones) meets a vertex. The same operations in the same
+    order (face normals as ``np.cross`` forms them, summed corner 0, 1, 2
+    with ``bincount``), so bit-identical to it, about 3x faster."""
+    n = PT.shape[1]
+    i0, i1, i2 = (np.ascontiguousarray(F[:, k]) for k in range(3))
+    a = np.take(PT, i0, axis=1)
+    e1 = np.take(PT, i1, axis=1)
+    e1 -= a
+    e2 = np.take(PT, i2, axis=1)
+    e2 -= a
+    fn = (e1[1] * e2[2] - e1[2] * e2[1], e1[2] * e2[0] - e1[0] * e2[2],
+          e1[0] * e2[1] - e1[1] * e2[0])
+    out = np.empty((3, n))
+    for k in range(3):
+        out[k] = np.bincount(i0, fn[k], n) + np.bincount(i1, fn[k], n) + np.bincount(i2, fn[k], n)
+    length = _length_t(out)
+    ok = length > 0
+    np.divide(out, length, out=out, where=ok)
+    out[:, ~ok] = 0.0
+    return out
 
 
 def _fine_geometry_at(binding, Vc, needed):
@@ -685,7 +710,7 @@ def _fine_geometry_at(binding, Vc, needed):
     the next one reads (found backwards), with the level's own stencil rows,
     on compact arrays (no fine-sized array is written); normals are summed
     over the faces around ``needed``, in the order of
-    :func:`~.mesh.vertex_normals`. Equal to the full computation to rounding
+    :func:`_vertex_normals_t`. Equal to the full computation to rounding
     (the rows sum in another order than the apply plan's tables)."""
     op = binding._operator
     idx = _incremental_index(binding)
@@ -716,8 +741,8 @@ def _fine_geometry_at(binding, Vc, needed):
         lut = np.empty(op.n_fine, dtype=np.int64)
         X = X[verts]
         lut[verts] = np.arange(verts.shape[0])
-    N = vertex_normals(X, lut[Fs])          # same faces, same order: same sums
-    return lut, np.ascontiguousarray(X.T), np.ascontiguousarray(N.T)
+    XT = np.ascontiguousarray(X.T)
+    return lut, XT, _vertex_normals_t(XT, lut[Fs])    # same faces, same order: same sums
 
 
 class _Rows(NamedTuple):
