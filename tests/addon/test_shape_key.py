@@ -126,3 +126,24 @@ def test_a_source_with_only_its_meshadjust_key_simplifies_as_a_plain_mesh(bound)
                                        fit=False, bind=False) == {'FINISHED'}
     second = dense.meshadjust.cage
     assert second != cage and "evaluated mesh" not in second.meshadjust.last_report
+
+
+def test_shape_key_under_a_modifier_that_keeps_the_vertex_count(scene):
+    V, F = bumpy_sphere(4)
+    dense = make_object("dense", V, F)
+    dense.modifiers.new("disp", 'DISPLACE').strength = 0.05     # along the normals, no texture
+    assert simplify(300) == {'FINISHED'}
+    cage = dense.meshadjust.cage
+    lift_top(cage, 0.2)
+    assert bpy.ops.meshadjust.refine(output='SHAPE_KEY') == {'FINISHED'}
+    assert bpy.ops.meshadjust.refine(output='EDITED') == {'FINISHED'}
+    # the key moves the base mesh by the edit; the modifier then acts on top, as it
+    # did on the mesh that was bound
+    kb = dense.data.shape_keys.key_blocks["dense_cage"]
+    disp = key_co(kb) - key_co(dense.data.shape_keys.reference_key)
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    kb.value = 0.0
+    depsgraph.update()
+    bound = mod("mesh_io").read_positions(dense.evaluated_get(depsgraph).data)
+    assert np.abs(disp - (pos(cage.meshadjust.edited) - bound)).max() < 1e-4
+    assert disp[:, 2].max() > 0.05
