@@ -1,12 +1,14 @@
 """Topology changes that ``simplify(..., preserve_topology=False)`` allows
 once the link condition has stopped every collapse (private).
 
-Both keep the mesh a clean manifold:
+All keep the mesh a clean manifold:
 
 * a hole bounded by three edges is closed with one triangle (the rim's
   half-edges get the new face's as twins), so its rim can collapse further;
 * a component that cannot lose another face (a tetrahedron, a lone
-  triangle) is removed, smallest first, while faces are still needed.
+  triangle) is removed, smallest first, while faces are still needed;
+* a longer hole is capped with a fan of triangles from one rim vertex,
+  shortest first (``close_smallest_hole``).
 
 They work on a compact :class:`core._collapse.State` and leave it compact.
 """
@@ -15,7 +17,7 @@ import numpy as np
 
 from ._clean import BOUNDARY, face_keys
 from ._collapse import HALF_EDGE_CACHE, _compact, _ends, _survivors
-from .topology import face_components
+from .topology import connected_labels, face_components
 
 
 def close_triangular_holes(st):
@@ -65,8 +67,17 @@ def close_triangular_holes(st):
     caps = np.stack([w, u, z], axis=1)            # opposite direction to the rim: w -> u, u -> z, z -> w
     hc = 3 * (m + np.arange(k, dtype=np.int64))
     pairs = [(hc + 0, rim(u, z)), (hc + 1, rim(z, w)), (hc + 2, hb)]  # edge c is opposite corner c
-    st.F = np.concatenate([F, caps])
-    st.forig = np.concatenate([st.forig, st.forig[hb // 3]])  # a cap descends from a rim face
+    _add_caps(st, caps, hb, pairs)
+    return k
+
+
+def _add_caps(st, caps, rim_h, pairs):
+    """Append the faces ``caps`` (k,3), each descending from the face of the
+    rim half-edge ``rim_h[i]``, and glue the half-edge ``pairs`` (lists of
+    (a, b) arrays) as twins; their vertices are no longer on a border."""
+    k = caps.shape[0]
+    st.F = np.concatenate([st.F, caps])
+    st.forig = np.concatenate([st.forig, st.forig[rim_h // 3]])
     for name, fill in {"twin": BOUNDARY, "feat": False, **HALF_EDGE_CACHE}.items():
         setattr(st, name, np.concatenate([getattr(st, name), np.full(3 * k, fill)]))
     st.c_x = [np.concatenate([c, np.zeros(3 * k)]) for c in st.c_x]
@@ -75,12 +86,88 @@ def close_triangular_holes(st):
         st.twin[b] = a
     st.alive = np.ones(st.F.shape[0], dtype=bool)
     st.m_live = st.F.shape[0]
-    rimv = np.concatenate([u, w, z])
-    st.is_bnd[rimv] = False
+    st.is_bnd[caps.ravel()] = False
     # the rims' edges were invalid (both ends on a border): cost everything afresh
     st.c_cost[:] = 0.0
     st.c_stale[:] = True
-    return k
+
+
+#: apexes tried per hole (evenly spaced along its rim) and holes tried per call
+_APEX_TRIES = 8
+_HOLE_TRIES = 4
+
+
+def _list_order(succ):
+    """Order of the nodes of one linked list (``succ[i]``: the next node,
+    ``-1`` at the end), first to last, by pointer jumping (Wyllie)."""
+    dist = (succ >= 0).astype(np.int64)          # distance to the end
+    ptr = succ.copy()
+    while (ptr >= 0).any():
+        ok = ptr >= 0
+        nxt = np.where(ok, ptr, 0)
+        dist = np.where(ok, dist + dist[nxt], dist)
+        ptr = np.where(ok, ptr[nxt], -1)
+    return np.argsort(-dist, kind="stable")
+
+
+def close_smallest_hole(st):
+    """Cap the shortest boundary loop of more than three edges with a fan of
+    triangles from one of its vertices, so that it can collapse further.
+    Apexes are tried along the rim (``_APEX_TRIES``) until none of the fan's
+    chords is already an edge (a chord that exists would be a third face on
+    it), and loops in order of length (``_HOLE_TRIES``). Returns the number
+    of faces added (0: no loop could be closed)."""
+    F, twin = st.F, st.twin
+    n = st.V.shape[0]
+    hb = np.flatnonzero(twin == BOUNDARY)
+    if hb.size < 4:
+        return 0
+    u, w = _ends(F, hb)                           # the face runs u -> w along its border
+    out = np.full(n, -1, dtype=np.int64)
+    out[u] = np.arange(hb.size)                   # the border half-edge leaving each rim vertex
+    nxt = out[w]
+    loop = connected_labels(hb.size, np.stack([np.arange(hb.size), nxt], axis=1))
+    length = np.bincount(loop, minlength=hb.size)
+    roots = np.flatnonzero((loop == np.arange(hb.size)) & (length > 3))
+    if roots.size == 0:
+        return 0
+    hi = np.flatnonzero(twin > np.arange(twin.size, dtype=np.int64))
+    ea, eb = _ends(F, np.concatenate([hi, hb]))
+    nn = np.int64(n)
+    edges = np.sort(np.minimum(ea, eb) * nn + np.maximum(ea, eb))
+    for root in roots[np.argsort(length[roots], kind="stable")][:_HOLE_TRIES]:
+        members = np.flatnonzero(loop == root)
+        local = np.full(hb.size, -1, dtype=np.int64)
+        local[members] = np.arange(members.size)
+        succ = local[nxt[members]]
+        succ[succ == 0] = -1                      # cut the loop before its first member
+        ring = members[_list_order(succ)]         # rim half-edges in order: v_i -> v_{i+1}
+        k = ring.size
+        for shift in np.unique(np.linspace(0, k, _APEX_TRIES, endpoint=False).astype(np.int64)):
+            r = np.roll(ring, -shift)
+            v = u[r]                              # v_0 (the apex) .. v_{k-1}
+            q = np.minimum(v[0], v[2:k - 1]) * nn + np.maximum(v[0], v[2:k - 1])
+            pos = np.minimum(np.searchsorted(edges, q), edges.size - 1)
+            if (edges[pos] == q).any():
+                continue
+            _fan(st, v, hb[r])
+            return k - 2
+    return 0
+
+
+def _fan(st, v, rim_h):
+    """Cap the loop ``v`` (rim vertices in order, the border half-edge
+    ``rim_h[i]`` running v_i -> v_{i+1}) with triangles (v_0, v_{i+1}, v_i),
+    i = 1 .. k-2, glued to the rim and to each other."""
+    k = v.size
+    i = np.arange(1, k - 1)
+    caps = np.stack([np.full(k - 2, v[0]), v[i + 1], v[i]], axis=1)
+    hc = 3 * (st.F.shape[0] + np.arange(k - 2, dtype=np.int64))
+    # corner 0 faces rim i; corner 1 the chord to v_i (rim 0 for the first);
+    # corner 2 the chord to v_{i+1} (rim k-1 for the last)
+    pairs = [(hc + 0, rim_h[i]), (hc[1:] + 1, hc[:-1] + 2),
+             (hc[:1] + 1, rim_h[:1]), (hc[-1:] + 2, rim_h[-1:])]
+    _add_caps(st, caps, rim_h[i], pairs)
 
 
 def drop_stuck_components(st, need, max_size):

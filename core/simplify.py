@@ -46,7 +46,7 @@ import numpy as np
 
 from ._clean import BOUNDARY, NON_MANIFOLD, half_edge_ends, spatial_order
 from ._collapse import State, _ends, run
-from ._relax import close_triangular_holes, drop_stuck_components
+from ._relax import close_smallest_hole, close_triangular_holes, drop_stuck_components
 from ._relocate import relocate, segment_triangles
 from .clean import MIN_COMPONENT_AREA, WELD_DISTANCE, CleanReport, clean_mesh
 from .errors import InvalidArgumentError, InvalidMeshError, MeshAdjustError
@@ -433,12 +433,14 @@ def _run_all(mesh, target, max_err_n, opts, progress, m0):
     stopped, passes = run(mesh, target, max_err_n, opts["preserve_boundary"], progress, m0, tun)
     while not opts["preserve_topology"] and stopped == "no_valid_collapse":
         # the link condition stopped every collapse: close 3-edge holes, drop
-        # components that cannot shrink, and go on
+        # components that cannot shrink, cap the shortest longer hole, and go on
         need = mesh.F.shape[0] - target if target is not None else mesh.F.shape[0]
         changed = close_triangular_holes(mesh)
         if not changed:
             size = tun.relax_max_size if max_err_n is None else min(tun.relax_max_size, max_err_n)
             changed = drop_stuck_components(mesh, need, size)
+        if not changed:
+            changed = close_smallest_hole(mesh)
         if not changed:
             break
         stopped, more = run(mesh, target, max_err_n, opts["preserve_boundary"], progress, m0, tun)

@@ -310,3 +310,20 @@ def test_every_shared_mesh_and_messy_variant_goes_through_the_chain(name, how):
     assert b.n_dense == Vm.shape[0]          # the source's own vertices, bow-ties and all
     d = core.bbox_diagonal(Vm)
     assert np.abs(core.deform(b, fit.V) - Vm).max() <= 1e-9 * d
+
+
+def test_a_scan_with_3000_specks_gets_the_cage_of_the_scan_alone():
+    V, F = icosphere(5)
+    rng = np.random.default_rng(5)
+    V = V * (1 + 0.03 * np.sin(7 * V[:, :1]) * np.cos(5 * V[:, 1:2]) + 0.002 * rng.standard_normal((len(V), 1)))
+    Vd, Fd = with_debris(V, F, k=3000)
+    for keep_topology in (True, False):
+        alone = core.simplify(V, F, target_faces=2000, preserve_topology=keep_topology)
+        r = core.simplify(Vd, Fd, target_faces=2000, preserve_topology=keep_topology)
+        assert abs(r.F.shape[0] - 2000) <= 100 and r.cleaning.n_debris_components == 3000
+        assert "dropped 3,000 debris components (12,000 faces)" in r.message
+        mean = core.surface_distance(V, F, r.V, r.F).mean
+        assert mean <= 1.1 * core.surface_distance(V, F, alone.V, alone.F).mean
+        # the specks still follow the edit: bound to the nearest cage surface
+        b = core.bind(Vd, Fd, r.V, r.F, levels=1)
+        assert b.n_dense == Vd.shape[0]

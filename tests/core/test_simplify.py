@@ -577,3 +577,22 @@ def test_relocation_samples_the_input_not_the_collapsed_positions(monkeypatch):
     r = simplify(V, F, target_faces=200)
     assert r.F.shape[0] == 200
     assert np.array_equal(seen["start"], seen["relocate"])
+
+
+def test_relaxed_topology_caps_holes_of_any_size_smallest_first():
+    # a sphere with a wide hole (a rim of many edges) and a small one: kept, both
+    # rims stay; relaxed, the small one is capped first, then the wide one
+    V, F = icosphere(3)
+    C = V[F].mean(axis=1)
+    holed = F[(C[:, 2] < 0.7) & ~((C[:, 0] > 0.93) & (np.abs(C[:, 2]) < 0.2))]
+    before = topology_summary(holed, V.shape[0])
+    assert before.boundary_loops == 2
+    kept = simplify(V, holed, target_faces=4)
+    assert topology_summary(kept.F, kept.V.shape[0]).boundary_loops == 2
+    assert kept.F.shape[0] > 4 and kept.stopped_because in ("topology_floor", "no_valid_collapse")
+    mid = simplify(V, holed, target_faces=60, preserve_topology=False)
+    r = simplify(V, holed, target_faces=4, preserve_topology=False)
+    for res in (mid, r):
+        assert manifold_report(res.F, res.V.shape[0]).is_oriented_manifold
+    assert topology_summary(r.F, r.V.shape[0])[:3] == (2, 1, 0)
+    assert r.F.shape[0] <= 4 or r.stopped_because == "no_valid_collapse"
