@@ -49,6 +49,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from .clean import clean_mesh
 from .errors import InvalidArgumentError, InvalidMeshError, TopologyMismatchError
 from .mesh import check_mesh
 from .spatial import TriangleIndex, point_triangle_closest
@@ -333,7 +334,11 @@ def bind(V_dense, F_dense, V_cage, F_cage, *, levels=2, scheme="butterfly", crea
         exact = detail_search == "exact" or (
             detail_search == "auto" and F_dense.shape[0] <= _EXACT_DETAIL_FACES)
         if exact:
-            q = TriangleIndex(V_dense, F_dense).closest(vfr.point).point
+            # the detail comes from the surface as simplify saw it: no debris to
+            # pull a fine vertex off the scan, no double-sided sheets
+            surface = clean_mesh(V_dense, F_dense)
+            Vs, Fs = (surface.V, surface.F) if surface.F.shape[0] else (V_dense, F_dense)
+            q = TriangleIndex(Vs, Fs).closest(vfr.point).point
         else:
             q = _dense_points_near(V_dense, F_dense, fine_face, op.F_fine, vfr.point)
         fine_detail = _to_frame(q - vfr.point, vfr)

@@ -330,3 +330,15 @@ def test_a_scan_with_3000_specks_gets_the_cage_of_the_scan_alone():
         # the specks still follow the edit: bound to the nearest cage surface
         b = core.bind(Vd, Fd, r.V, r.F, levels=1)
         assert b.n_dense == Vd.shape[0]
+
+
+def test_refine_detail_comes_from_the_scan_not_from_its_debris():
+    V, F = icosphere(4)
+    Vd, Fd = with_debris(V, F, k=400, size=2e-3)
+    r = core.simplify(Vd, Fd, target_faces=200)
+    b = core.bind(Vd, Fd, r.V, r.F, levels=2)
+    fine = core.refine(b, r.V)
+    # every refined vertex sits on the sphere (the specks, up to 6% of the diagonal
+    # away from it, pull none of them off)
+    d = core.TriangleIndex(V, F).closest(fine.V).distance
+    assert d.max() <= 1e-3 * core.bbox_diagonal(V)
