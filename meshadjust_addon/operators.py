@@ -131,6 +131,10 @@ class _Background:
     ``finish()`` commits the result on the main thread. Headless (no window),
     ``execute()`` runs the synchronous path instead.
 
+    An operator that changed something outside the scene's data before the
+    work began (Fit leaves Edit Mode) defines ``give_back()``, called when the
+    work fails or is cancelled.
+
     The operator calls ``start_background(context, label, compute)`` from
     ``invoke()``, where ``compute(progress)`` returns a job with a
     ``cancelled`` flag, and implements ``finish(context)``.
@@ -190,17 +194,21 @@ class _Background:
         wm.progress_end()
         settings.running = False
         settings.progress_text = ""
+        give_back = getattr(self, "give_back", None) or (lambda: None)
         if self._error is not None:
+            give_back()
             if isinstance(self._error, USER_ERRORS):
                 self.report({'ERROR'}, str(self._error))
                 return {'CANCELLED'}
             raise self._error   # a bug: let it show as one
         if self._cancel or getattr(self._job, "cancelled", False):
+            give_back()
             self.report({'WARNING'}, f"{self.bl_label} cancelled: nothing was changed")
             return {'CANCELLED'}
         try:
             return self.finish(context)
         except USER_ERRORS as exc:
+            give_back()
             self.report({'ERROR'}, str(exc))
             return {'CANCELLED'}
 
@@ -313,11 +321,17 @@ class _CageJobStep(_Background, _CageStep):
     the others still run."""
 
     def execute(self, context):
+        give_back = getattr(self, "give_back", None) or (lambda: None)
+
         def step(cage):
-            self._job = self._compute(self._prepare(cage))
-            if self._job.cancelled:
-                raise core.MeshAdjustError(f"{self.bl_label} cancelled: nothing was changed")
-            return api.Report(self._commit())
+            try:
+                self._job = self._compute(self._prepare(cage))
+                if self._job.cancelled:
+                    raise core.MeshAdjustError(f"{self.bl_label} cancelled: nothing was changed")
+                return api.Report(self._commit())
+            except USER_ERRORS:
+                give_back()
+                raise
 
         return run_each(self, selected_cages(context), step)
 
@@ -352,19 +366,24 @@ class MESHADJUST_OT_fit_cage(FitProps, _CageJobStep, bpy.types.Operator):
     bl_options = {'REGISTER', 'UNDO'}
 
     def _prepare(self, cage):
-        self._edit_mode = cage.mode == 'EDIT'   # the artist's mode, given back after the fit
+        self._edit_cage = cage.name if cage.mode == 'EDIT' else ""   # given back afterwards
         _object_mode(cage)
         return api.prepare_fit(cage, rebind=self.rebind)
 
     def _compute(self, job, progress=None):
         return api.compute_fit(job, progress=progress)
 
+    def give_back(self):
+        """Edit Mode again on a cage the fit took out of it."""
+        cage = bpy.data.objects.get(getattr(self, "_edit_cage", ""))
+        if cage is not None and cage.mode != 'EDIT':
+            _edit_mode(cage)
+
     def _commit(self):
         cage = bpy.data.objects[self._job.cage_name]
         _object_mode(cage)          # (the artist may have entered it while the fit ran)
         fit = api.commit_fit(cage, self._job)
-        if getattr(self, "_edit_mode", False):
-            _edit_mode(cage)
+        self.give_back()
         d = fit.mean_distance
         msg = (f"fitted '{cage.name}': mean distance {100 * d[0] / fit.diagonal:.3f}% -> "
                f"{100 * d[-1] / fit.diagonal:.3f}% of size")

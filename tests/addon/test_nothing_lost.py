@@ -368,3 +368,13 @@ def test_rebind_after_an_extrusion_refuses_to_keep_the_edit_and_says_why(bound):
     bpy.ops.mesh.quads_convert_to_tris()
     bpy.ops.object.mode_set(mode='OBJECT')
     assert bpy.ops.meshadjust.bind(keep_edit=False) == {'FINISHED'}
+
+
+def test_a_failed_fit_from_edit_mode_gives_edit_mode_back(bound, monkeypatch):
+    dense, cage = bound
+    bpy.context.view_layer.objects.active = cage
+    bpy.ops.object.mode_set(mode='EDIT')
+    monkeypatch.setattr(sys.modules[MODULE + ".core"], "fit_cage", _boom)
+    with pytest.raises(RuntimeError, match="boom"):
+        bpy.ops.meshadjust.fit_cage()
+    assert cage.mode == 'EDIT'
