@@ -20,15 +20,22 @@ from ._collapse import HALF_EDGE_CACHE, _compact, _ends, _survivors
 from .topology import connected_labels, face_components
 
 
+def _border(st):
+    """The border half-edges of the state and their ends ``u -> w`` (the
+    direction their face runs along the border)."""
+    hb = np.flatnonzero(st.twin == BOUNDARY)
+    u, w = _ends(st.F, hb)
+    return hb, u, w
+
+
 def close_triangular_holes(st):
     """Cap every boundary loop of exactly three edges whose triangle is not
     already a face. Returns the number of caps."""
     F, twin = st.F, st.twin
     n = st.V.shape[0]
-    hb = np.flatnonzero(twin == BOUNDARY)
+    hb, u, w = _border(st)
     if hb.size < 3:
         return 0
-    u, w = _ends(F, hb)                           # the face runs u -> w along its border
     deg = np.bincount(u, minlength=n) + np.bincount(w, minlength=n)
     nsum = np.bincount(u, weights=w, minlength=n) + np.bincount(w, weights=u, minlength=n)
     nsum = np.rint(nsum).astype(np.int64)         # sum of each rim vertex's two rim neighbours
@@ -119,10 +126,9 @@ def close_smallest_hole(st):
     of faces added (0: no loop could be closed)."""
     F, twin = st.F, st.twin
     n = st.V.shape[0]
-    hb = np.flatnonzero(twin == BOUNDARY)
+    hb, u, w = _border(st)
     if hb.size < 4:
         return 0
-    u, w = _ends(F, hb)                           # the face runs u -> w along its border
     out = np.full(n, -1, dtype=np.int64)
     out[u] = np.arange(hb.size)                   # the border half-edge leaving each rim vertex
     nxt = out[w]
