@@ -342,3 +342,11 @@ def test_refine_detail_comes_from_the_scan_not_from_its_debris():
     # away from it, pull none of them off)
     d = core.TriangleIndex(V, F).closest(fine.V).distance
     assert d.max() <= 1e-3 * core.bbox_diagonal(V)
+
+
+def test_a_collinear_soup_is_a_clear_error():
+    rng = np.random.default_rng(0)
+    P = np.zeros((3000, 3))
+    P[:, 0] = rng.random(3000)
+    with pytest.raises(InvalidMeshError, match="have no area"):
+        core.simplify(P, np.arange(3000).reshape(-1, 3), target_faces=100)
