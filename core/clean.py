@@ -183,14 +183,18 @@ def clean_mesh(V, F, *, weld_distance=WELD_DISTANCE, min_component_area=MIN_COMP
             raise InvalidArgumentError(
                 f"{_WHERE}: {name} must be a finite number >= 0, got {value!r}")
     n_in = V.shape[0]
-    counts = {"n_unreferenced_vertices": int(n_in - np.count_nonzero(
-        np.bincount(F.ravel(), minlength=n_in)))}
+    used = np.bincount(F.ravel(), minlength=n_in) > 0
+    counts = {"n_unreferenced_vertices": int(n_in - np.count_nonzero(used))}
     faces = np.arange(F.shape[0], dtype=np.int64)          # input face of each current face
     bad = _degenerate(F)
     n_degenerate = int(np.count_nonzero(bad))
     F, faces = F[~bad], faces[~bad]
     twin = twin_table(F, n_in)
-    rep = _weld_map(V, F, twin, float(weld_distance))
+    shape = _shape(V, F, bounding_box(V if used.all() else V[used]))
+    area = np.zeros(faces[-1] + 1 if faces.size else 0)
+    area[faces] = shape.area                               # per input face, as it came
+    rep = _weld_map(shape, F, twin, float(weld_distance))
+    del shape
     counts["n_welded_vertices"] = int(np.count_nonzero(rep != np.arange(n_in)))
     if counts["n_welded_vertices"]:
         F = rep[F]
@@ -210,7 +214,8 @@ def clean_mesh(V, F, *, weld_distance=WELD_DISTANCE, min_component_area=MIN_COMP
     counts.update(found)
     if protected is not None:
         protected = np.asarray(protected, dtype=bool)[to_input]
-    keep, found = _debris(V, F, twin, float(min_component_area), face_budget, protected)
+    # areas of the faces as they came (welds move corners by at most weld_distance)
+    keep, found = _debris(area[faces], F, twin, float(min_component_area), face_budget, protected)
     counts.update(found)
     if not keep.all():
         F, faces, twin = F[keep], faces[keep], _keep_twins(twin, keep)
@@ -223,50 +228,71 @@ def _degenerate(F):
     return (F[:, 0] == F[:, 1]) | (F[:, 1] == F[:, 2]) | (F[:, 0] == F[:, 2])
 
 
-def _weld_map(V, F, twin, weld_distance):
+class _Shape(NamedTuple):
+    """The input in unit-free form: coordinates scaled to a unit box
+    diagonal (no overflow near the float limits) and, per face, its area and
+    its height over its longest edge."""
+
+    V: np.ndarray       #: (n,3) float64, (V - lo) / diagonal
+    extent: np.ndarray  #: (3,) the box's sides, in those units
+    area: np.ndarray    #: (m,) float64
+    height: np.ndarray  #: (m,) float64
+
+
+def _shape(V, F, box):
+    """:class:`_Shape` of the faces ``F`` (one pass over them, coordinate by
+    coordinate: two edge vectors, their cross product, three squared lengths);
+    ``box``: the bounding box ``(lo, hi)`` of the vertices they use."""
+    lo, hi = box
+    d = diagonal_length(lo, hi) or 1.0
+    Vn = (V - lo) / d
+    cols = np.ascontiguousarray(Vn.T)
+    FT = np.ascontiguousarray(F.T)
+    e1, e2 = [], []
+    for c in cols:
+        a = np.take(c, FT[0])
+        e1.append(np.take(c, FT[1]) - a)
+        e2.append(np.take(c, FT[2]) - a)
+    twice2 = ((e1[1] * e2[2] - e1[2] * e2[1]) ** 2 + (e1[2] * e2[0] - e1[0] * e2[2]) ** 2
+              + (e1[0] * e2[1] - e1[1] * e2[0]) ** 2)
+    l1 = e1[0] ** 2 + e1[1] ** 2 + e1[2] ** 2
+    l2 = e2[0] ** 2 + e2[1] ** 2 + e2[2] ** 2
+    l3 = (e2[0] - e1[0]) ** 2 + (e2[1] - e1[1]) ** 2 + (e2[2] - e1[2]) ** 2
+    longest2 = np.maximum(np.maximum(l1, l2), l3)
+    height2 = np.divide(twice2, longest2, out=np.zeros_like(twice2), where=longest2 > 0)
+    return _Shape(Vn, (hi - lo) / d, 0.5 * np.sqrt(twice2), np.sqrt(height2))
+
+
+def _weld_map(shape, F, twin, weld_distance):
     """Representative of every vertex, (n,) int64: vertices on an open or
-    non-manifold edge (``twin < 0``) that coincide, exactly or within
-    ``weld_distance`` of the diagonal (see the module docstring), and the two
-    ends of any edge that short (a collapsed cluster) map to the smallest
-    index of their group; every other vertex to itself."""
+    non-manifold edge (``twin < 0``) or on a collapsed face (no taller than
+    ``weld_distance`` over its longest edge: a degenerate cluster, or an edge
+    that short, since a face is no taller than its shortest edge) that
+    coincide, exactly or within ``weld_distance`` of the diagonal (see the
+    module docstring), map to the smallest index of their group; every other
+    vertex to itself."""
+    V, tol = shape.V, weld_distance
     n = V.shape[0]
     rep = np.arange(n, dtype=np.int64)
-    if F.shape[0] == 0:
+    h = np.flatnonzero(twin < 0)
+    flat = np.flatnonzero(shape.height <= tol)
+    if h.size == 0 and flat.size == 0:
         return rep
     U, W = half_edge_ends(F)
-    lo, hi = bounding_box(V[F.ravel()])
-    V = (V - lo) / (diagonal_length(lo, hi) or 1.0)    # unit diagonal (no overflow)
-    lo, hi, tol = np.zeros(3), (hi - lo) / (diagonal_length(lo, hi) or 1.0), weld_distance
-    short = np.flatnonzero(np.max(np.abs(V[U] - V[W]), axis=1) <= tol)
-    pairs = [np.stack([U[short], W[short]], axis=1)]
-    h = np.flatnonzero(twin < 0)
-    flat = _collapsed_faces(V, F, tol)
-    if h.size or flat.size:
-        cand = np.unique(np.concatenate([U[h], W[h], F[flat].ravel()]))
-        P = V[cand] + 0.0                          # -0.0 and 0.0 are the same place
-        cell = 4.0 * tol
-        if cell > 0 and float(np.max(hi - lo)) / cell + 2 < 2 ** _GRID_BITS:
-            found = [_same_cell_pairs(np.floor((P - lo) / cell + k / 4.0).astype(np.int64))
-                     for k in range(4)]
-        else:
-            found = [_same_cell_pairs(None, P)]
-        pairs += [cand[p] for p in found]
-    pairs = np.concatenate(pairs)
+    cand = np.unique(np.concatenate([U[h], W[h], F[flat].ravel()]))
+    P = V[cand] + 0.0                              # -0.0 and 0.0 are the same place
+    cell = 4.0 * tol
+    if cell > 0 and float(np.max(shape.extent)) / cell + 2 < 2 ** _GRID_BITS:
+        found = [_same_cell_pairs(np.floor(P / cell + k / 4.0).astype(np.int64)) for k in range(4)]
+    else:
+        found = [_same_cell_pairs(None, P)]
+    pairs = np.concatenate([cand[p] for p in found])
     if pairs.shape[0] == 0:
         return rep
     used = np.unique(pairs)
     labels = connected_labels(used.size, np.searchsorted(used, pairs))
     rep[used] = used[labels]
     return rep
-
-
-def _collapsed_faces(V, F, tol):
-    """Faces whose height over their longest edge is at most ``tol`` (the
-    three corners on a line or a point): their corners are weld candidates."""
-    A, B, C = V[F[:, 0]], V[F[:, 1]], V[F[:, 2]]
-    twice_area = np.linalg.norm(np.cross(B - A, C - A), axis=1)
-    longest = np.sqrt(np.max([np.einsum("ij,ij->i", X, X) for X in (B - A, C - B, A - C)], axis=0))
-    return np.flatnonzero(twice_area <= tol * longest)
 
 
 def _same_cell_pairs(Q, P=None):
@@ -477,6 +503,9 @@ def _make_manifold(V, F, twin):
     ident = np.arange(V.shape[0], dtype=np.int64)
     for _ in range(_MAX_RECUTS):
         V2, F2, to_input, n_split, n_added = _split_fans(V, F, pairing, ident)
+        if n_nm == 0 and n_added == 0:
+            return V, F, twin, ident, {"n_non_manifold_edges": 0, "n_split_vertices": 0,
+                                       "n_added_vertices": 0, "n_detached_faces": 0}
         twin = twin_table(F2, V2.shape[0])
         left = np.flatnonzero(twin == NON_MANIFOLD)
         if left.size == 0 or not (pairing[left] >= 0).any():
@@ -552,20 +581,17 @@ def _orient(F, twin):
     return F, new_twin, found
 
 
-def _debris(V, F, twin, min_component_area, face_budget, protected):
+def _debris(area, F, twin, min_component_area, face_budget, protected):
     """Faces to keep: all but those of components (joined across manifold
-    edges) whose area is below ``min_component_area`` times the largest's,
-    or below the total over ``face_budget`` (never the largest, nor one with
-    a ``protected`` vertex)."""
+    edges) whose area (``area``: per face) is below ``min_component_area``
+    times the largest's, or below the total over ``face_budget`` (never the
+    largest, nor one with a ``protected`` vertex)."""
     keep = np.ones(F.shape[0], dtype=bool)
     found = {"n_debris_components": 0, "n_debris_faces": 0}
     if (min_component_area <= 0 and not face_budget) or F.shape[0] == 0:
         return keep, found
     h = np.flatnonzero(twin > np.arange(twin.size))
     labels = connected_labels(F.shape[0], np.stack([h // 3, twin[h] // 3], axis=1))
-    lo, hi = bounding_box(V)
-    scale = max(diagonal_length(lo, hi), np.finfo(float).tiny)
-    area = 0.5 * np.linalg.norm(face_normals((V - lo) / scale, F, normalize=False), axis=1)
     comp_area = np.bincount(labels, weights=area, minlength=F.shape[0])
     roots = np.flatnonzero(labels == np.arange(F.shape[0]))
     tiny = comp_area < min_component_area * comp_area.max()
