@@ -58,7 +58,7 @@ class MeshAdjustObjectState(bpy.types.PropertyGroup):
                              description="Triangles of the source at bind time")
     levels: IntProperty(name="Levels", default=2, min=0, max=6,
                         description="Subdivision levels of the binding")
-    scheme: EnumProperty(name="Scheme", items=SCHEMES, default='butterfly',
+    scheme: EnumProperty(name="Scheme", items=SCHEMES, default='loop',
                          description="Subdivision scheme of the binding")
     live: BoolProperty(name="Live", default=False,
                        description="Update the results while the cage is edited")
