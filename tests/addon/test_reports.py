@@ -62,7 +62,7 @@ def test_automatic_levels_and_the_refined_count_in_the_report(scene):
     assert cage.meshadjust.levels == 2             # 300 * 16 = 4,800: closest to 5,120
     assert "levels 2, automatic" in cage.meshadjust.last_report
     assert bpy.ops.meshadjust.refine(output='REFINED') == {'FINISHED'}
-    assert "refined: 4,800 faces, butterfly x2, about the source's 5,120" in \
+    assert "refined: 4,800 faces, loop x2, about the source's 5,120" in \
         cage.meshadjust.last_report
 
 
