@@ -49,6 +49,12 @@ class Capture:
     def __init__(self):
         self.text = ""
 
+    def explain(self, failure):
+        """``failure`` with what the log adds, quoted: ``' (Blender's log:
+        "...")'`` (at most 400 characters of it), or nothing."""
+        causes = self.causes(failure)
+        return f"{failure} (Blender's log: \"{'; '.join(causes)[:400]}\")" if causes else failure
+
     def causes(self, failure):
         """What the log says besides ``failure`` and timings: its lines
         without the time stamp and channel Blender's log puts first
@@ -203,6 +209,15 @@ def count_nonfinite(path):
     return int((~np.isfinite(xyz).all(axis=1)).sum())
 
 
+def _failure_of(op):
+    """Run a Blender operator; its error on one line, or None."""
+    try:
+        op()
+    except RuntimeError as exc:
+        return " ".join(str(exc).split())
+    return None
+
+
 def import_mesh(path, log=None):
     """Import ``path`` with Blender's importer into the current scene and
     return one mesh object (several meshes in the file are joined).
@@ -222,16 +237,9 @@ def import_mesh(path, log=None):
         raise BlenderIOError(f"{name}: unsupported file type '{ext}'")
     before = set(bpy.data.objects)
     with captured_output(log) as cap:
-        try:
-            ops[ext](filepath=path)
-        except RuntimeError as exc:
-            failure = " ".join(str(exc).split())
-        else:
-            failure = None
+        failure = _failure_of(lambda: ops[ext](filepath=path))
     if failure is not None:
-        causes = cap.causes(failure)
-        cause = f' (Blender\'s log: "{"; ".join(causes)[:400]}")' if causes else ""
-        raise BlenderIOError(f"Blender's importer failed on {name}: {failure}{cause}")
+        raise BlenderIOError(f"Blender's importer failed on {name}: {cap.explain(failure)}")
     meshes = [o for o in bpy.data.objects if o not in before and o.type == 'MESH'
               and len(o.data.polygons)]
     if not meshes:
@@ -295,23 +303,17 @@ def write_with_blender(path, V, F, log):
     obj.select_set(True)
     bpy.context.view_layer.objects.active = obj
     try:
+        exporters = {".ply": lambda: bpy.ops.wm.ply_export(filepath=path,
+                                                            export_selected_objects=True),
+                     ".stl": lambda: bpy.ops.wm.stl_export(filepath=path,
+                                                            export_selected_objects=True)}
+        gltf = lambda: bpy.ops.export_scene.gltf(filepath=path, use_selection=True,  # noqa: E731
+                                                 export_format='GLB')
         with captured_output(log) as cap:
-            try:
-                if fmt == ".ply":
-                    bpy.ops.wm.ply_export(filepath=path, export_selected_objects=True)
-                elif fmt == ".stl":
-                    bpy.ops.wm.stl_export(filepath=path, export_selected_objects=True)
-                else:
-                    bpy.ops.export_scene.gltf(filepath=path, use_selection=True,
-                                              export_format='GLB')
-            except RuntimeError as exc:
-                failure = " ".join(str(exc).split())
-            else:
-                failure = None
+            failure = _failure_of(exporters.get(fmt, gltf))
         if failure is not None:
-            causes = cap.causes(failure)
             raise BlenderIOError(f"Blender's exporter failed on {os.path.basename(path)}: "
-                                 f"{failure}" + (f" ({'; '.join(causes)[:400]})" if causes else ""))
+                                 f"{cap.explain(failure)}")
     finally:
         bpy.data.objects.remove(obj)
         bpy.data.meshes.remove(mesh)
