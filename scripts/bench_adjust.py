@@ -72,8 +72,9 @@ def bumpy_torus(n_major, n_minor, bump=0.01):
 
 
 # ------------------------------------------------------------------ Blender side
-def surface_deform(V_dense, F_dense, V_cage, F_cage, V_cage_edited):
-    """Blender's Surface Deform: (bind seconds, deform seconds, deformed positions)."""
+def surface_deform_bound(V_dense, F_dense, V_cage, F_cage):
+    """Blender's Surface Deform bound to the cage in an empty scene:
+    (dense object, cage object, bind seconds)."""
     bpy = empty_scene()
     dense = blender_object("dense", V_dense, F_dense)
     cage = blender_object("cage", V_cage, F_cage)
@@ -88,6 +89,12 @@ def surface_deform(V_dense, F_dense, V_cage, F_cage, V_cage_edited):
     t_bind = time.perf_counter() - t
     if not mod.is_bound:
         raise RuntimeError("Surface Deform did not bind")
+    return dense, cage, t_bind
+
+
+def surface_deform(V_dense, F_dense, V_cage, F_cage, V_cage_edited):
+    """Blender's Surface Deform: (bind seconds, deform seconds, deformed positions)."""
+    dense, cage, t_bind = surface_deform_bound(V_dense, F_dense, V_cage, F_cage)
     mesh_io().write_positions(cage.data, V_cage_edited)
     t = time.perf_counter()
     out = evaluated_positions(dense)
@@ -276,19 +283,7 @@ def count_folds(V_rest, V_new, F):
 def surface_deform_many(V_dense, F_dense, V_cage, F_cage, edits):
     """Surface Deform bound once, evaluated for each edited cage: list of
     deformed positions, and the bind seconds."""
-    bpy = empty_scene()
-    dense = blender_object("dense", V_dense, F_dense)
-    cage = blender_object("cage", V_cage, F_cage)
-    mod = dense.modifiers.new("SurfaceDeform", "SURFACE_DEFORM")
-    mod.target = cage
-    bpy.context.view_layer.objects.active = dense
-    t = time.perf_counter()
-    with bpy.context.temp_override(object=dense, active_object=dense):
-        bpy.ops.object.surfacedeform_bind(modifier=mod.name)
-    evaluated_positions(dense)
-    t_bind = time.perf_counter() - t
-    if not mod.is_bound:
-        raise RuntimeError("Surface Deform did not bind")
+    dense, cage, t_bind = surface_deform_bound(V_dense, F_dense, V_cage, F_cage)
     out = []
     for Ve in edits:
         mesh_io().write_positions(cage.data, Ve)
