@@ -20,7 +20,8 @@ The public API (one module per algorithm family):
 ==========================  ==============================================
 """
 
-from .errors import InvalidArgumentError, InvalidMeshError, MeshAdjustError, TopologyMismatchError
+from .errors import (CancelledError, InvalidArgumentError, InvalidMeshError, MeshAdjustError,
+                     TopologyMismatchError)
 from .mesh import (bbox_diagonal, check_mesh, enclosed_volume, face_areas, face_normals,
                    vertex_normals)
 from .topology import EdgeMap, edge_map, euler_characteristic, manifold_report, topology_summary
@@ -35,6 +36,7 @@ from .binding import Binding, RefineResult, bind, deform, refine
 
 __all__ = [
     "MeshAdjustError", "InvalidMeshError", "InvalidArgumentError", "TopologyMismatchError",
+    "CancelledError",
     "check_mesh", "bbox_diagonal", "enclosed_volume", "face_areas", "face_normals",
     "vertex_normals", "EdgeMap", "edge_map", "manifold_report", "topology_summary",
     "euler_characteristic", "read_obj", "write_obj", "read_smf", "write_smf", "read_mesh",

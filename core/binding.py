@@ -50,12 +50,12 @@ from typing import NamedTuple
 import numpy as np
 
 from .clean import clean_mesh
-from .errors import InvalidArgumentError, InvalidMeshError, TopologyMismatchError
+from .errors import CancelledError, InvalidArgumentError, InvalidMeshError, TopologyMismatchError
 from .mesh import check_mesh
 from .spatial import TriangleIndex, point_triangle_closest
 from .subdivide import subdivision_operator
 from ._groups import group_argmin, ragged_ranges
-from ._parallel import blocks, run_blocks
+from ._parallel import WORKERS, blocks, run_blocks
 
 #: relative length under which a normal or tangent counts as degenerate
 _DEGENERATE = 1e-12
@@ -266,7 +266,7 @@ class Binding:
 
 
 def bind(V_dense, F_dense, V_cage, F_cage, *, levels=2, scheme="butterfly", creases=None,
-         detail_search="auto"):
+         detail_search="auto", progress=None):
     """Bind a dense mesh to the subdivision surface of a cage.
 
     Parameters
@@ -291,6 +291,10 @@ def bind(V_dense, F_dense, V_cage, F_cage, *, levels=2, scheme="butterfly", crea
         very large meshes: the closest point for about 99.5% of fine
         vertices, a farther point of the dense surface for the rest);
         ``"auto"`` is exact up to 500,000 dense faces.
+    progress : callable(float) -> bool or None, optional
+        Called with the fraction done (0..1) between blocks of the
+        closest-point searches (from the calling thread); returning False
+        stops the bind with :class:`~.errors.CancelledError`.
 
     Returns
     -------
@@ -300,6 +304,8 @@ def bind(V_dense, F_dense, V_cage, F_cage, *, levels=2, scheme="butterfly", crea
     ------
     InvalidMeshError
         A mesh is malformed or the cage has no faces.
+    CancelledError
+        ``progress`` returned False.
 
     Examples
     --------
@@ -313,13 +319,16 @@ def bind(V_dense, F_dense, V_cage, F_cage, *, levels=2, scheme="butterfly", crea
     if detail_search not in _DETAIL_SEARCHES:
         raise InvalidArgumentError(
             f"bind: detail_search must be one of {_DETAIL_SEARCHES}, got {detail_search!r}")
+    if progress is not None and not callable(progress):
+        raise InvalidArgumentError(f"bind: progress must be callable or None, got {type(progress)}")
     op = subdivision_operator(F_cage, V_cage.shape[0], levels=levels, scheme=scheme,
                               creases=creases)
     Vf = op.apply(V_cage)
     VfT = np.ascontiguousarray(Vf.T)
     NfT = _vertex_normals_t(VfT, op.F_fine)
     Nf = NfT.T
-    fine_face, bary = _closest_on(TriangleIndex(Vf, op.F_fine), V_dense)
+    fine_face, bary = _closest_on(TriangleIndex(Vf, op.F_fine), V_dense,
+                                  _reporter(progress, 0.05, 0.6))
     # the frames in the transposed layout of deform (bit-identical to frames())
     p, t, bt, n = _frames_t(VfT, NfT, np.ascontiguousarray(op.F_fine[fine_face].T),
                             np.ascontiguousarray(bary.T))
@@ -338,7 +347,8 @@ def bind(V_dense, F_dense, V_cage, F_cage, *, levels=2, scheme="butterfly", crea
             # pull a fine vertex off the scan, no double-sided sheets
             surface = clean_mesh(V_dense, F_dense)
             Vs, Fs = (surface.V, surface.F) if surface.F.shape[0] else (V_dense, F_dense)
-            q = TriangleIndex(Vs, Fs).closest(vfr.point).point
+            q = _closest_on(TriangleIndex(Vs, Fs), vfr.point, _reporter(progress, 0.65, 0.95),
+                            point=True)
         else:
             q = _dense_points_near(V_dense, F_dense, fine_face, op.F_fine, vfr.point)
         fine_detail = _to_frame(q - vfr.point, vfr)
@@ -759,22 +769,40 @@ class _Rows(NamedTuple):
     n_out: int          #: number of columns (the map's outputs)
 
 
-def _closest_on(index, P):
+def _closest_on(index, P, report=None, point=False):
     """Closest points of ``P`` on an indexed mesh: (face (q,) int64, bary (q,3)
-    float64), queried in fixed blocks of ``_BIND_BLOCK`` points on the
-    worker threads (NumPy releases the GIL in the index's array work; the
-    blocks depend on the size alone, so results do not depend on the number
-    of threads)."""
+    float64), or with ``point`` the (q,3) points, queried in fixed blocks of
+    ``_BIND_BLOCK`` points on the worker threads (NumPy releases the GIL in
+    the index's array work; the blocks depend on the size alone, so results
+    do not depend on the number of threads), a round of blocks at a time,
+    ``report(fraction)`` after each round."""
     face = np.empty(P.shape[0], dtype=np.int64)
     bary = np.empty((P.shape[0], 3))
 
     def query(start, stop):
         hit = index.closest(P[start:stop])
         face[start:stop] = hit.face
-        bary[start:stop] = hit.bary
+        bary[start:stop] = hit.point if point else hit.bary
 
-    run_blocks(query, blocks(P.shape[0], _BIND_BLOCK))
-    return face, bary
+    spans = blocks(P.shape[0], _BIND_BLOCK)
+    for i in range(0, len(spans), WORKERS):
+        run_blocks(query, spans[i:i + WORKERS])
+        if report is not None:
+            report(spans[min(i + WORKERS, len(spans)) - 1][1] / P.shape[0])
+    return bary if point else (face, bary)
+
+
+def _reporter(progress, lo, hi):
+    """``report(fraction)`` for a stage spanning ``lo..hi`` of ``progress``:
+    raises :class:`~.errors.CancelledError` when it returns False (None when
+    there is no ``progress``)."""
+    if progress is None:
+        return None
+
+    def report(fraction):
+        if progress(lo + (hi - lo) * fraction) is False:
+            raise CancelledError("bind: cancelled")
+    return report
 
 
 def _dense_points_near(V_dense, F_dense, fine_face, F_fine, P):

@@ -27,3 +27,8 @@ class InvalidArgumentError(MeshAdjustError, ValueError):
 class TopologyMismatchError(MeshAdjustError, ValueError):
     """A cage whose topology no longer matches the one a binding was made
     for (vertices added or removed, faces changed)."""
+
+
+class CancelledError(MeshAdjustError):
+    """A long computation was stopped by its ``progress`` callback (which
+    returned False); nothing it would have returned exists."""

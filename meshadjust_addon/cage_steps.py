@@ -162,13 +162,18 @@ def prepare_cage_job(cage, *, levels=None, scheme=None, from_rest=False, keep_ed
 
 def compute_bind(job, *, progress=None):
     """Bind the source to the cage's rest shape and deform it by the edit
-    (pure NumPy, any thread). ``progress`` is only asked whether to go on,
-    at the end."""
+    (pure NumPy, any thread). ``progress`` follows the bind's closest-point
+    searches (the first 90%); returning False cancels (``job.cancelled``)."""
     if progress is not None and progress(0.0) is False:
         job.cancelled = True
         return job
-    job.binding = core.bind(job.V, job.F, job.V_cage, job.F_cage, levels=job.levels,
-                            scheme=job.scheme, creases=job.creases)
+    try:
+        job.binding = core.bind(job.V, job.F, job.V_cage, job.F_cage, levels=job.levels,
+                                scheme=job.scheme, creases=job.creases,
+                                progress=None if progress is None else (lambda f: progress(0.9 * f)))
+    except core.CancelledError:
+        job.cancelled = True
+        return job
     if progress is not None and progress(0.9) is False:
         job.cancelled = True
         return job

@@ -378,3 +378,19 @@ def test_a_failed_fit_from_edit_mode_gives_edit_mode_back(bound, monkeypatch):
     with pytest.raises(RuntimeError, match="boom"):
         bpy.ops.meshadjust.fit_cage()
     assert cage.mode == 'EDIT'
+
+
+def test_esc_during_the_bind_itself_cancels_it(bound):
+    # the bind reports from inside its closest-point searches: Esc there stops it
+    dense, cage = bound
+    api = mod("api")
+    lift_top(cage)
+    before = scene_snapshot()
+    seen = []
+
+    def stop_inside(f):
+        seen.append(f)
+        return not (0.0 < f < 0.9)
+    job = api.compute_bind(api.prepare_cage_job(cage, levels=1), progress=stop_inside)
+    assert job.cancelled and job.binding is None and any(0.0 < f < 0.9 for f in seen)
+    assert_unchanged(before)

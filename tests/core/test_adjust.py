@@ -470,3 +470,19 @@ def test_identity_and_rigid_motion_exact_to_1e12_of_the_diagonal(smooth_shape, s
     for seed in range(3):
         Q, t = _random_rigid(seed)
         assert np.abs(deform(b, cage.V @ Q.T + t) - (Vd @ Q.T + t)).max() <= 1e-12 * diag
+
+
+def test_bind_reports_progress_and_cancels():
+    from core.errors import CancelledError
+    from core.simplify import simplify
+    from tests.mesh_factory import icosphere
+    V, F = icosphere(4)
+    cage = simplify(V, F, target_faces=200)
+    seen = []
+    b = bind(V, F, cage.V, cage.F, levels=1, progress=lambda f: seen.append(f) or True)
+    assert seen and seen == sorted(seen) and 0 < seen[0] and seen[-1] <= 1
+    ref = bind(V, F, cage.V, cage.F, levels=1)
+    np.testing.assert_array_equal(b.offset, ref.offset)          # progress changes nothing
+    np.testing.assert_array_equal(b.fine_detail, ref.fine_detail)
+    with pytest.raises(CancelledError, match="cancelled"):
+        bind(V, F, cage.V, cage.F, levels=1, progress=lambda f: False)
