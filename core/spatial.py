@@ -416,7 +416,6 @@ class TriangleIndex:
         self._order = order                       # internal id -> face id
         A, B, C, tlo, thi = A[order], B[order], C[order], tlo[order], thi[order]
         self._D = _triangle_rows(A, B, C)
-        self._any_thin = bool(self._D[15].any())
         self._build_grid(tlo, thi, A, B, C, extent)
         self._bvh = None                          # built on first need (far queries)
         # bounding disks: centroid, radius (slightly inflated so that rounding never makes

@@ -249,11 +249,6 @@ class TopologySummary(NamedTuple):
     non_manifold_edges: int
     non_manifold_vertices: int
 
-    @property
-    def genus_sum(self):
-        """Total genus over components, from chi = sum(2 - 2g - b)."""
-        return (2 * self.components - self.boundary_loops - self.euler) // 2
-
 
 def topology_summary(F, n_vertices):
     """Euler characteristic, components, boundary loops and defects of a mesh."""

@@ -190,8 +190,3 @@ def load_binding(edited, cage):
             f"re-bind to use its new topology (the edit is kept)") from exc
     _cache[edited.session_uid] = binding
     return binding
-
-
-def forget(edited):
-    """Drop the session cache entry of ``edited``."""
-    _cache.pop(getattr(edited, "session_uid", None), None)

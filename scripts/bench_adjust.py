@@ -52,7 +52,8 @@ import numpy as np
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 sys.path.insert(0, ROOT)
 
-from core.adjust import bind, deform, fit_cage, refine  # noqa: E402
+from core.binding import bind, deform, refine  # noqa: E402
+from core.fit import fit_cage  # noqa: E402
 from core.io_obj import read_obj  # noqa: E402
 from core.errors import MeshAdjustError  # noqa: E402
 from core.mesh import bbox_diagonal, enclosed_volume, face_normals, vertex_normals  # noqa: E402

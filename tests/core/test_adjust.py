@@ -1,4 +1,4 @@
-"""Tests of core.binding / core.adjust: bind, deform, refine.
+"""Tests of core.binding: bind, deform, refine.
 
 Properties: identity, rigid motion, locality (bit-for-bit outside the
 affected set), the Binding round trip, topology mismatch errors, refine
@@ -11,7 +11,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from core.adjust import Binding, bind, deform, frames, refine
+from core.binding import Binding, bind, deform, frames, refine
 from core.errors import InvalidArgumentError, InvalidMeshError, TopologyMismatchError
 from core.mesh import bbox_diagonal, vertex_normals
 from core.spatial import closest_points

@@ -13,7 +13,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from core.adjust import bind, deform
+from core.binding import bind, deform
 from core.errors import InvalidArgumentError
 from core.mesh import bbox_diagonal
 from core.simplify import simplify

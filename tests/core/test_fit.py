@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from core.adjust import fit_cage
+from core.fit import fit_cage
 from core.cg import conjugate_gradient
 from core.errors import InvalidArgumentError, InvalidMeshError
 from core.mesh import bbox_diagonal, enclosed_volume
