@@ -120,7 +120,9 @@ class CleanResult(NamedTuple):
     copy); ``clean_to_input[j]`` the input vertex clean vertex ``j`` sits on;
     ``face_to_input[f]`` the input face clean face ``f`` comes from. ``twin``
     is the clean faces' half-edge twin table (``core._clean.twin_table``,
-    never ``NON_MANIFOLD``).
+    never ``NON_MANIFOLD``); ``area[f]`` the area of input face
+    ``face_to_input[f]`` as it came, in units of the squared bounding-box
+    diagonal (the debris test's measure).
     """
 
     V: np.ndarray               #: (n,3) float64
@@ -129,6 +131,7 @@ class CleanResult(NamedTuple):
     clean_to_input: np.ndarray  #: (n,) int64
     face_to_input: np.ndarray   #: (m,) int64
     twin: np.ndarray            #: (3m,) int64
+    area: np.ndarray            #: (m,) float64
     report: CleanReport
 
 
@@ -215,12 +218,14 @@ def clean_mesh(V, F, *, weld_distance=WELD_DISTANCE, min_component_area=MIN_COMP
     if protected is not None:
         protected = np.asarray(protected, dtype=bool)[to_input]
     # areas of the faces as they came (welds move corners by at most weld_distance)
-    keep, found = _debris(area[faces], F, twin, float(min_component_area), face_budget, protected)
+    area = area[faces]
+    keep, found = _debris(area, F, twin, float(min_component_area), face_budget, protected)
     counts.update(found)
     if not keep.all():
-        F, faces, twin = F[keep], faces[keep], _keep_twins(twin, keep)
+        F, faces, twin, area = F[keep], faces[keep], _keep_twins(twin, keep), area[keep]
     V, F, input_to_clean, clean_to_input = _compact(V, F, to_input, rep)
-    return CleanResult(V, F, input_to_clean, clean_to_input, faces, twin, CleanReport(**counts))
+    return CleanResult(V, F, input_to_clean, clean_to_input, faces, twin, area,
+                       CleanReport(**counts))
 
 
 def _degenerate(F):
@@ -437,9 +442,9 @@ def _pair_sheets(V, F, twin):
     n_after = n_after.astype(np.int64)
     i = np.repeat(np.arange(hn.size), n_after)
     j = i + 1 + (np.arange(i.size) - np.repeat(np.cumsum(n_after) - n_after, n_after))
-    N = face_normals(V, F)
     hi, hj = hn[i], hn[j]
-    score = 2.0 * (U[hi] == W[hj]) + np.einsum("ij,ij->i", N[hi // 3], N[hj // 3])
+    N = face_normals(V, F[hn // 3])                # of the faces on non-manifold edges, by hn
+    score = 2.0 * (U[hi] == W[hj]) + np.einsum("ij,ij->i", N[i], N[j])
     by = np.lexsort((-score, group[i]))
     i, j = i[by], j[by]
     matched = np.zeros(hn.size, dtype=bool)

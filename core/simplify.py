@@ -50,7 +50,7 @@ from ._relax import close_smallest_hole, close_triangular_holes, drop_stuck_comp
 from ._relocate import relocate, segment_triangles
 from .clean import MIN_COMPONENT_AREA, WELD_DISTANCE, CleanReport, clean_mesh
 from .errors import InvalidArgumentError, InvalidMeshError, MeshAdjustError
-from .mesh import bounding_box, check_mesh, diagonal_length, face_areas
+from .mesh import bounding_box, check_mesh, diagonal_length
 from .metrics import surface_distance
 from .topology import boundary_loops_count, collapsible_edges, face_components
 from .quadrics import _accumulate_T, _vertex_face_quadrics, edge_constraint_quadrics
@@ -609,9 +609,7 @@ def simplify(V, F, *, target_faces=None, ratio=None, max_error=None, preserve_bo
         raise InvalidMeshError(
             f"{_WHERE}: nothing is left after cleaning the {F.shape[0]:,} faces "
             f"({clean.report.summary() or 'no faces'}): no cage can be made")
-    lo, hi = bounding_box(clean.V)
-    if clean.F.shape[0] and not face_areas((clean.V - lo) / (diagonal_length(lo, hi) or 1.0),
-                                           clean.F).any():
+    if clean.F.shape[0] and not clean.area.any():
         raise InvalidMeshError(
             f"{_WHERE}: the {clean.F.shape[0]:,} faces left after cleaning have no area (their "
             f"corners are collinear): no cage can be made")
