@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from tests.addon.conftest import MODULE, make_object
-from tests.addon.test_operators import bumpy_sphere, delete_cage_vertex, simplify
+from tests.addon.test_operators import bumpy_sphere, delete_cage_vertex, lift_in_edit_mode, simplify
 
 
 def mod(name):
@@ -300,12 +300,7 @@ def test_steps_from_edit_mode_keep_the_edit_and_the_mode(bound):
     dense, cage = bound
     store = mod("store")
     rest0 = store.load_rest(cage)
-    bpy.context.view_layer.objects.active = cage
-    bpy.ops.object.mode_set(mode='EDIT')
-    bm = bmesh.from_edit_mesh(cage.data)
-    for v in bm.verts:
-        v.co.z += 0.1
-    bmesh.update_edit_mesh(cage.data)
+    lift_in_edit_mode(cage)
     # a re-bind inside Refine from Edit Mode: the rest shape is kept, so is the edit
     assert bpy.ops.meshadjust.refine(output='EDITED', levels=1) == {'FINISHED'}
     assert cage.mode == 'EDIT' and cage.meshadjust.levels == 1

@@ -115,12 +115,7 @@ def test_refine_syncs_edit_mode(dense):
     simplify(300)
     cage = dense.meshadjust.cage
     edited = cage.meshadjust.edited
-    bpy.context.view_layer.objects.active = cage
-    bpy.ops.object.mode_set(mode='EDIT')
-    bm = bmesh.from_edit_mesh(cage.data)
-    for v in bm.verts:
-        v.co.z += 0.1
-    bmesh.update_edit_mesh(cage.data)
+    lift_in_edit_mode(cage)
     assert bpy.ops.meshadjust.refine(output='EDITED') == {'FINISHED'}
     assert cage.mode == 'EDIT'
     dz = mio().read_positions(edited.data)[:, 2] - mio().read_positions(dense.data)[:, 2]
@@ -136,6 +131,16 @@ def test_cage_object_transform_is_respected(dense):
     dx = mio().read_positions(cage.meshadjust.edited.data)[:, 0] - \
         mio().read_positions(dense.data)[:, 0]
     assert np.allclose(dx, 0.5, atol=1e-4)
+
+
+def lift_in_edit_mode(cage, dz=0.1):
+    """Enter Edit Mode on the cage and lift every vertex by ``dz`` (left in Edit Mode)."""
+    bpy.context.view_layer.objects.active = cage
+    bpy.ops.object.mode_set(mode='EDIT')
+    bm = bmesh.from_edit_mesh(cage.data)
+    for v in bm.verts:
+        v.co.z += dz
+    bmesh.update_edit_mesh(cage.data)
 
 
 def delete_cage_vertex(cage, index):
