@@ -514,7 +514,8 @@ def _within_max_error(clean, target, max_error, opts, progress):
 
 def simplify(V, F, *, target_faces=None, ratio=None, max_error=None, preserve_boundary=True,
              preserve_topology=True, feature_angle_deg=60.0, vertex_weights=None, locked=None,
-             weld_distance=WELD_DISTANCE, min_component_area=MIN_COMPONENT_AREA, progress=None):
+             weld_distance=WELD_DISTANCE, min_component_area=MIN_COMPONENT_AREA, symmetry=None,
+             progress=None):
     """Simplify a triangle mesh to a coarse, clean manifold cage (QEM).
 
     The input is cleaned first (:func:`core.clean.clean_mesh`: welded,
@@ -567,6 +568,9 @@ def simplify(V, F, *, target_faces=None, ratio=None, max_error=None, preserve_bo
         target and no ``max_error``, components too small for one face of
         the target (by their share of the area) are dropped as debris too,
         and reported; never one with a locked vertex.
+    symmetry : {None, 'X', 'Y', 'Z'}
+        Make the cage mirror-symmetric about the plane through the origin
+        normal to this axis (see :func:`core.symmetry.simplify_symmetric`).
     progress : callable(float) -> bool or None, optional
         Called after every pass with the fraction done (0..1); returning
         ``False`` stops with ``stopped_because == "cancelled"`` and the
@@ -594,6 +598,13 @@ def simplify(V, F, *, target_faces=None, ratio=None, max_error=None, preserve_bo
     >>> r.F.shape[0] <= 100, r.stopped_because
     (True, 'target')
     """
+    if symmetry is not None:
+        from .symmetry import simplify_symmetric
+        return simplify_symmetric(
+            V, F, axis=symmetry, target_faces=target_faces, ratio=ratio, max_error=max_error,
+            preserve_boundary=preserve_boundary, preserve_topology=preserve_topology,
+            feature_angle_deg=feature_angle_deg, vertex_weights=vertex_weights, locked=locked,
+            weld_distance=weld_distance, min_component_area=min_component_area, progress=progress)
     V, F = check_mesh(V, F, where=_WHERE)
     n_in = V.shape[0]
     weights, lk = _check_args(n_in, target_faces, ratio, max_error, feature_angle_deg, vertex_weights,
