@@ -353,23 +353,43 @@ def _pool_size(ne, m, target, tun):
     return max(1, min(P, ne))
 
 
-def _priority(cost, a, b, bands):
+def _bands(x, n):
+    """Band 0..n-1 of every value of ``x``: its place among ``n - 1``
+    quantiles of ``x`` (of a sample on large arrays)."""
+    s = _thinned(x)
+    ks = (np.arange(1, n, dtype=np.int64) * s.size) // n
+    return np.searchsorted(np.partition(s, ks)[ks], x, side="left").astype(np.int64)
+
+
+def _priority(cost, length2, a, b, tun):
     """Unique int64 priority of each pool edge (smaller first), without a sort:
-    the cost band (quantiles of the pool's costs) in the high bits, a fixed
-    hash of the endpoints in the middle (dense local minima), the pool index
-    in the low bits (``key & (2^bits - 1)`` gives it back)."""
+    the cost band (quantiles of the pool's costs) in the high bits, then the
+    length band (shorter edges first: on a plateau of equal costs they make
+    the most compact triangles), then a fixed hash of the endpoints (dense
+    local minima), the pool index in the low bits (``key & (2^bits - 1)``
+    gives it back)."""
     P = cost.size
     bits = max(1, int(P - 1).bit_length())
     if bits > 28:
         raise OverflowError("simplify: more than 2^28 edges in one pass")
-    if P > bands:
-        s = _thinned(cost)                  # band edges: quantiles (of a sample on large pools)
-        ks = (np.arange(1, bands, dtype=np.int64) * s.size) // bands
-        band = np.searchsorted(np.partition(s, ks)[ks], cost, side="left").astype(np.int64)
-    else:
-        band = np.zeros(P, dtype=np.int64)
-    mix = ((a * np.int64(0x9E3779B1)) ^ (b * np.int64(0x85EBCA77))) & np.int64(0x7FFFFFFF)
+    band = _bands(cost, tun.bands) if P > tun.bands else np.zeros(P, dtype=np.int64)
+    lband = _bands(length2, tun.length_bands) if P > tun.length_bands else np.zeros(P, dtype=np.int64)
+    mix = ((a * np.int64(0x9E3779B1)) ^ (b * np.int64(0x85EBCA77))) & np.int64(0x3FFFFFF)
+    mix |= lband << np.int64(26)
     return (((band << np.int64(31)) | mix) << np.int64(bits)) | np.arange(P, dtype=np.int64)
+
+
+def _acceptance_bound(limit, totals, tun):
+    """Largest total (cost + penalties) a checked collapse may have: the
+    pool's cost bound, or on a plateau -- the bound below ``plateau_share``
+    of the median total of the valid collapses checked, as on a flat region
+    where every cost is 0 and only the penalties differ -- that median (the
+    cheaper half goes; otherwise every pass would take only the collapses
+    without any penalty)."""
+    if totals.size == 0:
+        return limit
+    med = float(np.median(totals))
+    return med if limit < tun.plateau_share * med else limit
 
 
 def run(st, target, max_err_n, preserve_boundary, progress, m0, tun):
@@ -458,7 +478,8 @@ def _run(st, target, max_err_n, preserve_boundary, progress, m0, tun):
         pint = twin[ph] >= 0
         pcost = cost[pool]
         praw = _take(st.c_cost, ph)
-        key = _priority(pcost, pa, pb, tun.bands)
+        D = _take(st.V, pb, axis=0) - _take(st.V, pa, axis=0)
+        key = _priority(pcost, np.einsum("ij,ij->i", D, D), pa, pb, tun)
 
         touched = np.zeros(n, dtype=bool)
         acc_edges, acc_wit, acc_rows = [], [], []
@@ -504,7 +525,7 @@ def _run(st, target, max_err_n, preserve_boundary, progress, m0, tun):
             kf = fpos[in_star]
             ok, pen, rows, wnew = _check(st, pa[sel], pb[sel], pX[sel], pint[sel], star, kf, tun, haus)
             total = praw[sel] + pen
-            acc = ok & (total <= limit)
+            acc = ok & (total <= _acceptance_bound(limit, total[ok], tun))
             # remember rejections until the neighbourhood changes
             rej = ~acc
             val = np.where(ok[rej], total[rej], np.inf)

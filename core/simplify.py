@@ -7,7 +7,7 @@ Nekhayev, "Topology preserving edge contraction" (1999) for the link
 condition. Instead of a sequential heap, collapses are applied in batches
 of independent edges, each batch checked on the mesh as it is::
 
-    clean the input; freeze non-manifold edges and vertices
+    clean the input (core.clean: a manifold, oriented mesh)
     Q[v] = sum of area-weighted face planes (+ boundary and crease planes)
     repeat (one pass):
         cost the edges around vertices moved by the last pass (cached
@@ -15,8 +15,8 @@ of independent edges, each batch checked on the mesh as it is::
         pool = the cheapest edges (a bounded share: never much costlier
                than the cheapest remaining ones), split into cost bands
         repeat (rounds):
-            pick pool edges whose priority (band, then a fixed hash) is the
-            smallest within two rings, so their stars -- the faces around
+            pick pool edges whose priority (cost band, length band, then a
+            fixed hash) is the smallest within two rings, so their stars -- the faces around
             both endpoints -- are disjoint
             check each on the current mesh: link condition, no flipped or
             near-degenerate face, no face turned > 90 deg from the summed
@@ -24,7 +24,9 @@ of independent edges, each batch checked on the mesh as it is::
             Hausdorff-aware one (distance of the merged vertices' witnesses,
             the input points they stood for that lay farthest from the
             surface, to the new faces)
-            accept those still within the pool's cost bound, lock their stars
+            accept those still within the pool's cost bound (on a plateau,
+            where the bound is about 0, the cheaper half by cost + penalty),
+            lock their stars
         apply every accepted collapse with one remap (b -> a, V[a] = x,
         Q[a] += Q[b]); glue the half-edge twins of the removed faces
     until the target, the error bound, or no valid collapse
@@ -68,8 +70,12 @@ class Tuning:
     feature_weight: float = 3.0      #: crease plane weight, times the edge length squared
     pool_share: float = 0.2          #: at most this share of the candidate edges per pass
     pool_goal_factor: float = 1.5    #: ... and at most this many times the collapses still needed
-    max_rounds: int = 4              #: selection rounds per pass
-    bands: int = 8                   #: cost bands of the pool (random order inside a band)
+    max_rounds: int = 16             #: selection rounds per pass
+    bands: int = 8                   #: cost bands of the pool (then length bands, then random)
+    length_bands: int = 16           #: length bands inside a cost band (shorter edges first)
+    #: a pool whose cost bound is below this share of the median total (cost + penalties)
+    #: of its valid collapses is a plateau: the cheaper half by total is accepted
+    plateau_share: float = 0.01
     flip_cos: float = 0.0            #: reject if a face normal turns by more than acos(flip_cos)
     #: ... or ends farther than acos(ref_cos) from the summed normals of the input it
     #: stands for (-1: off; 0, i.e. 90 degrees, keeps rough scans collapsing; stricter stalls them)
