@@ -33,8 +33,8 @@ BOUNDARY = -1
 NON_MANIFOLD = -2
 
 #: offset from half-edge ``h`` to the next / previous half-edge of its face
-_NEXT_OFF = np.array([1, 1, -2], dtype=np.int64)
-_PREV_OFF = np.array([2, -1, -1], dtype=np.int64)
+NEXT_OFFSET = np.array([1, 1, -2], dtype=np.int64)
+PREV_OFFSET = np.array([2, -1, -1], dtype=np.int64)
 #: lock-step fan walks longer than this finish with a union-find instead
 _MAX_WALK = 64
 #: vertices walked together (keeps the walk's temporaries in cache)
@@ -119,9 +119,14 @@ def spatial_order(V, F, twin, box=None):
     return V[order], F2, twin2, U2, W2, order, forder
 
 
-def half_edge_ends(F):
-    """Endpoints ``(U, W)`` of every half-edge, each (3m,) int64."""
-    return np.take(F, [1, 2, 0], axis=1).ravel(), np.take(F, [2, 0, 1], axis=1).ravel()
+def half_edge_ends(F, h=None):
+    """Endpoints ``(U, W)`` of every half-edge, each (3m,) int64, or of the
+    half-edges ``h`` only."""
+    if h is None:
+        return np.take(F, [1, 2, 0], axis=1).ravel(), np.take(F, [2, 0, 1], axis=1).ravel()
+    Fr = F.ravel()
+    c = h % 3
+    return np.take(Fr, h + np.take(NEXT_OFFSET, c)), np.take(Fr, h + np.take(PREV_OFFSET, c))
 
 
 def twin_table(F, n_vertices, *, ends=None):
@@ -232,7 +237,7 @@ def _walk_fans(twin, U, v, e, corners):
         go = np.flatnonzero(~stop & (left > 0))
         v, t, jt, base0, left = v[go], t[go], jt[go], base0[go], left[go] - 1
         # leave the new face through its other edge at v
-        e = t + np.where(U[t] == v, _PREV_OFF[jt], _NEXT_OFF[jt])
+        e = t + np.where(U[t] == v, PREV_OFFSET[jt], NEXT_OFFSET[jt])
     return np.concatenate(found) if found else v[:0], v
 
 
@@ -268,8 +273,8 @@ def non_manifold_vertices(F, n_vertices, twin, *, ends=None):
     if (walk & (start < 0)).any():
         start[U] = np.arange(U.size, dtype=np.int64)      # half-edge h leaves U[h]
     j = hopen % 3
-    start[Uo] = hopen + _PREV_OFF[j]                      # the other edge at U in that face
-    start[Wo] = hopen + _NEXT_OFF[j]                      # the other edge at W
+    start[Uo] = hopen + PREV_OFFSET[j]                      # the other edge at U in that face
+    start[Wo] = hopen + NEXT_OFFSET[j]                      # the other edge at W
     # walk in chunks of vertices: every temporary stays small (in cache)
     todo = np.flatnonzero(walk)
     rest = []

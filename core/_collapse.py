@@ -7,88 +7,145 @@ its representative half-edge: the one with ``twin < 0`` or ``h < twin``),
 and the "rejected until the neighbourhood changes" memory. Compaction keeps
 the order of faces, so a representative stays a representative.
 
-One pass::
+One pass, as stages (each a function below)::
 
-    recost the edges that touch a vertex moved by the previous pass
-    pool = cheapest candidates (bounded share; bounded by the collapses needed)
-    rounds:  chosen = pool edges whose rank is the smallest over every face
-             around both endpoints  -> the stars of chosen edges are disjoint
-             check chosen edges on the current mesh (link condition, flips,
-             turn against the input normals, compactness and Hausdorff
-             penalties); accept those within the pool's cost bound;
-             their closed one-rings become untouchable for later rounds
-    apply all accepted collapses at once, glue twins; removed faces and
-    vertices are only marked dead until a quarter of the rows are (then compact)
+    _candidate_edges      every live edge once; mark those around moved vertices stale
+    _current_costs        cached costs, raised by remembered rejections
+    _recost_cheapest      recost the stale edges that could be among the cheapest
+    _choose_pool          the cheapest candidates (bounded share; bounded by the
+                          collapses needed), ranked by _priority
+    rounds (_check_round):
+        _pick_independent pool edges whose rank is the smallest over every face
+                          around both endpoints -> the stars are disjoint
+        _check            on the current mesh: _link_condition, _turned_faces,
+                          _too_thin, _compactness_penalty, _hausdorff_penalty;
+                          accept those within _acceptance_bound; their closed
+                          one-rings become untouchable for later rounds
+    _trim_to_target       no more collapses than the target needs, cheapest first
+    _apply                all accepted collapses at once, twins glued; removed faces
+                          and vertices are only marked dead until compaction
 """
+
+from dataclasses import dataclass, field, fields
+from typing import NamedTuple
 
 import numpy as np
 
-from ._clean import _NEXT_OFF, _PREV_OFF, BOUNDARY, NON_MANIFOLD, renumber_twins
+from ._clean import BOUNDARY, NON_MANIFOLD, half_edge_ends, renumber_twins
 from ._parallel import blocks, run_blocks, run_each
 from .quadrics import place_columns, quadric_at, rms_distance
 from .spatial import _kernel, _triangle_rows
 
 _BIG = np.iinfo(np.int64).max
 DEAD = -3  #: twin of a half-edge of a removed face (before compaction)
-_COMPACT = 0.75  # compact once the live faces are fewer than this share of the rows
 _SQRT3x2 = 2.0 * np.sqrt(3.0)
-_BLOCK = 1 << 16  # elements per block of work (see core._parallel)
-_SNAP2 = 1e-12  # (distance / edge length)^2 below which a position is an endpoint
-_SAMPLE = 1 << 16  # cost thresholds of larger arrays come from a sample of about this size
 
 _take = np.take
 _NEXT = np.array([1, 2, 0], dtype=np.int64)  # corner after c
 _PREV = np.array([2, 0, 1], dtype=np.int64)  # corner before c
 
-#: per half-edge cache arrays and the value a new half-edge starts with (besides
-#: ``twin``, ``feat`` and the three position columns ``c_x``)
-HALF_EDGE_CACHE = {"swap": False, "blk_pass": -1, "c_cost": 0.0, "c_blk": -1.0, "c_stale": True}
+
+def _array(per, fill=None, values=None, reset=False):
+    """Declare a :class:`State` array: indexed by ``per`` ("vertex", "face",
+    "half_edge"; "vertex_t" / "half_edge_t" for coefficient-major (k, n)
+    arrays), ``fill`` for new rows, ``values`` ("vertex" or "half_edge")
+    when its entries are indices that compaction renumbers, ``reset`` when
+    compaction starts it afresh (from ``fill``) instead of keeping its rows."""
+    return field(default=None, metadata=dict(per=per, fill=fill, values=values, reset=reset))
 
 
+@dataclass(init=False, eq=False)
 class State:
-    """Mutable working mesh of one simplification (private)."""
+    """Mutable working mesh of one simplification.
+
+    Every array is declared once below with what it is indexed by; compaction
+    (:func:`compact`) and appending faces (:func:`append_faces`) follow the
+    declarations, so a new array cannot be left misaligned.
+    """
+
+    V: np.ndarray = _array("vertex")             #: working positions (unit-free)
+    VT: np.ndarray = _array("vertex_t")          #: (3,n) copy of V for column gathers
+    Q: np.ndarray = _array("vertex_t")           #: (11,n) quadrics, one row per coefficient
+    Nref: np.ndarray = _array("vertex")          #: summed area normals of the input faces merged in
+    wit: np.ndarray = _array("vertex")           #: witness: merged input point farthest from the surface
+    locked: np.ndarray = _array("vertex")
+    moved: np.ndarray = _array("vertex")         #: position changed (else the input's exact one)
+    orig: np.ndarray = _array("vertex")          #: clean index of each current vertex
+    vver: np.ndarray = _array("vertex")          #: pass in which the one-ring last changed
+    fresh: np.ndarray = _array("vertex")         #: quadric / position changed: recost its edges
+    is_bnd: np.ndarray = _array("vertex")        #: on a boundary edge
+    dead_v: np.ndarray = _array("vertex", False, reset=True)   #: removed since the last compaction
+    parent: np.ndarray = _array("vertex", "index", reset=True)  #: survivor of a merged vertex
+    F: np.ndarray = _array("face", values="vertex")
+    forig: np.ndarray = _array("face")           #: input face each face descends from
+    alive: np.ndarray = _array("face", True, reset=True)
+    twin: np.ndarray = _array("half_edge", BOUNDARY, values="half_edge")
+    feat: np.ndarray = _array("half_edge", False)  #: on an input crease
+    # the cache, on representatives: survivor is the second end (swap), pass of the
+    # remembered rejection and its value (blk_pass, c_blk), cost, position, and
+    # whether the cost is only a lower bound (c_stale)
+    swap: np.ndarray = _array("half_edge", False)
+    blk_pass: np.ndarray = _array("half_edge", -1)
+    c_blk: np.ndarray = _array("half_edge", -1.0)
+    c_cost: np.ndarray = _array("half_edge", 0.0)
+    c_stale: np.ndarray = _array("half_edge", True)
+    c_x: np.ndarray = _array("half_edge_t", 0.0)   #: (3, 3m) cached collapse positions
+    cur_of_clean: np.ndarray = None              #: current vertex of each clean vertex (-1: removed)
+    m_live: int = 0                              #: faces not removed
+    worst: float = 0.0                           #: largest error of an accepted collapse
 
     def __init__(self, V, F, twin, Q, locked, feat, Nref, forig=None):
-        n, h3 = V.shape[0], twin.size
-        self.V, self.locked = V.copy(), locked           # (V stays the input: relocation samples it)
-        self.Q = np.ascontiguousarray(Q.T)             # (11,n): one row per coefficient
-        self.VT = np.ascontiguousarray(V.T)            # (3,n) copy of V for column gathers
+        n, m = V.shape[0], F.shape[0]
+        self.V = V.copy()                          # (the input V stays: relocation samples it)
+        self.VT = np.ascontiguousarray(V.T)
+        self.Q = np.ascontiguousarray(Q.T)
+        self.Nref, self.wit, self.locked = Nref, V.copy(), locked
         self.moved = np.zeros(n, dtype=bool)
-        self.orig = np.arange(n, dtype=np.int64)       # clean index of each current vertex
-        self.vver = np.full(n, -1, dtype=np.int64)     # pass in which the one-ring last changed
-        self.fresh = np.ones(n, dtype=bool)            # quadric / position changed: recost edges
-        self.is_bnd = np.zeros(n, dtype=bool)          # on a boundary edge
-        self.Nref = Nref                               # summed area normals of the input faces merged in
+        self.orig = np.arange(n, dtype=np.int64)
+        self.vver = np.full(n, -1, dtype=np.int64)
+        self.fresh = np.ones(n, dtype=bool)
+        self.is_bnd = np.zeros(n, dtype=bool)
         hb = np.flatnonzero(twin == BOUNDARY)
         if hb.size:
-            ub, wb = _ends(F, hb)
+            ub, wb = half_edge_ends(F, hb)
             self.is_bnd[ub] = True
             self.is_bnd[wb] = True
         self.F, self.twin, self.feat = F, twin, feat
-        # input face each face descends from (the output keeps input order); caps: a rim face's
-        self.forig = np.arange(F.shape[0], dtype=np.int64) if forig is None else forig
-        # per half-edge cache (on representatives): survivor is the half-edge's second
-        # end (swap), pass of the remembered rejection and its value (blk_pass, c_blk),
-        # cost, position, and whether the cost is only a lower bound (c_stale)
-        for name, fill in HALF_EDGE_CACHE.items():
-            setattr(self, name, np.full(h3, fill))
-        self.c_x = [np.zeros(h3), np.zeros(h3), np.zeros(h3)]
+        self.forig = np.arange(m, dtype=np.int64) if forig is None else forig
+        for name in _declared("half_edge", "half_edge_t"):
+            if getattr(self, name) is None:
+                setattr(self, name, _fresh_rows(name, 3 * m))
+        for name in _declared(reset=True):
+            setattr(self, name, _fresh_rows(name, m if _per(name) == "face" else n))
         self.cur_of_clean = np.arange(n, dtype=np.int64)
-        self.parent = np.arange(n, dtype=np.int64)      # survivor of each vertex merged since the last compaction
-        # removed faces and vertices stay in the arrays (faces marked dead, their
-        # half-edges' twin DEAD) until enough have gone to make compaction pay
-        self.alive = np.ones(F.shape[0], dtype=bool)
-        self.dead_v = np.zeros(n, dtype=bool)
-        self.m_live = F.shape[0]
+        self.m_live = m
         self.worst = 0.0
-        self.wit = V.copy()                            # witness: merged input point farthest from the surface
 
 
-def _ends(F, h):
-    """Endpoints (U, W) of half-edges ``h``."""
-    Fr = F.ravel()
-    c = h % 3
-    return _take(Fr, h + _take(_NEXT_OFF, c)), _take(Fr, h + _take(_PREV_OFF, c))
+def _meta(name):
+    return next(f.metadata for f in fields(State) if f.name == name)
+
+
+def _per(name):
+    return _meta(name)["per"]
+
+
+def _declared(*per, reset=None):
+    """Names of the State arrays indexed by one of ``per`` (any when empty),
+    only those with that ``reset`` flag when given."""
+    return [f.name for f in fields(State) if f.metadata
+            and (not per or f.metadata["per"] in per)
+            and (reset is None or f.metadata["reset"] == reset)]
+
+
+def _fresh_rows(name, size):
+    """``size`` new rows of the State array ``name``, from its declared fill."""
+    fill = _meta(name)["fill"]
+    if fill == "index":
+        return np.arange(size, dtype=np.int64)
+    if _per(name) == "half_edge_t":
+        return np.full((3, size), fill)
+    return np.full(size, fill)
 
 
 def compactness(l, sumsq):
@@ -113,7 +170,10 @@ def _distance(st, cost, a, b):
     return rms_distance(cost, _take(st.Q[10], a) + _take(st.Q[10], b))
 
 
-def _recost(st, rep, U, W, stale, preserve_boundary):
+# ---------------------------------------------------------------- costs
+
+
+def _recost(st, rep, U, W, stale, preserve_boundary, tun):
     """Placement and cost of the edges ``rep[stale]`` (``stale``: indices),
     written into the cache (in blocks, on the worker threads)."""
     hs_all, a_all, b_all = _take(rep, stale), _take(U, stale), _take(W, stale)
@@ -136,7 +196,7 @@ def _recost(st, rep, U, W, stale, preserve_boundary):
         X, err = place_columns(q, pa, pb)
         # a position within round-off of an endpoint is that endpoint (it stays exact)
         E = pb - pa
-        tol2 = _SNAP2 * (E[0] * E[0] + E[1] * E[1] + E[2] * E[2])
+        tol2 = tun.snap_share * (E[0] * E[0] + E[1] * E[1] + E[2] * E[2])
         D = X - pb
         snap_b = D[0] * D[0] + D[1] * D[1] + D[2] * D[2] <= tol2
         D = X - pa
@@ -147,17 +207,289 @@ def _recost(st, rep, U, W, stale, preserve_boundary):
         if fix.size:
             err[fix] = quadric_at(q[:, fix], *X[:, fix])
         st.c_cost[hs] = np.where(valid, err, np.inf)
-        for c in range(3):
-            st.c_x[c][hs] = X[c]
+        st.c_x[:, hs] = X
         st.swap[hs] = swap
 
-    run_blocks(block, blocks(hs_all.size, _BLOCK))
+    run_blocks(block, blocks(hs_all.size, tun.block))
+
+
+class _Edges(NamedTuple):
+    """Every live edge once (its representative half-edge) and its state this pass."""
+
+    rep: np.ndarray      #: representative half-edges
+    U: np.ndarray        #: ... their ends
+    W: np.ndarray
+    cost: np.ndarray     #: cached cost, raised by a remembered rejection (a lower bound if stale)
+    stale: np.ndarray    #: bool: the cached cost is only a lower bound
+    blocked: np.ndarray  #: bool: rejected, and the neighbourhood has not changed since
+    bv: np.ndarray       #: the remembered rejection's value (-1: none)
+
+
+def _candidate_edges(st):
+    """Every live edge once, with its cached cost: the edges around vertices
+    that changed in the last pass become stale, and an edge rejected since
+    its neighbourhood last changed costs at least what its check found."""
+    F, twin = st.F, st.twin
+    h = np.arange(twin.size, dtype=np.int64)
+    rep = np.flatnonzero((twin == BOUNDARY) | (twin > h))
+    U, W = half_edge_ends(F, rep)
+    st.c_stale[rep[st.fresh[U] | st.fresh[W]]] = True
+    st.fresh[:] = False
+    stale = _take(st.c_stale, rep)
+    cost = _take(st.c_cost, rep)
+    bv = _take(st.c_blk, rep)
+    mem = np.flatnonzero(bv >= 0)           # rejections remembered until the neighbourhood changes
+    blocked = np.zeros(rep.size, dtype=bool)
+    blocked[mem] = _take(st.blk_pass, rep[mem]) > np.maximum(_take(st.vver, U[mem]), _take(st.vver, W[mem]))
+    cost = np.where(blocked, np.maximum(cost, bv), cost)
+    return _Edges(rep, U, W, cost, stale, blocked, bv)
+
+
+def _recost_cheapest(st, e, P, max_err_n, preserve_boundary, tun):
+    """Recost (in place in ``e.cost`` / ``e.stale``) the stale edges that
+    could still be among the ``P`` cheapest: merging only adds quadrics, so a
+    stale cached cost is a lower bound of the new one (lazy recosting)."""
+    cand = np.isfinite(e.cost)
+    need = e.stale & cand
+    if max_err_n is None and P < np.count_nonzero(cand):
+        need &= e.cost <= _kth_smallest(e.cost, P - 1, tun.sample)   # (inf sorts last)
+    ni = np.flatnonzero(need)
+    if ni.size:
+        _recost(st, e.rep, e.U, e.W, ni, preserve_boundary, tun)
+        hn = _take(e.rep, ni)
+        st.c_stale[hn] = False
+        e.stale[ni] = False
+        fresh_cost = _take(st.c_cost, hn)
+        e.cost[ni] = np.where(_take(e.blocked, ni), np.maximum(fresh_cost, _take(e.bv, ni)), fresh_cost)
+
+
+def _thinned(x, sample):
+    """``x`` itself up to ``4 * sample`` values, else an evenly strided
+    sample of ``sample`` to ``2 * sample`` of them (a view; deterministic)."""
+    return x if x.size <= 4 * sample else x[::x.size // sample]
+
+
+def _kth_smallest(x, k, sample):
+    """The ``k``-th smallest value of ``x`` (0-based). Exact for arrays of up to
+    ``4 * sample``; for larger ones estimated from :func:`_thinned`, two
+    standard deviations of the estimate on the high side (a pool bound then
+    takes a few more edges, never many fewer)."""
+    s = _thinned(x, sample)
+    if s is x:
+        return np.partition(x, k)[k]
+    q = (k + 1) / x.size
+    j = int(np.ceil(q * s.size + 2.0 * np.sqrt(q * (1.0 - q) * s.size)))
+    j = min(max(j, 0), s.size - 1)
+    return np.partition(s, j)[j]
+
+
+# ---------------------------------------------------------------- the pool
+
+
+def _pool_size(ne, m, target, tun):
+    """How many of the ``ne`` candidate edges one pass may consider."""
+    P = int(np.ceil(tun.pool_share * ne))
+    if target is not None:
+        P = min(P, int(np.ceil(tun.pool_goal_factor * (m - target) / 2.0)) + 1)
+    return max(1, min(P, ne))
+
+
+class _Pool(NamedTuple):
+    """The edges one pass may collapse, B -> A at X."""
+
+    h: np.ndarray         #: representative half-edges
+    A: np.ndarray         #: survivors
+    B: np.ndarray         #: removed ends
+    X: np.ndarray         #: (P,3) positions
+    interior: np.ndarray  #: bool: two faces go (else one: a border edge)
+    cost: np.ndarray      #: ranking cost (raised by remembered rejections)
+    raw: np.ndarray       #: quadric cost at X
+    key: np.ndarray       #: unique priority (:func:`_priority`)
+    limit: float          #: the pool's cost bound
+
+
+def _choose_pool(st, e, ci, P, tun):
+    """Every fresh candidate ``ci`` no costlier than the ``P``-th cheapest
+    (ties included), with its survivor, position and priority."""
+    P = max(1, min(P, ci.size))
+    cc = e.cost[ci]
+    limit = _kth_smallest(cc, P - 1, tun.sample) if P < ci.size else cc.max()
+    pool = ci[cc <= limit]
+    ph = e.rep[pool]
+    sw = st.swap[ph]
+    pa = np.where(sw, e.W[pool], e.U[pool])
+    pb = np.where(sw, e.U[pool], e.W[pool])
+    pX = np.ascontiguousarray(_take(st.c_x, ph, axis=1).T)
+    D = _take(st.V, pb, axis=0) - _take(st.V, pa, axis=0)
+    key = _priority(e.cost[pool], np.einsum("ij,ij->i", D, D), pa, pb, tun)
+    return _Pool(ph, pa, pb, pX, st.twin[ph] >= 0, e.cost[pool], _take(st.c_cost, ph), key, limit)
+
+
+def _bands(x, n, sample):
+    """Band 0..n-1 of every value of ``x``: its place among ``n - 1``
+    quantiles of ``x`` (of a sample on large arrays)."""
+    s = _thinned(x, sample)
+    ks = (np.arange(1, n, dtype=np.int64) * s.size) // n
+    return np.searchsorted(np.partition(s, ks)[ks], x, side="left").astype(np.int64)
+
+
+def _priority(cost, length2, a, b, tun):
+    """Unique int64 priority of each pool edge (smaller first), without a sort:
+    the cost band (quantiles of the pool's costs) in the high bits, then the
+    length band (shorter edges first: on a plateau of equal costs they make
+    the most compact triangles), then a fixed hash of the endpoints (dense
+    local minima), the pool index in the low bits (``key & (2^bits - 1)``
+    gives it back)."""
+    P = cost.size
+    bits = max(1, int(P - 1).bit_length())
+    if bits > 28:
+        raise OverflowError("simplify: more than 2^28 edges in one pass")
+    band = _bands(cost, tun.bands, tun.sample) if P > tun.bands else np.zeros(P, dtype=np.int64)
+    lband = (_bands(length2, tun.length_bands, tun.sample) if P > tun.length_bands
+             else np.zeros(P, dtype=np.int64))
+    mix = ((a * np.int64(0x9E3779B1)) ^ (b * np.int64(0x85EBCA77))) & np.int64(0x3FFFFFF)
+    mix |= lband << np.int64(26)
+    return (((band << np.int64(31)) | mix) << np.int64(bits)) | np.arange(P, dtype=np.int64)
+
+
+def _acceptance_bound(limit, totals, tun):
+    """Largest total (cost + penalties) a checked collapse may have: the
+    pool's cost bound, or on a plateau -- the bound below ``plateau_share``
+    of the median total of the valid collapses checked, as on a flat region
+    where every cost is 0 and only the penalties differ -- that median (the
+    cheaper half goes; otherwise every pass would take only the collapses
+    without any penalty)."""
+    if totals.size == 0:
+        return limit
+    med = float(np.median(totals))
+    return med if limit < tun.plateau_share * med else limit
+
+
+# ---------------------------------------------------------------- independent collapses
+
+
+class _Faces(NamedTuple):
+    """The live faces that may still touch an active pool edge (transposed
+    rows), their ids, and the smallest key around each."""
+
+    FT: np.ndarray
+    fidx: np.ndarray
+    fh: np.ndarray
+
+
+def _pick_independent(st, pool, active, faces):
+    """One selection round: the ``active`` pool edges whose key is the
+    smallest over every face around both endpoints (so their stars are
+    disjoint). Returns ``(sel, active left, star, kf, faces)``: the chosen
+    pool edges, the others, every face of the chosen edges' stars with the
+    chosen edge it belongs to, and the faces still in play."""
+    F, n, P = st.F, st.V.shape[0], pool.key.size
+    ka, aa, ab = pool.key[active], pool.A[active], pool.B[active]
+    vmin = np.full(n, _BIG, dtype=np.int64)
+    np.minimum.at(vmin, aa, ka)
+    np.minimum.at(vmin, ab, ka)
+    if faces is None:                        # first round: every live face
+        G = _take(vmin, F)
+        fmin = np.minimum(np.minimum(G[:, 0], G[:, 1]), G[:, 2])
+        del G
+        fidx = np.flatnonzero((fmin < _BIG) & st.alive)
+        faces = _Faces(np.ascontiguousarray(_take(F, fidx, axis=0).T), fidx, _take(fmin, fidx))
+    else:
+        FT, fidx = faces.FT, faces.fidx
+        fmin = np.minimum(np.minimum(_take(vmin, FT[0]), _take(vmin, FT[1])), _take(vmin, FT[2]))
+        live = np.flatnonzero(fmin < _BIG)
+        if live.size < 0.75 * fidx.size:     # keep only the faces still in play
+            faces = _Faces(np.ascontiguousarray(FT[:, live]), fidx[live], _take(fmin, live))
+        else:                                # (a _BIG minimum changes nothing below)
+            faces = _Faces(FT, fidx, fmin)
+    vmin2 = np.full(n, _BIG, dtype=np.int64)
+    for j in range(3):
+        np.minimum.at(vmin2, faces.FT[j], faces.fh)
+    chosen = ka == np.minimum(_take(vmin2, aa), _take(vmin2, ab))
+    sel = active[chosen]
+    # the star of a chosen edge is exactly the set of faces whose minimum is its key
+    imask = (np.int64(1) << np.int64(max(1, int(P - 1).bit_length()))) - 1
+    pos = np.full(P, -1, dtype=np.int64)
+    pos[sel] = np.arange(sel.size)
+    fpos = np.where(faces.fh < _BIG, _take(pos, np.minimum(faces.fh & imask, P - 1)), -1)
+    in_star = fpos >= 0
+    return sel, active[~chosen], faces.fidx[in_star], fpos[in_star], faces
+
+
+class _Accepted(NamedTuple):
+    """The collapses a pass accepted (pool indices), their star rows and witnesses."""
+
+    idx: np.ndarray
+    rows: tuple
+    wit: np.ndarray
+
+
+def _check_rounds(st, pool, passes, haus, tun):
+    """Selection rounds over the pool: pick independent collapses, check
+    them, accept those within the bound, lock their closed one-rings.
+    Rejections are remembered (``c_blk``) until their neighbourhood changes.
+    Returns the accepted collapses (or None) and the touched vertices."""
+    n, P = st.V.shape[0], pool.key.size
+    touched = np.zeros(n, dtype=bool)
+    acc_edges, acc_wit, acc_rows = [], [], []
+    active = np.arange(P, dtype=np.int64)
+    faces = None
+    for _ in range(tun.max_rounds):
+        active = active[~touched[pool.A[active]] & ~touched[pool.B[active]]]
+        if active.size == 0:
+            break
+        sel, active, star, kf, faces = _pick_independent(st, pool, active, faces)
+        ok, pen, rows, wnew = _check(st, pool.A[sel], pool.B[sel], pool.X[sel], pool.interior[sel],
+                                     star, kf, tun, haus)
+        total = pool.raw[sel] + pen
+        acc = ok & (total <= _acceptance_bound(pool.limit, total[ok], tun))
+        rej = ~acc
+        hr = pool.h[sel[rej]]
+        st.c_blk[hr] = np.where(ok[rej], total[rej], np.inf)
+        st.blk_pass[hr] = passes
+        if acc.any():
+            rows = _keep_rows(rows, acc, sum(x.size for x in acc_edges))
+            acc_edges.append(sel[acc])
+            acc_wit.append(wnew[acc])
+            acc_rows.append(rows)
+            touched[_take(st.F, rows[0], axis=0).ravel()] = True
+    if not acc_edges:
+        return None, touched
+    rows = tuple(np.concatenate(c) for c in zip(*acc_rows))
+    return _Accepted(np.concatenate(acc_edges), rows, np.concatenate(acc_wit)), touched
+
+
+def _trim_to_target(pool, acc, m, target):
+    """The accepted collapses the target still needs, cheapest first."""
+    if target is None:
+        return acc
+    removed = np.where(pool.interior[acc.idx], 2, 1)
+    order = np.argsort(pool.cost[acc.idx], kind="stable")
+    before = np.empty(acc.idx.size, dtype=np.int64)
+    before[order] = np.cumsum(removed[order]) - removed[order]
+    keep = before < m - target
+    if keep.all():
+        return acc
+    return _Accepted(acc.idx[keep], _keep_rows(acc.rows, keep), acc.wit[keep])
+
+
+def _keep_rows(rows, keep, offset=0):
+    """The star rows ``(star, kf, coll, cA, cB)`` of the collapses ``keep``
+    (bool per collapse), renumbered from ``offset``."""
+    kf = rows[1]
+    r = np.flatnonzero(_take(keep, kf))
+    out = [_take(c, r) for c in rows]
+    out[1] = _take(np.cumsum(keep) - 1 + offset, out[1])
+    return tuple(out)
+
+
+# ---------------------------------------------------------------- checks
 
 
 def _check(st, A, B, X, interior, star, kf, tun, haus=True):
     """:func:`_check_block` over blocks of collapses, on the worker threads.
     Same results; the star rows come back grouped by block."""
-    spans = blocks(A.size, _BLOCK // 10)
+    spans = blocks(A.size, tun.block // 10)
     if len(spans) <= 1:
         return _check_block(st, A, B, X, interior, star, kf, tun, haus)
     starts = np.array([i for i, _ in spans], dtype=np.int64)
@@ -174,6 +506,78 @@ def _check(st, A, B, X, interior, star, kf, tun, haus=True):
     ok, pen, wnew = (np.concatenate([r[c] for r in res]) for c in (0, 1, 3))
     coll, cA, cB = (np.concatenate([r[2][c] for r in res]) for c in (2, 3, 4))
     return ok, pen, (star, kf, coll, cA, cB), wnew
+
+
+class _Star(NamedTuple):
+    """The faces around the endpoints of k independent collapses B -> A."""
+
+    k: int
+    star: np.ndarray     #: face ids
+    kf: np.ndarray       #: the collapse each belongs to
+    Fs: np.ndarray       #: their rows
+    cA: np.ndarray       #: corner of A in each (-1: absent)
+    cB: np.ndarray       #: corner of B
+    coll: np.ndarray     #: bool: removed (has both)
+    mv: np.ndarray       #: rows of the faces that stay (one corner moves)
+    mk: np.ndarray       #: ... their collapse
+    cm: np.ndarray       #: ... the corner that moves
+    onA: np.ndarray      #: ... whether it is A's
+
+
+def _star_of(F, A, B, star, kf):
+    """The star rows of collapses ``B[k] -> A[k]`` (see :class:`_Star`)."""
+    Fs = _take(F, star, axis=0)
+    cA = _corner(Fs, _take(A, kf))
+    cB = _corner(Fs, _take(B, kf))
+    coll = (cA >= 0) & (cB >= 0)
+    mv = np.flatnonzero(~coll)
+    onA = _take(cA >= 0, mv)
+    cm = np.where(onA, _take(cA, mv), _take(cB, mv))
+    return _Star(A.size, star, kf, Fs, cA, cB, coll, mv, _take(kf, mv), cm, onA)
+
+
+def _link_condition(st, s, interior):
+    """Collapses that keep the mesh a manifold of the same topology (Dey et
+    al.): the common neighbours of A and B are exactly the opposite vertices
+    of the removed faces; not the last tetrahedron (both ends of valence
+    3), not an isolated triangle, never a non-manifold edge. (k,) bool."""
+    k, n = s.k, st.V.shape[0]
+    ok = np.ones(k, dtype=bool)
+    Fr = s.Fs.ravel()
+    cidx = np.flatnonzero(s.coll)
+    kc = _take(s.kf, cidx)
+    cv = _take(Fr, 3 * cidx + 3 - _take(s.cA, cidx) - _take(s.cB, cidx))  # opposite vertex of each removed face
+    order = np.argsort(kc, kind="stable")
+    ck, cv = _take(kc, order), _take(cv, order)
+    first = np.ones(ck.size, dtype=bool)
+    first[1:] = ck[1:] != ck[:-1]
+    opp = np.full((k, 2), -1, dtype=np.int64)
+    opp[ck[first], 0] = cv[first]
+    opp[ck[~first], 1] = cv[~first]
+    ok &= np.bincount(ck, minlength=k) == np.where(interior, 2, 1)
+    # the two other vertices of each face that stays: neighbours of A (or B)
+    # other than the opposite ones; a neighbour of both is an extra common one
+    base = 3 * s.mv
+    x1 = _take(Fr, base + _take(_NEXT, s.cm))
+    x2 = _take(Fr, base + _take(_PREV, s.cm))
+    ia, ib = np.flatnonzero(s.onA), np.flatnonzero(~s.onA)
+    if ia.size and ib.size:
+        ka = np.concatenate([_take(s.mk, ia), _take(s.mk, ia)])
+        xa = np.concatenate([_take(x1, ia), _take(x2, ia)])
+        qk = np.concatenate([_take(s.mk, ib), _take(s.mk, ib)])
+        qx = np.concatenate([_take(x1, ib), _take(x2, ib)])
+        common = _common_pairs(ka, xa, qk, qx, n)
+        extra = common & (qx != _take(opp[:, 0], qk)) & (qx != _take(opp[:, 1], qk))
+        ok[qk[extra]] = False
+    valA = np.bincount(s.kf[s.cA >= 0], minlength=k)
+    valB = np.bincount(s.kf[s.cB >= 0], minlength=k)
+    ok &= ~(interior & (valA == 3) & (valB == 3))
+    hA = 3 * s.star[cidx] + _take(s.cA, cidx)   # edge (B, c)
+    hB = 3 * s.star[cidx] + _take(s.cB, cidx)   # edge (c, A)
+    tA, tB = st.twin[hA], st.twin[hB]
+    bad = (tA == NON_MANIFOLD) | (tB == NON_MANIFOLD) | ((tA == BOUNDARY) & (tB == BOUNDARY))
+    ok[kc[bad]] = False
+    return ok
 
 
 def _common_pairs(ka, xa, kb, xb, n):
@@ -197,199 +601,121 @@ def _common_pairs(ka, xa, kb, xb, n):
     return hit
 
 
+class _Moved(NamedTuple):
+    """The faces that stay, before (P) and after (Q) their corner moves to X."""
+
+    FT: np.ndarray       #: (3, r) their vertex rows
+    P: tuple             #: three (r,3) corner arrays before
+    Q: tuple             #: ... and after
+    N0: np.ndarray       #: (r,3) area normals before
+    N1: np.ndarray       #: ... after
+    l0: np.ndarray       #: twice the areas before
+    l1: np.ndarray       #: ... after
+
+
+def _moved_faces(st, s, X):
+    """Geometry of the faces that stay, one corner moved to its collapse's X."""
+    FmT = np.ascontiguousarray(_take(s.Fs, s.mv, axis=0).T)   # (contiguous index rows gather much faster)
+    P0, P1, P2 = (_take(st.V, FmT[c], axis=0) for c in range(3))
+    Xm = _take(X, s.mk, axis=0)
+    Q0 = np.where((s.cm == 0)[:, None], Xm, P0)
+    Q1 = np.where((s.cm == 1)[:, None], Xm, P1)
+    Q2 = np.where((s.cm == 2)[:, None], Xm, P2)
+    N0 = np.cross(P1 - P0, P2 - P0)
+    N1 = np.cross(Q1 - Q0, Q2 - Q0)
+    l0 = np.sqrt(np.einsum("ij,ij->i", N0, N0))
+    l1 = np.sqrt(np.einsum("ij,ij->i", N1, N1))
+    return _Moved(FmT, (P0, P1, P2), (Q0, Q1, Q2), N0, N1, l0, l1)
+
+
+def _turned_faces(st, s, g, A, B, tun):
+    """Per moved face: does it flip (its normal turns by more than
+    ``acos(flip_cos)``), or end against the input surface it stands for
+    (the summed normals of the input faces merged into its vertices: no
+    slow drift)? A face already against its input (a fold of a noisy
+    input) may move freely: holding it would freeze its neighbourhood."""
+    flip = (g.l0 > 0) & (np.einsum("ij,ij->i", g.N0, g.N1) <= tun.flip_cos * g.l0 * g.l1)
+    if tun.ref_cos > -1.0:
+        Nr = st.Nref
+        moved_v = _take(s.Fs.ravel(), 3 * s.mv + s.cm)
+        ref0 = _take(Nr, g.FT[0], axis=0) + _take(Nr, g.FT[1], axis=0) + _take(Nr, g.FT[2], axis=0)
+        ref = ref0 - _take(Nr, moved_v, axis=0) + _take(_take(Nr, A, axis=0) + _take(Nr, B, axis=0), s.mk, axis=0)
+        lr = np.sqrt(np.einsum("ij,ij->i", ref, ref))
+        flip |= np.einsum("ij,ij->i", ref, g.N1) < tun.ref_cos * lr * g.l1
+        flip &= np.einsum("ij,ij->i", ref0, g.N0) >= 0
+    return flip
+
+
+def _min_compactness(s, g):
+    """Smallest compactness around each collapse, (before, after), (k,) each."""
+    (P0, P1, P2), (Q0, Q1, Q2) = g.P, g.Q
+    sq = [np.einsum("ij,ij->i", D, D) for D in (P1 - P0, P2 - P1, P0 - P2, Q1 - Q0, Q2 - Q1, Q0 - Q2)]
+    g_old = compactness(g.l0, sq[0] + sq[1] + sq[2])
+    g_new = compactness(g.l1, sq[3] + sq[4] + sq[5])
+    gmin_old = np.ones(s.k)
+    np.minimum.at(gmin_old, s.mk, g_old)
+    gmin_new = np.ones(s.k)
+    np.minimum.at(gmin_new, s.mk, g_new)
+    return gmin_old, gmin_new
+
+
+def _compactness_penalty(st, s, g, A, B, gmin_old, gmin_new, tun):
+    """Only collapses that make the neighbourhood less compact than it was
+    (below ``gamma_soft``) pay: star area * edge length^2 * shortfall^2."""
+    area = np.bincount(s.mk, weights=0.5 * g.l1, minlength=s.k)
+    D = _take(st.V, B, axis=0) - _take(st.V, A, axis=0)
+    L2 = np.einsum("ij,ij->i", D, D)
+    short = np.maximum(0.0, np.minimum(gmin_old, tun.gamma_soft) - gmin_new) / tun.gamma_soft
+    return tun.compact_weight * area * L2 * short * short
+
+
+def _hausdorff_penalty(st, s, g, A, B, tun):
+    """Distance of the witnesses of A and B (the input points merged into
+    them that were farthest from the surface) to the new faces: the penalty
+    ``haus_weight * merged area * max distance^2`` (k,), and the survivor's
+    witness (k,3): the farther of the two."""
+    wA, wB = _take(st.wit, A, axis=0), _take(st.wit, B, axis=0)
+    mk, k = s.mk, s.k
+    Pa = np.concatenate([wA[mk], wB[mk]])
+    Q0, Q1, Q2 = g.Q
+    _, _, d2 = _kernel(Pa[:, 0].copy(), Pa[:, 1].copy(), Pa[:, 2].copy(),
+                       _triangle_rows(np.concatenate([Q0, Q0]), np.concatenate([Q1, Q1]),
+                                      np.concatenate([Q2, Q2])))
+    dA = np.full(k, np.inf)
+    np.minimum.at(dA, mk, d2[:mk.size])
+    dB = np.full(k, np.inf)
+    np.minimum.at(dB, mk, d2[mk.size:])
+    dA[~np.isfinite(dA)] = 0.0
+    dB[~np.isfinite(dB)] = 0.0
+    Wq = _take(st.Q[10], A) + _take(st.Q[10], B)
+    return tun.haus_weight * Wq * np.maximum(dA, dB), np.where((dB > dA)[:, None], wB, wA)
+
+
 def _check_block(st, A, B, X, interior, star, kf, tun, haus=True):
-    """Validity and compactness penalty of independent collapses B[k] -> A[k]
-    at X[k], judged on the current mesh.
+    """Validity and penalty of independent collapses B[k] -> A[k] at X[k],
+    judged on the current mesh.
 
     ``star`` lists every face around the endpoints, ``kf`` the collapse each
     belongs to. Returns ``ok`` (k,) bool, ``penalty`` (k,), the star rows
     ``(star, kf, coll, cA, cB)``: face ids, their collapse index, whether each
     face is removed, and the corners of A and B in it (-1: absent), and the
-    survivor's witness (k,3): of A's and B's witnesses, the one farther from
-    the new faces.
+    survivor's witness (k,3).
     """
-    F, V = st.F, st.V
-    n, k = V.shape[0], A.size
-    Fs = _take(F, star, axis=0)
-    Ak, Bk = _take(A, kf), _take(B, kf)
-    cA = _corner(Fs, Ak)
-    cB = _corner(Fs, Bk)
-    rowsA, rowsB = cA >= 0, cB >= 0
-    coll = rowsA & rowsB
-    ok = np.ones(k, dtype=bool)
-    Fr = Fs.ravel()
-
-    # --- link condition (Dey et al.): the common neighbours of A and B are
-    # exactly the opposite vertices of the removed faces
-    cidx = np.flatnonzero(coll)
-    kc = _take(kf, cidx)
-    cv = _take(Fr, 3 * cidx + 3 - _take(cA, cidx) - _take(cB, cidx))  # opposite vertex of each removed face
-    order = np.argsort(kc, kind="stable")
-    ck, cv = _take(kc, order), _take(cv, order)
-    first = np.ones(ck.size, dtype=bool)
-    first[1:] = ck[1:] != ck[:-1]
-    opp = np.full((k, 2), -1, dtype=np.int64)
-    opp[ck[first], 0] = cv[first]
-    opp[ck[~first], 1] = cv[~first]
-    n_removed = np.bincount(ck, minlength=k)
-    ok &= n_removed == np.where(interior, 2, 1)
-    # the faces that stay (each has A or B, not both), the corner that moves,
-    # and its two other vertices: neighbours of A (or B) other than the opposite ones
-    mv = np.flatnonzero(~coll)
-    mk = _take(kf, mv)
-    onA = _take(rowsA, mv)
-    cm = np.where(onA, _take(cA, mv), _take(cB, mv))
-    base = 3 * mv
-    x1 = _take(Fr, base + _take(_NEXT, cm))
-    x2 = _take(Fr, base + _take(_PREV, cm))
-    ia, ib = np.flatnonzero(onA), np.flatnonzero(~onA)
-    if ia.size and ib.size:
-        ka = np.concatenate([_take(mk, ia), _take(mk, ia)])
-        xa = np.concatenate([_take(x1, ia), _take(x2, ia)])
-        qk = np.concatenate([_take(mk, ib), _take(mk, ib)])
-        qx = np.concatenate([_take(x1, ib), _take(x2, ib)])
-        common = _common_pairs(ka, xa, qk, qx, n)
-        extra = common & (qx != _take(opp[:, 0], qk)) & (qx != _take(opp[:, 1], qk))
-        ok[qk[extra]] = False
-    # not the last tetrahedron (both endpoints of valence 3)
-    valA = np.bincount(kf[rowsA], minlength=k)
-    valB = np.bincount(kf[rowsB], minlength=k)
-    ok &= ~(interior & (valA == 3) & (valB == 3))
-    # not an isolated triangle; never touch a non-manifold edge
-    hA = 3 * star[cidx] + _take(cA, cidx)   # edge (B, c)
-    hB = 3 * star[cidx] + _take(cB, cidx)   # edge (c, A)
-    tA, tB = st.twin[hA], st.twin[hB]
-    bad = (tA == NON_MANIFOLD) | (tB == NON_MANIFOLD) | ((tA == BOUNDARY) & (tB == BOUNDARY))
-    ok[kc[bad]] = False
-
-    # --- geometry of the faces that move (one corner each: A or B goes to X)
-    FmT = np.ascontiguousarray(_take(Fs, mv, axis=0).T)   # (contiguous index rows gather much faster)
-    P0, P1, P2 = (_take(V, FmT[c], axis=0) for c in range(3))
-    Xm = _take(X, mk, axis=0)
-    Q0 = np.where((cm == 0)[:, None], Xm, P0)
-    Q1 = np.where((cm == 1)[:, None], Xm, P1)
-    Q2 = np.where((cm == 2)[:, None], Xm, P2)
-    o0, o1, o2 = P1 - P0, P2 - P1, P0 - P2
-    e0, e1, e2 = Q1 - Q0, Q2 - Q1, Q0 - Q2
-    N0 = np.cross(o0, -o2)
-    N1 = np.cross(e0, -e2)
-    l0 = np.sqrt(np.einsum("ij,ij->i", N0, N0))
-    l1 = np.sqrt(np.einsum("ij,ij->i", N1, N1))
-    flip = (l0 > 0) & (np.einsum("ij,ij->i", N0, N1) <= tun.flip_cos * l0 * l1)
-    # and never against the input surface the face stands for (the summed
-    # normals of the input faces merged into its vertices): no slow drift
-    if tun.ref_cos > -1.0:
-        Nr = st.Nref
-        moved_v = _take(Fr, base + cm)
-        ref0 = _take(Nr, FmT[0], axis=0) + _take(Nr, FmT[1], axis=0) + _take(Nr, FmT[2], axis=0)
-        ref = ref0 - _take(Nr, moved_v, axis=0) + _take(_take(Nr, A, axis=0) + _take(Nr, B, axis=0), mk, axis=0)
-        lr = np.sqrt(np.einsum("ij,ij->i", ref, ref))
-        flip |= np.einsum("ij,ij->i", ref, N1) < tun.ref_cos * lr * l1
-        # a face already against its input (a fold of a noisy input) may move freely:
-        # holding it would freeze its whole neighbourhood at full resolution
-        flip &= np.einsum("ij,ij->i", ref0, N0) >= 0
-    ok[mk[flip]] = False
-    sumsq = np.einsum("ij,ij->i", e0, e0) + np.einsum("ij,ij->i", e1, e1) + np.einsum("ij,ij->i", e2, e2)
-    g_new = compactness(l1, sumsq)
-    osq = np.einsum("ij,ij->i", o0, o0) + np.einsum("ij,ij->i", o1, o1) + np.einsum("ij,ij->i", o2, o2)
-    g_old = compactness(l0, osq)
-    gmin_new = np.ones(k)
-    np.minimum.at(gmin_new, mk, g_new)
-    gmin_old = np.ones(k)
-    np.minimum.at(gmin_old, mk, g_old)
-    ok &= ~((gmin_new < tun.gamma_hard) & (gmin_new < 0.5 * gmin_old))
-    area = np.bincount(mk, weights=0.5 * l1, minlength=k)
-    D = _take(V, B, axis=0) - _take(V, A, axis=0)
-    L2 = np.einsum("ij,ij->i", D, D)
-    # only collapses that make the neighbourhood less compact than it was pay
-    short = np.maximum(0.0, np.minimum(gmin_old, tun.gamma_soft) - gmin_new) / tun.gamma_soft
-    penalty = tun.compact_weight * area * L2 * short * short
-    # --- Hausdorff-aware term: distance of the witnesses of A and B (the input
-    # points merged into them that were farthest from the surface) to the new faces
-    wA, wB = _take(st.wit, A, axis=0), _take(st.wit, B, axis=0)
-    wnew = wA
-    if haus and tun.haus_weight > 0.0 and mk.size:
-        Pa = np.concatenate([wA[mk], wB[mk]])
-        _, _, d2 = _kernel(Pa[:, 0].copy(), Pa[:, 1].copy(), Pa[:, 2].copy(),
-                           _triangle_rows(np.concatenate([Q0, Q0]), np.concatenate([Q1, Q1]),
-                                          np.concatenate([Q2, Q2])))
-        dA = np.full(k, np.inf)
-        np.minimum.at(dA, mk, d2[:mk.size])
-        dB = np.full(k, np.inf)
-        np.minimum.at(dB, mk, d2[mk.size:])
-        dA[~np.isfinite(dA)] = 0.0
-        dB[~np.isfinite(dB)] = 0.0
-        wnew = np.where((dB > dA)[:, None], wB, wA)
-        Wq = _take(st.Q[10], A) + _take(st.Q[10], B)
-        penalty = penalty + tun.haus_weight * Wq * np.maximum(dA, dB)
-    return ok, penalty, (star, kf, coll, cA, cB), wnew
+    s = _star_of(st.F, A, B, star, kf)
+    ok = _link_condition(st, s, interior)
+    g = _moved_faces(st, s, X)
+    ok[s.mk[_turned_faces(st, s, g, A, B, tun)]] = False
+    gmin_old, gmin_new = _min_compactness(s, g)
+    ok &= ~((gmin_new < tun.gamma_hard) & (gmin_new < 0.5 * gmin_old))   # no new sliver
+    penalty = _compactness_penalty(st, s, g, A, B, gmin_old, gmin_new, tun)
+    wnew = _take(st.wit, A, axis=0)
+    if haus and tun.haus_weight > 0.0 and s.mk.size:
+        pen_h, wnew = _hausdorff_penalty(st, s, g, A, B, tun)
+        penalty = penalty + pen_h
+    return ok, penalty, (star, kf, s.coll, s.cA, s.cB), wnew
 
 
-def _thinned(x):
-    """``x`` itself up to ``4 * _SAMPLE`` values, else an evenly strided
-    sample of ``_SAMPLE`` to ``2 * _SAMPLE`` of them (a view; deterministic)."""
-    return x if x.size <= 4 * _SAMPLE else x[::x.size // _SAMPLE]
-
-
-def _kth_smallest(x, k):
-    """The ``k``-th smallest value of ``x`` (0-based). Exact for arrays of up to
-    ``4 * _SAMPLE``; for larger ones estimated from :func:`_thinned`, two
-    standard deviations of the estimate on the high side (a pool bound then
-    takes a few more edges, never many fewer)."""
-    s = _thinned(x)
-    if s is x:
-        return np.partition(x, k)[k]
-    q = (k + 1) / x.size
-    j = int(np.ceil(q * s.size + 2.0 * np.sqrt(q * (1.0 - q) * s.size)))
-    j = min(max(j, 0), s.size - 1)
-    return np.partition(s, j)[j]
-
-
-def _pool_size(ne, m, target, tun):
-    """How many of the ``ne`` candidate edges one pass may consider."""
-    P = int(np.ceil(tun.pool_share * ne))
-    if target is not None:
-        P = min(P, int(np.ceil(tun.pool_goal_factor * (m - target) / 2.0)) + 1)
-    return max(1, min(P, ne))
-
-
-def _bands(x, n):
-    """Band 0..n-1 of every value of ``x``: its place among ``n - 1``
-    quantiles of ``x`` (of a sample on large arrays)."""
-    s = _thinned(x)
-    ks = (np.arange(1, n, dtype=np.int64) * s.size) // n
-    return np.searchsorted(np.partition(s, ks)[ks], x, side="left").astype(np.int64)
-
-
-def _priority(cost, length2, a, b, tun):
-    """Unique int64 priority of each pool edge (smaller first), without a sort:
-    the cost band (quantiles of the pool's costs) in the high bits, then the
-    length band (shorter edges first: on a plateau of equal costs they make
-    the most compact triangles), then a fixed hash of the endpoints (dense
-    local minima), the pool index in the low bits (``key & (2^bits - 1)``
-    gives it back)."""
-    P = cost.size
-    bits = max(1, int(P - 1).bit_length())
-    if bits > 28:
-        raise OverflowError("simplify: more than 2^28 edges in one pass")
-    band = _bands(cost, tun.bands) if P > tun.bands else np.zeros(P, dtype=np.int64)
-    lband = _bands(length2, tun.length_bands) if P > tun.length_bands else np.zeros(P, dtype=np.int64)
-    mix = ((a * np.int64(0x9E3779B1)) ^ (b * np.int64(0x85EBCA77))) & np.int64(0x3FFFFFF)
-    mix |= lband << np.int64(26)
-    return (((band << np.int64(31)) | mix) << np.int64(bits)) | np.arange(P, dtype=np.int64)
-
-
-def _acceptance_bound(limit, totals, tun):
-    """Largest total (cost + penalties) a checked collapse may have: the
-    pool's cost bound, or on a plateau -- the bound below ``plateau_share``
-    of the median total of the valid collapses checked, as on a flat region
-    where every cost is 0 and only the penalties differ -- that median (the
-    cheaper half goes; otherwise every pass would take only the collapses
-    without any penalty)."""
-    if totals.size == 0:
-        return limit
-    med = float(np.median(totals))
-    return med if limit < tun.plateau_share * med else limit
+# ---------------------------------------------------------------- the loop
 
 
 def run(st, target, max_err_n, preserve_boundary, progress, m0, tun):
@@ -398,176 +724,59 @@ def run(st, target, max_err_n, preserve_boundary, progress, m0, tun):
     try:
         return _run(st, target, max_err_n, preserve_boundary, progress, m0, tun)
     finally:
-        _compact(st)
+        compact(st)
+
+
+def _progress(progress, m0, m, target):
+    """Report the fraction done; False when the caller asks to stop."""
+    frac = (m0 - m) / (m0 - target) if target is not None and m0 > target else (m0 - m) / max(m0, 1)
+    return progress(float(min(max(frac, 0.0), 1.0))) is not False
 
 
 def _run(st, target, max_err_n, preserve_boundary, progress, m0, tun):
     passes = 0
     while passes < tun.max_passes:
-        if st.m_live < _COMPACT * st.F.shape[0]:
-            _compact(st)
-        F, twin = st.F, st.twin
-        m, n = st.m_live, st.V.shape[0]
+        if st.m_live < tun.compact_share * st.F.shape[0]:
+            compact(st)
+        m = st.m_live
         if target is not None and m <= target:
             return "target", passes
-        # the Hausdorff penalty matters once the cage is coarse: skip it before
-        haus = target is None or m <= tun.haus_phase * target
-        if progress is not None and passes > 0:
-            if target is not None and m0 > target:
-                frac = (m0 - m) / (m0 - target)
-            else:
-                frac = (m0 - m) / max(m0, 1)
-            if progress(float(min(max(frac, 0.0), 1.0))) is False:
-                return "cancelled", passes
+        if progress is not None and passes > 0 and not _progress(progress, m0, m, target):
+            return "cancelled", passes
         passes += 1
-        h = np.arange(twin.size, dtype=np.int64)
-        rep = np.flatnonzero((twin == BOUNDARY) | (twin > h))
-        U, W = _ends(F, rep)
-        st.c_stale[rep[st.fresh[U] | st.fresh[W]]] = True
-        st.fresh[:] = False
-        stale = _take(st.c_stale, rep)
-        cost = _take(st.c_cost, rep)
-        bv = _take(st.c_blk, rep)
-        mem = np.flatnonzero(bv >= 0)           # rejections remembered until the neighbourhood changes
-        blocked = np.zeros(rep.size, dtype=bool)
-        blocked[mem] = _take(st.blk_pass, rep[mem]) > np.maximum(_take(st.vver, U[mem]), _take(st.vver, W[mem]))
-        cost = np.where(blocked, np.maximum(cost, bv), cost)
-        cand = np.isfinite(cost)
-        ne = int(np.count_nonzero(cand))
+        e = _candidate_edges(st)
+        ne = int(np.count_nonzero(np.isfinite(e.cost)))
         if ne == 0:
             return "no_valid_collapse", passes
         P = _pool_size(ne, m, target, tun)
-        # lazy recosting: merging only adds quadrics, so the cached cost of a
-        # stale edge is a lower bound of its new cost; recost only the stale
-        # edges that could still be among the P cheapest
-        need = stale & cand
-        if max_err_n is None and P < ne:
-            need &= cost <= _kth_smallest(cost, P - 1)    # (non-candidates are inf: they sort last)
-        ni = np.flatnonzero(need)
-        if ni.size:
-            _recost(st, rep, U, W, ni, preserve_boundary)
-            hn = _take(rep, ni)
-            st.c_stale[hn] = False
-            stale[ni] = False
-            fresh_cost = _take(st.c_cost, hn)
-            cost[ni] = np.where(_take(blocked, ni), np.maximum(fresh_cost, _take(bv, ni)), fresh_cost)
-        cand = np.isfinite(cost)
+        _recost_cheapest(st, e, P, max_err_n, preserve_boundary, tun)
+        cand = np.isfinite(e.cost)
         if max_err_n is not None:
-            within = _distance(st, _take(st.c_cost, rep), U, W) <= max_err_n
+            within = _distance(st, _take(st.c_cost, e.rep), e.U, e.W) <= max_err_n
             if not (cand & within).any():
                 return ("max_error" if cand.any() else "no_valid_collapse"), passes
             cand &= within
-        cand &= ~stale
-        ci = np.flatnonzero(cand)
+        ci = np.flatnonzero(cand & ~e.stale)
         if ci.size == 0:
-            if stale.any():
+            if e.stale.any():
                 continue
             return "no_valid_collapse", passes
-        # pool: every fresh candidate no costlier than the P-th cheapest (ties included)
-        ne = ci.size
-        P = max(1, min(P, ne))
-        cc = cost[ci]
-        limit = _kth_smallest(cc, P - 1) if P < ne else cc.max()
-        pool = ci[cc <= limit]
-        P = pool.size
-        ph = rep[pool]
-        sw = st.swap[ph]
-        pa = np.where(sw, W[pool], U[pool])
-        pb = np.where(sw, U[pool], W[pool])
-        pX = np.stack([_take(c, ph) for c in st.c_x], axis=1)
-        pint = twin[ph] >= 0
-        pcost = cost[pool]
-        praw = _take(st.c_cost, ph)
-        D = _take(st.V, pb, axis=0) - _take(st.V, pa, axis=0)
-        key = _priority(pcost, np.einsum("ij,ij->i", D, D), pa, pb, tun)
-
-        touched = np.zeros(n, dtype=bool)
-        acc_edges, acc_wit, acc_rows = [], [], []
-        active = np.arange(P, dtype=np.int64)
-        FT = None                               # faces that may still touch an active edge (transposed)
-        imask = (np.int64(1) << np.int64(max(1, int(P - 1).bit_length()))) - 1
-        for _ in range(tun.max_rounds):
-            active = active[~touched[pa[active]] & ~touched[pb[active]]]
-            if active.size == 0:
-                break
-            ka, aa, ab = key[active], pa[active], pb[active]
-            vmin = np.full(n, _BIG, dtype=np.int64)
-            np.minimum.at(vmin, aa, ka)
-            np.minimum.at(vmin, ab, ka)
-            if FT is None:                        # first round: every live face
-                G = _take(vmin, F)
-                fmin = np.minimum(np.minimum(G[:, 0], G[:, 1]), G[:, 2])
-                del G
-                fidx = np.flatnonzero((fmin < _BIG) & st.alive)
-                FT = np.ascontiguousarray(_take(F, fidx, axis=0).T)
-                fh = _take(fmin, fidx)
-            else:
-                fmin = np.minimum(np.minimum(_take(vmin, FT[0]), _take(vmin, FT[1])), _take(vmin, FT[2]))
-                live = np.flatnonzero(fmin < _BIG)
-                if live.size < 0.75 * fidx.size:  # keep only the faces still in play
-                    FT = np.ascontiguousarray(FT[:, live])
-                    fidx = fidx[live]
-                    fh = _take(fmin, live)
-                else:                             # (a _BIG minimum changes nothing below)
-                    fh = fmin
-            vmin2 = np.full(n, _BIG, dtype=np.int64)
-            for j in range(3):
-                np.minimum.at(vmin2, FT[j], fh)
-            chosen = ka == np.minimum(_take(vmin2, aa), _take(vmin2, ab))
-            sel = active[chosen]
-            active = active[~chosen]
-            # the star of a chosen edge is exactly the set of faces whose minimum is its key
-            pos = np.full(P, -1, dtype=np.int64)
-            pos[sel] = np.arange(sel.size)
-            fpos = np.where(fh < _BIG, _take(pos, np.minimum(fh & imask, P - 1)), -1)
-            in_star = fpos >= 0
-            star = fidx[in_star]
-            kf = fpos[in_star]
-            ok, pen, rows, wnew = _check(st, pa[sel], pb[sel], pX[sel], pint[sel], star, kf, tun, haus)
-            total = praw[sel] + pen
-            acc = ok & (total <= _acceptance_bound(limit, total[ok], tun))
-            # remember rejections until the neighbourhood changes
-            rej = ~acc
-            val = np.where(ok[rej], total[rej], np.inf)
-            hr = ph[sel[rej]]
-            st.c_blk[hr] = val
-            st.blk_pass[hr] = passes
-            if acc.any():
-                rows = _keep_rows(rows, acc, sum(x.size for x in acc_edges))
-                acc_edges.append(sel[acc])
-                acc_wit.append(wnew[acc])
-                acc_rows.append(rows)
-                touched[_take(F, rows[0], axis=0).ravel()] = True
-        if not acc_edges:
+        pool = _choose_pool(st, e, ci, P, tun)
+        # the Hausdorff penalty matters once the cage is coarse: skip it before
+        haus = target is None or m <= tun.haus_phase * target
+        acc, touched = _check_rounds(st, pool, passes, haus, tun)
+        if acc is None:
             continue
-        acc = np.concatenate(acc_edges)
-        rows = tuple(np.concatenate(c) for c in zip(*acc_rows))
-        s_wit = np.concatenate(acc_wit)
-        if target is not None:
-            removed = np.where(pint[acc], 2, 1)
-            order = np.argsort(pcost[acc], kind="stable")
-            before = np.empty(acc.size, dtype=np.int64)
-            before[order] = np.cumsum(removed[order]) - removed[order]
-            keep_k = before < m - target
-            if not keep_k.all():
-                acc = acc[keep_k]
-                s_wit = s_wit[keep_k]
-                rows = _keep_rows(rows, keep_k)
-        st.worst = max(st.worst, float(_distance(st, praw[acc], pa[acc], pb[acc]).max()))
+        acc = _trim_to_target(pool, acc, m, target)
+        i = acc.idx
+        st.worst = max(st.worst, float(_distance(st, pool.raw[i], pool.A[i], pool.B[i]).max()))
         st.vver[touched] = passes
-        st.wit[pa[acc]] = s_wit
-        _apply(st, pa[acc], pb[acc], pX[acc], rows)
+        st.wit[pool.A[i]] = acc.wit
+        _apply(st, pool.A[i], pool.B[i], pool.X[i], acc.rows)
     return "no_valid_collapse", passes
 
 
-def _keep_rows(rows, keep, offset=0):
-    """The star rows ``(star, kf, coll, cA, cB)`` of the collapses ``keep``
-    (bool per collapse), renumbered from ``offset``."""
-    kf = rows[1]
-    r = np.flatnonzero(_take(keep, kf))
-    out = [_take(c, r) for c in rows]
-    out[1] = _take(np.cumsum(keep) - 1 + offset, out[1])
-    return tuple(out)
+# ---------------------------------------------------------------- applying, compacting
 
 
 def _apply(st, A, B, X, rows):
@@ -607,7 +816,7 @@ def _apply(st, A, B, X, rows):
     st.parent[B] = A
 
 
-def _survivors(st):
+def survivors(st):
     """Current vertex of every clean input vertex (``-1``: removed), following
     the merges since the last compaction (a few pointer jumps)."""
     cur = st.cur_of_clean
@@ -620,43 +829,47 @@ def _survivors(st):
         c = nxt
 
 
-def _compact(st):
-    """Drop the dead faces and vertices from every array (one job per array,
-    on the worker threads)."""
+def compact(st):
+    """Drop the dead faces and vertices from every declared array (one job
+    per array, on the worker threads)."""
     keep_f, keep_v = st.alive, ~st.dead_v
     if keep_f.all() and keep_v.all():
         return
     new_f = np.cumsum(keep_f) - 1
     new_v = np.cumsum(keep_v) - 1
-    ih = np.flatnonzero(np.repeat(keep_f, 3))
-    iv = np.flatnonzero(keep_v)
-
-    def on_h(a):   # per half-edge
-        return _take(a, ih)
-
-    def on_v(a):   # per vertex
-        return _take(a, iv, axis=0)
-
-    def on_vt(a):  # per vertex, coefficient-major
-        return _take(a, iv, axis=1)
-
-    per_vertex = ("V", "Nref", "wit", "locked", "moved", "orig", "vver", "fresh", "is_bnd")
-    rules = {"twin": lambda a: renumber_twins(_take(a, ih), new_f),
-             "F": lambda a: _take(new_v, np.compress(keep_f, a, axis=0)),
-             "forig": lambda a: np.compress(keep_f, a),
-             "feat": on_h, **dict.fromkeys(HALF_EDGE_CACHE, on_h), **dict.fromkeys(per_vertex, on_v),
-             "Q": on_vt, "VT": on_vt}
+    rows = {"vertex": (np.flatnonzero(keep_v), 0), "vertex_t": (np.flatnonzero(keep_v), 1),
+            "face": (np.flatnonzero(keep_f), 0), "half_edge": (np.flatnonzero(np.repeat(keep_f, 3)), 0),
+            "half_edge_t": (np.flatnonzero(np.repeat(keep_f, 3)), 1)}
+    renumber = {"vertex": lambda a: _take(new_v, a), "half_edge": lambda a: renumber_twins(a, new_f)}
 
     def swap(name):  # each job replaces one array: the old one goes as soon as its job is done
-        if isinstance(name, int):
-            st.c_x[name] = on_h(st.c_x[name])
-        else:
-            setattr(st, name, rules[name](getattr(st, name)))
+        meta = _meta(name)
+        idx, axis = rows[meta["per"]]
+        a = _take(getattr(st, name), idx, axis=axis)
+        setattr(st, name, a if meta["values"] is None else renumber[meta["values"]](a))
 
-    run_each(swap, [*rules, 0, 1, 2])
-    cur = _survivors(st)
+    run_each(swap, _declared(reset=False))
+    cur = survivors(st)
     st.cur_of_clean = np.where(cur >= 0, _take(new_v, np.maximum(cur, 0)), -1)  # -1: removed component
-    st.alive = np.ones(st.F.shape[0], dtype=bool)
-    st.dead_v = np.zeros(st.V.shape[0], dtype=bool)
-    st.parent = np.arange(st.V.shape[0], dtype=np.int64)
+    for name in _declared(reset=True):
+        setattr(st, name, _fresh_rows(name, st.F.shape[0] if _per(name) == "face" else st.V.shape[0]))
+    st.m_live = st.F.shape[0]
+
+
+def append_faces(st, faces, forig):
+    """Append ``faces`` (k,3) descending from input faces ``forig`` (k,):
+    every per-face and per-half-edge array grows by its declared fill (the
+    new half-edges are borders until the caller glues them); the state must
+    be compact."""
+    k = faces.shape[0]
+    st.F = np.concatenate([st.F, faces])
+    st.forig = np.concatenate([st.forig, forig])
+    for name in _declared("face", "half_edge", "half_edge_t", reset=False):
+        if name in ("F", "forig"):
+            continue
+        axis = 1 if _per(name).endswith("_t") else 0
+        size = 3 * k if _per(name).startswith("half_edge") else k
+        setattr(st, name, np.concatenate([getattr(st, name), _fresh_rows(name, size)], axis=axis))
+    for name in _declared("face", reset=True):
+        setattr(st, name, _fresh_rows(name, st.F.shape[0]))
     st.m_live = st.F.shape[0]

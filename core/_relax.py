@@ -15,8 +15,8 @@ They work on a compact :class:`core._collapse.State` and leave it compact.
 
 import numpy as np
 
-from ._clean import BOUNDARY, face_keys
-from ._collapse import HALF_EDGE_CACHE, _compact, _ends, _survivors
+from ._clean import BOUNDARY, face_keys, half_edge_ends
+from ._collapse import append_faces, compact, survivors
 from .topology import connected_labels, face_components
 
 
@@ -24,7 +24,7 @@ def _border(st):
     """The border half-edges of the state and their ends ``u -> w`` (the
     direction their face runs along the border)."""
     hb = np.flatnonzero(st.twin == BOUNDARY)
-    u, w = _ends(st.F, hb)
+    u, w = half_edge_ends(st.F, hb)
     return hb, u, w
 
 
@@ -61,7 +61,7 @@ def close_triangular_holes(st):
         return 0
     # rim half-edges by undirected key, to pair the caps' sides with them
     hall = np.flatnonzero(twin == BOUNDARY)
-    ua, wa = _ends(F, hall)
+    ua, wa = half_edge_ends(F, hall)
     ekey = np.minimum(ua, wa) * nn + np.maximum(ua, wa)
     order = np.argsort(ekey)
     ekey, hall = ekey[order], hall[order]
@@ -82,17 +82,10 @@ def _add_caps(st, caps, rim_h, pairs):
     """Append the faces ``caps`` (k,3), each descending from the face of the
     rim half-edge ``rim_h[i]``, and glue the half-edge ``pairs`` (lists of
     (a, b) arrays) as twins; their vertices are no longer on a border."""
-    k = caps.shape[0]
-    st.F = np.concatenate([st.F, caps])
-    st.forig = np.concatenate([st.forig, st.forig[rim_h // 3]])
-    for name, fill in {"twin": BOUNDARY, "feat": False, **HALF_EDGE_CACHE}.items():
-        setattr(st, name, np.concatenate([getattr(st, name), np.full(3 * k, fill)]))
-    st.c_x = [np.concatenate([c, np.zeros(3 * k)]) for c in st.c_x]
+    append_faces(st, caps, st.forig[rim_h // 3])
     for a, b in pairs:
         st.twin[a] = b
         st.twin[b] = a
-    st.alive = np.ones(st.F.shape[0], dtype=bool)
-    st.m_live = st.F.shape[0]
     st.is_bnd[caps.ravel()] = False
     # the rims' edges were invalid (both ends on a border): cost everything afresh
     st.c_cost[:] = 0.0
@@ -138,7 +131,7 @@ def close_smallest_hole(st):
     if roots.size == 0:
         return 0
     hi = np.flatnonzero(twin > np.arange(twin.size, dtype=np.int64))
-    ea, eb = _ends(F, np.concatenate([hi, hb]))
+    ea, eb = half_edge_ends(F, np.concatenate([hi, hb]))
     nn = np.int64(n)
     edges = np.sort(np.minimum(ea, eb) * nn + np.maximum(ea, eb))
     for root in roots[np.argsort(length[roots], kind="stable")][:_HOLE_TRIES]:
@@ -209,10 +202,10 @@ def drop_stuck_components(st, need, max_size):
     st.alive = ~drop[comp]
     dead_v = used & drop[np.maximum(vcomp, 0)]
     st.dead_v = dead_v
-    cur = _survivors(st)
+    cur = survivors(st)
     st.cur_of_clean = np.where((cur >= 0) & ~dead_v[np.maximum(cur, 0)], cur, -1)
     st.parent = np.arange(n, dtype=np.int64)
     st.m_live = int(st.alive.sum())
     removed = m - st.m_live
-    _compact(st)
+    compact(st)
     return removed

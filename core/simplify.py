@@ -47,7 +47,7 @@ from typing import NamedTuple
 import numpy as np
 
 from ._clean import BOUNDARY, NON_MANIFOLD, half_edge_ends, spatial_order
-from ._collapse import State, _ends, run
+from ._collapse import State, run
 from ._relax import close_smallest_hole, close_triangular_holes, drop_stuck_components
 from ._relocate import relocate, segment_triangles
 from .clean import MIN_COMPONENT_AREA, WELD_DISTANCE, CleanReport, clean_mesh
@@ -57,55 +57,11 @@ from .metrics import surface_distance
 from .topology import boundary_loops_count, collapsible_edges, face_components
 from .quadrics import _accumulate_T, _vertex_face_quadrics, edge_constraint_quadrics
 from .spatial import TriangleIndex
+from .tuning import TUNING, Tuning
 
 _WHERE = "simplify"
 
 
-@dataclass(frozen=True)
-class Tuning:
-    """Every constant of the algorithm in one place (all unit-free)."""
-
-    area_power: float = 0.5          #: face plane weight = area^p * mean area^(1-p)
-    boundary_weight: float = 100.0   #: boundary plane weight, times the edge length squared
-    feature_weight: float = 3.0      #: crease plane weight, times the edge length squared
-    pool_share: float = 0.2          #: at most this share of the candidate edges per pass
-    pool_goal_factor: float = 1.5    #: ... and at most this many times the collapses still needed
-    max_rounds: int = 16             #: selection rounds per pass
-    bands: int = 8                   #: cost bands of the pool (then length bands, then random)
-    length_bands: int = 16           #: length bands inside a cost band (shorter edges first)
-    #: a pool whose cost bound is below this share of the median total (cost + penalties)
-    #: of its valid collapses is a plateau: the cheaper half by total is accepted
-    plateau_share: float = 0.01
-    flip_cos: float = 0.0            #: reject if a face normal turns by more than acos(flip_cos)
-    #: ... or ends farther than acos(ref_cos) from the summed normals of the input it
-    #: stands for (-1: off; 0, i.e. 90 degrees, keeps rough scans collapsing; stricter stalls them)
-    ref_cos: float = 0.0
-    gamma_hard: float = 0.02         #: reject new triangles less compact than this (and than before)
-    gamma_soft: float = 0.3          #: penalise new triangles less compact than this
-    compact_weight: float = 1e-5     #: penalty scale: star area * edge length^2 * (1 - g/g_soft)^2
-    #: Hausdorff-aware penalty: weight * merged area * (distance of the farther merged
-    #: vertex's witness -- its input point farthest from the surface so far -- to the new faces)^2
-    haus_weight: float = 0.45
-    haus_phase: float = 4.0          #: ... only once the mesh has at most this many times the target faces
-    relocate_iters: int = 2          #: final relocation rounds towards the input (0: off)
-    #: inputs up to this many faces also get the backward pull (cage towards the input
-    #: surface, which needs an index of the whole input) ...
-    relocate_back_max_faces: int = 50000
-    relocate_back: float = 0.3       #: ... with this weight (cage area against the input points)
-    relocate_back_iters: int = 4     #: ... and this many rounds
-    relocate_border_weight: float = 1.0  #: weight of each input border point (a surface sample: 1)
-    relocate_samples: int = 20000    #: input vertices as relocation targets: this many ...
-    relocate_per_vertex: int = 4     #: ... or this many per cage vertex, whichever is more
-    relocate_reg: float = 1.0        #: pull of each vertex to its place, relative to its samples
-    relocate_max_faces: int = 200000  #: ... only for cages up to this size
-    relocate_max_share: float = 0.5  #: ... and at most this share of the input's faces
-    #: preserve_topology=False removes stuck components up to this size (share of the diagonal)
-    relax_max_size: float = 0.25
-    snap_bits: int = 32              #: coordinates snapped to 2^-snap_bits of the diagonal
-    max_passes: int = 100000
-
-
-TUNING = Tuning()
 
 
 
@@ -309,14 +265,15 @@ def _relocate_cage(mesh, Vn, creases, Eb_in, surface, tun):
     border = None
     if Eb_in.shape[0]:
         hb = np.flatnonzero(mesh.twin == BOUNDARY)
-        Eb = np.stack(_ends(Fm, hb), axis=1)
+        Eb = np.stack(half_edge_ends(Fm, hb), axis=1)
         C = Vn[np.unique(Eb_in)[::step]]
         border = (C, Eb, TriangleIndex(Vn, segment_triangles(Eb_in)), tun.relocate_border_weight)
     Nkeep = mesh.Nref[Fm].sum(axis=1) if tun.ref_cos > -1.0 else None
     back = dict(surface=TriangleIndex(Vn, surface), back=tun.relocate_back,
                 iters=tun.relocate_back_iters) if surface is not None else dict(iters=tun.relocate_iters)
     Vnew = relocate(mesh.V, Fm, P, movable, reg=tun.relocate_reg, N_keep=Nkeep, border=border,
-                    min_compact=tun.gamma_hard, **back)
+                    min_compact=tun.gamma_hard, cg_iters=tun.relocate_cg_iters,
+                    min_cos=tun.relocate_min_cos, **back)
     mesh.moved |= np.any(Vnew != mesh.V, axis=1)
     mesh.V = Vnew
 
@@ -413,7 +370,7 @@ def _cage_of(su, mesh, stopped, passes, opts, relocate=True):
     hf = np.flatnonzero(mesh.feat)
     tf = mesh.twin[hf]
     hf = hf[(tf > hf) | (tf == BOUNDARY)]  # one half-edge per feature edge
-    a, b = (new_v[e] for e in _ends(mesh.F, hf))
+    a, b = (new_v[e] for e in half_edge_ends(mesh.F, hf))
     fe = np.stack([np.minimum(a, b), np.maximum(a, b)], axis=1)
     fe = fe[np.lexsort((fe[:, 1], fe[:, 0]))]
     forder_out = np.argsort(mesh.forig, kind="stable")
@@ -521,7 +478,7 @@ def _within_max_error(clean, target, max_error, opts, progress):
 def simplify(V, F, *, target_faces=None, ratio=None, max_error=None, preserve_boundary=True,
              preserve_topology=True, feature_angle_deg=60.0, vertex_weights=None, locked=None,
              weld_distance=WELD_DISTANCE, min_component_area=MIN_COMPONENT_AREA, symmetry=None,
-             progress=None):
+             progress=None, tuning=None):
     """Simplify a triangle mesh to a coarse, clean manifold cage (QEM).
 
     The input is cleaned first (:func:`core.clean.clean_mesh`: welded,
@@ -581,6 +538,10 @@ def simplify(V, F, *, target_faces=None, ratio=None, max_error=None, preserve_bo
         Called after every pass with the fraction done (0..1); returning
         ``False`` stops with ``stopped_because == "cancelled"`` and the
         cleaned input, unchanged, as the cage.
+    tuning : :class:`core.tuning.Tuning` or None
+        Advanced: the engine's constants (pool sizes, penalty weights,
+        relocation, block sizes); ``None`` for the measured defaults
+        (``core.tuning.TUNING``).
 
     Returns
     -------
@@ -610,7 +571,11 @@ def simplify(V, F, *, target_faces=None, ratio=None, max_error=None, preserve_bo
             V, F, axis=symmetry, target_faces=target_faces, ratio=ratio, max_error=max_error,
             preserve_boundary=preserve_boundary, preserve_topology=preserve_topology,
             feature_angle_deg=feature_angle_deg, vertex_weights=vertex_weights, locked=locked,
-            weld_distance=weld_distance, min_component_area=min_component_area, progress=progress)
+            weld_distance=weld_distance, min_component_area=min_component_area, progress=progress,
+            tuning=tuning)
+    if tuning is not None and not isinstance(tuning, Tuning):
+        raise InvalidArgumentError(f"{_WHERE}: tuning must be a core.tuning.Tuning, not "
+                                   f"{type(tuning).__name__}")
     V, F = check_mesh(V, F, where=_WHERE)
     n_in = V.shape[0]
     weights, lk = _check_args(n_in, target_faces, ratio, max_error, feature_angle_deg, vertex_weights,
@@ -638,7 +603,7 @@ def simplify(V, F, *, target_faces=None, ratio=None, max_error=None, preserve_bo
         t = int(round(float(ratio) * m0))
         target = t if target is None else max(target, t)
     to_input = clean.clean_to_input
-    opts = dict(tuning=TUNING, preserve_boundary=preserve_boundary,
+    opts = dict(tuning=TUNING if tuning is None else tuning, preserve_boundary=preserve_boundary,
                 preserve_topology=preserve_topology, feature_angle_deg=feature_angle_deg,
                 weights=None if weights is None else weights[to_input],
                 locked=None if lk is None else lk[to_input])

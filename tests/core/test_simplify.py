@@ -10,6 +10,7 @@ from core.mesh import bbox_diagonal, face_normals
 from core.clean import clean_mesh
 from core.simplify import SimplifyResult, simplify
 from core.topology import manifold_report, topology_summary
+from core.tuning import TUNING, Tuning
 from tests.mesh_factory import (boundary_edges, cube, double_torus, icosphere, load_shared, regular_grid,
                                 tetrahedron, torus)
 
@@ -386,14 +387,13 @@ def test_output_does_not_depend_on_threads_or_block_size(monkeypatch):
     # threads; the blocks depend on the problem size only, so any thread count gives
     # the same cage bit for bit
     import importlib
-    collapse = importlib.import_module("core._collapse")
     parallel = importlib.import_module("core._parallel")
     V, F = torus(40, 20, bump=0.2)
-    monkeypatch.setattr(collapse, "_BLOCK", 640)   # many blocks even on a small mesh
+    small_blocks = Tuning(block=640)   # many blocks even on a small mesh
     runs = []
     for workers in (1, 2):
         monkeypatch.setattr(parallel, "WORKERS", workers)
-        runs.append(simplify(V, F, target_faces=300))
+        runs.append(simplify(V, F, target_faces=300, tuning=small_blocks))
     a, b = runs
     assert np.array_equal(a.F, b.F) and np.array_equal(a.V, b.V)
     assert np.array_equal(a.vertex_map, b.vertex_map)
@@ -405,22 +405,20 @@ def test_sampled_cost_thresholds_are_exact_when_small_and_slightly_high_when_lar
     collapse = importlib.import_module("core._collapse")
     rng = np.random.default_rng(3)
     small = rng.random(1000)
-    assert collapse._kth_smallest(small, 123) == np.partition(small, 123)[123]
+    sample = TUNING.sample
+    assert collapse._kth_smallest(small, 123, sample) == np.partition(small, 123)[123]
     x = np.concatenate([rng.random(1_000_000), np.full(50_000, np.inf)])
     for k in (0, 1000, 200_000, 999_999):
-        rank = int(np.count_nonzero(x < collapse._kth_smallest(x, k)))
+        rank = int(np.count_nonzero(x < collapse._kth_smallest(x, k, sample)))
         # at or above the exact k-th value, and within 0.5% of the array above it
         assert k - 5 * np.sqrt(k + 1) <= rank <= k + 0.005 * x.size
 
 
-def test_sampled_thresholds_keep_every_invariant(monkeypatch):
+def test_sampled_thresholds_keep_every_invariant():
     # large meshes take their pool bounds and cost bands from samples: force that
     # path on a small mesh
-    import importlib
-    collapse = importlib.import_module("core._collapse")
-    monkeypatch.setattr(collapse, "_SAMPLE", 16)
     V, F = torus(40, 20, bump=0.2)
-    r = simplify(V, F, target_faces=300)
+    r = simplify(V, F, target_faces=300, tuning=Tuning(sample=16))
     assert r.F.shape[0] == 300 and r.stopped_because == "target"
     assert_clean(r, V, F)
     assert topology_summary(r.F, r.V.shape[0]).euler == 0

@@ -1,0 +1,59 @@
+"""The constants of the simplification engine (:class:`Tuning`)."""
+
+from dataclasses import dataclass
+
+
+@dataclass(frozen=True)
+class Tuning:
+    """Every constant of :func:`core.simplify.simplify` in one place (all
+    unit-free). An advanced argument: ``simplify(..., tuning=Tuning(...))``
+    (``dataclasses.replace(TUNING, pool_share=0.3)``); the defaults are the
+    measured best over the shared meshes (``scripts/bench_simplify.py``)."""
+
+    area_power: float = 0.5          #: face plane weight = area^p * mean area^(1-p)
+    boundary_weight: float = 100.0   #: boundary plane weight, times the edge length squared
+    feature_weight: float = 3.0      #: crease plane weight, times the edge length squared
+    pool_share: float = 0.2          #: at most this share of the candidate edges per pass
+    pool_goal_factor: float = 1.5    #: ... and at most this many times the collapses still needed
+    max_rounds: int = 16             #: selection rounds per pass
+    bands: int = 8                   #: cost bands of the pool (then length bands, then random)
+    length_bands: int = 16           #: length bands inside a cost band (shorter edges first)
+    #: a pool whose cost bound is below this share of the median total (cost + penalties)
+    #: of its valid collapses is a plateau: the cheaper half by total is accepted
+    plateau_share: float = 0.01
+    flip_cos: float = 0.0            #: reject if a face normal turns by more than acos(flip_cos)
+    #: ... or ends farther than acos(ref_cos) from the summed normals of the input it
+    #: stands for (-1: off; 0, i.e. 90 degrees, keeps rough scans collapsing; stricter stalls them)
+    ref_cos: float = 0.0
+    gamma_hard: float = 0.02         #: reject new triangles less compact than this (and than before)
+    gamma_soft: float = 0.3          #: penalise new triangles less compact than this
+    compact_weight: float = 1e-5     #: penalty scale: star area * edge length^2 * (1 - g/g_soft)^2
+    #: Hausdorff-aware penalty: weight * merged area * (distance of the farther merged
+    #: vertex's witness -- its input point farthest from the surface so far -- to the new faces)^2
+    haus_weight: float = 0.45
+    haus_phase: float = 4.0          #: ... only once the mesh has at most this many times the target faces
+    relocate_iters: int = 2          #: final relocation rounds towards the input (0: off)
+    #: inputs up to this many faces also get the backward pull (cage towards the input
+    #: surface, which needs an index of the whole input) ...
+    relocate_back_max_faces: int = 50000
+    relocate_back: float = 0.3       #: ... with this weight (cage area against the input points)
+    relocate_back_iters: int = 4     #: ... and this many rounds
+    relocate_border_weight: float = 1.0  #: weight of each input border point (a surface sample: 1)
+    relocate_samples: int = 20000    #: input vertices as relocation targets: this many ...
+    relocate_per_vertex: int = 4     #: ... or this many per cage vertex, whichever is more
+    relocate_reg: float = 1.0        #: pull of each vertex to its place, relative to its samples
+    relocate_max_faces: int = 200000  #: ... only for cages up to this size
+    relocate_max_share: float = 0.5  #: ... and at most this share of the input's faces
+    relocate_cg_iters: int = 15      #: conjugate-gradient steps per relocation round
+    relocate_min_cos: float = 0.2    #: a relocated face turning by more than acos(this) is undone
+    #: preserve_topology=False removes stuck components up to this size (share of the diagonal)
+    relax_max_size: float = 0.25
+    snap_bits: int = 32              #: coordinates snapped to 2^-snap_bits of the diagonal
+    snap_share: float = 1e-12        #: (distance / edge length)^2 below which a position is an endpoint
+    compact_share: float = 0.75      #: compact the arrays once live faces are fewer than this share
+    sample: int = 1 << 16            #: cost thresholds of larger arrays come from a sample this size
+    block: int = 1 << 16             #: elements per block of work on the worker threads
+    max_passes: int = 100000
+
+
+TUNING = Tuning()
