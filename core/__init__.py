@@ -12,6 +12,8 @@ The public API (one module per algorithm family):
 ``simplify``                QEM edge collapse to a clean manifold cage
 ``subdivide``               modified butterfly / Loop subdivision
 ``subdivision_operator``    the same as a reusable linear operator
+``simplify_symmetric``      the same, mirror-symmetric (``simplify(symmetry=)``)
+``mirror_partners``         each vertex's mirror image (``symmetrize``: exact)
 ``fit_cage``                cage positions whose subdivision fits a surface
 ``bind`` / ``deform``       carry a dense mesh (and its detail) on a cage
 ``refine``                  the subdivided edited cage with the detail
@@ -31,6 +33,7 @@ from .metrics import SurfaceDistance, sample_surface, surface_distance
 from .subdivide import SubdivisionOperator, SubdivisionResult, subdivide, subdivision_operator
 from .clean import CleanReport, CleanResult, clean_mesh
 from .simplify import SimplifyResult, simplify
+from .symmetry import mirror_partners, simplify_symmetric, symmetrize
 from .fit import FitResult, fit_cage
 from .binding import Binding, RefineResult, bind, deform, refine
 
@@ -44,6 +47,7 @@ __all__ = [
     "TriangleIndex", "ClosestPoints", "closest_points",
     "surface_distance", "SurfaceDistance", "sample_surface",
     "subdivide", "subdivision_operator", "SubdivisionOperator", "SubdivisionResult",
-    "clean_mesh", "CleanResult", "CleanReport", "simplify", "SimplifyResult", "fit_cage", "FitResult",
+    "clean_mesh", "CleanResult", "CleanReport", "simplify", "SimplifyResult",
+    "simplify_symmetric", "mirror_partners", "symmetrize", "fit_cage", "FitResult",
     "bind", "deform", "refine", "Binding", "RefineResult",
 ]

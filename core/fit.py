@@ -59,7 +59,7 @@ class FitResult(NamedTuple):
 
 def fit_cage(V_dense, F_dense, V_cage, F_cage, *, levels=2, scheme="butterfly", creases=None,
              iterations=8, smoothness=0.05, point_to_point=0.1, laplacian="uniform",
-             samples=None, seed=0,
+             samples=None, seed=0, symmetry=None,
              cg_rtol=1e-6, cg_max_iterations=300, progress=None):
     """Cage positions whose subdivision surface best matches a dense surface.
 
@@ -89,6 +89,14 @@ def fit_cage(V_dense, F_dense, V_cage, F_cage, *, levels=2, scheme="butterfly", 
         between 5,000 and 200,000).
     seed : int
         Seed of the surface sampling.
+    symmetry : {None, 'X', 'Y', 'Z'}
+        Keep a mirror-symmetric cage (``simplify(..., symmetry=...)``)
+        symmetric about the plane through the origin normal to this axis:
+        each solve runs on the symmetric positions only (conjugate gradients
+        on the projected system ``P A P``, ``P`` averaging every vertex with
+        its partner's mirror image, :func:`core.symmetry.symmetrize`), so the
+        fit settles between the two sides of a nearly symmetric scan;
+        partners are exact mirror images, plane vertices exactly on it.
     cg_rtol, cg_max_iterations
         Stopping rule of each conjugate-gradient solve.
     progress : callable, optional
@@ -105,7 +113,8 @@ def fit_cage(V_dense, F_dense, V_cage, F_cage, *, levels=2, scheme="butterfly", 
     InvalidMeshError
         A mesh is malformed or has no faces.
     InvalidArgumentError
-        A parameter is out of range.
+        A parameter is out of range; with ``symmetry``, a cage vertex without
+        a mirror partner.
 
     Examples
     --------
@@ -134,6 +143,11 @@ def fit_cage(V_dense, F_dense, V_cage, F_cage, *, levels=2, scheme="butterfly", 
     # work around the dense bounding-box centre: the result then does not
     # depend on where the mesh sits (the CG stopping rule is relative)
     centre = 0.5 * np.add(*bounding_box(V_dense))
+    sym = None
+    if symmetry is not None:
+        k, sym = _symmetric_projection(V_cage, symmetry)
+        centre[k] = 0.0          # the mirror plane through the working origin: sym stays linear
+        V_cage = sym(V_cage)
     V_dense = V_dense - centre
     V_cage = V_cage - centre
     n_c = V_cage.shape[0]
@@ -207,9 +221,12 @@ def fit_cage(V_dense, F_dense, V_cage, F_cage, *, levels=2, scheme="butterfly", 
             + lam * L_diag
         lumped = np.maximum(lumped, 1e-3 * max(float(lumped.max()), 1e-300))
         inv = np.repeat(1.0 / lumped, 3)
+        precondition = lambda r: r * inv                               # noqa: E731
+        if sym is not None:
+            A, rhs, precondition = _restricted(sym, A, rhs, precondition, n_c)
         sol = conjugate_gradient(A, rhs.ravel(), X0=X.ravel(), rtol=cg_rtol,
-                                 max_iterations=cg_max_iterations, preconditioner=lambda r: r * inv)
-        X = sol.X.reshape(n_c, 3)
+                                 max_iterations=cg_max_iterations, preconditioner=precondition)
+        X = sol.X.reshape(n_c, 3) if sym is None else sym(sol.X.reshape(n_c, 3))
         cg_its.append(sol.iterations)
         if progress is not None and progress((it + 1) / (int(iterations) + 1)) is False:
             cancelled = True
@@ -219,6 +236,25 @@ def fit_cage(V_dense, F_dense, V_cage, F_cage, *, levels=2, scheme="butterfly", 
     diag = bbox_diagonal(V_dense)
     return FitResult(X + centre, 0.5 * (f2d + d2f), f2d, d2f, np.array(cg_its, dtype=np.int64), diag,
                      cancelled)
+
+
+def _symmetric_projection(V_cage, symmetry):
+    """``(axis, P)``: the axis index and the projection ``P`` of an (n,3)
+    array onto positions mirror-symmetric about the plane through the
+    origin normal to that axis (each vertex averaged with its partner's
+    mirror image; symmetric and idempotent)."""
+    from .symmetry import axis_index, mirror_partners, symmetrize
+    k = axis_index(symmetry, "fit_cage")
+    partner = mirror_partners(V_cage, symmetry, where="fit_cage")
+    return k, lambda X: symmetrize(X, partner, k)
+
+
+def _restricted(P, A, rhs, precondition, n):
+    """``P A P``, ``P rhs`` and ``P M P`` for conjugate gradients on the
+    range of the projection ``P`` (symmetric and idempotent)."""
+    def flat(f):
+        return lambda x: P(f(P(x.reshape(n, 3)).ravel()).reshape(n, 3)).ravel()
+    return flat(A), P(rhs.reshape(n, 3)), flat(precondition)
 
 
 def _interpolate(N, F, face, bary):

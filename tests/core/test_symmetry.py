@@ -1,0 +1,240 @@
+"""core.symmetry: mirror-symmetric cages (simplify(..., symmetry=...)) and the
+symmetric fit (fit_cage(..., symmetry=...))."""
+
+import numpy as np
+import pytest
+
+from core import (InvalidArgumentError, bind, bbox_diagonal, deform, euler_characteristic,
+                  fit_cage, manifold_report, simplify, surface_distance)
+from core.clean import clean_mesh
+from core.symmetry import AXES, mirror, mirror_partners, simplify_symmetric
+from tests.mesh_factory import icosphere, load_shared, regular_grid, torus
+
+
+# ---------------------------------------------------------------- meshes
+def bumpy_sphere(k=4):
+    """A sphere with bumps that are even in x, y and z (symmetric about every plane)."""
+    V, F = icosphere(k)
+    r = 1.0 + 0.06 * np.cos(5 * V[:, 0]) * np.cos(4 * V[:, 1]) + 0.04 * np.cos(6 * V[:, 2])
+    return V * r[:, None], F
+
+
+def open_sheet():
+    """A wavy open grid centred on x = 0, even in x: its border crosses the X plane."""
+    V, F = regular_grid(24, 16, z=lambda x, y: 0.08 * np.cos(9 * (x - 0.5)) * np.sin(7 * y))
+    return V - [0.5, 0.5, 0.0], F
+
+
+def jittered(V, F, axis="X", amount=0.004, seed=0):
+    """A nearly symmetric scan: the negative side moved about a little."""
+    k = AXES[axis]
+    rng = np.random.default_rng(seed)
+    W = V.copy()
+    neg = W[:, k] < -1e-9
+    W[neg] += amount * bbox_diagonal(V) * rng.standard_normal((int(neg.sum()), 3))
+    W[neg, (k + 1) % 3] *= 1.01
+    return W, F
+
+
+def centred(V, axis):
+    k = AXES[axis]
+    V = V.copy()
+    V[:, k] -= 0.5 * (V[:, k].min() + V[:, k].max())
+    return V
+
+
+# ---------------------------------------------------------------- checks
+def assert_symmetric(V, F, axis):
+    """Every vertex has an exact mirror partner, plane vertices have coordinate
+    exactly 0.0, and every face has its mirror face (reversed orientation)."""
+    k = AXES[axis]
+    p = mirror_partners(V, axis, tolerance=1e-6)
+    assert np.array_equal(mirror(V, k)[p], V) or np.abs(mirror(V, k)[p] - V).max() <= 1e-6 * bbox_diagonal(V)
+    assert np.array_equal(mirror(V, k)[p], V)                        # exactly, in fact
+    on = p == np.arange(V.shape[0])
+    assert np.all(V[on, k] == 0.0)
+    n = np.int64(V.shape[0])
+
+    def directed(F):
+        h = F[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2)
+        return np.sort(h[:, 0] * n + h[:, 1])
+
+    # the mirror of face (a, b, c) is (p[a], p[c], p[b]): same directed edges as the faces
+    assert np.array_equal(directed(F), directed(p[F][:, [0, 2, 1]]))
+    return p
+
+
+def assert_clean(r, V_in, F_in):
+    rep = manifold_report(r.F, r.V.shape[0])
+    assert rep.is_oriented_manifold, rep
+    assert np.array_equal(np.unique(r.F), np.arange(r.V.shape[0]))
+    used = np.flatnonzero(clean_mesh(V_in, F_in).input_to_clean >= 0)   # what cleaning keeps
+    assert r.vertex_map.shape == (V_in.shape[0],)
+    assert np.all((r.vertex_map[used] >= 0) & (r.vertex_map[used] < r.V.shape[0]))
+    assert r.face_map.shape == (r.F.shape[0],)
+    assert np.all((r.face_map >= 0) & (r.face_map < F_in.shape[0]))
+
+
+def hausdorff(V, F, r):
+    return surface_distance(V, F, r.V, r.F).hausdorff
+
+
+# ---------------------------------------------------------------- the cage
+@pytest.mark.parametrize("axis", ["X", "Y", "Z"])
+def test_bumpy_sphere_cage_is_symmetric_manifold_with_the_same_euler(axis):
+    V, F = bumpy_sphere()
+    r0 = simplify(V, F, target_faces=400)
+    r = simplify(V, F, target_faces=400, symmetry=axis)
+    assert_symmetric(r.V, r.F, axis)
+    assert_clean(r, V, F)
+    assert euler_characteristic(r.F) == euler_characteristic(r0.F) == 2
+    assert 0.95 * 400 <= r.F.shape[0] <= 400 and r.stopped_because == "target"
+    assert r.n_components == 1 and r.n_boundary_loops == 0
+
+
+@pytest.mark.parametrize("axis", ["X", "Z"])
+def test_torus_keeps_genus_and_symmetry(axis):
+    V, F = torus(48, 24, bump=0.02)
+    r = simplify(V, F, target_faces=300, symmetry=axis)
+    assert_symmetric(r.V, r.F, axis)
+    assert_clean(r, V, F)
+    assert euler_characteristic(r.F) == euler_characteristic(simplify(V, F, target_faces=300).F) == 0
+    assert 285 <= r.F.shape[0] <= 300
+
+
+def test_border_crossing_the_plane():
+    V, F = open_sheet()
+    r0 = simplify(V, F, target_faces=150)
+    r = simplify(V, F, target_faces=150, symmetry="X")
+    assert_symmetric(r.V, r.F, "X")
+    assert_clean(r, V, F)
+    assert r.n_boundary_loops == r0.n_boundary_loops == 1
+    assert euler_characteristic(r.F) == euler_characteristic(r0.F) == 1
+    assert 140 <= r.F.shape[0] <= 150
+
+
+def test_seam_never_pinches_when_the_plane_cuts_a_wavy_sheet_many_times():
+    # the sheet crosses z = 0 along several curves: seams that end on the border,
+    # and collapses that join two seam vertices by an inside edge (split before mirroring)
+    V, F = regular_grid(20, 20, z=lambda x, y: 0.1 * np.sin(6 * x) * np.cos(5 * y))
+    V = V - [0.5, 0.5, 0.0]
+    for target in (50, 400):
+        r = simplify(V, F, target_faces=target, symmetry="Z")
+        assert_symmetric(r.V, r.F, "Z")
+        assert manifold_report(r.F, r.V.shape[0]).is_oriented_manifold
+
+
+def test_several_components_on_both_sides():
+    S, Fs = icosphere(3, radius=0.4)
+    V = np.vstack([S + [0.6, 0.0, 0.0], S - [0.6, 0.0, 0.0], bumpy_sphere(3)[0] * 0.3])
+    F = np.vstack([Fs, Fs + S.shape[0], bumpy_sphere(3)[1] + 2 * S.shape[0]])
+    r = simplify(V, F, target_faces=300, symmetry="X")
+    assert_symmetric(r.V, r.F, "X")
+    assert_clean(r, V, F)
+    assert r.n_components == 3
+    # the spheres on the negative side map to the mirrored cage sphere
+    neg = V[:, 0] < -0.3
+    assert np.all(r.V[r.vertex_map[neg], 0] < 0)
+
+
+def test_nearly_symmetric_scan_still_gives_a_symmetric_cage():
+    V, F = jittered(*bumpy_sphere())
+    r = simplify(V, F, target_faces=400, symmetry="X")
+    assert_symmetric(r.V, r.F, "X")
+    assert_clean(r, V, F)
+    assert euler_characteristic(r.F) == 2
+
+
+def test_error_within_a_quarter_of_the_plain_cage():
+    V, F = bumpy_sphere()
+    for target in (200, 600):
+        d0 = hausdorff(V, F, simplify(V, F, target_faces=target))
+        d1 = hausdorff(V, F, simplify(V, F, target_faces=target, symmetry="X"))
+        assert d1 <= 1.25 * d0, (target, d1 / d0)
+
+
+@pytest.mark.parametrize("name, axis, target", [("suzanne.obj", "X", 150), ("spot.obj", "X", 300),
+                                                ("spot.obj", "X", 1200)])
+def test_shared_meshes_error_within_a_quarter_of_the_plain_cage(name, axis, target):
+    V, F = load_shared(name)
+    V = centred(V, axis)
+    r0 = simplify(V, F, target_faces=target)
+    r = simplify(V, F, target_faces=target, symmetry=axis)
+    assert_symmetric(r.V, r.F, axis)
+    assert_clean(r, V, F)
+    assert euler_characteristic(r.F) == euler_characteristic(r0.F)
+    assert hausdorff(V, F, r) <= 1.25 * hausdorff(V, F, r0)
+
+
+def test_ratio_and_max_error():
+    V, F = bumpy_sphere()
+    r = simplify(V, F, ratio=0.05, symmetry="Y")
+    assert_symmetric(r.V, r.F, "Y")
+    assert r.target == round(0.05 * F.shape[0]) and 0.95 * r.target <= r.F.shape[0] <= r.target
+    bound = 0.01 * bbox_diagonal(V)
+    r = simplify(V, F, max_error=bound, symmetry="X")
+    assert_symmetric(r.V, r.F, "X")
+    assert r.hausdorff is not None and r.hausdorff <= bound
+    assert hausdorff(V, F, r) <= bound and r.F.shape[0] < F.shape[0] / 4
+
+
+def test_cancel_returns_the_cleaned_input_and_inputs_are_not_modified():
+    V, F = bumpy_sphere(3)
+    V0, F0 = V.copy(), F.copy()
+    r = simplify(V, F, target_faces=100, symmetry="X", progress=lambda f: False)
+    assert r.stopped_because == "cancelled"
+    assert np.array_equal(r.V, V) and np.array_equal(r.F, F)
+    assert np.array_equal(r.vertex_map, np.arange(V.shape[0]))
+    seen = []
+    simplify(V, F, target_faces=100, symmetry="X", progress=lambda f: seen.append(f) or True)
+    assert seen and all(0.0 <= f <= 1.0 for f in seen)
+    assert np.array_equal(V, V0) and np.array_equal(F, F0)
+
+
+def test_weights_and_locks_are_read_on_both_sides():
+    V, F = bumpy_sphere(3)
+    lock = np.zeros(V.shape[0], dtype=bool)
+    i = int(np.argmax(V[:, 0] + 0.5 * V[:, 1]))            # far on the positive side
+    lock[i] = True
+    r = simplify(V, F, target_faces=100, symmetry="X", locked=lock,
+                 vertex_weights=np.where(V[:, 0] < 0, 5.0, 1.0))
+    assert_symmetric(r.V, r.F, "X")
+    assert np.array_equal(r.V[r.vertex_map[i]], V[i])      # a locked vertex is not moved
+
+
+def test_one_sided_mesh_and_bad_axis_are_clear_errors():
+    V, F = icosphere(2)
+    with pytest.raises(InvalidArgumentError, match=r"symmetry 'X'.*X = 0 plane.*positive side"):
+        simplify(V + [2.0, 0.0, 0.0], F, target_faces=50, symmetry="X")
+    with pytest.raises(InvalidArgumentError, match="negative side"):
+        simplify(V - [0.0, 0.0, 1.5], F, target_faces=50, symmetry="Z")
+    with pytest.raises(InvalidArgumentError, match="symmetry must be None, 'X', 'Y' or 'Z'"):
+        simplify_symmetric(V, F, axis="W", target_faces=50)
+    with pytest.raises(InvalidArgumentError, match="give at least one of"):
+        simplify(V, F, symmetry="X")
+
+
+def test_mirror_partners():
+    V = np.array([[1.0, 2, 3], [-1.0, 2, 3], [0.0, 5, 1], [2.0, 0, 0], [-2.0, 0, 0]])
+    assert mirror_partners(V, "X").tolist() == [1, 0, 2, 4, 3]
+    with pytest.raises(InvalidArgumentError, match="not mirror-symmetric about the Y plane"):
+        mirror_partners(V, "Y", where="fit_cage")
+
+
+# ---------------------------------------------------------------- fit and bind
+def test_fit_keeps_the_cage_symmetric_and_bind_deform_is_exact_on_an_asymmetric_scan():
+    V, F = jittered(*bumpy_sphere(), amount=0.006)
+    r = simplify(V, F, target_faces=200, symmetry="X")
+    fit = fit_cage(V, F, r.V, r.F, levels=2, scheme="loop", iterations=3, symmetry="X")
+    assert_symmetric(fit.V, r.F, "X")
+    assert fit.mean_distance[-1] < fit.mean_distance[0]
+    plain = fit_cage(V, F, r.V, r.F, levels=2, scheme="loop", iterations=3)
+    assert fit.mean_distance[-1] <= 1.25 * plain.mean_distance[-1]
+    b = bind(V, F, fit.V, r.F, levels=2, scheme="loop")
+    assert np.abs(deform(b, fit.V) - V).max() <= 1e-12 * bbox_diagonal(V)
+
+
+def test_fit_with_symmetry_needs_a_symmetric_cage():
+    V, F = bumpy_sphere(3)
+    with pytest.raises(InvalidArgumentError, match="fit_cage: the vertices are not mirror-symmetric"):
+        fit_cage(V, F, V + [0.1, 0.0, 0.0], F, levels=1, iterations=1, symmetry="X")
