@@ -64,6 +64,9 @@ def parse_args(argv, prog=PROG):
                    help="subdivision scheme for --fit and --refine (default: butterfly)")
     p.add_argument("--feature-angle", type=float, default=60.0, metavar="DEG",
                    help="dihedral angle above which edges are kept sharp (default 60)")
+    p.add_argument("--symmetry", choices=("X", "Y", "Z"), default=None,
+                   help="make the cage mirror-symmetric about the plane through the origin "
+                        "normal to this axis, in the file's coordinates (the fit keeps it so)")
     p.add_argument("--out", default="out", metavar="DIR", help="output folder (default: out)")
     p.add_argument("--format", choices=_convert.OUTPUT_FORMATS, default=None,
                    help="output format (default: the input's own, glTF as glb)")
@@ -98,7 +101,8 @@ def parse_args(argv, prog=PROG):
 def options(args):
     return _convert.Options(faces=args.faces, ratio=args.ratio, max_error_pct=args.max_error,
                             fit=args.fit, refine=args.refine, scheme=args.scheme,
-                            feature_angle_deg=args.feature_angle, format=args.format)
+                            feature_angle_deg=args.feature_angle, format=args.format,
+                            symmetry=args.symmetry)
 
 
 def _is_output(name):

@@ -47,6 +47,7 @@ class Options:
     scheme: str = "butterfly"
     feature_angle_deg: float = 60.0
     format: str = None               #: None: the input's own (glTF as glb)
+    symmetry: str = None             #: 'X', 'Y' or 'Z': a cage mirror-symmetric about that plane
 
     @property
     def levels(self):
@@ -188,7 +189,7 @@ def convert(task, opts):
             max_error = opts.max_error_pct / 100.0 * diag
         res = run.step("simplify", core.simplify, V, F, target_faces=opts.faces,
                        ratio=opts.ratio, max_error=max_error,
-                       feature_angle_deg=opts.feature_angle_deg)
+                       feature_angle_deg=opts.feature_angle_deg, symmetry=opts.symmetry)
         r["faces_out"] = int(res.F.shape[0])
         r["target_faces"] = res.target
         r["stopped_because"] = res.stopped_because
@@ -206,7 +207,7 @@ def convert(task, opts):
         if opts.fit:
             try:
                 fit = run.step("fit", core.fit_cage, V, F, res.V, res.F, levels=opts.levels,
-                               scheme=opts.scheme, creases=creases)
+                               scheme=opts.scheme, creases=creases, symmetry=opts.symmetry)
                 V_cage = fit.V
                 d = fit.mean_distance
                 r["fit"] = {"mean_before_pct": 100 * d[0] / fit.diagonal,

@@ -37,8 +37,8 @@ def simplify_fields(s):
     """The scene settings the Simplify panel shows, in order (the target
     field follows the target mode; the vertex groups are drawn apart)."""
     target = {'FACES': "target_faces", 'RATIO': "ratio", 'ERROR': "max_error_pct"}[s.target_mode]
-    return [target, "preserve_boundary", "preserve_topology", "feature_angle_deg", "fit",
-            "bind", "levels", "scheme", "hide_source"]
+    return [target, "preserve_boundary", "preserve_topology", "feature_angle_deg", "use_symmetry",
+            "symmetry_axis", "fit", "bind", "levels", "scheme", "hide_source"]
 
 
 def refine_messages(context):
@@ -90,7 +90,15 @@ class MESHADJUST_PT_simplify(_Panel, bpy.types.Panel):
         col.prop(s, fields[0])
         col = layout.column(align=True)
         for name in fields[1:]:
-            col.prop(s, name)
+            if name == "use_symmetry":
+                # as Decimate draws it: the toggle, then the axis it enables
+                row = col.row(align=True)
+                row.prop(s, "use_symmetry")
+                sub = row.row(align=True)
+                sub.active = s.use_symmetry
+                sub.prop(s, "symmetry_axis", expand=True)
+            elif name != "symmetry_axis":
+                col.prop(s, name)
         obj = context.active_object
         if obj is not None and obj.type == 'MESH':
             col.prop_search(s, "weight_group", obj, "vertex_groups")

@@ -45,6 +45,7 @@ OUTPUTS = [
     ('BOTH', "Edited and refined", "Update the edited original and the refined mesh"),
 ]
 AS_BOUND = [('BOUND', "As bound", "The scheme the cage is bound with")]
+AXES = [(a, a, f"Mirror across the object's local {a} = 0 plane") for a in "XYZ"]
 
 _MAKERS = {'BOOL': BoolProperty, 'INT': IntProperty, 'FLOAT': FloatProperty,
            'ENUM': EnumProperty, 'STRING': StringProperty}
@@ -87,6 +88,12 @@ SETTINGS = {
     "feature_angle_deg": Setting('FLOAT', "Feature angle", "Edges sharper than this (degrees) "
                                  "are kept as creases (180 turns it off)", 60.0,
                                  {"min": 0.0, "max": 180.0}),
+    "use_symmetry": Setting('BOOL', "Symmetry", "Make the cage mirror-symmetric about the "
+                            "object's local plane (as Decimate's Symmetry), so X-mirror editing "
+                            "moves both sides; the fit and the detail absorb the scan's own "
+                            "asymmetry", False),
+    "symmetry_axis": Setting('ENUM', "Axis", "Axis normal to the mirror plane, which passes "
+                             "through the object's origin", 'X', {"items": AXES}),
     "weight_group": Setting('STRING', "Importance group", "Vertex group whose weights make "
                             "areas more important (weight 1: ten times)", ""),
     "lock_group": Setting('STRING', "Locked group", "Vertex group of vertices that must not "
@@ -134,7 +141,8 @@ def _same(*keys):
 
 #: operator property name -> setting key, per operator
 SIMPLIFY = _same("target_mode", "target_faces", "ratio", "max_error_pct", "preserve_boundary",
-                 "preserve_topology", "feature_angle_deg", "weight_group", "lock_group", "fit",
+                 "preserve_topology", "feature_angle_deg", "use_symmetry", "symmetry_axis",
+                 "weight_group", "lock_group", "fit",
                  "bind", "levels", "scheme", "hide_source")
 FIT = _same("rebind")
 BIND = {"levels": "levels", "scheme": "refine_scheme", "keep_edit": "keep_edit"}

@@ -51,6 +51,8 @@ class SimplifyParams:
     preserve_boundary: bool = _d("preserve_boundary")
     preserve_topology: bool = _d("preserve_topology")
     feature_angle_deg: float = _d("feature_angle_deg")
+    use_symmetry: bool = _d("use_symmetry")
+    symmetry_axis: str = _d("symmetry_axis")   #: 'X', 'Y' or 'Z' (the object's local axes)
     weight_group: str = _d("weight_group")
     lock_group: str = _d("lock_group")
     fit: bool = _d("fit")
@@ -69,9 +71,15 @@ class SimplifyParams:
             ratio=s.ratio if s.target_mode == 'RATIO' else None,
             max_error_pct=s.max_error_pct if s.target_mode == 'ERROR' else None,
             preserve_boundary=s.preserve_boundary, preserve_topology=s.preserve_topology,
-            feature_angle_deg=s.feature_angle_deg, weight_group=s.weight_group,
+            feature_angle_deg=s.feature_angle_deg, use_symmetry=s.use_symmetry,
+            symmetry_axis=s.symmetry_axis, weight_group=s.weight_group,
             lock_group=s.lock_group, fit=s.fit, bind=s.bind, levels=s.levels, scheme=s.scheme,
             hide_source=s.hide_source)
+
+    @property
+    def symmetry(self):
+        """The core's ``symmetry`` argument: the axis, or None."""
+        return self.symmetry_axis if self.use_symmetry else None
 
     def keywords(self):
         """The parameters as keyword arguments of :func:`simplify_object`."""
@@ -164,7 +172,7 @@ def compute_simplify(job, *, progress=None):
                         preserve_topology=p.preserve_topology,
                         feature_angle_deg=None if p.feature_angle_deg >= 180.0
                         else p.feature_angle_deg,
-                        vertex_weights=job.weights, locked=job.locked,
+                        vertex_weights=job.weights, locked=job.locked, symmetry=p.symmetry,
                         progress=simplify_progress)
     job.result = res
     if res.stopped_because == "cancelled":
@@ -185,7 +193,8 @@ def compute_simplify(job, *, progress=None):
         fit_progress = None if progress is None else (lambda f: progress(0.8 + 0.12 * f))
         try:
             fit = core.fit_cage(job.V, job.F, res.V, res.F, levels=fit_levels(job.levels),
-                                scheme=p.scheme, creases=creases, progress=fit_progress)
+                                scheme=p.scheme, creases=creases, symmetry=p.symmetry,
+                                progress=fit_progress)
         except core.MeshAdjustError as exc:
             job.fit_error = user_cause(exc, "fitting", f"{job.source_name}_cage")
         else:
@@ -276,6 +285,8 @@ def commit_simplify(source, job):
             dev = 100.0 * job.distance.hausdorff / max(_diag(job.V), 1e-300)
             msg += (f", max deviation {dev:.2f}% of size (mean "
                     f"{100.0 * job.distance.mean / max(_diag(job.V), 1e-300):.3f}%)")
+        if p.symmetry:
+            msg += f", mirror-symmetric in {p.symmetry}"
         msg += f", {job.seconds:.1f} s"
         warnings = []
         target_note, missed = _target_note(job)
