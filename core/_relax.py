@@ -17,7 +17,7 @@ import numpy as np
 
 from ._clean import BOUNDARY, face_keys, half_edge_ends
 from ._collapse import append_faces, compact, survivors
-from .topology import connected_labels, face_components
+from .topology import connected_labels, edge_keys, face_components
 
 
 def _border(st):
@@ -55,19 +55,18 @@ def close_triangular_holes(st):
     pos = np.minimum(np.searchsorted(fkey, key), fkey.size - 1)
     new = fkey[pos] != key
     hb, u, w, z = hb[new], u[new], w[new], z[new]
-    nn = np.int64(n)
     k = hb.size
     if k == 0:
         return 0
     # rim half-edges by undirected key, to pair the caps' sides with them
     hall = np.flatnonzero(twin == BOUNDARY)
     ua, wa = half_edge_ends(F, hall)
-    ekey = np.minimum(ua, wa) * nn + np.maximum(ua, wa)
+    ekey = edge_keys(ua, wa, n)
     order = np.argsort(ekey)
     ekey, hall = ekey[order], hall[order]
 
     def rim(a, b):
-        q = np.minimum(a, b) * nn + np.maximum(a, b)
+        q = edge_keys(a, b, n)
         return hall[np.searchsorted(ekey, q)]
 
     m = F.shape[0]
@@ -132,8 +131,7 @@ def close_smallest_hole(st):
         return 0
     hi = np.flatnonzero(twin > np.arange(twin.size, dtype=np.int64))
     ea, eb = half_edge_ends(F, np.concatenate([hi, hb]))
-    nn = np.int64(n)
-    edges = np.sort(np.minimum(ea, eb) * nn + np.maximum(ea, eb))
+    edges = np.sort(edge_keys(ea, eb, n))
     for root in roots[np.argsort(length[roots], kind="stable")][:_HOLE_TRIES]:
         members = np.flatnonzero(loop == root)
         local = np.full(hb.size, -1, dtype=np.int64)
@@ -145,7 +143,7 @@ def close_smallest_hole(st):
         for shift in np.unique(np.linspace(0, k, _APEX_TRIES, endpoint=False).astype(np.int64)):
             r = np.roll(ring, -shift)
             v = u[r]                              # v_0 (the apex) .. v_{k-1}
-            q = np.minimum(v[0], v[2:k - 1]) * nn + np.maximum(v[0], v[2:k - 1])
+            q = edge_keys(v[0], v[2:k - 1], n)
             pos = np.minimum(np.searchsorted(edges, q), edges.size - 1)
             if (edges[pos] == q).any():
                 continue

@@ -30,7 +30,12 @@ caller's and frozen non-manifold ones) do not move.
 import numpy as np
 
 from ._collapse import compactness
+from .cg import conjugate_gradient
 from .spatial import TriangleIndex
+
+#: the relocation's solves stop early only once converged this far (they run
+#: ``cg_iters`` steps otherwise: a few steps are enough to move towards the samples)
+CG_RTOL = 1e-10
 
 
 def _gather(idx, b, x):
@@ -171,20 +176,8 @@ def relocate(V, F, P, movable, *, iters=2, cg_iters=15, reg=0.05, min_cos=0.2, N
         # solve (B^T B + lam) D = B^T (T - B V) for the displacement D by CG
         r = _scatter(idx, b, T - _gather(idx, b, V), n)
         r[~movable] = 0.0
-        D = np.zeros((n, 3))
-        Rk = r.copy()
-        Pk = Rk.copy()
-        rs = np.einsum("ij,ij->j", Rk, Rk)
-        for _ in range(cg_iters):
-            Ap = _matvec(idx, b, Pk, lam)
-            pAp = np.einsum("ij,ij->j", Pk, Ap)
-            alpha = np.divide(rs, pAp, out=np.zeros(3), where=pAp > 0)
-            D += alpha * Pk
-            Rk -= alpha * Ap
-            rs_new = np.einsum("ij,ij->j", Rk, Rk)
-            beta = np.divide(rs_new, rs, out=np.zeros(3), where=rs > 0)
-            Pk = Rk + beta * Pk
-            rs = rs_new
+        D = conjugate_gradient(lambda X: _matvec(idx, b, X, lam), r, rtol=CG_RTOL,
+                               max_iterations=cg_iters).X
         D[~movable] = 0.0
         # undo moves that flip or flatten a face (sweeps: undoing can expose others;
         # each sweep zeroes at least one move, and no move at all is valid)

@@ -48,7 +48,7 @@ from ._clean import (BOUNDARY, NON_MANIFOLD, corner_fans, face_keys, half_edge_e
                      non_manifold_vertices, renumber_twins, twin_table)
 from .errors import InvalidArgumentError
 from .mesh import bounding_box, check_mesh, diagonal_length, face_normals
-from .topology import connected_labels
+from .topology import connected_labels, edge_keys
 
 _WHERE = "clean_mesh"
 
@@ -377,14 +377,13 @@ def _one_side_mends(F, twin, n, faces, size):
     g = faces.size
     h = (3 * faces[:, None] + np.arange(3)).ravel()
     U, W = half_edge_ends(F)
-    nn = np.int64(max(n, 1))
-    key = np.minimum(U[h], W[h]) * nn + np.maximum(U[h], W[h])
+    key = edge_keys(U[h], W[h], n)
     t = twin[h]
     count = np.where(t >= 0, 2, 1)
     nm = t == NON_MANIFOLD
     if nm.any():
         hn = np.flatnonzero(twin == NON_MANIFOLD)
-        keys = np.sort(np.minimum(U[hn], W[hn]) * nn + np.maximum(U[hn], W[hn]))
+        keys = np.sort(edge_keys(U[hn], W[hn], n))
         count[nm] = np.searchsorted(keys, key[nm], side="right") - np.searchsorted(keys, key[nm])
     edges, e_of, e_first = _unique_inverse_first(key)
     owner = np.repeat(np.arange(g), 3)

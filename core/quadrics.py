@@ -130,7 +130,7 @@ def _plane_weights(area, area_power):
     return area
 
 
-def _vertex_face_quadrics(V, F, n, area_power):
+def vertex_face_quadrics(V, F, n, area_power):
     """Sum of the face quadrics around each vertex, coefficient-major.
 
     The same numbers as ``accumulate(face_quadrics(V, F, area_power=p),
@@ -209,10 +209,10 @@ def accumulate(Q_items, index, n, *, repeat=1):
     -------
     (n,11) float64
     """
-    return np.ascontiguousarray(_accumulate_T(Q_items, index, n, repeat).T)
+    return np.ascontiguousarray(accumulate_coefficients(Q_items, index, n, repeat).T)
 
 
-def _accumulate_T(Q_items, index, n, repeat):
+def accumulate_coefficients(Q_items, index, n, repeat):
     """``accumulate`` coefficient-major: (11, n). Each bin sums its items in
     the order of ``index`` (one ``bincount`` per coefficient)."""
     QT = np.ascontiguousarray(Q_items.T)

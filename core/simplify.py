@@ -55,7 +55,7 @@ from .errors import InvalidArgumentError, InvalidMeshError, MeshAdjustError
 from .mesh import bounding_box, check_mesh, diagonal_length
 from .metrics import surface_distance
 from .topology import boundary_loops_count, collapsible_edges, face_components
-from .quadrics import _accumulate_T, _vertex_face_quadrics, edge_constraint_quadrics
+from .quadrics import accumulate_coefficients, vertex_face_quadrics, edge_constraint_quadrics
 from .spatial import TriangleIndex
 from .tuning import TUNING, Tuning
 
@@ -202,7 +202,7 @@ def _initial_quadrics(V, F, twin, U, W, preserve_boundary, feature_angle_deg, tu
     ``face_normals(V, F, normalize=False)``). The quadrics are the transposed
     view of an (11,n) C-contiguous array (``State`` keeps that layout)."""
     n = V.shape[0]
-    QT, Nf, Nraw = _vertex_face_quadrics(V, F, n, tun.area_power)  # (11, n)
+    QT, Nf, Nraw = vertex_face_quadrics(V, F, n, tun.area_power)  # (11, n)
     feat = np.zeros(twin.size, dtype=bool)
     items, ends = [], []
     if preserve_boundary:
@@ -232,7 +232,7 @@ def _initial_quadrics(V, F, twin, U, W, preserve_boundary, feature_angle_deg, tu
         Qc[:, 10] = 0.0  # constraint planes do not count as surface area
         # only the vertices on constraint edges change (adding 0.0 elsewhere is exact)
         vc, local = np.unique(Ec, return_inverse=True)
-        QT[:, vc] += _accumulate_T(Qc, local.reshape(Ec.shape).T.ravel(), vc.size, 2)
+        QT[:, vc] += accumulate_coefficients(Qc, local.reshape(Ec.shape).T.ravel(), vc.size, 2)
     return QT.T, feat, Nraw  # (n,11) view of the coefficient-major array the engine uses
 
 

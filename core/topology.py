@@ -24,6 +24,13 @@ class EdgeMap(NamedTuple):
     edge_face_count: np.ndarray  #: (e,) int64, number of faces using each edge
 
 
+def edge_keys(a, b, n_vertices):
+    """One int64 key per undirected edge ``(a[i], b[i])`` of a mesh with
+    ``n_vertices`` vertices: ``min * n + max`` (the same for both
+    directions; sorting the keys sorts the edges by (lower, higher) end)."""
+    return np.minimum(a, b) * np.int64(max(n_vertices, 1)) + np.maximum(a, b)
+
+
 def edge_map(F, n_vertices):
     """Unique edges of ``F`` and the face-to-edge map.
 
@@ -45,9 +52,7 @@ def edge_map(F, n_vertices):
     F = np.asarray(F, dtype=np.int64)
     m = F.shape[0]
     half = F[:, [1, 2, 2, 0, 0, 1]].reshape(-1, 2)
-    lo = np.minimum(half[:, 0], half[:, 1])
-    hi = np.maximum(half[:, 0], half[:, 1])
-    key = lo * np.int64(max(n_vertices, 1)) + hi
+    key = edge_keys(half[:, 0], half[:, 1], n_vertices)
     uniq, inverse, counts = np.unique(key, return_inverse=True, return_counts=True)
     n = np.int64(max(n_vertices, 1))
     E = np.stack([uniq // n, uniq % n], axis=1)
@@ -288,7 +293,7 @@ def collapsible_edges(F, n_vertices, em=None):
     if e == 0:
         return em, np.zeros(0, dtype=bool)
     n = np.int64(max(n_vertices, 1))
-    key = E[:, 0] * n + E[:, 1]                       # sorted (edge_map's order)
+    key = edge_keys(E[:, 0], E[:, 1], n_vertices)     # sorted (edge_map's order)
     # adjacency lists: both directions of every edge, grouped by vertex
     src = np.concatenate([E[:, 0], E[:, 1]])
     dst = np.concatenate([E[:, 1], E[:, 0]])
@@ -302,7 +307,7 @@ def collapsible_edges(F, n_vertices, em=None):
     owner = np.repeat(np.arange(e), reps)
     c = dst[np.repeat(start[a] - np.cumsum(reps) + reps, reps) + np.arange(int(reps.sum()))]
     bb = b[owner]
-    q = np.minimum(bb, c) * n + np.maximum(bb, c)
+    q = edge_keys(bb, c, n_vertices)
     pos = np.minimum(np.searchsorted(key, q), e - 1)
     common = np.bincount(owner, weights=(key[pos] == q) & (c != bb), minlength=e)
     border = count == 1
