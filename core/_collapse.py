@@ -90,6 +90,7 @@ class State:
     c_cost: np.ndarray = _array("half_edge", 0.0)
     c_stale: np.ndarray = _array("half_edge", True)
     c_x: np.ndarray = _array("half_edge_t", 0.0)   #: (3, 3m) cached collapse positions
+    bent: np.ndarray = _array("half_edge", False)  #: last refused only by the dihedral bound
     cur_of_clean: np.ndarray = None              #: current vertex of each clean vertex (-1: removed)
     m_live: int = 0                              #: faces not removed
     worst: float = 0.0                           #: largest error of an accepted collapse
@@ -424,7 +425,7 @@ class _Accepted(NamedTuple):
     wit: np.ndarray
 
 
-def _check_rounds(st, pool, passes, haus, tun):
+def _check_rounds(st, pool, passes, haus, dihedral_cos, tun):
     """Selection rounds over the pool: pick independent collapses, check
     them, accept those within the bound, lock their closed one-rings.
     Rejections are remembered (``c_blk``) until their neighbourhood changes.
@@ -433,20 +434,26 @@ def _check_rounds(st, pool, passes, haus, tun):
     touched = np.zeros(n, dtype=bool)
     acc_edges, acc_wit, acc_rows = [], [], []
     active = np.arange(P, dtype=np.int64)
-    faces = None
+    faces = owned = None
     for _ in range(tun.max_rounds):
         active = active[~touched[pool.A[active]] & ~touched[pool.B[active]]]
         if active.size == 0:
             break
         sel, active, star, kf, faces = _pick_independent(st, pool, active, faces)
-        ok, pen, rows, wnew = _check(st, pool.A[sel], pool.B[sel], pool.X[sel], pool.interior[sel],
-                                     star, kf, tun, haus)
+        ok, pen, rows, wnew, bent = _check(st, pool.A[sel], pool.B[sel], pool.X[sel], pool.interior[sel],
+                                           star, kf, tun, haus, dihedral_cos)
+        st.bent[pool.h[sel]] = bent
         total = pool.raw[sel] + pen
         acc = ok & (total <= _acceptance_bound(pool.limit, total[ok], tun))
         rej = ~acc
         hr = pool.h[sel[rej]]
         st.c_blk[hr] = np.where(ok[rej], total[rej], np.inf)
         st.blk_pass[hr] = passes
+        if dihedral_cos is not None and acc.any():   # each bend was judged against still faces
+            if owned is None:
+                owned = np.zeros(st.F.shape[0], dtype=bool)
+            acc &= ~_next_to_another(st, pool.key[sel], rows, acc, owned)
+            owned[rows[0][_take(acc, rows[1])]] = True
         if acc.any():
             rows = _keep_rows(rows, acc, sum(x.size for x in acc_edges))
             acc_edges.append(sel[acc])
@@ -457,6 +464,28 @@ def _check_rounds(st, pool, passes, haus, tun):
         return None, touched
     rows = tuple(np.concatenate(c) for c in zip(*acc_rows))
     return _Accepted(np.concatenate(acc_edges), rows, np.concatenate(acc_wit)), touched
+
+
+def _next_to_another(st, key, rows, acc, owned):
+    """With a dihedral bound: the collapses ``acc`` (bool per chosen one) a
+    face of whose star borders the star of an accepted collapse (``owned``
+    faces, earlier rounds) or of one chosen now with a smaller ``key``: the
+    bend across that edge was judged against the face as it is, so they
+    wait for the next pass. (k,) bool."""
+    star, kf, coll, cA, cB = rows
+    mine = _take(acc, kf)
+    now = np.full(st.F.shape[0], _BIG, dtype=np.int64)
+    now[star[mine]] = _take(key, kf[mine])
+    r = np.flatnonzero(mine & ~coll)
+    h = 3 * star[r] + np.where(cA[r] >= 0, cA[r], cB[r])   # the far edge of each moved face
+    t = st.twin[h]
+    inner = t >= 0
+    r, fo = r[inner], t[inner] // 3
+    k = kf[r]
+    hit = owned[fo] | (now[fo] < _take(key, k))
+    wait = np.zeros(acc.size, dtype=bool)
+    wait[k[hit]] = True
+    return wait
 
 
 def _trim_to_target(pool, acc, m, target):
@@ -486,12 +515,12 @@ def _keep_rows(rows, keep, offset=0):
 # ---------------------------------------------------------------- checks
 
 
-def _check(st, A, B, X, interior, star, kf, tun, haus=True):
+def _check(st, A, B, X, interior, star, kf, tun, haus=True, dihedral_cos=None):
     """:func:`_check_block` over blocks of collapses, on the worker threads.
     Same results; the star rows come back grouped by block."""
     spans = blocks(A.size, tun.block // 10)
     if len(spans) <= 1:
-        return _check_block(st, A, B, X, interior, star, kf, tun, haus)
+        return _check_block(st, A, B, X, interior, star, kf, tun, haus, dihedral_cos)
     starts = np.array([i for i, _ in spans], dtype=np.int64)
     blk = np.searchsorted(starts, kf, side="right") - 1
     order = np.argsort(blk, kind="stable")
@@ -500,12 +529,13 @@ def _check(st, A, B, X, interior, star, kf, tun, haus=True):
 
     def block(b):
         (i, j), r0, r1 = spans[b], cut[b], cut[b + 1]
-        return _check_block(st, A[i:j], B[i:j], X[i:j], interior[i:j], star[r0:r1], kf[r0:r1] - i, tun, haus)
+        return _check_block(st, A[i:j], B[i:j], X[i:j], interior[i:j], star[r0:r1], kf[r0:r1] - i, tun,
+                            haus, dihedral_cos)
 
     res = run_each(block, range(len(spans)))
-    ok, pen, wnew = (np.concatenate([r[c] for r in res]) for c in (0, 1, 3))
+    ok, pen, wnew, bent = (np.concatenate([r[c] for r in res]) for c in (0, 1, 3, 4))
     coll, cA, cB = (np.concatenate([r[2][c] for r in res]) for c in (2, 3, 4))
-    return ok, pen, (star, kf, coll, cA, cB), wnew
+    return ok, pen, (star, kf, coll, cA, cB), wnew, bent
 
 
 class _Star(NamedTuple):
@@ -691,15 +721,56 @@ def _hausdorff_penalty(st, s, g, A, B, tun):
     return tun.haus_weight * Wq * np.maximum(dA, dB), np.where((dB > dA)[:, None], wB, wA)
 
 
-def _check_block(st, A, B, X, interior, star, kf, tun, haus=True):
+def _bends_too_far(st, s, g, dihedral_cos):
+    """Per collapse: would a pair of adjacent faces it changes bend by more
+    than ``acos(dihedral_cos)`` (the angle between their normals), away from
+    the input's creases? The pairs are the new fan's edges at A (both faces
+    moved) and each moved face's far edge (against the current face beyond).
+    (k,) bool."""
+    n = st.V.shape[0]
+    f = _take(s.star, s.mv)
+    x1 = _take(s.Fs.ravel(), 3 * s.mv + _take(_NEXT, s.cm))
+    x2 = _take(s.Fs.ravel(), 3 * s.mv + _take(_PREV, s.cm))
+    N, l = g.N1, g.l1
+    bad = np.zeros(s.k, dtype=bool)
+    # the fan: the face whose edge A -> x1 runs to x meets the one whose x2 is x
+    k1 = s.mk * np.int64(n) + x1
+    k2 = s.mk * np.int64(n) + x2
+    o2 = np.argsort(k2, kind="stable")
+    pos = np.minimum(np.searchsorted(k2[o2], k1), max(k2.size - 1, 0))
+    if k2.size:
+        b = o2[pos]
+        pair = np.flatnonzero(k2[b] == k1)
+        b = b[pair]
+        crease = (st.feat[3 * f[pair] + _take(_PREV, s.cm[pair])]
+                  | st.feat[3 * f[b] + _take(_NEXT, s.cm[b])])
+        cos_ok = np.einsum("ij,ij->i", N[pair], N[b]) >= dihedral_cos * l[pair] * l[b]
+        bad[s.mk[pair[~cos_ok & ~crease]]] = True
+    # the far edge of each moved face, against the (unchanged) face beyond it
+    h = 3 * f + s.cm
+    t = st.twin[h]
+    out = np.flatnonzero((t >= 0) & ~st.feat[h])
+    if out.size:
+        Fo = _take(st.F, t[out] // 3, axis=0)
+        Vo = [_take(st.V, Fo[:, c], axis=0) for c in range(3)]
+        No = np.cross(Vo[1] - Vo[0], Vo[2] - Vo[0])
+        lo = np.sqrt(np.einsum("ij,ij->i", No, No))
+        cos_ok = np.einsum("ij,ij->i", N[out], No) >= dihedral_cos * l[out] * lo
+        bad[s.mk[out[~cos_ok]]] = True
+    return bad
+
+
+def _check_block(st, A, B, X, interior, star, kf, tun, haus=True, dihedral_cos=None):
     """Validity and penalty of independent collapses B[k] -> A[k] at X[k],
-    judged on the current mesh.
+    judged on the current mesh (``dihedral_cos``: also refuse collapses that
+    bend adjacent faces too far, see :func:`_bends_too_far`).
 
     ``star`` lists every face around the endpoints, ``kf`` the collapse each
     belongs to. Returns ``ok`` (k,) bool, ``penalty`` (k,), the star rows
     ``(star, kf, coll, cA, cB)``: face ids, their collapse index, whether each
-    face is removed, and the corners of A and B in it (-1: absent), and the
-    survivor's witness (k,3).
+    face is removed, and the corners of A and B in it (-1: absent), the
+    survivor's witness (k,3), and ``bent`` (k,) bool: refused only by the
+    dihedral bound.
     """
     s = _star_of(st.F, A, B, star, kf)
     ok = _link_condition(st, s, interior)
@@ -707,24 +778,36 @@ def _check_block(st, A, B, X, interior, star, kf, tun, haus=True):
     ok[s.mk[_turned_faces(st, s, g, A, B, tun)]] = False
     gmin_old, gmin_new = _min_compactness(s, g)
     ok &= ~((gmin_new < tun.gamma_hard) & (gmin_new < 0.5 * gmin_old))   # no new sliver
+    bent = np.zeros(s.k, dtype=bool)
+    if dihedral_cos is not None:
+        bent = ok & _bends_too_far(st, s, g, dihedral_cos)
+        ok &= ~bent
     penalty = _compactness_penalty(st, s, g, A, B, gmin_old, gmin_new, tun)
     wnew = _take(st.wit, A, axis=0)
     if haus and tun.haus_weight > 0.0 and s.mk.size:
         pen_h, wnew = _hausdorff_penalty(st, s, g, A, B, tun)
         penalty = penalty + pen_h
-    return ok, penalty, (star, kf, s.coll, s.cA, s.cB), wnew
+    return ok, penalty, (star, kf, s.coll, s.cA, s.cB), wnew, bent
 
 
 # ---------------------------------------------------------------- the loop
 
 
-def run(st, target, max_err_n, preserve_boundary, progress, m0, tun):
+def run(st, target, max_err_n, preserve_boundary, progress, m0, tun, dihedral_cos=None):
     """The batched collapse loop. Returns (stopped_because, passes); the
-    state is compact afterwards."""
+    state is compact afterwards. With ``dihedral_cos``, collapses that would
+    bend two adjacent faces (off the input's creases) by more than its
+    arccos are refused, and a stop for want of valid collapses while some
+    were refused only for that reads ``"max_dihedral"``."""
     try:
-        return _run(st, target, max_err_n, preserve_boundary, progress, m0, tun)
+        stopped, passes = _run(st, target, max_err_n, preserve_boundary, progress, m0, tun, dihedral_cos)
     finally:
         compact(st)
+    if stopped == "no_valid_collapse" and dihedral_cos is not None:
+        h = np.arange(st.twin.size, dtype=np.int64)
+        if st.bent[(st.twin == BOUNDARY) | (st.twin > h)].any():
+            stopped = "max_dihedral"
+    return stopped, passes
 
 
 def _progress(progress, m0, m, target):
@@ -733,7 +816,7 @@ def _progress(progress, m0, m, target):
     return progress(float(min(max(frac, 0.0), 1.0))) is not False
 
 
-def _run(st, target, max_err_n, preserve_boundary, progress, m0, tun):
+def _run(st, target, max_err_n, preserve_boundary, progress, m0, tun, dihedral_cos):
     passes = 0
     while passes < tun.max_passes:
         if st.m_live < tun.compact_share * st.F.shape[0]:
@@ -764,7 +847,7 @@ def _run(st, target, max_err_n, preserve_boundary, progress, m0, tun):
         pool = _choose_pool(st, e, ci, P, tun)
         # the Hausdorff penalty matters once the cage is coarse: skip it before
         haus = target is None or m <= tun.haus_phase * target
-        acc, touched = _check_rounds(st, pool, passes, haus, tun)
+        acc, touched = _check_rounds(st, pool, passes, haus, dihedral_cos, tun)
         if acc is None:
             continue
         acc = _trim_to_target(pool, acc, m, target)

@@ -70,7 +70,8 @@ _WHERE = "simplify"
 MAX_ERROR_STEPS = (0.3, 0.5, 0.7, 0.85, 1.0)
 MAX_ERROR_QUICK_SAMPLES = 20_000
 
-STOP_REASONS = ("target", "max_error", "topology_floor", "no_valid_collapse", "cancelled")
+STOP_REASONS = ("target", "max_error", "max_dihedral", "topology_floor", "no_valid_collapse",
+                "cancelled")
 
 
 @dataclass(frozen=True)
@@ -93,7 +94,9 @@ class SimplifyResult:
         not counted in it.
     stopped_because : str, one of ``STOP_REASONS``: ``"target"``,
         ``"max_error"`` (the next collapse would exceed it, or the measured
-        distance did), ``"topology_floor"`` (short of the target, every edge
+        distance did), ``"max_dihedral"`` (short of the target, the
+        collapses left would bend adjacent faces beyond ``max_dihedral_deg``),
+        ``"topology_floor"`` (short of the target, every edge
         left would change the topology: border loops, genus, components or
         locked vertices are kept), ``"no_valid_collapse"`` (short of the
         target, the geometric checks refuse the rest) or ``"cancelled"``
@@ -139,6 +142,8 @@ class SimplifyResult:
         text = {
             "target": f"{self.n_input_faces:,} → {m:,} faces",
             "max_error": f"{self.n_input_faces:,} → {m:,} faces, where the error bound stopped it",
+            "max_dihedral": f"stopped at {m:,} faces{asked}: every collapse left would bend two "
+                            f"faces beyond the dihedral bound",
             "topology_floor": f"stopped at {m:,} faces{asked}: the topology floor ({kept})",
             "no_valid_collapse": f"stopped at {m:,} faces{asked}: every collapse left would fold "
                                  f"or squash a face",
@@ -148,7 +153,8 @@ class SimplifyResult:
         return f"{text}; {done}" if done else text
 
 
-def _check_args(n, target_faces, ratio, max_error, feature_angle_deg, vertex_weights, locked, progress):
+def _check_args(n, target_faces, ratio, max_error, feature_angle_deg, vertex_weights, locked, progress,
+                max_dihedral_deg=None):
     if target_faces is None and ratio is None and max_error is None:
         raise InvalidArgumentError(
             f"{_WHERE}: give at least one of target_faces, ratio or max_error, e.g. ratio=0.1")
@@ -172,6 +178,11 @@ def _check_args(n, target_faces, ratio, max_error, feature_angle_deg, vertex_wei
         if not (0.0 < a <= 180.0):
             raise InvalidArgumentError(
                 f"{_WHERE}: feature_angle_deg must be in (0, 180] or None, got {feature_angle_deg!r}")
+    if max_dihedral_deg is not None:
+        a = float(max_dihedral_deg)
+        if not (0.0 < a < 180.0):
+            raise InvalidArgumentError(
+                f"{_WHERE}: max_dihedral_deg must be in (0, 180) or None, got {max_dihedral_deg!r}")
     w = None
     if vertex_weights is not None:
         w = np.asarray(vertex_weights)
@@ -248,6 +259,20 @@ def _normal_sums(F, N, n):
         w.reshape(-1, 3)[:] = N[:, k, None]  # np.repeat(N[:, k], 3) without a new array
         out[:, k] = np.bincount(Fr, weights=w, minlength=n)
     return out
+
+
+def _bend_cosines(mesh):
+    """Cosine of the angle between the normals of the two faces of every
+    interior edge of the (compact) engine mesh off the input's creases, one
+    per edge in half-edge order (1 where a face has no area)."""
+    F, V, twin = mesh.F, mesh.V, mesh.twin
+    h = np.flatnonzero((twin > np.arange(twin.size, dtype=np.int64)) & ~mesh.feat)
+    N = np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]])
+    Na, Nb = N[h // 3], N[twin[h] // 3]
+    la = np.linalg.norm(Na, axis=1)
+    lb = np.linalg.norm(Nb, axis=1)
+    d = la * lb
+    return np.where(d > 0, np.einsum("ij,ij->i", Na, Nb) / np.where(d > 0, d, 1.0), 1.0)
 
 
 def _relocate_cage(mesh, Vn, creases, Eb_in, surface, tun):
@@ -354,7 +379,12 @@ def _cage_of(su, mesh, stopped, passes, opts, relocate=True):
     tun = opts["tuning"]
     if (relocate and tun.relocate_iters > 0 and passes > 0
             and mesh.F.shape[0] <= min(tun.relocate_max_faces, tun.relocate_max_share * su.m0)):
+        V0, moved0 = mesh.V, mesh.moved.copy()
+        bend0 = _bend_cosines(mesh)
         _relocate_cage(mesh, su.Vn, su.creases, su.Eb_in, su.Fin, tun)
+        cos_max = opts["dihedral_cos"]
+        if cos_max is not None and ((_bend_cosines(mesh) < cos_max) & (bend0 >= cos_max)).any():
+            mesh.V, mesh.moved = V0, moved0      # it would bend faces beyond the bound: undone
     # back to the caller's units; vertices never moved keep their exact input position
     Vout = mesh.V * su.scale + su.centre
     still = ~mesh.moved
@@ -393,7 +423,8 @@ def _run_all(mesh, target, max_err_n, opts, progress, m0):
     tun = opts["tuning"]
     if target is not None and m0 <= target:
         return "target", 0
-    stopped, passes = run(mesh, target, max_err_n, opts["preserve_boundary"], progress, m0, tun)
+    stopped, passes = run(mesh, target, max_err_n, opts["preserve_boundary"], progress, m0, tun,
+                          opts["dihedral_cos"])
     while not opts["preserve_topology"] and stopped == "no_valid_collapse":
         # the link condition stopped every collapse: close 3-edge holes, drop
         # components that cannot shrink, cap the shortest longer hole, and go on
@@ -406,7 +437,8 @@ def _run_all(mesh, target, max_err_n, opts, progress, m0):
             changed = close_smallest_hole(mesh)
         if not changed:
             break
-        stopped, more = run(mesh, target, max_err_n, opts["preserve_boundary"], progress, m0, tun)
+        stopped, more = run(mesh, target, max_err_n, opts["preserve_boundary"], progress, m0, tun,
+                            opts["dihedral_cos"])
         passes += more
     return stopped, passes
 
@@ -478,7 +510,7 @@ def _within_max_error(clean, target, max_error, opts, progress):
 def simplify(V, F, *, target_faces=None, ratio=None, max_error=None, preserve_boundary=True,
              preserve_topology=True, feature_angle_deg=60.0, vertex_weights=None, locked=None,
              weld_distance=WELD_DISTANCE, min_component_area=MIN_COMPONENT_AREA, symmetry=None,
-             progress=None, tuning=None):
+             max_dihedral_deg=None, progress=None, tuning=None):
     """Simplify a triangle mesh to a coarse, clean manifold cage (QEM).
 
     The input is cleaned first (:func:`core.clean.clean_mesh`: welded,
@@ -504,6 +536,12 @@ def simplify(V, F, *, target_faces=None, ratio=None, max_error=None, preserve_bo
         (see ``_within_max_error``). At least one of ``target_faces``,
         ``ratio``, ``max_error`` is needed; the run stops at whichever is
         reached first.
+    max_dihedral_deg : float in (0, 180), optional
+        Refuse every collapse that would bend two adjacent cage faces (the
+        angle between their normals) by more than this, except across the
+        input's creases (``feature_angle_deg``); the final relocation is
+        undone if it would. Short of the target for that reason,
+        ``stopped_because == "max_dihedral"``.
     preserve_boundary : bool
         Add heavy constraint planes on open borders so they keep their shape;
         an interior edge with one boundary endpoint collapses onto it.
@@ -579,7 +617,7 @@ def simplify(V, F, *, target_faces=None, ratio=None, max_error=None, preserve_bo
     V, F = check_mesh(V, F, where=_WHERE)
     n_in = V.shape[0]
     weights, lk = _check_args(n_in, target_faces, ratio, max_error, feature_angle_deg, vertex_weights,
-                              locked, progress)
+                              locked, progress, max_dihedral_deg)
     # components too small for one face of the target are debris (not with max_error:
     # dropping one could break its bound)
     budget = None
@@ -605,6 +643,7 @@ def simplify(V, F, *, target_faces=None, ratio=None, max_error=None, preserve_bo
     to_input = clean.clean_to_input
     opts = dict(tuning=TUNING if tuning is None else tuning, preserve_boundary=preserve_boundary,
                 preserve_topology=preserve_topology, feature_angle_deg=feature_angle_deg,
+                dihedral_cos=None if max_dihedral_deg is None else float(np.cos(np.radians(max_dihedral_deg))),
                 weights=None if weights is None else weights[to_input],
                 locked=None if lk is None else lk[to_input])
     hausdorff = None
