@@ -33,9 +33,11 @@ Incremental deform (``deform(b, V, moved=ids, out=D)``, for live editing):
 the dependency chain cage vertex -> fine positions (the operator's support)
 -> fine normals (one fine ring) -> fine faces -> bound dense vertices is
 followed on index sets of the fine mesh (a fine face -> dense vertices index
-built on first use), fine positions and normals are computed only where they
-are read, and only those dense rows are rebuilt: the cost is proportional to
-what moves, not to the dense mesh.
+built on first use). Every deform keeps the subdivided cage it computed
+(each level's positions and the fine normals); an incremental one
+recomputes there only the positions and normals that change, and only those
+dense rows: the cost is proportional to what moves, not to the dense or
+the fine mesh.
 
 Properties (tested): ``deform(bind(D, C), C) == D`` to rounding; a rigid motion
 of the cage moves the dense mesh rigidly; moving one cage vertex moves only the
@@ -71,6 +73,10 @@ _BIND_BLOCK = 131_072
 
 #: fine vertices per block of the local detail search (``detail_search="local"``)
 _DETAIL_BLOCK = 16_384
+
+#: dense rows per block of an incremental deform's frame rebuild (bounds the
+#: temporaries: (3, 16384) float64 is 384 KiB)
+_ROW_BLOCK = 16_384
 
 #: serialises incremental deforms (they share scratch tables in the binding's
 #: cache; a module lock, not one per binding, so a Binding stays picklable)
@@ -262,7 +268,7 @@ class Binding:
         if ids.size == 0:
             return np.zeros(0, dtype=np.int64)
         with _INCREMENTAL_LOCK:
-            return np.sort(_influenced_dense(self, ids)[0])
+            return np.sort(_influenced_dense(self, ids).rows)
 
 
 def bind(V_dense, F_dense, V_cage, F_cage, *, levels=2, scheme="butterfly", creases=None,
@@ -414,17 +420,19 @@ def deform(binding, V_cage_edited, *, F_cage=None, moved=None, out=None):
         Vc = _check_cage(binding, V_cage_edited, F_cage, "deform")
         if ids.size:
             with _INCREMENTAL_LOCK:
-                rows, needed = _influenced_dense(binding, ids)
-                if rows.size:
-                    lut, P, N = _fine_geometry_at(binding, Vc, needed)
-                    c = binding._cache
-                    corners = lut[np.take(c["corners_t"], rows, axis=1)]
-                    fr = _frames_t(P, N, corners, np.take(c["bary_t"], rows, axis=1))
-                    out[rows] = _from_frame_t(np.take(c["offset_t"], rows, axis=1), *fr)
+                hit = _influenced_dense(binding, ids)
+                P, N = _update_fine_geometry(binding, Vc, ids, hit)
+                if hit.rows.size:
+                    _deform_rows(binding, P, N, hit, out)
         return out
-    Vf, Nf = _fine_geometry(binding, V_cage_edited, F_cage, "deform")
+    Vc = _check_cage(binding, V_cage_edited, F_cage, "deform")
+    X = _fine_levels(binding, Vc)
+    Nf = _vertex_normals_t(X[-1], binding._operator.F_fine)
     c = binding._cache
-    D = _from_frame_t(c["offset_t"], *_frames_t(Vf, Nf, c["corners_t"], c["bary_t"]))
+    D = _from_frame_t(c["offset_t"], *_frames_t(X[-1], Nf, c["corners_t"], c["bary_t"]))
+    # kept for the incremental deforms that follow (a new object: one in use
+    # by an incremental deform is never changed under it)
+    c["geometry"] = _Geometry.of(Vc, X, Nf)
     if out is None:
         return D
     out[...] = D
@@ -458,20 +466,52 @@ def _check_moved(binding, moved, where="deform"):
     return np.unique(ids)
 
 
+class _Influenced(NamedTuple):
+    """What an incremental deform recomputes (see :func:`_influenced_dense`)."""
+
+    rows: np.ndarray       #: (r,) int64 dense vertices, grouped by fine face
+    sorted_at: np.ndarray  #: (r,) int64 their positions in the face-sorted order
+    faces: np.ndarray      #: (f,) int64 the fine faces they are bound to, ascending
+    changed: tuple         #: per level 1..L, the (k_l,) int64 vertices whose position changes
+    normals: np.ndarray    #: (j,) int64 fine vertices whose normal changes (unordered)
+
+
+def _deform_rows(binding, P, N, hit, out):
+    """Rebuild the dense rows ``hit.rows`` of ``out`` on the fine positions
+    and normals ``P``, ``N`` (3, n_fine) (the incremental deform's row work).
+
+    The rows are grouped by fine face, so their corners come from one
+    ``np.repeat`` of the faces' corners and their barycentric coordinates and
+    offsets from the face-sorted copies (contiguous runs, not a scattered
+    gather); the frames are built in blocks of ``_ROW_BLOCK`` rows. Each
+    row goes through the same operations as in a full deform."""
+    op = binding._operator
+    idx = binding._cache["incremental"]
+    cornersT = np.repeat(op.F_fine[hit.faces].T, idx["dense_count"][hit.faces], axis=1)
+    baryT = np.take(idx["bary_by_face"], hit.sorted_at, axis=1)
+    offsetT = np.take(idx["offset_by_face"], hit.sorted_at, axis=1)
+    rows = hit.rows
+    for s in range(0, rows.shape[0], _ROW_BLOCK):
+        e = min(s + _ROW_BLOCK, rows.shape[0])
+        fr = _frames_t(P, N, cornersT[:, s:e], baryT[:, s:e])
+        out[rows[s:e]] = _from_frame_t(offsetT[:, s:e], *fr)
+
+
 def _influenced_dense(binding, ids):
-    """Dense vertices (int64, grouped by fine face) whose deformed position
-    depends on the cage vertices ``ids``, and the fine vertices whose normals
-    they read: ``(rows, needed)``, ``needed`` an (n_fine,) bool mask.
+    """Dense vertices whose deformed position depends on the cage vertices
+    ``ids``, as an :class:`_Influenced` (the rows grouped by fine face, those
+    faces, each level's changed positions and the changed fine normals).
 
     The chain, all on index sets of the fine mesh (O(fine support + result),
-    never O(dense mesh)): fine vertices the stencils reach from ``ids`` level
-    by level with nonzero weights (positions change) -> every corner of a
-    fine face touching them (normals change) -> the fine faces with such a
-    corner (their bound dense vertices move) -> the corners of those faces
-    (``needed``). The fine face -> dense vertices, fine vertex -> fine faces
-    and transposed stencil indices are built on first use and cached in the
-    binding, with the last answer (so :meth:`Binding.influenced` followed by
-    the deform of the same ids searches once).
+    never O(dense or fine mesh): distinct values by :func:`_distinct`, no
+    mesh-sized mask): fine vertices the stencils reach from ``ids`` level by
+    level with nonzero weights (positions change) -> every corner of a fine
+    face touching them (normals change) -> the fine faces with such a corner
+    (their bound dense vertices move). The fine face -> dense vertices, fine
+    vertex -> fine faces and transposed stencil indices are built on first
+    use and cached in the binding, with the last answer (so
+    :meth:`Binding.influenced` followed by the deform of the same ids
+    searches once).
     """
     op = binding._operator
     idx = _incremental_index(binding)
@@ -480,22 +520,17 @@ def _influenced_dense(binding, ids):
     if last is not None and last[0] == key:    # Binding.influenced, then deform, same ids
         return last[1]
     Ff = op.F_fine
-    m_fine = Ff.shape[0]
-    pos_changed = ids
+    stamp = idx["stamp"]
+    changed, pos_changed = [], ids
     for T in idx["levels_t"]:        # level by level: the rows reading a changed vertex
-        k, _ = ragged_ranges(T.indptr[pos_changed], T.indptr[pos_changed + 1]
-                             - T.indptr[pos_changed])
-        mask = np.zeros(T.n_out, dtype=bool)
-        mask[T.cols[k]] = True
-        pos_changed = np.flatnonzero(mask)
-    touched = _faces_around(idx, pos_changed, m_fine)
-    normal_changed = np.zeros(op.n_fine, dtype=bool)
-    normal_changed[Ff[touched].ravel()] = True
-    faces = _faces_around(idx, np.flatnonzero(normal_changed), m_fine)
-    needed = np.zeros(op.n_fine, dtype=bool)
-    needed[Ff[faces].ravel()] = True
-    k, _ = ragged_ranges(idx["dense_start"][faces], idx["dense_count"][faces])
-    result = (idx["dense_by_face"][k], needed)
+        k = _ranges(T.indptr[pos_changed], T.indptr[pos_changed + 1] - T.indptr[pos_changed])
+        pos_changed = _distinct(T.cols[k], stamp)
+        changed.append(pos_changed)
+    touched = _faces_around(idx, pos_changed)
+    normal_changed = _distinct(Ff[touched].ravel(), stamp)
+    faces = np.sort(_faces_around(idx, normal_changed, with_rows=True))
+    k = _ranges(idx["dense_start"][faces], idx["dense_count"][faces])
+    result = _Influenced(idx["dense_by_face"][k], k, faces, tuple(changed), normal_changed)
     idx["last"] = (key, result)
     return result
 
@@ -510,15 +545,28 @@ def _incremental_index(binding):
         d_count = np.bincount(binding.fine_face, minlength=m_fine)
         flat = op.F_fine.ravel()
         v_count = np.bincount(flat, minlength=op.n_fine)
+        faces_by_vertex = np.argsort(flat, kind="stable") // 3
+        # the same, for the faces with bound dense vertices only (fewer than the
+        # fine faces when the fine mesh is denser than the dense one)
+        has_rows = d_count > 0
+        row_faces = faces_by_vertex[has_rows[faces_by_vertex]]
+        r_count = np.bincount(flat[np.repeat(has_rows, 3)], minlength=op.n_fine)
+        by_face = np.argsort(binding.fine_face, kind="stable")
         c["incremental"] = {
-            "dense_by_face": np.argsort(binding.fine_face, kind="stable"),
+            "dense_by_face": by_face,
+            # the rows' barycentric coordinates and offsets in that order: the rows of
+            # an incremental deform are runs of it
+            "bary_by_face": np.ascontiguousarray(np.take(c["bary_t"], by_face, axis=1)),
+            "offset_by_face": np.ascontiguousarray(np.take(c["offset_t"], by_face, axis=1)),
             "dense_count": d_count, "dense_start": np.cumsum(d_count) - d_count,
-            "faces_by_vertex": np.argsort(flat, kind="stable") // 3,
+            "faces_by_vertex": faces_by_vertex,
             "vertex_count": v_count, "vertex_start": np.cumsum(v_count) - v_count,
+            "row_faces_by_vertex": row_faces,
+            "row_vertex_count": r_count, "row_vertex_start": np.cumsum(r_count) - r_count,
             "levels_t": [_transposed(S) for S in op.stencils],
-            # per level, a fine-id -> compact-position table, written only where
-            # used (incremental deforms share it: they run under _INCREMENTAL_LOCK)
-            "lut": [np.empty(S.n_out, dtype=np.int64) for S in op.stencils],
+            # scratch for _distinct, over fine vertices and faces (incremental deforms
+            # share it: they run under _INCREMENTAL_LOCK)
+            "stamp": np.empty(max(op.n_fine, m_fine, binding.n_cage), dtype=np.int64),
         }
     return c["incremental"]
 
@@ -535,12 +583,31 @@ def _transposed(S):
     return _Rows(indptr, rows[order], np.zeros(0), S.n_out)
 
 
-def _faces_around(idx, vertices, m_fine):
-    """Sorted distinct fine faces incident to the given fine vertices."""
-    k, _ = ragged_ranges(idx["vertex_start"][vertices], idx["vertex_count"][vertices])
-    mask = np.zeros(m_fine, dtype=bool)
-    mask[idx["faces_by_vertex"][k]] = True
-    return np.flatnonzero(mask)
+def _faces_around(idx, vertices, with_rows=False):
+    """Distinct fine faces incident to the given distinct fine vertices
+    (unordered); with ``with_rows``, only faces some dense vertex is bound to."""
+    pre = "row_" if with_rows else ""
+    k = _ranges(idx[pre + "vertex_start"][vertices], idx[pre + "vertex_count"][vertices])
+    return _distinct(idx[pre + "faces_by_vertex"][k], idx["stamp"])
+
+
+def _ranges(starts, counts):
+    """Concatenated ``arange(starts[i], starts[i] + counts[i])``: the entries
+    of :func:`~._groups.ragged_ranges` without their owners (one ``repeat``
+    instead of two)."""
+    offsets = np.cumsum(counts) - counts
+    return np.arange(int(offsets[-1] + counts[-1]) if counts.shape[0] else 0,
+                     dtype=np.int64) + np.repeat(starts - offsets, counts)
+
+
+def _distinct(values, stamp):
+    """The distinct values of the int64 array ``values`` (unordered), in
+    O(len(values)) whatever their range: each value's slot of the scratch
+    array ``stamp`` (longer than the largest value) receives the position of
+    one of its occurrences, and exactly that occurrence is kept."""
+    pos = np.arange(values.shape[0], dtype=np.int64)
+    stamp[values] = pos
+    return values[stamp[values] == pos]
 
 
 def refine(binding, V_cage_edited, *, F_cage=None):
@@ -714,50 +781,80 @@ def _vertex_normals_t(PT, F):
     return out
 
 
-def _fine_geometry_at(binding, Vc, needed):
-    """Fine positions and normals at the vertices ``needed`` and the corners
-    of the faces around them: ``(lut, P, N)``, ``P`` and ``N`` transposed
-    (3, k), column ``lut[v]`` for fine vertex ``v`` (``lut`` is valid at
-    those vertices only; it is the binding's scratch table, so callers hold
-    ``_INCREMENTAL_LOCK``).
+class _Geometry(NamedTuple):
+    """The subdivided cage of the last deform, kept for incremental ones."""
 
-    Positions are evaluated level by level, each level only at the vertices
-    the next one reads (found backwards), with the level's own stencil rows,
-    on compact arrays (no fine-sized array is written); normals are summed
-    over the faces around ``needed``, in the order of
-    :func:`_vertex_normals_t`. Equal to the full computation to rounding
-    (the rows sum in another order than the apply plan's tables)."""
+    V_cage: np.ndarray   #: (n_cage,3) float64, the cage it was computed from
+    levels: list         #: per level 0..L, positions transposed (3, n_l); 0 the cage
+    normals: np.ndarray  #: (3, n_fine) fine vertex normals, valid where not ``stale``
+    stale: np.ndarray    #: (n_fine,) bool: normal changed, not recomputed (no row reads it)
+
+    @classmethod
+    def of(cls, Vc, X, normals):
+        return cls(Vc.copy(), X, normals, np.zeros(normals.shape[1], dtype=bool))
+
+
+def _fine_levels(binding, Vc):
+    """Positions of every level, transposed (3, n_l), level 0 the cage (the
+    apply of :meth:`~.subdivide.SubdivisionOperator.apply`, its
+    intermediates kept; the same values)."""
+    X = [np.ascontiguousarray(Vc.T)]
+    for S in binding._operator.stencils:
+        X.append(S.apply_t(X[-1]))
+    return X
+
+
+def _update_fine_geometry(binding, Vc, ids, hit):
+    """Fine positions and normals (3, n_fine) for the cage ``Vc``, from the
+    kept :class:`_Geometry` (callers hold ``_INCREMENTAL_LOCK``).
+
+    When the kept cage differs from ``Vc`` at most at ``ids``, only what
+    they move is recomputed, in place: each level's changed vertices
+    (``hit.changed``) from their stencil rows over the level below, then the
+    changed normals the rows read (at the corners of ``hit.faces``) from
+    the faces around them, in the order of :func:`_vertex_normals_t`. A
+    changed normal at a vertex with no bound dense vertex on its faces (a
+    fine mesh denser than the dense one) is never read: it is only marked
+    stale. Each value is recomputed from the level below, never updated
+    by a difference, so nothing drifts over many updates (rows sum in
+    another order than the apply plan's tables: equal to a full evaluation
+    to about 1e-16). Otherwise (nothing kept yet, or another cage)
+    everything is evaluated and kept."""
+    c = binding._cache
+    g = c.get("geometry")
+    other = None
+    if g is not None:
+        other = (g.V_cage != Vc).any(axis=1)
+        other[ids] = False
+    if g is None or other.any():
+        X = _fine_levels(binding, Vc)
+        g = _Geometry.of(Vc, X, _vertex_normals_t(X[-1], binding._operator.F_fine))
+        c["geometry"] = g
+        return g.levels[-1], g.normals
     op = binding._operator
-    idx = _incremental_index(binding)
-    faces = _faces_around(idx, np.flatnonzero(needed), op.F_fine.shape[0])
-    Fs = op.F_fine[faces]
-    at = np.zeros(op.n_fine, dtype=bool)
-    at[Fs.ravel()] = True
-    verts = np.flatnonzero(at)
-    wanted = [verts]
-    for S in reversed(op.stencils[1:]):     # what each level reads of the one before
-        r = wanted[-1]
-        k, _ = ragged_ranges(S.indptr[r], S.indptr[r + 1] - S.indptr[r])
-        mask = np.zeros(S.n_in, dtype=bool)
-        mask[S.cols[k]] = True
-        wanted.append(np.flatnonzero(mask))
-    X, lut = Vc, None                       # lut: fine id -> row of X (None: the identity)
-    for S, r, table in zip(op.stencils, reversed(wanted), idx["lut"]):
+    X = g.levels
+    X[0][:, ids] = Vc[ids].T
+    g.V_cage[ids] = Vc[ids]
+    for S, r, below, level in zip(op.stencils, hit.changed, X[:-1], X[1:]):
         k, owner = ragged_ranges(S.indptr[r], S.indptr[r + 1] - S.indptr[r])
         w, cols = S.weights[k], S.cols[k]
-        if lut is not None:
-            cols = lut[cols]
-        Y = np.empty((r.shape[0], 3))
         for d in range(3):
-            Y[:, d] = np.bincount(owner, weights=w * X[cols, d], minlength=r.shape[0])
-        table[r] = np.arange(r.shape[0])
-        X, lut = Y, table
-    if lut is None:                         # no levels: the cage itself
-        lut = np.empty(op.n_fine, dtype=np.int64)
-        X = X[verts]
-        lut[verts] = np.arange(verts.shape[0])
-    XT = np.ascontiguousarray(X.T)
-    return lut, XT, _vertex_normals_t(XT, lut[Fs])    # same faces, same order: same sums
+            level[d, r] = np.bincount(owner, weights=w * below[d].take(cols), minlength=r.shape[0])
+    VfT, NfT = X[-1], g.normals
+    g.stale[hit.normals] = True
+    idx = c["incremental"]
+    stamp = idx["stamp"]
+    read = _distinct(op.F_fine[hit.faces].ravel(), stamp)
+    redo = read[g.stale[read]]
+    if redo.size:
+        # from the faces around them, on their own vertices (compact ids)
+        Fs = op.F_fine[np.sort(_faces_around(idx, redo))]
+        verts = _distinct(Fs.ravel(), stamp)
+        stamp[verts] = np.arange(verts.shape[0])
+        N = _vertex_normals_t(np.take(VfT, verts, axis=1), stamp[Fs])
+        NfT[:, redo] = np.take(N, stamp[redo], axis=1)
+        g.stale[redo] = False
+    return VfT, NfT
 
 
 class _Rows(NamedTuple):

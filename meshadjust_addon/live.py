@@ -34,7 +34,6 @@ def refine_pending():
     directly, e.g. in tests). Returns None so the timer does not repeat."""
     names = list(_pending)
     _pending.clear()
-    live_update.forget()
     output = 'EDITED'
     scene = bpy.context.scene
     if scene is not None and hasattr(scene, "meshadjust"):

@@ -32,7 +32,8 @@ our bind against Surface Deform's and full against incremental deform
 
 Part 5, live (``--only live``): one live update of a 1M-vertex scan through
 the add-on (simplify + bind by the operator, then 5 neighbouring cage
-vertices moved and ``live_update.update_edited``), with its breakdown.
+vertices moved and ``live_update.update_edited``), with its breakdown; at
+the add-on's default levels (Auto: five for this scan) and at two.
 
 Part 3, fit (when ../shared/meshes is present): the QEM cage of 2,000
 faces of the bunny, homer, rocker-arm and spot, before and after
@@ -373,14 +374,15 @@ def fold_cases(quick):
 
 
 # ------------------------------------------------------------------ live update
-def run_live(quick, updates=5, seed=0, levels=2):
+def run_live(quick, updates=5, seed=0, levels=0):
     """One live update of a bound scan through the add-on, in Blender: a
     bumpy torus (1M vertices; 62.5k with --quick) simplified to a 2,000-face
-    cage and bound (Loop, ``levels``, default 2) by the add-on's own operator; then, per
-    update, a cage vertex and 4 of its neighbours are moved and
-    ``live_update.update_edited`` brings the edited original up to date.
-    Returns (info, list of LiveTiming, seconds of the depsgraph evaluation
-    after each update, max |evaluated - core.deform|)."""
+    cage and bound (Loop, ``levels``; 0, the default, is the add-on's own
+    default, Auto: the levels closest to the source's face count) by the
+    add-on's own operator; then, per update, a cage vertex and 4 of its
+    neighbours are moved and ``live_update.update_edited`` brings the edited
+    original up to date. Returns (info, list of LiveTiming, seconds of the
+    depsgraph evaluation after each update, max |evaluated - core.deform|)."""
     n_major, n_minor = (250, 250) if quick else (1000, 1000)
     Vd, Fd = bumpy_torus(n_major, n_minor)
     bpy = empty_scene()
@@ -416,13 +418,15 @@ def run_live(quick, updates=5, seed=0, levels=2):
     binding = addon.store.load_binding(edited, cage)
     V_src = lu.cage_in_source_space(cage, dense)
     err = float(np.abs(got - package.core.deform(binding, V_src)).max())
+    used = binding.levels
     info = (f"bumpy torus {Vd.shape[0]:,} vertices / {Fd.shape[0]:,} faces, cage "
-            f"{Fc.shape[0]:,} faces, Loop x{levels} (simplify + bind through the operator "
+            f"{Fc.shape[0]:,} faces, Loop x{used}{' (Auto, the add-on default)' if not levels else ''} "
+            f"(simplify + bind through the operator "
             f"{t_setup:.1f} s; first update, a full deform: {1e3 * first.total:.0f} ms)")
     return info, timings, evals, err
 
 
-def _live_section(quick, levels=2):
+def _live_section(quick, levels=0):
     info, timings, evals, err = run_live(quick, levels=levels)
     lines = ["## Live update (add-on, bpy): 5 neighbouring cage vertices moved", "", info, "",
              "| update | moved | dense rows | read cage ms | compare ms | deform ms | "
@@ -446,14 +450,19 @@ def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="smaller meshes, no results file")
     ap.add_argument("--levels", type=int, default=2,
-                    help="subdivision levels of the folds and live parts (fits use at most 2)")
+                    help="subdivision levels of the folds part (fits use at most 2)")
+    ap.add_argument("--live-levels", type=int, action="append",
+                    help="levels of the live part (repeatable; 0 = Auto, the add-on's default; "
+                         "default: 0 and 2)")
     ap.add_argument("--only", choices=("bend", "scale", "fit", "folds", "live"), action="append",
                     help="run only these parts (repeatable); the results file is then not written")
     args = ap.parse_args(argv)
     parts = set(args.only or ("bend", "scale", "fit", "folds", "live"))
-    lines = []
+    lines = [f"run of {time.strftime('%Y-%m-%d %H:%M', time.gmtime())} UTC, 1-minute load average at the "
+             f"start {os.getloadavg()[0]:.1f}", ""]
     if "live" in parts:
-        lines += _live_section(args.quick, args.levels)
+        for levels in args.live_levels or (0, 2):
+            lines += _live_section(args.quick, levels)
     if "folds" in parts:
         lines += _folds_section(args.quick, args.levels)
     if "bend" in parts:

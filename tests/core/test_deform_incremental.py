@@ -196,3 +196,57 @@ def test_binding_stays_picklable_after_an_incremental_deform(case):
     deform(b, Vc + 0.01, moved=[0, 1], out=D)
     b2 = pickle.loads(pickle.dumps(b))
     assert np.array_equal(deform(b2, Vc + 0.01), deform(b, Vc + 0.01))
+
+
+def test_long_chain_without_a_full_deform_between(torus_case):
+    """The kept fine geometry is updated in place (stale normals recomputed
+    when first read): a chain of overlapping updates, each checked against a
+    full deform on a copy of the binding (which keeps its own geometry)."""
+    import pickle
+    Vd, Vc, b = torus_case
+    ref = pickle.loads(pickle.dumps(b))
+    rng = np.random.default_rng(11)
+    D = deform(b, Vc)
+    Ve = Vc.copy()
+    centres = rng.choice(Vc.shape[0], 3, replace=False)
+    for step in range(12):
+        # around one of three places in turn, so changed-but-unread normals get read later
+        near = np.argsort(np.linalg.norm(Vc - Vc[centres[step % 3]], axis=1))[:rng.integers(1, 6)]
+        Ve[near] += 0.02 * rng.standard_normal((near.shape[0], 3))
+        deform(b, Ve, moved=near, out=D)
+        assert np.abs(D - deform(ref, Ve)).max() <= _tol(Vd)
+
+
+def test_incremental_after_a_deform_of_another_cage(torus_case):
+    """``out`` from one cage, the kept geometry from another: the geometry is
+    recomputed and the result still equals the full deform."""
+    Vd, Vc, b = torus_case
+    rng = np.random.default_rng(5)
+    V1 = Vc + 0.01 * rng.standard_normal(Vc.shape)
+    V2 = Vc + 0.01 * rng.standard_normal(Vc.shape)
+    D = deform(b, V2)
+    deform(b, V1)                         # keeps V1's geometry
+    V3 = V2.copy()
+    V3[[3, 8]] += 0.03
+    deform(b, V3, moved=[3, 8], out=D)
+    assert np.abs(D - deform(b, V3)).max() <= _tol(Vd)
+
+
+@pytest.mark.parametrize("scheme", ["butterfly", "loop"])
+def test_chain_on_a_fine_mesh_denser_than_the_dense_one(scheme):
+    """Most fine faces have no dense vertex bound to them: the normals no row
+    reads are not kept up to date, the ones rows read are."""
+    import pickle
+    Vd, Fd = _bumpy_sphere(k=3)
+    cage = simplify(Vd, Fd, target_faces=80)
+    b = bind(Vd, Fd, cage.V, cage.F, levels=3, scheme=scheme)
+    assert b.operator.F_fine.shape[0] > 3 * Vd.shape[0]
+    ref = pickle.loads(pickle.dumps(b))
+    rng = np.random.default_rng(2)
+    D = deform(b, cage.V)
+    Ve = cage.V.copy()
+    for step in range(10):
+        ids = rng.choice(cage.V.shape[0], rng.integers(1, 4), replace=False)
+        Ve[ids] += 0.03 * rng.standard_normal((ids.shape[0], 3))
+        deform(b, Ve, moved=ids, out=D)
+        assert np.abs(D - deform(ref, Ve)).max() <= _tol(Vd)
