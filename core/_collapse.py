@@ -26,6 +26,7 @@ One pass, as stages (each a function below)::
                           and vertices are only marked dead until compaction
 """
 
+import time
 from dataclasses import dataclass, field, fields
 from typing import NamedTuple
 
@@ -94,6 +95,7 @@ class State:
     cur_of_clean: np.ndarray = None              #: current vertex of each clean vertex (-1: removed)
     m_live: int = 0                              #: faces not removed
     worst: float = 0.0                           #: largest error of an accepted collapse
+    seconds: dict = None                         #: time spent per engine stage
 
     def __init__(self, V, F, twin, Q, locked, feat, Nref, forig=None):
         n, m = V.shape[0], F.shape[0]
@@ -121,6 +123,7 @@ class State:
         self.cur_of_clean = np.arange(n, dtype=np.int64)
         self.m_live = m
         self.worst = 0.0
+        self.seconds = {}
 
 
 def _meta(name):
@@ -818,9 +821,11 @@ def _progress(progress, m0, m, target):
 
 def _run(st, target, max_err_n, preserve_boundary, progress, m0, tun, dihedral_cos):
     passes = 0
+    clock = _Clock(st.seconds)
     while passes < tun.max_passes:
         if st.m_live < tun.compact_share * st.F.shape[0]:
             compact(st)
+            clock.lap("compact")
         m = st.m_live
         if target is not None and m <= target:
             return "target", passes
@@ -829,10 +834,12 @@ def _run(st, target, max_err_n, preserve_boundary, progress, m0, tun, dihedral_c
         passes += 1
         e = _candidate_edges(st)
         ne = int(np.count_nonzero(np.isfinite(e.cost)))
+        clock.lap("candidates")
         if ne == 0:
             return "no_valid_collapse", passes
         P = _pool_size(ne, m, target, tun)
         _recost_cheapest(st, e, P, max_err_n, preserve_boundary, tun)
+        clock.lap("recost")
         cand = np.isfinite(e.cost)
         if max_err_n is not None:
             within = _distance(st, _take(st.c_cost, e.rep), e.U, e.W) <= max_err_n
@@ -845,9 +852,11 @@ def _run(st, target, max_err_n, preserve_boundary, progress, m0, tun, dihedral_c
                 continue
             return "no_valid_collapse", passes
         pool = _choose_pool(st, e, ci, P, tun)
+        clock.lap("pool")
         # the Hausdorff penalty matters once the cage is coarse: skip it before
         haus = target is None or m <= tun.haus_phase * target
         acc, touched = _check_rounds(st, pool, passes, haus, dihedral_cos, tun)
+        clock.lap("pick and check")
         if acc is None:
             continue
         acc = _trim_to_target(pool, acc, m, target)
@@ -856,7 +865,20 @@ def _run(st, target, max_err_n, preserve_boundary, progress, m0, tun, dihedral_c
         st.vver[touched] = passes
         st.wit[pool.A[i]] = acc.wit
         _apply(st, pool.A[i], pool.B[i], pool.X[i], acc.rows)
+        clock.lap("apply")
     return "no_valid_collapse", passes
+
+
+class _Clock:
+    """Adds the seconds since the last lap to ``seconds[stage]``."""
+
+    def __init__(self, seconds):
+        self.seconds, self.t = seconds, time.perf_counter()
+
+    def lap(self, stage):
+        now = time.perf_counter()
+        self.seconds[stage] = self.seconds.get(stage, 0.0) + (now - self.t)
+        self.t = now
 
 
 # ---------------------------------------------------------------- applying, compacting

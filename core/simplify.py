@@ -41,6 +41,7 @@ diagonal before anything else, so the result does not depend on the units.
 """
 
 import copy
+import time
 from dataclasses import dataclass
 from typing import NamedTuple
 
@@ -113,6 +114,10 @@ class SimplifyResult:
         at most ``max_error``.
     n_boundary_loops, n_components : int, of the cage.
     n_passes : int, batches applied.
+    seconds : dict, wall-clock seconds per stage: ``"clean"``, ``"set-up"``
+        (order, quadrics), the engine's own (``"candidates"``, ``"recost"``,
+        ``"pool"``, ``"pick and check"``, ``"apply"``, ``"compact"``),
+        ``"relocate and output"``, and ``"total"``.
     """
 
     V: np.ndarray
@@ -129,6 +134,7 @@ class SimplifyResult:
     n_boundary_loops: int = 0
     n_components: int = 0
     n_passes: int = 0
+    seconds: dict = None
 
     @property
     def message(self):
@@ -314,6 +320,7 @@ class _Cage(NamedTuple):
     worst: float
     stopped: str
     passes: int
+    seconds: dict = {}        #: time per stage (set-up, engine stages, relocation)
 
 
 def _unchanged(clean):
@@ -336,12 +343,14 @@ class _SetUp(NamedTuple):
     Eb_in: np.ndarray      #: the input's border edges
     Fin: np.ndarray        #: the input's faces for the backward pull, or None
     m0: int
+    seconds: dict          #: {"set-up": its time}
 
 
 def _set_up(clean, opts):
     """The engine on the cleaned (manifold) mesh: working order, unit-free
     coordinates, quadrics, normals (see :class:`_SetUp`)."""
     tun = opts["tuning"]
+    t0 = time.perf_counter()
     if (clean.twin == NON_MANIFOLD).any():
         raise MeshAdjustError(f"{_WHERE}: cleaning left a non-manifold edge (a bug)")
     lo, hi = bounding_box(clean.V)
@@ -370,13 +379,15 @@ def _set_up(clean, opts):
     Nref = _normal_sums(Fc, Nf, n)
     del Nf
     mesh = State(Vn, Fc, twin, Q, lock, feat, Nref, forig=forder)  # Fc is spatial_order's own array
-    return _SetUp(mesh, Vc, Vn, order, centre, scale, creases, Eb_in, Fin, m0)
+    return _SetUp(mesh, Vc, Vn, order, centre, scale, creases, Eb_in, Fin, m0,
+                  {"set-up": time.perf_counter() - t0})
 
 
 def _cage_of(su, mesh, stopped, passes, opts, relocate=True):
     """The engine's ``mesh`` (compact) as a cage in the clean mesh's order and
     the caller's units, after the final relocation when ``relocate``."""
     tun = opts["tuning"]
+    t0 = time.perf_counter()
     if (relocate and tun.relocate_iters > 0 and passes > 0
             and mesh.F.shape[0] <= min(tun.relocate_max_faces, tun.relocate_max_share * su.m0)):
         V0, moved0 = mesh.V, mesh.moved.copy()
@@ -404,8 +415,9 @@ def _cage_of(su, mesh, stopped, passes, opts, relocate=True):
     fe = np.stack([np.minimum(a, b), np.maximum(a, b)], axis=1)
     fe = fe[np.lexsort((fe[:, 1], fe[:, 0]))]
     forder_out = np.argsort(mesh.forig, kind="stable")
+    seconds = {**su.seconds, **mesh.seconds, "relocate and output": time.perf_counter() - t0}
     return _Cage(Vout[vorder], new_v[mesh.F[forder_out]], of_clean, mesh.forig[forder_out],
-                 fe.astype(np.int64), float(mesh.worst * su.scale), stopped, passes)
+                 fe.astype(np.int64), float(mesh.worst * su.scale), stopped, passes, seconds)
 
 
 def _collapse(clean, target, opts, progress):
@@ -623,8 +635,10 @@ def simplify(V, F, *, target_faces=None, ratio=None, max_error=None, preserve_bo
     budget = None
     if max_error is None:
         budget = target_faces if ratio is None else max(target_faces or 0, round(ratio * F.shape[0]))
+    t0 = time.perf_counter()
     clean = clean_mesh(V, F, weld_distance=weld_distance, min_component_area=min_component_area,
                        face_budget=budget or None, protected=lk)
+    t_clean = time.perf_counter() - t0
     if clean.F.shape[0] == 0 and F.shape[0] > 0:
         raise InvalidMeshError(
             f"{_WHERE}: nothing is left after cleaning the {F.shape[0]:,} faces "
@@ -663,4 +677,5 @@ def simplify(V, F, *, target_faces=None, ratio=None, max_error=None, preserve_bo
         max_error=cage.worst, stopped_because=stopped, feature_edges=cage.feature_edges,
         cleaning=clean.report, n_input_faces=int(F.shape[0]), target=target, hausdorff=hausdorff,
         n_boundary_loops=boundary_loops_count(cage.F, cage.V.shape[0]), n_components=n_comp,
-        n_passes=cage.passes)
+        n_passes=cage.passes,
+        seconds={"clean": t_clean, **cage.seconds, "total": time.perf_counter() - t0})

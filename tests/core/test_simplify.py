@@ -594,3 +594,14 @@ def test_relaxed_topology_caps_holes_of_any_size_smallest_first():
         assert manifold_report(res.F, res.V.shape[0]).is_oriented_manifold
     assert topology_summary(r.F, r.V.shape[0])[:3] == (2, 1, 0)
     assert r.F.shape[0] <= 4 or r.stopped_because == "no_valid_collapse"
+
+
+def test_seconds_per_stage_add_up_to_the_total():
+    V, F = icosphere(4)
+    r = simplify(V, F, target_faces=300)
+    s = r.seconds
+    for stage in ("clean", "set-up", "candidates", "recost", "pool", "pick and check", "apply",
+                  "relocate and output", "total"):
+        assert s[stage] >= 0.0
+    parts = sum(v for k, v in s.items() if k != "total")
+    assert parts <= s["total"] and parts >= 0.5 * s["total"]
