@@ -8,7 +8,11 @@ Run with the bpy venv's Python (Blender as a module, NumPy 1.26)::
     python scripts/bench_simplify.py --messy-only   # only the messy section
 
 For every case Decimate runs first; ``core.simplify`` then gets Decimate's
-output face count as ``target_faces`` so both end at the same size. Errors
+output face count as ``target_faces`` so both end at the same size. Where
+the ``meshoptimizer`` Python binding installs (``pip install pymeshoptimizer``,
+a benchmark-only dependency: C++, one thread, float32), its ``simplify`` runs
+in the same process as a second reference (its output is not cleaned: it can
+leave unreferenced vertices and does not promise a manifold). Errors
 are two-sided surface distances to the input (Metro: area-weighted samples
 on both surfaces plus the vertices, exact point-to-triangle distances), in
 % of the input's bounding-box diagonal. Also reported: non-manifold edges,
@@ -119,11 +123,32 @@ def blender_decimate(V, F, target):
     return Vo, Fo, dt
 
 
+def meshopt_simplify(V, F, target):
+    """meshoptimizer's simplify to ``target`` faces (no error bound), or None
+    when the binding is not installed. Returns (V, F, seconds)."""
+    try:
+        import meshoptimizer
+    except ImportError:
+        return None
+    idx = np.ascontiguousarray(F, dtype=np.uint32).ravel()
+    pos = np.ascontiguousarray(V, dtype=np.float32)
+    dest = np.zeros_like(idx)
+    t0 = time.perf_counter()
+    k = meshoptimizer.simplify(dest, idx, pos, target_index_count=3 * int(target), target_error=1.0)
+    dt = time.perf_counter() - t0
+    Fo = dest[:k].reshape(-1, 3).astype(np.int64)
+    used = np.unique(Fo)
+    remap = np.full(V.shape[0], -1, dtype=np.int64)
+    remap[used] = np.arange(used.size)
+    return V[used], remap[Fo], dt
+
+
 # ---------------------------------------------------------------- cases
-def synthetic(levels, noise=1e-4):
-    """The bunny midpoint-subdivided ``levels`` times with small noise (fixed seed)."""
+def synthetic(levels, noise=1e-4, name="stanford-bunny.obj"):
+    """A shared mesh (the bunny) midpoint-subdivided ``levels`` times with
+    small noise (fixed seed)."""
     from tests.mesh_factory import midpoint_split
-    V, F = read_obj(os.path.join(MESHES, "stanford-bunny.obj"))
+    V, F = read_obj(os.path.join(MESHES, name))
     from core.clean import clean_mesh
     c = clean_mesh(V, F)
     V, F = c.V, c.F
@@ -156,12 +181,17 @@ def run_case(name, V, F, target, use_blender=True):
         simplify(V, F, target_faces=int(target))
         peak = tracemalloc.get_traced_memory()[1]
         tracemalloc.stop()
+    mo = meshopt_simplify(V, F, target)
+    if mo is not None:
+        hm, mm = surface_distance(V, F, mo[0], mo[1])
+        row.update(mo_time=mo[2], mo_out=mo[1].shape[0], mo_haus=100 * hm / diag, mo_mean=100 * mm / diag,
+                   mo_manifold=manifold_report(mo[1], mo[0].shape[0]).is_manifold)
     h, mn = surface_distance(V, F, r.V, r.F)
     c = clean_stats(r.V, r.F)
     row.update(target=int(target), out=r.F.shape[0], time=t, haus=100 * h / diag, mean=100 * mn / diag,
                nm_in=cin["nm"], nm=c["nm"], bnd_in=cin["bnd"], bnd=c["bnd"], euler_in=cin["euler"],
                euler=c["euler"], flip=flipped_faces(V, F, index0, r.V, r.F), minang=min_angle_deg(r.V, r.F),
-               peak_mb=peak / 2**20, stop=r.stopped_because)
+               peak_mb=peak / 2**20, stop=r.stopped_because, passes=r.n_passes, seconds=r.seconds)
     return row
 
 
@@ -225,25 +255,43 @@ def fmt_messy(rows, blender):
 
 
 def fmt_table(rows, blender):
-    head = ["mesh", "faces", "target / ours", "ours s", "mean %", "haus %"]
+    meshopt = any("mo_time" in r for r in rows)
+    head = ["mesh", "faces", "target / ours", "passes", "ours s", "mean %", "haus %"]
     if blender:
         head += ["Dec s", "Dec mean %", "Dec haus %", "t ratio", "mean ratio", "haus ratio"]
+    if meshopt:
+        head += ["meshopt s", "meshopt mean %", "meshopt haus %", "meshopt manifold", "t / meshopt"]
     head += ["nm in/ours" + ("/Dec" if blender else ""), "bnd in/ours" + ("/Dec" if blender else ""),
              "euler in/ours" + ("/Dec" if blender else ""), "flips ours" + ("/Dec" if blender else ""),
              "min angle ours" + ("/Dec" if blender else ""), "peak MiB"]
     lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for r in rows:
-        cells = [r["mesh"], f"{r['faces']:,}", f"{r['target']:,} / {r['out']:,}", f"{r['time']:.2f}", f"{r['mean']:.4f}",
-                 f"{r['haus']:.3f}"]
+        cells = [r["mesh"], f"{r['faces']:,}", f"{r['target']:,} / {r['out']:,}", f"{r['passes']}",
+                 f"{r['time']:.2f}", f"{r['mean']:.4f}", f"{r['haus']:.3f}"]
         if blender:
             cells += [f"{r['b_time']:.2f}", f"{r['b_mean']:.4f}", f"{r['b_haus']:.3f}",
                       f"{r['time'] / r['b_time']:.2f}", f"{r['mean'] / r['b_mean']:.2f}",
                       f"{r['haus'] / r['b_haus']:.2f}"]
+        if meshopt:
+            cells += ([f"{r['mo_time']:.3f}", f"{r['mo_mean']:.4f}", f"{r['mo_haus']:.3f}",
+                       "yes" if r["mo_manifold"] else "no", f"{r['time'] / r['mo_time']:.1f}"]
+                      if "mo_time" in r else ["-"] * 5)
         sfx = lambda k: f"/{r['b_' + k]}" if blender else ""  # noqa: E731
         cells += [f"{r['nm_in']}/{r['nm']}{sfx('nm')}", f"{r['bnd_in']}/{r['bnd']}{sfx('bnd')}",
                   f"{r['euler_in']}/{r['euler']}{sfx('euler')}", f"{r['flip']}{sfx('flip')}",
                   f"{r['minang']:.1f}" + (f"/{r['b_minang']:.1f}" if blender else ""), f"{r['peak_mb']:.0f}"]
         lines.append("| " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
+def fmt_stages(rows):
+    """Seconds per stage of our runs (``SimplifyResult.seconds``)."""
+    stages = list(dict.fromkeys(k for r in rows for k in r["seconds"]))
+    head = ["mesh", "passes"] + stages
+    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    for r in rows:
+        lines.append("| " + " | ".join([r["mesh"], str(r["passes"])]
+                                       + [f"{r['seconds'].get(k, 0.0):.2f}" for k in stages]) + " |")
     return "\n".join(lines)
 
 
@@ -293,13 +341,19 @@ def main():
             print(fmt_table([row], blender).splitlines()[-1], flush=True)
     real = list(rows)
     if not args.quick and not args.no_synthetic:
-        for levels, tgt, label in ((2, 10_000, "bunny x16 (1M)"),) + (((3, 40_000, "bunny x64 (4M)"),)
-                                                                      if args.big else ()):
-            V, F = synthetic(levels)
+        big = [(2, 10_000, "bunny x16 (1M)", "stanford-bunny.obj"),
+               (3, 10_000, "rocker-arm x64 (1.3M, held-out style)", "rocker-arm.obj")]
+        if args.big:
+            big.append((3, 40_000, "bunny x64 (4M)", "stanford-bunny.obj"))
+        for levels, tgt, label, name in big:
+            V, F = synthetic(levels, name=name)
             row = run_case(label, V, F, tgt, blender)
             rows.append(row)
             print(fmt_table([row], blender).splitlines()[-1], flush=True)
     text = fmt_table(rows, blender) if rows else ""
+    big_rows = [r for r in rows if r not in real]
+    if big_rows:
+        text += "\n\n## Where our time goes (seconds per stage)\n\n" + fmt_stages(big_rows)
     if messy:
         text += ("\n\n## Messy inputs\n\nDistances to the clean mesh (the scan alone), "
                  "% of its diagonal.\n\n" + fmt_messy(messy, blender))
@@ -311,8 +365,18 @@ def main():
         worst_h = max(r["haus"] / r["b_haus"] for r in real)
         text += (f"\n\nShared meshes ({len(real)} cases), geometric mean of ours / Decimate: "
                  f"mean distance {gm:.3f}, Hausdorff {gh:.3f}, time {gt:.2f}; "
-                 f"worst case mean {worst_m:.2f}, Hausdorff {worst_h:.2f}.")
+                 f"worst case mean {worst_m:.2f}, Hausdorff {worst_h:.2f}; "
+                 f"passes {sum(r['passes'] for r in real)} in all.")
+    mo_rows = [r for r in real if "mo_time" in r]
+    if mo_rows:
+        text += (f"\nOurs / meshoptimizer over the same cases: mean distance "
+                 f"{geomean([r['mean'] / r['mo_mean'] for r in mo_rows]):.3f}, Hausdorff "
+                 f"{geomean([r['haus'] / r['mo_haus'] for r in mo_rows]):.3f}, time "
+                 f"{geomean([r['time'] / r['mo_time'] for r in mo_rows]):.1f}.")
+    load = os.getloadavg() if hasattr(os, "getloadavg") else None
     text += "\nDistances: core.metrics.surface_distance, % of the input's bounding-box diagonal."
+    text += (f"\nRun {time.strftime('%Y-%m-%d %H:%M')} on this machine ({os.cpu_count()} cores"
+             + (f", load average {load[0]:.1f} at the end" if load else "") + ").")
     print()
     print(text)
     out = os.path.join(ROOT, "bench_results")
