@@ -24,11 +24,13 @@ local coordinates)::
                  x-o-x                               x-o-x
                    |                                   |
 
-The negative side of the input is used only to check that the mesh crosses
-the plane and to map its vertices and faces (to the mirrored cage vertices
-and faces). A scan that is only nearly symmetric gets the cage of its
-positive side; the fit (``fit_cage(..., symmetry=...)``, which solves for
-symmetric positions) and the binding's detail absorb the difference.
+The negative side of the input pulls the half halfway towards its mirror
+image and maps its vertices and faces (to the mirrored cage vertices and
+faces). Of a scan that is only nearly symmetric, the fit
+(``fit_cage(..., symmetry=...)``, which solves for symmetric positions) and
+the binding's detail absorb what the symmetric cage cannot follow; a
+symmetric cage is at least half the scan's own asymmetry (its two-sided
+Hausdorff distance to its mirror image) away from it.
 """
 
 from typing import NamedTuple
@@ -37,7 +39,7 @@ import numpy as np
 
 from .clean import MIN_COMPONENT_AREA, WELD_DISTANCE, clean_mesh
 from .errors import InvalidArgumentError, InvalidMeshError
-from .mesh import bbox_diagonal, check_mesh
+from .mesh import bbox_diagonal, check_mesh, face_normals
 from .metrics import surface_distance
 from .simplify import SimplifyResult, _check_args, simplify
 from .spatial import TriangleIndex
@@ -57,6 +59,11 @@ MAX_ERROR_SHARES = (1.0, 0.7, 0.5)
 #: a cage vertex off the seam that reaches the plane is lifted this far off it (share of
 #: the diagonal): apart from its own mirror copy, well inside ``PARTNER_TOLERANCE``
 LIFT = PARTNER_TOLERANCE / 8
+#: a cage over its target (chords split before mirroring add faces) asks the half for
+#: that many fewer faces, at most this many times
+TARGET_RETRIES = 2
+#: rounds of putting back vertices whose faces the symmetrising turned over
+SYMMETRISE_ROUNDS = 4
 
 
 def axis_index(axis, where=_WHERE):
@@ -108,33 +115,11 @@ def mirror_partners(V, axis, *, tolerance=PARTNER_TOLERANCE, where="mirror_partn
     if n == 0:
         return np.zeros(0, dtype=np.int64)
     tol = tolerance * (bbox_diagonal(V) or 1.0)
-    cell = 2.0 * tol
     M = mirror(V, k)
-    lo = np.minimum(V.min(axis=0), M.min(axis=0))
-    Q = np.floor((V - lo) / cell).astype(np.int64) + 1
-    dims = Q.max(axis=0) + 2
-    key = (Q[:, 0] * dims[1] + Q[:, 1]) * dims[2] + Q[:, 2]
-    order = np.argsort(key, kind="stable")
-    skey = key[order]
-    QM = np.floor((M - lo) / cell).astype(np.int64) + 1
-    partner = np.full(n, -1, dtype=np.int64)
-    best = np.full(n, np.inf)
-    # the cell of the mirrored point and its 26 neighbours; each cell holds few points
-    for off in np.stack(np.meshgrid([-1, 0, 1], [-1, 0, 1], [-1, 0, 1], indexing="ij"), -1).reshape(-1, 3):
-        q = QM + off
-        qk = (q[:, 0] * dims[1] + q[:, 1]) * dims[2] + q[:, 2]
-        start = np.searchsorted(skey, qk, side="left")
-        stop = np.searchsorted(skey, qk, side="right")
-        while True:
-            has = np.flatnonzero(start < stop)
-            if has.size == 0:
-                break
-            cand = order[start[has]]
-            d = np.linalg.norm(V[cand] - M[has], axis=1)
-            better = d < best[has]
-            partner[has[better]] = cand[better]
-            best[has[better]] = d[better]
-            start[has] += 1
+    partner, best = _exact_partners(V, M)
+    left = np.flatnonzero(partner < 0)
+    if left.size:
+        partner[left], best[left] = _nearest_partners(V, M[left], 2.0 * tol)
     bad = np.flatnonzero(~(best <= tol))
     if bad.size:
         i = int(bad[0])
@@ -148,6 +133,63 @@ def mirror_partners(V, axis, *, tolerance=PARTNER_TOLERANCE, where="mirror_partn
             f"{where}: the mirror pairing about the {axis} plane is ambiguous (two vertices at "
             f"one place?), e.g. vertex {i} and {int(partner[i])}")
     return partner
+
+
+def _exact_partners(V, M):
+    """Partners of the vertices whose mirror image ``M`` is exactly another
+    vertex, also among coincident vertices: a group of ``c`` vertices at one
+    place pairs, in index order, with the ``c`` at its mirror image (on the
+    plane, with itself). Returns ``(partner, distance)``, -1 / inf where
+    there is no such match."""
+    n = V.shape[0]
+    P = np.vstack([V, M])
+    order = np.lexsort((P[:, 2], P[:, 1], P[:, 0]))
+    Ps = P[order]
+    new = np.ones(2 * n, dtype=bool)
+    new[1:] = (Ps[1:] != Ps[:-1]).any(axis=1)           # -0.0 == 0.0: one group
+    gid = np.empty(2 * n, dtype=np.int64)
+    gid[order] = np.cumsum(new) - 1
+    gV, gM = gid[:n], gid[n:]
+    size = np.bincount(gV, minlength=int(gid.max()) + 1)
+    by_group = np.argsort(gV, kind="stable")              # vertices by group, then index
+    start = np.concatenate([[0], np.cumsum(size)[:-1]])
+    rank = np.empty(n, dtype=np.int64)
+    rank[by_group] = np.arange(n) - start[gV[by_group]]
+    ok = size[gM] == size[gV]
+    partner = np.full(n, -1, dtype=np.int64)
+    partner[ok] = by_group[start[gM[ok]] + rank[ok]]
+    return partner, np.where(ok, 0.0, np.inf)
+
+
+def _nearest_partners(V, Mq, cell):
+    """The vertex of ``V`` nearest each mirrored point of ``Mq`` among the
+    27 grid cells (side ``cell``) around it, and its distance."""
+    lo = np.minimum(V.min(axis=0), Mq.min(axis=0))
+    Q = np.floor((V - lo) / cell).astype(np.int64) + 1
+    QM = np.floor((Mq - lo) / cell).astype(np.int64) + 1
+    dims = np.maximum(Q.max(axis=0), QM.max(axis=0)) + 2
+    key = (Q[:, 0] * dims[1] + Q[:, 1]) * dims[2] + Q[:, 2]
+    order = np.argsort(key, kind="stable")
+    skey = key[order]
+    partner = np.full(Mq.shape[0], -1, dtype=np.int64)
+    best = np.full(Mq.shape[0], np.inf)
+    # the cell of the mirrored point and its 26 neighbours; each cell holds few points
+    for off in np.stack(np.meshgrid([-1, 0, 1], [-1, 0, 1], [-1, 0, 1], indexing="ij"), -1).reshape(-1, 3):
+        q = QM + off
+        qk = (q[:, 0] * dims[1] + q[:, 1]) * dims[2] + q[:, 2]
+        start = np.searchsorted(skey, qk, side="left")
+        stop = np.searchsorted(skey, qk, side="right")
+        while True:
+            has = np.flatnonzero(start < stop)
+            if has.size == 0:
+                break
+            cand = order[start[has]]
+            d = np.linalg.norm(V[cand] - Mq[has], axis=1)
+            better = d < best[has]
+            partner[has[better]] = cand[better]
+            best[has[better]] = d[better]
+            start[has] += 1
+    return partner, best
 
 
 def symmetrize(V, partner, axis):
@@ -235,10 +277,12 @@ def _seam_edges(F, n, on_plane):
 class _Mirrored(NamedTuple):
     V: np.ndarray
     F: np.ndarray
-    copy_of: np.ndarray    #: (nh,) index of each half vertex's mirror copy (itself on the seam)
+    of_half: np.ndarray    #: (nc,) cage vertex of each vertex of the simplified half (-1: dropped)
+    copy_of: np.ndarray    #: (n,) mirror copy of each cage vertex of the half (itself on the seam)
     n_half_faces: int      #: the first faces are the half's (after the chord splits), then their mirrors
     half_face_from: np.ndarray  #: (n_half_faces,) face of the simplified half each comes from
-    n_split_chords: int    #: inside edges between two seam vertices split (see ``_split_chords``)
+    n_chords: int          #: inside edges between two seam vertices flipped or split (``_remove_chords``)
+    n_flat_dropped: int    #: lone triangles on the seam dropped (see ``_drop_flat``)
     n_lifted: int          #: off-seam vertices that had reached the plane, lifted off it
 
 
@@ -253,53 +297,100 @@ def _chords(F, n, weld):
     return em.E[inside], np.stack([faces[first] // 3, faces[first + 1] // 3], axis=1)
 
 
-def _split_chords(V, F, weld, k, lift):
-    """Split every inside edge between two seam vertices at a new vertex.
+def _triangle_normals(V, A, B, C):
+    """Unnormalised normals (q,3) of the triangles with corners ``V[A], V[B], V[C]``."""
+    return np.cross(V[B] - V[A], V[C] - V[A])
+
+
+def _remove_chords(V, F, weld, k, lift):
+    """Remove every inside edge between two seam vertices.
 
     Mirrored, such an edge would meet its own mirror copy (both ends are
-    shared): four faces on one edge. Each is split into two at a vertex
-    placed at the mean of its ends and the two opposite corners, so off the
-    plane (at least ``lift``); chords sharing a face wait for the next round.
-    Returns ``(V, F, face_from, n_split)`` (``face_from``: the input face of
-    each output face)."""
+    shared): four faces on one edge. Each round takes chords with no face in
+    common and flips them (edge ``a-b`` of faces ``(a,b,c)``, ``(b,a,d)``
+    becomes ``c-d``) where that keeps the face count and is sound: ``c-d``
+    not an edge yet, not itself a chord, neither new face turned against
+    the two old ones; the others are split at a new vertex at the mean of
+    the four corners, kept off the plane (at least ``lift``). Returns
+    ``(V, F, face_from, n_removed)``, ``face_from`` the input face of each
+    output face."""
     face_from = np.arange(F.shape[0], dtype=np.int64)
-    n_split = 0
+    n_removed = 0
     while True:
         E, EF = _chords(F, V.shape[0], weld)
         if E.shape[0] == 0:
-            return V, F, face_from, n_split
+            return V, F, face_from, n_removed
         # one chord per face per round: the chord listed first on both of its faces
         owner = np.full(F.shape[0], E.shape[0], dtype=np.int64)
         np.minimum.at(owner, EF.ravel(), np.repeat(np.arange(E.shape[0]), 2))
         pick = np.flatnonzero((owner[EF[:, 0]] == np.arange(E.shape[0]))
                               & (owner[EF[:, 1]] == np.arange(E.shape[0])))
         E, EF = E[pick], EF[pick]
-        n0, c = V.shape[0], pick.size
-        mid = n0 + np.arange(c, dtype=np.int64)
-        rows = []
-        opp = []
+        R = []
         for side in (0, 1):
-            f = EF[:, side]
-            Ff = F[f]
-            # roll each face so that its chord is the edge from corner 0 to corner 1
+            # roll each face so that its chord runs from corner 0 to corner 1
+            Ff = F[EF[:, side]]
             is_end = (Ff == E[:, 0:1]) | (Ff == E[:, 1:2])
             start = np.argmax(is_end & np.roll(is_end, -1, axis=1), axis=1)
-            R = np.take_along_axis(Ff, (start[:, None] + np.arange(3)) % 3, axis=1)
-            rows.append((f, np.stack([R[:, 0], mid, R[:, 2]], 1), np.stack([mid, R[:, 1], R[:, 2]], 1)))
-            opp.append(R[:, 2])
-        P = 0.25 * (V[E[:, 0]] + V[E[:, 1]] + V[opp[0]] + V[opp[1]])
+            R.append(np.take_along_axis(Ff, (start[:, None] + np.arange(3)) % 3, axis=1))
+        a, b, c, d = R[0][:, 0], R[0][:, 1], R[0][:, 2], R[1][:, 2]   # faces (a,b,c), (b,a,d)
+        flip = _flip_ok(V, F, weld, a, b, c, d)
+        F = F.copy()
+        f1, f2 = EF[flip, 0], EF[flip, 1]
+        F[f1] = np.stack([c[flip], a[flip], d[flip]], axis=1)
+        F[f2] = np.stack([d[flip], b[flip], c[flip]], axis=1)
+        s = ~flip
+        mid = V.shape[0] + np.arange(int(s.sum()), dtype=np.int64)
+        P = 0.25 * (V[a[s]] + V[b[s]] + V[c[s]] + V[d[s]])
         P[:, k] = np.maximum(P[:, k], lift)
         V = np.vstack([V, P])
-        weld = np.concatenate([weld, np.zeros(c, dtype=bool)])
-        F = F.copy()
-        new_F, new_from = [], []
-        for f, A, B in rows:
-            F[f] = A
-            new_F.append(B)
-            new_from.append(face_from[f])
-        F = np.concatenate([F] + new_F)
-        face_from = np.concatenate([face_from] + new_from)
-        n_split += c
+        weld = np.concatenate([weld, np.zeros(mid.size, dtype=bool)])
+        f1, f2 = EF[s, 0], EF[s, 1]
+        F[f1] = np.stack([a[s], mid, c[s]], axis=1)
+        F[f2] = np.stack([b[s], mid, d[s]], axis=1)
+        F = np.concatenate([F, np.stack([mid, b[s], c[s]], axis=1), np.stack([mid, a[s], d[s]], axis=1)])
+        face_from = np.concatenate([face_from, face_from[f1], face_from[f2]])
+        n_removed += pick.size
+
+
+def _flip_ok(V, F, weld, a, b, c, d):
+    """Which chords ``a-b`` (faces ``(a,b,c)``, ``(b,a,d)``) can flip to ``c-d``."""
+    n = np.int64(max(V.shape[0], 1))
+    h = np.sort(F[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
+    edges = np.unique(h[:, 0] * n + h[:, 1])
+    key = np.minimum(c, d) * n + np.maximum(c, d)
+    pos = np.minimum(np.searchsorted(edges, key), edges.size - 1)
+    _, inv, count = np.unique(key, return_inverse=True, return_counts=True)
+    ref = _triangle_normals(V, a, b, c) + _triangle_normals(V, b, a, d)
+    n1 = _triangle_normals(V, c, a, d)
+    n2 = _triangle_normals(V, d, b, c)
+    return ((c != d) & ~(weld[c] & weld[d]) & (edges[pos] != key) & (count[inv] == 1)
+            & (np.einsum("ij,ij->i", n1, ref) > 0) & (np.einsum("ij,ij->i", n2, ref) > 0))
+
+
+def _drop_flat(Fc, nc, seam_from):
+    """Faces whose three edges are all seam edges: lone triangles (a sliver
+    of a component that crossed the plane, collapsed as far as it goes) that
+    would lie in the plane, their mirror on top of them. Returns the kept
+    faces' indices and each vertex's new index (-1: dropped)."""
+    E = _seam_edges(Fc, nc, seam_from)
+    keep = np.arange(Fc.shape[0], dtype=np.int64)
+    of_half = np.arange(nc, dtype=np.int64)
+    if E.shape[0] == 0:
+        return keep, of_half
+    n = np.int64(max(nc, 1))
+    seam_keys = np.sort(E[:, 0] * n + E[:, 1])
+    a, b = Fc, np.roll(Fc, -1, axis=1)
+    key = np.minimum(a, b) * n + np.maximum(a, b)
+    pos = np.minimum(np.searchsorted(seam_keys, key), seam_keys.size - 1)
+    flat = (seam_keys[pos] == key).all(axis=1)
+    if not flat.any():
+        return keep, of_half
+    keep = np.flatnonzero(~flat)
+    used = np.zeros(nc, dtype=bool)
+    used[Fc[keep].ravel()] = True
+    of_half = np.where(used, np.cumsum(used) - 1, -1)
+    return keep, of_half
 
 
 def _mirror_cage(Vc, Fc, seam_from, k, lift):
@@ -308,10 +399,15 @@ def _mirror_cage(Vc, Fc, seam_from, k, lift):
     ``seam_from`` (nc,) flags the half cage's vertices that descend from the
     seam; those on a border edge with both ends flagged are the seam, get
     coordinate 0.0 and are shared by both halves. Inside edges between two
-    seam vertices are split first (``_split_chords``). Any other vertex at
+    seam vertices are flipped or split first (``_remove_chords``). Any other vertex at
     or across the plane is lifted to ``lift`` (a tiny share of the diagonal)
-    so it stays apart from its own mirror copy.
+    so it stays apart from its own mirror copy. Lone triangles on the seam
+    are dropped (``_drop_flat``).
     """
+    m_half = Fc.shape[0]
+    keep, of_half = _drop_flat(Fc, Vc.shape[0], seam_from)
+    used = of_half >= 0
+    Vc, Fc, seam_from = Vc[used], of_half[Fc[keep]], seam_from[used]
     nc = Vc.shape[0]
     E = _seam_edges(Fc, nc, seam_from)
     weld = np.zeros(nc, dtype=bool)
@@ -320,15 +416,15 @@ def _mirror_cage(Vc, Fc, seam_from, k, lift):
     V[weld, k] = 0.0
     low = ~weld & (V[:, k] < lift)
     V[low, k] = lift
-    V, Fh, face_from, n_split = _split_chords(V, Fc, weld, k, lift)
+    V, Fh, face_from, n_split = _remove_chords(V, Fc, weld, k, lift)
     n = V.shape[0]
     weld = np.concatenate([weld, np.zeros(n - nc, dtype=bool)])
     copy_of = np.arange(n, dtype=np.int64)
     copy_of[~weld] = n + np.arange(int(np.count_nonzero(~weld)), dtype=np.int64)
     Vm = mirror(V[~weld], k)
     Fm = copy_of[Fh][:, [0, 2, 1]]                        # mirroring reverses the orientation
-    return _Mirrored(np.vstack([V, Vm]), np.concatenate([Fh, Fm]), copy_of, Fh.shape[0], face_from,
-                     n_split, int(low.sum()))
+    return _Mirrored(np.vstack([V, Vm]), np.concatenate([Fh, Fm]), of_half, copy_of, Fh.shape[0],
+                     keep[face_from], n_split, m_half - keep.size, int(low.sum()))
 
 
 def _half_inputs(half, clean, weights, locked, neg_to_half):
@@ -347,6 +443,31 @@ def _half_inputs(half, clean, weights, locked, neg_to_half):
         lk = lc[src[:, 0]] & (src[:, 0] == src[:, 1])
         lk[neg_to_half[neg][lc[neg]]] = True
     return w, lk
+
+
+def _symmetrised(half, Vs, F, s, k, keep=None):
+    """The half's positions moved halfway to the mirrored other side: each
+    vertex averaged with its closest point on the negative half, mirrored
+    (so a scan that is only nearly symmetric gets a cage between its two
+    sides). Vertices whose faces would turn over stay where they were, as
+    do those flagged in ``keep`` (locked); plane vertices stay exactly on
+    the plane. Returns (nh,3) float64."""
+    other = _cut_half(Vs, F, -s, k)
+    if other.F.shape[0] == 0:
+        return half.V
+    hit = TriangleIndex(mirror(other.V, k), other.F).closest(half.V)
+    W = 0.5 * (half.V + hit.point)
+    W[half.on_plane, k] = 0.0
+    if keep is not None:
+        W[keep] = half.V[keep]
+    N0 = face_normals(half.V, half.F, normalize=False)
+    for _ in range(SYMMETRISE_ROUNDS):
+        turned = np.einsum("ij,ij->i", face_normals(W, half.F, normalize=False), N0) <= 0
+        if not turned.any():
+            break
+        back = np.unique(half.F[turned])
+        W[back] = half.V[back]
+    return W
 
 
 def _negative_to_half(clean, half, k):
@@ -477,26 +598,35 @@ def simplify_symmetric(V, F, *, axis="X", target_faces=None, ratio=None, max_err
     seam_in[_seam_edges(half.F, half.V.shape[0], half.on_plane).ravel()] = True
     if lk_half is not None:
         lk_half &= ~seam_in
-    half_target = None if target is None else target // 2
-
+    half = half._replace(V=_symmetrised(half, Vs, clean.F, s, k, keep=lk_half))
     more = {} if tuning is None else {"tuning": tuning}
 
-    def run(bound):
-        return simplify(half.V, half.F, target_faces=half_target, max_error=bound, **more,
-                        preserve_boundary=True, preserve_topology=preserve_topology,
-                        feature_angle_deg=feature_angle_deg, vertex_weights=w_half, locked=lk_half,
-                        weld_distance=weld_distance, min_component_area=min_component_area,
-                        progress=progress)
-
-    hausdorff = None
-    for share in (MAX_ERROR_SHARES if max_error is not None else (None,)):
-        r = run(None if share is None else share * float(max_error))
+    def run(half_target, bound):
+        r = simplify(half.V, half.F, target_faces=half_target, max_error=bound, **more,
+                     preserve_boundary=True, preserve_topology=preserve_topology,
+                     feature_angle_deg=feature_angle_deg, vertex_weights=w_half, locked=lk_half,
+                     weld_distance=weld_distance, min_component_area=min_component_area,
+                     progress=progress)
         if r.stopped_because == "cancelled":
-            return _cancelled(clean, n_in, F.shape[0], target)
+            return r, None
         seam_from = np.zeros(r.V.shape[0], dtype=bool)
         hit = r.vertex_map[seam_in]
         seam_from[hit[hit >= 0]] = True
-        cage = _mirror_cage(r.V, r.F, seam_from, k, LIFT * diag)
+        return r, _mirror_cage(r.V, r.F, seam_from, k, LIFT * diag)
+
+    hausdorff = None
+    for share in (MAX_ERROR_SHARES if max_error is not None else (None,)):
+        bound = None if share is None else share * float(max_error)
+        half_target = None if target is None else target // 2
+        for _ in range(TARGET_RETRIES + 1):
+            r, cage = run(half_target, bound)
+            if cage is None:
+                return _cancelled(clean, n_in, F.shape[0], target)
+            over = 0 if target is None else cage.F.shape[0] - target
+            if over <= 0 or r.stopped_because != "target" or half_target == 0:
+                break
+            # the chords split before mirroring added faces: ask the half for fewer
+            half_target = max(0, half_target - (over + 1) // 2)
         if max_error is None:
             break
         hausdorff = surface_distance(clean.V, clean.F, cage.V, cage.F).hausdorff
@@ -505,9 +635,10 @@ def simplify_symmetric(V, F, *, axis="X", target_faces=None, ratio=None, max_err
     # maps: clean vertex -> cage (positive side directly, negative side through its mirror)
     of_clean = np.full(clean.V.shape[0], -1, dtype=np.int64)
     pos = half.of_clean >= 0
-    of_clean[pos] = r.vertex_map[half.of_clean[pos]]
+    at = np.append(cage.of_half, -1)                       # r's vertex -> cage vertex (-1 -> -1)
+    of_clean[pos] = at[r.vertex_map[half.of_clean[pos]]]
     neg = neg_to_half >= 0
-    via = r.vertex_map[neg_to_half[neg]]
+    via = at[r.vertex_map[neg_to_half[neg]]]
     of_clean[neg] = np.where(via >= 0, cage.copy_of[np.maximum(via, 0)], -1)
     kept = clean.input_to_clean >= 0
     vertex_map = np.full(n_in, -1, dtype=np.int64)
@@ -515,7 +646,8 @@ def simplify_symmetric(V, F, *, axis="X", target_faces=None, ratio=None, max_err
     mh = cage.n_half_faces
     face_from = np.concatenate([half.face_from[r.face_map[cage.half_face_from]],
                                 _mirror_face_sources(clean, s, cage.V, cage.F[mh:], k)])
-    fe = r.feature_edges
+    fe = cage.of_half[r.feature_edges]
+    fe = fe[(fe >= 0).all(axis=1)]
     fe = np.concatenate([fe, cage.copy_of[fe]])
     fe = np.unique(np.sort(fe, axis=1), axis=0).astype(np.int64).reshape(-1, 2)
     _, n_comp = face_components(cage.F, cage.V.shape[0])
