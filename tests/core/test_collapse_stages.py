@@ -1,0 +1,166 @@
+"""The stages of the collapse engine (core._collapse), each on its own."""
+
+import numpy as np
+import pytest
+
+from core import _collapse as engine
+from core._clean import BOUNDARY, twin_table
+from core.quadrics import vertex_face_quadrics
+from core.tuning import TUNING
+from tests.mesh_factory import icosphere, regular_grid, tetrahedron
+
+
+def engine_state(V, F):
+    """The engine's State of a clean mesh, as simplify sets it up (no
+    crease or boundary planes, nothing locked)."""
+    V = np.asarray(V, dtype=np.float64)
+    F = np.asarray(F, dtype=np.int64).copy()
+    n = V.shape[0]
+    QT, _, N = vertex_face_quadrics(V, F, n, TUNING.area_power)
+    Nref = np.zeros((n, 3))
+    for c in range(3):
+        np.add.at(Nref, F[:, c], N)
+    twin = twin_table(F, n)
+    return engine.State(V, F, twin, QT.T, np.zeros(n, dtype=bool), np.zeros(twin.size, dtype=bool), Nref)
+
+
+def declared_lengths(st):
+    n, m = st.V.shape[0], st.F.shape[0]
+    size = {"vertex": n, "vertex_t": n, "face": m, "half_edge": 3 * m, "half_edge_t": 3 * m}
+    for name in engine._declared():
+        a = getattr(st, name)
+        per = engine._per(name)
+        assert (a.shape[1] if per.endswith("_t") else a.shape[0]) == size[per], name
+
+
+def pool_of(st, tun=TUNING):
+    """Every edge of a fresh state as the pass's pool (all recosted)."""
+    e = engine._candidate_edges(st)
+    engine._recost_cheapest(st, e, e.rep.size, None, True, tun)
+    ci = np.flatnonzero(np.isfinite(e.cost) & ~e.stale)
+    return engine._choose_pool(st, e, ci, ci.size, tun)
+
+
+def test_every_declared_array_has_its_length_at_the_start_after_compaction_and_after_appending():
+    V, F = icosphere(2)
+    st = engine_state(V, F)
+    declared_lengths(st)
+    stopped, passes = engine.run(st, 40, None, True, None, F.shape[0], TUNING)
+    assert stopped == "target" and st.F.shape[0] == 40 and passes > 0
+    declared_lengths(st)                      # compact: every array follows the declarations
+    assert st.alive.all() and not st.dead_v.any()
+    assert np.array_equal(st.parent, np.arange(st.V.shape[0]))
+    assert st.F.max() < st.V.shape[0]
+    h = np.arange(st.twin.size)
+    assert np.array_equal(st.twin[st.twin], h)   # twins pair up, none dangling
+    engine.append_faces(st, st.F[:2, ::-1].copy(), st.forig[:2])
+    declared_lengths(st)
+    assert (st.twin[-6:] == BOUNDARY).all() and st.m_live == st.F.shape[0]
+
+
+def test_priority_is_unique_cost_band_first_then_shorter_edges():
+    rng = np.random.default_rng(0)
+    P = 2000
+    cost = rng.random(P)
+    length2 = rng.random(P)
+    a, b = rng.integers(0, 10_000, P), rng.integers(0, 10_000, P)
+    key = engine._priority(cost, length2, a, b, TUNING)
+    assert np.unique(key).size == P
+    bits = int(P - 1).bit_length()
+    assert np.array_equal(key & ((1 << bits) - 1), np.arange(P))   # the pool index comes back
+    band = engine._bands(cost, TUNING.bands, TUNING.sample)
+    lo, hi = np.argmin(cost), np.argmax(cost)
+    assert band[lo] < band[hi] and key[lo] < key[hi]
+    # equal costs: the shortest band goes first
+    flat = engine._priority(np.zeros(P), length2, a, b, TUNING)
+    assert flat[np.argmin(length2)] < flat[np.argmax(length2)]
+
+
+def test_acceptance_bound_is_the_cost_bound_except_on_a_plateau():
+    totals = np.array([1.0, 2.0, 3.0, 4.0, 5.0])
+    assert engine._acceptance_bound(4.5, totals, TUNING) == 4.5
+    assert engine._acceptance_bound(0.0, totals, TUNING) == 3.0          # the cheaper half
+    assert engine._acceptance_bound(0.0, np.zeros(0), TUNING) == 0.0
+
+
+def test_independent_picks_have_disjoint_stars_that_are_exactly_the_faces_around_both_ends():
+    V, F = icosphere(3)
+    st = engine_state(V, F)
+    pool = pool_of(st)
+    sel, rest, star, kf, _ = engine._pick_independent(st, pool, np.arange(pool.key.size), None)
+    assert sel.size > 0 and np.intersect1d(sel, rest).size == 0 and sel.size + rest.size == pool.key.size
+    assert np.unique(star).size == star.size                     # disjoint
+    for k in range(0, sel.size, max(1, sel.size // 25)):
+        a, b = pool.A[sel[k]], pool.B[sel[k]]
+        around = np.flatnonzero((st.F == a).any(axis=1) | (st.F == b).any(axis=1))
+        assert np.array_equal(np.sort(star[kf == k]), around)
+    # and the smallest key of all is always chosen
+    assert np.argmin(pool.key) in sel
+
+
+def test_link_condition_refuses_the_last_tetrahedron_and_allows_a_sphere():
+    V, F = tetrahedron()
+    st = engine_state(V, F)
+    pool = pool_of(st)
+    sel, _, star, kf, _ = engine._pick_independent(st, pool, np.arange(pool.key.size), None)
+    s = engine._star_of(st.F, pool.A[sel], pool.B[sel], star, kf)
+    assert not engine._link_condition(st, s, pool.interior[sel]).any()
+    V, F = icosphere(2)
+    st = engine_state(V, F)
+    pool = pool_of(st)
+    sel, _, star, kf, _ = engine._pick_independent(st, pool, np.arange(pool.key.size), None)
+    s = engine._star_of(st.F, pool.A[sel], pool.B[sel], star, kf)
+    assert engine._link_condition(st, s, pool.interior[sel]).all()
+
+
+def test_link_condition_refuses_an_edge_between_two_borders():
+    # a strip one face wide: every interior edge joins two border vertices, and
+    # a border edge whose faces have both other edges on the border is an ear
+    V, F = regular_grid(6, 1)
+    st = engine_state(V, F)
+    e = engine._candidate_edges(st)
+    engine._recost_cheapest(st, e, e.rep.size, None, True, TUNING)
+    interior = st.twin[e.rep] >= 0
+    # the recost marks interior edges between two border vertices invalid
+    assert np.isinf(e.cost[interior]).all()
+
+
+def test_trim_keeps_the_cheapest_collapses_the_target_needs():
+    V, F = icosphere(2)
+    st = engine_state(V, F)
+    pool = pool_of(st)
+    acc, touched = engine._check_rounds(st, pool, 1, False, None, TUNING)
+    m = st.F.shape[0]
+    need = 10
+    kept = engine._trim_to_target(pool, acc, m, m - need)
+    removed = np.where(pool.interior[kept.idx], 2, 1).sum()
+    assert need <= removed <= need + 1
+    assert pool.cost[kept.idx].max() <= np.sort(pool.cost[acc.idx])[kept.idx.size - 1]
+    assert engine._trim_to_target(pool, acc, m, None) is acc
+    assert touched[pool.A[acc.idx]].all() and touched[pool.B[acc.idx]].all()
+
+
+def test_compaction_renumbers_faces_and_survivors():
+    V, F = icosphere(2)
+    st = engine_state(V, F)
+    pool = pool_of(st)
+    acc, _ = engine._check_rounds(st, pool, 1, False, None, TUNING)
+    i = acc.idx
+    A, B = pool.A[i], pool.B[i]
+    engine._apply(st, A, B, pool.X[i], acc.rows)
+    before = engine.survivors(st)
+    assert np.array_equal(before[B], A)                 # the removed ends follow their survivors
+    pos = st.V[before].copy()
+    engine.compact(st)
+    declared_lengths(st)
+    after = st.cur_of_clean
+    assert np.array_equal(st.V[after], pos)             # same positions, new numbering
+    assert st.F.shape[0] == F.shape[0] - 2 * int(pool.interior[i].sum())
+
+
+@pytest.mark.parametrize("k", [1, 1000, 200_000])
+def test_sampled_kth_smallest_is_never_far_below(k):
+    x = np.random.default_rng(1).random(1_000_000)
+    v = engine._kth_smallest(x, k, TUNING.sample)
+    rank = int(np.count_nonzero(x < v))
+    assert k - 5 * np.sqrt(k + 1) <= rank <= k + 0.005 * x.size
