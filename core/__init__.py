@@ -33,7 +33,8 @@ from .metrics import SurfaceDistance, sample_surface, surface_distance
 from .subdivide import SubdivisionOperator, SubdivisionResult, subdivide, subdivision_operator
 from .clean import CleanReport, CleanResult, clean_mesh
 from .simplify import SimplifyResult, simplify
-from .symmetry import mirror_partners, simplify_symmetric, symmetrize
+from .mirror import mirror_partners, symmetrize
+from .symmetry import simplify_symmetric
 from .fit import FitResult, fit_cage
 from .binding import Binding, RefineResult, bind, deform, refine
 

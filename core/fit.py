@@ -38,6 +38,7 @@ from .clean import clean_mesh
 from .errors import InvalidArgumentError, InvalidMeshError
 from .mesh import bbox_diagonal, bounding_box, check_mesh, face_areas, vertex_normals
 from .metrics import sample_surface
+from .mirror import axis_index, mirror_partners, symmetrize
 from .spatial import TriangleIndex
 from .subdivide import subdivision_operator
 from .topology import edge_map
@@ -94,7 +95,7 @@ def fit_cage(V_dense, F_dense, V_cage, F_cage, *, levels=2, scheme="butterfly", 
         symmetric about the plane through the origin normal to this axis:
         each solve runs on the symmetric positions only (conjugate gradients
         on the projected system ``P A P``, ``P`` averaging every vertex with
-        its partner's mirror image, :func:`core.symmetry.symmetrize`), so the
+        its partner's mirror image, :func:`core.mirror.symmetrize`), so the
         fit settles between the two sides of a nearly symmetric scan;
         partners are exact mirror images, plane vertices exactly on it.
     cg_rtol, cg_max_iterations
@@ -243,7 +244,6 @@ def _symmetric_projection(V_cage, symmetry):
     array onto positions mirror-symmetric about the plane through the
     origin normal to that axis (each vertex averaged with its partner's
     mirror image; symmetric and idempotent)."""
-    from .symmetry import axis_index, mirror_partners, symmetrize
     k = axis_index(symmetry, "fit_cage")
     partner = mirror_partners(V_cage, symmetry, where="fit_cage")
     return k, lambda X: symmetrize(X, partner, k)

@@ -43,7 +43,7 @@ def simplify(**kw):
 def assert_mirror_symmetric(core, cage):
     V = mio().read_positions(cage.data)
     F = mio().read_triangles(cage.data)[0]
-    sym = sys.modules[MODULE + ".core.symmetry"]
+    sym = sys.modules[MODULE + ".core.mirror"]
     p = sym.mirror_partners(V, 'X', tolerance=1e-6)      # raises when a vertex has none
     assert np.array_equal(sym.mirror(V, 0)[p], V)         # exactly (float32 negates exactly)
     assert np.all(V[p == np.arange(V.shape[0]), 0] == 0.0) and (p == np.arange(V.shape[0])).any()
@@ -84,7 +84,7 @@ def test_asymmetric_scan_with_symmetry_binds_and_round_trips(scene, core):
     assert np.abs(V1 - V0).max() < 1e-5                   # float32 storage of positions and binding
     # an X-mirror edit of the cage moves both sides of the result alike
     Vc = mio().read_positions(cage.data)
-    sym = sys.modules[MODULE + ".core.symmetry"]
+    sym = sys.modules[MODULE + ".core.mirror"]
     p = sym.mirror_partners(Vc, 'X')
     i = int(np.argmax(Vc[:, 0]))
     Vc[[i, p[i]], 2] += 0.1

@@ -3,7 +3,7 @@
 import numpy as np
 
 import core
-from core.symmetry import mirror_partners
+from core.mirror import mirror_partners
 from tests.cli.test_batch import bumpy_sphere, run_batch
 
 

@@ -7,7 +7,8 @@ import pytest
 from core import (InvalidArgumentError, bind, bbox_diagonal, deform, euler_characteristic,
                   fit_cage, manifold_report, simplify, surface_distance)
 from core.clean import clean_mesh
-from core.symmetry import AXES, mirror, mirror_partners, simplify_symmetric
+from core.mirror import AXES, mirror, mirror_partners
+from core.symmetry import simplify_symmetric
 from tests.mesh_factory import icosphere, load_shared, regular_grid, torus
 
 
