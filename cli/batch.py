@@ -64,6 +64,9 @@ def parse_args(argv, prog=PROG):
                    help="subdivision scheme for --fit and --refine (default: butterfly)")
     p.add_argument("--feature-angle", type=float, default=60.0, metavar="DEG",
                    help="dihedral angle above which edges are kept sharp (default 60)")
+    p.add_argument("--max-dihedral", type=float, default=None, metavar="DEG",
+                   help="stop before a collapse would bend two adjacent cage faces by more than "
+                        "DEG degrees away from the creases (0 < DEG < 180; default: no bound)")
     p.add_argument("--symmetry", choices=("X", "Y", "Z"), default=None,
                    help="make the cage mirror-symmetric about the plane through the origin "
                         "normal to this axis, in the file's coordinates (the fit keeps it so)")
@@ -93,6 +96,8 @@ def parse_args(argv, prog=PROG):
         p.error("--ratio must be in (0, 1]")
     if args.max_error is not None and args.max_error <= 0:
         p.error("--max-error must be positive")
+    if args.max_dihedral is not None and not 0 < args.max_dihedral < 180:
+        p.error("--max-dihedral must be in (0, 180) degrees")
     if args.refine < 0 or args.jobs < 1:
         p.error("--refine must be >= 0 and --jobs >= 1")
     return args
@@ -102,7 +107,7 @@ def options(args):
     return _convert.Options(faces=args.faces, ratio=args.ratio, max_error_pct=args.max_error,
                             fit=args.fit, refine=args.refine, scheme=args.scheme,
                             feature_angle_deg=args.feature_angle, format=args.format,
-                            symmetry=args.symmetry)
+                            symmetry=args.symmetry, max_dihedral_deg=args.max_dihedral)
 
 
 def _is_output(name):

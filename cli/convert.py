@@ -48,6 +48,7 @@ class Options:
     feature_angle_deg: float = 60.0
     format: str = None               #: None: the input's own (glTF as glb)
     symmetry: str = None             #: 'X', 'Y' or 'Z': a cage mirror-symmetric about that plane
+    max_dihedral_deg: float = None   #: no collapse bends adjacent cage faces more than this
 
     @property
     def levels(self):
@@ -189,7 +190,8 @@ def convert(task, opts):
             max_error = opts.max_error_pct / 100.0 * diag
         res = run.step("simplify", core.simplify, V, F, target_faces=opts.faces,
                        ratio=opts.ratio, max_error=max_error,
-                       feature_angle_deg=opts.feature_angle_deg, symmetry=opts.symmetry)
+                       feature_angle_deg=opts.feature_angle_deg, symmetry=opts.symmetry,
+                       max_dihedral_deg=opts.max_dihedral_deg)
         r["faces_out"] = int(res.F.shape[0])
         r["target_faces"] = res.target
         r["stopped_because"] = res.stopped_because

@@ -88,6 +88,10 @@ SETTINGS = {
     "feature_angle_deg": Setting('FLOAT', "Feature angle", "Edges sharper than this (degrees) "
                                  "are kept as creases (180 turns it off)", 60.0,
                                  {"min": 0.0, "max": 180.0}),
+    "max_dihedral_deg": Setting('FLOAT', "Max bend", "Stop before a collapse would bend two "
+                                "adjacent cage faces by more than this (degrees) away from the "
+                                "creases: a rounder cage with more faces (180 turns it off)", 180.0,
+                                {"min": 1.0, "max": 180.0}),
     "use_symmetry": Setting('BOOL', "Symmetry", "Make the cage mirror-symmetric about the "
                             "object's local plane (as Decimate's Symmetry), so X-mirror editing "
                             "moves both sides; the fit and the detail absorb the scan's own "
@@ -141,7 +145,8 @@ def _same(*keys):
 
 #: operator property name -> setting key, per operator
 SIMPLIFY = _same("target_mode", "target_faces", "ratio", "max_error_pct", "preserve_boundary",
-                 "preserve_topology", "feature_angle_deg", "use_symmetry", "symmetry_axis",
+                 "preserve_topology", "feature_angle_deg", "max_dihedral_deg", "use_symmetry",
+                 "symmetry_axis",
                  "weight_group", "lock_group", "fit",
                  "bind", "levels", "scheme", "hide_source")
 FIT = _same("rebind")
@@ -156,9 +161,9 @@ OPERATORS = {"meshadjust.simplify": SIMPLIFY, "meshadjust.fit_cage": FIT,
 SCENE = _same(*SIMPLIFY, "refine_scheme", "output", "subdivide_levels", "subdivide_scheme")
 #: the add-on preferences, and those of them copied into every scene's settings
 PREFERENCES = _same("target_mode", "target_faces", "ratio", "max_error_pct", "preserve_boundary",
-                    "preserve_topology", "feature_angle_deg", "fit", "bind", "hide_source",
-                    "levels", "scheme", "output", "subdivide_levels", "subdivide_scheme",
-                    "live_interval")
+                    "preserve_topology", "feature_angle_deg", "max_dihedral_deg", "fit", "bind",
+                    "hide_source", "levels", "scheme", "output", "subdivide_levels",
+                    "subdivide_scheme", "live_interval")
 SEEDED = tuple(k for k in PREFERENCES if k in SCENE)
 
 

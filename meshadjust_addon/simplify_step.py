@@ -51,6 +51,7 @@ class SimplifyParams:
     preserve_boundary: bool = _d("preserve_boundary")
     preserve_topology: bool = _d("preserve_topology")
     feature_angle_deg: float = _d("feature_angle_deg")
+    max_dihedral_deg: float = _d("max_dihedral_deg")   #: 180: off
     use_symmetry: bool = _d("use_symmetry")
     symmetry_axis: str = _d("symmetry_axis")   #: 'X', 'Y' or 'Z' (the object's local axes)
     weight_group: str = _d("weight_group")
@@ -71,7 +72,8 @@ class SimplifyParams:
             ratio=s.ratio if s.target_mode == 'RATIO' else None,
             max_error_pct=s.max_error_pct if s.target_mode == 'ERROR' else None,
             preserve_boundary=s.preserve_boundary, preserve_topology=s.preserve_topology,
-            feature_angle_deg=s.feature_angle_deg, use_symmetry=s.use_symmetry,
+            feature_angle_deg=s.feature_angle_deg, max_dihedral_deg=s.max_dihedral_deg,
+            use_symmetry=s.use_symmetry,
             symmetry_axis=s.symmetry_axis, weight_group=s.weight_group,
             lock_group=s.lock_group, fit=s.fit, bind=s.bind, levels=s.levels, scheme=s.scheme,
             hide_source=s.hide_source)
@@ -172,6 +174,8 @@ def compute_simplify(job, *, progress=None):
                         preserve_topology=p.preserve_topology,
                         feature_angle_deg=None if p.feature_angle_deg >= 180.0
                         else p.feature_angle_deg,
+                        max_dihedral_deg=None if p.max_dihedral_deg >= 180.0
+                        else p.max_dihedral_deg,
                         vertex_weights=job.weights, locked=job.locked, symmetry=p.symmetry,
                         progress=simplify_progress)
     job.result = res
@@ -243,7 +247,8 @@ def _target_note(job):
         if p.ratio is not None:
             target = max(target or 0, int(round(p.ratio * job.F.shape[0])))
     missed = target is not None and m > target * (1.0 + TARGET_TOLERANCE)
-    if res.stopped_because not in ("topology_floor", "no_valid_collapse") and not missed:
+    short = res.stopped_because in ("topology_floor", "no_valid_collapse", "max_dihedral")
+    if not short and not missed:
         return "", False
     message = getattr(res, "message", "")
     head = message.split("; ")[0] if message else (
