@@ -480,21 +480,52 @@ def _deform_rows(binding, P, N, hit, out):
     """Rebuild the dense rows ``hit.rows`` of ``out`` on the fine positions
     and normals ``P``, ``N`` (3, n_fine) (the incremental deform's row work).
 
-    The rows are grouped by fine face, so their corners come from one
-    ``np.repeat`` of the faces' corners and their barycentric coordinates and
-    offsets from the face-sorted copies (contiguous runs, not a scattered
-    gather); the frames are built in blocks of ``_ROW_BLOCK`` rows. Each
-    row goes through the same operations as in a full deform."""
+    The rows are grouped by fine face, so the face's corner, edges and
+    corner normals are gathered once per face and repeated over its rows,
+    and the rows' barycentric coordinates and offsets come from the
+    face-sorted copies (contiguous runs, not a scattered gather); blocks of
+    whole faces, about ``_ROW_BLOCK`` rows each. Each row goes through the
+    operations of :func:`_frames_t` in the same order, so it is bit for bit
+    what a full deform gives on the same fine positions and normals."""
     op = binding._operator
     idx = binding._cache["incremental"]
-    cornersT = np.repeat(op.F_fine[hit.faces].T, idx["dense_count"][hit.faces], axis=1)
-    baryT = np.take(idx["bary_by_face"], hit.sorted_at, axis=1)
-    offsetT = np.take(idx["offset_by_face"], hit.sorted_at, axis=1)
-    rows = hit.rows
-    for s in range(0, rows.shape[0], _ROW_BLOCK):
-        e = min(s + _ROW_BLOCK, rows.shape[0])
-        fr = _frames_t(P, N, cornersT[:, s:e], baryT[:, s:e])
-        out[rows[s:e]] = _from_frame_t(offsetT[:, s:e], *fr)
+    # per face: its first corner, edges and corner normals, as _frames_t takes them
+    Fh = op.F_fine[hit.faces]
+    A = np.take(P, Fh[:, 0], axis=1)
+    E1 = np.take(P, Fh[:, 1], axis=1)
+    E1 -= A
+    E2 = np.take(P, Fh[:, 2], axis=1)
+    E2 -= A
+    Nk = [np.take(N, Fh[:, k], axis=1) for k in range(3)]
+    count = idx["dense_count"][hit.faces]
+    end = np.cumsum(count)
+    # blocks of whole faces, about _ROW_BLOCK rows each
+    cuts = np.unique(np.concatenate([[0], np.searchsorted(
+        end, np.arange(_ROW_BLOCK, int(end[-1]), _ROW_BLOCK)) + 1, [Fh.shape[0]]]))
+    at = 3 * hit.rows                 # row starts in the flat (C-contiguous) out
+    flat = out.reshape(-1)
+
+    for f0, f1 in zip(cuts[:-1], cuts[1:]):
+        s, e = int(end[f0 - 1]) if f0 else 0, int(end[f1 - 1])
+        c = count[f0:f1]
+        b0, b1, b2 = (np.take(idx["bary_by_face"][k], hit.sorted_at[s:e]) for k in range(3))
+        point = np.repeat(A[:, f0:f1], c, axis=1)
+        e1 = np.repeat(E1[:, f0:f1], c, axis=1)
+        e2 = np.repeat(E2[:, f0:f1], c, axis=1)
+        tmp = np.multiply(b1, e1)     # from here the operations of _frames_t
+        point += tmp
+        np.multiply(b2, e2, out=tmp)
+        point += tmp
+        normal = np.repeat(Nk[0][:, f0:f1], c, axis=1)
+        normal *= b0
+        np.multiply(np.repeat(Nk[1][:, f0:f1], c, axis=1), b1, out=tmp)
+        normal += tmp
+        np.multiply(np.repeat(Nk[2][:, f0:f1], c, axis=1), b2, out=tmp)
+        normal += tmp
+        X = _compose_t(np.take(idx["offset_by_face"], hit.sorted_at[s:e], axis=1),
+                       *_frames_finish(point, e1, e2, normal, tmp))
+        for d in range(3):            # a coordinate at a time: no (r,3) copy to scatter
+            flat[at[s:e] + d] = X[d]
 
 
 def _influenced_dense(binding, ids):
@@ -687,6 +718,13 @@ def _frames_t(VfT, NfT, cornersT, baryT):
     np.take(NfT, i2, axis=1, out=tmp)
     tmp *= b2
     normal += tmp
+    return _frames_finish(point, e1, e2, normal, tmp)
+
+
+def _frames_finish(point, e1, e2, normal, tmp):
+    """The rest of :func:`_frames_t` from the point, the face's edges
+    ``e1``, ``e2``, the blended normal (not yet normalised) and a scratch
+    (3, q) array; all are reused for the result."""
     bad = _normalise_t(normal, 1.0)
     if bad.any():
         fn = _cross_t(e1[:, bad], e2[:, bad])
@@ -812,7 +850,7 @@ def _update_fine_geometry(binding, Vc, ids, hit):
     they move is recomputed, in place: each level's changed vertices
     (``hit.changed``) from their stencil rows over the level below, then the
     changed normals the rows read (at the corners of ``hit.faces``) from
-    the faces around them, in the order of :func:`_vertex_normals_t`. A
+    the faces around them (:func:`_normals_at`). A
     changed normal at a vertex with no bound dense vertex on its faces (a
     fine mesh denser than the dense one) is never read: it is only marked
     stale. Each value is recomputed from the level below, never updated
@@ -847,14 +885,34 @@ def _update_fine_geometry(binding, Vc, ids, hit):
     read = _distinct(op.F_fine[hit.faces].ravel(), stamp)
     redo = read[g.stale[read]]
     if redo.size:
-        # from the faces around them, on their own vertices (compact ids)
-        Fs = op.F_fine[np.sort(_faces_around(idx, redo))]
-        verts = _distinct(Fs.ravel(), stamp)
-        stamp[verts] = np.arange(verts.shape[0])
-        N = _vertex_normals_t(np.take(VfT, verts, axis=1), stamp[Fs])
-        NfT[:, redo] = np.take(N, stamp[redo], axis=1)
+        NfT[:, redo] = _normals_at(idx, op.F_fine, VfT, redo)
         g.stale[redo] = False
     return VfT, NfT
+
+
+def _normals_at(idx, F, PT, vertices):
+    """Unit normals (3, k) at the given fine vertices (each on at least one
+    face): the sum of the normals of the faces around each (from the fine
+    vertex -> faces index, a group per vertex, ``np.add.reduceat``), as
+    :func:`_vertex_normals_t` forms and normalises them, summed in another
+    order (equal to it to rounding)."""
+    counts = idx["vertex_count"][vertices]
+    T = F[idx["faces_by_vertex"][_ranges(idx["vertex_start"][vertices], counts)]]
+    a = np.take(PT, T[:, 0], axis=1)
+    e1 = np.take(PT, T[:, 1], axis=1)
+    e1 -= a
+    e2 = np.take(PT, T[:, 2], axis=1)
+    e2 -= a
+    starts = np.cumsum(counts) - counts
+    out = np.empty((3, vertices.shape[0]))
+    out[0] = np.add.reduceat(e1[1] * e2[2] - e1[2] * e2[1], starts)
+    out[1] = np.add.reduceat(e1[2] * e2[0] - e1[0] * e2[2], starts)
+    out[2] = np.add.reduceat(e1[0] * e2[1] - e1[1] * e2[0], starts)
+    length = _length_t(out)
+    ok = length > 0
+    np.divide(out, length, out=out, where=ok)
+    out[:, ~ok] = 0.0
+    return out
 
 
 class _Rows(NamedTuple):
@@ -1019,13 +1077,18 @@ def _to_frame(d, fr):
 def _from_frame_t(oT, point, tangent, bitangent, normal):
     """Points ``point + o0 tangent + o1 bitangent + o2 normal`` as a (q,3)
     array, from (3,q) inputs, which it overwrites."""
+    return np.ascontiguousarray(_compose_t(oT, point, tangent, bitangent, normal).T)
+
+
+def _compose_t(oT, point, tangent, bitangent, normal):
+    """:func:`_from_frame_t` left in the (3,q) layout: ``point``, updated in place."""
     tangent *= oT[0]
     point += tangent
     bitangent *= oT[1]
     point += bitangent
     normal *= oT[2]
     point += normal
-    return np.ascontiguousarray(point.T)
+    return point
 
 
 def _dot(a, b):

@@ -250,3 +250,19 @@ def test_chain_on_a_fine_mesh_denser_than_the_dense_one(scheme):
         Ve[ids] += 0.03 * rng.standard_normal((ids.shape[0], 3))
         deform(b, Ve, moved=ids, out=D)
         assert np.abs(D - deform(ref, Ve)).max() <= _tol(Vd)
+
+
+def test_rows_rebuilt_in_many_blocks(torus_case, monkeypatch):
+    """Blocks of whole fine faces (tiny blocks here): same result as one block."""
+    import core.binding as binding_module
+    Vd, Vc, b = torus_case
+    Ve = Vc.copy()
+    ids = np.array([2, 30, 31])
+    Ve[ids] += 0.02
+    one = deform(b, Vc)
+    deform(b, Ve, moved=ids, out=one)
+    monkeypatch.setattr(binding_module, "_ROW_BLOCK", 5)
+    many = deform(b, Vc)
+    deform(b, Ve, moved=ids, out=many)
+    assert np.array_equal(one, many)
+    assert np.abs(many - deform(b, Ve)).max() <= _tol(Vd)
