@@ -636,9 +636,33 @@ def simplify(V, F, *, target_faces=None, ratio=None, max_error=None, preserve_bo
     if max_error is None:
         budget = target_faces if ratio is None else max(target_faces or 0, round(ratio * F.shape[0]))
     t0 = time.perf_counter()
-    clean = clean_mesh(V, F, weld_distance=weld_distance, min_component_area=min_component_area,
-                       face_budget=budget or None, protected=lk)
+    clean = _cleaned(V, F, weld_distance, min_component_area, budget, lk)
     t_clean = time.perf_counter() - t0
+    target = _target_of(target_faces, ratio, clean.F.shape[0])
+    to_input = clean.clean_to_input
+    opts = dict(tuning=TUNING if tuning is None else tuning, preserve_boundary=preserve_boundary,
+                preserve_topology=preserve_topology, feature_angle_deg=feature_angle_deg,
+                dihedral_cos=None if max_dihedral_deg is None
+                else float(np.cos(np.radians(max_dihedral_deg))),
+                weights=None if weights is None else weights[to_input],
+                locked=None if lk is None else lk[to_input])
+    hausdorff = None
+    if clean.F.shape[0] == 0:
+        cage = _unchanged(clean)._replace(stopped="target")
+    elif max_error is None:
+        cage = _collapse(clean, target, opts, progress)
+    else:
+        cage, hausdorff = _within_max_error(clean, target, max_error, opts, progress)
+    cage = cage._replace(stopped=_stop_reason(cage, target, opts),
+                         seconds={"clean": t_clean, **cage.seconds})
+    return _result(cage, clean, F.shape[0], n_in, target, hausdorff, t0)
+
+
+def _cleaned(V, F, weld_distance, min_component_area, budget, locked):
+    """The cleaned input (:func:`core.clean.clean_mesh`), or a clear error
+    when nothing with area is left of it."""
+    clean = clean_mesh(V, F, weld_distance=weld_distance, min_component_area=min_component_area,
+                       face_budget=budget or None, protected=locked)
     if clean.F.shape[0] == 0 and F.shape[0] > 0:
         raise InvalidMeshError(
             f"{_WHERE}: nothing is left after cleaning the {F.shape[0]:,} faces "
@@ -647,35 +671,28 @@ def simplify(V, F, *, target_faces=None, ratio=None, max_error=None, preserve_bo
         raise InvalidMeshError(
             f"{_WHERE}: the {clean.F.shape[0]:,} faces left after cleaning have no area (their "
             f"corners are collinear): no cage can be made")
-    m0 = clean.F.shape[0]
-    target = None
-    if target_faces is not None:
-        target = int(target_faces)
+    return clean
+
+
+def _target_of(target_faces, ratio, m0):
+    """The face count asked for (the larger of the two when both are given),
+    None with only ``max_error``."""
+    target = None if target_faces is None else int(target_faces)
     if ratio is not None:
         t = int(round(float(ratio) * m0))
         target = t if target is None else max(target, t)
-    to_input = clean.clean_to_input
-    opts = dict(tuning=TUNING if tuning is None else tuning, preserve_boundary=preserve_boundary,
-                preserve_topology=preserve_topology, feature_angle_deg=feature_angle_deg,
-                dihedral_cos=None if max_dihedral_deg is None else float(np.cos(np.radians(max_dihedral_deg))),
-                weights=None if weights is None else weights[to_input],
-                locked=None if lk is None else lk[to_input])
-    hausdorff = None
-    if m0 == 0:
-        cage = _unchanged(clean)._replace(stopped="target")
-    elif max_error is None:
-        cage = _collapse(clean, target, opts, progress)
-    else:
-        cage, hausdorff = _within_max_error(clean, target, max_error, opts, progress)
-    stopped = _stop_reason(cage, target, opts)
+    return target
+
+
+def _result(cage, clean, m_in, n_in, target, hausdorff, t0):
+    """The :class:`SimplifyResult` of ``cage``, mapped back to the input."""
     kept = clean.input_to_clean >= 0
     vertex_map = np.full(n_in, -1, dtype=np.int64)
     vertex_map[kept] = cage.of_clean[clean.input_to_clean[kept]]
     _, n_comp = face_components(cage.F, cage.V.shape[0])
     return SimplifyResult(
         V=cage.V, F=cage.F, vertex_map=vertex_map, face_map=clean.face_to_input[cage.face_from],
-        max_error=cage.worst, stopped_because=stopped, feature_edges=cage.feature_edges,
-        cleaning=clean.report, n_input_faces=int(F.shape[0]), target=target, hausdorff=hausdorff,
+        max_error=cage.worst, stopped_because=cage.stopped, feature_edges=cage.feature_edges,
+        cleaning=clean.report, n_input_faces=int(m_in), target=target, hausdorff=hausdorff,
         n_boundary_loops=boundary_loops_count(cage.F, cage.V.shape[0]), n_components=n_comp,
-        n_passes=cage.passes,
-        seconds={"clean": t_clean, **cage.seconds, "total": time.perf_counter() - t0})
+        n_passes=cage.passes, seconds={**cage.seconds, "total": time.perf_counter() - t0})
