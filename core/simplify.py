@@ -159,8 +159,11 @@ class SimplifyResult:
         return f"{text}; {done}" if done else text
 
 
-def _check_args(n, target_faces, ratio, max_error, feature_angle_deg, vertex_weights, locked, progress,
-                max_dihedral_deg=None):
+def check_arguments(n, target_faces, ratio, max_error, feature_angle_deg, vertex_weights, locked,
+                    progress, max_dihedral_deg=None):
+    """Check :func:`simplify`'s arguments for an input of ``n`` vertices
+    (:class:`InvalidArgumentError` naming the one that is wrong); returns the
+    vertex weights and the lock mask as arrays (or None)."""
     if target_faces is None and ratio is None and max_error is None:
         raise InvalidArgumentError(
             f"{_WHERE}: give at least one of target_faces, ratio or max_error, e.g. ratio=0.1")
@@ -621,24 +624,20 @@ def simplify(V, F, *, target_faces=None, ratio=None, max_error=None, preserve_bo
             V, F, axis=symmetry, target_faces=target_faces, ratio=ratio, max_error=max_error,
             preserve_boundary=preserve_boundary, preserve_topology=preserve_topology,
             feature_angle_deg=feature_angle_deg, vertex_weights=vertex_weights, locked=locked,
-            weld_distance=weld_distance, min_component_area=min_component_area, progress=progress,
-            tuning=tuning)
+            weld_distance=weld_distance, min_component_area=min_component_area,
+            max_dihedral_deg=max_dihedral_deg, progress=progress, tuning=tuning)
     if tuning is not None and not isinstance(tuning, Tuning):
         raise InvalidArgumentError(f"{_WHERE}: tuning must be a core.tuning.Tuning, not "
                                    f"{type(tuning).__name__}")
     V, F = check_mesh(V, F, where=_WHERE)
     n_in = V.shape[0]
-    weights, lk = _check_args(n_in, target_faces, ratio, max_error, feature_angle_deg, vertex_weights,
-                              locked, progress, max_dihedral_deg)
-    # components too small for one face of the target are debris (not with max_error:
-    # dropping one could break its bound)
-    budget = None
-    if max_error is None:
-        budget = target_faces if ratio is None else max(target_faces or 0, round(ratio * F.shape[0]))
+    weights, lk = check_arguments(n_in, target_faces, ratio, max_error, feature_angle_deg,
+                                  vertex_weights, locked, progress, max_dihedral_deg)
     t0 = time.perf_counter()
-    clean = _cleaned(V, F, weld_distance, min_component_area, budget, lk)
+    clean = cleaned_input(V, F, weld_distance, min_component_area,
+                          debris_budget(target_faces, ratio, max_error, F.shape[0]), lk)
     t_clean = time.perf_counter() - t0
-    target = _target_of(target_faces, ratio, clean.F.shape[0])
+    target = target_count(target_faces, ratio, clean.F.shape[0])
     to_input = clean.clean_to_input
     opts = dict(tuning=TUNING if tuning is None else tuning, preserve_boundary=preserve_boundary,
                 preserve_topology=preserve_topology, feature_angle_deg=feature_angle_deg,
@@ -658,7 +657,7 @@ def simplify(V, F, *, target_faces=None, ratio=None, max_error=None, preserve_bo
     return _result(cage, clean, F.shape[0], n_in, target, hausdorff, t0)
 
 
-def _cleaned(V, F, weld_distance, min_component_area, budget, locked):
+def cleaned_input(V, F, weld_distance, min_component_area, budget, locked):
     """The cleaned input (:func:`core.clean.clean_mesh`), or a clear error
     when nothing with area is left of it."""
     clean = clean_mesh(V, F, weld_distance=weld_distance, min_component_area=min_component_area,
@@ -674,7 +673,16 @@ def _cleaned(V, F, weld_distance, min_component_area, budget, locked):
     return clean
 
 
-def _target_of(target_faces, ratio, m0):
+def debris_budget(target_faces, ratio, max_error, m):
+    """The face count below which a component is too small for one face of
+    the target (debris), or None: never with ``max_error`` (dropping a
+    component could break its bound)."""
+    if max_error is not None:
+        return None
+    return target_faces if ratio is None else max(target_faces or 0, round(ratio * m))
+
+
+def target_count(target_faces, ratio, m0):
     """The face count asked for (the larger of the two when both are given),
     None with only ``max_error``."""
     target = None if target_faces is None else int(target_faces)

@@ -40,12 +40,13 @@ from typing import NamedTuple
 
 import numpy as np
 
-from .clean import MIN_COMPONENT_AREA, WELD_DISTANCE, clean_mesh
-from .errors import InvalidArgumentError, InvalidMeshError
+from .clean import MIN_COMPONENT_AREA, WELD_DISTANCE
+from .errors import InvalidArgumentError
 from .mesh import bbox_diagonal, check_mesh, face_normals
 from .metrics import surface_distance
 from .mirror import PARTNER_TOLERANCE, axis_index, mirror, mirror_partners  # noqa: F401 (example)
-from .simplify import SimplifyResult, _check_args, simplify
+from .simplify import (SimplifyResult, check_arguments, cleaned_input, debris_budget, simplify,
+                       target_count)
 from .spatial import TriangleIndex
 from .topology import boundary_loops_count, edge_map, face_components
 
@@ -360,7 +361,8 @@ def _mirror_face_sources(clean, s, V, F, k):
 def simplify_symmetric(V, F, *, axis="X", target_faces=None, ratio=None, max_error=None,
                        preserve_boundary=True, preserve_topology=True, feature_angle_deg=60.0,
                        vertex_weights=None, locked=None, weld_distance=WELD_DISTANCE,
-                       min_component_area=MIN_COMPONENT_AREA, progress=None, tuning=None):
+                       min_component_area=MIN_COMPONENT_AREA, max_dihedral_deg=None, progress=None,
+                       tuning=None):
     """A mirror-symmetric cage (what ``simplify(..., symmetry=axis)`` runs).
 
     Every cage vertex has an exact mirror partner about the plane through
@@ -389,6 +391,9 @@ def simplify_symmetric(V, F, *, axis="X", target_faces=None, ratio=None, max_err
         (Hausdorff geomean 2.15x on suzanne, spot and cow).
     tuning : optional
         The engine's constants, as :func:`core.simplify` takes them (passed on).
+    max_dihedral_deg : float, optional
+        As :func:`core.simplify`, on the half; bends across the mirror plane
+        (between a seam face and its mirror) are not bounded by it.
     vertex_weights, locked : (n,) optional
         As :func:`core.simplify`, read on both sides: a negative-side vertex
         weighs on (and locks) the positive-side vertex its mirror lands on.
@@ -421,24 +426,11 @@ def simplify_symmetric(V, F, *, axis="X", target_faces=None, ratio=None, max_err
     k = axis_index(axis)
     V, F = check_mesh(V, F, where=_WHERE)
     n_in = V.shape[0]
-    weights, lk = _check_args(n_in, target_faces, ratio, max_error, feature_angle_deg,
-                              vertex_weights, locked, progress)
-    budget = None
-    if max_error is None:
-        budget = target_faces if ratio is None else max(target_faces or 0, round(ratio * F.shape[0]))
-    clean = clean_mesh(V, F, weld_distance=weld_distance, min_component_area=min_component_area,
-                       face_budget=budget or None, protected=lk)
-    if clean.F.shape[0] == 0:
-        raise InvalidMeshError(
-            f"{_WHERE}: nothing is left after cleaning the {F.shape[0]:,} faces "
-            f"({clean.report.summary() or 'no faces'}): no cage can be made")
-    m0 = clean.F.shape[0]
-    target = None
-    if target_faces is not None:
-        target = int(target_faces)
-    if ratio is not None:
-        t = int(round(float(ratio) * m0))
-        target = t if target is None else max(target, t)
+    weights, lk = check_arguments(n_in, target_faces, ratio, max_error, feature_angle_deg,
+                                  vertex_weights, locked, progress, max_dihedral_deg)
+    clean = cleaned_input(V, F, weld_distance, min_component_area,
+                          debris_budget(target_faces, ratio, max_error, F.shape[0]), lk)
+    target = target_count(target_faces, ratio, clean.F.shape[0])
     diag = bbox_diagonal(clean.V) or 1.0
     s = clean.V[:, k].copy()
     s[np.abs(s) <= SNAP * diag] = 0.0
@@ -468,7 +460,7 @@ def simplify_symmetric(V, F, *, axis="X", target_faces=None, ratio=None, max_err
                      preserve_boundary=True, preserve_topology=preserve_topology,
                      feature_angle_deg=feature_angle_deg, vertex_weights=w_half, locked=lk_half,
                      weld_distance=weld_distance, min_component_area=min_component_area,
-                     progress=progress)
+                     max_dihedral_deg=max_dihedral_deg, progress=progress)
         if r.stopped_because == "cancelled":
             return r, None
         seam_from = np.zeros(r.V.shape[0], dtype=bool)

@@ -73,3 +73,15 @@ def test_bad_bounds_are_refused(bad):
     V, F = icosphere(2)
     with pytest.raises(InvalidArgumentError, match="max_dihedral_deg"):
         simplify(V, F, target_faces=20, max_dihedral_deg=bad)
+
+
+def test_a_symmetric_cage_takes_the_bound_too():
+    from core.mirror import mirror_partners
+    V, F = icosphere(4)
+    r = simplify(V, F, target_faces=40, max_dihedral_deg=25.0, symmetry="X")
+    assert r.stopped_because == "max_dihedral" and r.F.shape[0] > 40
+    assert (mirror_partners(r.V, "X") >= 0).all()
+    # away from the mirror plane every bend is within the bound
+    C = r.V[r.F].mean(axis=1)
+    off = np.abs(C[:, 0]) > 0.2
+    assert bends_deg(r.V, r.F[off]).max() <= 25.0 + 1e-9
