@@ -98,6 +98,7 @@ class CageJob:
     old_levels: int = 0          #: the binding's levels and scheme before (0: unbound)
     old_scheme: str = ""
     note: str = ""               #: what the commit re-made, for the report
+    symmetry: str = None         #: the cage's mirror axis ('X', 'Y', 'Z'), kept by a fit
 
     @property
     def n_moved(self):
@@ -157,7 +158,8 @@ def prepare_cage_job(cage, *, levels=None, scheme=None, from_rest=False, keep_ed
     bound = cs.edited is not None
     return CageJob(cage.name, src.V, src.F, V_now if V_rest is None else V_rest, F_cage, creases,
                    levels, scheme, V_rest is not None, V_now=V_now, source_fingerprint=fp,
-                   old_levels=cs.levels if bound else 0, old_scheme=cs.scheme if bound else "")
+                   old_levels=cs.levels if bound else 0, old_scheme=cs.scheme if bound else "",
+                   symmetry=None if cs.symmetry == 'NONE' else cs.symmetry)
 
 
 def compute_bind(job, *, progress=None):
@@ -253,7 +255,8 @@ def compute_fit(job, *, progress=None):
     if job.rebind and progress is not None:
         fit_progress = lambda f: progress(0.8 * f)   # noqa: E731
     job.fit = core.fit_cage(job.V, job.F, job.V_cage, job.F_cage, levels=fit_levels(job.levels),
-                            scheme=job.scheme, creases=job.creases, progress=fit_progress)
+                            scheme=job.scheme, creases=job.creases, symmetry=job.symmetry,
+                            progress=fit_progress)
     job.cancelled = job.fit.cancelled
     if job.cancelled:
         return job

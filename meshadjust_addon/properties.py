@@ -11,7 +11,10 @@ from bpy.props import (BoolProperty, EnumProperty, FloatProperty, IntProperty, I
                        PointerProperty, StringProperty)
 
 from . import settings as _settings
-from .settings import OUTPUTS, SCHEMES, TARGET_MODES  # noqa: F401  (re-exported)
+from .settings import AXES, OUTPUTS, SCHEMES, TARGET_MODES  # noqa: F401  (re-exported)
+
+#: the plane a cage mirrors about, or none
+MIRROR_PLANES = [('NONE', "None", "Not symmetric")] + AXES
 
 ROLES = [
     ('NONE', "None", "Not part of a MeshAdjust workflow"),
@@ -60,6 +63,9 @@ class MeshAdjustObjectState(bpy.types.PropertyGroup):
                         description="Subdivision levels of the binding")
     scheme: EnumProperty(name="Scheme", items=SCHEMES, default='loop',
                          description="Subdivision scheme of the binding")
+    symmetry: EnumProperty(name="Symmetry", items=MIRROR_PLANES, default='NONE',
+                           description="Mirror plane this cage was made symmetric about (Fit "
+                                       "keeps it symmetric)")
     live: BoolProperty(name="Live", default=False,
                        description="Update the results while the cage is edited")
     last_report: StringProperty(name="Last report", default="",

@@ -283,6 +283,7 @@ def commit_simplify(source, job):
         cs.source = source
         cs.levels = job.levels
         cs.scheme = p.scheme
+        cs.symmetry = p.symmetry or 'NONE'
         faces_in = job.F.shape[0]
         dev = float("nan")
         msg = f"{faces_in:,} -> {res.F.shape[0]:,} faces"

@@ -94,3 +94,15 @@ def test_asymmetric_scan_with_symmetry_binds_and_round_trips(scene, core):
     V2 = mio().read_positions(cage.meshadjust.edited.data)
     moved = np.linalg.norm(V2 - V0, axis=1)
     assert moved[V0[:, 0] > 0].max() > 0.02 and moved[V0[:, 0] < 0].max() > 0.02
+
+
+def test_fit_button_keeps_a_symmetric_cage_symmetric(scene, core):
+    src = suzanne(seed=5)
+    assert bpy.ops.meshadjust.simplify(target_mode='FACES', target_faces=500, fit=False, bind=True,
+                                       levels=2, use_symmetry=True, symmetry_axis='X') == {'FINISHED'}
+    cage = src.meshadjust.cage
+    assert cage.meshadjust.symmetry == 'X'
+    bpy.context.view_layer.objects.active = cage
+    for _ in range(2):                               # a fit, then a fit of the fitted cage
+        assert bpy.ops.meshadjust.fit_cage() == {'FINISHED'}
+        assert_mirror_symmetric(core, cage)
