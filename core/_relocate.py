@@ -31,6 +31,7 @@ import numpy as np
 
 from ._collapse import compactness
 from .cg import conjugate_gradient
+from .mesh import barycentric_gather, barycentric_scatter
 from .spatial import TriangleIndex
 
 #: the relocation's solves stop early only once converged this far (they run
@@ -41,23 +42,13 @@ CG_RTOL = 1e-10
 def _gather(idx, b, x):
     """B x: the barycentric combinations (s,3) of rows of ``x`` (n,3), with
     ``idx`` (3, s) the three vertices of each row and ``b`` (3, s) their weights."""
-    return (b[0, :, None] * np.take(x, idx[0], axis=0) + b[1, :, None] * np.take(x, idx[1], axis=0)
-            + b[2, :, None] * np.take(x, idx[2], axis=0))
+    return barycentric_gather(x, idx.T, b.T)
 
 
 def _matvec(idx, b, x, lam):
     """(B^T B + diag(lam)) x for the sample-to-cage barycentric operator B
     (see ``_gather``)."""
-    return _scatter(idx, b, _gather(idx, b, x), x.shape[0]) + lam[:, None] * x
-
-
-def _scatter(idx, b, R, n):
-    """B^T R: (s,3) sample residuals to (n,3) vertex sums."""
-    flat = idx.ravel()
-    out = np.empty((n, 3))
-    for k in range(3):
-        out[:, k] = np.bincount(flat, weights=(b * R[:, k]).ravel(), minlength=n)
-    return out
+    return barycentric_scatter(_gather(idx, b, x), idx.T, b.T, x.shape[0]) + lam[:, None] * x
 
 
 def _normals(V, F):
@@ -174,7 +165,7 @@ def relocate(V, F, P, movable, *, iters=2, cg_iters=15, reg=0.05, min_cos=0.2, N
         lam = reg * diag + reg * max(float(diag.mean()), 1e-300)
         lam[~movable] = 1e30  # pinned
         # solve (B^T B + lam) D = B^T (T - B V) for the displacement D by CG
-        r = _scatter(idx, b, T - _gather(idx, b, V), n)
+        r = barycentric_scatter(T - _gather(idx, b, V), idx.T, b.T, n)
         r[~movable] = 0.0
         D = conjugate_gradient(lambda X: _matvec(idx, b, X, lam), r, rtol=CG_RTOL,
                                max_iterations=cg_iters).X

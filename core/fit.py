@@ -36,7 +36,8 @@ import numpy as np
 from .cg import conjugate_gradient
 from .clean import clean_mesh
 from .errors import InvalidArgumentError, InvalidMeshError
-from .mesh import bbox_diagonal, bounding_box, check_mesh, face_areas, vertex_normals
+from .mesh import (barycentric_gather, barycentric_scatter, bbox_diagonal, bounding_box, check_mesh,
+                   face_areas, vertex_normals)
 from .metrics import sample_surface
 from .mirror import axis_index, mirror_partners, symmetrize
 from .spatial import TriangleIndex
@@ -191,17 +192,10 @@ def fit_cage(V_dense, F_dense, V_cage, F_cage, *, levels=2, scheme="butterfly", 
         bary = np.asarray(hit.bary, dtype=np.float64)
 
         def B(Y):
-            return (bary[:, 0:1] * Y[corners[:, 0]] + bary[:, 1:2] * Y[corners[:, 1]]
-                    + bary[:, 2:3] * Y[corners[:, 2]])
+            return barycentric_gather(Y, corners, bary)
 
         def Bt(Z):
-            out = np.empty((op.n_fine, Z.shape[1]))
-            for k in range(Z.shape[1]):
-                col = Z[:, k]
-                out[:, k] = (np.bincount(corners[:, 0], bary[:, 0] * col, op.n_fine)
-                             + np.bincount(corners[:, 1], bary[:, 1] * col, op.n_fine)
-                             + np.bincount(corners[:, 2], bary[:, 2] * col, op.n_fine))
-            return out
+            return barycentric_scatter(Z, corners, bary, op.n_fine)
 
         def metric(N, Y):
             # (mu I + n n^T) y per row: point-to-plane plus a little point-to-point
@@ -262,9 +256,7 @@ def _interpolate(N, F, face, bary):
     (continuous across edges and vertices, unlike face normals); a zero blend
     stays zero (that point then only has the point-to-point term)."""
     corners = F[np.asarray(face, dtype=np.int64)]
-    bary = np.asarray(bary, dtype=np.float64)
-    out = (bary[:, 0:1] * N[corners[:, 0]] + bary[:, 1:2] * N[corners[:, 1]]
-           + bary[:, 2:3] * N[corners[:, 2]])
+    out = barycentric_gather(N, corners, np.asarray(bary, dtype=np.float64))
     length = np.linalg.norm(out, axis=1)
     return np.divide(out, length[:, None], out=np.zeros_like(out), where=length[:, None] > 1e-12)
 

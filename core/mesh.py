@@ -140,3 +140,25 @@ def enclosed_volume(V, F):
     (divergence theorem; positive for outward-facing normals)."""
     a, b, c = V[F[:, 0]], V[F[:, 1]], V[F[:, 2]]
     return float(np.einsum("ij,ij->i", a, np.cross(b, c)).sum() / 6.0)
+
+
+def barycentric_gather(X, corners, bary):
+    """Points blended from the rows of ``X`` (n,d): ``sum_j bary[i, j] *
+    X[corners[i, j]]``, (s,d). ``corners`` and ``bary`` are (s,3) (a
+    transposed (3,s) array works as well: each column is read once)."""
+    out = bary[:, 0:1] * np.take(X, corners[:, 0], axis=0)
+    out += bary[:, 1:2] * np.take(X, corners[:, 1], axis=0)
+    out += bary[:, 2:3] * np.take(X, corners[:, 2], axis=0)
+    return out
+
+
+def barycentric_scatter(R, corners, bary, n):
+    """The adjoint of :func:`barycentric_gather`: every row of ``R`` (s,d)
+    spread onto its three corners with its weights, (n,d) sums (one
+    ``bincount`` per column)."""
+    flat = np.ascontiguousarray(corners.T).ravel()
+    w = np.ascontiguousarray(bary.T)
+    out = np.empty((n, R.shape[1]))
+    for k in range(R.shape[1]):
+        out[:, k] = np.bincount(flat, weights=(w * R[:, k]).ravel(), minlength=n)
+    return out
