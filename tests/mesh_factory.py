@@ -244,6 +244,24 @@ def boundary_edges(F, n):
 
 
 # ---------------------------------------------------------------- messy variants (as scans arrive)
+def bend_angles_deg(V, F, skip_edges=()):
+    """Angle between the normals of the two faces of every interior edge,
+    in degrees, leaving out the edges ``skip_edges`` (k,2)."""
+    em = edge_map(F, V.shape[0])
+    N = np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]])
+    N = N / np.linalg.norm(N, axis=1)[:, None]
+    fe = em.face_edge.ravel()
+    order = np.argsort(fe, kind="stable")
+    e, f = fe[order], order // 3
+    pair = np.flatnonzero(e[1:] == e[:-1])
+    edges, a, b = e[pair], f[pair], f[pair + 1]
+    if len(skip_edges):
+        skip = {tuple(x) for x in np.sort(np.asarray(skip_edges), axis=1).tolist()}
+        keep = np.array([tuple(x) not in skip for x in em.E[edges].tolist()], dtype=bool)
+        a, b = a[keep], b[keep]
+    return np.degrees(np.arccos(np.clip(np.einsum("ij,ij->i", N[a], N[b]), -1.0, 1.0)))
+
+
 def unwelded(V, F, jitter=0.0, seed=0):
     """A triangle soup of the mesh: three vertices of its own per face, each
     moved by ``jitter`` of the bounding-box diagonal (Gaussian)."""

@@ -6,26 +6,8 @@ import pytest
 
 from core.errors import InvalidArgumentError
 from core.simplify import simplify
-from core.topology import edge_map, manifold_report, topology_summary
-from tests.mesh_factory import cube, icosphere, torus
-
-
-def bends_deg(V, F, skip_edges=()):
-    """Angle between the normals of the two faces of every interior edge,
-    in degrees, leaving out the edges ``skip_edges`` (k,2)."""
-    em = edge_map(F, V.shape[0])
-    N = np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]])
-    N /= np.linalg.norm(N, axis=1)[:, None]
-    fe = em.face_edge.ravel()
-    order = np.argsort(fe, kind="stable")
-    e, f = fe[order], order // 3
-    pair = np.flatnonzero(e[1:] == e[:-1])
-    edges, a, b = e[pair], f[pair], f[pair + 1]
-    if len(skip_edges):
-        skip = {tuple(x) for x in np.sort(np.asarray(skip_edges), axis=1).tolist()}
-        keep = np.array([tuple(x) not in skip for x in em.E[edges].tolist()], dtype=bool)
-        a, b = a[keep], b[keep]
-    return np.degrees(np.arccos(np.clip(np.einsum("ij,ij->i", N[a], N[b]), -1.0, 1.0)))
+from core.topology import manifold_report, topology_summary
+from tests.mesh_factory import bend_angles_deg, cube, icosphere, torus
 
 
 @pytest.mark.parametrize("shape, limit", [("sphere", 20.0), ("sphere", 35.0), ("torus", 30.0)])
@@ -33,12 +15,12 @@ def test_no_collapse_bends_faces_beyond_the_bound(shape, limit):
     V, F = icosphere(4) if shape == "sphere" else torus(40, 20, bump=0.2)
     free = simplify(V, F, target_faces=40)
     assert free.stopped_because == "target"
-    assert bends_deg(free.V, free.F).max() > limit      # the bound is what stops it below
-    assert bends_deg(V, F).max() < limit                  # (the input is within it)
+    assert bend_angles_deg(free.V, free.F).max() > limit      # the bound is what stops it below
+    assert bend_angles_deg(V, F).max() < limit                  # (the input is within it)
     r = simplify(V, F, target_faces=40, max_dihedral_deg=limit)
     assert r.stopped_because == "max_dihedral"
     assert r.F.shape[0] > 40
-    assert bends_deg(r.V, r.F, r.feature_edges).max() <= limit + 1e-9
+    assert bend_angles_deg(r.V, r.F, r.feature_edges).max() <= limit + 1e-9
     rep = manifold_report(r.F, r.V.shape[0])
     assert rep.is_oriented_manifold
     assert topology_summary(r.F, r.V.shape[0]).euler == topology_summary(F, V.shape[0]).euler
@@ -57,7 +39,7 @@ def test_creases_of_the_input_are_exempt():
     V, F = cube(8)
     r = simplify(V, F, target_faces=12, max_dihedral_deg=10.0)
     assert r.F.shape[0] == 12 and r.stopped_because == "target"
-    assert bends_deg(r.V, r.F, r.feature_edges).max() <= 10.0 + 1e-9
+    assert bend_angles_deg(r.V, r.F, r.feature_edges).max() <= 10.0 + 1e-9
 
 
 def test_a_bound_the_target_never_reaches_changes_nothing():
@@ -65,7 +47,7 @@ def test_a_bound_the_target_never_reaches_changes_nothing():
     a = simplify(V, F, target_faces=2000)
     b = simplify(V, F, target_faces=2000, max_dihedral_deg=60.0)
     assert b.stopped_because == "target" and b.F.shape[0] == a.F.shape[0]
-    assert bends_deg(b.V, b.F).max() <= 60.0
+    assert bend_angles_deg(b.V, b.F).max() <= 60.0
 
 
 @pytest.mark.parametrize("bad", [0.0, -5.0, 180.0, 200.0, float("nan")])
@@ -84,4 +66,4 @@ def test_a_symmetric_cage_takes_the_bound_too():
     # away from the mirror plane every bend is within the bound
     C = r.V[r.F].mean(axis=1)
     off = np.abs(C[:, 0]) > 0.2
-    assert bends_deg(r.V, r.F[off]).max() <= 25.0 + 1e-9
+    assert bend_angles_deg(r.V, r.F[off]).max() <= 25.0 + 1e-9
