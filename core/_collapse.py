@@ -381,7 +381,7 @@ class _Faces(NamedTuple):
     fh: np.ndarray
 
 
-def _pick_independent(st, pool, active, faces):
+def _pick_independent(st, pool, active, faces, tun):
     """One selection round: the ``active`` pool edges whose key is the
     smallest over every face around both endpoints (so their stars are
     disjoint). Returns ``(sel, active left, star, kf, faces)``: the chosen
@@ -402,7 +402,7 @@ def _pick_independent(st, pool, active, faces):
         FT, fidx = faces.FT, faces.fidx
         fmin = np.minimum(np.minimum(_take(vmin, FT[0]), _take(vmin, FT[1])), _take(vmin, FT[2]))
         live = np.flatnonzero(fmin < _BIG)
-        if live.size < 0.75 * fidx.size:     # keep only the faces still in play
+        if live.size < tun.face_cache_share * fidx.size:   # keep only the faces still in play
             faces = _Faces(np.ascontiguousarray(FT[:, live]), fidx[live], _take(fmin, live))
         else:                                # (a _BIG minimum changes nothing below)
             faces = _Faces(FT, fidx, fmin)
@@ -442,7 +442,7 @@ def _check_rounds(st, pool, passes, haus, dihedral_cos, tun):
         active = active[~touched[pool.A[active]] & ~touched[pool.B[active]]]
         if active.size == 0:
             break
-        sel, active, star, kf, faces = _pick_independent(st, pool, active, faces)
+        sel, active, star, kf, faces = _pick_independent(st, pool, active, faces, tun)
         ok, pen, rows, wnew, bent = _check(st, pool.A[sel], pool.B[sel], pool.X[sel], pool.interior[sel],
                                            star, kf, tun, haus, dihedral_cos)
         st.bent[pool.h[sel]] = bent

@@ -91,9 +91,6 @@ def _add_caps(st, caps, rim_h, pairs):
     st.c_stale[:] = True
 
 
-#: apexes tried per hole (evenly spaced along its rim) and holes tried per call
-_APEX_TRIES = 8
-_HOLE_TRIES = 4
 
 
 def _list_order(succ):
@@ -109,12 +106,12 @@ def _list_order(succ):
     return np.argsort(-dist, kind="stable")
 
 
-def close_smallest_hole(st):
+def close_smallest_hole(st, tun):
     """Cap the shortest boundary loop of more than three edges with a fan of
     triangles from one of its vertices, so that it can collapse further.
-    Apexes are tried along the rim (``_APEX_TRIES``) until none of the fan's
+    Apexes are tried along the rim (``tun.cap_apex_tries``, evenly spaced) until none of the fan's
     chords is already an edge (a chord that exists would be a third face on
-    it), and loops in order of length (``_HOLE_TRIES``). Returns the number
+    it), and loops in order of length (``tun.cap_hole_tries``). Returns the number
     of faces added (0: no loop could be closed)."""
     F, twin = st.F, st.twin
     n = st.V.shape[0]
@@ -132,7 +129,7 @@ def close_smallest_hole(st):
     hi = np.flatnonzero(twin > np.arange(twin.size, dtype=np.int64))
     ea, eb = half_edge_ends(F, np.concatenate([hi, hb]))
     edges = np.sort(edge_keys(ea, eb, n))
-    for root in roots[np.argsort(length[roots], kind="stable")][:_HOLE_TRIES]:
+    for root in roots[np.argsort(length[roots], kind="stable")][:tun.cap_hole_tries]:
         members = np.flatnonzero(loop == root)
         local = np.full(hb.size, -1, dtype=np.int64)
         local[members] = np.arange(members.size)
@@ -140,7 +137,7 @@ def close_smallest_hole(st):
         succ[succ == 0] = -1                      # cut the loop before its first member
         ring = members[_list_order(succ)]         # rim half-edges in order: v_i -> v_{i+1}
         k = ring.size
-        for shift in np.unique(np.linspace(0, k, _APEX_TRIES, endpoint=False).astype(np.int64)):
+        for shift in np.unique(np.linspace(0, k, tun.cap_apex_tries, endpoint=False).astype(np.int64)):
             r = np.roll(ring, -shift)
             v = u[r]                              # v_0 (the apex) .. v_{k-1}
             q = edge_keys(v[0], v[2:k - 1], n)

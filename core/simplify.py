@@ -63,14 +63,6 @@ from .tuning import TUNING, Tuning
 _WHERE = "simplify"
 
 
-
-
-
-#: ``max_error`` raises the engine's bound in these steps (shares of it),
-#: measuring the cage after each (see ``_within_max_error``)
-MAX_ERROR_STEPS = (0.3, 0.5, 0.7, 0.85, 1.0)
-MAX_ERROR_QUICK_SAMPLES = 20_000
-
 STOP_REASONS = ("target", "max_error", "max_dihedral", "topology_floor", "no_valid_collapse",
                 "cancelled")
 
@@ -449,7 +441,7 @@ def _run_all(mesh, target, max_err_n, opts, progress, m0):
             size = tun.relax_max_size if max_err_n is None else min(tun.relax_max_size, max_err_n)
             changed = drop_stuck_components(mesh, need, size)
         if not changed:
-            changed = close_smallest_hole(mesh)
+            changed = close_smallest_hole(mesh, tun)
         if not changed:
             break
         stopped, more = run(mesh, target, max_err_n, opts["preserve_boundary"], progress, m0, tun,
@@ -481,9 +473,9 @@ def _within_max_error(clean, target, max_error, opts, progress):
 
     The collapse bound is an RMS distance to the planes of the faces a vertex
     stands for, which the worst point can exceed, so the bound is raised in
-    steps (``MAX_ERROR_STEPS`` of ``max_error``), the engine going on from a
+    steps (``Tuning.max_error_steps`` of ``max_error``), the engine going on from a
     copy of where the last step left it, each step's cage measured quickly
-    (``MAX_ERROR_QUICK_SAMPLES``); the first step over the bound is undone
+    (``Tuning.max_error_quick_samples``); the first step over the bound is undone
     (when even the first is, smaller first steps are tried). The last step's
     cage is then measured as ``surface_distance`` does by default, relocated
     and not; if both are over, the step before is tried, down to the cleaned
@@ -494,7 +486,8 @@ def _within_max_error(clean, target, max_error, opts, progress):
     def measure(cage, samples=None):
         return surface_distance(clean.V, clean.F, cage.V, cage.F, samples=samples).hausdorff
 
-    steps = list(MAX_ERROR_STEPS)
+    tun = opts["tuning"]
+    steps = list(tun.max_error_steps)
     good = []                                     # (engine state, stop reason, passes) per step
     while steps:
         share = steps.pop(0)
@@ -504,9 +497,9 @@ def _within_max_error(clean, target, max_error, opts, progress):
         if st == "cancelled":
             return _unchanged(clean), 0.0
         quick = measure(_cage_of(su, trial, st, passes + more, opts, relocate=False),
-                        MAX_ERROR_QUICK_SAMPLES)
+                        tun.max_error_quick_samples)
         if quick > max_error:
-            if not good and share > MAX_ERROR_STEPS[0] / 16:
+            if not good and share > tun.max_error_steps[0] / 16:
                 steps = [share / 2]               # even the first step is over: start lower
                 continue
             break

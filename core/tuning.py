@@ -16,6 +16,7 @@ class Tuning:
     pool_share: float = 0.2          #: at most this share of the candidate edges per pass
     pool_goal_factor: float = 1.5    #: ... and at most this many times the collapses still needed
     max_rounds: int = 16             #: selection rounds per pass
+    face_cache_share: float = 0.75   #: a round re-packs the faces in play below this share
     bands: int = 8                   #: cost bands of the pool (then length bands, then random)
     length_bands: int = 16           #: length bands inside a cost band (shorter edges first)
     #: a pool whose cost bound is below this share of the median total (cost + penalties)
@@ -48,6 +49,12 @@ class Tuning:
     relocate_min_cos: float = 0.2    #: a relocated face turning by more than acos(this) is undone
     #: preserve_topology=False removes stuck components up to this size (share of the diagonal)
     relax_max_size: float = 0.25
+    cap_apex_tries: int = 8          #: ... caps a hole from one of this many rim vertices
+    cap_hole_tries: int = 4          #: ... trying this many holes, shortest first, per call
+    #: max_error raises the engine's bound in these steps (shares of it), measuring the
+    #: cage after each with this many samples
+    max_error_steps: tuple = (0.3, 0.5, 0.7, 0.85, 1.0)
+    max_error_quick_samples: int = 20_000
     snap_bits: int = 32              #: coordinates snapped to 2^-snap_bits of the diagonal
     snap_share: float = 1e-12        #: (distance / edge length)^2 below which a position is an endpoint
     compact_share: float = 0.75      #: compact the arrays once live faces are fewer than this share

@@ -87,7 +87,7 @@ def test_independent_picks_have_disjoint_stars_that_are_exactly_the_faces_around
     V, F = icosphere(3)
     st = engine_state(V, F)
     pool = pool_of(st)
-    sel, rest, star, kf, _ = engine._pick_independent(st, pool, np.arange(pool.key.size), None)
+    sel, rest, star, kf, _ = engine._pick_independent(st, pool, np.arange(pool.key.size), None, TUNING)
     assert sel.size > 0 and np.intersect1d(sel, rest).size == 0 and sel.size + rest.size == pool.key.size
     assert np.unique(star).size == star.size                     # disjoint
     for k in range(0, sel.size, max(1, sel.size // 25)):
@@ -102,13 +102,13 @@ def test_link_condition_refuses_the_last_tetrahedron_and_allows_a_sphere():
     V, F = tetrahedron()
     st = engine_state(V, F)
     pool = pool_of(st)
-    sel, _, star, kf, _ = engine._pick_independent(st, pool, np.arange(pool.key.size), None)
+    sel, _, star, kf, _ = engine._pick_independent(st, pool, np.arange(pool.key.size), None, TUNING)
     s = engine._star_of(st.F, pool.A[sel], pool.B[sel], star, kf)
     assert not engine._link_condition(st, s, pool.interior[sel]).any()
     V, F = icosphere(2)
     st = engine_state(V, F)
     pool = pool_of(st)
-    sel, _, star, kf, _ = engine._pick_independent(st, pool, np.arange(pool.key.size), None)
+    sel, _, star, kf, _ = engine._pick_independent(st, pool, np.arange(pool.key.size), None, TUNING)
     s = engine._star_of(st.F, pool.A[sel], pool.B[sel], star, kf)
     assert engine._link_condition(st, s, pool.interior[sel]).all()
 
