@@ -14,7 +14,7 @@ class Tuning:
     boundary_weight: float = 100.0   #: boundary plane weight, times the edge length squared
     feature_weight: float = 3.0      #: crease plane weight, times the edge length squared
     pool_share: float = 0.2          #: at most this share of the candidate edges per pass
-    pool_goal_factor: float = 1.5    #: ... and at most this many times the collapses still needed
+    pool_goal_factor: float = 4.0    #: ... and at most this many times the collapses still needed
     max_rounds: int = 16             #: selection rounds per pass
     face_cache_share: float = 0.75   #: a round re-packs the faces in play below this share
     bands: int = 8                   #: cost bands of the pool (then length bands, then random)
