@@ -26,7 +26,7 @@ faces are left unseen; all walks advance in lock-step.
 import numpy as np
 
 from .mesh import bounding_box
-from .spatial import _morton
+from .spatial import morton_codes
 from .topology import connected_labels
 
 BOUNDARY = -1
@@ -99,7 +99,7 @@ def spatial_order(V, F, twin, box=None):
     # unique keys: the Morton code's high bits, then the index (any sort gives the
     # same order, on every machine)
     b = np.uint64(max(1, int(n).bit_length()))
-    code = (_morton(V, lo, hi - lo) >> b) << b
+    code = (morton_codes(V, lo, hi - lo) >> b) << b
     code |= np.arange(n, dtype=np.uint64)
     order = np.argsort(code)
     new_v = np.empty(n, dtype=np.int64)

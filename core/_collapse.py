@@ -35,7 +35,7 @@ import numpy as np
 from ._clean import BOUNDARY, NON_MANIFOLD, half_edge_ends, renumber_twins
 from ._parallel import blocks, run_blocks, run_each
 from .quadrics import place_columns, quadric_at, rms_distance
-from .spatial import _kernel, _triangle_rows
+from .spatial import closest_on_triangles, triangle_rows
 
 _BIG = np.iinfo(np.int64).max
 DEAD = -3  #: twin of a half-edge of a removed face (before compaction)
@@ -711,9 +711,9 @@ def _hausdorff_penalty(st, s, g, A, B, tun):
     mk, k = s.mk, s.k
     Pa = np.concatenate([wA[mk], wB[mk]])
     Q0, Q1, Q2 = g.Q
-    _, _, d2 = _kernel(Pa[:, 0].copy(), Pa[:, 1].copy(), Pa[:, 2].copy(),
-                       _triangle_rows(np.concatenate([Q0, Q0]), np.concatenate([Q1, Q1]),
-                                      np.concatenate([Q2, Q2])))
+    _, _, d2 = closest_on_triangles(Pa[:, 0].copy(), Pa[:, 1].copy(), Pa[:, 2].copy(),
+                                    triangle_rows(np.concatenate([Q0, Q0]), np.concatenate([Q1, Q1]),
+                                                  np.concatenate([Q2, Q2])))
     dA = np.full(k, np.inf)
     np.minimum.at(dA, mk, d2[:mk.size])
     dB = np.full(k, np.inf)

@@ -115,7 +115,7 @@ class TriangleClosest(NamedTuple):
 
 # --- the pair kernel -----------------------------------------------------------------------------
 
-def _triangle_rows(A, B, C):
+def triangle_rows(A, B, C):
     """(16, m) float64 rows: A (3), ab (3), ac (3), |ab|^2, |ac|^2, ab.ac, unit normal (3)
     (zero for zero-area triangles), thin flag (0/1)."""
     ab = B - A
@@ -144,8 +144,8 @@ def _triangle_rows(A, B, C):
     return D
 
 
-def _kernel(px, py, pz, D):
-    """Closest point of (px,py,pz)[k] on triangle D[:, k] (rows from :func:`_triangle_rows`).
+def closest_on_triangles(px, py, pz, D):
+    """Closest point of (px,py,pz)[k] on triangle D[:, k] (rows from :func:`triangle_rows`).
 
     Returns ``v, w, d2``: the point is ``A + v ab + w ac`` at squared distance ``d2``.
     """
@@ -301,8 +301,8 @@ def point_triangle_closest(P, A, B, C):
         raise InvalidArgumentError(
             "point_triangle_closest: P, A, B, C must have the same number of rows, got "
             f"{P.shape[0]}, {A.shape[0]}, {B.shape[0]}, {C.shape[0]}")
-    D = _triangle_rows(A, B, C)
-    v, w, _ = _kernel(P[:, 0].copy(), P[:, 1].copy(), P[:, 2].copy(), D)
+    D = triangle_rows(A, B, C)
+    v, w, _ = closest_on_triangles(P[:, 0].copy(), P[:, 1].copy(), P[:, 2].copy(), D)
     bary = _bary(v, w)
     point = A + v[:, None] * (B - A) + w[:, None] * (C - A)
     return TriangleClosest(point, bary, np.linalg.norm(P - point, axis=1))
@@ -332,7 +332,7 @@ def _spread_bits(x):
     return x
 
 
-def _morton(X, lo, extent):
+def morton_codes(X, lo, extent):
     """63-bit Morton codes of points X (clamped to the box ``lo + [0, extent]``).
     An axis thinner than 1e-12 of the widest counts as flat (code bits 0)."""
     extent = np.asarray(extent, dtype=np.float64)
@@ -407,7 +407,7 @@ class TriangleIndex:
         extent = hi - lo
         self._lo, self._hi = lo, hi
         # Morton order of the triangles (by bounding-box centre)
-        codes = _morton(0.5 * (tlo + thi), lo, extent)
+        codes = morton_codes(0.5 * (tlo + thi), lo, extent)
         order = np.argsort(codes, kind="stable")
         if _longest_run(codes[order]) > _MAX_SAME_CODE:
             # a degenerate cluster (faces on a few points): one of each distinct triangle,
@@ -415,7 +415,7 @@ class TriangleIndex:
             order = order[_first_of_each_triangle(V, F[order])]
         self._order = order                       # internal id -> face id
         A, B, C, tlo, thi = A[order], B[order], C[order], tlo[order], thi[order]
-        self._D = _triangle_rows(A, B, C)
+        self._D = triangle_rows(A, B, C)
         self._build_grid(tlo, thi, A, B, C, extent)
         self._bvh = None                          # built on first need (far queries)
         # bounding disks: centroid, radius (slightly inflated so that rounding never makes
@@ -698,12 +698,13 @@ class TriangleIndex:
         k = q.size
         if k <= _KERNEL_BLOCK:
             X = np.take(PT, q, axis=1)
-            return _kernel(X[0], X[1], X[2], np.take(self._D, t, axis=1))
+            return closest_on_triangles(X[0], X[1], X[2], np.take(self._D, t, axis=1))
         v, w, d2 = np.empty(k), np.empty(k), np.empty(k)
         for s in range(0, k, _KERNEL_BLOCK):
             e = min(s + _KERNEL_BLOCK, k)
             X = np.take(PT, q[s:e], axis=1)
-            v[s:e], w[s:e], d2[s:e] = _kernel(X[0], X[1], X[2], np.take(self._D, t[s:e], axis=1))
+            v[s:e], w[s:e], d2[s:e] = closest_on_triangles(X[0], X[1], X[2],
+                                                            np.take(self._D, t[s:e], axis=1))
         return v, w, d2
 
     def _cell_pairs(self, qi, g):

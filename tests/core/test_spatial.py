@@ -110,8 +110,8 @@ def test_kernel_ericson_and_robust_paths_agree():
     k = 20000
     A, B, C = rng.normal(size=(3, k, 3))
     P = rng.normal(size=(k, 3)) * 3
-    D = spatial._triangle_rows(A, B, C)
-    v, w, d2 = spatial._kernel(P[:, 0].copy(), P[:, 1].copy(), P[:, 2].copy(), D)
+    D = spatial.triangle_rows(A, B, C)
+    v, w, d2 = spatial.closest_on_triangles(P[:, 0].copy(), P[:, 1].copy(), P[:, 2].copy(), D)
     ap = P - A
     n = D[12:15].T
     h = np.einsum("ij,ij->i", ap, n)
