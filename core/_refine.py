@@ -22,6 +22,7 @@ from typing import NamedTuple
 import numpy as np
 
 from .errors import InvalidArgumentError, InvalidMeshError
+from .topology import edge_keys
 
 NEXT_CORNER = np.array([1, 2, 0], dtype=np.int64)
 
@@ -48,10 +49,6 @@ class Topology(NamedTuple):
     nb_sum: np.ndarray     #: (n,) int64, sum of the sharp neighbours (the other one is nb_sum - known)
 
 
-def _edge_keys(E, n):
-    return E[:, 0] * np.int64(max(n, 1)) + E[:, 1]
-
-
 def crease_edge_ids(creases, E, n, where):
     """Indices into ``E`` of the undirected vertex pairs ``creases``.
 
@@ -66,8 +63,8 @@ def crease_edge_ids(creases, E, n, where):
             f"{where}: creases must be a (k,2) integer array of vertex pairs, got {C.shape} {C.dtype}")
     C = C.astype(np.int64)
     lo, hi = np.minimum(C[:, 0], C[:, 1]), np.maximum(C[:, 0], C[:, 1])
-    keys = lo * np.int64(max(n, 1)) + hi
-    ekeys = _edge_keys(E, n)
+    keys = edge_keys(lo, hi, n)
+    ekeys = edge_keys(E[:, 0], E[:, 1], n)
     pos = np.searchsorted(ekeys, keys)
     pos_c = np.minimum(pos, max(ekeys.shape[0] - 1, 0))
     ok = (lo >= 0) & (hi < n) & (pos < ekeys.shape[0])
@@ -143,10 +140,8 @@ def _edge_map_faces(F, n):
     """``core.topology.edge_map`` plus ``edge_faces`` from one stable sort."""
     m = F.shape[0]
     half = F[:, [1, 2, 2, 0, 0, 1]].reshape(-1, 2)
-    lo = np.minimum(half[:, 0], half[:, 1])
-    hi = np.maximum(half[:, 0], half[:, 1])
+    key = edge_keys(half[:, 0], half[:, 1], n)
     nn = np.int64(max(n, 1))
-    key = lo * nn + hi
     order = np.argsort(key, kind="stable")
     sk = key[order]
     first = np.ones(sk.shape[0], dtype=bool)
@@ -373,8 +368,8 @@ def child_crease_ids(T, crease_ids, E_next, n_next):
     mid = T.n + crease_ids
     pairs = np.concatenate([np.stack([T.E[crease_ids, 0], mid], 1),
                             np.stack([T.E[crease_ids, 1], mid], 1)])
-    keys = pairs[:, 0] * np.int64(max(n_next, 1)) + pairs[:, 1]
-    return np.sort(np.searchsorted(_edge_keys(E_next, n_next), keys))
+    keys = edge_keys(pairs[:, 0], pairs[:, 1], n_next)
+    return np.sort(np.searchsorted(edge_keys(E_next[:, 0], E_next[:, 1], n_next), keys))
 
 
 # ---------------------------------------------------------------------------

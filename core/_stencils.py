@@ -38,10 +38,9 @@ class ApplyPlan(NamedTuple):
 
     blocks: tuple
     long_rows: np.ndarray     #: (q,) int64
-    long_entries: np.ndarray  #: CSR entry indices of the long rows, row by row
-    long_starts: np.ndarray   #: (q,) offsets into long_entries
-    long_cols: np.ndarray     #: cols[long_entries], gathered once
-    long_weights: np.ndarray  #: weights[long_entries]
+    long_starts: np.ndarray   #: (q,) offsets of each long row's entries in long_cols
+    long_cols: np.ndarray     #: the long rows' CSR columns, row by row, gathered once
+    long_weights: np.ndarray  #: ... and their weights
 
 
 class Stencil(NamedTuple):
@@ -165,7 +164,7 @@ def make_plan(S, bounds):
     starts = np.zeros(long_rows.shape[0], dtype=np.int64)
     np.cumsum(ll[:-1], out=starts[1:])
     entries = np.repeat(S.indptr[long_rows] - starts, ll) + np.arange(int(ll.sum()))
-    return ApplyPlan(tuple(blocks), long_rows, entries, starts, S.cols[entries], S.weights[entries])
+    return ApplyPlan(tuple(blocks), long_rows, starts, S.cols[entries], S.weights[entries])
 
 
 class _Table(NamedTuple):
