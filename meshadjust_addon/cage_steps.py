@@ -308,6 +308,17 @@ def _write_key(source, cage, edited, binding, V_edited, *, V_rest=None):
     return results.write_shape_key(source, cage, V_edited, V_bound)
 
 
+def _density_note(n_refined, n_source):
+    """``", about the source's 252k"`` when the refined mesh is within 2x
+    of the source's face count, else what the source has (``", the
+    source has 252k"``); nothing when the source's count is not known."""
+    if not n_source:
+        return ""
+    if 0.5 <= n_refined / n_source <= 2.0:
+        return f", about the source's {about(n_source)}"
+    return f", the source has {about(n_source)}"
+
+
 def refine_object(cage, *, output='EDITED', levels=None, scheme=None):
     """Update the results of an edited cage; returns a :class:`Report`.
 
@@ -361,10 +372,9 @@ def refine_object(cage, *, output='EDITED', levels=None, scheme=None):
         if output in ('REFINED', 'BOTH'):
             Vr, Fr = core.refine(binding, V_cage)
             refined = results.write_refined(cage, source, Vr, Fr)
-            n_about = edited.meshadjust.dense_faces
             parts.append(f"'{refined.name}' refined: {Fr.shape[0]:,} faces, {binding.scheme} x"
-                         f"{binding.levels}" + (f", about the source's {about(n_about)}"
-                                                if n_about else ""))
+                         f"{binding.levels}" + _density_note(Fr.shape[0],
+                                                             edited.meshadjust.dense_faces))
     stale = staleness.source_change(source, edited.meshadjust.source_fingerprint, fresh=True)
     if stale:
         warnings.append(f"{stale}: the result uses the mesh that was bound; re-bind to use the "

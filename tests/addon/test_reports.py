@@ -64,6 +64,9 @@ def test_automatic_levels_and_the_refined_count_in_the_report(scene):
     assert bpy.ops.meshadjust.refine(output='REFINED') == {'FINISHED'}
     assert "refined: 4,800 faces, loop x2, about the source's 5,120" in \
         cage.meshadjust.last_report
+    # levels chosen by hand, far from the source's count: the report does not say "about"
+    assert bpy.ops.meshadjust.refine(output='REFINED', levels=1) == {'FINISHED'}
+    assert "refined: 1,200 faces, loop x1, the source has 5,120" in cage.meshadjust.last_report
 
 
 def test_a_bug_is_not_reported_as_the_users_mistake(scene, monkeypatch):
