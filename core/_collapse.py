@@ -9,16 +9,18 @@ the order of faces, so a representative stays a representative.
 
 One pass, as stages (each a function below)::
 
-    _candidate_edges      every live edge once; mark those around moved vertices stale
-    _current_costs        cached costs, raised by remembered rejections
+    _candidate_edges      every live edge once with its cached cost; those around
+                          vertices the last pass changed become stale, remembered
+                          rejections raise the cost
     _recost_cheapest      recost the stale edges that could be among the cheapest
     _choose_pool          the cheapest candidates (bounded share; bounded by the
                           collapses needed), ranked by _priority
-    rounds (_check_round):
+    rounds (_check_rounds):
         _pick_independent pool edges whose rank is the smallest over every face
                           around both endpoints -> the stars are disjoint
         _check            on the current mesh: _link_condition, _turned_faces,
-                          _too_thin, _compactness_penalty, _hausdorff_penalty;
+                          _min_compactness (no new sliver), _bends_too_far (with a
+                          dihedral bound), _compactness_penalty, _hausdorff_penalty;
                           accept those within _acceptance_bound; their closed
                           one-rings become untouchable for later rounds
     _trim_to_target       no more collapses than the target needs, cheapest first
