@@ -385,10 +385,10 @@ def _cage_of(su, mesh, stopped, passes, opts, relocate=True):
     t0 = time.perf_counter()
     if (relocate and tun.relocate_iters > 0 and passes > 0
             and mesh.F.shape[0] <= min(tun.relocate_max_faces, tun.relocate_max_share * su.m0)):
-        V0, moved0 = mesh.V, mesh.moved.copy()
-        bend0 = _bend_cosines(mesh)
-        _relocate_cage(mesh, su.Vn, su.creases, su.Eb_in, su.Fin, tun)
         cos_max = opts["dihedral_cos"]
+        V0, moved0 = mesh.V, mesh.moved.copy()
+        bend0 = None if cos_max is None else _bend_cosines(mesh)
+        _relocate_cage(mesh, su.Vn, su.creases, su.Eb_in, su.Fin, tun)
         if cos_max is not None and ((_bend_cosines(mesh) < cos_max) & (bend0 >= cos_max)).any():
             mesh.V, mesh.moved = V0, moved0      # it would bend faces beyond the bound: undone
     # back to the caller's units; vertices never moved keep their exact input position
