@@ -61,6 +61,7 @@ evaluated in vectorised kernel calls; the per-query minimum comes from
 margins (``_SLACK``) so that rounding can only keep a candidate, never drop one.
 """
 
+import threading
 from typing import NamedTuple
 
 import numpy as np
@@ -68,6 +69,9 @@ import numpy as np
 from .errors import InvalidArgumentError
 from .mesh import check_mesh
 from ._groups import group_argmin, ragged_ranges
+
+#: serialises the lazy BVH builds of indexes queried from several threads at once
+_LAZY_BUILD = threading.Lock()
 
 __all__ = ["ClosestPoints", "TriangleClosest", "TriangleIndex", "closest_points",
            "point_triangle_closest"]
@@ -418,6 +422,7 @@ class TriangleIndex:
         self._D = triangle_rows(A, B, C)
         self._build_grid(tlo, thi, A, B, C, extent)
         self._bvh = None                          # built on first need (far queries)
+        self._bvh_ready = False                   # ... with its cylinder bounds
         # bounding disks: centroid, radius (slightly inflated so that rounding never makes
         # the lower bound exceed the true distance) and unit normal, for the cheap test
         centre = (A + B + C) / 3.0
@@ -481,6 +486,21 @@ class TriangleIndex:
         np.cumsum(np.bincount(cell, minlength=ncell), out=self._cell_start[1:])
 
     # -- BVH ----------------------------------------------------------------------------------
+    def _build_hierarchy(self):
+        """Build the BVH and its cylinder bounds, once: queries run on worker
+        threads, so the first far query of each thread may get here together
+        (a lock; the flag is set only once both are complete)."""
+        with _LAZY_BUILD:
+            if self._bvh_ready:
+                return
+            # corners as the kernel sees them (A + ab, A + ac); bounds carry rounding margins
+            A = self._D[0:3].T
+            B = A + self._D[3:6].T
+            C = A + self._D[6:9].T
+            self._build_bvh(np.minimum(np.minimum(A, B), C), np.maximum(np.maximum(A, B), C))
+            self._build_slabs(A, B, C)
+            self._bvh_ready = True
+
     def _build_bvh(self, tlo, thi):
         m = tlo.shape[0]
         n_leaves = -(-m // _LEAF)
@@ -777,7 +797,7 @@ class TriangleIndex:
         near the surface patch closest to the query without any initial guess.
         """
         m = self.n_faces
-        if self._bvh is None and far.size * m <= _BRUTE_PAIRS:
+        if not self._bvh_ready and far.size * m <= _BRUTE_PAIRS:
             # a handful of far queries: every triangle through the lower-bound filter costs
             # less than building the hierarchy
             per = max(1, _PAIR_CHUNK // m)
@@ -785,13 +805,8 @@ class TriangleIndex:
                 qs = far[s:s + per]
                 self._scan(PT, np.repeat(qs, m), np.tile(np.arange(m), qs.size), best)
             return
-        if self._bvh is None:
-            # corners as the kernel sees them (A + ab, A + ac); bounds carry rounding margins
-            A = self._D[0:3].T
-            B = A + self._D[3:6].T
-            C = A + self._D[6:9].T
-            self._build_bvh(np.minimum(np.minimum(A, B), C), np.maximum(np.maximum(A, B), C))
-            self._build_slabs(A, B, C)
+        if not self._bvh_ready:
+            self._build_hierarchy()
         ub = np.full(PT.shape[1], np.inf)
         for s in range(0, far.size, _QUERY_CHUNK // 4):
             qs = far[s:s + _QUERY_CHUNK // 4]

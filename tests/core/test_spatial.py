@@ -362,3 +362,20 @@ def test_index_reuse_gives_identical_results():
     a = index.closest(P)
     b = index.closest(P[::-1])
     assert (a.distance == b.distance[::-1]).all() and (a.face == b.face[::-1]).all()
+
+
+def test_far_queries_from_many_threads_build_the_hierarchy_once_and_agree(monkeypatch):
+    # the BVH is built lazily on the first far query; queries from worker threads
+    # (as bind runs them) may arrive together: every thread gets the exact answer
+    from concurrent.futures import ThreadPoolExecutor
+    monkeypatch.setattr(spatial, "_BRUTE_PAIRS", 0)      # every far query takes the BVH
+    V, F = icosphere(5)
+    rng = np.random.default_rng(7)
+    P = rng.standard_normal((4000, 3)) * 5.0          # far from the sphere: the BVH path
+    expect = TriangleIndex(V, F).closest(P).distance
+    for _ in range(5):
+        index = TriangleIndex(V, F)
+        with ThreadPoolExecutor(8) as pool:
+            parts = list(pool.map(lambda s: index.closest(P[s:s + 500]).distance,
+                                  range(0, P.shape[0], 500)))
+        assert np.array_equal(np.concatenate(parts), expect)
