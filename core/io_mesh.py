@@ -67,19 +67,25 @@ def _line_error(fn, path, lineno, problem):
     return InvalidMeshError(f"{fn}: {path} line {lineno}: '{_line_text(path, lineno)}' {problem}")
 
 
+def _parsed(fn, path, rows, lines, dtype, problem):
+    """The strings ``rows`` as one ``dtype`` array; the first line whose
+    strings do not parse is named with ``problem``."""
+    try:
+        return np.array(rows, dtype=dtype)
+    except ValueError:
+        for row, lineno in zip(rows, lines):
+            try:
+                np.array(row, dtype=dtype)
+            except ValueError:
+                raise _line_error(fn, path, lineno, problem) from None
+        raise
+
+
 def _vertices(fn, path, rows, lines):
     """(n,3) float64 from the coordinate strings of the ``v`` lines."""
     if not rows:
         return np.zeros((0, 3), dtype=np.float64)
-    try:
-        V = np.array(rows, dtype=np.float64)
-    except ValueError:
-        for row, lineno in zip(rows, lines):
-            try:
-                [float(x) for x in row]
-            except ValueError:
-                raise _line_error(fn, path, lineno, "is not a number") from None
-        raise
+    V = _parsed(fn, path, rows, lines, np.float64, "is not a number")
     bad = np.flatnonzero(~np.isfinite(V).all(axis=1))
     if bad.size:
         raise _line_error(fn, path, lines[bad[0]], "has a coordinate that is not a finite number")
@@ -129,15 +135,8 @@ def _read(path, fn, obj):
             tri_base.append(base)
     if not tri_rows:
         return MeshFile(V, np.zeros((0, 3), dtype=np.int64), 0, skipped)
-    try:
-        R = np.array(tri_rows, dtype=np.int64)     # the file's indices
-    except ValueError:
-        for row, lineno in zip(tri_rows, tri_lines):
-            try:
-                [int(x) for x in row]
-            except ValueError:
-                raise _line_error(fn, path, lineno, "has an index that is not an integer") from None
-        raise
+    R = _parsed(fn, path, tri_rows, tri_lines, np.int64,    # the file's indices
+                "has an index that is not an integer")
     del tri_rows
     lines = np.array(tri_lines, dtype=np.int64)
     base = np.array(tri_base, dtype=np.int64)
