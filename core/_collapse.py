@@ -944,9 +944,9 @@ def compact(st):
         return
     new_f = np.cumsum(keep_f) - 1
     new_v = np.cumsum(keep_v) - 1
-    rows = {"vertex": (np.flatnonzero(keep_v), 0), "vertex_t": (np.flatnonzero(keep_v), 1),
-            "face": (np.flatnonzero(keep_f), 0), "half_edge": (np.flatnonzero(np.repeat(keep_f, 3)), 0),
-            "half_edge_t": (np.flatnonzero(np.repeat(keep_f, 3)), 1)}
+    iv, ih = np.flatnonzero(keep_v), np.flatnonzero(np.repeat(keep_f, 3))
+    rows = {"vertex": (iv, 0), "vertex_t": (iv, 1), "face": (np.flatnonzero(keep_f), 0),
+            "half_edge": (ih, 0), "half_edge_t": (ih, 1)}
     renumber = {"vertex": lambda a: _take(new_v, a), "half_edge": lambda a: renumber_twins(a, new_f)}
 
     def swap(name):  # each job replaces one array: the old one goes as soon as its job is done
