@@ -370,6 +370,38 @@ def _first_of_each_triangle(V, F):
     return keep
 
 
+def _bounding_rows(A, B, C, n):
+    """The two lower-bound tables of the triangles ``(A, B, C)`` (each (m,3)) with
+    unit normals ``n`` (m,3) (zero for thin triangles, as in :func:`triangle_rows`).
+
+    ``ball`` (4, m): centroid c and radius r of a sphere holding the triangle;
+    ``prism`` (16, m): n, the three in-plane outward edge normals m_AB, m_BC,
+    m_CA, their distances o_k from c, and a rounding allowance e. For a point
+    at d = p - c the distance to the triangle is at least ``|d| - r`` and
+    ``sqrt(max(|d.n| - e, 0)^2 + max(max_k d.m_k - o_k - e, 0)^2)`` (height
+    above the plane, lateral distance beyond the farthest-out edge line).
+    r, o_k and e carry margins far above rounding. Thin triangles get
+    n = m_k = 0, so their second bound is 0.
+    """
+    centre = (A + B + C) / 3.0
+    r = np.sqrt(np.max([np.einsum("ij,ij->i", X - centre, X - centre) for X in (A, B, C)],
+                       axis=0))
+    scale = np.abs(centre).max(axis=1) + r
+    r = r * (1 + 1e-9) + 1e-12 * scale
+    prism = np.empty((16, A.shape[0]))
+    prism[0:3] = n.T
+    corners = (A, B, C)
+    # edge k runs from corner k to corner k+1; (edge x n) points away from the third corner
+    for k in range(3):
+        a, b = corners[k] - centre, corners[(k + 1) % 3] - centre
+        mk = _unit(np.cross(b - a, n))
+        o = np.maximum(np.einsum("ij,ij->i", a, mk), np.einsum("ij,ij->i", b, mk))
+        prism[3 + 3 * k:6 + 3 * k] = mk.T
+        prism[12 + k] = o * (1 + 1e-9) + 1e-9 * r
+    prism[15] = 1e-12 * scale
+    return np.ascontiguousarray(np.vstack([centre.T, r])), prism
+
+
 class TriangleIndex:
     """Exact nearest-triangle queries on a triangle mesh (pure NumPy).
 
@@ -423,13 +455,7 @@ class TriangleIndex:
         self._build_grid(tlo, thi, A, B, C, extent)
         self._bvh = None                          # built on first need (far queries)
         self._bvh_ready = False                   # ... with its cylinder bounds
-        # bounding disks: centroid, radius (slightly inflated so that rounding never makes
-        # the lower bound exceed the true distance) and unit normal, for the cheap test
-        centre = (A + B + C) / 3.0
-        r = np.sqrt(np.max([np.einsum("ij,ij->i", X - centre, X - centre) for X in (A, B, C)],
-                           axis=0))
-        r = r * (1 + 1e-9) + 1e-12 * (np.abs(centre).max(axis=1) + r)
-        self._disk = np.ascontiguousarray(np.vstack([centre.T, r, self._D[12:15]]))
+        self._ball, self._prism = _bounding_rows(A, B, C, self._D[12:15].T)
         self.n_faces = m
 
     # -- grid ---------------------------------------------------------------------------------
@@ -669,48 +695,121 @@ class TriangleIndex:
     def _scan(self, PT, q, t, best, probe=True):
         """Exact minimum over candidate pairs (q, t), grouped contiguously by query.
 
-        A cheap lower bound discards most pairs: squared height above the triangle's plane
-        plus the squared lateral excess beyond its bounding disk (centroid, radius). With
-        ``probe``, the pair with the smallest bound is evaluated exactly first (a tight
-        upper bound), then only the pairs whose lower bound is within it; without (when
-        the queries already have a tight bound), every pair within the bound at once.
+        Two cheap lower bounds (:func:`_bounding_rows`) discard most pairs: the
+        bounding sphere on every pair, then the height and the lateral distance
+        beyond the edge lines on those left; only the pairs within the query's
+        bound are evaluated exactly. With ``probe``, the pair with the nearest
+        centroid is evaluated first, for a tight bound (see :meth:`_fold_probe`
+        for which pair wins a tie).
         """
         if q.size == 0:
             return
-        # lower bound: height above the triangle's plane and lateral excess beyond its disk
-        S = np.take(self._disk, t, axis=1)
+        S = np.take(self._ball, t, axis=1)
         X = np.take(PT, q, axis=1)
-        dx = X[0] - S[0]
-        dy = X[1] - S[1]
-        dz = X[2] - S[2]
-        dc2 = dx * dx + dy * dy + dz * dz
-        hh = dx * S[4] + dy * S[5] + dz * S[6]
-        hh *= hh
-        lat = np.sqrt(np.maximum(dc2 - hh, 0.0)) - S[3]
-        # the cancellation in dc2 - hh costs a few ulps of dc2: subtract a margin
-        lb = hh + np.square(np.maximum(lat, 0.0)) - 1e-14 * dc2
-        bound = best.d2[q]
-        keep = np.flatnonzero(lb <= bound * (1 + _SLACK))
-        if keep.size == 0:
-            return
-        q, t, lb = q[keep], t[keep], lb[keep]
+        X -= S[:3]
+        dc2 = X[0] * X[0]
+        dc2 += X[1] * X[1]
+        dc2 += X[2] * X[2]
         if not probe:
-            v, w, d2 = self._eval(PT, q, t)
-            self._fold(q, t, v, w, d2, _run_lengths(q), best)
+            keep = self._within(X, S[3], dc2, t, best.d2[q])
+            # the query's best triangle again cannot do better (the same exact value)
+            keep = keep[best.t[q[keep]] != t[keep]]
+            if keep.size:
+                v, w, d2 = self._eval(PT, q[keep], t[keep])
+                self._fold(q[keep], t[keep], v, w, d2, _run_lengths(q[keep]), best)
             return
         counts = _run_lengths(q)
-        first = group_argmin(lb, counts)
-        qa, ta = q[first], t[first]
-        v, w, d2 = self._eval(PT, qa, ta)
-        self._fold(qa, ta, v, w, d2, np.ones(qa.size, dtype=np.int64), best)
-        bound = best.d2[q]
-        rest = lb <= bound * (1 + _SLACK)
-        rest[first] = False
-        rest = np.flatnonzero(rest)
-        if rest.size:
-            q, t = q[rest], t[rest]
-            v, w, d2 = self._eval(PT, q, t)
-            self._fold(q, t, v, w, d2, _run_lengths(q), best)
+        starts = np.cumsum(counts) - counts
+        first = group_argmin(dc2, counts)
+        v0, w0, d0 = self._eval(PT, q[first], t[first])
+        pre = best.d2[q[starts]]
+        keep = self._within(X, S[3], dc2, t, np.repeat(np.minimum(pre, d0), counts))
+        is_first = np.zeros(q.size, dtype=bool)
+        is_first[first] = True
+        keep = keep[~is_first[keep]]
+        v1, w1, d1 = self._eval(PT, q[keep], t[keep])
+        at = np.concatenate([first, keep])
+        order = np.argsort(at, kind="stable")
+        self._fold_probe(q, t, X, S, dc2, counts, pre, at[order],
+                         np.concatenate([v0, v1])[order], np.concatenate([w0, w1])[order],
+                         np.concatenate([d0, d1])[order], best)
+
+    def _within(self, X, r, dc2, t, bound):
+        """Indices of the pairs (offsets X from the centroids (3, k), squared
+        lengths dc2, triangles t) whose two lower bounds are within ``bound``."""
+        reach = np.sqrt(bound)
+        reach += r
+        reach *= reach
+        keep = np.flatnonzero(dc2 <= reach * (1 + 4 * _SLACK))
+        if keep.size:
+            lb = self._prism_bound(np.take(X, keep, axis=1), t[keep], dc2[keep])
+            keep = keep[lb <= bound[keep] * (1 + _SLACK)]
+        return keep
+
+    def _prism_bound(self, X, t, dc2):
+        """Squared-distance lower bound of the points ``c_t + X`` (X (3, k)) to the
+        triangles ``t``: height above the plane and lateral distance beyond the
+        farthest-out edge line, less the rounding allowances."""
+        P = np.take(self._prism, t, axis=1)
+        x, y, z = X
+        e = P[15]
+        h = np.abs(x * P[0] + y * P[1] + z * P[2])
+        h -= e
+        np.maximum(h, 0.0, out=h)
+        lat = x * P[3] + y * P[4] + z * P[5] - P[12]
+        np.maximum(lat, x * P[6] + y * P[7] + z * P[8] - P[13], out=lat)
+        np.maximum(lat, x * P[9] + y * P[10] + z * P[11] - P[14], out=lat)
+        lat -= e
+        np.maximum(lat, 0.0, out=lat)
+        h *= h
+        lat *= lat
+        h += lat
+        h -= 1e-14 * dc2
+        return h
+
+    def _fold_probe(self, q, t, X, S, dc2, counts, pre, at, v, w, d2, best):
+        """Fold a probed scan's exact results (pairs ``at`` of the scan, ascending;
+        every group has one) into ``best``.
+
+        A group's winner is its smallest distance; among exactly equal ones, the
+        pair with the smallest bounding-disk bound (height, lateral excess
+        beyond the bounding disk) among those within ``pre``, the bound before
+        the scan, else the first in the scan's order. That is the rule the
+        index has always had, kept so that results stay bit-identical.
+        """
+        qa = q[at]
+        c2 = _run_lengths(qa)
+        s2 = np.cumsum(c2) - c2
+        win = group_argmin(d2, c2)
+        tied = d2 == np.repeat(d2[win], c2)
+        groups = np.flatnonzero(np.add.reduceat(tied, s2) > 1)
+        if groups.size:
+            # the old probe of each tied group: the smallest disk bound in the whole group
+            k, own = ragged_ranges(np.cumsum(counts)[groups] - counts[groups], counts[groups])
+            x, y, z = X[:, k]
+            n = np.take(self._prism[0:3], t[k], axis=1)
+            hh = x * n[0] + y * n[1] + z * n[2]
+            hh *= hh
+            lat = np.sqrt(np.maximum(dc2[k] - hh, 0.0)) - S[3, k]
+            lb = hh + np.square(np.maximum(lat, 0.0)) - 1e-14 * dc2[k]
+            lb[lb > pre[groups][own] * (1 + _SLACK)] = np.inf
+            probe = k[group_argmin(lb, counts[groups])]
+            # where that pair is among the tied ones, it wins
+            mine = np.flatnonzero(tied)
+            g_of = np.searchsorted(s2, mine, side="right") - 1
+            slot = np.full(c2.size, -1, dtype=np.int64)
+            slot[groups] = np.arange(groups.size)
+            sel = slot[g_of] >= 0
+            mine, g_of = mine[sel], g_of[sel]
+            hit = at[mine] == probe[slot[g_of]]
+            win[g_of[hit]] = mine[hit]
+        qq = qa[win]
+        better = d2[win] < best.d2[qq]
+        qq, win = qq[better], win[better]
+        best.d2[qq] = d2[win]
+        best.t[qq] = t[at[win]]
+        best.v[qq] = v[win]
+        best.w[qq] = w[win]
 
     def _eval(self, PT, q, t):
         """The exact kernel on the pairs (query columns q of PT, internal triangles t),
