@@ -23,6 +23,8 @@ One pass, as stages (each a function below)::
                           dihedral bound), _compactness_penalty, _hausdorff_penalty;
                           accept those within _acceptance_bound; their closed
                           one-rings become untouchable for later rounds
+        _CheckedAhead     once few pool edges are left, all of them checked at
+                          once (the mesh is still): later rounds only pick
     _trim_to_target       no more collapses than the target needs, cheapest first
     _apply                all accepted collapses at once, twins glued; removed faces
                           and vertices are only marked dead until compaction
@@ -383,12 +385,13 @@ class _Faces(NamedTuple):
     fh: np.ndarray
 
 
-def _pick_independent(st, pool, active, faces, tun):
+def _pick_independent(st, pool, active, faces, tun, stars=True):
     """One selection round: the ``active`` pool edges whose key is the
     smallest over every face around both endpoints (so their stars are
     disjoint). Returns ``(sel, active left, star, kf, faces)``: the chosen
     pool edges, the others, every face of the chosen edges' stars with the
-    chosen edge it belongs to, and the faces still in play."""
+    chosen edge it belongs to (None without ``stars``), and the faces still
+    in play."""
     F, n, P = st.F, st.V.shape[0], pool.key.size
     ka, aa, ab = pool.key[active], pool.A[active], pool.B[active]
     vmin = np.full(n, _BIG, dtype=np.int64)
@@ -413,6 +416,8 @@ def _pick_independent(st, pool, active, faces, tun):
         np.minimum.at(vmin2, faces.FT[j], faces.fh)
     chosen = ka == np.minimum(_take(vmin2, aa), _take(vmin2, ab))
     sel = active[chosen]
+    if not stars:
+        return sel, active[~chosen], None, None, faces
     # the star of a chosen edge is exactly the set of faces whose minimum is its key
     imask = (np.int64(1) << np.int64(max(1, int(P - 1).bit_length()))) - 1
     pos = np.full(P, -1, dtype=np.int64)
@@ -439,14 +444,19 @@ def _check_rounds(st, pool, passes, haus, dihedral_cos, tun):
     touched = np.zeros(n, dtype=bool)
     acc_edges, acc_wit, acc_rows = [], [], []
     active = np.arange(P, dtype=np.int64)
-    faces = owned = None
+    faces = owned = ahead = None
     for _ in range(tun.max_rounds):
         active = active[~touched[pool.A[active]] & ~touched[pool.B[active]]]
         if active.size == 0:
             break
-        sel, active, star, kf, faces = _pick_independent(st, pool, active, faces, tun)
-        ok, pen, rows, wnew, bent = _check(st, pool.A[sel], pool.B[sel], pool.X[sel], pool.interior[sel],
-                                           star, kf, tun, haus, dihedral_cos)
+        if ahead is None and active.size <= tun.check_ahead:
+            ahead = _CheckedAhead.of(st, pool, active, faces, tun, haus, dihedral_cos)
+        sel, active, star, kf, faces = _pick_independent(st, pool, active, faces, tun, stars=ahead is None)
+        if ahead is None:
+            ok, pen, rows, wnew, bent = _check(st, pool.A[sel], pool.B[sel], pool.X[sel], pool.interior[sel],
+                                               star, kf, tun, haus, dihedral_cos)
+        else:
+            ok, pen, rows, wnew, bent = ahead.results(sel)
         st.bent[pool.h[sel]] = bent
         total = pool.raw[sel] + pen
         acc = ok & (total <= _acceptance_bound(pool.limit, total[ok], tun))
@@ -469,6 +479,67 @@ def _check_rounds(st, pool, passes, haus, dihedral_cos, tun):
         return None, touched
     rows = tuple(np.concatenate(c) for c in zip(*acc_rows))
     return _Accepted(np.concatenate(acc_edges), rows, np.concatenate(acc_wit)), touched
+
+
+class _CheckedAhead(NamedTuple):
+    """:func:`_check` results of pool edges checked before they are picked
+    (the mesh does not change during a pass, so neither do they): once few
+    edges are left, one check of them all costs less than the rounds' many
+    small ones. Each star is listed in the order a pick gives it (ascending
+    face ids), so the results are the same bits."""
+
+    at: np.ndarray       #: (P,) row of each pool edge in the results (-1: not checked)
+    ok: np.ndarray
+    pen: np.ndarray
+    rows: tuple
+    wnew: np.ndarray
+    bent: np.ndarray
+
+    @classmethod
+    def of(cls, st, pool, active, faces, tun, haus, dihedral_cos):
+        """Check every ``active`` pool edge on its whole star; ``faces`` are
+        the faces in play (None: all live faces)."""
+        fidx = faces.fidx if faces is not None else np.flatnonzero(st.alive)
+        A, B = pool.A[active], pool.B[active]
+        star, kf = _whole_stars(st.F, fidx, A, B)
+        ok, pen, rows, wnew, bent = _check(st, A, B, pool.X[active], pool.interior[active], star, kf, tun,
+                                           haus, dihedral_cos)
+        at = np.full(pool.key.size, -1, dtype=np.int64)
+        at[active] = np.arange(active.size)
+        return cls(at, ok, pen, rows, wnew, bent)
+
+    def results(self, sel):
+        """The results of the pool edges ``sel`` (ascending), as :func:`_check`
+        returns them for that selection."""
+        i = _take(self.at, sel)
+        keep = np.zeros(self.ok.size, dtype=bool)
+        keep[i] = True
+        return (_take(self.ok, i), _take(self.pen, i), _keep_rows(self.rows, keep), _take(self.wnew, i, axis=0),
+                _take(self.bent, i))
+
+
+def _whole_stars(F, fidx, A, B):
+    """Every face (among ``fidx``, ascending) around ``A[k]`` or ``B[k]``, as
+    rows ``(star, kf)`` sorted by collapse, then face; stars may overlap."""
+    k = A.size
+    v = _take(F, fidx, axis=0).ravel()
+    order = np.argsort(v, kind="stable")            # faces stay ascending within each vertex
+    vs, fs = _take(v, order), _take(np.repeat(fidx, 3), order)
+    a0, b0 = np.searchsorted(vs, A, side="left"), np.searchsorted(vs, B, side="left")
+    na = np.searchsorted(vs, A, side="right") - a0
+    nb = np.searchsorted(vs, B, side="right") - b0
+    cnt = na + nb
+    kf = np.repeat(np.arange(k, dtype=np.int64), cnt)
+    j = np.arange(kf.size, dtype=np.int64) - np.repeat(np.cumsum(cnt) - cnt, cnt)
+    from_b = j >= _take(na, kf)
+    star = _take(fs, np.where(from_b, _take(b0, kf) + j - _take(na, kf), _take(a0, kf) + j))
+    Fs = _take(F, star, axis=0)
+    ak = _take(A, kf)
+    has_a = (Fs[:, 0] == ak) | (Fs[:, 1] == ak) | (Fs[:, 2] == ak)
+    r = np.flatnonzero(~(from_b & has_a))            # the faces of the edge come with A
+    star, kf = _take(star, r), _take(kf, r)
+    o = np.argsort(kf * np.int64(F.shape[0]) + star, kind="stable")
+    return _take(star, o), _take(kf, o)
 
 
 def _next_to_another(st, key, rows, acc, owned):

@@ -1,5 +1,7 @@
 """The stages of the collapse engine (core._collapse), each on its own."""
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
@@ -96,6 +98,47 @@ def test_independent_picks_have_disjoint_stars_that_are_exactly_the_faces_around
         assert np.array_equal(np.sort(star[kf == k]), around)
     # and the smallest key of all is always chosen
     assert np.argmin(pool.key) in sel
+
+
+def test_whole_stars_are_the_faces_around_both_ends_in_ascending_order_even_where_they_overlap():
+    V, F = icosphere(2)
+    st = engine_state(V, F)
+    pool = pool_of(st)
+    star, kf = engine._whole_stars(st.F, np.arange(F.shape[0]), pool.A, pool.B)
+    assert np.all(np.diff(kf) >= 0)
+    for k in range(pool.key.size):
+        a, b = pool.A[k], pool.B[k]
+        around = np.flatnonzero((st.F == a).any(axis=1) | (st.F == b).any(axis=1))
+        assert np.array_equal(star[kf == k], around)           # ascending, each face once
+
+
+@pytest.mark.parametrize("bend", [None, np.cos(np.radians(100.0))])
+def test_checking_ahead_gives_the_same_bits_as_checking_each_round_and_the_same_cage(bend):
+    V, F = icosphere(3)
+    rng = np.random.default_rng(3)
+    V = V * (1.0 + 0.6 * rng.random((V.shape[0], 1)))        # spiky: some collapses fail their checks
+    st = engine_state(V, F)
+    pool = pool_of(st)
+    active = np.arange(pool.key.size)
+    ahead = engine._CheckedAhead.of(st, pool, active, None, TUNING, True, bend)
+    sel, _, star, kf, _ = engine._pick_independent(st, pool, active, None, TUNING)
+    now = engine._check(st, pool.A[sel], pool.B[sel], pool.X[sel], pool.interior[sel], star, kf, TUNING,
+                        True, bend)
+    got = ahead.results(sel)
+    assert not now[0].all() and now[0].any()
+    for x, y in zip((got[0], got[1], got[3], got[4]), (now[0], now[1], now[3], now[4])):
+        assert np.array_equal(x, y)                            # bit for bit
+    order_now, order_got = np.lexsort(now[2][:2]), np.lexsort(got[2][:2])
+    for x, y in zip(got[2], now[2]):
+        assert np.array_equal(x[order_got], y[order_now])      # the same star rows
+    cages = []
+    for check_ahead in (0, TUNING.check_ahead, 10**9):         # never, the default, always
+        tun = replace(TUNING, check_ahead=check_ahead)
+        st = engine_state(V, F)
+        engine.run(st, 60, None, True, None, F.shape[0], tun, bend)
+        cages.append((st.V, st.F))
+    for Vc, Fc in cages[1:]:
+        assert np.array_equal(Vc, cages[0][0]) and np.array_equal(Fc, cages[0][1])
 
 
 def test_link_condition_refuses_the_last_tetrahedron_and_allows_a_sphere():
