@@ -456,6 +456,7 @@ class TriangleIndex:
         self._bvh = None                          # built on first need (far queries)
         self._bvh_ready = False                   # ... with its cylinder bounds
         self._ball, self._prism = _bounding_rows(A, B, C, self._D[12:15].T)
+        self._normal = np.ascontiguousarray(self._D[12:15])
         self.n_faces = m
 
     # -- grid ---------------------------------------------------------------------------------
@@ -673,8 +674,9 @@ class TriangleIndex:
             if far.size:
                 self._bvh_query(PT, far, best)
         bary = _bary(best.v, best.w)
-        D, t = self._D, best.t
-        point = (D[0:3, t] + best.v * D[3:6, t] + best.w * D[6:9, t]).T
+        t = best.t
+        D = np.take(self._D[0:9], t, axis=1)
+        point = (D[0:3] + best.v * D[3:6] + best.w * D[6:9]).T
         return ClosestPoints(self._order[t].astype(np.int64), np.ascontiguousarray(point),
                              bary, np.sqrt(best.d2))
 
@@ -742,9 +744,22 @@ class TriangleIndex:
         reach *= reach
         keep = np.flatnonzero(dc2 <= reach * (1 + 4 * _SLACK))
         if keep.size:
-            lb = self._prism_bound(np.take(X, keep, axis=1), t[keep], dc2[keep])
-            keep = keep[lb <= bound[keep] * (1 + _SLACK)]
+            X, t, dc2, bound = np.take(X, keep, axis=1), t[keep], dc2[keep], bound[keep]
+            sub = np.flatnonzero(self._disk_bound(X, t, dc2, r[keep]) <= bound * (1 + _SLACK))
+            X, t, dc2, bound, keep = np.take(X, sub, axis=1), t[sub], dc2[sub], bound[sub], keep[sub]
+            keep = keep[self._prism_bound(X, t, dc2) <= bound * (1 + _SLACK)]
         return keep
+
+    def _disk_bound(self, X, t, dc2, r):
+        n = np.take(self._normal, t, axis=1)
+        hh = X[0] * n[0] + X[1] * n[1] + X[2] * n[2]
+        hh *= hh
+        lat = np.sqrt(np.maximum(dc2 - hh, 0.0)) - r
+        np.maximum(lat, 0.0, out=lat)
+        lat *= lat
+        hh += lat
+        hh -= 1e-14 * dc2
+        return hh
 
     def _prism_bound(self, X, t, dc2):
         """Squared-distance lower bound of the points ``c_t + X`` (X (3, k)) to the
