@@ -335,13 +335,7 @@ def bind(V_dense, F_dense, V_cage, F_cage, *, levels=2, scheme="butterfly", crea
     Nf = NfT.T
     fine_face, bary = _closest_on(TriangleIndex(Vf, op.F_fine), V_dense,
                                   _reporter(progress, 0.05, 0.6))
-    # the frames in the transposed layout of deform (bit-identical to frames())
-    p, t, bt, n = _frames_t(VfT, NfT, np.ascontiguousarray(op.F_fine[fine_face].T),
-                            np.ascontiguousarray(bary.T))
-    d = np.ascontiguousarray(V_dense.T)
-    d -= p
-    offset = np.stack([_dot_t(d, t), _dot_t(d, bt), _dot_t(d, n)], axis=1)
-    del p, t, bt, n, d
+    offset = _dense_offsets(VfT, NfT, op.F_fine, fine_face, bary, V_dense)
     d_face, d_bary = _vertex_corners(op.F_fine, op.n_fine)
     fine_detail = np.zeros((op.n_fine, 3))
     if F_dense.shape[0]:
@@ -964,6 +958,26 @@ def _closest_on(index, P, report=None, point=False):
     return bary if point else (face, bary)
 
 
+def _dense_offsets(VfT, NfT, F_fine, fine_face, bary, V_dense):
+    """(n_dense,3) frame components of each dense vertex's offset from its
+    bound point, the frames in the transposed layout of deform (bit-identical
+    to :func:`frames`: every row on its own), in blocks of ``_BIND_BLOCK``
+    rows on the worker threads."""
+    offset = np.empty((V_dense.shape[0], 3))
+
+    def rows(start, stop):
+        p, t, bt, n = _frames_t(VfT, NfT, np.ascontiguousarray(F_fine[fine_face[start:stop]].T),
+                                np.ascontiguousarray(bary[start:stop].T))
+        d = np.ascontiguousarray(V_dense[start:stop].T)
+        d -= p
+        offset[start:stop, 0] = _dot_t(d, t)
+        offset[start:stop, 1] = _dot_t(d, bt)
+        offset[start:stop, 2] = _dot_t(d, n)
+
+    run_blocks(rows, blocks(V_dense.shape[0], _BIND_BLOCK))
+    return offset
+
+
 def _reporter(progress, lo, hi):
     """``report(fraction)`` for a stage spanning ``lo..hi`` of ``progress``:
     raises :class:`~.errors.CancelledError` when it returns False (None when
@@ -1012,7 +1026,8 @@ def _dense_points_near(V_dense, F_dense, fine_face, F_fine, P):
         pj, pk = jj[owner], by_face[idx]
         keep = degree[pk] > 0
         pj, pk = pj[keep], pk[keep]
-        d = V_dense[pk] - P[pj]
+        d = np.take(V_dense, pk, axis=0)
+        d -= np.take(P, pj, axis=0)
         cnt_j = np.bincount(pj - s, minlength=e - s)
         has_none[s:e] = cnt_j == 0
         has = np.flatnonzero(cnt_j) + s
