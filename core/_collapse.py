@@ -385,16 +385,32 @@ class _Faces(NamedTuple):
     fh: np.ndarray
 
 
-def _pick_independent(st, pool, active, faces, tun, stars=True):
+def _scratch(n):
+    """Two (n,) int64 arrays of ``_BIG`` for the per-vertex minima of the
+    rounds of one pass (each round puts back what it wrote: small rounds on
+    a large mesh then cost what they touch, not the mesh's size)."""
+    return np.full(n, _BIG, dtype=np.int64), np.full(n, _BIG, dtype=np.int64)
+
+
+def _put_back(buf, *idx):
+    """Reset ``buf`` to ``_BIG`` where the index arrays ``idx`` wrote."""
+    if sum(i.size for i in idx) > buf.size:
+        buf.fill(_BIG)
+    else:
+        for i in idx:
+            buf[i] = _BIG
+
+
+def _pick_independent(st, pool, active, faces, tun, scratch, stars=True):
     """One selection round: the ``active`` pool edges whose key is the
     smallest over every face around both endpoints (so their stars are
     disjoint). Returns ``(sel, active left, star, kf, faces)``: the chosen
     pool edges, the others, every face of the chosen edges' stars with the
     chosen edge it belongs to (None without ``stars``), and the faces still
-    in play."""
-    F, n, P = st.F, st.V.shape[0], pool.key.size
+    in play. ``scratch``: :func:`_scratch` of the vertex count."""
+    F, P = st.F, pool.key.size
     ka, aa, ab = pool.key[active], pool.A[active], pool.B[active]
-    vmin = np.full(n, _BIG, dtype=np.int64)
+    vmin, vmin2 = scratch
     np.minimum.at(vmin, aa, ka)
     np.minimum.at(vmin, ab, ka)
     if faces is None:                        # first round: every live face
@@ -411,10 +427,11 @@ def _pick_independent(st, pool, active, faces, tun, stars=True):
             faces = _Faces(np.ascontiguousarray(FT[:, live]), fidx[live], _take(fmin, live))
         else:                                # (a _BIG minimum changes nothing below)
             faces = _Faces(FT, fidx, fmin)
-    vmin2 = np.full(n, _BIG, dtype=np.int64)
     for j in range(3):
         np.minimum.at(vmin2, faces.FT[j], faces.fh)
     chosen = ka == np.minimum(_take(vmin2, aa), _take(vmin2, ab))
+    _put_back(vmin, aa, ab)
+    _put_back(vmin2, *faces.FT)
     sel = active[chosen]
     if not stars:
         return sel, active[~chosen], None, None, faces
@@ -445,13 +462,14 @@ def _check_rounds(st, pool, passes, haus, dihedral_cos, tun):
     acc_edges, acc_wit, acc_rows = [], [], []
     active = np.arange(P, dtype=np.int64)
     faces = owned = ahead = None
+    scratch = _scratch(n)
     for _ in range(tun.max_rounds):
         active = active[~touched[pool.A[active]] & ~touched[pool.B[active]]]
         if active.size == 0:
             break
         if ahead is None and active.size <= tun.check_ahead:
             ahead = _CheckedAhead.of(st, pool, active, faces, tun, haus, dihedral_cos)
-        sel, active, star, kf, faces = _pick_independent(st, pool, active, faces, tun, stars=ahead is None)
+        sel, active, star, kf, faces = _pick_independent(st, pool, active, faces, tun, scratch, stars=ahead is None)
         if ahead is None:
             ok, pen, rows, wnew, bent = _check(st, pool.A[sel], pool.B[sel], pool.X[sel], pool.interior[sel],
                                                star, kf, tun, haus, dihedral_cos)
@@ -499,9 +517,16 @@ class _CheckedAhead(NamedTuple):
     def of(cls, st, pool, active, faces, tun, haus, dihedral_cos):
         """Check every ``active`` pool edge on its whole star; ``faces`` are
         the faces in play (None: all live faces)."""
-        fidx = faces.fidx if faces is not None else np.flatnonzero(st.alive)
         A, B = pool.A[active], pool.B[active]
-        star, kf = _whole_stars(st.F, fidx, A, B)
+        ends = np.zeros(st.V.shape[0], dtype=bool)
+        ends[A] = True
+        ends[B] = True
+        FT = faces.FT if faces is not None else st.F.T
+        fidx = faces.fidx if faces is not None else np.arange(st.F.shape[0], dtype=np.int64)
+        near = ends[FT[0]] | ends[FT[1]] | ends[FT[2]]
+        if faces is None:
+            near &= st.alive
+        star, kf = _whole_stars(st.F, fidx[near], A, B)
         ok, pen, rows, wnew, bent = _check(st, A, B, pool.X[active], pool.interior[active], star, kf, tun,
                                            haus, dihedral_cos)
         at = np.full(pool.key.size, -1, dtype=np.int64)
@@ -519,8 +544,9 @@ class _CheckedAhead(NamedTuple):
 
 
 def _whole_stars(F, fidx, A, B):
-    """Every face (among ``fidx``, ascending) around ``A[k]`` or ``B[k]``, as
-    rows ``(star, kf)`` sorted by collapse, then face; stars may overlap."""
+    """Every face (among ``fidx``: ascending, and every face around the ends
+    among them) around ``A[k]`` or ``B[k]``, as rows ``(star, kf)`` sorted by
+    collapse, then face; stars may overlap."""
     k = A.size
     v = _take(F, fidx, axis=0).ravel()
     order = np.argsort(v, kind="stable")            # faces stay ascending within each vertex
@@ -690,6 +716,12 @@ def _common_pairs(ka, xa, kb, xb, n):
     """For each pair ``(kb[i], xb[i])``: is ``(kb[i], xb[i])`` among the pairs
     ``(ka, xa)``? Marks vertices with their collapse (last write wins) and
     settles the few vertices claimed by several collapses with a sort."""
+    nn = np.int64(max(n, 1))
+    if 8 * (xa.size + xb.size) < n:          # few pairs on a large mesh: a sort costs less than marks
+        keys = np.sort(ka * nn + xa)
+        q = kb * nn + xb
+        pos = np.minimum(np.searchsorted(keys, q), max(keys.size - 1, 0))
+        return keys[pos] == q if keys.size else np.zeros(q.size, dtype=bool)
     mark = np.full(n, -1, dtype=np.int64)
     mark[xa] = ka
     hit = _take(mark, xb) == kb
@@ -699,7 +731,6 @@ def _common_pairs(ka, xa, kb, xb, n):
         contested[xa[lost]] = True
         sa = np.flatnonzero(contested[xa])
         sb = np.flatnonzero(contested[xb])
-        nn = np.int64(max(n, 1))
         keys = np.sort(ka[sa] * nn + xa[sa])
         q = kb[sb] * nn + xb[sb]
         pos = np.minimum(np.searchsorted(keys, q), keys.size - 1)
