@@ -45,10 +45,29 @@ def _gather(idx, b, x):
     return barycentric_gather(x, idx.T, b.T)
 
 
-def _matvec(idx, b, x, lam):
-    """(B^T B + diag(lam)) x for the sample-to-cage barycentric operator B
-    (see ``_gather``)."""
-    return barycentric_scatter(_gather(idx, b, x), idx.T, b.T, x.shape[0]) + lam[:, None] * x
+def normal_blocks(group, b, n_groups):
+    """B^T B of the sample-to-cage operator B (see ``_gather``) as one
+    symmetric 3x3 block per triangle: ``M[g] = sum of b b^T`` over the rows
+    ``b`` (3,s) on triangle ``group`` (s,). (n_groups, 3, 3) float64. With
+    the blocks a product costs the triangles, not the (many more) rows."""
+    M = np.empty((n_groups, 3, 3))
+    for i in range(3):
+        for j in range(i, 3):
+            M[:, i, j] = np.bincount(group, weights=b[i] * b[j], minlength=n_groups)
+            M[:, j, i] = M[:, i, j]
+    return M
+
+
+def block_matvec(G, M, x, lam):
+    """(B^T B + diag(lam)) x from the blocks ``M`` of :func:`normal_blocks`
+    on the triangles ``G`` (g,3) (their corners in the rows' order)."""
+    n = x.shape[0]
+    Y = np.einsum("gij,gjk->gik", M, np.take(x, G, axis=0))     # (g, corner, coordinate)
+    out = lam[:, None] * x
+    for c in range(3):
+        for d in range(x.shape[1]):
+            out[:, d] += np.bincount(G[:, c], weights=Y[:, c, d], minlength=n)
+    return out
 
 
 def _normals(V, F):
@@ -68,16 +87,17 @@ _BACK_BARY = np.array([[2.0, 2.0, 2.0], [4.0, 1.0, 1.0], [1.0, 4.0, 1.0], [1.0, 
 
 
 def _back_rows(V, F, surface, total):
-    """Rows of the backward term: (idx (3,r), b (3,r), targets (r,3)), each row
-    scaled by the square root of its weight (``total`` shared out by the area
-    each point stands for) so it can join the forward rows unchanged."""
+    """Rows of the backward term: (idx (3,r), b (3,r), targets (r,3), the
+    cage face of each (r,)), each row scaled by the square root of its weight
+    (``total`` shared out by the area each point stands for) so it can join
+    the forward rows unchanged."""
     m, k = F.shape[0], _BACK_BARY.shape[0]
     idx = np.repeat(F.T, k, axis=1)                                   # (3, m*k)
     b = np.tile(_BACK_BARY.T, (1, m))                                 # (3, m*k)
     T = surface.closest(_gather(idx, b, V)).point
     area = np.linalg.norm(_normals(V, F), axis=1)
     w = np.sqrt(np.repeat(area * (total / max(k * float(area.sum()), 1e-300)), k))
-    return idx, b * w, T * w[:, None]
+    return idx, b * w, T * w[:, None], np.repeat(np.arange(m, dtype=np.int64), k)
 
 
 _SEG_T = np.array([0.25, 0.5, 0.75])   #: points along each cage border edge (backward)
@@ -94,8 +114,8 @@ def _border_rows(V, C, Eb, C_index, weight):
     input border point ``C`` to its closest cage border edge (forward), and
     points along every cage border edge to the closest input border edge
     ``C_index`` (backward, as much weight in all as the forward rows, shared
-    by length). Returns (idx (3,r), b (3,r), targets (r,3)), rows pre-scaled
-    by the square roots of their weights."""
+    by length). Returns (idx (3,r), b (3,r), targets (r,3), the border edge
+    of each (r,)), rows pre-scaled by the square roots of their weights."""
     T3 = segment_triangles(Eb)
     cp = TriangleIndex(V, T3).closest(C)
     idx_f = np.take(T3, cp.face, axis=0).T
@@ -108,7 +128,8 @@ def _border_rows(V, C, Eb, C_index, weight):
     length = np.linalg.norm(V[Eb[:, 1]] - V[Eb[:, 0]], axis=1)
     w = np.sqrt(np.repeat(length * (weight * C.shape[0] / max(k * float(length.sum()), 1e-300)), k))
     return (np.concatenate([idx_f, idx_b], axis=1), np.concatenate([b_f, b_b * w], axis=1),
-            np.concatenate([C * np.sqrt(weight), Tb * w[:, None]]))
+            np.concatenate([C * np.sqrt(weight), Tb * w[:, None]]),
+            np.concatenate([cp.face, np.repeat(np.arange(Eb.shape[0], dtype=np.int64), k)]))
 
 
 def relocate(V, F, P, movable, *, iters=2, cg_iters=15, reg=0.05, min_cos=0.2, N_keep=None,
@@ -153,21 +174,28 @@ def relocate(V, F, P, movable, *, iters=2, cg_iters=15, reg=0.05, min_cos=0.2, N
     use_back = surface is not None and back > 0.0
     for _ in range(iters):
         cp = TriangleIndex(V, F).closest(P)
-        rows = [(np.take(F, cp.face, axis=0).T, cp.bary.T, P)]  # (3,s) vertices, (3,s) weights, targets
+        # (3,s) vertices, (3,s) weights, targets, and the triangle of each row
+        rows = [(np.take(F, cp.face, axis=0).T, cp.bary.T, P, cp.face)]
+        tris = [F]
         if use_back:
             rows.append(_back_rows(V, F, surface, back * P.shape[0]))
         if border is not None and border[1].shape[0] and border[0].shape[0]:
-            rows.append(_border_rows(V, *border))
+            Eb = border[1]
+            r = _border_rows(V, *border)
+            rows.append(r[:3] + (r[3] + F.shape[0],))
+            tris.append(segment_triangles(Eb))
         idx = np.concatenate([r[0] for r in rows], axis=1)   # C-contiguous copies
         b = np.concatenate([r[1] for r in rows], axis=1)
         T = np.concatenate([r[2] for r in rows])
+        G = np.concatenate(tris)
+        M = normal_blocks(np.concatenate([r[3] for r in rows]), b, G.shape[0])
         diag = np.bincount(idx.ravel(), weights=(b * b).ravel(), minlength=n)
         lam = reg * diag + reg * max(float(diag.mean()), 1e-300)
         lam[~movable] = 1e30  # pinned
         # solve (B^T B + lam) D = B^T (T - B V) for the displacement D by CG
         r = barycentric_scatter(T - _gather(idx, b, V), idx.T, b.T, n)
         r[~movable] = 0.0
-        D = conjugate_gradient(lambda X: _matvec(idx, b, X, lam), r, rtol=CG_RTOL,
+        D = conjugate_gradient(lambda X: block_matvec(G, M, X, lam), r, rtol=CG_RTOL,
                                max_iterations=cg_iters).X
         D[~movable] = 0.0
         # undo moves that flip or flatten a face (sweeps: undoing can expose others;

@@ -77,3 +77,23 @@ def test_a_move_that_would_make_a_sliver_is_undone():
     assert compactness(free) < 0.01                # unguarded: the face becomes a needle
     assert compactness(kept) >= 0.02               # guarded: the step that would is undone
     assert kept[2, 1] < 0.1                        # ... the ones before it stay
+
+
+def test_the_per_triangle_normal_blocks_apply_the_same_operator_as_the_rows():
+    # B^T B + diag(lam) from 3x3 blocks per triangle equals gathering the rows
+    # and scattering them back, on a grid with rows on faces and on segments
+    from core._relocate import block_matvec, normal_blocks
+    from core.mesh import barycentric_gather, barycentric_scatter
+    V, F = regular_grid(6, 5)
+    T3 = segment_triangles(boundary_edges(F, V.shape[0]))
+    G = np.concatenate([F, T3])
+    rng = np.random.default_rng(7)
+    group = rng.integers(0, G.shape[0], 500)
+    b = rng.random((3, 500))
+    b[2, group >= F.shape[0]] = 0.0                    # a point on a segment has two weights
+    idx = G[group].T
+    lam = rng.random(V.shape[0])
+    X = rng.normal(size=(V.shape[0], 3))
+    rows = barycentric_scatter(barycentric_gather(X, idx.T, b.T), idx.T, b.T, V.shape[0]) + lam[:, None] * X
+    got = block_matvec(G, normal_blocks(group, b, G.shape[0]), X, lam)
+    assert np.abs(got - rows).max() <= 1e-12 * np.abs(rows).max()
