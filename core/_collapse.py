@@ -813,17 +813,16 @@ def _hausdorff_penalty(st, s, g, A, B, tun):
     witness (k,3): the farther of the two."""
     wA, wB = _take(st.wit, A, axis=0), _take(st.wit, B, axis=0)
     mk, k = s.mk, s.k
-    Pa = np.concatenate([wA[mk], wB[mk]])
-    Q0, Q1, Q2 = g.Q
-    _, _, d2 = closest_on_triangles(Pa[:, 0].copy(), Pa[:, 1].copy(), Pa[:, 2].copy(),
-                                    triangle_rows(np.concatenate([Q0, Q0]), np.concatenate([Q1, Q1]),
-                                                  np.concatenate([Q2, Q2])))
-    dA = np.full(k, np.inf)
-    np.minimum.at(dA, mk, d2[:mk.size])
-    dB = np.full(k, np.inf)
-    np.minimum.at(dB, mk, d2[mk.size:])
-    dA[~np.isfinite(dA)] = 0.0
-    dB[~np.isfinite(dB)] = 0.0
+    D = triangle_rows(*g.Q)                 # the new faces, once for both witnesses
+
+    def nearest(w):
+        P = np.ascontiguousarray(_take(w, mk, axis=0).T)
+        d = np.full(k, np.inf)
+        np.minimum.at(d, mk, closest_on_triangles(P[0], P[1], P[2], D)[2])
+        d[~np.isfinite(d)] = 0.0
+        return d
+
+    dA, dB = nearest(wA), nearest(wB)
     Wq = _take(st.Q[10], A) + _take(st.Q[10], B)
     return tun.haus_weight * Wq * np.maximum(dA, dB), np.where((dB > dA)[:, None], wB, wA)
 
