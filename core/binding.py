@@ -240,7 +240,7 @@ class Binding:
         normal_changed[op.F_fine[touched].ravel()] = True
         return normal_changed[self._cache["corners_t"]].any(axis=0)
 
-    def influenced(self, cage_vertex_ids):
+    def influenced(self, cage_vertex_ids, *, ordered=True):
         """The dense vertices an incremental :func:`deform` recomputes when
         the given cage vertices move (a subset of :meth:`affected`, found
         without touching the dense mesh: O(fine support + result)).
@@ -253,10 +253,15 @@ class Binding:
         Parameters
         ----------
         cage_vertex_ids : (k,) int, duplicates allowed
+        ordered : bool, keyword-only
+            Sort the result (the default). False returns the same rows
+            grouped by the fine face they are bound to, faces ascending (no
+            sort: about 1 ms less for 25k rows; a live update that copies
+            the rows needs no order).
 
         Returns
         -------
-        (r,) int64 ndarray, sorted, distinct
+        (r,) int64 ndarray, distinct (sorted when ``ordered``)
 
         Raises
         ------
@@ -268,7 +273,8 @@ class Binding:
         if ids.size == 0:
             return np.zeros(0, dtype=np.int64)
         with _INCREMENTAL_LOCK:
-            return np.sort(_influenced_dense(self, ids).rows)
+            rows = _influenced_dense(self, ids).rows
+        return np.sort(rows) if ordered else rows.copy()
 
 
 def bind(V_dense, F_dense, V_cage, F_cage, *, levels=2, scheme="butterfly", creases=None,

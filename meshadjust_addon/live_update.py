@@ -7,7 +7,7 @@ float32 buffer handed to Blender. One update::
 
     V      = cage positions (Edit Mode synced), in the source's space
     moved  = cage vertices whose position differs from the last update's
-    rows   = binding.influenced(moved)                  dense vertices they move
+    rows   = binding.influenced(moved, ordered=False)   dense vertices they move
     core.deform(binding, V, moved=moved, out=D)          only those rows
     buf[rows] = D[rows]                                  float32, only those rows
     position attribute <- buf (one foreach_set), mesh tagged for redraw
@@ -116,10 +116,10 @@ def update_edited(cage):
         rows = binding.n_dense
     else:
         D, buf = state.D, state.buf
-        r = binding.influenced(moved)
+        r = binding.influenced(moved, ordered=False)
         core.deform(binding, V, moved=moved, out=D)
         t3 = time.perf_counter()
-        buf[r] = D[r]
+        buf[r] = np.take(D, r, axis=0)
         rows = r.shape[0]
         state = state._replace(V_cage=V)
     t4 = time.perf_counter()

@@ -173,6 +173,17 @@ def test_influenced_lists_exactly_the_rows_the_update_writes(torus_case):
         b.influenced([-2])
 
 
+def test_influenced_unordered_is_the_same_set_and_a_copy(torus_case):
+    Vd, Vc, b = torus_case
+    ids = [4, 17, 30]
+    loose = b.influenced(ids, ordered=False)
+    assert loose.dtype == np.int64 and loose.size == np.unique(loose).size
+    assert np.array_equal(np.sort(loose), b.influenced(ids))
+    loose[:] = -1                     # the caller's array, not the binding's cache
+    assert np.array_equal(np.sort(b.influenced(ids, ordered=False)), b.influenced(ids))
+    assert b.influenced([], ordered=False).shape == (0,)
+
+
 @pytest.mark.parametrize("levels", [0, 1, 3])
 @pytest.mark.parametrize("scheme", ["butterfly", "loop"])
 def test_incremental_equals_full_at_other_levels(levels, scheme):
