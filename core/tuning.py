@@ -18,7 +18,7 @@ class Tuning:
     max_rounds: int = 16             #: selection rounds per pass
     #: once at most this many pool edges are left in a pass, check them all at once
     #: (the rounds then only pick: same results, far fewer small checks)
-    check_ahead: int = 2048
+    check_ahead: int = 1024
     face_cache_share: float = 0.75   #: a round re-packs the faces in play below this share
     bands: int = 8                   #: cost bands of the pool (then length bands, then random)
     length_bands: int = 16           #: length bands inside a cost band (shorter edges first)
