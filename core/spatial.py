@@ -36,13 +36,21 @@ The index (:class:`TriangleIndex`) answers "nearest triangle" exactly:
    triangle. Phase 2: every other cell within ``u`` of the query (box
    distance) is examined; any triangle closer than ``u`` has a point in one of
    those cells and is referenced there, so the minimum is exact.
-3. Every candidate set is first filtered by a cheap lower bound, the height
-   above the triangle's plane and the lateral excess beyond its bounding disk::
+3. Every candidate set goes through three lower bounds of increasing cost and
+   tightness (c the centroid, r the radius of a sphere around the triangle, n
+   its normal, m_k / o_k its in-plane outward edge normals and their distances
+   from c)::
 
-       lb^2 = ((p - c).n)^2 + max(0, |p - c|_lateral - r)^2 <= |p - T|^2
+       sphere:  (|p - c| - r)^2
+       disk:    ((p - c).n)^2 + max(0, |p - c|_lateral - r)^2
+       prism:   ((p - c).n)^2 + max(0, max_k (p - c).m_k - o_k)^2   <= |p - T|^2
 
-   the candidate with the smallest bound is evaluated exactly, then only the
-   candidates whose bound is below that distance.
+   (the last is exact wherever the closest point is inside the triangle or on
+   an edge). With a probe, the candidate with the nearest centroid is
+   evaluated exactly first; then only the candidates whose three bounds are
+   within the best distance. Among exactly equidistant triangles the one
+   with the smallest disk bound wins (the index's rule since its first
+   version, kept so that results do not change).
 4. Queries with no triangle nearby, or whose ball spans more than
    ``_MAX_PHASE2_CELLS`` cells (far from the surface, outside the grid), go to a
    bounding-volume hierarchy over the same Morton order (a balanced binary tree
@@ -456,7 +464,7 @@ class TriangleIndex:
         self._bvh = None                          # built on first need (far queries)
         self._bvh_ready = False                   # ... with its cylinder bounds
         self._ball, self._prism = _bounding_rows(A, B, C, self._D[12:15].T)
-        self._normal = np.ascontiguousarray(self._D[12:15])
+        self._normal = np.ascontiguousarray(self._D[12:15])      # the disk bound's rows
         self.n_faces = m
 
     # -- grid ---------------------------------------------------------------------------------
@@ -751,6 +759,9 @@ class TriangleIndex:
         return keep
 
     def _disk_bound(self, X, t, dc2, r):
+        """Squared-distance lower bound of the points ``c_t + X`` to the triangles
+        ``t``: height above the plane and lateral excess beyond the bounding disk
+        (radius ``r``), less a rounding margin of ``dc2`` (the squared ``|X|``)."""
         n = np.take(self._normal, t, axis=1)
         hh = X[0] * n[0] + X[1] * n[1] + X[2] * n[2]
         hh *= hh

@@ -277,3 +277,17 @@ def test_rows_rebuilt_in_many_blocks(torus_case, monkeypatch):
     deform(b, Ve, moved=ids, out=many)
     assert np.array_equal(one, many)
     assert np.abs(many - deform(b, Ve)).max() <= _tol(Vd)
+
+
+@pytest.mark.parametrize("span", [10, 1000, 10**6])
+def test_distinct_is_unique_on_both_paths_and_leaves_the_scratch_clean(span):
+    from core import binding
+    rng = np.random.default_rng(span)
+    scratch = {"stamp": np.empty(10**6 + 10, dtype=np.int64),
+               "seen": np.zeros(10**6 + 10, dtype=bool)}
+    for dtype in (np.int64, np.int32):
+        values = (rng.integers(0, span, 5000) + 7).astype(dtype)
+        got = binding._distinct(values, scratch)
+        assert got.dtype == np.int64 and np.array_equal(got, np.unique(values))
+        assert not scratch["seen"].any()
+    assert binding._distinct(np.zeros(0, dtype=np.int32), scratch).dtype == np.int64

@@ -379,3 +379,47 @@ def test_far_queries_from_many_threads_build_the_hierarchy_once_and_agree(monkey
             parts = list(pool.map(lambda s: index.closest(P[s:s + 500]).distance,
                                   range(0, P.shape[0], 500)))
         assert np.array_equal(np.concatenate(parts), expect)
+
+
+def _lower_bound_cases(rng):
+    """Triangles of every kind (regular, slivers, needles, segments, points) and
+    points near them, on them and far away."""
+    k = 200
+    A = rng.normal(size=(k, 3)) * 10
+    B = A + rng.normal(size=(k, 3))
+    C = A + rng.normal(size=(k, 3))
+    C[:40] = A[:40] + (B[:40] - A[:40]) * rng.random((40, 1)) + 1e-7 * rng.normal(size=(40, 3))
+    C[40:60] = B[40:60]                                   # segments
+    B[60:70] = C[60:70] = A[60:70]                        # points
+    V = np.concatenate([A, B, C]) + 1e3                   # off the origin
+    F = np.arange(3 * k).reshape(3, k).T
+    P = np.concatenate([V + rng.normal(size=V.shape) * 0.01, V,
+                        rng.normal(size=(300, 3)) * 30 + 1e3])
+    return V, F, P
+
+
+def test_the_pair_filters_never_exceed_the_exact_distance():
+    """The sphere, bounding-disk and edge-line bounds the index filters pairs
+    with are below the kernel's own squared distance (what a pair is pruned
+    against), on every (point, triangle) pair, slivers and degenerate ones included."""
+    V, F, P = _lower_bound_cases(np.random.default_rng(3))
+    index = TriangleIndex(V, F)
+    m = index.n_faces
+    q = np.repeat(np.arange(P.shape[0]), m)
+    t = np.tile(np.arange(m), P.shape[0])
+    PT = np.ascontiguousarray(P.T)
+    _, _, d2 = index._eval(PT, q, t)
+    S = index._ball[:, t]
+    X = PT[:, q] - S[:3]
+    dc2 = (X * X).sum(axis=0)
+    ok = d2 * (1 + spatial._SLACK)
+    sphere = np.maximum(np.sqrt(dc2) - S[3], 0.0) ** 2
+    assert (sphere <= ok * (1 + 4 * spatial._SLACK)).all()
+    assert (index._disk_bound(X, t, dc2, S[3]) <= ok).all()
+    assert (index._prism_bound(X, t, dc2) <= ok).all()
+    # and the edge-line bound is tight where it matters: a point above the middle
+    # of a regular triangle is bounded by its height exactly
+    regular = np.flatnonzero(index._order >= 70)           # internal ids of faces 70..
+    above = (index._ball[:3, regular] + 0.5 * index._prism[0:3, regular])
+    lb = index._prism_bound(above - index._ball[:3, regular], regular, np.full(regular.size, 0.25))
+    np.testing.assert_allclose(lb, 0.25, rtol=1e-7)    # less the 1e-12-of-size allowance
