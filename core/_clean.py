@@ -129,6 +129,24 @@ def half_edge_ends(F, h=None):
     return np.take(Fr, h + np.take(NEXT_OFFSET, c)), np.take(Fr, h + np.take(PREV_OFFSET, c))
 
 
+#: half-edges per slice of :func:`edge_representatives` (bounds its temporaries)
+_REP_SLICE = 1 << 20
+
+
+def edge_representatives(twin, boundary=True, step=_REP_SLICE):
+    """One half-edge per edge, ascending: each interior edge's half-edge
+    ``h < twin[h]``, and with ``boundary`` every border half-edge
+    (``twin == BOUNDARY``). In slices of ``step``: no (3m,) index array is made."""
+    parts = [np.zeros(0, dtype=np.int64)]
+    for i in range(0, twin.size, step):
+        t = twin[i:i + step]
+        keep = t > np.arange(i, i + t.size, dtype=np.int64)
+        if boundary:
+            keep |= t == BOUNDARY
+        parts.append(np.flatnonzero(keep) + i)
+    return np.concatenate(parts)
+
+
 def twin_table(F, n_vertices, *, ends=None):
     """Twin of every half-edge (see the module docstring), (3m,) int64.
 
@@ -189,7 +207,7 @@ def corner_fans(F, twin, U, W, vertices, n_vertices):
     """
     sel = np.zeros(n_vertices, dtype=bool)
     sel[vertices] = True
-    h = np.flatnonzero(twin > np.arange(twin.size))
+    h = edge_representatives(twin, boundary=False)
     t = twin[h]
     f_h, f_t = h - h % 3, t - t % 3
     Fr = F.ravel()

@@ -36,7 +36,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from ._clean import BOUNDARY, NON_MANIFOLD, half_edge_ends, renumber_twins
+from ._clean import BOUNDARY, NON_MANIFOLD, edge_representatives, half_edge_ends, renumber_twins
 from ._parallel import blocks, run_blocks, run_each
 from .quadrics import place_columns, quadric_at, rms_distance
 from .spatial import closest_on_triangles, triangle_rows
@@ -90,7 +90,7 @@ class State:
     # remembered rejection and its value (blk_pass, c_blk), cost, position, and
     # whether the cost is only a lower bound (c_stale)
     swap: np.ndarray = _array("half_edge", False)
-    blk_pass: np.ndarray = _array("half_edge", -1)
+    blk_pass: np.ndarray = _array("half_edge", np.int32(-1))   #: (int32: a pass count)
     c_blk: np.ndarray = _array("half_edge", -1.0)
     c_cost: np.ndarray = _array("half_edge", 0.0)
     c_stale: np.ndarray = _array("half_edge", True)
@@ -238,8 +238,7 @@ def _candidate_edges(st):
     that changed in the last pass become stale, and an edge rejected since
     its neighbourhood last changed costs at least what its check found."""
     F, twin = st.F, st.twin
-    h = np.arange(twin.size, dtype=np.int64)
-    rep = np.flatnonzero((twin == BOUNDARY) | (twin > h))
+    rep = edge_representatives(twin)
     U, W = half_edge_ends(F, rep)
     st.c_stale[rep[st.fresh[U] | st.fresh[W]]] = True
     st.fresh[:] = False
@@ -910,8 +909,7 @@ def run(st, target, max_err_n, preserve_boundary, progress, m0, tun, dihedral_co
     finally:
         compact(st)
     if stopped == "no_valid_collapse" and dihedral_cos is not None:
-        h = np.arange(st.twin.size, dtype=np.int64)
-        if st.bent[(st.twin == BOUNDARY) | (st.twin > h)].any():
+        if st.bent[edge_representatives(st.twin)].any():
             stopped = "max_dihedral"
     return stopped, passes
 

@@ -15,7 +15,7 @@ They work on a compact :class:`core._collapse.State` and leave it compact.
 
 import numpy as np
 
-from ._clean import BOUNDARY, face_keys, half_edge_ends
+from ._clean import BOUNDARY, edge_representatives, face_keys, half_edge_ends
 from ._collapse import append_faces, compact, survivors
 from .topology import connected_labels, edge_keys, face_components
 
@@ -126,7 +126,7 @@ def close_smallest_hole(st, tun):
     roots = np.flatnonzero((loop == np.arange(hb.size)) & (length > 3))
     if roots.size == 0:
         return 0
-    hi = np.flatnonzero(twin > np.arange(twin.size, dtype=np.int64))
+    hi = edge_representatives(twin, boundary=False)
     ea, eb = half_edge_ends(F, np.concatenate([hi, hb]))
     edges = np.sort(edge_keys(ea, eb, n))
     for root in roots[np.argsort(length[roots], kind="stable")][:tun.cap_hole_tries]:

@@ -44,8 +44,8 @@ from typing import NamedTuple
 
 import numpy as np
 
-from ._clean import (BOUNDARY, NON_MANIFOLD, corner_fans, face_keys, half_edge_ends,
-                     non_manifold_vertices, renumber_twins, twin_table)
+from ._clean import (BOUNDARY, NON_MANIFOLD, corner_fans, edge_representatives, face_keys,
+                     half_edge_ends, non_manifold_vertices, renumber_twins, twin_table)
 from .errors import InvalidArgumentError
 from .mesh import bounding_box, check_mesh, diagonal_length, face_normals
 from .topology import connected_labels, edge_keys
@@ -548,7 +548,7 @@ def _orient(F, twin):
     itself flipped is non-orientable (left as it is).
     """
     found = {"n_flipped_faces": 0, "n_non_orientable_components": 0}
-    h = np.flatnonzero(twin > np.arange(twin.size))
+    h = edge_representatives(twin, boundary=False)
     if h.size == 0:
         return F, twin, found
     t = twin[h]
@@ -594,7 +594,7 @@ def _debris(area, F, twin, min_component_area, face_budget, protected):
     found = {"n_debris_components": 0, "n_debris_faces": 0}
     if (min_component_area <= 0 and not face_budget) or F.shape[0] == 0:
         return keep, found
-    h = np.flatnonzero(twin > np.arange(twin.size))
+    h = edge_representatives(twin, boundary=False)
     labels = connected_labels(F.shape[0], np.stack([h // 3, twin[h] // 3], axis=1))
     comp_area = np.bincount(labels, weights=area, minlength=F.shape[0])
     roots = np.flatnonzero(labels == np.arange(F.shape[0]))

@@ -47,7 +47,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from ._clean import BOUNDARY, NON_MANIFOLD, half_edge_ends, spatial_order
+from ._clean import BOUNDARY, NON_MANIFOLD, edge_representatives, half_edge_ends, spatial_order
 from ._collapse import State, run
 from ._relax import close_smallest_hole, close_triangular_holes, drop_stuck_components
 from ._relocate import relocate, segment_triangles
@@ -224,7 +224,7 @@ def _initial_quadrics(V, F, twin, U, W, preserve_boundary, feature_angle_deg, tu
         items.append(edge_constraint_quadrics(V, E, Nf[hb // 3], tun.boundary_weight * L2))
         ends.append(E)
     if feature_angle_deg is not None:
-        hi = np.flatnonzero(twin > np.arange(twin.size, dtype=np.int64))
+        hi = edge_representatives(twin, boundary=False)
         t = twin[hi]
         cosang = np.einsum("ij,ij->i", np.take(Nf, hi // 3, axis=0), np.take(Nf, t // 3, axis=0))
         # faces that disagree on the edge's direction have opposite normal conventions
@@ -267,7 +267,8 @@ def _bend_cosines(mesh):
     interior edge of the (compact) engine mesh off the input's creases, one
     per edge in half-edge order (1 where a face has no area)."""
     F, V, twin = mesh.F, mesh.V, mesh.twin
-    h = np.flatnonzero((twin > np.arange(twin.size, dtype=np.int64)) & ~mesh.feat)
+    h = edge_representatives(twin, boundary=False)
+    h = h[~mesh.feat[h]]
     N = np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]])
     Na, Nb = N[h // 3], N[twin[h] // 3]
     la = np.linalg.norm(Na, axis=1)
@@ -329,7 +330,7 @@ class _SetUp(NamedTuple):
     """The engine's state at the start and what turning it back into a cage needs."""
 
     mesh: State
-    Vc: np.ndarray         #: the clean vertices in working (spatial) order
+    V_clean: np.ndarray    #: the clean vertices (``V_clean[order]``: in working order)
     Vn: np.ndarray         #: ... centred, scaled to a unit diagonal, snapped
     order: np.ndarray      #: clean index of each working vertex
     centre: np.ndarray
@@ -357,6 +358,7 @@ def _set_up(clean, opts):
     scale = diagonal_length(lo, hi) or 1.0
     grid = float(2 ** tun.snap_bits)
     Vn = (Vc - centre) / scale
+    del Vc                       # (clean.V[order]: the set-up keeps clean.V itself)
     Vn *= grid
     np.round(Vn, out=Vn)
     Vn /= grid
@@ -374,7 +376,7 @@ def _set_up(clean, opts):
     Nref = _normal_sums(Fc, Nf, n)
     del Nf
     mesh = State(Vn, Fc, twin, Q, lock, feat, Nref, forig=forder)  # Fc is spatial_order's own array
-    return _SetUp(mesh, Vc, Vn, order, centre, scale, creases, Eb_in, Fin, m0,
+    return _SetUp(mesh, clean.V, Vn, order, centre, scale, creases, Eb_in, Fin, m0,
                   {"set-up": time.perf_counter() - t0})
 
 
@@ -394,7 +396,7 @@ def _cage_of(su, mesh, stopped, passes, opts, relocate=True):
     # back to the caller's units; vertices never moved keep their exact input position
     Vout = mesh.V * su.scale + su.centre
     still = ~mesh.moved
-    Vout[still] = su.Vc[mesh.orig[still]]
+    Vout[still] = su.V_clean[su.order[mesh.orig[still]]]
     # back to the clean mesh's order: cage vertices in the order of the clean vertices
     # they keep, faces in the order of the clean faces they descend from
     vorder = np.argsort(su.order[mesh.orig])  # (distinct keys)
@@ -415,9 +417,8 @@ def _cage_of(su, mesh, stopped, passes, opts, relocate=True):
                  fe.astype(np.int64), float(mesh.worst * su.scale), stopped, passes, seconds)
 
 
-def _collapse(clean, target, opts, progress):
-    """Collapse the cleaned mesh to ``target`` (see :func:`simplify`)."""
-    su = _set_up(clean, opts)
+def _collapse(su, clean, target, opts, progress):
+    """Collapse the cleaned mesh (set up as ``su``) to ``target`` (see :func:`simplify`)."""
     stopped, passes = _run_all(su.mesh, target, None, opts, progress, su.m0)
     if stopped == "cancelled":
         return _unchanged(clean)
@@ -466,7 +467,7 @@ def _stop_reason(cage, target, opts):
     return "topology_floor" if not ok.any() else cage.stopped
 
 
-def _within_max_error(clean, target, max_error, opts, progress):
+def _within_max_error(su, clean, target, max_error, opts, progress):
     """Collapse with ``max_error`` as a guarantee: the cage's two-sided
     Hausdorff distance to the cleaned input, as ``surface_distance`` measures
     it, is at most ``max_error``.
@@ -479,9 +480,9 @@ def _within_max_error(clean, target, max_error, opts, progress):
     (when even the first is, smaller first steps are tried). The last step's
     cage is then measured as ``surface_distance`` does by default, relocated
     and not; if both are over, the step before is tried, down to the cleaned
-    input itself (distance 0). Returns the cage and its distance.
+    input itself (distance 0). ``su``: the set-up of ``clean``. Returns the
+    cage and its distance.
     """
-    su = _set_up(clean, opts)
 
     def measure(cage, samples=None):
         return surface_distance(clean.V, clean.F, cage.V, cage.F, samples=samples).hausdorff
@@ -630,6 +631,8 @@ def simplify(V, F, *, target_faces=None, ratio=None, max_error=None, preserve_bo
     clean = cleaned_input(V, F, weld_distance, min_component_area,
                           debris_budget(target_faces, ratio, max_error, F.shape[0]), lk)
     t_clean = time.perf_counter() - t0
+    m_in = F.shape[0]
+    del V, F                     # check_mesh's copies: the clean mesh is all that is needed now
     target = target_count(target_faces, ratio, clean.F.shape[0])
     to_input = clean.clean_to_input
     opts = dict(tuning=TUNING if tuning is None else tuning, preserve_boundary=preserve_boundary,
@@ -641,13 +644,16 @@ def simplify(V, F, *, target_faces=None, ratio=None, max_error=None, preserve_bo
     hausdorff = None
     if clean.F.shape[0] == 0:
         cage = _unchanged(clean)._replace(stopped="target")
-    elif max_error is None:
-        cage = _collapse(clean, target, opts, progress)
     else:
-        cage, hausdorff = _within_max_error(clean, target, max_error, opts, progress)
+        su = _set_up(clean, opts)
+        clean = clean._replace(twin=None, area=None)   # (3m,) and (m,): not needed past the set-up
+        if max_error is None:
+            cage = _collapse(su, clean, target, opts, progress)
+        else:
+            cage, hausdorff = _within_max_error(su, clean, target, max_error, opts, progress)
     cage = cage._replace(stopped=_stop_reason(cage, target, opts),
                          seconds={"clean": t_clean, **cage.seconds})
-    return _result(cage, clean, F.shape[0], n_in, target, hausdorff, t0)
+    return _result(cage, clean, m_in, n_in, target, hausdorff, t0)
 
 
 def cleaned_input(V, F, weld_distance, min_component_area, budget, locked):

@@ -220,3 +220,20 @@ def test_spatial_order_is_the_same_mesh_with_its_own_twin_table(case):
         # faces in the order of their smallest (new) vertex
         first = F2.min(axis=1)
         assert np.all(np.diff(first) >= 0)
+
+
+@pytest.mark.parametrize("step", [1, 7, 1 << 20])
+def test_edge_representatives_are_one_half_edge_per_edge_in_any_slicing(step):
+    from core._clean import BOUNDARY, edge_representatives, half_edge_ends, twin_table
+    from core.topology import edge_keys
+    from tests.mesh_factory import regular_grid
+    V, F = regular_grid(9, 7)                      # borders and interior edges
+    twin = twin_table(F, V.shape[0])
+    h = np.arange(twin.size)
+    for boundary in (True, False):
+        rep = edge_representatives(twin, boundary, step)
+        want = np.flatnonzero((twin > h) | ((twin == BOUNDARY) & boundary))
+        assert np.array_equal(rep, want)
+    U, W = half_edge_ends(F, edge_representatives(twin, True, step))
+    keys = edge_keys(U, W, V.shape[0])
+    assert np.unique(keys).size == keys.size == np.unique(edge_keys(*half_edge_ends(F), V.shape[0])).size
