@@ -702,7 +702,7 @@ class TriangleIndex:
         best.v[qq] = v[win]
         best.w[qq] = w[win]
 
-    def _scan(self, PT, q, t, best, probe=True):
+    def _scan(self, PT, q, t, best, probe=True, edges=True):
         """Exact minimum over candidate pairs (q, t), grouped contiguously by query.
 
         Two cheap lower bounds (:func:`_bounding_rows`) discard most pairs: the
@@ -710,7 +710,8 @@ class TriangleIndex:
         beyond the edge lines on those left; only the pairs within the query's
         bound are evaluated exactly. With ``probe``, the pair with the nearest
         centroid is evaluated first, for a tight bound (see :meth:`_fold_probe`
-        for which pair wins a tie).
+        for which pair wins a tie). Without ``edges``, the edge-line bound is
+        left out (far queries: it prunes little there and costs 16 rows a pair).
         """
         if q.size == 0:
             return
@@ -721,7 +722,7 @@ class TriangleIndex:
         dc2 += X[1] * X[1]
         dc2 += X[2] * X[2]
         if not probe:
-            keep = self._within(X, S[3], dc2, t, best.d2[q])
+            keep = self._within(X, S[3], dc2, t, best.d2[q], edges)
             # the query's best triangle again cannot do better (the same exact value)
             keep = keep[best.t[q[keep]] != t[keep]]
             if keep.size:
@@ -733,7 +734,7 @@ class TriangleIndex:
         first = group_argmin(dc2, counts)
         v0, w0, d0 = self._eval(PT, q[first], t[first])
         pre = best.d2[q[starts]]
-        keep = self._within(X, S[3], dc2, t, np.repeat(np.minimum(pre, d0), counts))
+        keep = self._within(X, S[3], dc2, t, np.repeat(np.minimum(pre, d0), counts), edges)
         is_first = np.zeros(q.size, dtype=bool)
         is_first[first] = True
         keep = keep[~is_first[keep]]
@@ -744,9 +745,10 @@ class TriangleIndex:
                          np.concatenate([v0, v1])[order], np.concatenate([w0, w1])[order],
                          np.concatenate([d0, d1])[order], best)
 
-    def _within(self, X, r, dc2, t, bound):
+    def _within(self, X, r, dc2, t, bound, edges=True):
         """Indices of the pairs (offsets X from the centroids (3, k), squared
-        lengths dc2, triangles t) whose two lower bounds are within ``bound``."""
+        lengths dc2, triangles t) whose lower bounds (sphere, disk and, with
+        ``edges``, edge lines) are all within ``bound``."""
         reach = np.sqrt(bound)
         reach += r
         reach *= reach
@@ -754,8 +756,10 @@ class TriangleIndex:
         if keep.size:
             X, t, dc2, bound = np.take(X, keep, axis=1), t[keep], dc2[keep], bound[keep]
             sub = np.flatnonzero(self._disk_bound(X, t, dc2, r[keep]) <= bound * (1 + _SLACK))
-            X, t, dc2, bound, keep = np.take(X, sub, axis=1), t[sub], dc2[sub], bound[sub], keep[sub]
-            keep = keep[self._prism_bound(X, t, dc2) <= bound * (1 + _SLACK)]
+            keep = keep[sub]
+            if edges:
+                X, t, dc2, bound = np.take(X, sub, axis=1), t[sub], dc2[sub], bound[sub]
+                keep = keep[self._prism_bound(X, t, dc2) <= bound * (1 + _SLACK)]
         return keep
 
     def _disk_bound(self, X, t, dc2, r):
@@ -928,7 +932,8 @@ class TriangleIndex:
             per = max(1, _PAIR_CHUNK // m)
             for s in range(0, far.size, per):
                 qs = far[s:s + per]
-                self._scan(PT, np.repeat(qs, m), np.tile(np.arange(m), qs.size), best)
+                self._scan(PT, np.repeat(qs, m), np.tile(np.arange(m), qs.size), best,
+                           edges=False)
             return
         if not self._bvh_ready:
             self._build_hierarchy()
@@ -994,7 +999,7 @@ class TriangleIndex:
     def _scan_leaves(self, PT, q, leaf, best, probe=True):
         t, own = ragged_ranges(leaf * _LEAF, np.full(q.size, _LEAF, dtype=np.int64))
         ok = t < self.n_faces
-        self._scan(PT, q[own[ok]], t[ok], best, probe)
+        self._scan(PT, q[own[ok]], t[ok], best, probe, edges=False)
 
 
 class _Best:
