@@ -1042,6 +1042,7 @@ def _dense_points_near(V_dense, F_dense, fine_face, F_fine, P):
     by_vertex = np.argsort(F_dense.ravel(), kind="stable") // 3
     start_v = np.cumsum(degree) - degree
     has_none = np.zeros(n_f, dtype=bool)
+    all_in_faces = bool((degree > 0).all())      # no isolated dense vertex to skip
 
     def near(s, e):
         # fine vertices s..e-1 (results depend on the vertex alone, not on the block)
@@ -1049,8 +1050,9 @@ def _dense_points_near(V_dense, F_dense, fine_face, F_fine, P):
         jj, ff = inc_j[lo:hi], inc_f[lo:hi]
         idx, owner = ragged_ranges(start_f[ff], cnt_f[ff])
         pj, pk = jj[owner], by_face[idx]
-        keep = degree[pk] > 0
-        pj, pk = pj[keep], pk[keep]
+        if not all_in_faces:
+            keep = degree[pk] > 0
+            pj, pk = pj[keep], pk[keep]
         d = np.take(V_dense, pk, axis=0)
         d -= np.take(P, pj, axis=0)
         cnt_j = np.bincount(pj - s, minlength=e - s)
@@ -1089,8 +1091,9 @@ def _closest_in_groups(V, F, P, j, face, counts):
     """Closest point of ``P[j[k]]`` over the candidate faces ``face[k]``,
     grouped contiguously by ``j`` (``counts`` per group, each > 0). Returns
     the best point, its face's corners and barycentric coordinates per group."""
-    T = F[face]
-    hit = point_triangle_closest(P[j], V[T[:, 0]], V[T[:, 1]], V[T[:, 2]])
+    T = np.take(F, face, axis=0)
+    hit = point_triangle_closest(np.take(P, j, axis=0), np.take(V, T[:, 0], axis=0),
+                                 np.take(V, T[:, 1], axis=0), np.take(V, T[:, 2], axis=0))
     best = group_argmin(hit.distance, counts)
     return hit.point[best], T[best], hit.bary[best]
 
