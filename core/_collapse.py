@@ -470,11 +470,12 @@ def _check_rounds(st, pool, passes, haus, dihedral_cos, tun):
             ahead = _CheckedAhead.of(st, pool, active, faces, tun, haus, dihedral_cos)
         sel, active, star, kf, faces = _pick_independent(st, pool, active, faces, tun, scratch, stars=ahead is None)
         if ahead is None:
-            ok, pen, rows, wnew, bent = _check(st, pool.A[sel], pool.B[sel], pool.X[sel], pool.interior[sel],
-                                               star, kf, tun, haus, dihedral_cos)
+            c = _check(st, pool.A[sel], pool.B[sel], pool.X[sel], pool.interior[sel], star, kf, tun, haus,
+                       dihedral_cos)
         else:
-            ok, pen, rows, wnew, bent = ahead.results(sel)
-        st.bent[pool.h[sel]] = bent
+            c = ahead.results(sel)
+        ok, pen, rows = c.ok, c.pen, c.rows
+        st.bent[pool.h[sel]] = c.bent
         total = pool.raw[sel] + pen
         acc = ok & (total <= _acceptance_bound(pool.limit, total[ok], tun))
         rej = ~acc
@@ -489,7 +490,7 @@ def _check_rounds(st, pool, passes, haus, dihedral_cos, tun):
         if acc.any():
             rows = _keep_rows(rows, acc, sum(x.size for x in acc_edges))
             acc_edges.append(sel[acc])
-            acc_wit.append(wnew[acc])
+            acc_wit.append(c.wit[acc])
             acc_rows.append(rows)
             touched[_take(st.F, rows[0], axis=0).ravel()] = True
     if not acc_edges:
@@ -506,11 +507,7 @@ class _CheckedAhead(NamedTuple):
     face ids), so the results are the same bits."""
 
     at: np.ndarray       #: (P,) row of each pool edge in the results (-1: not checked)
-    ok: np.ndarray
-    pen: np.ndarray
-    rows: tuple
-    wnew: np.ndarray
-    bent: np.ndarray
+    found: "_Checked"
 
     @classmethod
     def of(cls, st, pool, active, faces, tun, haus, dihedral_cos):
@@ -526,20 +523,18 @@ class _CheckedAhead(NamedTuple):
         if faces is None:
             near &= st.alive
         star, kf = _whole_stars(st.F, fidx[near], A, B)
-        ok, pen, rows, wnew, bent = _check(st, A, B, pool.X[active], pool.interior[active], star, kf, tun,
-                                           haus, dihedral_cos)
+        found = _check(st, A, B, pool.X[active], pool.interior[active], star, kf, tun, haus, dihedral_cos)
         at = np.full(pool.key.size, -1, dtype=np.int64)
         at[active] = np.arange(active.size)
-        return cls(at, ok, pen, rows, wnew, bent)
+        return cls(at, found)
 
     def results(self, sel):
         """The results of the pool edges ``sel`` (ascending), as :func:`_check`
         returns them for that selection."""
         i = _take(self.at, sel)
-        keep = np.zeros(self.ok.size, dtype=bool)
+        keep = np.zeros(self.found.ok.size, dtype=bool)
         keep[i] = True
-        return (_take(self.ok, i), _take(self.pen, i), _keep_rows(self.rows, keep), _take(self.wnew, i, axis=0),
-                _take(self.bent, i))
+        return self.found.subset(i, keep)
 
 
 def _whole_stars(F, fidx, A, B):
@@ -616,6 +611,21 @@ def _keep_rows(rows, keep, offset=0):
 # ---------------------------------------------------------------- checks
 
 
+class _Checked(NamedTuple):
+    """What :func:`_check` finds for k collapses."""
+
+    ok: np.ndarray       #: (k,) bool: valid
+    pen: np.ndarray      #: (k,) penalties (compactness, Hausdorff)
+    rows: tuple          #: star rows ``(star, kf, coll, cA, cB)``
+    wit: np.ndarray      #: (k,3) the survivor's witness
+    bent: np.ndarray     #: (k,) bool: refused only by the dihedral bound
+
+    def subset(self, i, keep):
+        """The collapses ``i`` (ascending; ``keep``: the same as a (k,) mask)."""
+        return _Checked(_take(self.ok, i), _take(self.pen, i), _keep_rows(self.rows, keep),
+                        _take(self.wit, i, axis=0), _take(self.bent, i))
+
+
 def _check(st, A, B, X, interior, star, kf, tun, haus=True, dihedral_cos=None):
     """:func:`_check_block` over blocks of collapses, on the worker threads.
     Same results; the star rows come back grouped by block."""
@@ -634,9 +644,9 @@ def _check(st, A, B, X, interior, star, kf, tun, haus=True, dihedral_cos=None):
                             haus, dihedral_cos)
 
     res = run_each(block, range(len(spans)))
-    ok, pen, wnew, bent = (np.concatenate([r[c] for r in res]) for c in (0, 1, 3, 4))
+    ok, pen, wit, bent = (np.concatenate([r[c] for r in res]) for c in (0, 1, 3, 4))
     coll, cA, cB = (np.concatenate([r[2][c] for r in res]) for c in (2, 3, 4))
-    return ok, pen, (star, kf, coll, cA, cB), wnew, bent
+    return _Checked(ok, pen, (star, kf, coll, cA, cB), wit, bent)
 
 
 class _Star(NamedTuple):
@@ -875,7 +885,7 @@ def _check_block(st, A, B, X, interior, star, kf, tun, haus=True, dihedral_cos=N
     ``(star, kf, coll, cA, cB)``: face ids, their collapse index, whether each
     face is removed, and the corners of A and B in it (-1: absent), the
     survivor's witness (k,3), and ``bent`` (k,) bool: refused only by the
-    dihedral bound.
+    dihedral bound (a :class:`_Checked`).
     """
     s = _star_of(st.F, A, B, star, kf)
     ok = _link_condition(st, s, interior)
@@ -892,7 +902,7 @@ def _check_block(st, A, B, X, interior, star, kf, tun, haus=True, dihedral_cos=N
     if haus and tun.haus_weight > 0.0 and s.mk.size:
         pen_h, wnew = _hausdorff_penalty(st, s, g, A, B, tun)
         penalty = penalty + pen_h
-    return ok, penalty, (star, kf, s.coll, s.cA, s.cB), wnew, bent
+    return _Checked(ok, penalty, (star, kf, s.coll, s.cA, s.cB), wnew, bent)
 
 
 # ---------------------------------------------------------------- the loop

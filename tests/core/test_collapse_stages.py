@@ -130,11 +130,11 @@ def test_checking_ahead_gives_the_same_bits_as_checking_each_round_and_the_same_
     now = engine._check(st, pool.A[sel], pool.B[sel], pool.X[sel], pool.interior[sel], star, kf, TUNING,
                         True, bend)
     got = ahead.results(sel)
-    assert not now[0].all() and now[0].any()
-    for x, y in zip((got[0], got[1], got[3], got[4]), (now[0], now[1], now[3], now[4])):
+    assert not now.ok.all() and now.ok.any()
+    for x, y in zip((got.ok, got.pen, got.wit, got.bent), (now.ok, now.pen, now.wit, now.bent)):
         assert np.array_equal(x, y)                            # bit for bit
-    order_now, order_got = np.lexsort(now[2][:2]), np.lexsort(got[2][:2])
-    for x, y in zip(got[2], now[2]):
+    order_now, order_got = np.lexsort(now.rows[:2]), np.lexsort(got.rows[:2])
+    for x, y in zip(got.rows, now.rows):
         assert np.array_equal(x[order_got], y[order_now])      # the same star rows
     cages = []
     for check_ahead in (0, TUNING.check_ahead, 10**9):         # never, the default, always
