@@ -389,15 +389,15 @@ def test_output_does_not_depend_on_threads_or_block_size(monkeypatch):
     import importlib
     parallel = importlib.import_module("core._parallel")
     V, F = torus(40, 20, bump=0.2)
-    small_blocks = Tuning(block=640)   # many blocks even on a small mesh
     runs = []
-    for workers in (1, 2):
+    for workers, block in ((1, 640), (2, 640), (2, 64), (2, TUNING.block)):   # 640: many blocks
         monkeypatch.setattr(parallel, "WORKERS", workers)
-        runs.append(simplify(V, F, target_faces=300, tuning=small_blocks))
-    a, b = runs
-    assert np.array_equal(a.F, b.F) and np.array_equal(a.V, b.V)
-    assert np.array_equal(a.vertex_map, b.vertex_map)
-    assert a.F.shape[0] == 300 and a.n_passes == b.n_passes
+        runs.append(simplify(V, F, target_faces=300, tuning=Tuning(block=block)))
+    a = runs[0]
+    for b in runs[1:]:
+        assert np.array_equal(a.F, b.F) and np.array_equal(a.V, b.V)
+        assert np.array_equal(a.vertex_map, b.vertex_map) and np.array_equal(a.face_map, b.face_map)
+        assert a.F.shape[0] == 300 and a.n_passes == b.n_passes
 
 
 def test_sampled_cost_thresholds_are_exact_when_small_and_slightly_high_when_large():
