@@ -133,7 +133,7 @@ def _border_rows(V, C, Eb, C_index, weight):
 
 
 def relocate(V, F, P, movable, *, iters=2, cg_iters=15, reg=0.05, min_cos=0.2, N_keep=None,
-             surface=None, back=0.0, border=None, min_compact=0.0):
+             surface=None, back=0.0, border=None, min_compact=0.0, min_move=0.0):
     """Move ``movable`` vertices of the cage ``(V, F)`` towards points ``P``.
 
     Parameters
@@ -142,7 +142,7 @@ def relocate(V, F, P, movable, *, iters=2, cg_iters=15, reg=0.05, min_cos=0.2, N
     F : (m,3) int64 cage faces.
     P : (s,3) float64 points on the original surface.
     movable : (n,) bool.
-    iters : int, correspondence updates.
+    iters : int, correspondence updates (at most: see ``min_move``).
     cg_iters : int, conjugate-gradient steps per update.
     reg : float, weight pulling each vertex to its current position, relative
         to the vertex's own sample weight (unit-free).
@@ -160,6 +160,9 @@ def relocate(V, F, P, movable, *, iters=2, cg_iters=15, reg=0.05, min_cos=0.2, N
     border : None or (C (c,3) input border points, Eb (k,2) cage border edges,
         TriangleIndex of the input's border edges, weight per point): ties the
         cage's borders to the input's in both directions.
+    min_move : float, stop once an update moves no vertex farther than this
+        share of the cage's mean edge length (it has settled: a flat cage on
+        a flat input does not move at all).
 
     Returns
     -------
@@ -172,6 +175,8 @@ def relocate(V, F, P, movable, *, iters=2, cg_iters=15, reg=0.05, min_cos=0.2, N
     N_ref = _normals(V, F)
     g0 = _compactness(V, F, np.linalg.norm(N_ref, axis=1))  # of the cage as it came
     use_back = surface is not None and back > 0.0
+    E = V[F[:, [1, 2, 0]]] - V[F]
+    settled = min_move * float(np.sqrt(np.einsum("ijk,ijk->ij", E, E)).mean())
     for _ in range(iters):
         cp = TriangleIndex(V, F).closest(P)
         # (3,s) vertices, (3,s) weights, targets, and the triangle of each row
@@ -216,4 +221,6 @@ def relocate(V, F, P, movable, *, iters=2, cg_iters=15, reg=0.05, min_cos=0.2, N
                 break
             D[F[bad].ravel()] = 0.0
         V = V + D
+        if np.abs(D).max() <= settled:
+            break
     return V

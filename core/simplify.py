@@ -300,7 +300,7 @@ def _relocate_cage(mesh, Vn, creases, Eb_in, surface, tun):
                 iters=tun.relocate_back_iters) if surface is not None else dict(iters=tun.relocate_iters)
     Vnew = relocate(mesh.V, Fm, P, movable, reg=tun.relocate_reg, N_keep=Nkeep, border=border,
                     min_compact=tun.gamma_hard, cg_iters=tun.relocate_cg_iters,
-                    min_cos=tun.relocate_min_cos, **back)
+                    min_cos=tun.relocate_min_cos, min_move=tun.relocate_min_move, **back)
     mesh.moved |= np.any(Vnew != mesh.V, axis=1)
     mesh.V = Vnew
 

@@ -50,6 +50,8 @@ class Tuning:
     relocate_max_share: float = 0.5  #: ... and at most this share of the input's faces
     relocate_cg_iters: int = 15      #: conjugate-gradient steps per relocation round
     relocate_min_cos: float = 0.2    #: a relocated face turning by more than acos(this) is undone
+    #: the relocation stops once a round moves no vertex by more than this share of an edge
+    relocate_min_move: float = 1e-4
     #: preserve_topology=False removes stuck components up to this size (share of the diagonal)
     relax_max_size: float = 0.25
     cap_apex_tries: int = 8          #: ... caps a hole from one of this many rim vertices

@@ -97,3 +97,20 @@ def test_the_per_triangle_normal_blocks_apply_the_same_operator_as_the_rows():
     rows = barycentric_scatter(barycentric_gather(X, idx.T, b.T), idx.T, b.T, V.shape[0]) + lam[:, None] * X
     got = block_matvec(G, normal_blocks(group, b, G.shape[0]), X, lam)
     assert np.abs(got - rows).max() <= 1e-12 * np.abs(rows).max()
+
+
+def test_relocation_stops_once_an_update_moves_less_than_min_move():
+    # the cage floats above the input square: every update moves it down, by less
+    # each time; with min_move at a whole edge length the first update is the last
+    Vc, Fc = _square(9, z=0.05)
+    Vi, Fi = _square(17)
+    movable = np.ones(Vc.shape[0], dtype=bool)
+    kw = dict(surface=TriangleIndex(Vi, Fi), back=0.3)
+    once = relocate(Vc, Fc, Vi, movable, iters=1, **kw)
+    four = relocate(Vc, Fc, Vi, movable, iters=4, **kw)
+    assert np.abs(four[:, 2]).max() < np.abs(once[:, 2]).max() < 0.05     # each update moves
+    assert np.array_equal(relocate(Vc, Fc, Vi, movable, iters=4, min_move=1.0, **kw), once)
+    assert np.array_equal(relocate(Vc, Fc, Vi, movable, iters=4, min_move=1e-12, **kw), four)
+    # on the plane nothing moves (beyond round-off): one update
+    Vp = _square(9)[0]
+    assert np.abs(relocate(Vp, Fc, Vi, movable, iters=4, min_move=1e-4, **kw) - Vp).max() < 1e-15
