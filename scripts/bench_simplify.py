@@ -20,6 +20,11 @@ boundary edges and Euler characteristic (input -> output), flipped faces
 (normal against the input's nearest face), the minimum angle, and the peak
 memory of our run (peak RSS above the RSS before it). The table goes to bench_results/simplify.md.
 
+The small-mesh section takes a flat grid, a cube (both 20,000 faces), fandisk
+and the bunny to 2,000, 200 and 4 faces (times: the best of three runs): the
+fixed cost per pass that small meshes feel, and a 4-face target against a
+2,000-face one.
+
 The messy section runs every shared mesh as real scans arrive (an exact soup,
 a soup jittered by 1e-7 of the diagonal, 300 specks of debris, 3 pinched
 bow-tie vertices, double-sided sheets; built by ``tests/mesh_factory``) at
@@ -158,7 +163,8 @@ def synthetic(levels, noise=1e-4, name="stanford-bunny.obj"):
     return V + rng.normal(scale=noise * bbox_diagonal(V), size=V.shape), F
 
 
-def run_case(name, V, F, target, use_blender=True):
+def run_case(name, V, F, target, use_blender=True, repeat=1):
+    """One case: Decimate, ours (time: the best of ``repeat`` runs), meshoptimizer."""
     diag = bbox_diagonal(V)
     index0 = TriangleIndex(V, F)
     row = dict(mesh=name, faces=F.shape[0])
@@ -176,6 +182,10 @@ def run_case(name, V, F, target, use_blender=True):
     r = simplify(V, F, target_faces=int(target))
     t = time.perf_counter() - t0
     peak = _peak_rss() - base if base is not None else None
+    for _ in range(repeat - 1):
+        t0 = time.perf_counter()
+        simplify(V, F, target_faces=int(target))
+        t = min(t, time.perf_counter() - t0)
     if peak is None:  # no /proc: measure NumPy allocations instead (slower run, not timed)
         tracemalloc.start()
         simplify(V, F, target_faces=int(target))
@@ -196,6 +206,48 @@ def run_case(name, V, F, target, use_blender=True):
 
 
 MESSY = ("soup", "jittered soup", "debris", "bowties", "sheets")
+
+#: the small-mesh section's meshes (each to 2,000, 200 and 4 faces)
+SMALL = ("flat grid 100x100", "cube 40x40 per side", "fandisk", "stanford-bunny")
+
+
+def small_mesh(label):
+    """A mesh of the small-mesh section, or None when its file is absent."""
+    from tests.mesh_factory import cube, regular_grid
+    if label.startswith("flat grid"):
+        return regular_grid(100, 100)
+    if label.startswith("cube"):
+        return cube(40)
+    path = os.path.join(MESHES, label + ".obj")
+    return read_obj(path)[:2] if os.path.exists(path) else None
+
+
+def run_small(use_blender):
+    """Flat, CAD and tiny targets (times: best of 3): the fixed cost per pass that
+    small meshes feel, and a 4-face target against a 2,000-face one."""
+    rows = []
+    for label in SMALL:
+        mesh = small_mesh(label)
+        if mesh is None:
+            continue
+        V, F = mesh
+        for tgt in (2000, 200, 4):
+            rows.append(run_case(f"{label} -> {tgt}", V, F, tgt, use_blender, repeat=3))
+            print(fmt_table([rows[-1]], use_blender).splitlines()[-1], flush=True)
+    return rows
+
+
+def fmt_small(rows):
+    """The small-mesh section's summary line."""
+    small = [r for r in rows if r["faces"] <= 20000]
+    text = (f"Meshes up to 20,000 faces: {min(r['time'] for r in small):.2f}-"
+            f"{max(r['time'] for r in small):.2f} s, {max(r['passes'] for r in small)} passes at most. "
+            if small else "")
+    by = {}
+    for r in rows:
+        by.setdefault(r["mesh"].rsplit(" -> ", 1)[0], {})[r["mesh"].rsplit(" -> ", 1)[1]] = r["time"]
+    return text + "4-face target / 2,000-face target time: " + ", ".join(
+        f"{k} {v['4'] / v['2000']:.2f}" for k, v in by.items() if "4" in v and "2000" in v) + "."
 
 
 def messy_variant(V, F, how):
@@ -309,6 +361,7 @@ def main():
     ap.add_argument("--no-synthetic", action="store_true", help="skip the 1M mesh")
     ap.add_argument("--no-messy", action="store_true", help="skip the messy section")
     ap.add_argument("--messy-only", action="store_true", help="only the messy section")
+    ap.add_argument("--no-small", action="store_true", help="skip the small-mesh section")
     args = ap.parse_args()
     blender = not args.no_blender
     if blender:
@@ -326,6 +379,7 @@ def main():
             target = min(1000, int(round(0.1 * F.shape[0])))
             messy += run_messy(name[:-4], V, F, target, blender)
             print(fmt_messy(messy[-len(MESSY):], blender), flush=True)
+    small = [] if args.no_small or args.quick or args.messy_only or args.meshes else run_small(blender)
     if args.messy_only:
         names = []
     for name in names:
@@ -354,6 +408,9 @@ def main():
     big_rows = [r for r in rows if r not in real]
     if big_rows:
         text += "\n\n## Where our time goes (seconds per stage)\n\n" + fmt_stages(big_rows)
+    if small:
+        text += ("\n\n## Small meshes, flat and CAD meshes, tiny targets\n\n" + fmt_table(small, blender)
+                 + "\n\n" + fmt_small(small))
     if messy:
         text += ("\n\n## Messy inputs\n\nDistances to the clean mesh (the scan alone), "
                  "% of its diagonal.\n\n" + fmt_messy(messy, blender))
