@@ -468,7 +468,8 @@ def _check_rounds(st, pool, passes, haus, dihedral_cos, tun):
             break
         if ahead is None and active.size <= tun.check_ahead:
             ahead = _CheckedAhead.of(st, pool, active, faces, tun, haus, dihedral_cos)
-        sel, active, star, kf, faces = _pick_independent(st, pool, active, faces, tun, scratch, stars=ahead is None)
+        sel, active, star, kf, faces = _pick_independent(st, pool, active, faces, tun, scratch,
+                                                         stars=ahead is None)
         if ahead is None:
             c = _check(st, pool.A[sel], pool.B[sel], pool.X[sel], pool.interior[sel], star, kf, tun, haus,
                        dihedral_cos)
@@ -495,7 +496,7 @@ def _check_rounds(st, pool, passes, haus, dihedral_cos, tun):
             touched[_take(st.F, rows[0], axis=0).ravel()] = True
     if not acc_edges:
         return None, touched
-    rows = tuple(np.concatenate(c) for c in zip(*acc_rows))
+    rows = tuple(np.concatenate(col) for col in zip(*acc_rows))
     return _Accepted(np.concatenate(acc_edges), rows, np.concatenate(acc_wit)), touched
 
 

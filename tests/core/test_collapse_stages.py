@@ -93,7 +93,7 @@ def test_independent_picks_have_disjoint_stars_that_are_exactly_the_faces_around
     sel, rest, star, kf, faces = engine._pick_independent(st, pool, np.arange(pool.key.size), None, TUNING,
                                                          scratch)
     assert all((a == engine._BIG).all() for a in scratch)        # put back for the next round
-    again = engine._pick_independent(st, pool, rest, faces, TUNING, scratch)   # a later round's (smaller) put-back
+    again = engine._pick_independent(st, pool, rest, faces, TUNING, scratch)   # a smaller put-back
     assert again[0].size > 0 and all((a == engine._BIG).all() for a in scratch)
     assert sel.size > 0 and np.intersect1d(sel, rest).size == 0 and sel.size + rest.size == pool.key.size
     assert np.unique(star).size == star.size                     # disjoint
@@ -126,7 +126,8 @@ def test_checking_ahead_gives_the_same_bits_as_checking_each_round_and_the_same_
     pool = pool_of(st)
     active = np.arange(pool.key.size)
     ahead = engine._CheckedAhead.of(st, pool, active, None, TUNING, True, bend)
-    sel, _, star, kf, _ = engine._pick_independent(st, pool, active, None, TUNING, engine._scratch(st.V.shape[0]))
+    scratch = engine._scratch(st.V.shape[0])
+    sel, _, star, kf, _ = engine._pick_independent(st, pool, active, None, TUNING, scratch)
     now = engine._check(st, pool.A[sel], pool.B[sel], pool.X[sel], pool.interior[sel], star, kf, TUNING,
                         True, bend)
     got = ahead.results(sel)
