@@ -554,9 +554,7 @@ def _whole_stars(F, fidx, A, B):
     j = np.arange(kf.size, dtype=np.int64) - np.repeat(np.cumsum(cnt) - cnt, cnt)
     from_b = j >= _take(na, kf)
     star = _take(fs, np.where(from_b, _take(b0, kf) + j - _take(na, kf), _take(a0, kf) + j))
-    Fs = _take(F, star, axis=0)
-    ak = _take(A, kf)
-    has_a = (Fs[:, 0] == ak) | (Fs[:, 1] == ak) | (Fs[:, 2] == ak)
+    has_a = _corner(_take(F, star, axis=0), _take(A, kf)) >= 0
     r = np.flatnonzero(~(from_b & has_a))            # the faces of the edge come with A
     star, kf = _take(star, r), _take(kf, r)
     o = np.argsort(kf * np.int64(F.shape[0]) + star, kind="stable")
@@ -722,16 +720,23 @@ def _link_condition(st, s, interior):
     return ok
 
 
+def _pairs_among(ka, xa, kb, xb, n):
+    """For each pair ``(kb[i], xb[i])``: is it among the pairs ``(ka, xa)``?
+    By one sort of the keys ``k * n + x``."""
+    nn = np.int64(max(n, 1))
+    keys = np.sort(ka * nn + xa)
+    q = kb * nn + xb
+    if keys.size == 0:
+        return np.zeros(q.size, dtype=bool)
+    return keys[np.minimum(np.searchsorted(keys, q), keys.size - 1)] == q
+
+
 def _common_pairs(ka, xa, kb, xb, n):
     """For each pair ``(kb[i], xb[i])``: is ``(kb[i], xb[i])`` among the pairs
     ``(ka, xa)``? Marks vertices with their collapse (last write wins) and
     settles the few vertices claimed by several collapses with a sort."""
-    nn = np.int64(max(n, 1))
     if 8 * (xa.size + xb.size) < n:          # few pairs on a large mesh: a sort costs less than marks
-        keys = np.sort(ka * nn + xa)
-        q = kb * nn + xb
-        pos = np.minimum(np.searchsorted(keys, q), max(keys.size - 1, 0))
-        return keys[pos] == q if keys.size else np.zeros(q.size, dtype=bool)
+        return _pairs_among(ka, xa, kb, xb, n)
     mark = np.full(n, -1, dtype=np.int64)
     mark[xa] = ka
     hit = _take(mark, xb) == kb
@@ -741,10 +746,7 @@ def _common_pairs(ka, xa, kb, xb, n):
         contested[xa[lost]] = True
         sa = np.flatnonzero(contested[xa])
         sb = np.flatnonzero(contested[xb])
-        keys = np.sort(ka[sa] * nn + xa[sa])
-        q = kb[sb] * nn + xb[sb]
-        pos = np.minimum(np.searchsorted(keys, q), keys.size - 1)
-        hit[sb] = keys[pos] == q
+        hit[sb] = _pairs_among(ka[sa], xa[sa], kb[sb], xb[sb], n)
     return hit
 
 

@@ -74,11 +74,16 @@ def _normals(V, F):
     return np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]])
 
 
+def _squared_edges(V, F):
+    """Squared lengths of the three edges of each face, (m,3)."""
+    E = V[F[:, [1, 2, 0]]] - V[F]
+    return np.einsum("ijk,ijk->ij", E, E)
+
+
 def _compactness(V, F, l):
     """Compactness (``core._collapse.compactness``) of each face, given ``l`` =
     twice the areas."""
-    E = V[F[:, [1, 2, 0]]] - V[F]
-    return compactness(l, np.einsum("ijk,ijk->i", E, E))
+    return compactness(l, _squared_edges(V, F).sum(axis=1))
 
 
 #: barycentric points of each cage face for the backward term: the centroid and
@@ -115,7 +120,8 @@ def _border_rows(V, C, Eb, C_index, weight):
     points along every cage border edge to the closest input border edge
     ``C_index`` (backward, as much weight in all as the forward rows, shared
     by length). Returns (idx (3,r), b (3,r), targets (r,3), the border edge
-    of each (r,)), rows pre-scaled by the square roots of their weights."""
+    of each (r,)), rows pre-scaled by the square roots of their weights, and
+    the border edges as triangles (:func:`segment_triangles`)."""
     T3 = segment_triangles(Eb)
     cp = TriangleIndex(V, T3).closest(C)
     idx_f = np.take(T3, cp.face, axis=0).T
@@ -129,7 +135,7 @@ def _border_rows(V, C, Eb, C_index, weight):
     w = np.sqrt(np.repeat(length * (weight * C.shape[0] / max(k * float(length.sum()), 1e-300)), k))
     return (np.concatenate([idx_f, idx_b], axis=1), np.concatenate([b_f, b_b * w], axis=1),
             np.concatenate([C * np.sqrt(weight), Tb * w[:, None]]),
-            np.concatenate([cp.face, np.repeat(np.arange(Eb.shape[0], dtype=np.int64), k)]))
+            np.concatenate([cp.face, np.repeat(np.arange(Eb.shape[0], dtype=np.int64), k)]), T3)
 
 
 def relocate(V, F, P, movable, *, iters=2, cg_iters=15, reg=0.05, min_cos=0.2, N_keep=None,
@@ -175,8 +181,7 @@ def relocate(V, F, P, movable, *, iters=2, cg_iters=15, reg=0.05, min_cos=0.2, N
     N_ref = _normals(V, F)
     g0 = _compactness(V, F, np.linalg.norm(N_ref, axis=1))  # of the cage as it came
     use_back = surface is not None and back > 0.0
-    E = V[F[:, [1, 2, 0]]] - V[F]
-    settled = min_move * float(np.sqrt(np.einsum("ijk,ijk->ij", E, E)).mean())
+    settled = min_move * float(np.sqrt(_squared_edges(V, F)).mean())
     for _ in range(iters):
         cp = TriangleIndex(V, F).closest(P)
         # (3,s) vertices, (3,s) weights, targets, and the triangle of each row
@@ -185,10 +190,9 @@ def relocate(V, F, P, movable, *, iters=2, cg_iters=15, reg=0.05, min_cos=0.2, N
         if use_back:
             rows.append(_back_rows(V, F, surface, back * P.shape[0]))
         if border is not None and border[1].shape[0] and border[0].shape[0]:
-            Eb = border[1]
-            r = _border_rows(V, *border)
-            rows.append(r[:3] + (r[3] + F.shape[0],))
-            tris.append(segment_triangles(Eb))
+            *r, T3 = _border_rows(V, *border)
+            rows.append((*r[:3], r[3] + F.shape[0]))
+            tris.append(T3)
         idx = np.concatenate([r[0] for r in rows], axis=1)   # C-contiguous copies
         b = np.concatenate([r[1] for r in rows], axis=1)
         T = np.concatenate([r[2] for r in rows])
