@@ -233,7 +233,8 @@ def run_small(use_blender):
             continue
         V, F = mesh
         for tgt in (2000, 200, 4):
-            rows.append(run_case(f"{label} -> {tgt}", V, F, tgt, use_blender, repeat=3))
+            rows.append(dict(run_case(f"{label} -> {tgt}", V, F, tgt, use_blender, repeat=3),
+                             label=label, asked=tgt))
             print(fmt_table([rows[-1]], use_blender).splitlines()[-1], flush=True)
     return rows
 
@@ -246,9 +247,9 @@ def fmt_small(rows):
             if small else "")
     by = {}
     for r in rows:
-        by.setdefault(r["mesh"].rsplit(" -> ", 1)[0], {})[r["mesh"].rsplit(" -> ", 1)[1]] = r["time"]
+        by.setdefault(r["label"], {})[r["asked"]] = r["time"]
     return text + "4-face target / 2,000-face target time: " + ", ".join(
-        f"{k} {v['4'] / v['2000']:.2f}" for k, v in by.items() if "4" in v and "2000" in v) + "."
+        f"{k} {v[4] / v[2000]:.2f}" for k, v in by.items() if 4 in v and 2000 in v) + "."
 
 
 def messy_variant(V, F, how):
