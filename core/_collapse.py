@@ -298,12 +298,13 @@ def _kth_smallest(x, k, sample):
 # ---------------------------------------------------------------- the pool
 
 
-def _pool_size(ne, m, target, tun, bold=False):
+def _pool_size(ne, m, target, tun, bold=False, grow=1.0):
     """How many of the ``ne`` candidate edges one pass (``bold``: see
-    :func:`_bold_rounds`) may consider."""
+    :func:`_bold_rounds`) may consider; ``grow`` widens the bound set by the
+    collapses still needed (see ``Tuning.slow_pass_share``)."""
     P = int(np.ceil((tun.bold_pool_share if bold else tun.pool_share) * ne))
     if target is not None:
-        P = min(P, int(np.ceil(tun.pool_goal_factor * (m - target) / 2.0)) + 1)
+        P = min(P, int(np.ceil(grow * tun.pool_goal_factor * (m - target) / 2.0)) + 1)
     return max(1, min(P, ne))
 
 
@@ -545,15 +546,22 @@ def _bold_rounds(st, pool, passes, haus, dihedral_cos, tun, target):
         merged[pool.A[a.idx]] = True
         merged[pool.B[a.idx]] = True
         done += a.idx.size
-        faces = _refreshed(st, faces)
+        _refresh(st, faces, a.rows[0], merged)
     return done
 
 
-def _refreshed(st, faces):
-    """The faces in play (:class:`_Faces`) after collapses were applied:
-    the removed ones dropped, the others' rows as they are now."""
-    fidx = faces.fidx[_take(st.alive, faces.fidx)]
-    return _Faces(np.ascontiguousarray(_take(st.F, fidx, axis=0).T), fidx, None)
+def _refresh(st, faces, changed, merged):
+    """Bring the rows of the faces in play (:class:`_Faces`, in place) that
+    ``changed`` (the stars of applied collapses) up to date; a removed face
+    gets one of its merged corners thrice, so it is never in play again."""
+    pos = np.minimum(np.searchsorted(faces.fidx, changed), faces.fidx.size - 1)
+    hit = np.flatnonzero(_take(faces.fidx, pos) == changed)
+    pos, f = _take(pos, hit), _take(changed, hit)
+    rows = _take(st.F, f, axis=0).T
+    gone = np.flatnonzero(~_take(st.alive, f))
+    r0, r1 = rows[0, gone], rows[1, gone]
+    rows[:, gone] = np.where(_take(merged, r0), r0, r1)   # (a removed face has two merged corners)
+    faces.FT[:, pos] = rows
 
 
 class _CheckedAhead(NamedTuple):
@@ -1010,7 +1018,7 @@ def _progress(progress, m0, m, target):
 
 
 def _run(st, target, max_err_n, preserve_boundary, progress, m0, tun, dihedral_cos):
-    passes = 0
+    passes, grow, m_last = 0, 1.0, None
     clock = _Clock(st.seconds)
     while passes < tun.max_passes:
         if st.m_live < tun.compact_share * st.F.shape[0]:
@@ -1021,6 +1029,9 @@ def _run(st, target, max_err_n, preserve_boundary, progress, m0, tun, dihedral_c
             return "target", passes
         if progress is not None and passes > 0 and not _progress(progress, m0, m, target):
             return "cancelled", passes
+        if m_last is not None and target is not None:
+            grow = grow * tun.pool_growth if m_last - m < tun.slow_pass_share * (m_last - target) else 1.0
+        m_last = m
         passes += 1
         e = _candidate_edges(st)
         ne = int(np.count_nonzero(np.isfinite(e.cost)))
@@ -1028,7 +1039,7 @@ def _run(st, target, max_err_n, preserve_boundary, progress, m0, tun, dihedral_c
         if ne == 0:
             return "no_valid_collapse", passes
         bold = target is not None and m > tun.bold_above * target
-        P = _pool_size(ne, m, target, tun, bold)
+        P = _pool_size(ne, m, target, tun, bold, grow)
         _recost_cheapest(st, e, P, max_err_n, preserve_boundary, tun)
         clock.lap("recost")
         cand = np.isfinite(e.cost)
