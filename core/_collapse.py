@@ -554,6 +554,7 @@ def _refresh(st, faces, changed, merged):
     """Bring the rows of the faces in play (:class:`_Faces`, in place) that
     ``changed`` (the stars of applied collapses) up to date; a removed face
     gets one of its merged corners thrice, so it is never in play again."""
+    changed = np.sort(changed)                 # (sorted: the search below runs in order)
     pos = np.minimum(np.searchsorted(faces.fidx, changed), faces.fidx.size - 1)
     hit = np.flatnonzero(_take(faces.fidx, pos) == changed)
     pos, f = _take(pos, hit), _take(changed, hit)
