@@ -14,8 +14,13 @@ One pass, as stages (each a function below)::
                           rejections raise the cost
     _recost_cheapest      recost the stale edges that could be among the cheapest
     _choose_pool          the cheapest candidates (bounded share; bounded by the
-                          collapses needed), ranked by _priority
-    rounds (_check_rounds):
+                          collapses needed, a bound that grows after a pass that
+                          fell short), ranked by _priority
+    far from the target (more than Tuning.bold_above times its faces), a bold
+    pass (_bold_rounds): each round picks, checks and applies at once, and
+    later rounds may take collapses next to earlier ones (only merged ends
+    wait): about 30% of the faces go per pass instead of about 12%;
+    closer to it, a careful pass, rounds (_check_rounds):
         _pick_independent pool edges whose rank is the smallest over every face
                           around both endpoints -> the stars are disjoint
         _check            on the current mesh: _link_condition, _turned_faces,
@@ -30,6 +35,7 @@ One pass, as stages (each a function below)::
                           and vertices are only marked dead until compaction
 """
 
+import threading
 import time
 from dataclasses import dataclass, field, fields
 from typing import NamedTuple
@@ -340,7 +346,10 @@ def _choose_pool(st, e, ci, P, tun):
 
 def _bands(x, n, sample):
     """Band 0..n-1 of every value of ``x``: its place among ``n - 1``
-    quantiles of ``x`` (of a sample on large arrays)."""
+    quantiles of ``x`` (of a sample on large arrays); up to ``n`` values,
+    its rank (equal values share one)."""
+    if x.size <= n:
+        return np.unique(x, return_inverse=True)[1].astype(np.int64).reshape(-1)
     s = _thinned(x, sample)
     ks = (np.arange(1, n, dtype=np.int64) * s.size) // n
     return np.searchsorted(np.partition(s, ks)[ks], x, side="left").astype(np.int64)
@@ -357,9 +366,8 @@ def _priority(cost, length2, a, b, tun):
     bits = max(1, int(P - 1).bit_length())
     if bits > 28:
         raise OverflowError("simplify: more than 2^28 edges in one pass")
-    band = _bands(cost, tun.bands, tun.sample) if P > tun.bands else np.zeros(P, dtype=np.int64)
-    lband = (_bands(length2, tun.length_bands, tun.sample) if P > tun.length_bands
-             else np.zeros(P, dtype=np.int64))
+    band = _bands(cost, tun.bands, tun.sample)
+    lband = _bands(length2, tun.length_bands, tun.sample)
     mix = ((a * np.int64(0x9E3779B1)) ^ (b * np.int64(0x85EBCA77))) & np.int64(0x3FFFFFF)
     mix |= lband << np.int64(26)
     return (((band << np.int64(31)) | mix) << np.int64(bits)) | np.arange(P, dtype=np.int64)
@@ -390,11 +398,13 @@ class _Faces(NamedTuple):
     fh: np.ndarray
 
 
-def _scratch(n):
-    """Two (n,) int64 arrays of ``_BIG`` for the per-vertex minima of the
-    rounds of one pass (each round puts back what it wrote: small rounds on
-    a large mesh then cost what they touch, not the mesh's size)."""
-    return np.full(n, _BIG, dtype=np.int64), np.full(n, _BIG, dtype=np.int64)
+def _scratch(n, P):
+    """Scratch of the rounds of one pass: two (n,) int64 arrays of ``_BIG``
+    for the per-vertex minima and a (P,) one of -1 for the chosen pool edges
+    (each round puts back what it wrote: small rounds on a large mesh then
+    cost what they touch, not the mesh's size)."""
+    return (np.full(n, _BIG, dtype=np.int64), np.full(n, _BIG, dtype=np.int64),
+            np.full(P, -1, dtype=np.int64))
 
 
 def _put_back(buf, *idx):
@@ -415,7 +425,7 @@ def _pick_independent(st, pool, active, faces, tun, scratch, stars=True):
     in play. ``scratch``: :func:`_scratch` of the vertex count."""
     F, P = st.F, pool.key.size
     ka, aa, ab = pool.key[active], pool.A[active], pool.B[active]
-    vmin, vmin2 = scratch
+    vmin, vmin2, pos = scratch
     np.minimum.at(vmin, aa, ka)
     np.minimum.at(vmin, ab, ka)
     if faces is None:                        # first round: every live face
@@ -442,9 +452,9 @@ def _pick_independent(st, pool, active, faces, tun, scratch, stars=True):
         return sel, active[~chosen], None, None, faces
     # the star of a chosen edge is exactly the set of faces whose minimum is its key
     imask = (np.int64(1) << np.int64(max(1, int(P - 1).bit_length()))) - 1
-    pos = np.full(P, -1, dtype=np.int64)
     pos[sel] = np.arange(sel.size)
     fpos = np.where(faces.fh < _BIG, _take(pos, np.minimum(faces.fh & imask, P - 1)), -1)
+    pos[sel] = -1
     in_star = fpos >= 0
     return sel, active[~chosen], faces.fidx[in_star], fpos[in_star], faces
 
@@ -467,7 +477,7 @@ def _check_rounds(st, pool, passes, haus, dihedral_cos, tun):
     acc_edges, acc_wit, acc_rows = [], [], []
     active = np.arange(P, dtype=np.int64)
     faces = owned = ahead = None
-    scratch = _scratch(n)
+    scratch = _scratch(n, P)
     for _ in range(tun.max_rounds):
         active = active[~touched[pool.A[active]] & ~touched[pool.B[active]]]
         if active.size == 0:
@@ -522,16 +532,24 @@ def _bold_rounds(st, pool, passes, haus, dihedral_cos, tun, target):
     accepted at once, so a later round may take a collapse next to an
     earlier one (its cost is still exact: neither end changed). About three
     times the collapses of a careful pass (:func:`_check_rounds`), for a
-    slightly less even mesh. Returns the number of collapses applied."""
+    slightly less even mesh. Returns the number of collapses applied.
+
+    The picks read the faces in play as they were at the start of the pass:
+    a collapse only renames a merged vertex (no longer the end of any active
+    edge) into another, so every face's smallest active key, and with it
+    every pick and star, is the same; only the faces removed are dropped
+    from the stars (the checks read the current rows)."""
     n = st.V.shape[0]
     merged = np.zeros(n, dtype=bool)
     active = np.arange(pool.key.size, dtype=np.int64)
-    faces, scratch, done = None, _scratch(n), 0
-    for _ in range(tun.max_rounds):
+    faces, scratch, done = None, _scratch(n, pool.key.size), 0
+    for _ in range(tun.bold_rounds):
         active = active[~merged[pool.A[active]] & ~merged[pool.B[active]]]
         if active.size == 0 or (target is not None and st.m_live <= target):
             break
         sel, active, star, kf, faces = _pick_independent(st, pool, active, faces, tun, scratch)
+        live = np.flatnonzero(_take(st.alive, star))   # (faces removed by earlier rounds)
+        star, kf = _take(star, live), _take(kf, live)
         c = _check(st, pool.A[sel], pool.B[sel], pool.XT[:, sel], pool.interior[sel], star, kf, tun, haus,
                    dihedral_cos)
         acc = _judge(st, pool, sel, c, passes, tun)
@@ -546,23 +564,7 @@ def _bold_rounds(st, pool, passes, haus, dihedral_cos, tun, target):
         merged[pool.A[a.idx]] = True
         merged[pool.B[a.idx]] = True
         done += a.idx.size
-        _refresh(st, faces, a.rows[0], merged)
     return done
-
-
-def _refresh(st, faces, changed, merged):
-    """Bring the rows of the faces in play (:class:`_Faces`, in place) that
-    ``changed`` (the stars of applied collapses) up to date; a removed face
-    gets one of its merged corners thrice, so it is never in play again."""
-    changed = np.sort(changed)                 # (sorted: the search below runs in order)
-    pos = np.minimum(np.searchsorted(faces.fidx, changed), faces.fidx.size - 1)
-    hit = np.flatnonzero(_take(faces.fidx, pos) == changed)
-    pos, f = _take(pos, hit), _take(changed, hit)
-    rows = _take(st.F, f, axis=0).T
-    gone = np.flatnonzero(~_take(st.alive, f))
-    r0, r1 = rows[0, gone], rows[1, gone]
-    rows[:, gone] = np.where(_take(merged, r0), r0, r1)   # (a removed face has two merged corners)
-    faces.FT[:, pos] = rows
 
 
 class _CheckedAhead(NamedTuple):
@@ -802,17 +804,29 @@ def _common_pairs(ka, xa, kb, xb, n):
     settles the few vertices claimed by several collapses with a sort."""
     if 8 * (xa.size + xb.size) < n:          # few pairs on a large mesh: a sort costs less than marks
         return _pairs_among(ka, xa, kb, xb, n)
-    mark = np.full(n, -1, dtype=np.int64)
+    mark = _marks(n)
     mark[xa] = ka
     hit = _take(mark, xb) == kb
     lost = _take(mark, xa) != ka
     if lost.any():
-        contested = np.zeros(n, dtype=bool)
-        contested[xa[lost]] = True
-        sa = np.flatnonzero(contested[xa])
-        sb = np.flatnonzero(contested[xb])
+        mark[xa[lost]] = -2                  # contested: claimed by several collapses
+        sa = np.flatnonzero(_take(mark, xa) == -2)
+        sb = np.flatnonzero(_take(mark, xb) == -2)
         hit[sb] = _pairs_among(ka[sa], xa[sa], kb[sb], xb[sb], n)
+    mark[xa] = -1
     return hit
+
+
+_local = threading.local()
+
+
+def _marks(n):
+    """An int64 array of at least ``n`` entries of -1, one per thread, kept
+    between calls (its user puts back -1 where it wrote)."""
+    mark = getattr(_local, "mark", None)
+    if mark is None or mark.size < n:
+        mark = _local.mark = np.full(n, -1, dtype=np.int64)
+    return mark
 
 
 class _Moved(NamedTuple):

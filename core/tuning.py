@@ -20,6 +20,7 @@ class Tuning:
     #: pass); closer to the target a pass is careful: every collapse's one-ring waits
     bold_above: float = 4.0
     bold_pool_share: float = 0.35    #: pool_share of a bold pass
+    bold_rounds: int = 16            #: selection rounds of a bold pass
     pool_goal_factor: float = 4.0    #: ... and at most this many times the collapses still needed
     #: a pass that removed less than this share of the faces still needed lets the next
     #: pass's goal bound grow by pool_growth (again after each such pass): near the
