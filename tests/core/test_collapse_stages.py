@@ -9,6 +9,9 @@ from core import _collapse as engine
 from core._clean import BOUNDARY, twin_table
 from core.quadrics import vertex_face_quadrics
 from core.tuning import TUNING
+from core._relax import close_smallest_hole
+from core.clean import clean_mesh
+from core.topology import topology_summary
 from tests.mesh_factory import icosphere, regular_grid, tetrahedron
 
 
@@ -256,3 +259,22 @@ def test_a_bold_pass_is_its_collapses_applied_one_at_a_time_each_valid_on_the_me
     assert np.array_equal(ref.alive, st.alive) and np.array_equal(ref.F[ref.alive], st.F[st.alive])
     assert np.array_equal(ref.V, st.V) and np.array_equal(ref.twin, st.twin)
     assert next_to_earlier > 0.1 * sum(r.size for r in rounds[1:])   # the pass went where a careful one stops
+
+
+def test_holes_are_capped_shortest_first_and_the_mesh_stays_closed_and_manifold():
+    # a sphere with a wide hole and a small one: the small rim is capped first
+    V, F = icosphere(3)
+    C = V[F].mean(axis=1)
+    c = clean_mesh(V, F[(C[:, 2] < 0.7) & ~((C[:, 0] > 0.93) & (np.abs(C[:, 2]) < 0.2))])
+    st = engine_state(c.V, c.F)
+    before = topology_summary(st.F, st.V.shape[0])
+    assert before.boundary_loops == 2
+    added = close_smallest_hole(st, TUNING)
+    after = topology_summary(st.F, st.V.shape[0])
+    assert added > 0 and after.boundary_loops == 1
+    assert after.boundary_edges > before.boundary_edges - after.boundary_edges   # the wide rim is left
+    assert close_smallest_hole(st, TUNING) > 0
+    closed = topology_summary(st.F, st.V.shape[0])
+    assert (closed.boundary_loops, closed.euler, closed.non_manifold_edges) == (0, 2, 0)
+    h = np.arange(st.twin.size)
+    assert np.array_equal(st.twin[st.twin], h)               # every half-edge has its twin
