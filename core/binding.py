@@ -54,6 +54,7 @@ import numpy as np
 from .clean import clean_mesh
 from .errors import CancelledError, InvalidArgumentError, InvalidMeshError, TopologyMismatchError
 from .mesh import check_mesh
+from .near_query import NearQuery
 from .spatial import TriangleIndex, point_triangle_closest
 from .subdivide import subdivision_operator
 from ._groups import group_argmin, ragged_ranges
@@ -343,7 +344,7 @@ def bind(V_dense, F_dense, V_cage, F_cage, *, levels=2, scheme="butterfly", crea
     VfT = np.ascontiguousarray(Vf.T)
     NfT = _vertex_normals_t(VfT, op.F_fine)
     Nf = NfT.T
-    fine_face, bary = _closest_on(TriangleIndex(Vf, op.F_fine), V_dense,
+    fine_face, bary = _closest_on(NearQuery(Vf, op.F_fine), V_dense,
                                   _reporter(progress, 0.05, 0.6))
     offset = _dense_offsets(VfT, NfT, op.F_fine, fine_face, bary, V_dense)
     d_face, d_bary = _vertex_corners(op.F_fine, op.n_fine)

@@ -81,7 +81,7 @@ from ._groups import group_argmin, ragged_ranges
 #: serialises the lazy BVH builds of indexes queried from several threads at once
 _LAZY_BUILD = threading.Lock()
 
-__all__ = ["ClosestPoints", "TriangleClosest", "TriangleIndex", "closest_points",
+__all__ = ["ClosestPoints", "IndexTables", "TriangleClosest", "TriangleIndex", "closest_points",
            "point_triangle_closest"]
 
 # --- tolerances and tuning, in one place -------------------------------------------------------
@@ -116,6 +116,25 @@ class ClosestPoints(NamedTuple):
     point: np.ndarray
     bary: np.ndarray
     distance: np.ndarray
+
+
+class IndexTables(NamedTuple):
+    """The arrays of a :class:`TriangleIndex`, for another query over the same grid
+    (read-only views: never modify them). Triangles are numbered in the index's
+    internal (Morton) order ``t``; ``face[t]`` is the face of ``F``."""
+
+    lo: np.ndarray          #: (3,) float64, the grid's origin (the mesh's lower corner)
+    hi: np.ndarray          #: (3,) float64, the mesh's upper corner
+    cell_size: float        #: edge of the cubic cells
+    dims: np.ndarray        #: (3,) int64 cells per axis; cell ``x + dims[0] (y + dims[1] z)``
+    cell_start: np.ndarray  #: (n_cells + 1,) int64: cell c's references are
+    #:                         ``cell_tri[cell_start[c]:cell_start[c + 1]]``
+    cell_tri: np.ndarray    #: (refs,) int32/int64 triangles referenced per cell, cell by cell
+    rows: np.ndarray        #: (16, m) float64 :func:`triangle_rows` (the exact kernel's input)
+    ball: np.ndarray        #: (4, m) float64 centroid and radius of a sphere holding each
+    prism: np.ndarray       #: (16, m) float64 normal, edge normals, offsets, allowance (the
+    #:                         edge-line bound's rows, see the module docstring)
+    face: np.ndarray        #: (m,) int64 face of ``F`` of each internal triangle
 
 
 class TriangleClosest(NamedTuple):
@@ -323,6 +342,17 @@ def point_triangle_closest(P, A, B, C):
 def _bary(v, w):
     bary = np.stack([1.0 - v - w, v, w], axis=1)
     return np.clip(bary, 0.0, 1.0, out=bary)
+
+
+def closest_result(tables, t, v, w, d2):
+    """The :class:`ClosestPoints` of kernel results: internal triangles ``t`` (q,),
+    the kernel's ``v, w`` and squared distances ``d2`` (q,) over an index's
+    :class:`IndexTables` (the point ``A + v ab + w ac``, barycentric coordinates
+    ``(1-v-w, v, w)`` clipped to [0, 1])."""
+    D = np.take(tables.rows[0:9], t, axis=1)
+    point = (D[0:3] + v * D[3:6] + w * D[6:9]).T
+    return ClosestPoints(tables.face[t].astype(np.int64), np.ascontiguousarray(point),
+                         _bary(v, w), np.sqrt(d2))
 
 
 # --- small vectorised helpers --------------------------------------------------------------------
@@ -681,12 +711,13 @@ class TriangleIndex:
             far = np.concatenate(far)
             if far.size:
                 self._bvh_query(PT, far, best)
-        bary = _bary(best.v, best.w)
-        t = best.t
-        D = np.take(self._D[0:9], t, axis=1)
-        point = (D[0:3] + best.v * D[3:6] + best.w * D[6:9]).T
-        return ClosestPoints(self._order[t].astype(np.int64), np.ascontiguousarray(point),
-                             bary, np.sqrt(best.d2))
+        return closest_result(self.tables, best.t, best.v, best.w, best.d2)
+
+    @property
+    def tables(self):
+        """The index's arrays as :class:`IndexTables` (read-only views)."""
+        return IndexTables(self._lo, self._hi, self._h, self._dims, self._cell_start,
+                           self._cell_tri, self._D, self._ball, self._prism, self._order)
 
     def _fold(self, q, t, v, w, d2, counts, best):
         """Fold pair results (contiguous groups, one per query) into ``best``."""
