@@ -283,12 +283,13 @@ def _relocate_cage(mesh, Vn, creases, Eb_in, surface, tun):
     border edges ``Eb_in`` (k,2) are tied to the cage's, and ``surface`` (the
     input faces, or None) turns on the backward pull. Borders, creases and
     corners move too, towards the input's (pinning them measured worse: their
-    collapse positions are often off the input)."""
+    collapse positions are often off the input). The searches for closest
+    points start where the engine merged each input vertex."""
     Fm = mesh.F
     movable = ~mesh.locked
     samples = max(tun.relocate_samples, tun.relocate_per_vertex * mesh.V.shape[0])
     step = max(1, int(np.ceil(Vn.shape[0] / samples)))
-    P = np.concatenate([Vn[::step], Vn[creases[::step]]])
+    at = np.concatenate([np.arange(0, Vn.shape[0], step), creases[::step]])
     border = None
     if Eb_in.shape[0]:
         hb = np.flatnonzero(mesh.twin == BOUNDARY)
@@ -296,11 +297,13 @@ def _relocate_cage(mesh, Vn, creases, Eb_in, surface, tun):
         C = Vn[np.unique(Eb_in)[::step]]
         border = (C, Eb, TriangleIndex(Vn, segment_triangles(Eb_in)), tun.relocate_border_weight)
     Nkeep = mesh.Nref[Fm].sum(axis=1) if tun.ref_cos > -1.0 else None
-    back = dict(surface=TriangleIndex(Vn, surface), back=tun.relocate_back,
+    back = dict(surface=(Vn, surface), back=tun.relocate_back,
                 iters=tun.relocate_back_iters) if surface is not None else dict(iters=tun.relocate_iters)
-    Vnew = relocate(mesh.V, Fm, P, movable, reg=tun.relocate_reg, N_keep=Nkeep, border=border,
+    Vnew = relocate(mesh.V, Fm, Vn[at], movable, reg=tun.relocate_reg, N_keep=Nkeep, border=border,
                     min_compact=tun.gamma_hard, cg_iters=tun.relocate_cg_iters,
-                    min_cos=tun.relocate_min_cos, min_move=tun.relocate_min_move, **back)
+                    min_cos=tun.relocate_min_cos, min_move=tun.relocate_min_move,
+                    P_near=mesh.cur_of_clean[at], cage_of=mesh.cur_of_clean,
+                    walk_steps=tun.relocate_walk_steps, **back)
     mesh.moved |= np.any(Vnew != mesh.V, axis=1)
     mesh.V = Vnew
 
