@@ -49,6 +49,7 @@ import numpy as np
 
 from ._clean import BOUNDARY, NON_MANIFOLD, edge_representatives, half_edge_ends, spatial_order
 from ._collapse import State, run
+from ._parallel import blocks, run_blocks
 from ._relax import close_smallest_hole, close_triangular_holes, drop_stuck_components
 from ._relocate import relocate, segment_triangles
 from .clean import MIN_COMPONENT_AREA, WELD_DISTANCE, CleanReport, clean_mesh
@@ -224,13 +225,7 @@ def _initial_quadrics(V, F, twin, U, W, preserve_boundary, feature_angle_deg, tu
         items.append(edge_constraint_quadrics(V, E, Nf[hb // 3], tun.boundary_weight * L2))
         ends.append(E)
     if feature_angle_deg is not None:
-        hi = edge_representatives(twin, boundary=False)
-        t = twin[hi]
-        cosang = np.einsum("ij,ij->i", np.take(Nf, hi // 3, axis=0), np.take(Nf, t // 3, axis=0))
-        # faces that disagree on the edge's direction have opposite normal conventions
-        np.negative(cosang, out=cosang, where=U[hi] != W[t])
-        sharp = np.flatnonzero(cosang < np.cos(np.radians(feature_angle_deg)))
-        hs, ts = hi[sharp], t[sharp]
+        hs, ts = _sharp_edges(Nf, twin, U, W, np.cos(np.radians(feature_angle_deg)))
         feat[hs] = True
         feat[ts] = True
         E = np.stack([U[hs], W[hs]], axis=1)
@@ -246,6 +241,30 @@ def _initial_quadrics(V, F, twin, U, W, preserve_boundary, feature_angle_deg, tu
         vc, local = np.unique(Ec, return_inverse=True)
         QT[:, vc] += accumulate_coefficients(Qc, local.reshape(Ec.shape).T.ravel(), vc.size, 2)
     return QT.T, feat, Nraw  # (n,11) view of the coefficient-major array the engine uses
+
+
+#: half-edges per block of :func:`_sharp_edges`
+_SHARP_BLOCK = 1 << 16
+
+
+def _sharp_edges(Nf, twin, U, W, cos_max):
+    """The interior edges whose faces' unit normals ``Nf`` meet at a cosine
+    below ``cos_max``, as ``(h, twin[h])`` with ``h < twin[h]`` ascending;
+    half-edge block by half-edge block (``U``, ``W``: the half-edge ends)."""
+
+    def block(a, b):
+        h = np.flatnonzero(twin[a:b] > np.arange(a, b)) + a
+        t = np.take(twin, h)
+        cosang = np.einsum("ij,ij->i", np.take(Nf, h // 3, axis=0), np.take(Nf, t // 3, axis=0))
+        # faces that disagree on the edge's direction have opposite normal conventions
+        np.negative(cosang, out=cosang, where=np.take(U, h) != np.take(W, t))
+        sharp = np.flatnonzero(cosang < cos_max)
+        return h[sharp], t[sharp]
+
+    found = run_blocks(block, blocks(twin.size, _SHARP_BLOCK))
+    empty = np.zeros(0, dtype=np.int64)
+    return (np.concatenate([empty] + [h for h, _ in found]),
+            np.concatenate([empty] + [t for _, t in found]))
 
 
 def _normal_sums(F, N, n):
