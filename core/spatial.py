@@ -349,10 +349,11 @@ def closest_result(tables, t, v, w, d2):
     the kernel's ``v, w`` and squared distances ``d2`` (q,) over an index's
     :class:`IndexTables` (the point ``A + v ab + w ac``, barycentric coordinates
     ``(1-v-w, v, w)`` clipped to [0, 1])."""
-    D = np.take(tables.rows[0:9], t, axis=1)
-    point = (D[0:3] + v * D[3:6] + w * D[6:9]).T
-    return ClosestPoints(tables.face[t].astype(np.int64), np.ascontiguousarray(point),
-                         _bary(v, w), np.sqrt(d2))
+    point = np.empty((t.shape[0], 3))
+    for k in range(3):
+        point[:, k] = (np.take(tables.rows[k], t) + v * np.take(tables.rows[3 + k], t)
+                       + w * np.take(tables.rows[6 + k], t))
+    return ClosestPoints(tables.face[t].astype(np.int64), point, _bary(v, w), np.sqrt(d2))
 
 
 # --- small vectorised helpers --------------------------------------------------------------------
