@@ -38,9 +38,6 @@ from .spatial import TriangleIndex, closest_on_triangles, triangle_rows
 
 #: (query, face) pairs per kernel call (temporaries that stay in cache)
 _BLOCK = 1 << 14
-#: (v, w) of the corners A, B, C
-_CORNER_V = np.array([0.0, 1.0, 0.0])
-_CORNER_W = np.array([0.0, 0.0, 1.0])
 #: a barycentric coordinate this small puts the closest point on the edge
 _ON_EDGE = 1e-12
 
@@ -99,7 +96,8 @@ class FaceTracker:
         self._deg = np.bincount(c, minlength=n)
         self._first = np.cumsum(self._deg) - self._deg   # of each vertex's run in _ring
         self._ring = np.argsort(c, kind="stable") // 3   # faces around each vertex
-        self._across = faces_across(F, n)
+        self._across = np.ascontiguousarray(faces_across(F, n).T)   # (3,m)
+        self._FT = np.ascontiguousarray(F.T)
         self.steps = steps
         self.face = None                                 # the last answer
 
@@ -110,8 +108,8 @@ class FaceTracker:
         self._D = D = triangle_rows(V[F[:, 0]], V[F[:, 1]], V[F[:, 2]])
         s_ab, s_ac, s_abac = D[9], D[10], D[11]
         area2 = np.maximum(s_ab * s_ac - s_abac * s_abac, 0.0)          # (2 area)^2
-        edge2 = np.stack([s_ab + s_ac - 2.0 * s_abac, s_ac, s_ab], axis=1)
-        self._alt2 = area2[:, None] / np.maximum(edge2, 1e-300)      # squared altitudes
+        edge2 = np.stack([s_ab + s_ac - 2.0 * s_abac, s_ac, s_ab])
+        self._alt2 = area2 / np.maximum(edge2, 1e-300)           # squared altitudes (3,m)
 
     def closest(self, Q, near=None):
         """Closest faces of the points ``Q`` (q,3): on the first call from the
@@ -181,19 +179,22 @@ class FaceTracker:
         the module docstring); the arrays are updated in place and returned."""
         active = np.arange(face.size)
         for step in range(self.steps):
-            f, h2 = face[active], d2[active][:, None]
-            B = np.stack([1.0 - v[active] - w[active], v[active], w[active]], axis=1)
-            line = (B * B * np.take(self._alt2, f, axis=0) <= h2) | (B <= _ON_EDGE)
-            keep = np.flatnonzero(line.any(axis=1))
-            active, f, line, h2 = active[keep], f[keep], line[keep], h2[keep]
+            f, h2 = face[active], d2[active]
+            B = (1.0 - v[active] - w[active], v[active], w[active])
+            line = [(B[k] * B[k] * self._alt2[k].take(f) <= h2) | (B[k] <= _ON_EDGE)
+                    for k in range(3)]
+            keep = np.flatnonzero(line[0] | line[1] | line[2])
+            if keep.size == 0:
+                break
+            active, f, h2 = active[keep], f[keep], h2[keep]
+            line = [x[keep] for x in line]
             corner = self._corners(f, v[active], w[active], h2, line)
             if step > 0:     # walking on: around both ends of every edge crossed
-                corner |= line[:, [1, 2, 0]] | line[:, [2, 0, 1]]
-                cross = np.zeros_like(line)
+                corner = [corner[k] | line[(k + 1) % 3] | line[(k + 2) % 3] for k in range(3)]
+                cross = []
             else:
-                cross = line & (np.take(self._across, f, axis=0) >= 0)
-            moved = self._try_across(QT, active, f, cross, face, v, w, d2)
-            moved |= self._try_around(QT, active, f, corner, face, v, w, d2)
+                cross = [line[k] & (self._across[k].take(f) >= 0) for k in range(3)]
+            moved = self._try(QT, active, f, cross, corner, face, v, w, d2)
             active = active[moved]
             if active.size == 0:
                 break
@@ -201,46 +202,49 @@ class FaceTracker:
 
     def _corners(self, f, v, w, h2, line):
         """Which corners of the faces ``f`` lie within the balls (squared radii
-        ``h2`` (k,1)) around the closest points ``(v, w)``: |x ab + y ac|^2 for
-        (x, y) = (v, w) less the corner's. A ball that holds a corner reaches
-        the lines of both edges there (``line``), so only those are measured."""
-        corner = np.zeros_like(line)
-        i = np.flatnonzero(line.sum(axis=1) >= 2)
+        ``h2``) around the closest points ``(v, w)``: |x ab + y ac|^2 for
+        (x, y) = (v, w) less the corner's, one mask per corner. A ball that
+        holds a corner reaches the lines of both edges there (``line``, one
+        mask per edge, named by its opposite corner), so only those are
+        measured."""
+        corner = [np.zeros(f.size, dtype=bool) for _ in range(3)]
+        i = np.flatnonzero(line[0].astype(np.int8) + line[1] + line[2] >= 2)
         if i.size:
-            f, v, w = f[i], v[i, None], w[i, None]
-            s_ab, s_ac, s_abac = (np.take(self._D[r], f)[:, None] for r in (9, 10, 11))
-            x = v - _CORNER_V
-            y = w - _CORNER_W
-            corner[i] = x * x * s_ab + 2.0 * x * y * s_abac + y * y * s_ac <= h2[i]
+            f, v, w, h2 = f[i], v[i], w[i], h2[i]
+            s_ab, s_ac, s_abac = (self._D[r].take(f) for r in (9, 10, 11))
+            for k, (x, y) in enumerate(((v, w), (v - 1.0, w), (v, w - 1.0))):
+                corner[k][i] = x * x * s_ab + 2.0 * x * y * s_abac + y * y * s_ac <= h2
         return corner
 
-    def _try_across(self, QT, active, f, cross, face, v, w, d2):
-        """Move each query ``active[i]`` to the closest of the faces across
-        its crossed edges if closer; which of them moved."""
+    def _try(self, QT, active, f, cross, corner, face, v, w, d2):
+        """Move each query ``active[i]`` to the closest of the faces across its
+        ``cross`` edges and around its ``corner`` corners if that is closer
+        (one mask per corner, the edge named by its opposite corner); which of
+        them moved."""
+        i = [np.flatnonzero(c) for c in cross]
+        t = [self._across[k].take(f[ik]) for k, ik in enumerate(i)]
+        for k, c in enumerate(corner):
+            ik = np.flatnonzero(c)
+            vert = self._FT[k].take(f[ik])
+            at, own = ragged_ranges(self._first[vert], self._deg[vert])
+            i.append(ik[own])
+            t.append(self._ring[at])
+        i, t = np.concatenate(i), np.concatenate(t)
         moved = np.zeros(active.size, dtype=bool)
-        i, c = np.nonzero(cross)
         if i.size:
-            t = self._across[f[i], c]
+            o = np.argsort(i, kind="stable")              # each query's faces together
+            i, t = i[o], t[o]
             nv, nw, nd = self._pairs(QT, active[i], t)
-            o = np.lexsort((nd, i))                      # each query's closest first
-            o = o[np.concatenate([[True], i[o][1:] != i[o][:-1]])]
-            o = o[nd[o] < d2[active[i[o]]]]
-            a = active[i[o]]
-            face[a], v[a], w[a], d2[a] = t[o], nv[o], nw[o], nd[o]
-            moved[i[o]] = True
-        return moved
-
-    def _try_around(self, QT, active, f, corner, face, v, w, d2):
-        """Move each query ``active[i]`` to the closest face around its flagged
-        corners if closer; which of them moved."""
-        moved = np.zeros(active.size, dtype=bool)
-        i = np.flatnonzero(corner.any(axis=1))
-        if i.size:
+            b = group_argmin(nd, _run_lengths(i))
+            i, t, nv, nw, nd = i[b], t[b], nv[b], nw[b], nd[b]
+            better = nd < d2[active[i]]
+            i = i[better]
             a = active[i]
-            t, nv, nw, nd = self._around(QT, a, self.F[f[i]][corner[i]], corner[i].sum(axis=1))
-            better = nd < d2[a]
-            a = a[better]
             face[a], v[a], w[a], d2[a] = t[better], nv[better], nw[better], nd[better]
-            moved[i[better]] = True
+            moved[i] = True
         return moved
 
+
+def _run_lengths(x):
+    """Lengths of the runs of equal values of the sorted array ``x``."""
+    return np.diff(np.flatnonzero(np.concatenate([[True], x[1:] != x[:-1], [True]])))

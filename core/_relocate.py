@@ -66,15 +66,16 @@ def block_matvec(G, M, x, lam):
     on the triangles ``G`` (3,g) (row c: corner c of every triangle, in the
     rows' order); ``x`` (n,d), returns (n,d)."""
     n = x.shape[0]
-    out = lam * x.T                                               # (d, n)
+    xT = np.ascontiguousarray(x.T)
+    out = lam * xT                                                # (d, n)
     for d in range(x.shape[1]):
-        X0, X1, X2 = (np.take(x[:, d], G[c]) for c in range(3))
+        X0, X1, X2 = (xT[d].take(G[c]) for c in range(3))
         for c in range(3):
             y = M[c, 0] * X0
             y += M[c, 1] * X1
             y += M[c, 2] * X2
             out[d] += np.bincount(G[c], weights=y, minlength=n)
-    return out.T
+    return np.ascontiguousarray(out.T)
 
 
 def _normals(V, F):
