@@ -113,7 +113,6 @@ def spatial_order(V, F, twin, box=None):
     F2 = np.empty_like(F)
     twin2 = np.empty_like(twin)
     U2, W2 = np.empty_like(twin), np.empty_like(twin)
-    new_h = (3 * new_f[:, None] + np.arange(3)).ravel()
     twin3 = twin.reshape(m, 3)
 
     def block(a, b):
@@ -122,7 +121,11 @@ def spatial_order(V, F, twin, box=None):
         U2[3 * a:3 * b] = np.take(Fb, [1, 2, 0], axis=1).ravel()
         W2[3 * a:3 * b] = np.take(Fb, [2, 0, 1], axis=1).ravel()
         t = np.take(twin3, forder[a:b], axis=0).ravel()
-        twin2[3 * a:3 * b] = np.where(t >= 0, np.take(new_h, np.maximum(t, 0)), t)
+        f, c = np.divmod(np.maximum(t, 0), 3)           # half-edge 3 f + c -> 3 new_f[f] + c
+        h = np.take(new_f, f)
+        h *= 3
+        h += c
+        twin2[3 * a:3 * b] = np.where(t >= 0, h, t)
 
     run_blocks(block, blocks(m, _PAIR_BLOCK // 3))
     return V[order], F2, twin2, U2, W2, order, forder

@@ -584,7 +584,9 @@ def _orient(F, twin, inner):
     h, t = inner
     if h.size == 0:
         return F, twin, found
-    agree = half_edge_ends(F, h)[0] == half_edge_ends(F, t)[1]
+    # twins share their two ends, so they agree when they start at different ones
+    U = np.take(F, [1, 2, 0], axis=1).ravel()              # half_edge_ends(F)[0]
+    agree = np.take(U, h) != np.take(U, t)
     if agree.all():
         return F, twin, found
     m = F.shape[0]
