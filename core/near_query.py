@@ -5,35 +5,43 @@ for any query; binding a scan asks it for a million points that all lie
 within a fraction of a face of the surface, and there most of its time goes
 into choosing candidates. :class:`NearQuery` keeps its grid, its bounds and
 its exact kernel, and reorganises the candidate search so that nearly all of
-it runs on fixed-width float32 tables, a block of points at a time::
+it is a few batched matrix products on float32 tiles, a block of points at
+a time::
 
     probe cell   the point's own cell, or when that is empty the nearest
                  non-empty one of its 26 neighbours (box distance)
-    phase A      squared distance to the centroid of every reference of the
-                 probe cell; the nearest centroid is the probe, evaluated
-                 exactly -> u (an exact upper bound)
-    phase B      every other cell within u of the point (box distance)
-    filters      sphere (|p - c| <= u + r) on every pair of A and B, then the
-                 edge-line bound (height above the plane, lateral distance
-                 beyond the edge lines; ``spatial``'s docstring) on the pairs
-                 left, both in float32
-    exact        the kernel on the pairs left (float64); the smallest squared
-                 distance wins, exact ties go to the lowest face index
+    phase A      the edge-line bound (height above the plane, lateral distance
+                 beyond the farthest-out edge line, ``spatial``'s docstring)
+                 of every reference of the probe cell; the smallest is the
+                 probe, evaluated exactly -> u (an exact upper bound)
+    phase B      the same bound on every other cell within u of the point
+                 (box distance)
+    exact        the kernel (float64) on the pairs whose bound is within u:
+                 first each point's smallest bound, then the others within
+                 the bound that gives; the smallest squared distance wins,
+                 exact ties go to the lowest face index
 
-Windows: the references of cell ``c`` are a run of the cell-ordered table,
-``ref[start[c] : start[c] + count[c]]``. A point's candidates are the row
+Tiles: points (or (point, cell) pairs) that share a cell go in tiles of
+``_TILE`` rows. The references of cell ``c`` are a run of the cell-ordered
+table, ``ref[start[c] : start[c] + count[c]]``; a tile reads the window
 ``ref[start[c] : start[c] + W]`` for the width class ``W >= count[c]`` (one
-fancy-indexed row of a ``sliding_window_view``, no ragged expansion); its
-entries past ``count[c]`` belong to the next cells, so a row holds more
-candidates than the cell, never fewer (the table ends in ``W`` padding
-entries that never pass a filter). Rows are bucketed by width class.
+fancy-indexed row of a ``sliding_window_view``), whose entries past
+``count[c]`` belong to the next cells: more candidates than the cell, never
+fewer (the table ends in padding entries whose bound is infinite). Each
+reference is stored as four rows ``[d, -(d.c) - o]`` (d the normal and the
+three outward edge normals, c the centroid, o the edge's offset), so the
+tile's heights and edge-line excesses are ``[x, y, z, 1]`` times them: four
+``(t, _TILE, 4) @ (t, 4, W)`` products.
 
-Float32: coordinates are taken relative to the grid's origin, and every
-bound is loosened by ``eps = 2**-16`` of the grid's extent (the float32
-rounding of the quantities involved is below ``2**-21`` of it), so a filter
+Float32: coordinates are taken relative to the grid's origin, and the bound
+is loosened by ``eps = 2**-16`` of the grid's extent grown by 4 cells (for
+points in the grid's box grown by 4 cells the float32 rounding of the
+products is below ``2**-19`` of that; points outside go to the index), so it
 can keep a pair the float64 bound would drop, never drop one it keeps: the
-result is the exact closest point, the same as ``TriangleIndex.closest``
-except among exactly equidistant triangles.
+result is the exact
+closest point, bit for bit the minimum of the kernel over every triangle
+(ties to the lowest face index); ``TriangleIndex.closest`` gives the same
+distances and, but for exactly equidistant triangles, the same faces.
 
 Every point's result depends on the point alone (not on the block, the
 order or the thread), so the answer is the same for any block size and
@@ -56,9 +64,11 @@ __all__ = ["NearQuery"]
 #: points per block (float32 temporaries of a few hundred KiB)
 _BLOCK = 8192
 
-#: float32 filters are loosened by this fraction of the grid's extent
-_F32_EPS = 2.0 ** -16
+#: rows (points, or (point, cell) pairs) per tile of one cell
+_TILE = 8
 
+#: the float32 bound is loosened by this fraction of the grid's extent
+_F32_EPS = 2.0 ** -16
 
 #: relative slack on the float64 cell tests (as ``spatial``'s)
 _SLACK = 1e-9
@@ -95,16 +105,15 @@ class _Tables(NamedTuple):
     lo: np.ndarray        #: (3,) grid origin
     h: float              #: cell size
     dims: np.ndarray      #: (3,) cells per axis
-    eps: np.float32       #: float32 slack of the bounds (absolute)
+    eps: np.float32       #: float32 slack of the bound (absolute)
+    box: np.ndarray       #: (2, 3) the box the float32 bound holds in (the grid's, grown by 4h)
     pdims: np.ndarray     #: (3,) cells per axis of the padded grid (one empty layer around)
     count: np.ndarray     #: (padded cells,) int64 references per cell
     start: np.ndarray     #: (padded cells,) int64 first reference of each cell
     offset: np.ndarray    #: (26,) int64 padded-id offsets of the 26 neighbours
     widths: np.ndarray    #: (k,) int64 window width classes
-    ref: tuple            #: per width: (refs, W) windows of the references' cx, cy, cz, r
-    ref_tri: np.ndarray   #: (refs + W,) int64 triangle of each reference (padding 0)
-    centre: np.ndarray    #: (3, m) float32 centroids relative to lo
-    prism: np.ndarray     #: (15, m) float32 edge-line bound rows
+    tri: tuple            #: per width: (refs, W) windows of the referenced triangles
+    lines: tuple          #: per width: 4 directions' (4, refs, W) windows of [d, -(d.c) - o]
     rows: tuple           #: 16 (m,) float64 rows of the exact kernel
     tables: object        #: the index's IndexTables
 
@@ -112,8 +121,8 @@ class _Tables(NamedTuple):
 class NearQuery:
     """Exact closest points on a triangle mesh for many queries near it.
 
-    Builds a :class:`~.spatial.TriangleIndex` and answers with the float32
-    window search of the module docstring; far queries go to the index.
+    Builds a :class:`~.spatial.TriangleIndex` and answers with the tiled
+    search of the module docstring; far queries go to the index.
 
     Parameters
     ----------
@@ -209,30 +218,41 @@ class _Best(NamedTuple):
 
 def _build_tables(tables):
     """The :class:`_Tables` of an index's :class:`~.spatial.IndexTables`: the
-    padded cell grid, the window tables of the references (float32 centroid
-    relative to the origin, radius plus eps; padding entries never pass a
-    filter), the float32 edge-line rows and the kernel rows."""
+    padded cell grid, the windows of the references (triangles and the
+    edge-line rows) and the kernel rows as contiguous arrays."""
     lo, h, dims = tables.lo, float(tables.cell_size), tables.dims
     extent = float(np.abs(tables.hi - lo).max()) + 4.0 * h + float(tables.ball[3].max())
-    eps = np.float32(_F32_EPS * extent)
     count, start, pdims = _padded_grid(tables.cell_start, dims)
     widths = _width_classes(int(count.max()))
-    centre = np.ascontiguousarray((tables.ball[:3] - lo[:, None]).astype(np.float32))
-    radius = tables.ball[3].astype(np.float32) + eps
-    tri = tables.cell_tri.astype(np.int64)
     pad = int(widths[-1])
-    ref = []
-    for values, fill in ((centre[0], np.inf), (centre[1], np.inf), (centre[2], np.inf),
-                         (radius, 0.0)):
-        run = np.full(tri.shape[0] + pad, fill, dtype=np.float32)
-        np.take(values, tri, out=run[:tri.shape[0]])
-        ref.append(run)
-    windows = tuple(tuple(sliding_window_view(run, int(W)) for run in ref) for W in widths)
+    tri = np.concatenate([tables.cell_tri.astype(np.int64), np.zeros(pad, dtype=np.int64)])
+    lines = _line_rows(tables, tri[:tri.shape[0] - pad], pad)
     offset = _OFFSETS[:, 0] + pdims[0] * (_OFFSETS[:, 1] + pdims[1] * _OFFSETS[:, 2])
-    return _Tables(lo, h, dims, eps, pdims, count, start, offset, widths, windows,
-                   np.concatenate([tri, np.zeros(pad, dtype=np.int64)]), centre,
-                   np.ascontiguousarray(tables.prism[:15].astype(np.float32)),
+    box = np.stack([lo - 4.0 * h, tables.hi + 4.0 * h])
+    return _Tables(lo, h, dims, np.float32(_F32_EPS * extent), box, pdims, count, start, offset,
+                   widths, tuple(sliding_window_view(tri, int(W)) for W in widths),
+                   tuple(tuple(sliding_window_view(r, int(W), axis=1) for r in lines)
+                         for W in widths),
                    tuple(np.ascontiguousarray(r) for r in tables.rows), tables)
+
+
+def _line_rows(tables, tri, pad):
+    """Per reference (cell-major, then ``pad`` padding entries) and for each of
+    the edge-line bound's four directions d (normal, three edge normals): the
+    rows [d_x, d_y, d_z, -(d.c) - o] (c the centroid relative to the origin, o
+    the edge's offset, 0 for the normal), float32 (4, refs + pad), so that
+    [x, y, z, 1] times them is the signed height / edge-line excess of the
+    point x (relative to the origin). Padding rows give +inf."""
+    P = tables.prism
+    c = tables.ball[:3] - tables.lo[:, None]
+    out = []
+    for d, off in ((P[0:3], 0.0), (P[3:6], P[12]), (P[6:9], P[13]), (P[9:12], P[14])):
+        row = np.zeros((4, tri.shape[0] + pad), dtype=np.float32)
+        row[:3, :tri.shape[0]] = np.take(d, tri, axis=1)
+        row[3, :tri.shape[0]] = np.take(-np.einsum("ij,ij->j", d, c) - off, tri)
+        row[3, tri.shape[0]:] = np.inf
+        out.append(row)
+    return out
 
 
 def _padded_grid(cell_start, dims):
@@ -260,13 +280,12 @@ def _width_classes(most):
 # --- one block -----------------------------------------------------------------------------------
 
 class _Block(NamedTuple):
-    """A block of points: their rows of P, float32 offsets from the origin,
-    own cell (grid coordinates and padded id), position inside the own cell,
-    and the probe cell (padded id)."""
+    """A block of points: their rows of P, coordinates, own cell (grid
+    coordinates and padded id), position inside the own cell, probe cell."""
 
     q: np.ndarray       #: (k,) rows of P
     X: np.ndarray       #: (3, k) float64 coordinates
-    x32: np.ndarray     #: (3, k) float32, relative to the grid origin
+    A: np.ndarray       #: (k, 4) float32 [x, y, z, 1], x relative to the grid origin
     cell3: np.ndarray   #: (k, 3) own cell
     own: np.ndarray     #: (k,) padded id of the own cell
     wall: np.ndarray    #: (3, k) position inside the own cell, 0..h (outside for clipped points)
@@ -277,19 +296,19 @@ def _block(T, P, q, cell3, best):
     """Answer the points ``q`` (rows of ``P``) into ``best``; returns the rows
     left for ``TriangleIndex.closest``."""
     B, lost = _start_block(T, P, q, cell3)
-    t0, v0, w0, d0, stored = _probe(T, B)
-    u32 = _bound32(T, d0)
-    owner_a, tri_a = _probe_cell_survivors(T, stored, u32)
+    n = B.q.shape[0]
+    tiles, probe_col, t0 = _probe(T, B)
+    v0, w0, d0 = _kernel(T, B.X, np.arange(n), t0)
+    u2 = np.square(_bound32(T, d0))
+    owner_a, tri_a, lb_a = _within(tiles, np.arange(n), u2, probe_col)
     point_b, cell_b, far = _neighbour_cells(T, B, np.sqrt(d0))
-    owner_b, tri_b = _window_survivors(T, B.x32, point_b, cell_b, u32)
+    owner_b, tri_b, lb_b = _within(_tiles(T, B.A, point_b, cell_b), point_b, u2)
     owner = np.concatenate([owner_a, owner_b])
     tri = np.concatenate([tri_a, tri_b])
-    lb = _edge_line_bound(T, B.x32, owner, tri)
-    keep = np.flatnonzero(lb <= np.square(u32[owner]))
-    owner, tri, lb = owner[keep], tri[keep], lb[keep]
+    lb = np.concatenate([lb_a, lb_b])
     # the pair with the smallest bound of each point first: usually the closest,
     # so the bound it gives leaves few of the others
-    first = _lowest_per_point(owner, lb, d0.shape[0])
+    first = _lowest_per_point(owner, lb, n)
     t, v, w, d2 = _fold(T, B.X, owner[first], tri[first], t0, v0, w0, d0)
     rest = np.ones(owner.shape[0], dtype=bool)
     rest[first] = False
@@ -318,8 +337,10 @@ def _lowest_per_point(owner, value, n):
 
 
 def _start_block(T, P, q, cell3):
-    """The :class:`_Block` of the points ``q``, and the points with no
-    non-empty cell among their own and its 26 neighbours."""
+    """The :class:`_Block` of the points ``q``, and the points left for the
+    index: those with no non-empty cell among their own and its 26
+    neighbours, and those outside ``T.box`` (where the float32 rounding of
+    the bound could exceed its slack)."""
     g = cell3[q]
     own = (g[:, 0] + 1) + T.pdims[0] * ((g[:, 1] + 1) + T.pdims[1] * (g[:, 2] + 1))
     X = np.ascontiguousarray(P[q].T)
@@ -329,11 +350,13 @@ def _start_block(T, P, q, cell3):
     if empty.size:
         probe[empty] = _nearest_filled(T, own[empty], wall[:, empty])
     ok = probe >= 0
+    ok &= ((X >= T.box[0][:, None]) & (X <= T.box[1][:, None])).all(axis=0)
     lost = q[~ok]
     if lost.size:
         q, X, g, own, wall, probe = q[ok], X[:, ok], g[ok], own[ok], wall[:, ok], probe[ok]
-    x32 = (X - T.lo[:, None]).astype(np.float32)
-    return _Block(q, X, x32, g, own, wall, probe), lost
+    A = np.ones((q.shape[0], 4), dtype=np.float32)
+    A[:, :3] = (X - T.lo[:, None]).T
+    return _Block(q, X, A, g, own, wall, probe), lost
 
 
 def _nearest_filled(T, own, wall):
@@ -359,76 +382,105 @@ def _wall_distances(T, wall):
     return d2
 
 
-def _classes(T, counts):
-    """Rows bucketed by window width class: (order, [(lo, hi, class index)])
-    such that ``order[lo:hi]`` are the rows of one class."""
-    cls = np.searchsorted(T.widths, counts).astype(np.int16)
-    order = np.argsort(cls, kind="stable")
-    if order.size == 0:
-        return order, []
-    cls = cls[order]
-    cuts = np.flatnonzero(np.concatenate([[True], cls[1:] != cls[:-1], [True]]))
-    return order, [(a, b, int(cls[a])) for a, b in zip(cuts[:-1], cuts[1:])]
+# --- tiles ---------------------------------------------------------------------------------------
+
+class _Tile(NamedTuple):
+    """Tiles of one window width: up to ``_TILE`` rows that share a cell, the
+    cell's window of triangles, and the bound of every (row, window entry)."""
+
+    rows: np.ndarray    #: (t, _TILE) rows of the tiled set (a short tile repeats its last row)
+    valid: np.ndarray   #: (t, _TILE) bool, False for the repeats
+    tri: np.ndarray     #: (t, W) internal triangles of the cell's window
+    lb: np.ndarray      #: (t, _TILE, W) float32 squared edge-line bound (less eps)
 
 
-def _where2(mask):
-    """Row and column indices of the True entries of a 2-D mask, row-major
-    (``np.nonzero``, about 2.5x faster through the flat indices)."""
-    flat = np.flatnonzero(mask)
-    row = flat // mask.shape[1]
-    return row, flat - row * mask.shape[1]
+def _tiles(T, A, point, cell):
+    """The rows ``(point[i], cell[i])`` grouped by cell into :class:`_Tile`
+    sets, one per window width class; ``A`` (k, 4) the points' [x, y, z, 1]."""
+    if point.size == 0:
+        return []
+    order = np.argsort(cell)
+    cs = cell[order]
+    first = np.flatnonzero(np.concatenate([[True], cs[1:] != cs[:-1]]))
+    size = np.diff(np.concatenate([first, [cs.shape[0]]]))
+    per = -(-size // _TILE)
+    group = np.repeat(np.arange(first.shape[0]), per)
+    k = np.arange(group.shape[0]) - np.repeat(np.cumsum(per) - per, per)
+    begin = first[group] + _TILE * k
+    length = np.minimum(_TILE, size[group] - _TILE * k)
+    tcell = cs[begin]
+    cls = np.searchsorted(T.widths, T.count[tcell]).astype(np.int16)
+    by_class = np.argsort(cls, kind="stable")
+    cuts = np.flatnonzero(np.concatenate([[True], np.diff(cls[by_class]) != 0, [True]]))
+    lane = np.arange(_TILE)
+    out = []
+    for a, b in zip(cuts[:-1], cuts[1:]):
+        sel = by_class[a:b]
+        c = int(cls[sel[0]])
+        rows = order[begin[sel, None] + np.minimum(lane, length[sel, None] - 1)]
+        s = T.start[tcell[sel]]
+        out.append(_Tile(rows, lane < length[sel, None], T.tri[c][s],
+                         _edge_line_bound(T, A[point[rows]], s, c)))
+    return out
 
 
-def _centre_d2(windows, s, x32, rows):
-    """(k, W) float32 squared distances from the points ``rows`` to the
-    centroids of the window rows starting at references ``s``."""
-    d = windows[0][s]
-    d -= x32[0, rows, None]
-    dc2 = d * d
-    for axis in (1, 2):
-        d = windows[axis][s]
-        d -= x32[axis, rows, None]
-        d *= d
-        dc2 += d
-    return dc2
+def _edge_line_bound(T, A, s, c):
+    """(t, _TILE, W) float32 squared edge-line bound of the tile rows' points
+    ``A`` (t, _TILE, 4) to the references of the windows at ``s`` (width class
+    ``c``): max(|height| - eps, 0)^2 + max(max_k excess_k - eps, 0)^2, the
+    height and the three edge-line excesses each one batched product."""
+    height, *excess = (np.matmul(A, np.ascontiguousarray(line[:, s].transpose(1, 0, 2)))
+                       for line in T.lines[c])
+    np.abs(height, out=height)
+    lateral = excess[0]
+    np.maximum(lateral, excess[1], out=lateral)
+    np.maximum(lateral, excess[2], out=lateral)
+    for part in (height, lateral):
+        part -= T.eps
+        np.maximum(part, 0.0, out=part)
+        part *= part
+    height += lateral
+    return height
 
 
 def _probe(T, B):
-    """Phase A: per point, the nearest centroid among the references of its
-    probe cell's window, evaluated exactly. Returns the probe (t, v, w, d2)
-    and, per width class, (rows, starts, dc2, chosen column, radii) for the
-    sphere filter once the bound is known."""
-    count = T.count[B.probe]
-    starts = T.start[B.probe]
-    order, classes = _classes(T, count)
-    t0 = np.empty(count.shape[0], dtype=np.int64)
-    stored = []
-    for lo, hi, c in classes:
-        rows = order[lo:hi]
-        s = starts[rows]
-        dc2 = _centre_d2(T.ref[c], s, B.x32, rows)
-        col = np.argmin(dc2, axis=1)
-        t0[rows] = T.ref_tri[s + col]
-        stored.append((rows, s, dc2, col, T.ref[c][3]))
-    v0, w0, d0 = _kernel(T, B.X, np.arange(count.shape[0]), t0)
-    return t0, v0, w0, d0, stored
+    """Phase A: the tiles of the probe cells and, per point, the column and
+    triangle of the smallest bound in its probe cell's window."""
+    n = B.q.shape[0]
+    tiles = _tiles(T, B.A, np.arange(n), B.probe)
+    t0 = np.empty(n, dtype=np.int64)
+    cols = []
+    for tile in tiles:
+        col = np.argmin(tile.lb, axis=2)
+        t0[tile.rows[tile.valid]] = np.take_along_axis(tile.tri, col, axis=1)[tile.valid]
+        cols.append(col)
+    return tiles, cols, t0
 
 
-def _probe_cell_survivors(T, stored, u32):
-    """Phase A's pairs (point, triangle) within the sphere bound ``u32`` of
-    each point (the probe itself left out)."""
-    owners, tris = [np.zeros(0, dtype=np.int64)], [np.zeros(0, dtype=np.int64)]
-    for rows, s, dc2, col, radius in stored:
-        reach = radius[s]
-        reach += u32[rows, None]
-        reach *= reach
-        keep = dc2 <= reach
-        keep[np.arange(rows.shape[0]), col] = False
-        i, j = _where2(keep)
-        owners.append(rows[i])
-        tris.append(T.ref_tri[s[i] + j])
-    return np.concatenate(owners), np.concatenate(tris)
+def _within(tiles, who, u2, skip=None):
+    """(owner, triangle, bound) of the tile pairs whose bound is within the
+    rows' ``u2``; ``who`` maps tile rows to points; ``skip`` (per tile,
+    (t, _TILE) columns) leaves one entry per row out (the probe)."""
+    owners = [np.zeros(0, dtype=np.int64)]
+    tris = [np.zeros(0, dtype=np.int64)]
+    lbs = [np.zeros(0, dtype=np.float32)]
+    for k, tile in enumerate(tiles):
+        pts = who[tile.rows]
+        keep = tile.lb <= u2[pts][:, :, None]
+        keep &= tile.valid[:, :, None]
+        if skip is not None:
+            np.put_along_axis(keep, skip[k][:, :, None], False, axis=2)
+        flat = np.flatnonzero(keep)
+        W = keep.shape[2]
+        i, rest = np.divmod(flat, _TILE * W)
+        j, col = np.divmod(rest, W)
+        owners.append(pts[i, j])
+        tris.append(tile.tri[i, col])
+        lbs.append(tile.lb.reshape(-1)[flat])
+    return np.concatenate(owners), np.concatenate(tris), np.concatenate(lbs)
 
+
+# --- neighbours, exact evaluation ------------------------------------------------------------
 
 def _neighbour_cells(T, B, u):
     """Phase B's cells: (point, padded cell) pairs for every non-empty cell of
@@ -447,8 +499,9 @@ def _neighbour_cells(T, B, u):
     d2 = np.zeros((sel.shape[0], 7))
     d2[:, 0:6:2] = below[:, sel].T
     d2[:, 1:6:2] = above[:, sel].T
-    need = d2[:, _WALL_A] + d2[:, _WALL_B] + d2[:, _WALL_C]
-    i, k = _where2(need <= u2[sel, None])
+    need = (d2[:, _WALL_A] + d2[:, _WALL_B] + d2[:, _WALL_C]) <= u2[sel, None]
+    flat = np.flatnonzero(need)
+    i, k = np.divmod(flat, 26)
     point = sel[i]
     cell = B.own[point] + T.offset[k]
     keep = (T.count[cell] > 0) & (cell != B.probe[point])
@@ -467,57 +520,6 @@ def _block_clearance(T, B):
     return out
 
 
-def _window_survivors(T, x32, point, cell, u32):
-    """Phase B: the pairs (point, triangle) of the windows of ``cell`` (one
-    per pair) within the sphere bound ``u32`` of ``point``."""
-    order, classes = _classes(T, T.count[cell])
-    starts = T.start[cell]
-    owners, tris = [np.zeros(0, dtype=np.int64)], [np.zeros(0, dtype=np.int64)]
-    for lo, hi, c in classes:
-        rows = order[lo:hi]
-        who = point[rows]
-        s = starts[rows]
-        dc2 = _centre_d2(T.ref[c], s, x32, who)
-        reach = T.ref[c][3][s]
-        reach += u32[who, None]
-        reach *= reach
-        i, j = _where2(dc2 <= reach)
-        owners.append(who[i])
-        tris.append(T.ref_tri[s[i] + j])
-    return np.concatenate(owners), np.concatenate(tris)
-
-
-def _edge_line_bound(T, x32, owner, t):
-    """(k,) float32 lower bound of the squared distance from the points
-    ``owner`` to the triangles ``t``: height above the plane and lateral
-    distance beyond the farthest-out edge line, each less ``eps``."""
-    x = np.take(x32[0], owner) - np.take(T.centre[0], t)
-    y = np.take(x32[1], owner) - np.take(T.centre[1], t)
-    z = np.take(x32[2], owner) - np.take(T.centre[2], t)
-
-    def dot(row):
-        out = np.take(T.prism[row], t)
-        out *= x
-        tmp = np.take(T.prism[row + 1], t)
-        tmp *= y
-        out += tmp
-        np.take(T.prism[row + 2], t, out=tmp)
-        tmp *= z
-        out += tmp
-        return out
-
-    height = np.abs(dot(0))
-    lateral = dot(3) - np.take(T.prism[12], t)
-    np.maximum(lateral, dot(6) - np.take(T.prism[13], t), out=lateral)
-    np.maximum(lateral, dot(9) - np.take(T.prism[14], t), out=lateral)
-    for part in (height, lateral):
-        part -= T.eps
-        np.maximum(part, 0.0, out=part)
-        part *= part
-    height += lateral
-    return height
-
-
 def _kernel(T, X, owner, t):
     """The exact kernel (v, w, d2) on the pairs (points ``owner`` of X, triangles t)."""
     D = np.empty((16, t.shape[0]))
@@ -528,8 +530,8 @@ def _kernel(T, X, owner, t):
 
 
 def _fold(T, X, owner, t, t0, v0, w0, d0):
-    """Evaluate the pairs left and fold them into the probes: per point the
-    smallest squared distance, among equal ones the lowest face index."""
+    """Evaluate the pairs left and fold them into the current best: per point
+    the smallest squared distance, among equal ones the lowest face index."""
     if owner.size == 0:
         return t0, v0, w0, d0
     v, w, d2 = _kernel(T, X, owner, t)

@@ -198,3 +198,53 @@ def test_does_not_modify_inputs_and_checks_them():
     assert r.face.shape == (0,) and r.point.shape == (0, 3) and r.distance.shape == (0,)
     with pytest.raises(InvalidMeshError):
         NearQuery(V, np.zeros((0, 3), dtype=np.int64))
+
+
+def test_the_float32_bound_never_exceeds_the_kernels_distance():
+    """Every (point, reference) bound the tiles compute, slivers, segments and
+    points included, near and off the origin, is at most the kernel's squared
+    distance of that pair (what it is compared with)."""
+    rng = np.random.default_rng(9)
+    k = 80
+    A = rng.normal(size=(k, 3))
+    B = A + rng.normal(size=(k, 3)) * 0.3
+    C = A + rng.normal(size=(k, 3)) * 0.3
+    C[:20] = A[:20] + (B[:20] - A[:20]) * rng.random((20, 1)) + 1e-8 * rng.normal(size=(20, 3))
+    C[20:30] = B[20:30]
+    B[30:36] = C[30:36] = A[30:36]
+    for offset, scale in ((0.0, 1.0), (-3e3, 1e-2)):
+        V = np.concatenate([A, B, C]) * scale + offset
+        F = np.arange(3 * k).reshape(3, k).T
+        query = NearQuery(V, F)
+        T = query._t
+        P = np.concatenate([V + rng.normal(size=V.shape) * 0.05 * scale, V])
+        block, _ = near_query._start_block(T, P, np.arange(P.shape[0]),
+                                           np.clip(np.floor((P - T.lo) / T.h), 0, T.dims - 1)
+                                           .astype(np.int64))
+        cells = np.flatnonzero(T.count)
+        point = np.repeat(np.arange(block.q.shape[0]), cells.shape[0])
+        cell = np.tile(cells, block.q.shape[0])
+        for tile in near_query._tiles(T, block.A, point, cell):
+            rows = point[tile.rows][tile.valid]
+            lb = tile.lb[tile.valid]                          # (r, W)
+            tri = np.repeat(tile.tri, tile.valid.sum(axis=1), axis=0)
+            owner = np.repeat(rows, tri.shape[1])
+            _, _, d2 = near_query._kernel(T, block.X, owner, tri.ravel())
+            real = np.isfinite(lb.ravel())               # the table's padding is infinite
+            assert real.mean() > 0.9 and (lb.ravel()[real] <= d2[real]).all()
+
+
+def test_a_one_cell_grid_and_points_a_long_way_off():
+    """One triangle (every grid side is the border): points at 1e6 of its size
+    leave the float32 box and go to the index; the answer stays exact."""
+    V = np.array([[0.0, 0, 0], [1, 0, 0], [0, 1, 0], [1, 1, 0.2]])
+    F = np.array([[0, 1, 2], [1, 3, 2]])
+    rng = np.random.default_rng(10)
+    P = np.vstack([rng.normal(size=(50, 3)) * s for s in (0.5, 10.0, 1e6)])
+    query = NearQuery(V, F)
+    r = query.closest(P)
+    face, v, w, d2 = _brute(V, F, P)
+    np.testing.assert_array_equal(r.distance, np.sqrt(d2))
+    near = np.isin(np.arange(P.shape[0]), _fallback_rows(query, P), invert=True)
+    assert near[:50].all() and not near[-50:].any()
+    np.testing.assert_array_equal(r.face[near], face[near])
