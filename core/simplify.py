@@ -313,8 +313,8 @@ def _relocate_cage(mesh, Vn, creases, Eb_in, surface, tun):
     if Eb_in.shape[0]:
         hb = np.flatnonzero(mesh.twin == BOUNDARY)
         Eb = np.stack(half_edge_ends(Fm, hb), axis=1)
-        C = Vn[np.unique(Eb_in)[::step]]
-        border = (C, Eb, TriangleIndex(Vn, segment_triangles(Eb_in)), tun.relocate_border_weight)
+        ends = np.unique(Eb_in)[::step]
+        border = (Vn[ends], Eb, (Vn, segment_triangles(Eb_in)), tun.relocate_border_weight)
     Nkeep = mesh.Nref[Fm].sum(axis=1) if tun.ref_cos > -1.0 else None
     back = dict(surface=(Vn, surface), back=tun.relocate_back,
                 iters=tun.relocate_back_iters) if surface is not None else dict(iters=tun.relocate_iters)
@@ -322,6 +322,7 @@ def _relocate_cage(mesh, Vn, creases, Eb_in, surface, tun):
                     min_compact=tun.gamma_hard, cg_iters=tun.relocate_cg_iters,
                     min_cos=tun.relocate_min_cos, min_move=tun.relocate_min_move,
                     P_near=mesh.cur_of_clean[at], cage_of=mesh.cur_of_clean,
+                    border_near=None if border is None else mesh.cur_of_clean[ends],
                     walk_steps=tun.relocate_walk_steps, **back)
     mesh.moved |= np.any(Vnew != mesh.V, axis=1)
     mesh.V = Vnew

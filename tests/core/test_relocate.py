@@ -4,7 +4,6 @@ backward pull and the border ties, each against the same set-up without it."""
 import numpy as np
 
 from core._relocate import relocate, segment_triangles
-from core.spatial import TriangleIndex
 from tests.mesh_factory import boundary_edges, regular_grid
 
 
@@ -40,7 +39,7 @@ def test_border_ties_pull_an_overhanging_border_back_onto_the_input_border():
     movable = np.ones(Vc.shape[0], dtype=bool)
     Eb_c, Eb_i = boundary_edges(Fc, Vc.shape[0]), boundary_edges(Fi, Vi.shape[0])
     C = Vi[np.unique(Eb_i)]
-    seg = TriangleIndex(Vi, segment_triangles(Eb_i))
+    seg = (Vi, segment_triangles(Eb_i))
     alone = relocate(Vc, Fc, Vi, movable, iters=4)
     tied = relocate(Vc, Fc, Vi, movable, iters=4, border=(C, Eb_c, seg, 1.0))
     assert (alone[right, 0] - 1).min() > 0.04
