@@ -77,6 +77,7 @@ import numpy as np
 from .errors import InvalidArgumentError
 from .mesh import check_mesh
 from ._groups import group_argmin, ragged_ranges
+from ._parallel import run_each
 
 #: serialises the lazy BVH builds of indexes queried from several threads at once
 _LAZY_BUILD = threading.Lock()
@@ -101,6 +102,7 @@ _KERNEL_BLOCK = 1 << 14    # pairs per kernel call (temporaries of 128 KiB)
 _BRUTE_PAIRS = 1 << 24     # fewer far (query, triangle) pairs than this: no BVH, scan all
 _FRONTIER_CAP = 1 << 21    # BVH frontier pairs before it is split and processed depth first
 _SLACK = 1e-9              # relative slack on pruning tests (keeps rounding conservative)
+_THREADED_BUILD = 1 << 15  # from this many faces the build runs its two halves on two threads
 
 
 class ClosestPoints(NamedTuple):
@@ -450,6 +452,10 @@ class TriangleIndex:
     ----------
     V : (n, 3) array_like of float
     F : (m, 3) array_like of int, m >= 1. Degenerate triangles are allowed.
+    cell_factor : float, keyword-only
+        Grid cell size in mean triangle bounding-box extents (default 1.5;
+        the answers are exact for any, ties among exactly equidistant
+        triangles aside).
 
     Attributes
     ----------
@@ -469,8 +475,11 @@ class TriangleIndex:
     ([0, 0], [0.707107, 2.0])
     """
 
-    def __init__(self, V, F):
+    def __init__(self, V, F, *, cell_factor=_CELL_FACTOR):
         V, F = check_mesh(V, F, where="TriangleIndex", allow_empty=False)
+        if not (isinstance(cell_factor, (int, float)) and cell_factor > 0):
+            raise InvalidArgumentError(
+                f"TriangleIndex: cell_factor must be a positive number, got {cell_factor!r}")
         self.V = V
         self.F = F
         m = F.shape[0]
@@ -490,19 +499,26 @@ class TriangleIndex:
             order = order[_first_of_each_triangle(V, F[order])]
         self._order = order                       # internal id -> face id
         A, B, C, tlo, thi = A[order], B[order], C[order], tlo[order], thi[order]
-        self._D = triangle_rows(A, B, C)
-        self._build_grid(tlo, thi, A, B, C, extent)
+
+        def rows_and_bounds():
+            D = triangle_rows(A, B, C)
+            return (D,) + _bounding_rows(A, B, C, D[12:15].T)
+        jobs = [rows_and_bounds,
+                lambda: self._build_grid(tlo, thi, A, B, C, extent, cell_factor)]
+        if m >= _THREADED_BUILD:     # the kernel rows and bounds beside the grid
+            (self._D, self._ball, self._prism), _ = run_each(lambda job: job(), jobs)
+        else:
+            (self._D, self._ball, self._prism), _ = [job() for job in jobs]
         self._bvh = None                          # built on first need (far queries)
         self._bvh_ready = False                   # ... with its cylinder bounds
-        self._ball, self._prism = _bounding_rows(A, B, C, self._D[12:15].T)
         self._normal = np.ascontiguousarray(self._D[12:15])      # the disk bound's rows
         self.n_faces = m
 
     # -- grid ---------------------------------------------------------------------------------
-    def _build_grid(self, tlo, thi, A, B, C, extent):
+    def _build_grid(self, tlo, thi, A, B, C, extent, cell_factor):
         m = tlo.shape[0]
         ext = (thi - tlo).max(axis=1)
-        h = _CELL_FACTOR * float(ext.mean())
+        h = cell_factor * float(ext.mean())
         span = float(extent.max())
         if not h > 0:
             h = span / 64 if span > 0 else 1.0
