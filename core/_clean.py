@@ -25,6 +25,7 @@ faces are left unseen; all walks advance in lock-step.
 
 import numpy as np
 
+from ._parallel import blocks, run_blocks, run_each
 from .mesh import bounding_box
 from .spatial import morton_codes
 from .topology import connected_labels
@@ -97,26 +98,57 @@ def spatial_order(V, F, twin, box=None):
         return V, F, twin, U, W, np.arange(n, dtype=np.int64), np.arange(m, dtype=np.int64)
     lo, hi = bounding_box(V) if box is None else box
     # unique keys: the Morton code's high bits, then the index (any sort gives the
-    # same order, on every machine)
-    b = np.uint64(max(1, int(n).bit_length()))
-    code = (morton_codes(V, lo, hi - lo) >> b) << b
+    # same order, on every machine); the index is the key's low bits
+    b = max(1, int(n).bit_length())
+    code = (morton_codes(V, lo, hi - lo) >> np.uint64(b)) << np.uint64(b)
     code |= np.arange(n, dtype=np.uint64)
-    order = np.argsort(code)
+    code.sort()
+    order = (code & np.uint64((1 << b) - 1)).astype(np.int64)
+    del code
     new_v = np.empty(n, dtype=np.int64)
     new_v[order] = np.arange(n, dtype=np.int64)
-    Fn = new_v[F]
-    key = np.minimum(np.minimum(Fn[:, 0], Fn[:, 1]), Fn[:, 2])
-    key *= m
-    key += np.arange(m, dtype=np.int64)
-    forder = np.argsort(key)
-    del key
-    F2 = np.take(Fn, forder, axis=0)
-    del Fn
+    forder = _faces_by_smallest(F, new_v)
     new_f = np.empty(m, dtype=np.int64)
     new_f[forder] = np.arange(m, dtype=np.int64)
-    twin2 = renumber_twins(np.take(twin.reshape(m, 3), forder, axis=0).ravel(), new_f)
-    U2, W2 = half_edge_ends(F2)
+    F2 = np.empty_like(F)
+    twin2 = np.empty_like(twin)
+    U2, W2 = np.empty_like(twin), np.empty_like(twin)
+    twin3 = twin.reshape(m, 3)
+
+    def block(a, b):
+        Fb = np.take(new_v, np.take(F, forder[a:b], axis=0))
+        F2[a:b] = Fb
+        U2[3 * a:3 * b] = np.take(Fb, [1, 2, 0], axis=1).ravel()
+        W2[3 * a:3 * b] = np.take(Fb, [2, 0, 1], axis=1).ravel()
+        t = np.take(twin3, forder[a:b], axis=0).ravel()
+        f, c = np.divmod(np.maximum(t, 0), 3)           # half-edge 3 f + c -> 3 new_f[f] + c
+        h = np.take(new_f, f)
+        h *= 3
+        h += c
+        twin2[3 * a:3 * b] = np.where(t >= 0, h, t)
+
+    run_blocks(block, blocks(m, _PAIR_BLOCK // 3))
     return V[order], F2, twin2, U2, W2, order, forder
+
+
+def _faces_by_smallest(F, new_v):
+    """Face order by (smallest new vertex index ``new_v[F]``, face index):
+    ``argsort(min * m + f)``, from one sort of those unique keys."""
+    m = F.shape[0]
+    bits = max(1, int(m - 1).bit_length())
+    key = np.empty(m, dtype=np.int64)
+
+    def block(a, b):
+        Fb = np.take(new_v, F[a:b])
+        k = np.minimum(np.minimum(Fb[:, 0], Fb[:, 1]), Fb[:, 2])
+        k <<= bits
+        k |= np.arange(a, b, dtype=np.int64)
+        key[a:b] = k
+
+    run_blocks(block, blocks(m, _PAIR_BLOCK // 3))
+    key.sort()
+    key &= np.int64((1 << bits) - 1)
+    return key
 
 
 def half_edge_ends(F, h=None):
@@ -147,52 +179,169 @@ def edge_representatives(twin, boundary=True, step=_REP_SLICE):
     return np.concatenate(parts)
 
 
+def interior_edges(twin):
+    """Every interior edge once: its half-edge ``h < twin[h]`` (ascending,
+    :func:`edge_representatives`) and that twin, ``(h, twin[h])``, (k,) int64 each."""
+    h = edge_representatives(twin, boundary=False)
+    return h, np.take(twin, h)
+
+
 def twin_table(F, n_vertices, *, ends=None):
     """Twin of every half-edge (see the module docstring), (3m,) int64.
 
-    One sort of the undirected edge keys; edges used once are boundary
-    (``-1``), twice are paired, more than twice non-manifold (``-2``).
-    ``ends`` may pass ``half_edge_ends(F)`` when the caller has it.
+    One sort of the undirected edge keys (:func:`sort_keys`); edges used once
+    are boundary (``-1``), twice are paired, more than twice non-manifold
+    (``-2``). ``ends`` may pass ``half_edge_ends(F)`` when the caller has it.
     """
-    U, W = half_edge_ends(F) if ends is None else ends
-    size = U.size
+    size = 3 * F.shape[0]
     twin = np.full(size, BOUNDARY, dtype=np.int64)
     if size == 0:
         return twin
     nn = max(n_vertices, 1)
-    key = np.minimum(U, W)
-    key *= np.int64(nn)
-    key += np.maximum(U, W)
-    bits = int(size - 1).bit_length()
-    if (nn * nn) << bits <= 1 << 63:
-        # sort (key, h) packed in one int64: a plain sort, no indirection
-        key <<= bits
-        key |= np.arange(size, dtype=np.int64)
-        key.sort(kind="stable")
-        order = key & np.int64((1 << bits) - 1)
-        ks = key >> bits
-    else:
-        order = np.argsort(key, kind="stable")
-        ks = key[order]
-    eq = ks[1:] == ks[:-1]          # sorted position i and i+1 are the same edge
+    order, ks = sort_keys(_half_edge_keys(F, nn, ends), nn * nn)
+    run_blocks(lambda a, b: _pair_runs(ks, order, twin, a, b), _run_spans(ks, _PAIR_BLOCK))
+    return twin
+
+
+#: half-edges per block of the twin table's passes (temporaries stay in cache)
+_PAIR_BLOCK = 1 << 16
+
+
+def _half_edge_keys(F, nn, ends):
+    """``lo * nn + hi`` of every half-edge's ends, (3m,) int64, face block by
+    face block (``ends``: ``half_edge_ends(F)`` when the caller has it)."""
+    m = F.shape[0]
+    key = np.empty(3 * m, dtype=np.int64)
+    nn = np.int64(nn)
+
+    def block(a, b):
+        if ends is not None:
+            pairs = [(ends[0][3 * a:3 * b], ends[1][3 * a:3 * b], key[3 * a:3 * b])]
+        else:
+            cols = [F[a:b, 0], F[a:b, 1], F[a:b, 2]]
+            out = key[3 * a:3 * b].reshape(-1, 3)
+            pairs = [(cols[(c + 1) % 3], cols[(c + 2) % 3], out[:, c]) for c in range(3)]
+        for u, w, out in pairs:
+            lo = np.minimum(u, w)
+            lo *= nn
+            lo += np.maximum(u, w)
+            out[...] = lo
+
+    run_blocks(block, blocks(m, _PAIR_BLOCK // 3))
+    return key
+
+
+def _run_spans(ks, size):
+    """Blocks of about ``size`` positions of the sorted keys ``ks`` that never
+    split a run of equal keys."""
+    cuts = [0]
+    for _, b in blocks(ks.size, size)[:-1]:
+        b = int(np.searchsorted(ks, ks[b]))          # back to the start of b's run
+        if b > cuts[-1]:
+            cuts.append(b)
+    cuts.append(ks.size)
+    return list(zip(cuts[:-1], cuts[1:]))
+
+
+def _pair_runs(ks, order, twin, a, b):
+    """Twins of the sorted half-edges ``order[a:b]`` (whole runs of equal
+    keys ``ks``): runs of two are each other's twin, longer runs
+    ``NON_MANIFOLD``, single ones stay ``BOUNDARY``."""
+    k = ks[a:b]
+    eq = k[1:] == k[:-1]            # sorted position i and i+1 are the same edge
     if not eq.any():
-        return twin
-    before = np.empty_like(eq)
-    before[0] = False
-    before[1:] = eq[:-1]
-    after = np.empty_like(eq)
-    after[-1] = False
-    after[:-1] = eq[1:]
-    lone = before | after           # i and i+1 belong to a run of 3 or more
+        return
+    o = order[a:b]
+    lone = np.zeros(eq.size, dtype=bool)   # i and i+1 belong to a run of 3 or more
+    lone[1:] = eq[:-1]
+    lone[:-1] |= eq[1:]
     pair = np.flatnonzero(eq & ~lone)
-    h0, h1 = order[pair], order[pair + 1]
+    h0, h1 = o[pair], o[pair + 1]
     twin[h0] = h1
     twin[h1] = h0
     multi = np.flatnonzero(eq & lone)
     if multi.size:
-        twin[order[multi]] = NON_MANIFOLD
-        twin[order[multi + 1]] = NON_MANIFOLD
-    return twin
+        twin[o[multi]] = NON_MANIFOLD
+        twin[o[multi + 1]] = NON_MANIFOLD
+
+
+#: bins of the histogram that splits a sort too wide to pack into key ranges
+_SORT_BINS = 1 << 12
+
+
+def sort_keys(key, bound):
+    """``order = np.argsort(key, kind="stable")`` and ``key[order]`` for keys
+    in ``[0, bound)``, from plain sorts of ``key << bits | index`` (unique
+    values: far faster than a stable argsort, and the same result).
+
+    Keys too wide to pack with their index are split into key ranges that
+    can be (a histogram of the keys' high bits), sorted range by range.
+    ``key`` (int64) is overwritten.
+    """
+    size = key.size
+    bits = max(int(size - 1).bit_length(), 1)
+    if bound <= 1 << (63 - bits):
+        return _packed_sort(key, bits)
+    shift = max(0, int(bound - 1).bit_length() - _SORT_BINS.bit_length() + 1)
+    spans = blocks(size, _PAIR_BLOCK)
+    count = sum(run_each(lambda ab: np.bincount(key[ab[0]:ab[1]] >> shift,
+                                                minlength=int((bound - 1) >> shift) + 1), spans))
+    ranges = _key_ranges(count, shift)
+    if ranges is None:
+        order = np.argsort(key, kind="stable")
+        return order, key[order]
+    of_bin = np.repeat(np.arange(len(ranges), dtype=np.uint16), [hi - lo for lo, hi in ranges])
+    bucket = np.empty(size, dtype=np.uint16)
+
+    def label(a, b):
+        bucket[a:b] = of_bin.take(key[a:b] >> shift)
+
+    run_blocks(label, spans)
+    order = np.empty(size, dtype=np.int64)
+    ks = np.empty(size, dtype=np.int64)
+    starts = np.cumsum([0] + [int(count[lo:hi].sum()) for lo, hi in ranges])
+
+    def one(r):
+        sel = np.flatnonzero(bucket == r)
+        k = key.take(sel)
+        base = np.int64(ranges[r][0] << shift)
+        k -= base
+        local, k = _packed_sort(k, max(int(sel.size - 1).bit_length(), 1))
+        k += base
+        ks[starts[r]:starts[r + 1]] = k
+        np.take(sel, local, out=order[starts[r]:starts[r + 1]])
+
+    run_each(one, range(len(ranges)))
+    return order, ks
+
+
+def _packed_sort(key, bits):
+    """:func:`sort_keys` when ``key << bits`` fits in 63 bits (in place)."""
+    key <<= bits
+    key |= np.arange(key.size, dtype=np.int64)
+    key.sort()
+    order = key & np.int64((1 << bits) - 1)
+    key >>= bits
+    return order, key
+
+
+def _key_ranges(count, shift):
+    """Consecutive ranges ``(lo, hi)`` of histogram bins (``count``: keys per
+    bin of ``2**shift`` keys) whose keys pack with their index in the range
+    into 63 bits, or None when one bin alone does not."""
+    ranges, lo, total = [], 0, 0
+    for i, c in enumerate(count.tolist()):
+        width = (i + 1 - lo) << shift
+        if total + c and width << max(int(total + c - 1).bit_length(), 1) > 1 << 63:
+            if i == lo:
+                return None
+            ranges.append((lo, i))
+            lo, total = i, 0
+            if (1 << shift) << max(int(c - 1).bit_length(), 1) > 1 << 63:
+                return None
+        total += c
+    ranges.append((lo, count.size))
+    return ranges
 
 
 def corner_fans(F, twin, U, W, vertices, n_vertices):
@@ -235,10 +384,11 @@ def _fans_union_find(F, twin, U, W, vertices, n_vertices):
     return np.bincount(F.ravel()[nodes[roots == nodes]], minlength=n_vertices)
 
 
-def _walk_fans(twin, U, v, e, corners):
+def _walk_fans(twin, Fr, v, e, corners):
     """Lock-step walks around vertices ``v`` from the exit half-edges ``e``
-    (in the first face). Returns the vertices found with several fans and
-    those still walking after ``_MAX_WALK`` steps."""
+    (in the first face; ``Fr``: the faces' corners, ``F.ravel()``). Returns
+    the vertices found with several fans and those still walking after
+    ``_MAX_WALK`` steps."""
     base0 = e - e % 3                                     # first face (3 f) of the walk
     # once a walk has seen more than corners - 3 faces, the rest cannot hold
     # another (closed) fan: one fan. A walk that ends before that is one of several.
@@ -254,54 +404,56 @@ def _walk_fans(twin, U, v, e, corners):
         found.append(v[stop])
         go = np.flatnonzero(~stop & (left > 0))
         v, t, jt, base0, left = v[go], t[go], jt[go], base0[go], left[go] - 1
-        # leave the new face through its other edge at v
-        e = t + np.where(U[t] == v, PREV_OFFSET[jt], NEXT_OFFSET[jt])
+        # leave the new face through its other edge at v (t's first end: U[t])
+        e = t + np.where(Fr[t + NEXT_OFFSET[jt]] == v, PREV_OFFSET[jt], NEXT_OFFSET[jt])
     return np.concatenate(found) if found else v[:0], v
 
 
-def non_manifold_vertices(F, n_vertices, twin, *, ends=None):
+def non_manifold_vertices(F, n_vertices, twin, *, ends=None, corners=None):
     """Boolean mask of vertices on a non-manifold edge or whose faces form
     more than one fan (bow-tie vertices), (n,) bool.
 
     ``F`` must be clean (no degenerate or duplicate faces, as after
-    :func:`core.clean.clean_mesh`); ``twin`` is ``twin_table(F, n_vertices)`` and
-    ``ends`` may pass ``half_edge_ends(F)``. Fans are counted as described in
-    the module docstring: from the corner and open-edge counts, walking only
-    around the vertices where a second closed fan could hide.
+    :func:`core.clean.clean_mesh`); ``twin`` is ``twin_table(F, n_vertices)``,
+    ``ends`` may pass ``half_edge_ends(F)`` and ``corners`` the faces at
+    each vertex, ``np.bincount(F.ravel(), minlength=n_vertices)``. Fans are
+    counted as described in the module docstring: from the corner and
+    open-edge counts, walking only around the vertices where a second closed
+    fan could hide.
     """
-    U, W = half_edge_ends(F) if ends is None else ends
     n = n_vertices
     bad = np.zeros(n, dtype=bool)
     if twin.size == 0:
         return bad
-    nm = np.flatnonzero(twin == NON_MANIFOLD)
-    bad[U[nm]] = True
-    bad[W[nm]] = True
     Fr = F.ravel()
-    corners = np.bincount(Fr, minlength=n)
+    nm = np.flatnonzero(twin == NON_MANIFOLD)
+    for end in half_edge_ends(F, nm):
+        bad[end] = True
+    if corners is None:
+        corners = np.bincount(Fr, minlength=n)
     hopen = np.flatnonzero(twin < 0)
-    Uo, Wo = U[hopen], W[hopen]
+    Uo, Wo = half_edge_ends(F, hopen)
     paths = (np.bincount(Uo, minlength=n) + np.bincount(Wo, minlength=n)) // 2
     bad |= paths > 1
     # a closed fan has >= 3 corners: one path plus a cycle needs 4, two cycles 6
     walk = ~bad & (corners >= np.where(paths == 0, 6, 4))
-    # start: the face after an open end, else any face, leaving through an edge at v
-    start = np.full(n, -1, dtype=np.int64)
-    start[F[:, 0]] = 3 * np.arange(F.shape[0], dtype=np.int64) + 2   # 3f+2 leaves F[f, 0]
-    if (walk & (start < 0)).any():
-        start[U] = np.arange(U.size, dtype=np.int64)      # half-edge h leaves U[h]
+    # start: the face after an open end, else any face (a walk around one fan
+    # meets every face of it from any start), leaving through an edge at v
+    start = np.empty(n, dtype=np.int64)
+    f3 = 3 * np.arange(F.shape[0], dtype=np.int64)
+    for c, leaving in ((2, 1), (1, 0), (0, 2)):           # 3f+2 leaves F[f, 0], ...
+        start[F[:, c]] = f3 + leaving
+    del f3
     j = hopen % 3
     start[Uo] = hopen + PREV_OFFSET[j]                      # the other edge at U in that face
     start[Wo] = hopen + NEXT_OFFSET[j]                      # the other edge at W
-    # walk in chunks of vertices: every temporary stays small (in cache)
     todo = np.flatnonzero(walk)
-    rest = []
-    for i in range(0, todo.size, _WALK_CHUNK):
-        v = todo[i:i + _WALK_CHUNK]
-        bad_v, left_v = _walk_fans(twin, U, v, start[v], corners[v])
+    chunks = [todo[i:i + _WALK_CHUNK] for i in range(0, todo.size, _WALK_CHUNK)]
+    walked = run_each(lambda v: _walk_fans(twin, Fr, v, start[v], corners[v]), chunks)
+    for bad_v, _ in walked:
         bad[bad_v] = True
-        rest.append(left_v)
-    rest = np.concatenate(rest) if rest else todo[:0]
+    rest = np.concatenate([left for _, left in walked]) if walked else todo[:0]
     if rest.size:  # very high valence: union-find the rest
+        U, W = half_edge_ends(F) if ends is None else ends
         bad[rest[_fans_union_find(F, twin, U, W, rest, n)[rest] > 1]] = True
     return bad

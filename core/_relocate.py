@@ -30,9 +30,10 @@ caller's and frozen non-manifold ones) do not move.
 import numpy as np
 
 from ._collapse import compactness
+from ._face_tracker import FaceTracker, stable_argsort
+from ._groups import group_argmin, ragged_ranges
 from .cg import conjugate_gradient
 from .mesh import barycentric_gather, barycentric_scatter
-from .spatial import TriangleIndex
 
 #: the relocation's solves stop early only once converged this far (they run
 #: ``cg_iters`` steps otherwise: a few steps are enough to move towards the samples)
@@ -47,27 +48,33 @@ def _gather(idx, b, x):
 
 def normal_blocks(group, b, n_groups):
     """B^T B of the sample-to-cage operator B (see ``_gather``) as one
-    symmetric 3x3 block per triangle: ``M[g] = sum of b b^T`` over the rows
-    ``b`` (3,s) on triangle ``group`` (s,). (n_groups, 3, 3) float64. With
-    the blocks a product costs the triangles, not the (many more) rows."""
-    M = np.empty((n_groups, 3, 3))
+    symmetric 3x3 block per triangle: ``M[:, :, g] = sum of b b^T`` over the
+    rows ``b`` (3,s) on triangle ``group`` (s,). (3, 3, n_groups) float64,
+    each entry's values contiguous. With the blocks a product costs the
+    triangles, not the (many more) rows."""
+    M = np.empty((3, 3, n_groups))
     for i in range(3):
         for j in range(i, 3):
-            M[:, i, j] = np.bincount(group, weights=b[i] * b[j], minlength=n_groups)
-            M[:, j, i] = M[:, i, j]
+            M[i, j] = np.bincount(group, weights=b[i] * b[j], minlength=n_groups)
+            M[j, i] = M[i, j]
     return M
 
 
 def block_matvec(G, M, x, lam):
     """(B^T B + diag(lam)) x from the blocks ``M`` of :func:`normal_blocks`
-    on the triangles ``G`` (g,3) (their corners in the rows' order)."""
+    on the triangles ``G`` (3,g) (row c: corner c of every triangle, in the
+    rows' order); ``x`` (n,d), returns (n,d)."""
     n = x.shape[0]
-    Y = np.einsum("gij,gjk->gik", M, np.take(x, G, axis=0))     # (g, corner, coordinate)
-    out = lam[:, None] * x
-    for c in range(3):
-        for d in range(x.shape[1]):
-            out[:, d] += np.bincount(G[:, c], weights=Y[:, c, d], minlength=n)
-    return out
+    xT = np.ascontiguousarray(x.T)
+    out = lam * xT                                                # (d, n)
+    for d in range(x.shape[1]):
+        X0, X1, X2 = (xT[d].take(G[c]) for c in range(3))
+        for c in range(3):
+            y = M[c, 0] * X0
+            y += M[c, 1] * X1
+            y += M[c, 2] * X2
+            out[d] += np.bincount(G[c], weights=y, minlength=n)
+    return np.ascontiguousarray(out.T)
 
 
 def _normals(V, F):
@@ -91,18 +98,53 @@ def _compactness(V, F, l):
 _BACK_BARY = np.array([[2.0, 2.0, 2.0], [4.0, 1.0, 1.0], [1.0, 4.0, 1.0], [1.0, 1.0, 4.0]]) / 6.0
 
 
-def _back_rows(V, F, surface, total):
+def _back_rows(V, F, surface, total, cage_of=None):
     """Rows of the backward term: (idx (3,r), b (3,r), targets (r,3), the
     cage face of each (r,)), each row scaled by the square root of its weight
     (``total`` shared out by the area each point stands for) so it can join
-    the forward rows unchanged."""
+    the forward rows unchanged. ``surface`` is a :class:`FaceTracker` of the
+    input; on its first call the search for each point starts at the input
+    vertex nearest to it among those merged into its face's corners
+    (``cage_of``, see :func:`_merged_nearest`), or is exact (``None``)."""
     m, k = F.shape[0], _BACK_BARY.shape[0]
     idx = np.repeat(F.T, k, axis=1)                                   # (3, m*k)
     b = np.tile(_BACK_BARY.T, (1, m))                                 # (3, m*k)
-    T = surface.closest(_gather(idx, b, V)).point
+    X = _gather(idx, b, V)
+    near = None
+    if surface.face is None and cage_of is not None:
+        near = _merged_nearest(X, F, _BACK_BARY, V.shape[0], surface.V, cage_of)
+    T = surface.closest(X, near).point
     area = np.linalg.norm(_normals(V, F), axis=1)
     w = np.sqrt(np.repeat(area * (total / max(k * float(area.sum()), 1e-300)), k))
     return idx, b * w, T * w[:, None], np.repeat(np.arange(m, dtype=np.int64), k)
+
+
+def _merged_nearest(X, F, bary, n, Vin, cage_of):
+    """For each point in ``X`` (m*k,3) (k per cage face, face by face, at the
+    barycentrics ``bary`` (k,3)), the input vertex nearest to it among those
+    merged into the corners of its face with the largest weight (all three
+    for a centroid): ``cage_of`` (n_in,) is the cage vertex (of ``n``) each
+    input vertex went to, -1 for none (or not to be used). (m*k,) int64, -1
+    where no input vertex went to those corners."""
+    ok = np.flatnonzero(cage_of >= 0)
+    members = ok[stable_argsort(cage_of[ok])]
+    count = np.bincount(cage_of[ok], minlength=n)
+    home = bary == bary.max(axis=1, keepdims=True)                     # (k,3)
+    m, k = F.shape[0], home.shape[0]
+    corners = np.take(F, np.tile(np.flatnonzero(home.ravel()) % 3, m)
+                      + 3 * np.repeat(np.arange(m), home.sum()))    # point by point
+    at, own = ragged_ranges((np.cumsum(count) - count)[corners], count[corners])
+    point = np.repeat(np.arange(m * k), np.tile(home.sum(axis=1), m))[own]
+    cand = members[at]
+    d2 = np.zeros(cand.size)
+    for a, x in zip(Vin.T, X.T):
+        d = a.take(cand) - x.take(point)
+        d *= d
+        d2 += d
+    out = np.full(m * k, -1, dtype=np.int64)
+    per = np.bincount(point, minlength=m * k)
+    out[per > 0] = cand[group_argmin(d2, per[per > 0])]
+    return out
 
 
 _SEG_T = np.array([0.25, 0.5, 0.75])   #: points along each cage border edge (backward)
@@ -114,32 +156,84 @@ def segment_triangles(E):
     return np.concatenate([E, E[:, 1:]], axis=1)
 
 
-def _border_rows(V, C, Eb, C_index, weight):
-    """Rows tying the cage's border edges ``Eb`` to the input's border: each
-    input border point ``C`` to its closest cage border edge (forward), and
-    points along every cage border edge to the closest input border edge
-    ``C_index`` (backward, as much weight in all as the forward rows, shared
-    by length). Returns (idx (3,r), b (3,r), targets (r,3), the border edge
-    of each (r,)), rows pre-scaled by the square roots of their weights, and
-    the border edges as triangles (:func:`segment_triangles`)."""
-    T3 = segment_triangles(Eb)
-    cp = TriangleIndex(V, T3).closest(C)
+def _border_rows(V, C, cage, surface, weight, near=None, cage_of=None):
+    """Rows tying the cage's border edges to the input's border: each input
+    border point ``C`` to its closest cage border edge (forward; ``cage`` a
+    :class:`FaceTracker` of the cage's border edges as
+    :func:`segment_triangles`, its searches started at ``near`` on the first
+    call), and points along every cage border edge to the closest input
+    border edge (backward, ``surface`` the input's, first searched from the
+    input border vertices merged into the edge's ends, ``cage_of`` -1 for
+    the others: see :func:`_merged_nearest`; as much weight in all as the
+    forward rows, shared by length). Returns (idx (3,r), b (3,r),
+    targets (r,3), the border edge of each (r,)), rows pre-scaled by the
+    square roots of their weights."""
+    T3 = cage.F
+    cage.place(V)
+    cp = cage.closest(C, near)
     idx_f = np.take(T3, cp.face, axis=0).T
     b_f = cp.bary.T * np.sqrt(weight)
     k = _SEG_T.size
     idx_b = np.repeat(T3.T, k, axis=1)
-    t = np.tile(_SEG_T, Eb.shape[0])
+    t = np.tile(_SEG_T, T3.shape[0])
     b_b = np.stack([1.0 - t, t, np.zeros_like(t)])
-    Tb = C_index.closest(_gather(idx_b, b_b, V)).point
-    length = np.linalg.norm(V[Eb[:, 1]] - V[Eb[:, 0]], axis=1)
+    X = _gather(idx_b, b_b, V)
+    start = None
+    if surface.face is None and cage_of is not None:
+        start = _merged_nearest(X, T3, b_b[:, :k].T, V.shape[0], surface.V, cage_of)
+    Tb = surface.closest(X, start).point
+    length = np.linalg.norm(V[T3[:, 1]] - V[T3[:, 0]], axis=1)
     w = np.sqrt(np.repeat(length * (weight * C.shape[0] / max(k * float(length.sum()), 1e-300)), k))
     return (np.concatenate([idx_f, idx_b], axis=1), np.concatenate([b_f, b_b * w], axis=1),
             np.concatenate([C * np.sqrt(weight), Tb * w[:, None]]),
-            np.concatenate([cp.face, np.repeat(np.arange(Eb.shape[0], dtype=np.int64), k)]), T3)
+            np.concatenate([cp.face, np.repeat(np.arange(T3.shape[0], dtype=np.int64), k)]))
+
+
+class _Pulls:
+    """The terms of one relocation: the closest-point searches, kept from
+    round to round (:class:`FaceTracker`), and the rows they give."""
+
+    def __init__(self, F, n, P, P_near, surface, back, cage_of, border, border_near, steps):
+        self.F, self.P, self.P_near, self.cage_of = F, P, P_near, cage_of
+        self.forward = FaceTracker(F, n, steps)
+        self.backward = None
+        if surface is not None and back > 0.0:
+            self.backward = FaceTracker(surface[1], surface[0].shape[0], steps)
+            self.backward.place(surface[0])
+            self.back_total = back * P.shape[0]
+        self.border = None
+        if border is not None and border[1].shape[0] and border[0].shape[0]:
+            C, Eb, (Vin, Sin), weight = border
+            cage = FaceTracker(segment_triangles(Eb), n, steps)
+            inside = FaceTracker(Sin, Vin.shape[0], steps)
+            inside.place(Vin)
+            on = None
+            if cage_of is not None:               # only the input's border vertices
+                on = np.full(cage_of.shape[0], -1, dtype=np.int64)
+                on[Sin.ravel()] = cage_of[Sin.ravel()]
+            self.border = (C, cage, inside, weight, border_near, on)
+
+    def rows(self, V):
+        """Rows of every term for the cage at ``V`` (idx (3,r), b (3,r),
+        targets (r,3), the triangle of each (r,)) and the triangles (g,3)."""
+        F = self.F
+        self.forward.place(V)
+        cp = self.forward.closest(self.P, self.P_near)
+        # (3,s) vertices, (3,s) weights, targets, and the triangle of each row
+        rows = [(np.take(F, cp.face, axis=0).T, cp.bary.T, self.P, cp.face)]
+        tris = [F]
+        if self.backward is not None:
+            rows.append(_back_rows(V, F, self.backward, self.back_total, self.cage_of))
+        if self.border is not None:
+            idx, b, T, group = _border_rows(V, *self.border)
+            rows.append((idx, b, T, group + F.shape[0]))
+            tris.append(self.border[1].F)
+        return rows, np.concatenate(tris)
 
 
 def relocate(V, F, P, movable, *, iters=2, cg_iters=15, reg=0.05, min_cos=0.2, N_keep=None,
-             surface=None, back=0.0, border=None, min_compact=0.0, min_move=0.0):
+             surface=None, back=0.0, border=None, min_compact=0.0, min_move=0.0,
+             P_near=None, cage_of=None, border_near=None, walk_steps=8):
     """Move ``movable`` vertices of the cage ``(V, F)`` towards points ``P``.
 
     Parameters
@@ -160,15 +254,28 @@ def relocate(V, F, P, movable, *, iters=2, cg_iters=15, reg=0.05, min_cos=0.2, N
     min_compact : float, a moved face less compact than this (``4 sqrt(3) area /
         sum of squared edges``, 1 for equilateral) and than half its own
         compactness before is undone too (no new slivers).
-    surface : TriangleIndex of the input surface or None (no backward term).
+    surface : None (no backward term) or the input surface ``(Vin, Fin)``
+        ((n_in,3) float64, (m_in,3) int64).
     back : float, weight of the backward term: the cage's whole area counts
         ``back`` times as much as all the forward points together.
     border : None or (C (c,3) input border points, Eb (k,2) cage border edges,
-        TriangleIndex of the input's border edges, weight per point): ties the
-        cage's borders to the input's in both directions.
+        the input's border edges as ``(Vin, segment_triangles(E_in))``,
+        weight per point): ties the cage's borders to the input's in both
+        directions.
     min_move : float, stop once an update moves no vertex farther than this
         share of the cage's mean edge length (it has settled: a flat cage on
         a flat input does not move at all).
+    P_near : (s,) int64 or None, a cage vertex near each point of ``P`` (the
+        one its input vertex was merged into; -1: unknown), where the search
+        for its closest cage face starts (else: an exact search).
+    cage_of : (n_in,) int64 or None, the cage vertex each input vertex was
+        merged into (-1: none): the backward term's search for the input
+        point closest to a cage point starts among the input vertices merged
+        into its face's corners (else: an exact search).
+    border_near : (c,) int64 or None, as ``P_near`` for the border points ``C``.
+    walk_steps : int, the searches then walk over the meshes, and in every
+        later update from the last answers, at most this many steps
+        (:class:`~._face_tracker.FaceTracker`).
 
     Returns
     -------
@@ -180,51 +287,69 @@ def relocate(V, F, P, movable, *, iters=2, cg_iters=15, reg=0.05, min_cos=0.2, N
         return V
     N_ref = _normals(V, F)
     g0 = _compactness(V, F, np.linalg.norm(N_ref, axis=1))  # of the cage as it came
-    use_back = surface is not None and back > 0.0
     settled = min_move * float(np.sqrt(_squared_edges(V, F)).mean())
+    pulls = _Pulls(F, n, P, P_near, surface, back, cage_of, border, border_near, walk_steps)
     for _ in range(iters):
-        cp = TriangleIndex(V, F).closest(P)
-        # (3,s) vertices, (3,s) weights, targets, and the triangle of each row
-        rows = [(np.take(F, cp.face, axis=0).T, cp.bary.T, P, cp.face)]
-        tris = [F]
-        if use_back:
-            rows.append(_back_rows(V, F, surface, back * P.shape[0]))
-        if border is not None and border[1].shape[0] and border[0].shape[0]:
-            *r, T3 = _border_rows(V, *border)
-            rows.append((*r[:3], r[3] + F.shape[0]))
-            tris.append(T3)
-        idx = np.concatenate([r[0] for r in rows], axis=1)   # C-contiguous copies
-        b = np.concatenate([r[1] for r in rows], axis=1)
-        T = np.concatenate([r[2] for r in rows])
-        G = np.concatenate(tris)
-        M = normal_blocks(np.concatenate([r[3] for r in rows]), b, G.shape[0])
-        diag = np.bincount(idx.ravel(), weights=(b * b).ravel(), minlength=n)
-        lam = reg * diag + reg * max(float(diag.mean()), 1e-300)
-        lam[~movable] = 1e30  # pinned
-        # solve (B^T B + lam) D = B^T (T - B V) for the displacement D by CG
-        r = barycentric_scatter(T - _gather(idx, b, V), idx.T, b.T, n)
-        r[~movable] = 0.0
-        D = conjugate_gradient(lambda X: block_matvec(G, M, X, lam), r, rtol=CG_RTOL,
-                               max_iterations=cg_iters).X
-        D[~movable] = 0.0
-        # undo moves that flip or flatten a face (sweeps: undoing can expose others;
-        # each sweep zeroes at least one move, and no move at all is valid)
-        l0 = np.linalg.norm(N_ref, axis=1)
-        while True:
-            Vn = V + D
-            N1 = _normals(Vn, F)
-            l1 = np.linalg.norm(N1, axis=1)
-            bad = np.einsum("ij,ij->i", N_ref, N1) <= min_cos * l0 * l1
-            if N_keep is not None:
-                bad |= np.einsum("ij,ij->i", N_keep, N1) <= 0.0
-            if min_compact > 0.0:
-                g1 = _compactness(Vn, F, l1)
-                bad |= (g1 < min_compact) & (g1 < 0.5 * g0)
-            bad &= np.any(D[F] != 0.0, axis=(1, 2))
-            if not bad.any():
-                break
-            D[F[bad].ravel()] = 0.0
+        rows, G = pulls.rows(V)
+        D = _solve(V, rows, G, movable, reg, cg_iters)
+        D = _undo_bad_moves(V, F, D, N_ref, g0, N_keep, min_cos, min_compact)
         V = V + D
         if np.abs(D).max() <= settled:
             break
     return V
+
+
+def _solve(V, rows, G, movable, reg, cg_iters):
+    """The displacement D (n,3) of the cage vertices ``V`` that minimises the
+    squared residuals of ``rows`` (idx (3,r), b (3,r), targets (r,3), the
+    triangle of ``G`` (g,3) of each) plus ``lam_j |D_j|^2`` (``lam`` ``reg``
+    times each vertex's own row weight plus the mean), ``cg_iters`` steps of
+    conjugate gradients on the normal equations; D = 0 where not ``movable``."""
+    n = V.shape[0]
+    idx = np.concatenate([r[0] for r in rows], axis=1)   # C-contiguous copies
+    b = np.concatenate([r[1] for r in rows], axis=1)
+    T = np.concatenate([r[2] for r in rows])
+    M = normal_blocks(np.concatenate([r[3] for r in rows]), b, G.shape[0])
+    diag = np.bincount(idx.ravel(), weights=(b * b).ravel(), minlength=n)
+    lam = reg * diag + reg * max(float(diag.mean()), 1e-300)
+    lam[~movable] = 1e30  # pinned
+    # solve (B^T B + lam) D = B^T (T - B V) for the displacement D by CG
+    r = barycentric_scatter(T - _gather(idx, b, V), idx.T, b.T, n)
+    r[~movable] = 0.0
+    GT = np.ascontiguousarray(G.T)
+    D = conjugate_gradient(lambda X: block_matvec(GT, M, X, lam), r, rtol=CG_RTOL,
+                           max_iterations=cg_iters).X
+    D[~movable] = 0.0
+    return D
+
+
+def _undo_bad_moves(V, F, D, N_ref, g0, N_keep, min_cos, min_compact):
+    """``D`` with the moves of every vertex of a face that would flip (turn by
+    more than ``acos(min_cos)`` from ``N_ref``, or end more than 90 degrees
+    from ``N_keep``) or become a new sliver undone (sweeps: undoing can expose
+    others, among the faces around the vertices it stopped; each sweep zeroes
+    at least one move, and no move at all is valid)."""
+    l0 = np.linalg.norm(N_ref, axis=1)
+    faces = np.arange(F.shape[0])
+    ring = None
+    while faces.size:
+        Fs = F[faces]
+        Vn = V + D
+        N1 = _normals(Vn, Fs)
+        l1 = np.linalg.norm(N1, axis=1)
+        bad = np.einsum("ij,ij->i", N_ref[faces], N1) <= min_cos * l0[faces] * l1
+        if N_keep is not None:
+            bad |= np.einsum("ij,ij->i", N_keep[faces], N1) <= 0.0
+        if min_compact > 0.0:
+            g1 = _compactness(Vn, Fs, l1)
+            bad |= (g1 < min_compact) & (g1 < 0.5 * g0[faces])
+        bad &= np.any(D[Fs] != 0.0, axis=(1, 2))
+        if not bad.any():
+            break
+        stopped = np.unique(Fs[bad])
+        D[stopped] = 0.0
+        if ring is None:
+            ring = stable_argsort(F.ravel()) // 3, np.bincount(F.ravel(), minlength=V.shape[0])
+        at, _ = ragged_ranges((np.cumsum(ring[1]) - ring[1])[stopped], ring[1][stopped])
+        faces = np.unique(ring[0][at])
+    return D

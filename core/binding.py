@@ -54,10 +54,11 @@ import numpy as np
 from .clean import clean_mesh
 from .errors import CancelledError, InvalidArgumentError, InvalidMeshError, TopologyMismatchError
 from .mesh import check_mesh
+from .near_query import NearQuery
 from .spatial import TriangleIndex, point_triangle_closest
 from .subdivide import subdivision_operator
 from ._groups import group_argmin, ragged_ranges
-from ._parallel import WORKERS, blocks, run_blocks
+from ._parallel import WORKERS, blocks, run_blocks, run_each
 
 #: relative length under which a normal or tangent counts as degenerate
 _DEGENERATE = 1e-12
@@ -342,25 +343,25 @@ def bind(V_dense, F_dense, V_cage, F_cage, *, levels=2, scheme="butterfly", crea
     Vf = op.apply(V_cage)
     VfT = np.ascontiguousarray(Vf.T)
     NfT = _vertex_normals_t(VfT, op.F_fine)
-    Nf = NfT.T
-    fine_face, bary = _closest_on(TriangleIndex(Vf, op.F_fine), V_dense,
-                                  _reporter(progress, 0.05, 0.6))
-    offset = _dense_offsets(VfT, NfT, op.F_fine, fine_face, bary, V_dense)
-    d_face, d_bary = _vertex_corners(op.F_fine, op.n_fine)
-    fine_detail = np.zeros((op.n_fine, 3))
+    detail = None
     if F_dense.shape[0]:
-        vfr = frames(Vf, Nf, op.F_fine[d_face], d_bary)
-        exact = detail_search == "exact" or (
-            detail_search == "auto" and F_dense.shape[0] <= _EXACT_DETAIL_FACES)
-        if exact:
-            # the detail comes from the surface as simplify saw it: no debris to
-            # pull a fine vertex off the scan, no double-sided sheets
-            surface = clean_mesh(V_dense, F_dense)
-            Vs, Fs = (surface.V, surface.F) if surface.F.shape[0] else (V_dense, F_dense)
-            q = _closest_on(TriangleIndex(Vs, Fs), vfr.point, _reporter(progress, 0.65, 0.95),
-                            point=True)
+        detail = "exact" if detail_search == "exact" or (
+            detail_search == "auto" and F_dense.shape[0] <= _EXACT_DETAIL_FACES) else "local"
+    # the fine surface's index and the dense side of the detail search do not
+    # depend on each other: built side by side on the worker threads
+    query, dense_side = run_each(lambda build: build(), [
+        lambda: NearQuery(Vf, op.F_fine), lambda: _detail_setup(V_dense, F_dense, detail)])
+    fine_face, bary = _closest_on(query, V_dense, _reporter(progress, 0.05, 0.6))
+    offset = _dense_offsets(VfT, NfT, op.F_fine, fine_face, bary, V_dense)
+    fine_detail = np.zeros((op.n_fine, 3))
+    if detail is not None:
+        d_face, d_bary = _vertex_corners(op.F_fine, op.n_fine)
+        vfr = frames(Vf, NfT.T, op.F_fine[d_face], d_bary)
+        if detail == "exact":
+            q = _closest_on(dense_side, vfr.point, _reporter(progress, 0.65, 0.95), point=True)
         else:
-            q = _dense_points_near(V_dense, F_dense, fine_face, op.F_fine, vfr.point)
+            q = _dense_points_near(V_dense, F_dense, dense_side, fine_face, op.F_fine,
+                                   vfr.point)
         fine_detail = _to_frame(q - vfr.point, vfr)
     return Binding(fine_face=fine_face, bary=bary, offset=offset, fine_detail=fine_detail,
                    F_cage=F_cage, n_cage=int(V_cage.shape[0]), levels=int(levels),
@@ -1016,15 +1017,44 @@ def _reporter(progress, lo, hi):
     return report
 
 
-def _dense_points_near(V_dense, F_dense, fine_face, F_fine, P):
+def _detail_setup(V_dense, F_dense, detail):
+    """What the refine detail search needs from the dense mesh alone: for
+    ``"exact"`` a :class:`~.spatial.TriangleIndex` over the dense surface as
+    simplify saw it (cleaned: no debris to pull a fine vertex off the scan, no
+    double-sided sheets), for ``"local"`` its :class:`_Fans`, else None."""
+    if detail == "exact":
+        surface = clean_mesh(V_dense, F_dense)
+        Vs, Fs = (surface.V, surface.F) if surface.F.shape[0] else (V_dense, F_dense)
+        return TriangleIndex(Vs, Fs)
+    if detail == "local":
+        return _vertex_fans(F_dense, V_dense.shape[0])
+    return None
+
+
+class _Fans(NamedTuple):
+    """The faces around each vertex of a mesh (CSR, faces ascending)."""
+
+    degree: np.ndarray  #: (n,) int64 faces at each vertex
+    start: np.ndarray   #: (n,) int64 first entry of each vertex in ``faces``
+    faces: np.ndarray   #: (3m,) int64 faces, vertex by vertex
+
+
+def _vertex_fans(F, n):
+    """:class:`_Fans` of the triangles ``F`` over ``n`` vertices."""
+    degree = np.bincount(F.ravel(), minlength=n)
+    return _Fans(degree, np.cumsum(degree) - degree, np.argsort(F.ravel(), kind="stable") // 3)
+
+
+def _dense_points_near(V_dense, F_dense, fans, fine_face, F_fine, P):
     """A point of the dense surface near each fine vertex position ``P[j]``.
 
     Searched without a spatial index over the dense mesh, using the binding:
     take the dense vertex nearest to ``P[j]`` among those bound to the fine
     faces around ``j``, and return the closest point of ``P[j]`` on that
-    vertex's triangle fan, or on its two-ring where the fan's best point lies
-    on the fan's rim (the surface may come closer beyond it). Fine vertices with no bound dense vertex around
-    them (a dense mesh coarser than the cage there) use an exact
+    vertex's triangle fan (``fans``, the dense mesh's :class:`_Fans`), or on
+    its two-ring where the fan's best point lies on the fan's rim (the surface
+    may come closer beyond it). Fine vertices with no bound dense vertex
+    around them (a dense mesh coarser than the cage there) use an exact
     :class:`~.spatial.TriangleIndex` query. Every returned point lies on the
     dense surface; it is the closest one whenever the closest triangle
     lies in the two-ring of the nearest bound vertex (the usual case for a
@@ -1032,15 +1062,13 @@ def _dense_points_near(V_dense, F_dense, fine_face, F_fine, P):
     """
     n_d, m_f, n_f = V_dense.shape[0], F_fine.shape[0], P.shape[0]
     q = np.empty((n_f, 3))
-    degree = np.bincount(F_dense.ravel(), minlength=n_d)
+    degree, start_v, by_vertex = fans
     # dense vertices grouped by fine face; (fine vertex, incident fine face) sorted by vertex
     by_face = np.argsort(fine_face, kind="stable")
     cnt_f = np.bincount(fine_face, minlength=m_f)
     start_f = np.cumsum(cnt_f) - cnt_f
     inc = np.argsort(F_fine.ravel(), kind="stable")
     inc_j, inc_f = F_fine.ravel()[inc], inc // 3
-    by_vertex = np.argsort(F_dense.ravel(), kind="stable") // 3
-    start_v = np.cumsum(degree) - degree
     has_none = np.zeros(n_f, dtype=bool)
     all_in_faces = bool((degree > 0).all())      # no isolated dense vertex to skip
 

@@ -44,8 +44,9 @@ from typing import NamedTuple
 
 import numpy as np
 
-from ._clean import (BOUNDARY, NON_MANIFOLD, corner_fans, edge_representatives, face_keys,
-                     half_edge_ends, non_manifold_vertices, renumber_twins, twin_table)
+from ._clean import (BOUNDARY, NON_MANIFOLD, corner_fans, face_keys, half_edge_ends,
+                     interior_edges, non_manifold_vertices, renumber_twins, twin_table)
+from ._parallel import blocks, run_blocks
 from .errors import InvalidArgumentError
 from .mesh import bounding_box, check_mesh, diagonal_length, face_normals
 from .topology import connected_labels, edge_keys
@@ -186,12 +187,14 @@ def clean_mesh(V, F, *, weld_distance=WELD_DISTANCE, min_component_area=MIN_COMP
             raise InvalidArgumentError(
                 f"{_WHERE}: {name} must be a finite number >= 0, got {value!r}")
     n_in = V.shape[0]
-    used = np.bincount(F.ravel(), minlength=n_in) > 0
+    corners = np.bincount(F.ravel(), minlength=n_in)       # of the current F (None once it changes)
+    used = corners > 0
     counts = {"n_unreferenced_vertices": int(n_in - np.count_nonzero(used))}
     faces = np.arange(F.shape[0], dtype=np.int64)          # input face of each current face
     bad = _degenerate(F)
     n_degenerate = int(np.count_nonzero(bad))
-    F, faces = F[~bad], faces[~bad]
+    if n_degenerate:
+        F, faces, corners = F[~bad], faces[~bad], None
     twin = twin_table(F, n_in)
     shape = _shape(V, F, bounding_box(V if used.all() else V[used]))
     area = np.zeros(faces[-1] + 1 if faces.size else 0)
@@ -203,23 +206,27 @@ def clean_mesh(V, F, *, weld_distance=WELD_DISTANCE, min_component_area=MIN_COMP
         F = rep[F]
         bad = _degenerate(F)
         n_degenerate += int(np.count_nonzero(bad))
-        F, faces = F[~bad], faces[~bad]
+        F, faces, corners = F[~bad], faces[~bad], None
         twin = twin_table(F, n_in)
     counts["n_degenerate_faces"] = n_degenerate
     keep, found = _unique_faces(F, twin, n_in)
     counts.update(found)
     if not keep.all():
-        F, faces = F[keep], faces[keep]
+        F, faces, corners = F[keep], faces[keep], None
         twin = twin_table(F, n_in)
-    V, F, twin, to_input, found = _make_manifold(V, F, twin)
+    V, F, twin, to_input, found = _make_manifold(V, F, twin, corners)
     counts.update(found)
-    F, twin, found = _orient(F, twin)
+    inner = interior_edges(twin)
+    F, twin, found = _orient(F, twin, inner)
     counts.update(found)
+    if found["n_flipped_faces"]:
+        inner = interior_edges(twin)
     if protected is not None:
         protected = np.asarray(protected, dtype=bool)[to_input]
     # areas of the faces as they came (welds move corners by at most weld_distance)
     area = area[faces]
-    keep, found = _debris(area, F, twin, float(min_component_area), face_budget, protected)
+    keep, found = _debris(area, F, inner, float(min_component_area), face_budget, protected)
+    del inner
     counts.update(found)
     if not keep.all():
         F, faces, twin, area = F[keep], faces[keep], _keep_twins(twin, keep), area[keep]
@@ -245,19 +252,32 @@ class _Shape(NamedTuple):
 
 
 def _shape(V, F, box):
-    """:class:`_Shape` of the faces ``F`` (one pass over them, coordinate by
-    coordinate: two edge vectors, their cross product, three squared lengths);
-    ``box``: the bounding box ``(lo, hi)`` of the vertices they use."""
+    """:class:`_Shape` of the faces ``F`` (coordinate by coordinate: two edge
+    vectors, their cross product, three squared lengths; face block by face
+    block); ``box``: the bounding box ``(lo, hi)`` of the vertices they use."""
     lo, hi = box
     d = diagonal_length(lo, hi) or 1.0
     Vn = (V - lo) / d
     cols = np.ascontiguousarray(Vn.T)
-    FT = np.ascontiguousarray(F.T)
+    m = F.shape[0]
+    area, height = np.empty(m), np.empty(m)
+    run_blocks(lambda a, b: _face_shape(cols, F[a:b], area[a:b], height[a:b]),
+               blocks(m, _SHAPE_BLOCK))
+    return _Shape(Vn, (hi - lo) / d, area, height)
+
+
+#: faces per block of :func:`_shape` (temporaries stay in cache)
+_SHAPE_BLOCK = 1 << 14
+
+
+def _face_shape(cols, F, area, height):
+    """Area and height over the longest edge of the faces ``F`` (k,3), into
+    ``area`` and ``height`` (k,); ``cols``: the coordinates, (3,n)."""
     e1, e2 = [], []
     for c in cols:
-        a = np.take(c, FT[0])
-        e1.append(np.take(c, FT[1]) - a)
-        e2.append(np.take(c, FT[2]) - a)
+        a = np.take(c, F[:, 0])
+        e1.append(np.take(c, F[:, 1]) - a)
+        e2.append(np.take(c, F[:, 2]) - a)
     twice2 = ((e1[1] * e2[2] - e1[2] * e2[1]) ** 2 + (e1[2] * e2[0] - e1[0] * e2[2]) ** 2
               + (e1[0] * e2[1] - e1[1] * e2[0]) ** 2)
     l1 = e1[0] ** 2 + e1[1] ** 2 + e1[2] ** 2
@@ -265,7 +285,9 @@ def _shape(V, F, box):
     l3 = (e2[0] - e1[0]) ** 2 + (e2[1] - e1[1]) ** 2 + (e2[2] - e1[2]) ** 2
     longest2 = np.maximum(np.maximum(l1, l2), l3)
     height2 = np.divide(twice2, longest2, out=np.zeros_like(twice2), where=longest2 > 0)
-    return _Shape(Vn, (hi - lo) / d, 0.5 * np.sqrt(twice2), np.sqrt(height2))
+    np.sqrt(twice2, out=area)
+    area *= 0.5
+    np.sqrt(height2, out=height)
 
 
 def _weld_map(shape, F, twin, weld_distance):
@@ -283,8 +305,7 @@ def _weld_map(shape, F, twin, weld_distance):
     flat = np.flatnonzero(shape.height <= tol)
     if h.size == 0 and flat.size == 0:
         return rep
-    U, W = half_edge_ends(F)
-    cand = np.unique(np.concatenate([U[h], W[h], F[flat].ravel()]))
+    cand = np.unique(np.concatenate([*half_edge_ends(F, h), F[flat].ravel()]))
     P = V[cand] + 0.0                              # -0.0 and 0.0 are the same place
     cell = 4.0 * tol
     if cell > 0 and float(np.max(shape.extent)) / cell + 2 < 2 ** _GRID_BITS:
@@ -338,10 +359,8 @@ def _unique_faces(F, twin, n):
     found = {"n_duplicate_faces": 0, "n_double_sided_sheets": 0, "n_double_sided_faces": 0}
     if F.shape[0] == 0:
         return keep, found
-    t = twin.reshape(-1, 3)
-    g = np.where(t >= 0, t // 3, -1 - np.arange(3))   # distinct negatives never match
-    cand = (g[:, 0] == g[:, 1]) | (g[:, 1] == g[:, 2]) | (g[:, 0] == g[:, 2])
-    cand |= (t == NON_MANIFOLD).any(axis=1)
+    cand = np.empty(F.shape[0], dtype=bool)
+    run_blocks(lambda a, b: _may_repeat(twin[3 * a:3 * b], cand[a:b]), blocks(F.shape[0], _SHAPE_BLOCK))
     ci = np.flatnonzero(cand)
     if ci.size < 2:
         return keep, found
@@ -361,6 +380,17 @@ def _unique_faces(F, twin, n):
     found["n_duplicate_faces"] = int(drop.size - found["n_double_sided_faces"]
                                      - np.count_nonzero(~sheet & (size > 1)))
     return keep, found
+
+
+def _may_repeat(twin, out):
+    """Whether each face of the twin rows ``twin`` (3k,) meets one face
+    across two of its edges or has a non-manifold edge (all a face on the
+    same three vertices as another can do), into ``out`` (k,)."""
+    t = twin.reshape(-1, 3)
+    g = np.where(t >= 0, t // 3, -1 - np.arange(3))   # distinct negatives never match
+    np.equal(g[:, 0], g[:, 1], out=out)
+    out |= (g[:, 1] == g[:, 2]) | (g[:, 0] == g[:, 2])
+    out |= (t == NON_MANIFOLD).any(axis=1)
 
 
 def _one_side_mends(F, twin, n, faces, size):
@@ -460,19 +490,20 @@ def _pair_sheets(V, F, twin):
     return twin, int(start.size)
 
 
-def _split_fans(V, F, twin, to_input):
+def _split_fans(V, F, twin, to_input, corners=None):
     """One vertex per fan: every vertex whose faces form several fans (across
     ``twin``) keeps its index for the fan of its smallest corner and gets a
-    new vertex, at the same position, for each other fan.
+    new vertex, at the same position, for each other fan (``corners``: the
+    faces at each vertex, when the caller has them).
 
     Returns the new V, F, to_input (vertex -> input vertex) and the numbers of
     vertices split and added.
     """
     n = V.shape[0]
-    U, W = half_edge_ends(F)
-    bad = np.flatnonzero(non_manifold_vertices(F, n, twin, ends=(U, W)))
+    bad = np.flatnonzero(non_manifold_vertices(F, n, twin, corners=corners))
     if bad.size == 0:
         return V, F, to_input, 0, 0
+    U, W = half_edge_ends(F)
     nodes, roots = corner_fans(F, twin, U, W, bad, n)
     Fr = F.ravel()
     owner = Fr[nodes]
@@ -491,7 +522,7 @@ def _split_fans(V, F, twin, to_input):
             int(np.unique(fan_owner[extra]).size), int(extra.size))
 
 
-def _make_manifold(V, F, twin):
+def _make_manifold(V, F, twin, corners=None):
     """Pair the faces of non-manifold edges into sheets and split every
     vertex into its fans (see :func:`_pair_sheets`, :func:`_split_fans`).
 
@@ -500,13 +531,14 @@ def _make_manifold(V, F, twin):
     vertex and an edge stays shared by three faces. Such an edge is cut open
     (its pairs too) and the fans split again, until none is left; a face that
     still shares a cut edge with two others (a surface touching itself along
-    the edge) is detached (three vertices of its own). Returns V, F, the twin
-    table, the input vertex of every vertex and the counts.
+    the edge) is detached (three vertices of its own). ``corners``: the faces
+    at each vertex, when the caller has them. Returns V, F, the twin table,
+    the input vertex of every vertex and the counts.
     """
     pairing, n_nm = _pair_sheets(V, F, twin)
     ident = np.arange(V.shape[0], dtype=np.int64)
     for _ in range(_MAX_RECUTS):
-        V2, F2, to_input, n_split, n_added = _split_fans(V, F, pairing, ident)
+        V2, F2, to_input, n_split, n_added = _split_fans(V, F, pairing, ident, corners)
         if n_nm == 0 and n_added == 0:
             return V, F, twin, ident, {"n_non_manifold_edges": 0, "n_split_vertices": 0,
                                        "n_added_vertices": 0, "n_detached_faces": 0}
@@ -537,7 +569,7 @@ def _make_manifold(V, F, twin):
                                   "n_added_vertices": n_added, "n_detached_faces": n_detached}
 
 
-def _orient(F, twin):
+def _orient(F, twin, inner):
     """Flip faces so that every orientable component is consistent, keeping
     the orientation most of its faces have.
 
@@ -545,15 +577,16 @@ def _orient(F, twin):
     ``2f`` is face ``f`` as it is, ``2f+1`` flipped; two faces on an edge
     that agree join (as is, as is) and (flipped, flipped), two that disagree
     (as is, flipped) and (flipped, as is). A component whose face meets
-    itself flipped is non-orientable (left as it is).
+    itself flipped is non-orientable (left as it is). ``inner``: the interior
+    edges, ``interior_edges(twin)``.
     """
     found = {"n_flipped_faces": 0, "n_non_orientable_components": 0}
-    h = edge_representatives(twin, boundary=False)
+    h, t = inner
     if h.size == 0:
         return F, twin, found
-    t = twin[h]
-    U, W = half_edge_ends(F)
-    agree = U[h] == W[t]
+    # twins share their two ends, so they agree when they start at different ones
+    U = np.take(F, [1, 2, 0], axis=1).ravel()              # half_edge_ends(F)[0]
+    agree = np.take(U, h) != np.take(U, t)
     if agree.all():
         return F, twin, found
     m = F.shape[0]
@@ -585,17 +618,18 @@ def _orient(F, twin):
     return F, new_twin, found
 
 
-def _debris(area, F, twin, min_component_area, face_budget, protected):
-    """Faces to keep: all but those of components (joined across manifold
-    edges) whose area (``area``: per face) is below ``min_component_area``
-    times the largest's, or below the total over ``face_budget`` (never the
-    largest, nor one with a ``protected`` vertex)."""
+def _debris(area, F, inner, min_component_area, face_budget, protected):
+    """Faces to keep: all but those of components (joined across the
+    manifold edges ``inner``, ``interior_edges(twin)``) whose area (``area``:
+    per face) is below ``min_component_area`` times the largest's, or below
+    the total over ``face_budget`` (never the largest, nor one with a
+    ``protected`` vertex)."""
     keep = np.ones(F.shape[0], dtype=bool)
     found = {"n_debris_components": 0, "n_debris_faces": 0}
     if (min_component_area <= 0 and not face_budget) or F.shape[0] == 0:
         return keep, found
-    h = edge_representatives(twin, boundary=False)
-    labels = connected_labels(F.shape[0], np.stack([h // 3, twin[h] // 3], axis=1))
+    h, t = inner
+    labels = connected_labels(F.shape[0], np.stack([h // 3, t // 3], axis=1))
     comp_area = np.bincount(labels, weights=area, minlength=F.shape[0])
     roots = np.flatnonzero(labels == np.arange(F.shape[0]))
     tiny = comp_area < min_component_area * comp_area.max()

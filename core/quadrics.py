@@ -19,6 +19,8 @@ units (an RMS distance to the planes the vertex stands for).
 
 import numpy as np
 
+from ._parallel import blocks, run_blocks
+
 #: columns of a quadric stack
 N_COEFFS = 11
 
@@ -105,8 +107,8 @@ def _face_geometry(V, F):
     unit = np.empty((m, 3))
     d = np.empty(m)
     area = np.empty(m)
-    for a in range(0, m, _BLOCK):
-        b = min(a + _BLOCK, m)
+
+    def block(a, b):
         Fb = F[a:b]
         p0 = np.take(V, Fb[:, 0], axis=0)
         Nb = np.cross(np.take(V, Fb[:, 1], axis=0) - p0, np.take(V, Fb[:, 2], axis=0) - p0)
@@ -116,6 +118,8 @@ def _face_geometry(V, F):
         unit[a:b] = ub
         d[a:b] = -np.einsum("ij,ij->i", ub, p0)
         area[a:b] = 0.5 * length
+
+    run_blocks(block, blocks(m, _BLOCK))
     return N, unit, d, area
 
 

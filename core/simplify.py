@@ -53,6 +53,7 @@ import numpy as np
 
 from ._clean import BOUNDARY, NON_MANIFOLD, edge_representatives, half_edge_ends, spatial_order
 from ._collapse import State, run
+from ._parallel import blocks, run_blocks
 from ._relax import close_smallest_hole, close_triangular_holes, drop_stuck_components
 from ._relocate import relocate, segment_triangles
 from .clean import MIN_COMPONENT_AREA, WELD_DISTANCE, CleanReport, clean_mesh
@@ -228,13 +229,7 @@ def _initial_quadrics(V, F, twin, U, W, preserve_boundary, feature_angle_deg, tu
         items.append(edge_constraint_quadrics(V, E, Nf[hb // 3], tun.boundary_weight * L2))
         ends.append(E)
     if feature_angle_deg is not None:
-        hi = edge_representatives(twin, boundary=False)
-        t = twin[hi]
-        cosang = np.einsum("ij,ij->i", np.take(Nf, hi // 3, axis=0), np.take(Nf, t // 3, axis=0))
-        # faces that disagree on the edge's direction have opposite normal conventions
-        np.negative(cosang, out=cosang, where=U[hi] != W[t])
-        sharp = np.flatnonzero(cosang < np.cos(np.radians(feature_angle_deg)))
-        hs, ts = hi[sharp], t[sharp]
+        hs, ts = _sharp_edges(Nf, twin, U, W, np.cos(np.radians(feature_angle_deg)))
         feat[hs] = True
         feat[ts] = True
         E = np.stack([U[hs], W[hs]], axis=1)
@@ -250,6 +245,30 @@ def _initial_quadrics(V, F, twin, U, W, preserve_boundary, feature_angle_deg, tu
         vc, local = np.unique(Ec, return_inverse=True)
         QT[:, vc] += accumulate_coefficients(Qc, local.reshape(Ec.shape).T.ravel(), vc.size, 2)
     return QT.T, feat, Nraw  # (n,11) view of the coefficient-major array the engine uses
+
+
+#: half-edges per block of :func:`_sharp_edges`
+_SHARP_BLOCK = 1 << 16
+
+
+def _sharp_edges(Nf, twin, U, W, cos_max):
+    """The interior edges whose faces' unit normals ``Nf`` meet at a cosine
+    below ``cos_max``, as ``(h, twin[h])`` with ``h < twin[h]`` ascending;
+    half-edge block by half-edge block (``U``, ``W``: the half-edge ends)."""
+
+    def block(a, b):
+        h = np.flatnonzero(twin[a:b] > np.arange(a, b)) + a
+        t = np.take(twin, h)
+        cosang = np.einsum("ij,ij->i", np.take(Nf, h // 3, axis=0), np.take(Nf, t // 3, axis=0))
+        # faces that disagree on the edge's direction have opposite normal conventions
+        np.negative(cosang, out=cosang, where=np.take(U, h) != np.take(W, t))
+        sharp = np.flatnonzero(cosang < cos_max)
+        return h[sharp], t[sharp]
+
+    found = run_blocks(block, blocks(twin.size, _SHARP_BLOCK))
+    empty = np.zeros(0, dtype=np.int64)
+    return (np.concatenate([empty] + [h for h, _ in found]),
+            np.concatenate([empty] + [t for _, t in found]))
 
 
 def _normal_sums(F, N, n):
@@ -287,24 +306,28 @@ def _relocate_cage(mesh, Vn, creases, Eb_in, surface, tun):
     border edges ``Eb_in`` (k,2) are tied to the cage's, and ``surface`` (the
     input faces, or None) turns on the backward pull. Borders, creases and
     corners move too, towards the input's (pinning them measured worse: their
-    collapse positions are often off the input)."""
+    collapse positions are often off the input). The searches for closest
+    points start where the engine merged each input vertex."""
     Fm = mesh.F
     movable = ~mesh.locked
     samples = max(tun.relocate_samples, tun.relocate_per_vertex * mesh.V.shape[0])
     step = max(1, int(np.ceil(Vn.shape[0] / samples)))
-    P = np.concatenate([Vn[::step], Vn[creases[::step]]])
+    at = np.concatenate([np.arange(0, Vn.shape[0], step), creases[::step]])
     border = None
     if Eb_in.shape[0]:
         hb = np.flatnonzero(mesh.twin == BOUNDARY)
         Eb = np.stack(half_edge_ends(Fm, hb), axis=1)
-        C = Vn[np.unique(Eb_in)[::step]]
-        border = (C, Eb, TriangleIndex(Vn, segment_triangles(Eb_in)), tun.relocate_border_weight)
+        ends = np.unique(Eb_in)[::step]
+        border = (Vn[ends], Eb, (Vn, segment_triangles(Eb_in)), tun.relocate_border_weight)
     Nkeep = mesh.Nref[Fm].sum(axis=1) if tun.ref_cos > -1.0 else None
-    back = dict(surface=TriangleIndex(Vn, surface), back=tun.relocate_back,
+    back = dict(surface=(Vn, surface), back=tun.relocate_back,
                 iters=tun.relocate_back_iters) if surface is not None else dict(iters=tun.relocate_iters)
-    Vnew = relocate(mesh.V, Fm, P, movable, reg=tun.relocate_reg, N_keep=Nkeep, border=border,
+    Vnew = relocate(mesh.V, Fm, Vn[at], movable, reg=tun.relocate_reg, N_keep=Nkeep, border=border,
                     min_compact=tun.gamma_hard, cg_iters=tun.relocate_cg_iters,
-                    min_cos=tun.relocate_min_cos, min_move=tun.relocate_min_move, **back)
+                    min_cos=tun.relocate_min_cos, min_move=tun.relocate_min_move,
+                    P_near=mesh.cur_of_clean[at], cage_of=mesh.cur_of_clean,
+                    border_near=None if border is None else mesh.cur_of_clean[ends],
+                    walk_steps=tun.relocate_walk_steps, **back)
     mesh.moved |= np.any(Vnew != mesh.V, axis=1)
     mesh.V = Vnew
 

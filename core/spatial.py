@@ -77,11 +77,12 @@ import numpy as np
 from .errors import InvalidArgumentError
 from .mesh import check_mesh
 from ._groups import group_argmin, ragged_ranges
+from ._parallel import run_each
 
 #: serialises the lazy BVH builds of indexes queried from several threads at once
 _LAZY_BUILD = threading.Lock()
 
-__all__ = ["ClosestPoints", "TriangleClosest", "TriangleIndex", "closest_points",
+__all__ = ["ClosestPoints", "IndexTables", "TriangleClosest", "TriangleIndex", "closest_points",
            "point_triangle_closest"]
 
 # --- tolerances and tuning, in one place -------------------------------------------------------
@@ -101,6 +102,7 @@ _KERNEL_BLOCK = 1 << 14    # pairs per kernel call (temporaries of 128 KiB)
 _BRUTE_PAIRS = 1 << 24     # fewer far (query, triangle) pairs than this: no BVH, scan all
 _FRONTIER_CAP = 1 << 21    # BVH frontier pairs before it is split and processed depth first
 _SLACK = 1e-9              # relative slack on pruning tests (keeps rounding conservative)
+_THREADED_BUILD = 1 << 15  # from this many faces the build runs its two halves on two threads
 
 
 class ClosestPoints(NamedTuple):
@@ -116,6 +118,25 @@ class ClosestPoints(NamedTuple):
     point: np.ndarray
     bary: np.ndarray
     distance: np.ndarray
+
+
+class IndexTables(NamedTuple):
+    """The arrays of a :class:`TriangleIndex`, for another query over the same grid
+    (read-only views: never modify them). Triangles are numbered in the index's
+    internal (Morton) order ``t``; ``face[t]`` is the face of ``F``."""
+
+    lo: np.ndarray          #: (3,) float64, the grid's origin (the mesh's lower corner)
+    hi: np.ndarray          #: (3,) float64, the mesh's upper corner
+    cell_size: float        #: edge of the cubic cells
+    dims: np.ndarray        #: (3,) int64 cells per axis; cell ``x + dims[0] (y + dims[1] z)``
+    cell_start: np.ndarray  #: (n_cells + 1,) int64: cell c's references are
+    #:                         ``cell_tri[cell_start[c]:cell_start[c + 1]]``
+    cell_tri: np.ndarray    #: (refs,) int32/int64 triangles referenced per cell, cell by cell
+    rows: np.ndarray        #: (16, m) float64 :func:`triangle_rows` (the exact kernel's input)
+    ball: np.ndarray        #: (4, m) float64 centroid and radius of a sphere holding each
+    prism: np.ndarray       #: (16, m) float64 normal, edge normals, offsets, allowance (the
+    #:                         edge-line bound's rows, see the module docstring)
+    face: np.ndarray        #: (m,) int64 face of ``F`` of each internal triangle
 
 
 class TriangleClosest(NamedTuple):
@@ -325,6 +346,18 @@ def _bary(v, w):
     return np.clip(bary, 0.0, 1.0, out=bary)
 
 
+def closest_result(tables, t, v, w, d2):
+    """The :class:`ClosestPoints` of kernel results: internal triangles ``t`` (q,),
+    the kernel's ``v, w`` and squared distances ``d2`` (q,) over an index's
+    :class:`IndexTables` (the point ``A + v ab + w ac``, barycentric coordinates
+    ``(1-v-w, v, w)`` clipped to [0, 1])."""
+    point = np.empty((t.shape[0], 3))
+    for k in range(3):
+        point[:, k] = (np.take(tables.rows[k], t) + v * np.take(tables.rows[3 + k], t)
+                       + w * np.take(tables.rows[6 + k], t))
+    return ClosestPoints(tables.face[t].astype(np.int64), point, _bary(v, w), np.sqrt(d2))
+
+
 # --- small vectorised helpers --------------------------------------------------------------------
 
 def _unit(X):
@@ -419,6 +452,10 @@ class TriangleIndex:
     ----------
     V : (n, 3) array_like of float
     F : (m, 3) array_like of int, m >= 1. Degenerate triangles are allowed.
+    cell_factor : float, keyword-only
+        Grid cell size in mean triangle bounding-box extents (default 1.5;
+        the answers are exact for any, ties among exactly equidistant
+        triangles aside).
 
     Attributes
     ----------
@@ -438,8 +475,11 @@ class TriangleIndex:
     ([0, 0], [0.707107, 2.0])
     """
 
-    def __init__(self, V, F):
+    def __init__(self, V, F, *, cell_factor=_CELL_FACTOR):
         V, F = check_mesh(V, F, where="TriangleIndex", allow_empty=False)
+        if not (isinstance(cell_factor, (int, float)) and cell_factor > 0):
+            raise InvalidArgumentError(
+                f"TriangleIndex: cell_factor must be a positive number, got {cell_factor!r}")
         self.V = V
         self.F = F
         m = F.shape[0]
@@ -459,19 +499,26 @@ class TriangleIndex:
             order = order[_first_of_each_triangle(V, F[order])]
         self._order = order                       # internal id -> face id
         A, B, C, tlo, thi = A[order], B[order], C[order], tlo[order], thi[order]
-        self._D = triangle_rows(A, B, C)
-        self._build_grid(tlo, thi, A, B, C, extent)
+
+        def rows_and_bounds():
+            D = triangle_rows(A, B, C)
+            return (D,) + _bounding_rows(A, B, C, D[12:15].T)
+        jobs = [rows_and_bounds,
+                lambda: self._build_grid(tlo, thi, A, B, C, extent, cell_factor)]
+        if m >= _THREADED_BUILD:     # the kernel rows and bounds beside the grid
+            (self._D, self._ball, self._prism), _ = run_each(lambda job: job(), jobs)
+        else:
+            (self._D, self._ball, self._prism), _ = [job() for job in jobs]
         self._bvh = None                          # built on first need (far queries)
         self._bvh_ready = False                   # ... with its cylinder bounds
-        self._ball, self._prism = _bounding_rows(A, B, C, self._D[12:15].T)
         self._normal = np.ascontiguousarray(self._D[12:15])      # the disk bound's rows
         self.n_faces = m
 
     # -- grid ---------------------------------------------------------------------------------
-    def _build_grid(self, tlo, thi, A, B, C, extent):
+    def _build_grid(self, tlo, thi, A, B, C, extent, cell_factor):
         m = tlo.shape[0]
         ext = (thi - tlo).max(axis=1)
-        h = _CELL_FACTOR * float(ext.mean())
+        h = cell_factor * float(ext.mean())
         span = float(extent.max())
         if not h > 0:
             h = span / 64 if span > 0 else 1.0
@@ -681,12 +728,13 @@ class TriangleIndex:
             far = np.concatenate(far)
             if far.size:
                 self._bvh_query(PT, far, best)
-        bary = _bary(best.v, best.w)
-        t = best.t
-        D = np.take(self._D[0:9], t, axis=1)
-        point = (D[0:3] + best.v * D[3:6] + best.w * D[6:9]).T
-        return ClosestPoints(self._order[t].astype(np.int64), np.ascontiguousarray(point),
-                             bary, np.sqrt(best.d2))
+        return closest_result(self.tables, best.t, best.v, best.w, best.d2)
+
+    @property
+    def tables(self):
+        """The index's arrays as :class:`IndexTables` (read-only views)."""
+        return IndexTables(self._lo, self._hi, self._h, self._dims, self._cell_start,
+                           self._cell_tri, self._D, self._ball, self._prism, self._order)
 
     def _fold(self, q, t, v, w, d2, counts, best):
         """Fold pair results (contiguous groups, one per query) into ``best``."""

@@ -91,8 +91,13 @@ def edge_faces(em):
 def connected_labels(n_nodes, pairs):
     """Connected-component labels of an undirected graph, vectorised.
 
-    Min-label propagation with pointer jumping; the loop runs over passes,
-    never over nodes.
+    Hooking with pointer jumping, on a graph that contracts as it goes: each
+    round hooks the larger root of every pair that still joins two trees
+    under the smaller one, jumps the hooked roots to their new roots and
+    drops the pairs now inside one tree; the loop runs over rounds, never
+    over nodes. A node only ever points at a smaller one of its component,
+    so the component's smallest node is its root, whichever of several
+    hooks on one root lands.
 
     Parameters
     ----------
@@ -103,27 +108,48 @@ def connected_labels(n_nodes, pairs):
     -------
     labels : (n_nodes,) int64, each node's component's smallest node index.
     """
-    labels = np.arange(n_nodes, dtype=np.int64)
-    pairs = np.asarray(pairs, dtype=np.int64).reshape(-1, 2)
-    if pairs.shape[0] == 0:
-        return labels
-    a, b = pairs[:, 0], pairs[:, 1]
+    pairs = np.asarray(pairs).reshape(-1, 2)
+    dtype = np.int32 if n_nodes < 2 ** 31 else np.int64    # half the memory traffic
+    parent = np.arange(n_nodes, dtype=dtype)
+    ra, rb = pairs[:, 0].astype(dtype), pairs[:, 1].astype(dtype)
+    first = True
     while True:
-        la, lb = labels[a], labels[b]
-        low = np.minimum(la, lb)
-        new = labels.copy()
-        # hook the larger root under the smaller label
-        np.minimum.at(new, la, low)
-        np.minimum.at(new, lb, low)
-        # pointer jumping until every node points at a root
-        while True:
-            jumped = new[new]
-            if np.array_equal(jumped, new):
-                break
-            new = jumped
-        if np.array_equal(new, labels):
-            return labels
-        labels = new
+        keep = ra != rb
+        k = int(np.count_nonzero(keep))
+        if k == 0:
+            break
+        if k < ra.size:
+            ra, rb = ra[keep], rb[keep]
+        lo = np.minimum(ra, rb)
+        hi = np.maximum(ra, rb)
+        parent[hi] = lo                  # roots hooked below smaller roots
+        if first:
+            _jump_all(parent)
+            first = False
+        else:
+            _jump(parent, hi)
+        ra, rb = parent[ra], parent[rb]  # roots again
+    _jump_all(parent)
+    return parent.astype(np.int64)
+
+
+def _jump(parent, nodes):
+    """Pointer jumping on ``nodes`` (in place) until each points at a root
+    (every node on their paths to the roots must be among them)."""
+    while nodes.size:
+        p = parent[nodes]
+        gp = parent[p]
+        moving = gp != p
+        nodes = nodes[moving]
+        parent[nodes] = gp[moving]
+
+
+def _jump_all(parent):
+    """Pointer jumping on every node (in place) until each points at a root."""
+    gp = parent[parent]
+    nodes = np.flatnonzero(gp != parent).astype(parent.dtype)
+    parent[nodes] = gp[nodes]
+    _jump(parent, nodes)
 
 
 def face_components(F, n_vertices):

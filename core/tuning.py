@@ -64,6 +64,9 @@ class Tuning:
     relocate_min_cos: float = 0.2    #: a relocated face turning by more than acos(this) is undone
     #: the relocation stops once a round moves no vertex by more than this share of an edge
     relocate_min_move: float = 1e-4
+    #: its closest-point searches walk over the meshes from where the engine merged each
+    #: input vertex (then from the last round's answers), at most this many steps a round
+    relocate_walk_steps: int = 8
     #: preserve_topology=False removes stuck components up to this size (share of the diagonal)
     relax_max_size: float = 0.25
     cap_apex_tries: int = 8          #: ... caps a hole from one of this many rim vertices

@@ -237,3 +237,87 @@ def test_edge_representatives_are_one_half_edge_per_edge_in_any_slicing(step):
     U, W = half_edge_ends(F, edge_representatives(twin, True, step))
     keys = edge_keys(U, W, V.shape[0])
     assert np.unique(keys).size == keys.size == np.unique(edge_keys(*half_edge_ends(F), V.shape[0])).size
+
+
+# --- sorted keys, components, interior edges ------------------------------------------------
+
+@pytest.mark.parametrize("size, bound", [(1, 10), (7, 2 ** 62), (3000, 2 ** 40), (3000, 2 ** 60),
+                                         (40000, 2 ** 62)])
+def test_sort_keys_is_the_stable_argsort_packed_or_split_into_key_ranges(size, bound):
+    from core._clean import sort_keys
+    rng = np.random.default_rng(size)
+    key = rng.integers(0, bound, size, dtype=np.int64)
+    key[::3] = key[0]                                  # long runs of one key: ties by index
+    key[1::7] = bound - 1
+    order, ks = sort_keys(key.copy(), bound)
+    ref = np.argsort(key, kind="stable")
+    np.testing.assert_array_equal(order, ref)
+    np.testing.assert_array_equal(ks, key[ref])
+
+
+def test_twin_table_split_into_key_ranges_equals_the_reference():
+    # 2^28 vertices: n^2 with the half-edge index no longer packs into one int64
+    V, F = torus(20, 10)
+    F = np.concatenate([F, F[:3]])                     # a few non-manifold edges too
+    big = 2 ** 28
+    np.testing.assert_array_equal(twin_table(F, big), ref_twin_table(F, big))
+    np.testing.assert_array_equal(twin_table(F, big), twin_table(F, V.shape[0]))
+
+
+def ref_connected_labels(n, pairs):
+    """Smallest node of each component, by a plain union-find."""
+    parent = list(range(n))
+
+    def find(x):
+        while parent[x] != x:
+            parent[x] = parent[parent[x]]
+            x = parent[x]
+        return x
+
+    for a, b in np.asarray(pairs).reshape(-1, 2).tolist():
+        ra, rb = find(a), find(b)
+        if ra != rb:
+            parent[max(ra, rb)] = min(ra, rb)
+    return np.array([find(x) for x in range(n)], dtype=np.int64)
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_connected_labels_are_each_components_smallest_node(seed):
+    rng = np.random.default_rng(seed)
+    n = int(rng.integers(1, 3000))
+    k = int(rng.integers(0, 2 * n))
+    pairs = rng.integers(0, n, (k, 2))
+    if seed % 2:                                        # long chains in both index orders
+        chain = rng.permutation(n)
+        pairs = np.concatenate([pairs, np.stack([chain[:-1], chain[1:]], axis=1)])
+    labels = connected_labels(n, pairs)
+    assert labels.dtype == np.int64
+    np.testing.assert_array_equal(labels, ref_connected_labels(n, pairs))
+
+
+def test_connected_labels_of_a_path_and_of_no_pairs():
+    n = 1000
+    path = np.stack([np.arange(n - 1, 0, -1), np.arange(n - 2, -1, -1)], axis=1)
+    assert (connected_labels(n, path) == 0).all()
+    np.testing.assert_array_equal(connected_labels(5, np.zeros((0, 2), dtype=np.int64)), np.arange(5))
+
+
+def test_interior_edges_are_the_representatives_and_their_twins():
+    from core._clean import edge_representatives, interior_edges
+    V, F = regular_grid(9, 7)
+    twin = twin_table(F, V.shape[0])
+    h, t = interior_edges(twin)
+    np.testing.assert_array_equal(h, edge_representatives(twin, boundary=False))
+    np.testing.assert_array_equal(t, twin[h])
+    assert (h < t).all()
+
+
+@pytest.mark.parametrize("make", [lambda: torus(12, 8), lambda: regular_grid(6, 6)])
+def test_non_manifold_vertices_with_the_callers_corner_counts(make):
+    from tests.mesh_factory import with_fins
+    V, F = with_fins(*make())                           # non-manifold edges
+    n = V.shape[0]
+    twin = twin_table(F, n)
+    corners = np.bincount(F.ravel(), minlength=n)
+    np.testing.assert_array_equal(non_manifold_vertices(F, n, twin, corners=corners),
+                                  ref_non_manifold_vertices(F, n, twin))

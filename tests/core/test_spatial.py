@@ -423,3 +423,16 @@ def test_the_pair_filters_never_exceed_the_exact_distance():
     above = (index._ball[:3, regular] + 0.5 * index._prism[0:3, regular])
     lb = index._prism_bound(above - index._ball[:3, regular], regular, np.full(regular.size, 0.25))
     np.testing.assert_allclose(lb, 0.25, rtol=1e-7)    # less the 1e-12-of-size allowance
+
+
+@pytest.mark.parametrize("factor", [0.4, 1.5, 4.0])
+def test_index_any_cell_factor_is_exact(factor):
+    V, F = torus(24, 12)
+    V = V + 0.01 * np.random.default_rng(11).normal(size=V.shape)
+    P = _random_queries(V, np.random.default_rng(12), 300)
+    _check_result(V, F, P, TriangleIndex(V, F, cell_factor=factor).closest(P))
+    default = TriangleIndex(V, F).closest(P)
+    same = TriangleIndex(V, F, cell_factor=1.5).closest(P)
+    assert all(np.array_equal(a, b) for a, b in zip(default, same))
+    with pytest.raises(InvalidArgumentError, match="cell_factor must be a positive number"):
+        TriangleIndex(V, F, cell_factor=0)

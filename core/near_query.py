@@ -1,0 +1,557 @@
+"""Exact closest points of many query points near a triangle mesh (the bind's query).
+
+:class:`~.spatial.TriangleIndex` answers "closest point on the mesh" exactly
+for any query; binding a scan asks it for a million points that all lie
+within a fraction of a face of the surface, and there most of its time goes
+into choosing candidates. :class:`NearQuery` keeps its grid, its bounds and
+its exact kernel, and reorganises the candidate search so that nearly all of
+it is a few batched matrix products on float32 tiles, a block of points at
+a time::
+
+    probe cell   the point's own cell, or when that is empty the nearest
+                 non-empty one of its 26 neighbours (box distance)
+    phase A      the edge-line bound (height above the plane, lateral distance
+                 beyond the farthest-out edge line, ``spatial``'s docstring)
+                 of every reference of the probe cell; the smallest is the
+                 probe, evaluated exactly -> u (an exact upper bound)
+    phase B      the same bound on every other cell within u of the point
+                 (box distance)
+    exact        the kernel (float64) on the pairs whose bound is within u:
+                 first each point's smallest bound, then the others within
+                 the bound that gives; the smallest squared distance wins,
+                 exact ties go to the lowest face index
+
+Tiles: points (or (point, cell) pairs) that share a cell go in tiles of
+``_TILE`` rows. The references of cell ``c`` are a run of the cell-ordered
+table, ``ref[start[c] : start[c] + count[c]]``; a tile reads the window
+``ref[start[c] : start[c] + W]`` for the width class ``W >= count[c]`` (one
+fancy-indexed row of a ``sliding_window_view``), whose entries past
+``count[c]`` belong to the next cells: more candidates than the cell, never
+fewer (the table ends in padding entries whose bound is infinite). Each
+reference is stored as four rows ``[d, -(d.c) - o]`` (d the normal and the
+three outward edge normals, c the centroid, o the edge's offset), so the
+tile's heights and edge-line excesses are ``[x, y, z, 1]`` times them: four
+``(t, _TILE, 4) @ (t, 4, W)`` products.
+
+Float32: coordinates are taken relative to the grid's origin, and the bound
+is loosened by ``eps = 2**-16`` of the grid's extent grown by 4 cells (for
+points in the grid's box grown by 4 cells the float32 rounding of the
+products is below ``2**-19`` of that; points outside go to the index), so it
+can keep a pair the float64 bound would drop, never drop one it keeps: the
+result is the exact
+closest point, bit for bit the minimum of the kernel over every triangle
+(ties to the lowest face index); ``TriangleIndex.closest`` gives the same
+distances and, but for exactly equidistant triangles, the same faces.
+
+Every point's result depends on the point alone (not on the block, the
+order or the thread), so the answer is the same for any block size and
+thread count. Points whose ball around the probe leaves the 3x3x3 block of
+cells around their own cell (far from the surface), or that have no
+non-empty cell in that block, are answered by ``TriangleIndex.closest``.
+"""
+
+import itertools
+from typing import NamedTuple
+
+import numpy as np
+from numpy.lib.stride_tricks import sliding_window_view
+
+from .errors import InvalidArgumentError
+from .spatial import TriangleIndex, closest_on_triangles, closest_result
+
+__all__ = ["NearQuery"]
+
+#: points per block (float32 temporaries of a few hundred KiB)
+_BLOCK = 8192
+
+#: rows (points, or (point, cell) pairs) per tile of one cell
+_TILE = 8
+
+#: the float32 bound is loosened by this fraction of the grid's extent
+_F32_EPS = 2.0 ** -16
+
+#: relative slack on the float64 cell tests (as ``spatial``'s)
+_SLACK = 1e-9
+
+#: grid cells of this many mean triangle extents (larger than the index's
+#: default: the batched bound makes a reference cheap, a neighbour cell less so)
+_CELL_FACTOR = 2.5
+
+#: smallest window widths; beyond the last, each class is twice the previous
+_WIDTHS = (4, 8, 12, 16, 24, 32, 48, 64)
+
+
+def _neighbour_offsets():
+    """The 26 neighbour offsets (26, 3) and, for each, its cell's squared box
+    distance as a sum of per-side terms: columns ``a, b, c`` of the (q, 7)
+    table of squared distances to the 6 walls (column 6 is 0), so the box
+    distance of neighbour k is ``W[:, a[k]] + W[:, b[k]] + W[:, c[k]]``.
+    Wall ``2 axis + side`` (side 0: below, 1: above)."""
+    walls = []
+    for k in (1, 2, 3):
+        for axes in itertools.combinations(range(3), k):
+            for sides in itertools.product((0, 1), repeat=k):
+                walls.append([2 * a + s for a, s in zip(axes, sides)] + [6] * (3 - k))
+    walls = np.array(walls)
+    off = np.zeros((26, 3), dtype=np.int64)
+    for k, row in enumerate(walls):
+        for wall in row[row < 6]:
+            off[k, wall // 2] = 1 if wall % 2 else -1
+    return off, walls[:, 0], walls[:, 1], walls[:, 2]
+
+
+_OFFSETS, _WALL_A, _WALL_B, _WALL_C = _neighbour_offsets()
+
+
+class _Tables(NamedTuple):
+    """Everything the query reads, built once per :class:`NearQuery`."""
+
+    lo: np.ndarray        #: (3,) grid origin
+    h: float              #: cell size
+    dims: np.ndarray      #: (3,) cells per axis
+    eps: np.float32       #: float32 slack of the bound (absolute)
+    box: np.ndarray       #: (2, 3) the box the float32 bound holds in (the grid's, grown by 4h)
+    pdims: np.ndarray     #: (3,) cells per axis of the padded grid (one empty layer around)
+    count: np.ndarray     #: (padded cells,) int64 references per cell
+    start: np.ndarray     #: (padded cells,) int64 first reference of each cell
+    offset: np.ndarray    #: (26,) int64 padded-id offsets of the 26 neighbours
+    widths: np.ndarray    #: (k,) int64 window width classes
+    tri: tuple            #: per width: (refs, W) windows of the referenced triangles
+    lines: tuple          #: per width: 4 directions' (4, refs, W) windows of [d, -(d.c) - o]
+    rows: tuple           #: 16 (m,) float64 rows of the exact kernel
+    tables: object        #: the index's IndexTables
+
+
+class NearQuery:
+    """Exact closest points on a triangle mesh for many queries near it.
+
+    Builds a :class:`~.spatial.TriangleIndex` (cells of ``_CELL_FACTOR``
+    mean triangle extents) and answers with the tiled search of the module
+    docstring; far queries go to the index.
+
+    Parameters
+    ----------
+    V : (n, 3) array_like of float
+    F : (m, 3) array_like of int, m >= 1
+
+    Attributes
+    ----------
+    index : TriangleIndex
+        The index over ``(V, F)`` (also answers the far queries).
+
+    Raises
+    ------
+    InvalidMeshError
+        As :class:`~.spatial.TriangleIndex`.
+
+    Examples
+    --------
+    >>> q = NearQuery([[0, 0, 0], [1, 0, 0], [0, 1, 0]], [[0, 1, 2]])
+    >>> r = q.closest([[0.2, 0.2, 0.1]])
+    >>> r.face.tolist(), r.bary.round(6).tolist()
+    ([0], [[0.6, 0.2, 0.2]])
+    """
+
+    def __init__(self, V, F):
+        self.index = TriangleIndex(V, F, cell_factor=_CELL_FACTOR)
+        self._t = _build_tables(self.index.tables)
+
+    def closest(self, P):
+        """Closest point on the mesh of every query point.
+
+        Parameters
+        ----------
+        P : (q, 3) array_like of float, finite.
+
+        Returns
+        -------
+        ClosestPoints
+            ``face`` (q,) int64, ``point`` (q,3), ``bary`` (q,3), ``distance``
+            (q,): the exact closest points, as ``TriangleIndex.closest``;
+            among exactly equidistant triangles the lowest face index (far
+            queries: the one ``TriangleIndex.closest`` picks).
+
+        Raises
+        ------
+        InvalidArgumentError
+            P not (q,3) or not finite.
+        """
+        P = _check_points(P)
+        T = self._t
+        q = P.shape[0]
+        cell3 = np.clip(np.floor((P - T.lo) / T.h), 0, T.dims - 1).astype(np.int64)
+        order = np.argsort(cell3[:, 0] + T.dims[0] * (cell3[:, 1] + T.dims[1] * cell3[:, 2]))
+        best = _Best.empty(q)
+        far = [_block(T, P, order[s:s + _BLOCK], cell3, best) for s in range(0, q, _BLOCK)]
+        far = np.concatenate(far) if far else np.zeros(0, dtype=np.int64)
+        result = closest_result(T.tables, best.t, best.v, best.w, best.d2)
+        if far.size:
+            hit = self.index.closest(P[far])
+            for out, value in zip(result, hit):
+                out[far] = value
+        return result
+
+
+def _check_points(P):
+    P = np.asarray(P, dtype=np.float64)
+    if P.ndim != 2 or P.shape[1] != 3:
+        raise InvalidArgumentError(
+            f"NearQuery.closest: P must be (q,3) floats, got {P.shape} {P.dtype}")
+    bad = ~np.isfinite(P).all(axis=1)
+    if bad.any():
+        k = int(np.flatnonzero(bad)[0])
+        raise InvalidArgumentError(
+            f"NearQuery.closest: {int(bad.sum())} query points have NaN or infinite "
+            f"coordinates, e.g. point {k} = {P[k].tolist()}")
+    return P
+
+
+class _Best(NamedTuple):
+    """Per query: internal triangle, kernel (v, w) and squared distance."""
+
+    t: np.ndarray
+    v: np.ndarray
+    w: np.ndarray
+    d2: np.ndarray
+
+    @classmethod
+    def empty(cls, q):
+        return cls(np.zeros(q, dtype=np.int64), np.zeros(q), np.zeros(q), np.zeros(q))
+
+
+# --- tables ------------------------------------------------------------------------------------
+
+def _build_tables(tables):
+    """The :class:`_Tables` of an index's :class:`~.spatial.IndexTables`: the
+    padded cell grid, the windows of the references (triangles and the
+    edge-line rows) and the kernel rows as contiguous arrays."""
+    lo, h, dims = tables.lo, float(tables.cell_size), tables.dims
+    extent = float(np.abs(tables.hi - lo).max()) + 4.0 * h + float(tables.ball[3].max())
+    count, start, pdims = _padded_grid(tables.cell_start, dims)
+    widths = _width_classes(int(count.max()))
+    pad = int(widths[-1])
+    tri = np.concatenate([tables.cell_tri.astype(np.int64), np.zeros(pad, dtype=np.int64)])
+    lines = _line_rows(tables, tri[:tri.shape[0] - pad], pad)
+    offset = _OFFSETS[:, 0] + pdims[0] * (_OFFSETS[:, 1] + pdims[1] * _OFFSETS[:, 2])
+    box = np.stack([lo - 4.0 * h, tables.hi + 4.0 * h])
+    return _Tables(lo, h, dims, np.float32(_F32_EPS * extent), box, pdims, count, start, offset,
+                   widths, tuple(sliding_window_view(tri, int(W)) for W in widths),
+                   tuple(tuple(sliding_window_view(r, int(W), axis=1) for r in lines)
+                         for W in widths),
+                   tuple(np.ascontiguousarray(r) for r in tables.rows), tables)
+
+
+def _line_rows(tables, tri, pad):
+    """Per reference (cell-major, then ``pad`` padding entries) and for each of
+    the edge-line bound's four directions d (normal, three edge normals): the
+    rows [d_x, d_y, d_z, -(d.c) - o] (c the centroid relative to the origin, o
+    the edge's offset, 0 for the normal), float32 (4, refs + pad), so that
+    [x, y, z, 1] times them is the signed height / edge-line excess of the
+    point x (relative to the origin). Padding rows give +inf."""
+    P = tables.prism
+    c = tables.ball[:3] - tables.lo[:, None]
+    out = []
+    for d, off in ((P[0:3], 0.0), (P[3:6], P[12]), (P[6:9], P[13]), (P[9:12], P[14])):
+        row = np.zeros((4, tri.shape[0] + pad), dtype=np.float32)
+        row[:3, :tri.shape[0]] = np.take(d, tri, axis=1)
+        row[3, :tri.shape[0]] = np.take(-np.einsum("ij,ij->j", d, c) - off, tri)
+        row[3, tri.shape[0]:] = np.inf
+        out.append(row)
+    return out
+
+
+def _padded_grid(cell_start, dims):
+    """Reference counts and starts on the grid padded with one empty layer of
+    cells on every side (so every neighbour of a real cell has an id):
+    (count, start, padded dims)."""
+    pdims = dims + 2
+    shape = (int(dims[2]), int(dims[1]), int(dims[0]))
+    count = np.zeros((pdims[2], pdims[1], pdims[0]), dtype=np.int64)
+    start = np.zeros_like(count)
+    count[1:-1, 1:-1, 1:-1] = np.diff(cell_start).reshape(shape)
+    start[1:-1, 1:-1, 1:-1] = cell_start[:-1].reshape(shape)
+    return count.ravel(), start.ravel(), pdims
+
+
+def _width_classes(most):
+    """Window widths: ``_WIDTHS`` then doubling, up to the first >= ``most``."""
+    widths = list(_WIDTHS)
+    while widths[-1] < most:
+        widths.append(2 * widths[-1])
+    widths = np.array(widths, dtype=np.int64)
+    return widths[:int(np.searchsorted(widths, most)) + 1]
+
+
+# --- one block -----------------------------------------------------------------------------------
+
+class _Block(NamedTuple):
+    """A block of points: their rows of P, coordinates, own cell (grid
+    coordinates and padded id), position inside the own cell, probe cell."""
+
+    q: np.ndarray       #: (k,) rows of P
+    X: np.ndarray       #: (3, k) float64 coordinates
+    A: np.ndarray       #: (k, 4) float32 [x, y, z, 1], x relative to the grid origin
+    cell3: np.ndarray   #: (k, 3) own cell
+    own: np.ndarray     #: (k,) padded id of the own cell
+    wall: np.ndarray    #: (3, k) position inside the own cell, 0..h (outside for clipped points)
+    probe: np.ndarray   #: (k,) padded id of the probe cell
+
+
+def _block(T, P, q, cell3, best):
+    """Answer the points ``q`` (rows of ``P``) into ``best``; returns the rows
+    left for ``TriangleIndex.closest``."""
+    B, lost = _start_block(T, P, q, cell3)
+    n = B.q.shape[0]
+    tiles, probe_col, t0 = _probe(T, B)
+    v0, w0, d0 = _kernel(T, B.X, np.arange(n), t0)
+    u2 = np.square(_bound32(T, d0))
+    owner_a, tri_a, lb_a = _within(tiles, np.arange(n), u2, probe_col)
+    point_b, cell_b, far = _neighbour_cells(T, B, np.sqrt(d0))
+    owner_b, tri_b, lb_b = _within(_tiles(T, B.A, point_b, cell_b), point_b, u2)
+    owner = np.concatenate([owner_a, owner_b])
+    tri = np.concatenate([tri_a, tri_b])
+    lb = np.concatenate([lb_a, lb_b])
+    # the pair with the smallest bound of each point first: usually the closest,
+    # so the bound it gives leaves few of the others
+    first = _lowest_per_point(owner, lb, n)
+    t, v, w, d2 = _fold(T, B.X, owner[first], tri[first], t0, v0, w0, d0)
+    rest = np.ones(owner.shape[0], dtype=bool)
+    rest[first] = False
+    rest &= lb <= np.square(_bound32(T, d2)[owner])
+    t, v, w, d2 = _fold(T, B.X, owner[rest], tri[rest], t, v, w, d2)
+    best.t[B.q], best.v[B.q], best.w[B.q], best.d2[B.q] = t, v, w, d2
+    return np.concatenate([lost, B.q[far]])
+
+
+def _bound32(T, d2):
+    """float32 distance bounds from exact squared distances: never below the
+    distance, loosened by ``eps``."""
+    return (np.sqrt(d2) * (1 + 1e-6)).astype(np.float32) + T.eps
+
+
+def _lowest_per_point(owner, value, n):
+    """Index of the pair with the smallest ``value`` (float32 >= 0) of each
+    point that has one (the first among equal ones)."""
+    if owner.size == 0:
+        return owner
+    key = value.view(np.int32).astype(np.int64) << 32
+    key |= np.arange(owner.shape[0], dtype=np.int64)
+    low = np.full(n, np.iinfo(np.int64).max)
+    np.minimum.at(low, owner, key)
+    return low[low != np.iinfo(np.int64).max] & 0xFFFFFFFF
+
+
+def _start_block(T, P, q, cell3):
+    """The :class:`_Block` of the points ``q``, and the points left for the
+    index: those with no non-empty cell among their own and its 26
+    neighbours, and those outside ``T.box`` (where the float32 rounding of
+    the bound could exceed its slack)."""
+    g = cell3[q]
+    own = (g[:, 0] + 1) + T.pdims[0] * ((g[:, 1] + 1) + T.pdims[1] * (g[:, 2] + 1))
+    X = np.ascontiguousarray(P[q].T)
+    wall = X - T.lo[:, None] - g.T * T.h
+    probe = own.copy()
+    empty = np.flatnonzero(T.count[own] == 0)
+    if empty.size:
+        probe[empty] = _nearest_filled(T, own[empty], wall[:, empty])
+    ok = probe >= 0
+    ok &= ((X >= T.box[0][:, None]) & (X <= T.box[1][:, None])).all(axis=0)
+    lost = q[~ok]
+    if lost.size:
+        q, X, g, own, wall, probe = q[ok], X[:, ok], g[ok], own[ok], wall[:, ok], probe[ok]
+    A = np.ones((q.shape[0], 4), dtype=np.float32)
+    A[:, :3] = (X - T.lo[:, None]).T
+    return _Block(q, X, A, g, own, wall, probe), lost
+
+
+def _nearest_filled(T, own, wall):
+    """For points whose own cell is empty: the padded id of the nearest
+    non-empty neighbour (box distance; the lowest neighbour number among equal
+    ones), -1 where all 26 are empty."""
+    d2 = _wall_distances(T, wall)
+    box = d2[:, _WALL_A] + d2[:, _WALL_B] + d2[:, _WALL_C]
+    cells = own[:, None] + T.offset
+    box[T.count[cells] == 0] = np.inf
+    k = np.argmin(box, axis=1)
+    found = np.isfinite(box[np.arange(k.shape[0]), k])
+    return np.where(found, cells[np.arange(k.shape[0]), k], -1)
+
+
+def _wall_distances(T, wall):
+    """(k, 7) float64 squared distances from each point to the 6 walls of its
+    own cell (0 where it is beyond the wall), column 6 zero."""
+    d2 = np.zeros((wall.shape[1], 7))
+    for axis in range(3):
+        d2[:, 2 * axis] = np.square(np.maximum(wall[axis], 0.0))
+        d2[:, 2 * axis + 1] = np.square(np.maximum(T.h - wall[axis], 0.0))
+    return d2
+
+
+# --- tiles ---------------------------------------------------------------------------------------
+
+class _Tile(NamedTuple):
+    """Tiles of one window width: up to ``_TILE`` rows that share a cell, the
+    cell's window of triangles, and the bound of every (row, window entry)."""
+
+    rows: np.ndarray    #: (t, _TILE) rows of the tiled set (a short tile repeats its last row)
+    valid: np.ndarray   #: (t, _TILE) bool, False for the repeats
+    tri: np.ndarray     #: (t, W) internal triangles of the cell's window
+    lb: np.ndarray      #: (t, _TILE, W) float32 squared edge-line bound (less eps)
+
+
+def _tiles(T, A, point, cell):
+    """The rows ``(point[i], cell[i])`` grouped by cell into :class:`_Tile`
+    sets, one per window width class; ``A`` (k, 4) the points' [x, y, z, 1]."""
+    if point.size == 0:
+        return []
+    order = np.argsort(cell)
+    cs = cell[order]
+    first = np.flatnonzero(np.concatenate([[True], cs[1:] != cs[:-1]]))
+    size = np.diff(np.concatenate([first, [cs.shape[0]]]))
+    per = -(-size // _TILE)
+    group = np.repeat(np.arange(first.shape[0]), per)
+    k = np.arange(group.shape[0]) - np.repeat(np.cumsum(per) - per, per)
+    begin = first[group] + _TILE * k
+    length = np.minimum(_TILE, size[group] - _TILE * k)
+    tcell = cs[begin]
+    cls = np.searchsorted(T.widths, T.count[tcell]).astype(np.int16)
+    by_class = np.argsort(cls, kind="stable")
+    cuts = np.flatnonzero(np.concatenate([[True], np.diff(cls[by_class]) != 0, [True]]))
+    lane = np.arange(_TILE)
+    out = []
+    for a, b in zip(cuts[:-1], cuts[1:]):
+        sel = by_class[a:b]
+        c = int(cls[sel[0]])
+        rows = order[begin[sel, None] + np.minimum(lane, length[sel, None] - 1)]
+        s = T.start[tcell[sel]]
+        out.append(_Tile(rows, lane < length[sel, None], T.tri[c][s],
+                         _edge_line_bound(T, A[point[rows]], s, c)))
+    return out
+
+
+def _edge_line_bound(T, A, s, c):
+    """(t, _TILE, W) float32 squared edge-line bound of the tile rows' points
+    ``A`` (t, _TILE, 4) to the references of the windows at ``s`` (width class
+    ``c``): max(|height| - eps, 0)^2 + max(max_k excess_k - eps, 0)^2, the
+    height and the three edge-line excesses each one batched product."""
+    height, *excess = (np.matmul(A, np.ascontiguousarray(line[:, s].transpose(1, 0, 2)))
+                       for line in T.lines[c])
+    np.abs(height, out=height)
+    lateral = excess[0]
+    np.maximum(lateral, excess[1], out=lateral)
+    np.maximum(lateral, excess[2], out=lateral)
+    for part in (height, lateral):
+        part -= T.eps
+        np.maximum(part, 0.0, out=part)
+        part *= part
+    height += lateral
+    return height
+
+
+def _probe(T, B):
+    """Phase A: the tiles of the probe cells and, per point, the column and
+    triangle of the smallest bound in its probe cell's window."""
+    n = B.q.shape[0]
+    tiles = _tiles(T, B.A, np.arange(n), B.probe)
+    t0 = np.empty(n, dtype=np.int64)
+    cols = []
+    for tile in tiles:
+        col = np.argmin(tile.lb, axis=2)
+        t0[tile.rows[tile.valid]] = np.take_along_axis(tile.tri, col, axis=1)[tile.valid]
+        cols.append(col)
+    return tiles, cols, t0
+
+
+def _within(tiles, who, u2, skip=None):
+    """(owner, triangle, bound) of the tile pairs whose bound is within the
+    rows' ``u2``; ``who`` maps tile rows to points; ``skip`` (per tile,
+    (t, _TILE) columns) leaves one entry per row out (the probe)."""
+    owners = [np.zeros(0, dtype=np.int64)]
+    tris = [np.zeros(0, dtype=np.int64)]
+    lbs = [np.zeros(0, dtype=np.float32)]
+    for k, tile in enumerate(tiles):
+        pts = who[tile.rows]
+        keep = tile.lb <= u2[pts][:, :, None]
+        keep &= tile.valid[:, :, None]
+        if skip is not None:
+            np.put_along_axis(keep, skip[k][:, :, None], False, axis=2)
+        flat = np.flatnonzero(keep)
+        W = keep.shape[2]
+        i, rest = np.divmod(flat, _TILE * W)
+        j, col = np.divmod(rest, W)
+        owners.append(pts[i, j])
+        tris.append(tile.tri[i, col])
+        lbs.append(tile.lb.reshape(-1)[flat])
+    return np.concatenate(owners), np.concatenate(tris), np.concatenate(lbs)
+
+
+# --- neighbours, exact evaluation ------------------------------------------------------------
+
+def _neighbour_cells(T, B, u):
+    """Phase B's cells: (point, padded cell) pairs for every non-empty cell of
+    the 3x3x3 block around the own cell within ``u`` (box distance) of the
+    point, other than the probe cell; and the mask of points whose ball
+    leaves that block (answered by the index instead)."""
+    ub = u * (1 + 4 * _SLACK)
+    u2 = ub * ub
+    below = np.square(np.maximum(B.wall, 0.0))          # (3, k) to the lower walls
+    above = np.square(np.maximum(T.h - B.wall, 0.0))    # (3, k) to the upper walls
+    reach = below[0] <= u2
+    for side in (below[1], below[2], above[0], above[1], above[2]):
+        reach |= side <= u2
+    far = ub >= _block_clearance(T, B)
+    sel = np.flatnonzero(reach & ~far)
+    d2 = np.zeros((sel.shape[0], 7))
+    d2[:, 0:6:2] = below[:, sel].T
+    d2[:, 1:6:2] = above[:, sel].T
+    need = (d2[:, _WALL_A] + d2[:, _WALL_B] + d2[:, _WALL_C]) <= u2[sel, None]
+    flat = np.flatnonzero(need)
+    i, k = np.divmod(flat, 26)
+    point = sel[i]
+    cell = B.own[point] + T.offset[k]
+    keep = (T.count[cell] > 0) & (cell != B.probe[point])
+    return point[keep], cell[keep], far
+
+
+def _block_clearance(T, B):
+    """Distance from each point to the boundary of the 3x3x3 block of cells
+    around its own cell, sides on the grid's border excepted (nothing lies
+    beyond them)."""
+    out = np.full(B.q.shape[0], np.inf)
+    for axis in range(3):
+        g, wall = B.cell3[:, axis], B.wall[axis]
+        np.minimum(out, np.where(g > 0, wall + T.h, np.inf), out=out)
+        np.minimum(out, np.where(g < T.dims[axis] - 1, 2 * T.h - wall, np.inf), out=out)
+    return out
+
+
+def _kernel(T, X, owner, t):
+    """The exact kernel (v, w, d2) on the pairs (points ``owner`` of X, triangles t)."""
+    D = np.empty((16, t.shape[0]))
+    for k in range(16):
+        np.take(T.rows[k], t, out=D[k])
+    return closest_on_triangles(np.take(X[0], owner), np.take(X[1], owner),
+                                np.take(X[2], owner), D)
+
+
+def _fold(T, X, owner, t, t0, v0, w0, d0):
+    """Evaluate the pairs left and fold them into the current best: per point
+    the smallest squared distance, among equal ones the lowest face index."""
+    if owner.size == 0:
+        return t0, v0, w0, d0
+    v, w, d2 = _kernel(T, X, owner, t)
+    keep = d2 <= d0[owner]
+    owner, t, v, w, d2 = owner[keep], t[keep], v[keep], w[keep], d2[keep]
+    if owner.size == 0:
+        return t0, v0, w0, d0
+    best = d0.copy()
+    np.minimum.at(best, owner, d2)
+    face = T.tables.face
+    low = np.where(best == d0, face[t0], np.iinfo(np.int64).max)
+    tie = d2 == best[owner]
+    np.minimum.at(low, owner[tie], face[t[tie]])
+    win = tie & (face[t] == low[owner])
+    t_out, v_out, w_out = t0.copy(), v0.copy(), w0.copy()
+    i = owner[win]
+    t_out[i], v_out[i], w_out[i] = t[win], v[win], w[win]
+    return t_out, v_out, w_out, best

@@ -1,0 +1,86 @@
+"""Closest faces by walking (``core._face_tracker``): the same closest points
+as the exact :class:`TriangleIndex` when started near the answer, and again
+after the mesh or the points move."""
+
+import numpy as np
+
+from core._face_tracker import FaceTracker, faces_across
+from core.spatial import TriangleIndex
+from tests.mesh_factory import icosphere, regular_grid, torus
+
+
+def _nearest_vertex(V, Q):
+    """Brute-force nearest vertex of ``V`` to each query (the relocation's
+    guess is as good: the vertex the query's input vertex was merged into)."""
+    return np.argmin(((Q[:, None, :] - V[None, :, :]) ** 2).sum(axis=2), axis=1)
+
+
+def _assert_same_as_index(got, V, F, Q):
+    exact = TriangleIndex(V, F).closest(Q)
+    d = np.linalg.norm(got.point - Q, axis=1)
+    # the same distances (a tie between two faces may pick the other one)
+    np.testing.assert_allclose(d, exact.distance, rtol=1e-12, atol=1e-15)
+    same = got.face == exact.face
+    assert same.mean() > 0.99
+    np.testing.assert_array_equal(got.bary[same], exact.bary[same])
+    np.testing.assert_array_equal(got.point[same], exact.point[same])
+    A, B, C = (V[F[got.face, k]] for k in range(3))
+    np.testing.assert_allclose(got.bary[:, :1] * A + got.bary[:, 1:2] * B + got.bary[:, 2:] * C,
+                               got.point, atol=1e-14)
+
+
+def test_faces_across_link_the_two_faces_of_every_edge_and_mark_borders():
+    for V, F in (torus(12, 8), regular_grid(5, 4)):
+        X = faces_across(F, V.shape[0])
+        for f in range(F.shape[0]):
+            for c in range(3):
+                edge = {F[f, (c + 1) % 3], F[f, (c + 2) % 3]}
+                others = [g for g in range(F.shape[0]) if g != f and edge <= set(F[g])]
+                assert X[f, c] == (others[0] if others else -1)
+
+
+def test_walks_from_a_vertex_near_each_point_find_the_exact_closest_points():
+    # a coarse noisy sphere and points around it, in and out, each started at
+    # its nearest coarse vertex
+    rng = np.random.default_rng(3)
+    V, F = icosphere(2)
+    V = V * (1 + 0.05 * rng.standard_normal((V.shape[0], 1)))
+    Q = icosphere(4)[0] * (1 + 0.08 * rng.standard_normal((2562, 1)))
+    Q = Q @ np.linalg.qr(rng.standard_normal((3, 3)))[0]   # off the coarse vertices: no ties
+    near = _nearest_vertex(V, Q)
+    tracker = FaceTracker(F, V.shape[0], steps=8)
+    tracker.place(V)
+    _assert_same_as_index(tracker.closest(Q, near), V, F, Q)
+    # started one edge off (a neighbour of the nearest vertex), they walk there
+    E = np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]])
+    neighbour = np.zeros(V.shape[0], dtype=np.int64)
+    neighbour[E[:, 0]] = E[:, 1]
+    tracker = FaceTracker(F, V.shape[0], steps=8)
+    tracker.place(V)
+    _assert_same_as_index(tracker.closest(Q, neighbour[near]), V, F, Q)
+
+
+def test_later_calls_follow_the_moving_mesh_and_the_moving_points():
+    rng = np.random.default_rng(4)
+    V, F = torus(24, 12, bump=0.03, bump_waves=(7, 3))
+    Q = torus(96, 48)[0] + 0.01 * rng.standard_normal((96 * 48, 3))
+    tracker = FaceTracker(F, V.shape[0], steps=8)
+    tracker.place(V)
+    tracker.closest(Q, _nearest_vertex(V, Q))
+    for _ in range(3):
+        V = V + 0.01 * rng.standard_normal(V.shape)     # the mesh moves
+        tracker.place(V)
+        _assert_same_as_index(tracker.closest(Q), V, F, Q)
+        Q = Q + 0.01 * rng.standard_normal(Q.shape)     # the points move
+        _assert_same_as_index(tracker.closest(Q), V, F, Q)
+
+
+def test_queries_with_no_guess_are_searched_exactly():
+    V, F = icosphere(2)
+    Q = np.array([[0.0, 0.0, 2.0], [0.3, -0.2, 0.1], [5.0, 1.0, -1.0]])
+    tracker = FaceTracker(F, V.shape[0], steps=0)      # no walking at all
+    tracker.place(V)
+    _assert_same_as_index(tracker.closest(Q, np.array([-1, -1, -1])), V, F, Q)
+    tracker = FaceTracker(F, V.shape[0], steps=0)
+    tracker.place(V)
+    _assert_same_as_index(tracker.closest(Q), V, F, Q)

@@ -1,0 +1,250 @@
+"""Tests of core/near_query.py: NearQuery returns the exact closest point,
+bit for bit the brute-force minimum over every triangle (ties to the lowest
+face index), whatever the block size, point order or thread."""
+
+from concurrent.futures import ThreadPoolExecutor
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings, strategies as st
+
+import core.near_query as near_query
+from core.errors import InvalidArgumentError, InvalidMeshError
+from core.near_query import NearQuery
+from core.spatial import TriangleIndex, closest_on_triangles, triangle_rows
+from core.subdivide import subdivision_operator
+from tests.mesh_factory import cube, icosphere, regular_grid, torus
+
+
+def _brute(V, F, P, faces=None):
+    """Per point: the smallest squared distance the kernel gives over every
+    triangle (or over ``faces``), the lowest face index among equal ones,
+    and that face's (v, w)."""
+    faces = np.arange(F.shape[0]) if faces is None else np.sort(faces)
+    D = triangle_rows(V[F[faces, 0]], V[F[faces, 1]], V[F[faces, 2]])
+    q, m = P.shape[0], faces.shape[0]
+    qq = np.repeat(np.arange(q), m)
+    tt = np.tile(np.arange(m), q)
+    v, w, d2 = closest_on_triangles(P[qq, 0], P[qq, 1], P[qq, 2], D[:, tt])
+    d2 = d2.reshape(q, m)
+    first = np.argmin(d2, axis=1)                 # the first (lowest face) among equal minima
+    k = np.arange(q) * m + first
+    return faces[first], v[k], w[k], d2[np.arange(q), first]
+
+
+def _assert_exact(V, F, P, r, faces=None):
+    face, v, w, d2 = _brute(V, F, P, faces)
+    assert r.face.dtype == np.int64 and r.face.shape == (P.shape[0],)
+    np.testing.assert_array_equal(r.face, face)
+    np.testing.assert_array_equal(r.bary[:, 1], np.clip(v, 0, 1))
+    np.testing.assert_array_equal(r.bary[:, 2], np.clip(w, 0, 1))
+    np.testing.assert_array_equal(r.distance, np.sqrt(d2))
+
+
+def _near_points(V, F, rng, n=600, spread=(0.0, 0.05, 0.3)):
+    """Points on and around the surface: vertices, edge and face points, and
+    those moved by a fraction ``spread`` of the mean edge length."""
+    E = V[F[:, [1, 2, 0]]] - V[F]
+    edge = float(np.linalg.norm(E, axis=2).mean())
+    f = rng.integers(0, F.shape[0], n)
+    b = rng.random((n, 3))
+    b[: n // 4, 0] = 0                                  # on edges
+    b /= b.sum(axis=1, keepdims=True)
+    P = np.einsum("ij,ijk->ik", b, V[F[f]])
+    P += rng.normal(size=P.shape) * edge * rng.choice(spread, size=(n, 1))
+    return np.vstack([P, V[F[:40].ravel()]])
+
+
+def _meshes():
+    rng = np.random.default_rng(5)
+    V, F = icosphere(3)
+    yield "icosphere", V, F
+    V, F = torus(40, 16)
+    yield "bumpy torus", V + 0.004 * rng.normal(size=V.shape), F
+    yield "open grid", *regular_grid(20, 14, z=lambda x, y: 0.2 * np.sin(4 * x) * y)
+    yield "cube", *cube(4)                                   # flat faces: exact ties
+    Vc, Fc = torus(12, 6)
+    op = subdivision_operator(Fc, Vc.shape[0], levels=2, scheme="butterfly")
+    yield "subdivided cage", op.apply(Vc), op.F_fine            # what bind queries
+    Vs = rng.normal(size=(400, 3)) * rng.choice([0.01, 0.1, 1.0], size=(400, 1))
+    yield "soup", Vs, rng.integers(0, 400, size=(150, 3))
+
+
+@pytest.mark.parametrize("name,V,F", list(_meshes()), ids=[m[0] for m in _meshes()])
+def test_equals_the_brute_force_minimum_bit_for_bit(name, V, F):
+    P = _near_points(V, F, np.random.default_rng(1))
+    _assert_exact(V, F, P, NearQuery(V, F).closest(P))
+
+
+@pytest.mark.parametrize("name,V,F", list(_meshes())[:4], ids=[m[0] for m in _meshes()][:4])
+def test_same_answer_for_any_block_size_order_and_thread(monkeypatch, name, V, F):
+    P = _near_points(V, F, np.random.default_rng(2))
+    query = NearQuery(V, F)
+    ref = query.closest(P)
+    for block in (7, 64):
+        monkeypatch.setattr(near_query, "_BLOCK", block)
+        r = query.closest(P)
+        for a, b in zip(r, ref):
+            np.testing.assert_array_equal(a, b)
+    perm = np.random.default_rng(3).permutation(P.shape[0])
+    r = query.closest(P[perm])
+    for a, b in zip(r, ref):
+        np.testing.assert_array_equal(a, b[perm])
+    monkeypatch.setattr(near_query, "_BLOCK", 50)
+    with ThreadPoolExecutor(4) as pool:
+        parts = list(pool.map(lambda s: query.closest(P[s:s + 100]), range(0, P.shape[0], 100)))
+    for k in range(4):
+        np.testing.assert_array_equal(np.concatenate([p[k] for p in parts]), ref[k])
+
+
+def test_agrees_with_the_index_up_to_exact_ties():
+    V, F = torus(60, 24)
+    V = V + 0.003 * np.random.default_rng(4).normal(size=V.shape)
+    P = _near_points(V, F, np.random.default_rng(5), n=3000)
+    query = NearQuery(V, F)
+    a = query.closest(P)
+    b = query.index.closest(P)
+    np.testing.assert_array_equal(a.distance, b.distance)
+    same = a.face == b.face
+    assert same.mean() > 0.95
+    np.testing.assert_array_equal(a.bary[same], b.bary[same])
+    np.testing.assert_array_equal(a.point[same], b.point[same])
+
+
+def test_points_in_empty_cells_off_and_outside_the_grid():
+    """Points in cells no triangle crosses (off a flat grid), beyond the
+    grid's box, and far away (answered by the index): exact distances, and
+    bit-exact results where no fallback is involved."""
+    V, F = regular_grid(16, 16)
+    rng = np.random.default_rng(6)
+    xy = rng.random((400, 2))
+    P = np.column_stack([xy, rng.choice([-1, 1], 400) * rng.choice([0.02, 0.08, 0.2], 400)])
+    P[:50, :2] += rng.choice([-1.0, 1.0], (50, 2)) * 0.05        # beyond the border
+    query = NearQuery(V, F)
+    _assert_exact(V, F, P, query.closest(P))
+    far = rng.normal(size=(60, 3)) * 100
+    r = query.closest(far)
+    np.testing.assert_allclose(r.distance, np.sqrt(_brute(V, F, far)[3]), rtol=1e-12)
+
+
+def test_degenerate_triangles_slivers_far_from_the_origin():
+    """Slivers, segments and points; small triangles a long way from the
+    origin (the float32 filters are relative to the grid and loosened)."""
+    rng = np.random.default_rng(7)
+    k = 120
+    A = rng.normal(size=(k, 3))
+    B = A + rng.normal(size=(k, 3)) * 0.3
+    C = A + rng.normal(size=(k, 3)) * 0.3
+    C[:30] = A[:30] + (B[:30] - A[:30]) * rng.random((30, 1)) + 1e-8 * rng.normal(size=(30, 3))
+    C[30:45] = B[30:45]
+    B[45:55] = C[45:55] = A[45:55]
+    for offset, scale in ((0.0, 1.0), (1e4, 1e-3)):
+        V = np.concatenate([A, B, C]) * scale + offset
+        F = np.arange(3 * k).reshape(3, k).T
+        P = V[rng.integers(0, V.shape[0], 500)] + rng.normal(size=(500, 3)) * 0.05 * scale
+        query = NearQuery(V, F)
+        _assert_exact(V, F, P, query.closest(P), faces=query.index.tables.face)
+
+
+@settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(st.integers(0, 2**32 - 1), st.integers(1, 60), st.sampled_from([1e-3, 1.0, 1e3]))
+def test_property_random_soups(seed, m, scale):
+    rng = np.random.default_rng(seed)
+    n = int(rng.integers(3, 3 * m + 3))
+    V = rng.normal(size=(n, 3)) * scale
+    if rng.random() < 0.3:                            # a coarse lattice: ties, degeneracies
+        V = np.round(V / scale * 2) * scale / 2
+    F = rng.integers(0, n, size=(m, 3))
+    P = np.vstack([V[F[:5].ravel()], rng.normal(size=(80, 3)) * scale * rng.choice([0.3, 1, 3])])
+    query = NearQuery(V, F)
+    r = query.closest(P)
+    face, v, w, d2 = _brute(V, F, P, faces=query.index.tables.face)
+    np.testing.assert_array_equal(r.distance, np.sqrt(d2))      # the exact minimum
+    near = np.isin(np.arange(P.shape[0]), _fallback_rows(query, P), invert=True)
+    np.testing.assert_array_equal(r.face[near], face[near])     # ties: the lowest face
+
+
+def _fallback_rows(query, P):
+    """Rows NearQuery hands to TriangleIndex.closest (their ties follow its rule)."""
+    rows = []
+    original = query.index.closest
+
+    def spy(Q):
+        rows.append(Q)
+        return original(Q)
+    query.index.closest = spy
+    try:
+        query.closest(P)
+    finally:
+        query.index.closest = original
+    if not rows:
+        return np.zeros(0, dtype=np.int64)
+    Q = np.concatenate(rows)
+    return np.flatnonzero((P[:, None, :] == Q[None, :, :]).all(axis=2).any(axis=1))
+
+
+def test_does_not_modify_inputs_and_checks_them():
+    V, F = icosphere(2)
+    P = _near_points(V, F, np.random.default_rng(8), n=50)
+    V0, F0, P0 = V.copy(), F.copy(), P.copy()
+    query = NearQuery(V, F)
+    query.closest(P)
+    assert (V == V0).all() and (F == F0).all() and (P == P0).all()
+    with pytest.raises(InvalidArgumentError, match=r"NearQuery.closest: P must be \(q,3\)"):
+        query.closest(np.zeros((4, 2)))
+    with pytest.raises(InvalidArgumentError, match="NaN or infinite"):
+        query.closest([[0.0, np.nan, 0.0]])
+    r = query.closest(np.zeros((0, 3)))
+    assert r.face.shape == (0,) and r.point.shape == (0, 3) and r.distance.shape == (0,)
+    with pytest.raises(InvalidMeshError):
+        NearQuery(V, np.zeros((0, 3), dtype=np.int64))
+
+
+def test_the_float32_bound_never_exceeds_the_kernels_distance():
+    """Every (point, reference) bound the tiles compute, slivers, segments and
+    points included, near and off the origin, is at most the kernel's squared
+    distance of that pair (what it is compared with)."""
+    rng = np.random.default_rng(9)
+    k = 80
+    A = rng.normal(size=(k, 3))
+    B = A + rng.normal(size=(k, 3)) * 0.3
+    C = A + rng.normal(size=(k, 3)) * 0.3
+    C[:20] = A[:20] + (B[:20] - A[:20]) * rng.random((20, 1)) + 1e-8 * rng.normal(size=(20, 3))
+    C[20:30] = B[20:30]
+    B[30:36] = C[30:36] = A[30:36]
+    for offset, scale in ((0.0, 1.0), (-3e3, 1e-2)):
+        V = np.concatenate([A, B, C]) * scale + offset
+        F = np.arange(3 * k).reshape(3, k).T
+        query = NearQuery(V, F)
+        T = query._t
+        P = np.concatenate([V + rng.normal(size=V.shape) * 0.05 * scale, V])
+        block, _ = near_query._start_block(T, P, np.arange(P.shape[0]),
+                                           np.clip(np.floor((P - T.lo) / T.h), 0, T.dims - 1)
+                                           .astype(np.int64))
+        cells = np.flatnonzero(T.count)
+        point = np.repeat(np.arange(block.q.shape[0]), cells.shape[0])
+        cell = np.tile(cells, block.q.shape[0])
+        for tile in near_query._tiles(T, block.A, point, cell):
+            rows = point[tile.rows][tile.valid]
+            lb = tile.lb[tile.valid]                          # (r, W)
+            tri = np.repeat(tile.tri, tile.valid.sum(axis=1), axis=0)
+            owner = np.repeat(rows, tri.shape[1])
+            _, _, d2 = near_query._kernel(T, block.X, owner, tri.ravel())
+            real = np.isfinite(lb.ravel())               # the table's padding is infinite
+            assert real.mean() > 0.9 and (lb.ravel()[real] <= d2[real]).all()
+
+
+def test_a_one_cell_grid_and_points_a_long_way_off():
+    """One triangle (every grid side is the border): points at 1e6 of its size
+    leave the float32 box and go to the index; the answer stays exact."""
+    V = np.array([[0.0, 0, 0], [1, 0, 0], [0, 1, 0], [1, 1, 0.2]])
+    F = np.array([[0, 1, 2], [1, 3, 2]])
+    rng = np.random.default_rng(10)
+    P = np.vstack([rng.normal(size=(50, 3)) * s for s in (0.5, 10.0, 1e6)])
+    query = NearQuery(V, F)
+    r = query.closest(P)
+    face, v, w, d2 = _brute(V, F, P)
+    np.testing.assert_array_equal(r.distance, np.sqrt(d2))
+    near = np.isin(np.arange(P.shape[0]), _fallback_rows(query, P), invert=True)
+    assert near[:50].all() and not near[-50:].any()
+    np.testing.assert_array_equal(r.face[near], face[near])
