@@ -29,10 +29,6 @@ of independent edges, each batch checked on the mesh as it is::
             lock their stars
         apply every accepted collapse with one remap (b -> a, V[a] = x,
         Q[a] += Q[b]); glue the half-edge twins of the removed faces
-        (a bold pass, while the mesh has over 4x the target faces, applies
-        each round before the next and locks only the merged ends, so
-        neighbouring collapses go in the same pass: about a third of the
-        faces per pass instead of about an eighth)
     until the target, the error bound, or no valid collapse
     move the unlocked cage vertices towards the input surface, both ways, and
     its borders onto the input's (``core._relocate``)
