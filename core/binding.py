@@ -351,22 +351,25 @@ def bind(V_dense, F_dense, V_cage, F_cage, *, levels=2, scheme="butterfly", crea
     # depend on each other: built side by side on the worker threads
     query, dense_side = run_each(lambda build: build(), [
         lambda: NearQuery(Vf, op.F_fine), lambda: _detail_setup(V_dense, F_dense, detail)])
-    fine_face, bary = _closest_on(query, V_dense, _reporter(progress, 0.05, 0.6))
-    offset = _dense_offsets(VfT, NfT, op.F_fine, fine_face, bary, V_dense)
+    dense = _bind_dense(query, V_dense, VfT, NfT, op.F_fine, _reporter(progress, 0.05, 0.6))
+    d_face, d_bary = _vertex_corners(op.F_fine, op.n_fine)
     fine_detail = np.zeros((op.n_fine, 3))
     if detail is not None:
-        d_face, d_bary = _vertex_corners(op.F_fine, op.n_fine)
         vfr = frames(Vf, NfT.T, op.F_fine[d_face], d_bary)
         if detail == "exact":
             q = _closest_on(dense_side, vfr.point, _reporter(progress, 0.65, 0.95), point=True)
         else:
-            q = _dense_points_near(V_dense, F_dense, dense_side, fine_face, op.F_fine,
+            q = _dense_points_near(V_dense, F_dense, dense_side, dense.face, op.F_fine,
                                    vfr.point)
         fine_detail = _to_frame(q - vfr.point, vfr)
-    return Binding(fine_face=fine_face, bary=bary, offset=offset, fine_detail=fine_detail,
-                   F_cage=F_cage, n_cage=int(V_cage.shape[0]), levels=int(levels),
-                   scheme=str(scheme), creases=creases, fingerprint=op.fingerprint,
-                   _operator=op)
+    cache = {"corners_t": dense.corners_t, "bary_t": dense.bary_t, "offset_t": dense.offset_t,
+             "detail_corners_t": np.ascontiguousarray(op.F_fine[d_face].T),
+             "detail_bary_t": np.ascontiguousarray(d_bary.T),
+             "detail_offset_t": np.ascontiguousarray(fine_detail.T)}
+    return Binding(fine_face=dense.face, bary=dense.bary, offset=dense.offset,
+                   fine_detail=fine_detail, F_cage=F_cage, n_cage=int(V_cage.shape[0]),
+                   levels=int(levels), scheme=str(scheme), creases=creases,
+                   fingerprint=op.fingerprint, _operator=op, _cache=cache)
 
 
 def deform(binding, V_cage_edited, *, F_cage=None, moved=None, out=None):
@@ -984,24 +987,51 @@ def _closest_on(index, P, report=None, point=False):
     return bary if point else (face, bary)
 
 
-def _dense_offsets(VfT, NfT, F_fine, fine_face, bary, V_dense):
-    """(n_dense,3) frame components of each dense vertex's offset from its
-    bound point, the frames in the transposed layout of deform (bit-identical
-    to :func:`frames`: every row on its own), in blocks of ``_BIND_BLOCK``
-    rows on the worker threads."""
-    offset = np.empty((V_dense.shape[0], 3))
+class _DenseBound(NamedTuple):
+    """Every dense vertex's fine face, barycentric coordinates and offset, and
+    the transposed copies the binding's cache holds."""
 
-    def rows(start, stop):
-        p, t, bt, n = _frames_t(VfT, NfT, np.ascontiguousarray(F_fine[fine_face[start:stop]].T),
-                                np.ascontiguousarray(bary[start:stop].T))
+    face: np.ndarray        #: (n,) int64
+    bary: np.ndarray        #: (n,3) float64
+    offset: np.ndarray      #: (n,3) float64
+    corners_t: np.ndarray   #: (3,n) int64 corners of each fine face
+    bary_t: np.ndarray      #: (3,n) float64
+    offset_t: np.ndarray    #: (3,n) float64
+
+
+def _bind_dense(query, V_dense, VfT, NfT, F_fine, report=None):
+    """The :class:`_DenseBound` of the dense vertices: closest points on the
+    fine surface (``query``, a :class:`~.near_query.NearQuery`), then the
+    frame components of each vertex's offset from its point (the frames in
+    the transposed layout of deform, bit-identical to :func:`frames`), block
+    by block on the worker threads (fixed blocks of ``_BIND_BLOCK``: results
+    do not depend on the number of threads), a round of blocks at a time,
+    ``report(fraction)`` after each round."""
+    n = V_dense.shape[0]
+    out = _DenseBound(np.empty(n, dtype=np.int64), np.empty((n, 3)), np.empty((n, 3)),
+                      np.empty((3, n), dtype=np.int64), np.empty((3, n)), np.empty((3, n)))
+
+    def block(start, stop):
+        hit = query.closest(V_dense[start:stop])
+        out.face[start:stop] = hit.face
+        out.bary[start:stop] = hit.bary
+        corners = np.ascontiguousarray(F_fine[hit.face].T)
+        bary = np.ascontiguousarray(hit.bary.T)
+        out.corners_t[:, start:stop] = corners
+        out.bary_t[:, start:stop] = bary
+        p, t, bt, nrm = _frames_t(VfT, NfT, corners, bary)
         d = np.ascontiguousarray(V_dense[start:stop].T)
         d -= p
-        offset[start:stop, 0] = _dot_t(d, t)
-        offset[start:stop, 1] = _dot_t(d, bt)
-        offset[start:stop, 2] = _dot_t(d, n)
+        for k, axis in enumerate((t, bt, nrm)):
+            out.offset_t[k, start:stop] = _dot_t(d, axis)
+        out.offset[start:stop] = out.offset_t[:, start:stop].T
 
-    run_blocks(rows, blocks(V_dense.shape[0], _BIND_BLOCK))
-    return offset
+    spans = blocks(n, _BIND_BLOCK)
+    for i in range(0, len(spans), WORKERS):
+        run_blocks(block, spans[i:i + WORKERS])
+        if report is not None:
+            report(spans[min(i + WORKERS, len(spans)) - 1][1] / n)
+    return out
 
 
 def _reporter(progress, lo, hi):
