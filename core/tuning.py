@@ -77,7 +77,7 @@ class Tuning:
     max_error_quick_samples: int = 20_000
     snap_bits: int = 32              #: coordinates snapped to 2^-snap_bits of the diagonal
     snap_share: float = 1e-12        #: (distance / edge length)^2 below which a position is an endpoint
-    compact_share: float = 0.75      #: compact the arrays once live faces are fewer than this share
+    compact_share: float = 0.5       #: compact the arrays once live faces are fewer than this share
     sample: int = 1 << 16            #: cost thresholds of larger arrays come from a sample this size
     block: int = 1 << 16             #: elements per block of work on the worker threads
     max_passes: int = 100000
