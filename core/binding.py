@@ -73,7 +73,7 @@ _DETAIL_SEARCHES = ("auto", "exact", "local")
 _BIND_BLOCK = 131_072
 
 #: fine vertices per block of the local detail search (``detail_search="local"``)
-_DETAIL_BLOCK = 16_384
+_DETAIL_BLOCK = 8_192
 
 #: dense rows per block of an incremental deform's frame rebuild (bounds the
 #: temporaries: (3, 16384) float64 is 384 KiB)
