@@ -14,8 +14,13 @@ One pass, as stages (each a function below)::
                           rejections raise the cost
     _recost_cheapest      recost the stale edges that could be among the cheapest
     _choose_pool          the cheapest candidates (bounded share; bounded by the
-                          collapses needed), ranked by _priority
-    rounds (_check_rounds):
+                          collapses needed, a bound that grows after a pass that
+                          fell short), ranked by _priority
+    far from the target (more than Tuning.bold_above times its faces), a bold
+    pass (_bold_rounds): each round picks, checks and applies at once, and
+    later rounds may take collapses next to earlier ones (only merged ends
+    wait): about 30% of the faces go per pass instead of about 12%;
+    closer to it, a careful pass, rounds (_check_rounds):
         _pick_independent pool edges whose rank is the smallest over every face
                           around both endpoints -> the stars are disjoint
         _check            on the current mesh: _link_condition, _turned_faces,
@@ -30,6 +35,7 @@ One pass, as stages (each a function below)::
                           and vertices are only marked dead until compaction
 """
 
+import threading
 import time
 from dataclasses import dataclass, field, fields
 from typing import NamedTuple
@@ -71,7 +77,7 @@ class State:
     V: np.ndarray = _array("vertex")             #: working positions (unit-free)
     VT: np.ndarray = _array("vertex_t")          #: (3,n) copy of V for column gathers
     Q: np.ndarray = _array("vertex_t")           #: (11,n) quadrics, one row per coefficient
-    Nref: np.ndarray = _array("vertex")          #: summed area normals of the input faces merged in
+    NrefT: np.ndarray = _array("vertex_t")       #: (3,n) summed area normals of the input faces merged in
     wit: np.ndarray = _array("vertex")           #: witness: merged input point farthest from the surface
     locked: np.ndarray = _array("vertex")
     moved: np.ndarray = _array("vertex")         #: position changed (else the input's exact one)
@@ -106,7 +112,7 @@ class State:
         self.V = V.copy()                          # (the input V stays: relocation samples it)
         self.VT = np.ascontiguousarray(V.T)
         self.Q = np.ascontiguousarray(Q.T)
-        self.Nref, self.wit, self.locked = Nref, V.copy(), locked
+        self.NrefT, self.wit, self.locked = np.ascontiguousarray(Nref.T), V.copy(), locked
         self.moved = np.zeros(n, dtype=bool)
         self.orig = np.arange(n, dtype=np.int64)
         self.vver = np.full(n, -1, dtype=np.int64)
@@ -128,6 +134,11 @@ class State:
         self.m_live = m
         self.worst = 0.0
         self.seconds = {}
+
+    @property
+    def Nref(self):
+        """(n,3) view of :attr:`NrefT`."""
+        return self.NrefT.T
 
 
 def _meta(name):
@@ -293,11 +304,13 @@ def _kth_smallest(x, k, sample):
 # ---------------------------------------------------------------- the pool
 
 
-def _pool_size(ne, m, target, tun):
-    """How many of the ``ne`` candidate edges one pass may consider."""
-    P = int(np.ceil(tun.pool_share * ne))
+def _pool_size(ne, m, target, tun, bold=False, grow=1.0):
+    """How many of the ``ne`` candidate edges one pass (``bold``: see
+    :func:`_bold_rounds`) may consider; ``grow`` widens the bound set by the
+    collapses still needed (see ``Tuning.slow_pass_share``)."""
+    P = int(np.ceil((tun.bold_pool_share if bold else tun.pool_share) * ne))
     if target is not None:
-        P = min(P, int(np.ceil(tun.pool_goal_factor * (m - target) / 2.0)) + 1)
+        P = min(P, int(np.ceil(grow * tun.pool_goal_factor * (m - target) / 2.0)) + 1)
     return max(1, min(P, ne))
 
 
@@ -307,7 +320,7 @@ class _Pool(NamedTuple):
     h: np.ndarray         #: representative half-edges
     A: np.ndarray         #: survivors
     B: np.ndarray         #: removed ends
-    X: np.ndarray         #: (P,3) positions
+    XT: np.ndarray        #: (3,P) positions
     interior: np.ndarray  #: bool: two faces go (else one: a border edge)
     cost: np.ndarray      #: ranking cost (raised by remembered rejections)
     raw: np.ndarray       #: quadric cost at X
@@ -326,15 +339,17 @@ def _choose_pool(st, e, ci, P, tun):
     sw = st.swap[ph]
     pa = np.where(sw, e.W[pool], e.U[pool])
     pb = np.where(sw, e.U[pool], e.W[pool])
-    pX = np.ascontiguousarray(_take(st.c_x, ph, axis=1).T)
-    D = _take(st.V, pb, axis=0) - _take(st.V, pa, axis=0)
-    key = _priority(e.cost[pool], np.einsum("ij,ij->i", D, D), pa, pb, tun)
+    pX = _take(st.c_x, ph, axis=1)
+    key = _priority(e.cost[pool], _squared_lengths(st.VT, pa, pb), pa, pb, tun)
     return _Pool(ph, pa, pb, pX, st.twin[ph] >= 0, e.cost[pool], _take(st.c_cost, ph), key, limit)
 
 
 def _bands(x, n, sample):
     """Band 0..n-1 of every value of ``x``: its place among ``n - 1``
-    quantiles of ``x`` (of a sample on large arrays)."""
+    quantiles of ``x`` (of a sample on large arrays); up to ``n`` values,
+    its rank (equal values share one)."""
+    if x.size <= n:
+        return np.unique(x, return_inverse=True)[1].astype(np.int64).reshape(-1)
     s = _thinned(x, sample)
     ks = (np.arange(1, n, dtype=np.int64) * s.size) // n
     return np.searchsorted(np.partition(s, ks)[ks], x, side="left").astype(np.int64)
@@ -351,9 +366,8 @@ def _priority(cost, length2, a, b, tun):
     bits = max(1, int(P - 1).bit_length())
     if bits > 28:
         raise OverflowError("simplify: more than 2^28 edges in one pass")
-    band = _bands(cost, tun.bands, tun.sample) if P > tun.bands else np.zeros(P, dtype=np.int64)
-    lband = (_bands(length2, tun.length_bands, tun.sample) if P > tun.length_bands
-             else np.zeros(P, dtype=np.int64))
+    band = _bands(cost, tun.bands, tun.sample)
+    lband = _bands(length2, tun.length_bands, tun.sample)
     mix = ((a * np.int64(0x9E3779B1)) ^ (b * np.int64(0x85EBCA77))) & np.int64(0x3FFFFFF)
     mix |= lband << np.int64(26)
     return (((band << np.int64(31)) | mix) << np.int64(bits)) | np.arange(P, dtype=np.int64)
@@ -384,11 +398,13 @@ class _Faces(NamedTuple):
     fh: np.ndarray
 
 
-def _scratch(n):
-    """Two (n,) int64 arrays of ``_BIG`` for the per-vertex minima of the
-    rounds of one pass (each round puts back what it wrote: small rounds on
-    a large mesh then cost what they touch, not the mesh's size)."""
-    return np.full(n, _BIG, dtype=np.int64), np.full(n, _BIG, dtype=np.int64)
+def _scratch(n, P):
+    """Scratch of the rounds of one pass: two (n,) int64 arrays of ``_BIG``
+    for the per-vertex minima and a (P,) one of -1 for the chosen pool edges
+    (each round puts back what it wrote: small rounds on a large mesh then
+    cost what they touch, not the mesh's size)."""
+    return (np.full(n, _BIG, dtype=np.int64), np.full(n, _BIG, dtype=np.int64),
+            np.full(P, -1, dtype=np.int64))
 
 
 def _put_back(buf, *idx):
@@ -409,7 +425,7 @@ def _pick_independent(st, pool, active, faces, tun, scratch, stars=True):
     in play. ``scratch``: :func:`_scratch` of the vertex count."""
     F, P = st.F, pool.key.size
     ka, aa, ab = pool.key[active], pool.A[active], pool.B[active]
-    vmin, vmin2 = scratch
+    vmin, vmin2, pos = scratch
     np.minimum.at(vmin, aa, ka)
     np.minimum.at(vmin, ab, ka)
     if faces is None:                        # first round: every live face
@@ -436,9 +452,9 @@ def _pick_independent(st, pool, active, faces, tun, scratch, stars=True):
         return sel, active[~chosen], None, None, faces
     # the star of a chosen edge is exactly the set of faces whose minimum is its key
     imask = (np.int64(1) << np.int64(max(1, int(P - 1).bit_length()))) - 1
-    pos = np.full(P, -1, dtype=np.int64)
     pos[sel] = np.arange(sel.size)
     fpos = np.where(faces.fh < _BIG, _take(pos, np.minimum(faces.fh & imask, P - 1)), -1)
+    pos[sel] = -1
     in_star = fpos >= 0
     return sel, active[~chosen], faces.fidx[in_star], fpos[in_star], faces
 
@@ -461,7 +477,7 @@ def _check_rounds(st, pool, passes, haus, dihedral_cos, tun):
     acc_edges, acc_wit, acc_rows = [], [], []
     active = np.arange(P, dtype=np.int64)
     faces = owned = ahead = None
-    scratch = _scratch(n)
+    scratch = _scratch(n, P)
     for _ in range(tun.max_rounds):
         active = active[~touched[pool.A[active]] & ~touched[pool.B[active]]]
         if active.size == 0:
@@ -471,18 +487,12 @@ def _check_rounds(st, pool, passes, haus, dihedral_cos, tun):
         sel, active, star, kf, faces = _pick_independent(st, pool, active, faces, tun, scratch,
                                                          stars=ahead is None)
         if ahead is None:
-            c = _check(st, pool.A[sel], pool.B[sel], pool.X[sel], pool.interior[sel], star, kf, tun, haus,
+            c = _check(st, pool.A[sel], pool.B[sel], pool.XT[:, sel], pool.interior[sel], star, kf, tun, haus,
                        dihedral_cos)
         else:
             c = ahead.results(sel)
-        ok, pen, rows = c.ok, c.pen, c.rows
-        st.bent[pool.h[sel]] = c.bent
-        total = pool.raw[sel] + pen
-        acc = ok & (total <= _acceptance_bound(pool.limit, total[ok], tun))
-        rej = ~acc
-        hr = pool.h[sel[rej]]
-        st.c_blk[hr] = np.where(ok[rej], total[rej], np.inf)
-        st.blk_pass[hr] = passes
+        rows = c.rows
+        acc = _judge(st, pool, sel, c, passes, tun)
         if dihedral_cos is not None and acc.any():   # each bend was judged against still faces
             if owned is None:
                 owned = np.zeros(st.F.shape[0], dtype=bool)
@@ -498,6 +508,63 @@ def _check_rounds(st, pool, passes, haus, dihedral_cos, tun):
         return None, touched
     rows = tuple(np.concatenate(col) for col in zip(*acc_rows))
     return _Accepted(np.concatenate(acc_edges), rows, np.concatenate(acc_wit)), touched
+
+
+def _judge(st, pool, sel, c, passes, tun):
+    """Which of the checked collapses ``sel`` (their :class:`_Checked` ``c``)
+    are accepted: valid, and their total (cost + penalties) within
+    :func:`_acceptance_bound`. The others are remembered as rejected (their
+    total, or inf when invalid) until their neighbourhood changes. (k,) bool."""
+    st.bent[pool.h[sel]] = c.bent
+    total = pool.raw[sel] + c.pen
+    acc = c.ok & (total <= _acceptance_bound(pool.limit, total[c.ok], tun))
+    rej = ~acc
+    hr = pool.h[sel[rej]]
+    st.c_blk[hr] = np.where(c.ok[rej], total[rej], np.inf)
+    st.blk_pass[hr] = passes
+    return acc
+
+
+def _bold_rounds(st, pool, passes, haus, dihedral_cos, tun, target):
+    """Selection rounds of a bold pass, far from the target: each round
+    picks independent collapses among the pool edges whose ends no earlier
+    round merged, checks them on the mesh as it is and applies those
+    accepted at once, so a later round may take a collapse next to an
+    earlier one (its cost is still exact: neither end changed). About three
+    times the collapses of a careful pass (:func:`_check_rounds`), for a
+    slightly less even mesh. Returns the number of collapses applied.
+
+    The picks read the faces in play as they were at the start of the pass:
+    a collapse only renames a merged vertex (no longer the end of any active
+    edge) into another, so every face's smallest active key, and with it
+    every pick and star, is the same; only the faces removed are dropped
+    from the stars (the checks read the current rows)."""
+    n = st.V.shape[0]
+    merged = np.zeros(n, dtype=bool)
+    active = np.arange(pool.key.size, dtype=np.int64)
+    faces, scratch, done = None, _scratch(n, pool.key.size), 0
+    for _ in range(tun.bold_rounds):
+        active = active[~merged[pool.A[active]] & ~merged[pool.B[active]]]
+        if active.size == 0 or (target is not None and st.m_live <= target):
+            break
+        sel, active, star, kf, faces = _pick_independent(st, pool, active, faces, tun, scratch)
+        live = np.flatnonzero(_take(st.alive, star))   # (faces removed by earlier rounds)
+        star, kf = _take(star, live), _take(kf, live)
+        c = _check(st, pool.A[sel], pool.B[sel], pool.XT[:, sel], pool.interior[sel], star, kf, tun, haus,
+                   dihedral_cos)
+        acc = _judge(st, pool, sel, c, passes, tun)
+        if dihedral_cos is not None and acc.any():
+            acc &= ~_next_to_another(st, pool.key[sel], c.rows, acc, np.zeros(st.F.shape[0], dtype=bool))
+        if not acc.any():
+            continue
+        a = _trim_to_target(pool, _Accepted(sel[acc], _keep_rows(c.rows, acc), c.wit[acc]), st.m_live,
+                            target)
+        st.vver[_take(st.F, a.rows[0], axis=0).ravel()] = passes
+        _apply_accepted(st, pool, a)
+        merged[pool.A[a.idx]] = True
+        merged[pool.B[a.idx]] = True
+        done += a.idx.size
+    return done
 
 
 class _CheckedAhead(NamedTuple):
@@ -524,7 +591,7 @@ class _CheckedAhead(NamedTuple):
         if faces is None:
             near &= st.alive
         star, kf = _whole_stars(st.F, fidx[near], A, B)
-        found = _check(st, A, B, pool.X[active], pool.interior[active], star, kf, tun, haus, dihedral_cos)
+        found = _check(st, A, B, pool.XT[:, active], pool.interior[active], star, kf, tun, haus, dihedral_cos)
         at = np.full(pool.key.size, -1, dtype=np.int64)
         at[active] = np.arange(active.size)
         return cls(at, found)
@@ -625,12 +692,12 @@ class _Checked(NamedTuple):
                         _take(self.wit, i, axis=0), _take(self.bent, i))
 
 
-def _check(st, A, B, X, interior, star, kf, tun, haus=True, dihedral_cos=None):
+def _check(st, A, B, XT, interior, star, kf, tun, haus=True, dihedral_cos=None):
     """:func:`_check_block` over blocks of collapses, on the worker threads.
     Same results; the star rows come back grouped by block."""
     spans = blocks(A.size, tun.block // 10)
     if len(spans) <= 1:
-        return _check_block(st, A, B, X, interior, star, kf, tun, haus, dihedral_cos)
+        return _check_block(st, A, B, XT, interior, star, kf, tun, haus, dihedral_cos)
     starts = np.array([i for i, _ in spans], dtype=np.int64)
     blk = np.searchsorted(starts, kf, side="right") - 1
     order = np.argsort(blk, kind="stable")
@@ -639,7 +706,7 @@ def _check(st, A, B, X, interior, star, kf, tun, haus=True, dihedral_cos=None):
 
     def block(b):
         (i, j), r0, r1 = spans[b], cut[b], cut[b + 1]
-        return _check_block(st, A[i:j], B[i:j], X[i:j], interior[i:j], star[r0:r1], kf[r0:r1] - i, tun,
+        return _check_block(st, A[i:j], B[i:j], XT[:, i:j], interior[i:j], star[r0:r1], kf[r0:r1] - i, tun,
                             haus, dihedral_cos)
 
     res = run_each(block, range(len(spans)))
@@ -737,44 +804,75 @@ def _common_pairs(ka, xa, kb, xb, n):
     settles the few vertices claimed by several collapses with a sort."""
     if 8 * (xa.size + xb.size) < n:          # few pairs on a large mesh: a sort costs less than marks
         return _pairs_among(ka, xa, kb, xb, n)
-    mark = np.full(n, -1, dtype=np.int64)
+    mark = _marks(n)
     mark[xa] = ka
     hit = _take(mark, xb) == kb
     lost = _take(mark, xa) != ka
     if lost.any():
-        contested = np.zeros(n, dtype=bool)
-        contested[xa[lost]] = True
-        sa = np.flatnonzero(contested[xa])
-        sb = np.flatnonzero(contested[xb])
+        mark[xa[lost]] = -2                  # contested: claimed by several collapses
+        sa = np.flatnonzero(_take(mark, xa) == -2)
+        sb = np.flatnonzero(_take(mark, xb) == -2)
         hit[sb] = _pairs_among(ka[sa], xa[sa], kb[sb], xb[sb], n)
+    mark[xa] = -1
     return hit
 
 
+_local = threading.local()
+
+
+def _marks(n):
+    """An int64 array of at least ``n`` entries of -1, one per thread, kept
+    between calls (its user puts back -1 where it wrote)."""
+    mark = getattr(_local, "mark", None)
+    if mark is None or mark.size < n:
+        mark = _local.mark = np.full(n, -1, dtype=np.int64)
+    return mark
+
+
 class _Moved(NamedTuple):
-    """The faces that stay, before (P) and after (Q) their corner moves to X."""
+    """The faces that stay, before (P) and after (Q) their corner moves to X;
+    coordinates first: ``P[c]`` is the (3, r) corner c of every face."""
 
     FT: np.ndarray       #: (3, r) their vertex rows
-    P: tuple             #: three (r,3) corner arrays before
-    Q: tuple             #: ... and after
-    N0: np.ndarray       #: (r,3) area normals before
+    P: np.ndarray        #: (3, 3, r) corners before
+    Q: tuple             #: three (3, r) corners after
+    N0: np.ndarray       #: (3, r) area normals before
     N1: np.ndarray       #: ... after
     l0: np.ndarray       #: twice the areas before
     l1: np.ndarray       #: ... after
 
 
-def _moved_faces(st, s, X):
+def _cross_t(a, b):
+    """Cross products of the columns of two (3, r) arrays (as ``np.cross`` of rows)."""
+    out = np.empty(a.shape)
+    np.subtract(a[1] * b[2], a[2] * b[1], out=out[0])
+    np.subtract(a[2] * b[0], a[0] * b[2], out=out[1])
+    np.subtract(a[0] * b[1], a[1] * b[0], out=out[2])
+    return out
+
+
+def _dot_t(a, b):
+    """Dot products of the columns of two (3, r) arrays."""
+    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+
+
+def _squared_lengths(VT, a, b):
+    """Squared lengths of the edges ``(a[i], b[i])`` from the (3, n) positions ``VT``."""
+    D = _take(VT, b, axis=1)
+    D -= _take(VT, a, axis=1)
+    return _dot_t(D, D)
+
+
+def _moved_faces(st, s, XT):
     """Geometry of the faces that stay, one corner moved to its collapse's X."""
     FmT = np.ascontiguousarray(_take(s.Fs, s.mv, axis=0).T)   # (contiguous index rows gather much faster)
-    P0, P1, P2 = (_take(st.V, FmT[c], axis=0) for c in range(3))
-    Xm = _take(X, s.mk, axis=0)
-    Q0 = np.where((s.cm == 0)[:, None], Xm, P0)
-    Q1 = np.where((s.cm == 1)[:, None], Xm, P1)
-    Q2 = np.where((s.cm == 2)[:, None], Xm, P2)
-    N0 = np.cross(P1 - P0, P2 - P0)
-    N1 = np.cross(Q1 - Q0, Q2 - Q0)
-    l0 = np.sqrt(np.einsum("ij,ij->i", N0, N0))
-    l1 = np.sqrt(np.einsum("ij,ij->i", N1, N1))
-    return _Moved(FmT, (P0, P1, P2), (Q0, Q1, Q2), N0, N1, l0, l1)
+    r = FmT.shape[1]
+    P = _take(st.VT, FmT.ravel(), axis=1).reshape(3, 3, r).transpose(1, 0, 2)
+    Xm = _take(XT, s.mk, axis=1)
+    Q = tuple(np.where(s.cm == c, Xm, P[c]) for c in range(3))
+    N0 = _cross_t(P[1] - P[0], P[2] - P[0])
+    N1 = _cross_t(Q[1] - Q[0], Q[2] - Q[0])
+    return _Moved(FmT, P, Q, N0, N1, np.sqrt(_dot_t(N0, N0)), np.sqrt(_dot_t(N1, N1)))
 
 
 def _turned_faces(st, s, g, A, B, tun):
@@ -783,22 +881,24 @@ def _turned_faces(st, s, g, A, B, tun):
     (the summed normals of the input faces merged into its vertices: no
     slow drift)? A face already against its input (a fold of a noisy
     input) may move freely: holding it would freeze its neighbourhood."""
-    flip = (g.l0 > 0) & (np.einsum("ij,ij->i", g.N0, g.N1) <= tun.flip_cos * g.l0 * g.l1)
+    flip = (g.l0 > 0) & (_dot_t(g.N0, g.N1) <= tun.flip_cos * g.l0 * g.l1)
     if tun.ref_cos > -1.0:
-        Nr = st.Nref
+        Nr = st.NrefT
         moved_v = _take(s.Fs.ravel(), 3 * s.mv + s.cm)
-        ref0 = _take(Nr, g.FT[0], axis=0) + _take(Nr, g.FT[1], axis=0) + _take(Nr, g.FT[2], axis=0)
-        ref = ref0 - _take(Nr, moved_v, axis=0) + _take(_take(Nr, A, axis=0) + _take(Nr, B, axis=0), s.mk, axis=0)
-        lr = np.sqrt(np.einsum("ij,ij->i", ref, ref))
-        flip |= np.einsum("ij,ij->i", ref, g.N1) < tun.ref_cos * lr * g.l1
-        flip &= np.einsum("ij,ij->i", ref0, g.N0) >= 0
+        ref0 = _take(Nr, g.FT.ravel(), axis=1).reshape(3, 3, -1)
+        ref0 = ref0[:, 0] + ref0[:, 1] + ref0[:, 2]
+        AB = _take(Nr, A, axis=1) + _take(Nr, B, axis=1)
+        ref = ref0 - _take(Nr, moved_v, axis=1) + _take(AB, s.mk, axis=1)
+        lr = np.sqrt(_dot_t(ref, ref))
+        flip |= _dot_t(ref, g.N1) < tun.ref_cos * lr * g.l1
+        flip &= _dot_t(ref0, g.N0) >= 0
     return flip
 
 
 def _min_compactness(s, g):
     """Smallest compactness around each collapse, (before, after), (k,) each."""
     (P0, P1, P2), (Q0, Q1, Q2) = g.P, g.Q
-    sq = [np.einsum("ij,ij->i", D, D) for D in (P1 - P0, P2 - P1, P0 - P2, Q1 - Q0, Q2 - Q1, Q0 - Q2)]
+    sq = [_dot_t(D, D) for D in (P1 - P0, P2 - P1, P0 - P2, Q1 - Q0, Q2 - Q1, Q0 - Q2)]
     g_old = compactness(g.l0, sq[0] + sq[1] + sq[2])
     g_new = compactness(g.l1, sq[3] + sq[4] + sq[5])
     gmin_old = np.ones(s.k)
@@ -812,8 +912,7 @@ def _compactness_penalty(st, s, g, A, B, gmin_old, gmin_new, tun):
     """Only collapses that make the neighbourhood less compact than it was
     (below ``gamma_soft``) pay: star area * edge length^2 * shortfall^2."""
     area = np.bincount(s.mk, weights=0.5 * g.l1, minlength=s.k)
-    D = _take(st.V, B, axis=0) - _take(st.V, A, axis=0)
-    L2 = np.einsum("ij,ij->i", D, D)
+    L2 = _squared_lengths(st.VT, A, B)
     short = np.maximum(0.0, np.minimum(gmin_old, tun.gamma_soft) - gmin_new) / tun.gamma_soft
     return tun.compact_weight * area * L2 * short * short
 
@@ -825,7 +924,7 @@ def _hausdorff_penalty(st, s, g, A, B, tun):
     witness (k,3): the farther of the two."""
     wA, wB = _take(st.wit, A, axis=0), _take(st.wit, B, axis=0)
     mk, k = s.mk, s.k
-    D = triangle_rows(*g.Q)                 # the new faces, once for both witnesses
+    D = triangle_rows(*(q.T for q in g.Q))  # the new faces, once for both witnesses
 
     def nearest(w):
         P = np.ascontiguousarray(_take(w, mk, axis=0).T)
@@ -862,7 +961,7 @@ def _bends_too_far(st, s, g, dihedral_cos):
         b = b[pair]
         crease = (st.feat[3 * f[pair] + _take(_PREV, s.cm[pair])]
                   | st.feat[3 * f[b] + _take(_NEXT, s.cm[b])])
-        cos_ok = np.einsum("ij,ij->i", N[pair], N[b]) >= dihedral_cos * l[pair] * l[b]
+        cos_ok = _dot_t(_take(N, pair, axis=1), _take(N, b, axis=1)) >= dihedral_cos * l[pair] * l[b]
         bad[s.mk[pair[~cos_ok & ~crease]]] = True
     # the far edge of each moved face, against the (unchanged) face beyond it
     h = 3 * f + s.cm
@@ -870,16 +969,16 @@ def _bends_too_far(st, s, g, dihedral_cos):
     out = np.flatnonzero((t >= 0) & ~st.feat[h])
     if out.size:
         Fo = _take(st.F, t[out] // 3, axis=0)
-        Vo = [_take(st.V, Fo[:, c], axis=0) for c in range(3)]
-        No = np.cross(Vo[1] - Vo[0], Vo[2] - Vo[0])
-        lo = np.sqrt(np.einsum("ij,ij->i", No, No))
-        cos_ok = np.einsum("ij,ij->i", N[out], No) >= dihedral_cos * l[out] * lo
+        Vo = [_take(st.VT, Fo[:, c], axis=1) for c in range(3)]
+        No = _cross_t(Vo[1] - Vo[0], Vo[2] - Vo[0])
+        lo = np.sqrt(_dot_t(No, No))
+        cos_ok = _dot_t(_take(N, out, axis=1), No) >= dihedral_cos * l[out] * lo
         bad[s.mk[out[~cos_ok]]] = True
     return bad
 
 
-def _check_block(st, A, B, X, interior, star, kf, tun, haus=True, dihedral_cos=None):
-    """Validity and penalty of independent collapses B[k] -> A[k] at X[k],
+def _check_block(st, A, B, XT, interior, star, kf, tun, haus=True, dihedral_cos=None):
+    """Validity and penalty of independent collapses B[k] -> A[k] at XT[:, k],
     judged on the current mesh (``dihedral_cos``: also refuse collapses that
     bend adjacent faces too far, see :func:`_bends_too_far`).
 
@@ -892,7 +991,7 @@ def _check_block(st, A, B, X, interior, star, kf, tun, haus=True, dihedral_cos=N
     """
     s = _star_of(st.F, A, B, star, kf)
     ok = _link_condition(st, s, interior)
-    g = _moved_faces(st, s, X)
+    g = _moved_faces(st, s, XT)
     ok[s.mk[_turned_faces(st, s, g, A, B, tun)]] = False
     gmin_old, gmin_new = _min_compactness(s, g)
     ok &= ~((gmin_new < tun.gamma_hard) & (gmin_new < 0.5 * gmin_old))   # no new sliver
@@ -934,7 +1033,7 @@ def _progress(progress, m0, m, target):
 
 
 def _run(st, target, max_err_n, preserve_boundary, progress, m0, tun, dihedral_cos):
-    passes = 0
+    passes, grow, m_last = 0, 1.0, None
     clock = _Clock(st.seconds)
     while passes < tun.max_passes:
         if st.m_live < tun.compact_share * st.F.shape[0]:
@@ -945,13 +1044,17 @@ def _run(st, target, max_err_n, preserve_boundary, progress, m0, tun, dihedral_c
             return "target", passes
         if progress is not None and passes > 0 and not _progress(progress, m0, m, target):
             return "cancelled", passes
+        if m_last is not None and target is not None:
+            grow = grow * tun.pool_growth if m_last - m < tun.slow_pass_share * (m_last - target) else 1.0
+        m_last = m
         passes += 1
         e = _candidate_edges(st)
         ne = int(np.count_nonzero(np.isfinite(e.cost)))
         clock.lap("candidates")
         if ne == 0:
             return "no_valid_collapse", passes
-        P = _pool_size(ne, m, target, tun)
+        bold = target is not None and m > tun.bold_above * target
+        P = _pool_size(ne, m, target, tun, bold, grow)
         _recost_cheapest(st, e, P, max_err_n, preserve_boundary, tun)
         clock.lap("recost")
         cand = np.isfinite(e.cost)
@@ -969,16 +1072,16 @@ def _run(st, target, max_err_n, preserve_boundary, progress, m0, tun, dihedral_c
         clock.lap("pool")
         # the Hausdorff penalty matters once the cage is coarse: skip it before
         haus = target is None or m <= tun.haus_phase * target
+        if bold:
+            _bold_rounds(st, pool, passes, haus, dihedral_cos, tun, target)
+            clock.lap("pick, check and apply (bold)")
+            continue
         acc, touched = _check_rounds(st, pool, passes, haus, dihedral_cos, tun)
         clock.lap("pick and check")
         if acc is None:
             continue
-        acc = _trim_to_target(pool, acc, m, target)
-        i = acc.idx
-        st.worst = max(st.worst, float(_distance(st, pool.raw[i], pool.A[i], pool.B[i]).max()))
         st.vver[touched] = passes
-        st.wit[pool.A[i]] = acc.wit
-        _apply(st, pool.A[i], pool.B[i], pool.X[i], acc.rows)
+        _apply_accepted(st, pool, _trim_to_target(pool, acc, m, target))
         clock.lap("apply")
     return "no_valid_collapse", passes
 
@@ -998,8 +1101,17 @@ class _Clock:
 # ---------------------------------------------------------------- applying, compacting
 
 
-def _apply(st, A, B, X, rows):
-    """Collapse every B[k] into A[k] at X[k] at once (stars disjoint;
+def _apply_accepted(st, pool, acc):
+    """Apply the accepted collapses ``acc`` of ``pool`` (:class:`_Accepted`):
+    the largest error so far, the survivors' witnesses, then :func:`_apply`."""
+    i = acc.idx
+    st.worst = max(st.worst, float(_distance(st, pool.raw[i], pool.A[i], pool.B[i]).max()))
+    st.wit[pool.A[i]] = acc.wit
+    _apply(st, pool.A[i], pool.B[i], _take(pool.XT, i, axis=1), acc.rows)
+
+
+def _apply(st, A, B, XT, rows):
+    """Collapse every B[k] into A[k] at XT[:, k] at once (stars disjoint;
     ``rows`` as returned by :func:`_check`)."""
     F, twin = st.F, st.twin
     star, kf, coll, cA, cB = rows
@@ -1017,12 +1129,12 @@ def _apply(st, A, B, X, rows):
     st.feat[tB[okB]] = fl[okB]
     # positions and quadrics
     VA = _take(st.VT, A, axis=1)
-    st.moved[A] |= (X[:, 0] != VA[0]) | (X[:, 1] != VA[1]) | (X[:, 2] != VA[2])
+    st.moved[A] |= (XT[0] != VA[0]) | (XT[1] != VA[1]) | (XT[2] != VA[2])
     for q in st.Q:                                 # one coefficient row at a time (A are distinct)
         np.put(q, A, _take(q, A) + _take(q, B))
-    st.Nref[A] = _take(st.Nref, A, axis=0) + _take(st.Nref, B, axis=0)
-    st.V[A] = X
-    st.VT[:, A] = X.T
+    st.NrefT[:, A] = _take(st.NrefT, A, axis=1) + _take(st.NrefT, B, axis=1)
+    st.V[A] = XT.T
+    st.VT[:, A] = XT
     st.fresh[A] = True
     st.is_bnd[A] |= st.is_bnd[B]
     # B leaves the faces around it; the removed faces and B are marked dead

@@ -9,6 +9,9 @@ from core import _collapse as engine
 from core._clean import BOUNDARY, twin_table
 from core.quadrics import vertex_face_quadrics
 from core.tuning import TUNING
+from core._relax import close_smallest_hole
+from core.clean import clean_mesh
+from core.topology import topology_summary
 from tests.mesh_factory import icosphere, regular_grid, tetrahedron
 
 
@@ -89,12 +92,15 @@ def test_independent_picks_have_disjoint_stars_that_are_exactly_the_faces_around
     V, F = icosphere(3)
     st = engine_state(V, F)
     pool = pool_of(st)
-    scratch = engine._scratch(st.V.shape[0])
+    scratch = engine._scratch(st.V.shape[0], pool.key.size)
     sel, rest, star, kf, faces = engine._pick_independent(st, pool, np.arange(pool.key.size), None, TUNING,
                                                          scratch)
-    assert all((a == engine._BIG).all() for a in scratch)        # put back for the next round
+    def put_back():
+        return all((a == engine._BIG).all() for a in scratch[:2]) and (scratch[2] == -1).all()
+
+    assert put_back()                                            # put back for the next round
     again = engine._pick_independent(st, pool, rest, faces, TUNING, scratch)   # a smaller put-back
-    assert again[0].size > 0 and all((a == engine._BIG).all() for a in scratch)
+    assert again[0].size > 0 and put_back()
     assert sel.size > 0 and np.intersect1d(sel, rest).size == 0 and sel.size + rest.size == pool.key.size
     assert np.unique(star).size == star.size                     # disjoint
     for k in range(0, sel.size, max(1, sel.size // 25)):
@@ -126,9 +132,9 @@ def test_checking_ahead_gives_the_same_bits_as_checking_each_round_and_the_same_
     pool = pool_of(st)
     active = np.arange(pool.key.size)
     ahead = engine._CheckedAhead.of(st, pool, active, None, TUNING, True, bend)
-    scratch = engine._scratch(st.V.shape[0])
+    scratch = engine._scratch(st.V.shape[0], pool.key.size)
     sel, _, star, kf, _ = engine._pick_independent(st, pool, active, None, TUNING, scratch)
-    now = engine._check(st, pool.A[sel], pool.B[sel], pool.X[sel], pool.interior[sel], star, kf, TUNING,
+    now = engine._check(st, pool.A[sel], pool.B[sel], pool.XT[:, sel], pool.interior[sel], star, kf, TUNING,
                         True, bend)
     got = ahead.results(sel)
     assert not now.ok.all() and now.ok.any()
@@ -152,14 +158,14 @@ def test_link_condition_refuses_the_last_tetrahedron_and_allows_a_sphere():
     st = engine_state(V, F)
     pool = pool_of(st)
     sel, _, star, kf, _ = engine._pick_independent(st, pool, np.arange(pool.key.size), None, TUNING,
-                                                         engine._scratch(st.V.shape[0]))
+                                                         engine._scratch(st.V.shape[0], pool.key.size))
     s = engine._star_of(st.F, pool.A[sel], pool.B[sel], star, kf)
     assert not engine._link_condition(st, s, pool.interior[sel]).any()
     V, F = icosphere(2)
     st = engine_state(V, F)
     pool = pool_of(st)
     sel, _, star, kf, _ = engine._pick_independent(st, pool, np.arange(pool.key.size), None, TUNING,
-                                                         engine._scratch(st.V.shape[0]))
+                                                         engine._scratch(st.V.shape[0], pool.key.size))
     s = engine._star_of(st.F, pool.A[sel], pool.B[sel], star, kf)
     assert engine._link_condition(st, s, pool.interior[sel]).all()
 
@@ -198,7 +204,7 @@ def test_compaction_renumbers_faces_and_survivors():
     acc, _ = engine._check_rounds(st, pool, 1, False, None, TUNING)
     i = acc.idx
     A, B = pool.A[i], pool.B[i]
-    engine._apply(st, A, B, pool.X[i], acc.rows)
+    engine._apply(st, A, B, pool.XT[:, i], acc.rows)
     before = engine.survivors(st)
     assert np.array_equal(before[B], A)                 # the removed ends follow their survivors
     pos = st.V[before].copy()
@@ -215,3 +221,60 @@ def test_sampled_kth_smallest_is_never_far_below(k):
     v = engine._kth_smallest(x, k, TUNING.sample)
     rank = int(np.count_nonzero(x < v))
     assert k - 5 * np.sqrt(k + 1) <= rank <= k + 0.005 * x.size
+
+
+def star_around(st, a, b):
+    """Every live face around ``a`` or ``b``, ascending."""
+    return np.flatnonzero(st.alive & ((st.F == a).any(axis=1) | (st.F == b).any(axis=1)))
+
+
+def test_a_bold_pass_is_its_collapses_applied_one_at_a_time_each_valid_on_the_mesh_as_it_is(monkeypatch):
+    # a bold pass applies round after round; later rounds take collapses next to
+    # earlier ones. Replayed one collapse at a time, each checked alone on the mesh
+    # as the collapses before it left it, every one is valid and the meshes agree.
+    V, F = icosphere(4)
+    rng = np.random.default_rng(5)
+    V = V * (1.0 + 0.05 * rng.random((V.shape[0], 1)))        # bumpy: costs differ, some checks fail
+    st = engine_state(V, F)
+    pool = pool_of(st, replace(TUNING, pool_share=TUNING.bold_pool_share))
+    rounds = []
+    real = engine._apply_accepted
+    monkeypatch.setattr(engine, "_apply_accepted",
+                        lambda st_, pool_, acc: (rounds.append(acc.idx.copy()), real(st_, pool_, acc)))
+    done = engine._bold_rounds(st, pool, 1, False, None, TUNING, None)
+    assert done == sum(r.size for r in rounds) and len(rounds) >= 3
+    merged = np.concatenate([np.concatenate([pool.A[r], pool.B[r]]) for r in rounds])
+    assert np.unique(merged).size == merged.size                 # an end merges once per pass
+    ref = engine_state(V, F)
+    next_to_earlier = 0
+    for i, r in enumerate(rounds):
+        earlier = pool.A[np.concatenate(rounds[:i])] if i else np.zeros(0, dtype=np.int64)
+        for k in r:
+            star = star_around(ref, pool.A[k], pool.B[k])
+            next_to_earlier += bool(np.isin(ref.F[star], earlier).any())
+            c = engine._check(ref, pool.A[[k]], pool.B[[k]], pool.XT[:, [k]], pool.interior[[k]], star,
+                              np.zeros(star.size, dtype=np.int64), TUNING, False)
+            assert c.ok[0]
+            engine._apply(ref, pool.A[[k]], pool.B[[k]], pool.XT[:, [k]], c.rows)
+    assert np.array_equal(ref.alive, st.alive) and np.array_equal(ref.F[ref.alive], st.F[st.alive])
+    assert np.array_equal(ref.V, st.V) and np.array_equal(ref.twin, st.twin)
+    assert next_to_earlier > 0.1 * sum(r.size for r in rounds[1:])   # the pass went where a careful one stops
+
+
+def test_holes_are_capped_shortest_first_and_the_mesh_stays_closed_and_manifold():
+    # a sphere with a wide hole and a small one: the small rim is capped first
+    V, F = icosphere(3)
+    C = V[F].mean(axis=1)
+    c = clean_mesh(V, F[(C[:, 2] < 0.7) & ~((C[:, 0] > 0.93) & (np.abs(C[:, 2]) < 0.2))])
+    st = engine_state(c.V, c.F)
+    before = topology_summary(st.F, st.V.shape[0])
+    assert before.boundary_loops == 2
+    added = close_smallest_hole(st, TUNING)
+    after = topology_summary(st.F, st.V.shape[0])
+    assert added > 0 and after.boundary_loops == 1
+    assert after.boundary_edges > before.boundary_edges - after.boundary_edges   # the wide rim is left
+    assert close_smallest_hole(st, TUNING) > 0
+    closed = topology_summary(st.F, st.V.shape[0])
+    assert (closed.boundary_loops, closed.euler, closed.non_manifold_edges) == (0, 2, 0)
+    h = np.arange(st.twin.size)
+    assert np.array_equal(st.twin[st.twin], h)               # every half-edge has its twin

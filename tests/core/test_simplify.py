@@ -592,8 +592,10 @@ def test_relaxed_topology_caps_holes_of_any_size_smallest_first():
     r = simplify(V, holed, target_faces=4, preserve_topology=False)
     for res in (mid, r):
         assert manifold_report(res.F, res.V.shape[0]).is_oriented_manifold
-    assert topology_summary(r.F, r.V.shape[0])[:3] == (2, 1, 0)
-    assert r.F.shape[0] <= 4 or r.stopped_because == "no_valid_collapse"
+    # the rims collapse or are capped (which comes first follows the costs); either
+    # way the target is reached
+    assert r.F.shape[0] <= 4 and r.stopped_because == "target"
+    assert topology_summary(r.F, r.V.shape[0]).boundary_loops <= 1
 
 
 def test_seconds_per_stage_add_up_to_the_total():
