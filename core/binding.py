@@ -1101,6 +1101,7 @@ def _dense_points_near(V_dense, F_dense, fans, fine_face, F_fine, P):
     inc_j, inc_f = F_fine.ravel()[inc], inc // 3
     has_none = np.zeros(n_f, dtype=bool)
     all_in_faces = bool((degree > 0).all())      # no isolated dense vertex to skip
+    V_by_face = np.take(V_dense, by_face, axis=0)   # candidates read as contiguous runs
 
     def near(s, e):
         # fine vertices s..e-1 (results depend on the vertex alone, not on the block)
@@ -1110,8 +1111,8 @@ def _dense_points_near(V_dense, F_dense, fans, fine_face, F_fine, P):
         pj, pk = jj[owner], by_face[idx]
         if not all_in_faces:
             keep = degree[pk] > 0
-            pj, pk = pj[keep], pk[keep]
-        d = np.take(V_dense, pk, axis=0)
+            pj, pk, idx = pj[keep], pk[keep], idx[keep]
+        d = np.take(V_by_face, idx, axis=0)
         d -= np.take(P, pj, axis=0)
         cnt_j = np.bincount(pj - s, minlength=e - s)
         has_none[s:e] = cnt_j == 0
