@@ -58,7 +58,7 @@ from .near_query import NearQuery
 from .spatial import TriangleIndex, point_triangle_closest
 from .subdivide import subdivision_operator
 from ._groups import group_argmin, ragged_ranges
-from ._parallel import WORKERS, blocks, run_blocks, run_each
+from ._parallel import WORKERS, blocks, each_in_order, run_blocks, run_each
 
 #: relative length under which a normal or tangent counts as degenerate
 _DEGENERATE = 1e-12
@@ -1005,8 +1005,9 @@ def _bind_dense(query, V_dense, VfT, NfT, F_fine, report=None):
     frame components of each vertex's offset from its point (the frames in
     the transposed layout of deform, bit-identical to :func:`frames`), block
     by block on the worker threads (fixed blocks of ``_BIND_BLOCK``: results
-    do not depend on the number of threads), a round of blocks at a time,
-    ``report(fraction)`` after each round."""
+    do not depend on the number of threads), ``report(fraction)`` as each
+    block is done, in order (returning False cancels the blocks not yet
+    started)."""
     n = V_dense.shape[0]
     out = _DenseBound(np.empty(n, dtype=np.int64), np.empty((n, 3)), np.empty((n, 3)),
                       np.empty((3, n), dtype=np.int64), np.empty((3, n)), np.empty((3, n)))
@@ -1026,11 +1027,13 @@ def _bind_dense(query, V_dense, VfT, NfT, F_fine, report=None):
             out.offset_t[k, start:stop] = _dot_t(d, axis)
         out.offset[start:stop] = out.offset_t[:, start:stop].T
 
-    spans = blocks(n, _BIND_BLOCK)
-    for i in range(0, len(spans), WORKERS):
-        run_blocks(block, spans[i:i + WORKERS])
+    def run(span):
+        block(*span)
+        return span[1]
+
+    for stop in each_in_order(run, blocks(n, _BIND_BLOCK)):
         if report is not None:
-            report(spans[min(i + WORKERS, len(spans)) - 1][1] / n)
+            report(stop / n)
     return out
 
 
