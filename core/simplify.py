@@ -247,17 +247,18 @@ def _initial_quadrics(V, F, twin, preserve_boundary, feature_angle_deg, tun):
 _SHARP_BLOCK = 1 << 16
 
 
-def _sharp_edges(Nf, twin, U, W, cos_max):
+def _sharp_edges(Nf, F, twin, cos_max):
     """The interior edges whose faces' unit normals ``Nf`` meet at a cosine
     below ``cos_max``, as ``(h, twin[h])`` with ``h < twin[h]`` ascending;
-    half-edge block by half-edge block (``U``, ``W``: the half-edge ends)."""
+    half-edge block by half-edge block."""
 
     def block(a, b):
         h = np.flatnonzero(twin[a:b] > np.arange(a, b)) + a
         t = np.take(twin, h)
         cosang = np.einsum("ij,ij->i", np.take(Nf, h // 3, axis=0), np.take(Nf, t // 3, axis=0))
-        # faces that disagree on the edge's direction have opposite normal conventions
-        np.negative(cosang, out=cosang, where=np.take(U, h) != np.take(W, t))
+        # faces that disagree on the edge's direction (twins that start at the same
+        # end: they share both) have opposite normal conventions
+        np.negative(cosang, out=cosang, where=half_edge_ends(F, h)[0] == half_edge_ends(F, t)[0])
         sharp = np.flatnonzero(cosang < cos_max)
         return h[sharp], t[sharp]
 
