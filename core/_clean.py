@@ -76,7 +76,7 @@ def renumber_twins(t, new_f):
     return np.where(t >= 0, np.take(new_h, np.maximum(t, 0)), t)
 
 
-def spatial_order(V, F, twin, box=None):
+def spatial_order(V, F, twin, box=None, ends=True):
     """The same mesh with vertices in Morton (Z-curve) order of their
     position and faces in order of their smallest new vertex index, so that
     neighbours sit near each other in memory (large meshes simplify much
@@ -86,7 +86,7 @@ def spatial_order(V, F, twin, box=None):
     Returns
     -------
     V2, F2, twin2 : the reordered mesh and its twin table.
-    U2, W2 : ``half_edge_ends(F2)``.
+    U2, W2 : ``half_edge_ends(F2)`` (None without ``ends``).
     order : (n,) int64, old index of each new vertex (``V2 = V[order]``).
     forder : (m,) int64, old index of each new face.
 
@@ -112,14 +112,15 @@ def spatial_order(V, F, twin, box=None):
     new_f[forder] = np.arange(m, dtype=np.int64)
     F2 = np.empty_like(F)
     twin2 = np.empty_like(twin)
-    U2, W2 = np.empty_like(twin), np.empty_like(twin)
+    U2, W2 = (np.empty_like(twin), np.empty_like(twin)) if ends else (None, None)
     twin3 = twin.reshape(m, 3)
 
     def block(a, b):
         Fb = np.take(new_v, np.take(F, forder[a:b], axis=0))
         F2[a:b] = Fb
-        U2[3 * a:3 * b] = np.take(Fb, [1, 2, 0], axis=1).ravel()
-        W2[3 * a:3 * b] = np.take(Fb, [2, 0, 1], axis=1).ravel()
+        if ends:
+            U2[3 * a:3 * b] = np.take(Fb, [1, 2, 0], axis=1).ravel()
+            W2[3 * a:3 * b] = np.take(Fb, [2, 0, 1], axis=1).ravel()
         t = np.take(twin3, forder[a:b], axis=0).ravel()
         f, c = np.divmod(np.maximum(t, 0), 3)           # half-edge 3 f + c -> 3 new_f[f] + c
         h = np.take(new_f, f)

@@ -246,10 +246,11 @@ class FaceTracker:
         i, t = np.concatenate(i), np.concatenate(t)
         moved = np.zeros(active.size, dtype=bool)
         if i.size:
-            o = np.argsort(i, kind="stable")              # each query's faces together
+            o = stable_argsort(i)                         # each query's faces together
             i, t = i[o], t[o]
             nv, nw, nd = self._pairs(QT, active[i], t)
-            b = group_argmin(nd, _run_lengths(i))
+            count = np.bincount(i)
+            b = group_argmin(nd, count[count > 0])
             i, t, nv, nw, nd = i[b], t[b], nv[b], nw[b], nd[b]
             better = nd < d2[active[i]]
             i = i[better]
@@ -258,7 +259,3 @@ class FaceTracker:
             moved[i] = True
         return moved
 
-
-def _run_lengths(x):
-    """Lengths of the runs of equal values of the sorted array ``x``."""
-    return np.diff(np.flatnonzero(np.concatenate([[True], x[1:] != x[:-1], [True]])))

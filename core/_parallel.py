@@ -51,3 +51,22 @@ def run_each(fn, items):
 def run_blocks(fn, spans):
     """Call ``fn(start, stop)`` for every span of :func:`blocks`, as :func:`run_each`."""
     return run_each(lambda s: fn(*s), spans)
+
+
+def each_in_order(fn, items):
+    """Yield ``fn(item)`` for every item, in item order, as soon as it is
+    done, the items running on the worker threads meanwhile (inline when
+    :func:`run_each` would run them inline). Leaving the loop early (an
+    exception, ``break``) cancels the items not yet started."""
+    items = list(items)
+    if len(items) <= 1 or WORKERS == 1 or threading.current_thread().name.startswith("meshadjust"):
+        for item in items:
+            yield fn(item)
+        return
+    futures = [_executor().submit(fn, item) for item in items]
+    try:
+        for future in futures:
+            yield future.result()
+    finally:
+        for future in futures:
+            future.cancel()

@@ -12,7 +12,7 @@ distance between the cage and the original surface in both directions
         backward: x_t = fixed barycentric points b_t on every cage face f_t,
                   q_t = their closest points on the input surface, each row
                   weighted by the cage area it stands for (only when the
-                  caller passes an index of the input)
+                  caller passes the input surface)
         minimise  sum_s |sum_c b_sc v[F[f_s, c]] - p_s|^2
                 + sum_t w_t |sum_c b_tc v[F[f_t, c]] - q_t|^2
                 + sum_j l_j |v_j - v0_j|^2
@@ -25,6 +25,16 @@ The forward term alone cannot see a cage face that spans a gap of the input
 The input's border is matched to the cage's border edges both ways, so borders
 follow the input's instead of drifting with the surface. Locked vertices (the
 caller's and frozen non-manifold ones) do not move.
+
+Every closest point is found by walking over the mesh searched
+(:class:`~._face_tracker.FaceTracker`): the first round starts each input
+point at the cage vertex it was merged into, and each cage point at the input
+vertex nearest to it among those merged into its face's corners; later rounds
+start from the last round's answers, which the small moves of a round rarely
+change. No index of the whole input is built. The walks give the exact
+closest points wherever the start lies on the near side (the engine's merges
+put it there); where a thin part of the cage or input folds back, a few end
+on a local minimum instead.
 """
 
 import numpy as np
@@ -127,14 +137,13 @@ def _merged_nearest(X, F, bary, n, Vin, cage_of):
     input vertex went to, -1 for none (or not to be used). (m*k,) int64, -1
     where no input vertex went to those corners."""
     ok = np.flatnonzero(cage_of >= 0)
-    members = ok[stable_argsort(cage_of[ok])]
+    members = ok[stable_argsort(cage_of[ok])]                          # cage vertex by vertex
     count = np.bincount(cage_of[ok], minlength=n)
-    home = bary == bary.max(axis=1, keepdims=True)                     # (k,3)
-    m, k = F.shape[0], home.shape[0]
-    corners = np.take(F, np.tile(np.flatnonzero(home.ravel()) % 3, m)
-                      + 3 * np.repeat(np.arange(m), home.sum()))    # point by point
+    j, c = np.nonzero(bary == bary.max(axis=1, keepdims=True))       # point j looks at corner c
+    m, k = F.shape[0], bary.shape[0]
+    corners = F[:, c].ravel()                                          # face by face
     at, own = ragged_ranges((np.cumsum(count) - count)[corners], count[corners])
-    point = np.repeat(np.arange(m * k), np.tile(home.sum(axis=1), m))[own]
+    point = (np.arange(m)[:, None] * k + j).ravel()[own]
     cand = members[at]
     d2 = np.zeros(cand.size)
     for a, x in zip(Vin.T, X.T):
@@ -147,12 +156,15 @@ def _merged_nearest(X, F, bary, n, Vin, cage_of):
     return out
 
 
-_SEG_T = np.array([0.25, 0.5, 0.75])   #: points along each cage border edge (backward)
+#: barycentric points of each cage border edge (as a segment triangle) for the
+#: backward border term: a quarter, half and three quarters along
+_SEG_BARY = np.array([[0.75, 0.25, 0.0], [0.5, 0.5, 0.0], [0.25, 0.75, 0.0]])
 
 
 def segment_triangles(E):
-    """Edges (k,2) as zero-area triangles (k,3) ``(a, b, b)``, so a
-    :class:`~.spatial.TriangleIndex` finds closest points on polylines."""
+    """Edges (k,2) as zero-area triangles (k,3) ``(a, b, b)``, so the
+    closest-point searches (:class:`FaceTracker`, :class:`~.spatial.TriangleIndex`)
+    find closest points on polylines."""
     return np.concatenate([E, E[:, 1:]], axis=1)
 
 
@@ -173,14 +185,13 @@ def _border_rows(V, C, cage, surface, weight, near=None, cage_of=None):
     cp = cage.closest(C, near)
     idx_f = np.take(T3, cp.face, axis=0).T
     b_f = cp.bary.T * np.sqrt(weight)
-    k = _SEG_T.size
+    k = _SEG_BARY.shape[0]
     idx_b = np.repeat(T3.T, k, axis=1)
-    t = np.tile(_SEG_T, T3.shape[0])
-    b_b = np.stack([1.0 - t, t, np.zeros_like(t)])
+    b_b = np.tile(_SEG_BARY.T, (1, T3.shape[0]))
     X = _gather(idx_b, b_b, V)
     start = None
     if surface.face is None and cage_of is not None:
-        start = _merged_nearest(X, T3, b_b[:, :k].T, V.shape[0], surface.V, cage_of)
+        start = _merged_nearest(X, T3, _SEG_BARY, V.shape[0], surface.V, cage_of)
     Tb = surface.closest(X, start).point
     length = np.linalg.norm(V[T3[:, 1]] - V[T3[:, 0]], axis=1)
     w = np.sqrt(np.repeat(length * (weight * C.shape[0] / max(k * float(length.sum()), 1e-300)), k))

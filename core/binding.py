@@ -58,7 +58,7 @@ from .near_query import NearQuery
 from .spatial import TriangleIndex, point_triangle_closest
 from .subdivide import subdivision_operator
 from ._groups import group_argmin, ragged_ranges
-from ._parallel import WORKERS, blocks, run_blocks, run_each
+from ._parallel import WORKERS, blocks, each_in_order, run_blocks, run_each
 
 #: relative length under which a normal or tangent counts as degenerate
 _DEGENERATE = 1e-12
@@ -73,7 +73,7 @@ _DETAIL_SEARCHES = ("auto", "exact", "local")
 _BIND_BLOCK = 131_072
 
 #: fine vertices per block of the local detail search (``detail_search="local"``)
-_DETAIL_BLOCK = 16_384
+_DETAIL_BLOCK = 8_192
 
 #: dense rows per block of an incremental deform's frame rebuild (bounds the
 #: temporaries: (3, 16384) float64 is 384 KiB)
@@ -347,20 +347,22 @@ def bind(V_dense, F_dense, V_cage, F_cage, *, levels=2, scheme="butterfly", crea
     if F_dense.shape[0]:
         detail = "exact" if detail_search == "exact" or (
             detail_search == "auto" and F_dense.shape[0] <= _EXACT_DETAIL_FACES) else "local"
-    # the fine surface's index and the dense side of the detail search do not
-    # depend on each other: built side by side on the worker threads
-    query, dense_side = run_each(lambda build: build(), [
-        lambda: NearQuery(Vf, op.F_fine), lambda: _detail_setup(V_dense, F_dense, detail)])
+    if detail == "exact":
+        # the fine surface's index and the dense one do not depend on each other:
+        # built side by side on the worker threads
+        query, dense_index = run_each(lambda build: build(), [
+            lambda: NearQuery(Vf, op.F_fine), lambda: _exact_detail_index(V_dense, F_dense)])
+    else:
+        query = NearQuery(Vf, op.F_fine)          # its two halves on the worker threads
     dense = _bind_dense(query, V_dense, VfT, NfT, op.F_fine, _reporter(progress, 0.05, 0.6))
     d_face, d_bary = _vertex_corners(op.F_fine, op.n_fine)
     fine_detail = np.zeros((op.n_fine, 3))
     if detail is not None:
         vfr = frames(Vf, NfT.T, op.F_fine[d_face], d_bary)
         if detail == "exact":
-            q = _closest_on(dense_side, vfr.point, _reporter(progress, 0.65, 0.95), point=True)
+            q = _closest_on(dense_index, vfr.point, _reporter(progress, 0.65, 0.95), point=True)
         else:
-            q = _dense_points_near(V_dense, F_dense, dense_side, dense.face, op.F_fine,
-                                   vfr.point)
+            q = _dense_points_near(V_dense, F_dense, dense.face, op.F_fine, vfr.point)
         fine_detail = _to_frame(q - vfr.point, vfr)
     cache = {"corners_t": dense.corners_t, "bary_t": dense.bary_t, "offset_t": dense.offset_t,
              "detail_corners_t": np.ascontiguousarray(op.F_fine[d_face].T),
@@ -1005,8 +1007,9 @@ def _bind_dense(query, V_dense, VfT, NfT, F_fine, report=None):
     frame components of each vertex's offset from its point (the frames in
     the transposed layout of deform, bit-identical to :func:`frames`), block
     by block on the worker threads (fixed blocks of ``_BIND_BLOCK``: results
-    do not depend on the number of threads), a round of blocks at a time,
-    ``report(fraction)`` after each round."""
+    do not depend on the number of threads), ``report(fraction)`` as each
+    block is done, in order (returning False cancels the blocks not yet
+    started)."""
     n = V_dense.shape[0]
     out = _DenseBound(np.empty(n, dtype=np.int64), np.empty((n, 3)), np.empty((n, 3)),
                       np.empty((3, n), dtype=np.int64), np.empty((3, n)), np.empty((3, n)))
@@ -1026,11 +1029,13 @@ def _bind_dense(query, V_dense, VfT, NfT, F_fine, report=None):
             out.offset_t[k, start:stop] = _dot_t(d, axis)
         out.offset[start:stop] = out.offset_t[:, start:stop].T
 
-    spans = blocks(n, _BIND_BLOCK)
-    for i in range(0, len(spans), WORKERS):
-        run_blocks(block, spans[i:i + WORKERS])
+    def run(span):
+        block(*span)
+        return span[1]
+
+    for stop in each_in_order(run, blocks(n, _BIND_BLOCK)):
         if report is not None:
-            report(spans[min(i + WORKERS, len(spans)) - 1][1] / n)
+            report(stop / n)
     return out
 
 
@@ -1047,60 +1052,103 @@ def _reporter(progress, lo, hi):
     return report
 
 
-def _detail_setup(V_dense, F_dense, detail):
-    """What the refine detail search needs from the dense mesh alone: for
-    ``"exact"`` a :class:`~.spatial.TriangleIndex` over the dense surface as
-    simplify saw it (cleaned: no debris to pull a fine vertex off the scan, no
-    double-sided sheets), for ``"local"`` its :class:`_Fans`, else None."""
-    if detail == "exact":
-        surface = clean_mesh(V_dense, F_dense)
-        Vs, Fs = (surface.V, surface.F) if surface.F.shape[0] else (V_dense, F_dense)
-        return TriangleIndex(Vs, Fs)
-    if detail == "local":
-        return _vertex_fans(F_dense, V_dense.shape[0])
-    return None
+def _exact_detail_index(V_dense, F_dense):
+    """The :class:`~.spatial.TriangleIndex` the exact refine detail search
+    queries: over the dense surface as simplify saw it (cleaned: no debris to
+    pull a fine vertex off the scan, no double-sided sheets)."""
+    surface = clean_mesh(V_dense, F_dense)
+    Vs, Fs = (surface.V, surface.F) if surface.F.shape[0] else (V_dense, F_dense)
+    return TriangleIndex(Vs, Fs)
 
 
 class _Fans(NamedTuple):
-    """The faces around each vertex of a mesh (CSR, faces ascending)."""
+    """The faces around some vertices of a mesh (CSR over ``vertices``, each
+    fan's faces ascending)."""
 
-    degree: np.ndarray  #: (n,) int64 faces at each vertex
-    start: np.ndarray   #: (n,) int64 first entry of each vertex in ``faces``
-    faces: np.ndarray   #: (3m,) int64 faces, vertex by vertex
+    vertices: np.ndarray  #: (k,) int64 the vertices, ascending
+    start: np.ndarray     #: (k + 1,) int64 fan of vertices[i]: faces[start[i]:start[i+1]]
+    faces: np.ndarray     #: (entries,) int64
+
+    def of(self, v):
+        """(first entry, count) of the fans of the vertices ``v`` (each in ``vertices``)."""
+        i = np.searchsorted(self.vertices, v)
+        return self.start[i], self.start[i + 1] - self.start[i]
 
 
-def _vertex_fans(F, n):
-    """:class:`_Fans` of the triangles ``F`` over ``n`` vertices."""
-    degree = np.bincount(F.ravel(), minlength=n)
-    return _Fans(degree, np.cumsum(degree) - degree, np.argsort(F.ravel(), kind="stable") // 3)
+def _fans_of(F, vertices):
+    """:class:`_Fans` of the distinct ``vertices`` of the triangles ``F``: one
+    scan of F for the corners at them, then those (vertex, face) entries
+    sorted by vertex (stable: faces ascending, as a full vertex -> face
+    table lists them)."""
+    vertices = np.unique(vertices)
+    flat = F.ravel()
+    mark = np.zeros(int(flat.max()) + 1 if flat.size else 0, dtype=bool)
+    mark[vertices[vertices < mark.shape[0]]] = True
+    hit = np.flatnonzero(mark[flat])
+    v = flat[hit]
+    order = np.argsort(v, kind="stable")
+    counts = np.bincount(np.searchsorted(vertices, v), minlength=vertices.shape[0])
+    return _Fans(vertices, np.concatenate([[0], np.cumsum(counts)]), hit[order] // 3)
 
 
-def _dense_points_near(V_dense, F_dense, fans, fine_face, F_fine, P):
+def _dense_points_near(V_dense, F_dense, fine_face, F_fine, P):
     """A point of the dense surface near each fine vertex position ``P[j]``.
 
     Searched without a spatial index over the dense mesh, using the binding:
     take the dense vertex nearest to ``P[j]`` among those bound to the fine
-    faces around ``j``, and return the closest point of ``P[j]`` on that
-    vertex's triangle fan (``fans``, the dense mesh's :class:`_Fans`), or on
-    its two-ring where the fan's best point lies on the fan's rim (the surface
-    may come closer beyond it). Fine vertices with no bound dense vertex
-    around them (a dense mesh coarser than the cage there) use an exact
+    faces around ``j`` (:func:`_nearest_bound`), and return the closest point
+    of ``P[j]`` on that vertex's triangle fan, or on its two-ring where the
+    fan's best point lies on the fan's rim (the surface may come closer
+    beyond it). Fine vertices with no bound dense vertex around them (a dense
+    mesh coarser than the cage there) use an exact
     :class:`~.spatial.TriangleIndex` query. Every returned point lies on the
     dense surface; it is the closest one whenever the closest triangle
     lies in the two-ring of the nearest bound vertex (the usual case for a
     cage near the surface).
     """
-    n_d, m_f, n_f = V_dense.shape[0], F_fine.shape[0], P.shape[0]
+    n_f = P.shape[0]
     q = np.empty((n_f, 3))
-    degree, start_v, by_vertex = fans
+    nearest = _nearest_bound(V_dense, F_dense, fine_face, F_fine, P)
+    has = np.flatnonzero(nearest >= 0)
+    fans = _fans_of(F_dense, nearest[has])
+    rim = np.zeros(n_f, dtype=bool)
+
+    def on_fan(s, e):
+        # fine vertices has[s:e]: the closest point on the fan of their nearest vertex;
+        # where it lands on the fan's rim (zero weight on the centre), the two-ring
+        j, k = has[s:e], nearest[has[s:e]]
+        first, count = fans.of(k)
+        idx, owner = ragged_ranges(first, count)
+        point, corners, bary = _closest_in_groups(V_dense, F_dense, P, j[owner],
+                                                  fans.faces[idx], count)
+        q[j] = point
+        rim[j] = (bary * (corners == k[:, None])).sum(axis=1) <= 0.0
+
+    run_blocks(on_fan, blocks(has.shape[0], _DETAIL_BLOCK))
+    if rim.any():
+        _two_ring_points(V_dense, F_dense, P, np.flatnonzero(rim), nearest, fans, q)
+    missing = np.flatnonzero(nearest < 0)
+    if missing.size:
+        q[missing] = TriangleIndex(V_dense, F_dense).closest(P[missing]).point
+    return q
+
+
+def _nearest_bound(V_dense, F_dense, fine_face, F_fine, P):
+    """(n_fine,) int64: for each fine vertex j, the dense vertex nearest to
+    ``P[j]`` among those bound to the fine faces around j (the first among
+    equally near ones, candidates in fine face order, then dense vertex
+    order), -1 where none is (isolated dense vertices never count)."""
+    n_d, m_f, n_f = V_dense.shape[0], F_fine.shape[0], P.shape[0]
+    degree = np.bincount(F_dense.ravel(), minlength=n_d)
     # dense vertices grouped by fine face; (fine vertex, incident fine face) sorted by vertex
     by_face = np.argsort(fine_face, kind="stable")
     cnt_f = np.bincount(fine_face, minlength=m_f)
     start_f = np.cumsum(cnt_f) - cnt_f
     inc = np.argsort(F_fine.ravel(), kind="stable")
     inc_j, inc_f = F_fine.ravel()[inc], inc // 3
-    has_none = np.zeros(n_f, dtype=bool)
     all_in_faces = bool((degree > 0).all())      # no isolated dense vertex to skip
+    V_by_face = np.take(V_dense, by_face, axis=0)   # candidates read as contiguous runs
+    nearest = np.full(n_f, -1, dtype=np.int64)
 
     def near(s, e):
         # fine vertices s..e-1 (results depend on the vertex alone, not on the block)
@@ -1110,39 +1158,34 @@ def _dense_points_near(V_dense, F_dense, fans, fine_face, F_fine, P):
         pj, pk = jj[owner], by_face[idx]
         if not all_in_faces:
             keep = degree[pk] > 0
-            pj, pk = pj[keep], pk[keep]
-        d = np.take(V_dense, pk, axis=0)
+            pj, pk, idx = pj[keep], pk[keep], idx[keep]
+        d = np.take(V_by_face, idx, axis=0)
         d -= np.take(P, pj, axis=0)
         cnt_j = np.bincount(pj - s, minlength=e - s)
-        has_none[s:e] = cnt_j == 0
-        has = np.flatnonzero(cnt_j) + s
-        if has.size == 0:
-            return
-        nearest = pk[group_argmin(_dot(d, d), cnt_j[has - s])]
-        # closest point on the triangle fan of the nearest vertex; where it lands
-        # on the fan's rim (zero weight on the centre), look in the two-ring
-        idx, owner = ragged_ranges(start_v[nearest], degree[nearest])
-        fan_f = by_vertex[idx]
-        point, corners, bary = _closest_in_groups(V_dense, F_dense, P, has[owner], fan_f,
-                                                  degree[nearest])
-        q[has] = point
-        centre_weight = (bary * (corners == nearest[:, None])).sum(axis=1)
-        rim = centre_weight <= 0.0
-        if rim.any():
-            keep = rim[owner]
-            ring_j, ring_v = _unique_pairs(np.repeat(has[owner][keep], 3),
-                                           F_dense[fan_f[keep]].ravel(), n_d)
-            idx, owner2 = ragged_ranges(start_v[ring_v], degree[ring_v])
-            cand_j, cand_f = _unique_pairs(ring_j[owner2], by_vertex[idx], F_dense.shape[0])
-            counts = np.bincount(cand_j - s, minlength=e - s)
-            js = np.flatnonzero(counts)
-            q[js + s] = _closest_in_groups(V_dense, F_dense, P, cand_j, cand_f, counts[js])[0]
+        has = np.flatnonzero(cnt_j)
+        if has.size:
+            nearest[has + s] = pk[group_argmin(_dot(d, d), cnt_j[has])]
 
     run_blocks(near, blocks(n_f, _DETAIL_BLOCK))
-    missing = np.flatnonzero(has_none)
-    if missing.size:
-        q[missing] = TriangleIndex(V_dense, F_dense).closest(P[missing]).point
-    return q
+    return nearest
+
+
+def _two_ring_points(V_dense, F_dense, P, js, nearest, fans, q):
+    """For the fine vertices ``js`` whose fan point lies on the rim, the
+    closest point over the two-ring of their nearest dense vertex (the fans
+    of the fan's vertices), into ``q``."""
+    n_d = V_dense.shape[0]
+    first, count = fans.of(nearest[js])
+    idx, owner = ragged_ranges(first, count)
+    ring_j, ring_v = _unique_pairs(np.repeat(js[owner], 3),
+                                   F_dense[fans.faces[idx]].ravel(), n_d)
+    ring = _fans_of(F_dense, ring_v)
+    first, count = ring.of(ring_v)
+    idx, owner = ragged_ranges(first, count)
+    cand_j, cand_f = _unique_pairs(ring_j[owner], ring.faces[idx], F_dense.shape[0])
+    counts = np.bincount(cand_j)
+    j = np.flatnonzero(counts)
+    q[j] = _closest_in_groups(V_dense, F_dense, P, cand_j, cand_f, counts[j])[0]
 
 
 def _closest_in_groups(V, F, P, j, face, counts):

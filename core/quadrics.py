@@ -157,18 +157,24 @@ def vertex_face_quadrics(V, F, n, area_power):
     QT = np.empty((N_COEFFS, n))
     w3 = np.empty(3 * m)
     index = F.T.ravel()
+    spans = blocks(m, _BLOCK)
     for j in range(N_COEFFS):
-        if j == 10:
-            w3[:m] = w
-        else:
-            f1, f2 = rows[j]
-            for a in range(0, m, _BLOCK):
-                b = min(a + _BLOCK, m)
-                np.multiply(w[a:b] * f1[a:b], f2[a:b], out=w3[a:b])
-        w3[m:2 * m] = w3[:m]
-        w3[2 * m:] = w3[:m]
+        run_blocks(lambda a, b: _corner_weights(w, rows[j] if j < 10 else None, w3, m, a, b), spans)
         QT[j] = np.bincount(index, weights=w3, minlength=n)
     return QT, unit, N
+
+
+def _corner_weights(w, factors, w3, m, a, b):
+    """Faces ``a:b`` of one coefficient's weights ``(w * f1) * f2`` (``w``
+    itself without ``factors``) into ``w3`` at each of the three corners
+    (``w3[c m + f]``), while the block is in cache."""
+    if factors is None:
+        w3[a:b] = w[a:b]
+    else:
+        f1, f2 = factors
+        np.multiply(w[a:b] * f1[a:b], f2[a:b], out=w3[a:b])
+    w3[m + a:m + b] = w3[a:b]
+    w3[2 * m + a:2 * m + b] = w3[a:b]
 
 
 def edge_constraint_quadrics(V, E, face_normals, weights):

@@ -209,7 +209,7 @@ def check_arguments(n, target_faces, ratio, max_error, feature_angle_deg, vertex
     return w, lk
 
 
-def _initial_quadrics(V, F, twin, U, W, preserve_boundary, feature_angle_deg, tun):
+def _initial_quadrics(V, F, twin, preserve_boundary, feature_angle_deg, tun):
     """Vertex quadrics (n,11) with boundary and crease planes, the crease
     flags per half-edge, and the unnormalised face normals (m,3) (as
     ``face_normals(V, F, normalize=False)``). The quadrics are the transposed
@@ -220,15 +220,15 @@ def _initial_quadrics(V, F, twin, U, W, preserve_boundary, feature_angle_deg, tu
     items, ends = [], []
     if preserve_boundary:
         hb = np.flatnonzero(twin == BOUNDARY)
-        E = np.stack([U[hb], W[hb]], axis=1)
+        E = np.stack(half_edge_ends(F, hb), axis=1)
         L2 = np.einsum("ij,ij->i", V[E[:, 1]] - V[E[:, 0]], V[E[:, 1]] - V[E[:, 0]])
         items.append(edge_constraint_quadrics(V, E, Nf[hb // 3], tun.boundary_weight * L2))
         ends.append(E)
     if feature_angle_deg is not None:
-        hs, ts = _sharp_edges(Nf, twin, U, W, np.cos(np.radians(feature_angle_deg)))
+        hs, ts = _sharp_edges(Nf, F, twin, np.cos(np.radians(feature_angle_deg)))
         feat[hs] = True
         feat[ts] = True
-        E = np.stack([U[hs], W[hs]], axis=1)
+        E = np.stack(half_edge_ends(F, hs), axis=1)
         L2 = np.einsum("ij,ij->i", V[E[:, 1]] - V[E[:, 0]], V[E[:, 1]] - V[E[:, 0]])
         for side in (hs, ts):
             items.append(edge_constraint_quadrics(V, E, Nf[side // 3], tun.feature_weight * L2))
@@ -247,17 +247,18 @@ def _initial_quadrics(V, F, twin, U, W, preserve_boundary, feature_angle_deg, tu
 _SHARP_BLOCK = 1 << 16
 
 
-def _sharp_edges(Nf, twin, U, W, cos_max):
+def _sharp_edges(Nf, F, twin, cos_max):
     """The interior edges whose faces' unit normals ``Nf`` meet at a cosine
     below ``cos_max``, as ``(h, twin[h])`` with ``h < twin[h]`` ascending;
-    half-edge block by half-edge block (``U``, ``W``: the half-edge ends)."""
+    half-edge block by half-edge block."""
 
     def block(a, b):
         h = np.flatnonzero(twin[a:b] > np.arange(a, b)) + a
         t = np.take(twin, h)
         cosang = np.einsum("ij,ij->i", np.take(Nf, h // 3, axis=0), np.take(Nf, t // 3, axis=0))
-        # faces that disagree on the edge's direction have opposite normal conventions
-        np.negative(cosang, out=cosang, where=np.take(U, h) != np.take(W, t))
+        # faces that disagree on the edge's direction (twins that start at the same
+        # end: they share both) have opposite normal conventions
+        np.negative(cosang, out=cosang, where=half_edge_ends(F, h)[0] == half_edge_ends(F, t)[0])
         sharp = np.flatnonzero(cosang < cos_max)
         return h[sharp], t[sharp]
 
@@ -274,9 +275,15 @@ def _normal_sums(F, N, n):
         return np.zeros((n, 3))
     Fr = F.ravel()
     w = np.empty(Fr.size)
+    w3 = w.reshape(-1, 3)
     out = np.empty((n, 3))
+    spans = blocks(F.shape[0], _SHARP_BLOCK)
     for k in range(3):
-        w.reshape(-1, 3)[:] = N[:, k, None]  # np.repeat(N[:, k], 3) without a new array
+
+        def fill(a, b):             # np.repeat(N[:, k], 3) without a new array, block by block
+            w3[a:b] = N[a:b, k, None]
+
+        run_blocks(fill, spans)
         out[:, k] = np.bincount(Fr, weights=w, minlength=n)
     return out
 
@@ -373,7 +380,8 @@ def _set_up(clean, opts):
     if (clean.twin == NON_MANIFOLD).any():
         raise MeshAdjustError(f"{_WHERE}: cleaning left a non-manifold edge (a bug)")
     lo, hi = bounding_box(clean.V)
-    Vc, Fc, twin, U, W, order, forder = spatial_order(clean.V, clean.F, clean.twin, box=(lo, hi))
+    Vc, Fc, twin, _, _, order, forder = spatial_order(clean.V, clean.F, clean.twin, box=(lo, hi),
+                                                      ends=False)
     n, m0 = Vc.shape[0], Fc.shape[0]
     lock = np.zeros(n, dtype=bool) if opts["locked"] is None else opts["locked"][order]
     # unit-free working coordinates: centred, unit diagonal, snapped to a grid
@@ -385,15 +393,13 @@ def _set_up(clean, opts):
     Vn *= grid
     np.round(Vn, out=Vn)
     Vn /= grid
-    Q, feat, Nf = _initial_quadrics(Vn, Fc, twin, U, W, opts["preserve_boundary"],
+    Q, feat, Nf = _initial_quadrics(Vn, Fc, twin, opts["preserve_boundary"],
                                     opts["feature_angle_deg"], tun)
     # for the final relocation: the input's border edges and crease vertices, and its
     # faces when small enough for the backward pull (the engine rewrites Fc)
-    hb = np.flatnonzero(twin == BOUNDARY)
-    Eb_in = np.stack([U[hb], W[hb]], axis=1)
-    creases = np.unique(np.concatenate([U[feat], W[feat]]))
+    Eb_in = np.stack(half_edge_ends(Fc, np.flatnonzero(twin == BOUNDARY)), axis=1)
+    creases = np.unique(np.concatenate(half_edge_ends(Fc, np.flatnonzero(feat))))
     Fin = Fc.copy() if m0 <= tun.relocate_back_max_faces else None
-    del U, W  # (3m,) each: not needed past the set-up
     if opts["weights"] is not None:
         Q *= opts["weights"][order][:, None]
     Nref = _normal_sums(Fc, Nf, n)

@@ -112,7 +112,7 @@ def connected_labels(n_nodes, pairs):
     dtype = np.int32 if n_nodes < 2 ** 31 else np.int64    # half the memory traffic
     parent = np.arange(n_nodes, dtype=dtype)
     ra, rb = pairs[:, 0].astype(dtype), pairs[:, 1].astype(dtype)
-    first = True
+    hooked = None
     while True:
         keep = ra != rb
         k = int(np.count_nonzero(keep))
@@ -123,11 +123,14 @@ def connected_labels(n_nodes, pairs):
         lo = np.minimum(ra, rb)
         hi = np.maximum(ra, rb)
         parent[hi] = lo                  # roots hooked below smaller roots
-        if first:
+        if hooked is None:               # (the first round hooks most nodes)
             _jump_all(parent)
-            first = False
-        else:
-            _jump(parent, hi)
+            hooked = np.zeros(n_nodes, dtype=bool)
+        else:                            # the hooked roots, once each, in order
+            hooked[hi] = True
+            nodes = np.flatnonzero(hooked)
+            hooked[nodes] = False
+            _jump(parent, nodes.astype(dtype))
         ra, rb = parent[ra], parent[rb]  # roots again
     _jump_all(parent)
     return parent.astype(np.int64)
@@ -135,7 +138,7 @@ def connected_labels(n_nodes, pairs):
 
 def _jump(parent, nodes):
     """Pointer jumping on ``nodes`` (in place) until each points at a root
-    (every node on their paths to the roots must be among them)."""
+    (pointers double when every node on their paths is among them)."""
     while nodes.size:
         p = parent[nodes]
         gp = parent[p]

@@ -486,3 +486,63 @@ def test_bind_reports_progress_and_cancels():
     np.testing.assert_array_equal(b.fine_detail, ref.fine_detail)
     with pytest.raises(CancelledError, match="cancelled"):
         bind(V, F, cage.V, cage.F, levels=1, progress=lambda f: False)
+
+
+def _local_detail_reference(Vd, Fd, b, P):
+    """The local detail search's definition, one fine vertex at a time: the
+    dense vertex nearest to P[j] among those bound to the fine faces around j
+    (the first among equals, in fine face then dense vertex order), the
+    closest point on its fan, or on its two-ring when that point is on the
+    fan's rim (no weight on the centre)."""
+    from core.spatial import point_triangle_closest
+    Ff = b.operator.F_fine
+    around = [np.flatnonzero((Ff == j).any(axis=1)) for j in range(P.shape[0])]
+    bound = [np.flatnonzero(b.fine_face == f) for f in range(Ff.shape[0])]
+    fan = [[] for _ in range(Vd.shape[0])]
+    for f, tri in enumerate(Fd):
+        for v in tri:
+            fan[v].append(f)
+
+    def best_on(j, faces):
+        faces = np.array(faces)
+        r = point_triangle_closest(np.repeat(P[j:j + 1], faces.size, axis=0),
+                                   *(Vd[Fd[faces, k]] for k in range(3)))
+        k = int(np.argmin(r.distance))
+        return r.point[k], Fd[faces[k]], r.bary[k]
+    out = np.empty_like(P)
+    for j in range(P.shape[0]):
+        cand = np.concatenate([bound[f] for f in around[j]])
+        if cand.size == 0:                       # no dense vertex bound around j
+            out[j] = closest_points(Vd, Fd, P[j:j + 1]).point[0]
+            continue
+        k = cand[np.argmin(((Vd[cand] - P[j]) ** 2).sum(axis=1))]
+        point, corners, bary = best_on(j, fan[k])
+        if (bary * (corners == k)).sum() <= 0.0:
+            ring = np.unique(Fd[fan[k]].ravel())
+            point = best_on(j, np.unique(np.concatenate([fan[v] for v in ring])))[0]
+        out[j] = point
+    return out
+
+
+@pytest.mark.parametrize("size", [(60, 30), (30, 14)], ids=["rims", "unbound"])
+def test_local_detail_search_on_a_coarse_dense_mesh_uses_the_two_ring(size):
+    """Dense meshes about as coarse as the fine surface: fan points land on the
+    rim (60x30: 26 take the two-ring path) or fine vertices have no dense
+    vertex bound around them (30x14: 65, answered by the exact index); the
+    points equal the definition computed one fine vertex at a time, and lie
+    on the dense surface."""
+    rng = np.random.default_rng(3)
+    Vd, Fd = torus(*size, bump=0.01, bump_waves=(10, 5))
+    Vd = Vd + 0.01 * rng.standard_normal(Vd.shape)
+    Vc, Fc = torus(12, 6)
+    b = bind(Vd, Fd, Vc, Fc, levels=2, detail_search="local")
+    Vf = b.operator.apply(Vc)
+    from core.binding import _vertex_corners
+    d_face, d_bary = _vertex_corners(b.operator.F_fine, b.operator.n_fine)
+    fr = frames(Vf, vertex_normals(Vf, b.operator.F_fine), b.operator.F_fine[d_face], d_bary)
+    got = fr.point + (b.fine_detail[:, :1] * fr.tangent + b.fine_detail[:, 1:2] * fr.bitangent
+                      + b.fine_detail[:, 2:] * fr.normal)
+    ref = _local_detail_reference(Vd, Fd, b, fr.point)
+    diag = bbox_diagonal(Vd)
+    np.testing.assert_allclose(got, ref, rtol=0, atol=1e-12 * diag)
+    assert closest_points(Vd, Fd, got).distance.max() <= 1e-9 * diag

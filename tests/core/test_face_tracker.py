@@ -84,3 +84,11 @@ def test_queries_with_no_guess_are_searched_exactly():
     tracker = FaceTracker(F, V.shape[0], steps=0)
     tracker.place(V)
     _assert_same_as_index(tracker.closest(Q), V, F, Q)
+
+
+def test_stable_argsort_is_numpys_stable_argsort():
+    from core._face_tracker import stable_argsort
+    rng = np.random.default_rng(6)
+    for x in (rng.integers(0, 50, 1000), rng.integers(0, 1 << 40, 1000),
+              np.array([2 ** 62, 3, 2 ** 62, 0]), np.zeros(0, dtype=np.int64)):
+        np.testing.assert_array_equal(stable_argsort(x), np.argsort(x, kind="stable"))

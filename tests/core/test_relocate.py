@@ -135,3 +135,24 @@ def test_searches_started_where_the_input_was_merged_give_the_exact_searches_res
     # the same closest points (a point on an edge between two faces may be
     # assigned to the other one: the same row, summed in another order)
     np.testing.assert_allclose(walked, exact, rtol=0, atol=1e-14)
+
+
+def test_the_backward_start_is_the_nearest_input_vertex_merged_into_the_home_corners():
+    # brute force: for each point, the input vertices merged into the corners of
+    # its face that carry its largest barycentric weight, and the nearest of them
+    from core._relocate import _BACK_BARY, _merged_nearest
+    rng = np.random.default_rng(8)
+    F = rng.integers(0, 20, (30, 3))
+    Vc = rng.random((20, 3))
+    Vin = rng.random((200, 3))
+    cage_of = rng.integers(-1, 20, 200)
+    cage_of[cage_of == 7] = -1                   # a cage vertex nothing went to
+    k = _BACK_BARY.shape[0]
+    X = np.einsum("pc,fcd->fpd", _BACK_BARY, Vc[F]).reshape(-1, 3)
+    got = _merged_nearest(X, F, _BACK_BARY, 20, Vin, cage_of)
+    for p in range(X.shape[0]):
+        f, j = divmod(p, k)
+        home = F[f][_BACK_BARY[j] == _BACK_BARY[j].max()]
+        cand = np.flatnonzero(np.isin(cage_of, home))
+        want = cand[np.argmin(((Vin[cand] - X[p]) ** 2).sum(axis=1))] if cand.size else -1
+        assert got[p] == want

@@ -1,0 +1,44 @@
+"""core/_parallel.py: each_in_order yields in order, runs the items on the
+worker threads, and cancels the items not yet started when left early."""
+
+import threading
+import time
+
+import pytest
+
+import core._parallel as parallel
+
+
+def test_each_in_order_yields_every_result_in_item_order():
+    def slow_first(i):
+        time.sleep(0.02 if i == 0 else 0.0)
+        return i * i
+    assert list(parallel.each_in_order(slow_first, range(7))) == [i * i for i in range(7)]
+    assert list(parallel.each_in_order(slow_first, [])) == []
+
+
+def test_each_in_order_runs_inline_on_a_worker_thread():
+    names = []
+
+    def outer(_):
+        # called on a worker thread: the inner items run inline, no deadlock
+        return list(parallel.each_in_order(lambda i: threading.current_thread().name, range(3)))
+    for inner in parallel.each_in_order(outer, range(2)):
+        names.extend(inner)
+    if parallel.WORKERS > 1:
+        assert all(n.startswith("meshadjust") for n in names)
+
+
+@pytest.mark.skipif(parallel.WORKERS < 2, reason="needs worker threads")
+def test_leaving_early_cancels_the_items_not_started():
+    started = []
+
+    def item(i):
+        started.append(i)
+        time.sleep(0.01)
+        return i
+    gen = parallel.each_in_order(item, range(100))
+    assert next(gen) == 0
+    gen.close()                           # leaving the loop early
+    time.sleep(0.1)                       # the ones running finish; the rest never start
+    assert len(started) < 20
