@@ -189,7 +189,6 @@ def topology(F, n, crease_ids, where, check):
                 f"{where}: {deg.size} degenerate faces (a repeated vertex), e.g. face {deg[0]} = "
                 f"{F[deg[0]].tolist()}")
     E, FE, cnt, faces, corners = _edge_map_faces(F, n)
-    e = E.shape[0]
     if check:
         bad = np.flatnonzero(cnt > 2)
         if bad.size:

@@ -29,6 +29,10 @@ of independent edges, each batch checked on the mesh as it is::
             lock their stars
         apply every accepted collapse with one remap (b -> a, V[a] = x,
         Q[a] += Q[b]); glue the half-edge twins of the removed faces
+        (a bold pass, while the mesh has over 4x the target faces, applies
+        each round before the next and locks only the merged ends, so
+        neighbouring collapses go in the same pass: about a third of the
+        faces per pass instead of about an eighth)
     until the target, the error bound, or no valid collapse
     move the unlocked cage vertices towards the input surface, both ways, and
     its borders onto the input's (``core._relocate``)
@@ -58,7 +62,6 @@ from .mesh import bounding_box, check_mesh, diagonal_length
 from .metrics import surface_distance
 from .topology import boundary_loops_count, collapsible_edges, face_components
 from .quadrics import accumulate_coefficients, vertex_face_quadrics, edge_constraint_quadrics
-from .spatial import TriangleIndex
 from .tuning import TUNING, Tuning
 
 _WHERE = "simplify"
@@ -537,8 +540,8 @@ def _within_max_error(su, clean, target, max_error, opts, progress):
         if st != "max_error":
             break                                 # the target (or the floor) came first
     for mesh, st, passes in reversed(good):
-        for relocate in (True, False):
-            cage = _cage_of(su, copy.deepcopy(mesh), st, passes, opts, relocate=relocate)
+        for relocated in (True, False):
+            cage = _cage_of(su, copy.deepcopy(mesh), st, passes, opts, relocate=relocated)
             d = measure(cage)
             if d <= max_error:
                 return cage, d
