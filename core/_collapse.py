@@ -76,7 +76,7 @@ class State:
 
     V: np.ndarray = _array("vertex")             #: working positions (unit-free)
     VT: np.ndarray = _array("vertex_t")          #: (3,n) copy of V for column gathers
-    Q: np.ndarray = _array("vertex_t")           #: (11,n) quadrics, one row per coefficient
+    Q: np.ndarray = _array("vertex")             #: (n,11) quadrics, one row of coefficients per vertex
     NrefT: np.ndarray = _array("vertex_t")       #: (3,n) summed area normals of the input faces merged in
     wit: np.ndarray = _array("vertex")           #: witness: merged input point farthest from the surface
     locked: np.ndarray = _array("vertex")
@@ -111,7 +111,7 @@ class State:
         n, m = V.shape[0], F.shape[0]
         self.V = V.copy()                          # (the input V stays: relocation samples it)
         self.VT = np.ascontiguousarray(V.T)
-        self.Q = np.ascontiguousarray(Q.T)
+        self.Q = np.ascontiguousarray(Q)
         self.NrefT, self.wit, self.locked = np.ascontiguousarray(Nref.T), V.copy(), locked
         self.moved = np.zeros(n, dtype=bool)
         self.orig = np.arange(n, dtype=np.int64)
@@ -186,7 +186,8 @@ def _corner(Fs, v):
 def _distance(st, cost, a, b):
     """RMS distance ``sqrt(cost / w)`` of edge collapses (``w``: the merged
     quadric's area; 0 where it has none), in working units."""
-    return rms_distance(cost, _take(st.Q[10], a) + _take(st.Q[10], b))
+    w = st.Q[:, 10]
+    return rms_distance(cost, _take(w, a) + _take(w, b))
 
 
 # ---------------------------------------------------------------- costs
@@ -209,8 +210,9 @@ def _recost(st, rep, U, W, stale, preserve_boundary, tun):
         swap = lb | (~la & preserve_boundary & interior & bb)
         a, b = np.where(swap, b, a), np.where(swap, a, b)
         la, ba = np.where(swap, lb, la), np.where(swap, bb, ba)
-        q = _take(st.Q, a, axis=1)
-        q += _take(st.Q, b, axis=1)
+        q = _take(st.Q, a, axis=0)                 # (whole rows: contiguous gathers)
+        q += _take(st.Q, b, axis=0)
+        q = np.ascontiguousarray(q.T)
         pa, pb = _take(st.VT, a, axis=1), _take(st.VT, b, axis=1)
         X, err = place_columns(q, pa, pb)
         # a position within round-off of an endpoint is that endpoint (it stays exact)
@@ -934,7 +936,8 @@ def _hausdorff_penalty(st, s, g, A, B, tun):
         return d
 
     dA, dB = nearest(wA), nearest(wB)
-    Wq = _take(st.Q[10], A) + _take(st.Q[10], B)
+    w = st.Q[:, 10]
+    Wq = _take(w, A) + _take(w, B)
     return tun.haus_weight * Wq * np.maximum(dA, dB), np.where((dB > dA)[:, None], wB, wA)
 
 
@@ -1130,8 +1133,7 @@ def _apply(st, A, B, XT, rows):
     # positions and quadrics
     VA = _take(st.VT, A, axis=1)
     st.moved[A] |= (XT[0] != VA[0]) | (XT[1] != VA[1]) | (XT[2] != VA[2])
-    for q in st.Q:                                 # one coefficient row at a time (A are distinct)
-        np.put(q, A, _take(q, A) + _take(q, B))
+    st.Q[A] = _take(st.Q, A, axis=0) + _take(st.Q, B, axis=0)   # (A are distinct)
     st.NrefT[:, A] = _take(st.NrefT, A, axis=1) + _take(st.NrefT, B, axis=1)
     st.V[A] = XT.T
     st.VT[:, A] = XT
