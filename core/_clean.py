@@ -266,54 +266,53 @@ def _pair_runs(ks, order, twin, a, b):
         twin[o[multi + 1]] = NON_MANIFOLD
 
 
-#: bins of the histogram that splits a sort too wide to pack into key ranges
-_SORT_BINS = 1 << 12
-
-
 def sort_keys(key, bound):
     """``order = np.argsort(key, kind="stable")`` and ``key[order]`` for keys
     in ``[0, bound)``, from plain sorts of ``key << bits | index`` (unique
     values: far faster than a stable argsort, and the same result).
 
-    Keys too wide to pack with their index are split into key ranges that
-    can be (a histogram of the keys' high bits), sorted range by range.
+    Keys too wide to pack with their index are sorted range by range: the
+    ranges of ``2**(63 - bits)`` keys, each packed relative to its start.
     ``key`` (int64) is overwritten.
     """
     size = key.size
     bits = max(int(size - 1).bit_length(), 1)
     if bound <= 1 << (63 - bits):
         return _packed_sort(key, bits)
-    shift = max(0, int(bound - 1).bit_length() - _SORT_BINS.bit_length() + 1)
-    spans = blocks(size, _PAIR_BLOCK)
-    count = sum(run_each(lambda ab: np.bincount(key[ab[0]:ab[1]] >> shift,
-                                                minlength=int((bound - 1) >> shift) + 1), spans))
-    ranges = _key_ranges(count, shift)
-    if ranges is None:
+    width = 63 - bits
+    n_ranges = int((bound - 1) >> width) + 1
+    if n_ranges > _MAX_RANGES:
         order = np.argsort(key, kind="stable")
         return order, key[order]
-    of_bin = np.repeat(np.arange(len(ranges), dtype=np.uint16), [hi - lo for lo, hi in ranges])
-    bucket = np.empty(size, dtype=np.uint16)
+    spans = blocks(size, _PAIR_BLOCK)
+    in_range = np.empty(size, dtype=np.uint16)
 
     def label(a, b):
-        bucket[a:b] = of_bin.take(key[a:b] >> shift)
+        np.right_shift(key[a:b], width, out=in_range[a:b], casting="unsafe")
 
     run_blocks(label, spans)
+    starts = np.concatenate([[0], np.cumsum(np.bincount(in_range, minlength=n_ranges))])
     order = np.empty(size, dtype=np.int64)
     ks = np.empty(size, dtype=np.int64)
-    starts = np.cumsum([0] + [int(count[lo:hi].sum()) for lo, hi in ranges])
 
     def one(r):
-        sel = np.flatnonzero(bucket == r)
+        sel = np.flatnonzero(in_range == r)
         k = key.take(sel)
-        base = np.int64(ranges[r][0] << shift)
-        k -= base
-        local, k = _packed_sort(k, max(int(sel.size - 1).bit_length(), 1))
-        k += base
-        ks[starts[r]:starts[r + 1]] = k
-        np.take(sel, local, out=order[starts[r]:starts[r + 1]])
+        k -= np.int64(r << width)
+        k <<= bits
+        k |= sel
+        k.sort()
+        a, b = starts[r], starts[r + 1]
+        np.bitwise_and(k, np.int64((1 << bits) - 1), out=order[a:b])
+        np.right_shift(k, bits, out=ks[a:b])
+        ks[a:b] += np.int64(r << width)
 
-    run_each(one, range(len(ranges)))
+    run_each(one, range(n_ranges))
     return order, ks
+
+
+#: key ranges beyond which :func:`sort_keys` falls back on a stable argsort
+_MAX_RANGES = 64
 
 
 def _packed_sort(key, bits):
@@ -324,25 +323,6 @@ def _packed_sort(key, bits):
     order = key & np.int64((1 << bits) - 1)
     key >>= bits
     return order, key
-
-
-def _key_ranges(count, shift):
-    """Consecutive ranges ``(lo, hi)`` of histogram bins (``count``: keys per
-    bin of ``2**shift`` keys) whose keys pack with their index in the range
-    into 63 bits, or None when one bin alone does not."""
-    ranges, lo, total = [], 0, 0
-    for i, c in enumerate(count.tolist()):
-        width = (i + 1 - lo) << shift
-        if total + c and width << max(int(total + c - 1).bit_length(), 1) > 1 << 63:
-            if i == lo:
-                return None
-            ranges.append((lo, i))
-            lo, total = i, 0
-            if (1 << shift) << max(int(c - 1).bit_length(), 1) > 1 << 63:
-                return None
-        total += c
-    ranges.append((lo, count.size))
-    return ranges
 
 
 def corner_fans(F, twin, U, W, vertices, n_vertices):

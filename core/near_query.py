@@ -302,22 +302,26 @@ def _block(T, P, q, cell3, best):
     left for ``TriangleIndex.closest``."""
     B, lost = _start_block(T, P, q, cell3)
     n = B.q.shape[0]
-    tiles, probe_col, t0 = _probe(T, B)
+    tiles, t0 = _probe(T, B)
     v0, w0, d0 = _kernel(T, B.X, np.arange(n), t0)
     u2 = np.square(_bound32(T, d0))
-    owner_a, tri_a, lb_a = _within(tiles, np.arange(n), u2, probe_col)
+    owner_a, tri_a, lb_a = _within(tiles, np.arange(n), u2)
     point_b, cell_b, far = _neighbour_cells(T, B, np.sqrt(d0))
     owner_b, tri_b, lb_b = _within(_tiles(T, B.A, point_b, cell_b), point_b, u2)
     owner = np.concatenate([owner_a, owner_b])
     tri = np.concatenate([tri_a, tri_b])
-    lb = np.concatenate([lb_a, lb_b])
+    # a triangle is referenced in every cell it crosses, and windows overlap the
+    # next cells: the probe and other pairs come again, evaluated once only
+    again = np.flatnonzero(tri != t0[owner])
+    owner, tri, lb = owner[again], tri[again], np.concatenate([lb_a, lb_b])[again]
     # the pair with the smallest bound of each point first: usually the closest,
     # so the bound it gives leaves few of the others
     first = _lowest_per_point(owner, lb, n)
     t, v, w, d2 = _fold(T, B.X, owner[first], tri[first], t0, v0, w0, d0)
-    rest = np.ones(owner.shape[0], dtype=bool)
-    rest[first] = False
-    rest &= lb <= np.square(_bound32(T, d2)[owner])
+    done = t0.copy()
+    done[owner[first]] = tri[first]
+    rest = lb <= np.square(_bound32(T, d2)[owner])
+    rest &= tri != done[owner]
     t, v, w, d2 = _fold(T, B.X, owner[rest], tri[rest], t, v, w, d2)
     best.t[B.q], best.v[B.q], best.w[B.q], best.d2[B.q] = t, v, w, d2
     return np.concatenate([lost, B.q[far]])
@@ -449,32 +453,27 @@ def _edge_line_bound(T, A, s, c):
 
 
 def _probe(T, B):
-    """Phase A: the tiles of the probe cells and, per point, the column and
-    triangle of the smallest bound in its probe cell's window."""
+    """Phase A: the tiles of the probe cells and, per point, the triangle of
+    the smallest bound in its probe cell's window."""
     n = B.q.shape[0]
     tiles = _tiles(T, B.A, np.arange(n), B.probe)
     t0 = np.empty(n, dtype=np.int64)
-    cols = []
     for tile in tiles:
         col = np.argmin(tile.lb, axis=2)
         t0[tile.rows[tile.valid]] = np.take_along_axis(tile.tri, col, axis=1)[tile.valid]
-        cols.append(col)
-    return tiles, cols, t0
+    return tiles, t0
 
 
-def _within(tiles, who, u2, skip=None):
+def _within(tiles, who, u2):
     """(owner, triangle, bound) of the tile pairs whose bound is within the
-    rows' ``u2``; ``who`` maps tile rows to points; ``skip`` (per tile,
-    (t, _TILE) columns) leaves one entry per row out (the probe)."""
+    rows' ``u2``; ``who`` maps tile rows to points."""
     owners = [np.zeros(0, dtype=np.int64)]
     tris = [np.zeros(0, dtype=np.int64)]
     lbs = [np.zeros(0, dtype=np.float32)]
-    for k, tile in enumerate(tiles):
+    for tile in tiles:
         pts = who[tile.rows]
         keep = tile.lb <= u2[pts][:, :, None]
         keep &= tile.valid[:, :, None]
-        if skip is not None:
-            np.put_along_axis(keep, skip[k][:, :, None], False, axis=2)
         flat = np.flatnonzero(keep)
         W = keep.shape[2]
         i, rest = np.divmod(flat, _TILE * W)

@@ -111,16 +111,25 @@ def _face_geometry(V, F):
     def block(a, b):
         Fb = F[a:b]
         p0 = np.take(V, Fb[:, 0], axis=0)
-        Nb = np.cross(np.take(V, Fb[:, 1], axis=0) - p0, np.take(V, Fb[:, 2], axis=0) - p0)
-        N[a:b] = Nb
+        Nb = N[a:b]
+        _cross(np.take(V, Fb[:, 1], axis=0) - p0, np.take(V, Fb[:, 2], axis=0) - p0, out=Nb)
         length = np.sqrt(np.einsum("ij,ij->i", Nb, Nb))
-        ub = np.divide(Nb, length[:, None], out=np.zeros_like(Nb), where=length[:, None] > 0)
-        unit[a:b] = ub
+        ub = unit[a:b]
+        ub[...] = 0.0
+        np.divide(Nb, length[:, None], out=ub, where=length[:, None] > 0)
         d[a:b] = -np.einsum("ij,ij->i", ub, p0)
         area[a:b] = 0.5 * length
 
     run_blocks(block, blocks(m, _BLOCK))
     return N, unit, d, area
+
+
+def _cross(e1, e2, out):
+    """``np.cross(e1, e2)`` of (k,3) rows into ``out`` (the same products and
+    differences, without its temporaries)."""
+    for c, i, j in ((0, 1, 2), (1, 2, 0), (2, 0, 1)):
+        np.multiply(e1[:, i], e2[:, j], out=out[:, c])
+        out[:, c] -= e1[:, j] * e2[:, i]
 
 
 def _plane_weights(area, area_power):
