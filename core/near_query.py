@@ -61,11 +61,16 @@ from .spatial import TriangleIndex, closest_on_triangles, closest_result
 
 __all__ = ["NearQuery"]
 
-#: points per block (float32 temporaries of a few hundred KiB)
-_BLOCK = 8192
+#: points per block (float32 temporaries of a few MiB; large blocks mean fewer NumPy
+#: calls, each a GIL hand-over when two threads query at once)
+_BLOCK = 32768
 
 #: rows (points, or (point, cell) pairs) per tile of one cell
 _TILE = 8
+
+#: (row, reference) pairs per set of tiles handled at once (float32 arrays of
+#: 256 KiB: they stay in cache)
+_TILE_SLOTS = 1 << 16
 
 #: the float32 bound is loosened by this fraction of the grid's extent
 _F32_EPS = 2.0 ** -16
@@ -421,6 +426,9 @@ def _tiles(T, A, point, cell):
     cls = np.searchsorted(T.widths, T.count[tcell]).astype(np.int16)
     by_class = np.argsort(cls, kind="stable")
     cuts = np.flatnonzero(np.concatenate([[True], np.diff(cls[by_class]) != 0, [True]]))
+    # at most _TILE_SLOTS (row, reference) pairs per set: its arrays stay in cache
+    cuts = np.unique(np.concatenate([cuts] + [np.arange(a, b, max(1, _TILE_SLOTS // (
+        _TILE * int(T.widths[cls[by_class[a]]])))) for a, b in zip(cuts[:-1], cuts[1:])]))
     lane = np.arange(_TILE)
     out = []
     for a, b in zip(cuts[:-1], cuts[1:]):
@@ -490,23 +498,32 @@ def _neighbour_cells(T, B, u):
     """Phase B's cells: (point, padded cell) pairs for every non-empty cell of
     the 3x3x3 block around the own cell within ``u`` (box distance) of the
     point, other than the probe cell; and the mask of points whose ball
-    leaves that block (answered by the index instead)."""
+    leaves that block (answered by the index instead). The 6 face neighbours
+    from one test per wall; the 20 edge and corner ones only for the points
+    whose ball crosses two walls or more."""
     ub = u * (1 + 4 * _SLACK)
     u2 = ub * ub
-    below = np.square(np.maximum(B.wall, 0.0))          # (3, k) to the lower walls
-    above = np.square(np.maximum(T.h - B.wall, 0.0))    # (3, k) to the upper walls
-    reach = below[0] <= u2
-    for side in (below[1], below[2], above[0], above[1], above[2]):
-        reach |= side <= u2
     far = ub >= _block_clearance(T, B)
-    sel = np.flatnonzero(reach & ~far)
-    d2 = np.zeros((sel.shape[0], 7))
-    d2[:, 0:6:2] = below[:, sel].T
-    d2[:, 1:6:2] = above[:, sel].T
-    need = (d2[:, _WALL_A] + d2[:, _WALL_B] + d2[:, _WALL_C]) <= u2[sel, None]
-    flat = np.flatnonzero(need)
-    i, k = np.divmod(flat, 26)
-    point = sel[i]
+    d2 = np.empty((7, B.q.shape[0]))                # squared distance to each wall, then 0
+    d2[0:6:2] = np.square(np.maximum(B.wall, 0.0))
+    d2[1:6:2] = np.square(np.maximum(T.h - B.wall, 0.0))
+    d2[6] = 0.0
+    crossed = d2[:6] <= u2
+    crossed &= ~far
+    points, ks = [], []
+    for wall in range(6):                           # face neighbour k = wall k
+        p = np.flatnonzero(crossed[wall])
+        points.append(p)
+        ks.append(np.full(p.shape[0], wall))
+    sel = np.flatnonzero(crossed.sum(axis=0) >= 2)
+    if sel.size:
+        D = d2[:, sel]
+        need = (D[_WALL_A[6:]] + D[_WALL_B[6:]] + D[_WALL_C[6:]]) <= u2[sel]     # (20, s)
+        flat = np.flatnonzero(need)
+        k, i = np.divmod(flat, sel.shape[0])
+        points.append(sel[i])
+        ks.append(k + 6)
+    point, k = np.concatenate(points), np.concatenate(ks)
     cell = B.own[point] + T.offset[k]
     keep = (T.count[cell] > 0) & (cell != B.probe[point])
     return point[keep], cell[keep], far
