@@ -236,27 +236,30 @@ def _build_tables(tables):
     widths = _width_classes(int(count.max()))
     pad = int(widths[-1])
     tri = np.concatenate([tables.cell_tri.astype(np.int64), np.zeros(pad, dtype=np.int64)])
-    lines = _line_rows(tables, tri[:tri.shape[0] - pad], pad)
+    eps = np.float32(_F32_EPS * extent)
+    lines = _line_rows(tables, tri[:tri.shape[0] - pad], pad, eps)
     offset = _OFFSETS[:, 0] + pdims[0] * (_OFFSETS[:, 1] + pdims[1] * _OFFSETS[:, 2])
     box = np.stack([lo - 4.0 * h, tables.hi + 4.0 * h])
-    return _Tables(lo, h, dims, np.float32(_F32_EPS * extent), box, pdims, count, start, offset,
+    return _Tables(lo, h, dims, eps, box, pdims, count, start, offset,
                    widths, tuple(sliding_window_view(tri, int(W)) for W in widths),
                    tuple(tuple(sliding_window_view(r, int(W), axis=1) for r in lines)
                          for W in widths),
                    tuple(np.ascontiguousarray(r) for r in tables.rows), tables)
 
 
-def _line_rows(tables, tri, pad):
+def _line_rows(tables, tri, pad, eps):
     """Per reference (cell-major, then ``pad`` padding entries) and for each of
     the edge-line bound's four directions d (normal, three edge normals): the
     rows [d_x, d_y, d_z, -(d.c) - o] (c the centroid relative to the origin, o
-    the edge's offset, 0 for the normal), float32 (4, refs + pad), so that
-    [x, y, z, 1] times them is the signed height / edge-line excess of the
-    point x (relative to the origin). Padding rows give +inf."""
+    the edge's offset less the slack ``eps``, 0 for the normal), float32
+    (4, refs + pad), so that [x, y, z, 1] times them is the signed height /
+    the edge-line excess less eps of the point x (relative to the origin).
+    Padding rows give +inf."""
     P = tables.prism
     c = tables.ball[:3] - tables.lo[:, None]
     out = []
-    for d, off in ((P[0:3], 0.0), (P[3:6], P[12]), (P[6:9], P[13]), (P[9:12], P[14])):
+    for d, off in ((P[0:3], 0.0), (P[3:6], P[12] + eps), (P[6:9], P[13] + eps),
+                   (P[9:12], P[14] + eps)):
         row = np.zeros((4, tri.shape[0] + pad), dtype=np.float32)
         row[:3, :tri.shape[0]] = np.take(d, tri, axis=1)
         row[3, :tri.shape[0]] = np.take(-np.einsum("ij,ij->j", d, c) - off, tri)
@@ -449,11 +452,11 @@ def _edge_line_bound(T, A, s, c):
     height, *excess = (np.matmul(A, np.ascontiguousarray(line[:, s].transpose(1, 0, 2)))
                        for line in T.lines[c])
     np.abs(height, out=height)
-    lateral = excess[0]
+    height -= T.eps
+    lateral = excess[0]                                     # the excesses come less eps
     np.maximum(lateral, excess[1], out=lateral)
     np.maximum(lateral, excess[2], out=lateral)
     for part in (height, lateral):
-        part -= T.eps
         np.maximum(part, 0.0, out=part)
         part *= part
     height += lateral
@@ -480,10 +483,9 @@ def _within(tiles, who, u2):
     lbs = [np.zeros(0, dtype=np.float32)]
     for tile in tiles:
         pts = who[tile.rows]
-        keep = tile.lb <= u2[pts][:, :, None]
-        keep &= tile.valid[:, :, None]
-        flat = np.flatnonzero(keep)
-        W = keep.shape[2]
+        bound = np.where(tile.valid, u2[pts], np.float32(-1.0))   # repeats: nothing passes
+        flat = np.flatnonzero(tile.lb <= bound[:, :, None])
+        W = tile.lb.shape[2]
         i, rest = np.divmod(flat, _TILE * W)
         j, col = np.divmod(rest, W)
         owners.append(pts[i, j])
