@@ -94,7 +94,7 @@ def spatial_order(V, F, twin, box=None, ends=True):
     """
     n, m = V.shape[0], F.shape[0]
     if n == 0 or m == 0:
-        U, W = half_edge_ends(F)
+        U, W = half_edge_ends(F) if ends else (None, None)
         return V, F, twin, U, W, np.arange(n, dtype=np.int64), np.arange(m, dtype=np.int64)
     lo, hi = bounding_box(V) if box is None else box
     # unique keys: the Morton code's high bits, then the index (any sort gives the
@@ -129,7 +129,7 @@ def spatial_order(V, F, twin, box=None, ends=True):
         twin2[3 * a:3 * b] = np.where(t >= 0, h, t)
 
     run_blocks(block, blocks(m, _PAIR_BLOCK // 3))
-    return V[order], F2, twin2, U2, W2, order, forder
+    return np.take(V, order, axis=0), F2, twin2, U2, W2, order, forder
 
 
 def _faces_by_smallest(F, new_v):
@@ -307,7 +307,8 @@ def sort_keys(key, bound):
         np.right_shift(k, bits, out=ks[a:b])
         ks[a:b] += np.int64(r << width)
 
-    run_each(one, range(n_ranges))
+    for r in range(n_ranges):      # in this thread: a worker's arena would keep their memory
+        one(r)
     return order, ks
 
 

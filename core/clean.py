@@ -257,13 +257,13 @@ def _shape(V, F, box):
     block); ``box``: the bounding box ``(lo, hi)`` of the vertices they use."""
     lo, hi = box
     d = diagonal_length(lo, hi) or 1.0
-    Vn = (V - lo) / d
-    cols = np.ascontiguousarray(Vn.T)
+    cols = np.subtract(V.T, lo[:, None], order="C")     # (V - lo) / d, coordinate-major
+    cols /= d
     m = F.shape[0]
     area, height = np.empty(m), np.empty(m)
     run_blocks(lambda a, b: _face_shape(cols, F[a:b], area[a:b], height[a:b]),
                blocks(m, _SHAPE_BLOCK))
-    return _Shape(Vn, (hi - lo) / d, area, height)
+    return _Shape(cols.T, (hi - lo) / d, area, height)
 
 
 #: faces per block of :func:`_shape` (temporaries stay in cache)
@@ -629,7 +629,11 @@ def _debris(area, F, inner, min_component_area, face_budget, protected):
     if (min_component_area <= 0 and not face_budget) or F.shape[0] == 0:
         return keep, found
     h, t = inner
-    labels = connected_labels(F.shape[0], np.stack([h // 3, t // 3], axis=1))
+    pairs = np.empty((h.size, 2), dtype=np.int32 if F.shape[0] < 2 ** 31 else np.int64)
+    np.floor_divide(h, 3, out=pairs[:, 0], casting="unsafe")
+    np.floor_divide(t, 3, out=pairs[:, 1], casting="unsafe")
+    labels = connected_labels(F.shape[0], pairs)
+    del pairs
     comp_area = np.bincount(labels, weights=area, minlength=F.shape[0])
     roots = np.flatnonzero(labels == np.arange(F.shape[0]))
     tiny = comp_area < min_component_area * comp_area.max()

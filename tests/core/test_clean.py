@@ -217,9 +217,15 @@ def test_spatial_order_is_the_same_mesh_with_its_own_twin_table(case):
     U, W = half_edge_ends(F2)
     assert np.array_equal(U2, U) and np.array_equal(W2, W)
     if F.shape[0]:
-        # faces in the order of their smallest (new) vertex
+        # faces in the order of their smallest (new) vertex, ties by old index
         first = F2.min(axis=1)
         assert np.all(np.diff(first) >= 0)
+        assert np.array_equal(forder, np.lexsort((np.arange(F.shape[0]), first[np.argsort(forder)])))
+    # without the ends: the same mesh, no (3m,) end arrays
+    lean = spatial_order(V, F, twin, ends=False)
+    assert lean[3] is None and lean[4] is None
+    for a, b in zip(lean[:3] + lean[5:], (V2, F2, twin2, order, forder)):
+        assert np.array_equal(a, b)
 
 
 @pytest.mark.parametrize("step", [1, 7, 1 << 20])

@@ -127,3 +127,18 @@ def test_scaling_the_mesh_scales_the_distance():
     Qs = face_quadrics(V * s, F)
     ds = quadric_distance(Qs, quadric_error(Qs, X * s))
     np.testing.assert_allclose(ds, d1 * s, rtol=1e-9)
+
+
+def test_vertex_face_quadrics_are_the_accumulated_face_quadrics_bit_for_bit():
+    # the same operations in the same order as the (m,11) stack accumulated by bincount
+    from core.quadrics import accumulate, face_quadrics, vertex_face_quadrics
+    from core.mesh import face_normals
+    from tests.mesh_factory import torus
+    V, F = torus(30, 14, bump=0.05)
+    F = np.concatenate([F, [[0, 1, 1]]])                  # a degenerate face: a zero quadric
+    for p in (1.0, 0.5):
+        QT, unit, N = vertex_face_quadrics(V, F, V.shape[0], p)
+        ref = accumulate(face_quadrics(V, F, area_power=p), F.T.ravel(), V.shape[0], repeat=3)
+        assert np.array_equal(QT.T, ref)
+        assert np.array_equal(N, face_normals(V, F, normalize=False))
+        assert np.array_equal(unit, face_quadrics(V, F, area_power=p, return_normals=True)[1])
