@@ -354,15 +354,18 @@ def bind(V_dense, F_dense, V_cage, F_cage, *, levels=2, scheme="butterfly", crea
             lambda: NearQuery(Vf, op.F_fine), lambda: _exact_detail_index(V_dense, F_dense)])
     else:
         query = NearQuery(Vf, op.F_fine)          # its two halves on the worker threads
-    dense = _bind_dense(query, V_dense, VfT, NfT, op.F_fine, _reporter(progress, 0.05, 0.6))
     d_face, d_bary = _vertex_corners(op.F_fine, op.n_fine)
+    vfr = frames(Vf, NfT.T, op.F_fine[d_face], d_bary) if detail is not None else None
+    near = _NearSearch(vfr.point, _used_vertices(F_dense, V_dense.shape[0])) \
+        if detail == "local" else None
+    dense = _bind_dense(query, V_dense, VfT, NfT, op.F_fine, _reporter(progress, 0.05, 0.6),
+                        near)
     fine_detail = np.zeros((op.n_fine, 3))
-    if detail is not None:
-        vfr = frames(Vf, NfT.T, op.F_fine[d_face], d_bary)
-        if detail == "exact":
-            q = _closest_on(dense_index, vfr.point, _reporter(progress, 0.65, 0.95), point=True)
-        else:
-            q = _dense_points_near(V_dense, F_dense, dense.face, op.F_fine, vfr.point)
+    if detail == "exact":
+        q = _closest_on(dense_index, vfr.point, _reporter(progress, 0.65, 0.95), point=True)
+        fine_detail = _to_frame(q - vfr.point, vfr)
+    elif detail == "local":
+        q = _dense_points_near(V_dense, F_dense, dense.nearest, vfr.point)
         fine_detail = _to_frame(q - vfr.point, vfr)
     cache = {"corners_t": dense.corners_t, "bary_t": dense.bary_t, "offset_t": dense.offset_t,
              "detail_corners_t": np.ascontiguousarray(op.F_fine[d_face].T),
@@ -999,9 +1002,25 @@ class _DenseBound(NamedTuple):
     corners_t: np.ndarray   #: (3,n) int64 corners of each fine face
     bary_t: np.ndarray      #: (3,n) float64
     offset_t: np.ndarray    #: (3,n) float64
+    nearest: object         #: (n_fine,) int64 nearest bound dense vertex (_NearSearch), or None
 
 
-def _bind_dense(query, V_dense, VfT, NfT, F_fine, report=None):
+class _NearSearch(NamedTuple):
+    """What the dense pass needs to find, for the local detail search, each
+    fine vertex's nearest bound dense vertex (:func:`_nearest_parts`)."""
+
+    P: np.ndarray       #: (n_fine,3) fine vertex positions (the frames' points)
+    used: object        #: (n_dense,) bool, dense vertices on a face; None: all are
+
+
+def _used_vertices(F, n):
+    """(n,) bool mask of the vertices some face of ``F`` uses, or None when all are."""
+    used = np.zeros(n, dtype=bool)
+    used[F.ravel()] = True
+    return None if used.all() else used
+
+
+def _bind_dense(query, V_dense, VfT, NfT, F_fine, report=None, near=None):
     """The :class:`_DenseBound` of the dense vertices: closest points on the
     fine surface (``query``, a :class:`~.near_query.NearQuery`), then the
     frame components of each vertex's offset from its point (the frames in
@@ -1009,10 +1028,13 @@ def _bind_dense(query, V_dense, VfT, NfT, F_fine, report=None):
     by block on the worker threads (fixed blocks of ``_BIND_BLOCK``: results
     do not depend on the number of threads), ``report(fraction)`` as each
     block is done, in order (returning False cancels the blocks not yet
-    started)."""
+    started). With ``near`` (a :class:`_NearSearch`), each block also
+    offers its vertices as the nearest bound ones of its faces' corners
+    (:func:`_nearest_parts`), combined into ``nearest``."""
     n = V_dense.shape[0]
     out = _DenseBound(np.empty(n, dtype=np.int64), np.empty((n, 3)), np.empty((n, 3)),
-                      np.empty((3, n), dtype=np.int64), np.empty((3, n)), np.empty((3, n)))
+                      np.empty((3, n), dtype=np.int64), np.empty((3, n)), np.empty((3, n)), None)
+    parts = []
 
     def block(start, stop):
         hit = query.closest(V_dense[start:stop])
@@ -1028,15 +1050,53 @@ def _bind_dense(query, V_dense, VfT, NfT, F_fine, report=None):
         for k, axis in enumerate((t, bt, nrm)):
             out.offset_t[k, start:stop] = _dot_t(d, axis)
         out.offset[start:stop] = out.offset_t[:, start:stop].T
+        if near is not None:
+            return _nearest_parts(near, V_dense[start:stop], start, corners, hit.face, n)
+        return None
 
     def run(span):
-        block(*span)
-        return span[1]
+        return block(*span), span[1]
 
-    for stop in each_in_order(run, blocks(n, _BIND_BLOCK)):
+    for part, stop in each_in_order(run, blocks(n, _BIND_BLOCK)):
+        parts.append(part)
         if report is not None:
             report(stop / n)
-    return out
+    return out._replace(nearest=_nearest_of(parts, n)) if near is not None else out
+
+
+def _nearest_parts(near, V, start, corners, face, n_dense):
+    """One block's offer for the nearest bound dense vertex of each fine
+    vertex: the block's dense vertices ``start + i`` (positions ``V``, bound
+    to ``face`` with ``corners`` (3, b)) paired with their face's corners,
+    the smallest squared distance per fine vertex and, among the pairs at
+    that distance, the smallest key ``face * n_dense + vertex`` (the order of
+    the candidates the definition takes the first of). Returns (d2, key),
+    each (n_fine,): inf / the largest int64 where the block offers none."""
+    n_f = near.P.shape[0]
+    vertex = np.arange(start, start + V.shape[0], dtype=np.int64)
+    keep = slice(None) if near.used is None else near.used[vertex]
+    j = corners[:, keep].ravel()
+    k = np.tile(vertex[keep], 3)
+    key = np.tile(face[keep], 3) * np.int64(n_dense) + k
+    d = np.take(V, k - start, axis=0)
+    d -= np.take(near.P, j, axis=0)
+    d2 = _dot(d, d)
+    best = np.full(n_f, np.inf)
+    np.minimum.at(best, j, d2)
+    low = np.full(n_f, np.iinfo(np.int64).max)
+    at = d2 == best[j]
+    np.minimum.at(low, j[at], key[at])
+    return best, low
+
+
+def _nearest_of(parts, n_dense):
+    """The nearest bound dense vertex of each fine vertex (-1 for none) from
+    the blocks' :func:`_nearest_parts` (in block order): the smallest squared
+    distance over the blocks, the smallest key among the blocks at it."""
+    none = np.iinfo(np.int64).max
+    best = np.min([d2 for d2, _ in parts], axis=0)
+    key = np.min([np.where(d2 == best, low, none) for d2, low in parts], axis=0)
+    return np.where(key == none, -1, key % n_dense)
 
 
 def _reporter(progress, lo, hi):
@@ -1091,12 +1151,13 @@ def _fans_of(F, vertices):
     return _Fans(vertices, np.concatenate([[0], np.cumsum(counts)]), hit[order] // 3)
 
 
-def _dense_points_near(V_dense, F_dense, fine_face, F_fine, P):
+def _dense_points_near(V_dense, F_dense, nearest, P):
     """A point of the dense surface near each fine vertex position ``P[j]``.
 
     Searched without a spatial index over the dense mesh, using the binding:
-    take the dense vertex nearest to ``P[j]`` among those bound to the fine
-    faces around ``j`` (:func:`_nearest_bound`), and return the closest point
+    take ``nearest[j]``, the dense vertex nearest to ``P[j]`` among those
+    bound to the fine faces around ``j`` (found by the dense pass,
+    :func:`_nearest_parts`), and return the closest point
     of ``P[j]`` on that vertex's triangle fan, or on its two-ring where the
     fan's best point lies on the fan's rim (the surface may come closer
     beyond it). Fine vertices with no bound dense vertex around them (a dense
@@ -1108,7 +1169,6 @@ def _dense_points_near(V_dense, F_dense, fine_face, F_fine, P):
     """
     n_f = P.shape[0]
     q = np.empty((n_f, 3))
-    nearest = _nearest_bound(V_dense, F_dense, fine_face, F_fine, P)
     has = np.flatnonzero(nearest >= 0)
     fans = _fans_of(F_dense, nearest[has])
     rim = np.zeros(n_f, dtype=bool)
@@ -1131,43 +1191,6 @@ def _dense_points_near(V_dense, F_dense, fine_face, F_fine, P):
     if missing.size:
         q[missing] = TriangleIndex(V_dense, F_dense).closest(P[missing]).point
     return q
-
-
-def _nearest_bound(V_dense, F_dense, fine_face, F_fine, P):
-    """(n_fine,) int64: for each fine vertex j, the dense vertex nearest to
-    ``P[j]`` among those bound to the fine faces around j (the first among
-    equally near ones, candidates in fine face order, then dense vertex
-    order), -1 where none is (isolated dense vertices never count)."""
-    n_d, m_f, n_f = V_dense.shape[0], F_fine.shape[0], P.shape[0]
-    degree = np.bincount(F_dense.ravel(), minlength=n_d)
-    # dense vertices grouped by fine face; (fine vertex, incident fine face) sorted by vertex
-    by_face = np.argsort(fine_face, kind="stable")
-    cnt_f = np.bincount(fine_face, minlength=m_f)
-    start_f = np.cumsum(cnt_f) - cnt_f
-    inc = np.argsort(F_fine.ravel(), kind="stable")
-    inc_j, inc_f = F_fine.ravel()[inc], inc // 3
-    all_in_faces = bool((degree > 0).all())      # no isolated dense vertex to skip
-    V_by_face = np.take(V_dense, by_face, axis=0)   # candidates read as contiguous runs
-    nearest = np.full(n_f, -1, dtype=np.int64)
-
-    def near(s, e):
-        # fine vertices s..e-1 (results depend on the vertex alone, not on the block)
-        lo, hi = np.searchsorted(inc_j, [s, e])
-        jj, ff = inc_j[lo:hi], inc_f[lo:hi]
-        idx, owner = ragged_ranges(start_f[ff], cnt_f[ff])
-        pj, pk = jj[owner], by_face[idx]
-        if not all_in_faces:
-            keep = degree[pk] > 0
-            pj, pk, idx = pj[keep], pk[keep], idx[keep]
-        d = np.take(V_by_face, idx, axis=0)
-        d -= np.take(P, pj, axis=0)
-        cnt_j = np.bincount(pj - s, minlength=e - s)
-        has = np.flatnonzero(cnt_j)
-        if has.size:
-            nearest[has + s] = pk[group_argmin(_dot(d, d), cnt_j[has])]
-
-    run_blocks(near, blocks(n_f, _DETAIL_BLOCK))
-    return nearest
 
 
 def _two_ring_points(V_dense, F_dense, P, js, nearest, fans, q):

@@ -497,7 +497,8 @@ def _local_detail_reference(Vd, Fd, b, P):
     from core.spatial import point_triangle_closest
     Ff = b.operator.F_fine
     around = [np.flatnonzero((Ff == j).any(axis=1)) for j in range(P.shape[0])]
-    bound = [np.flatnonzero(b.fine_face == f) for f in range(Ff.shape[0])]
+    used = np.isin(np.arange(Vd.shape[0]), Fd)               # isolated vertices never count
+    bound = [np.flatnonzero((b.fine_face == f) & used) for f in range(Ff.shape[0])]
     fan = [[] for _ in range(Vd.shape[0])]
     for f, tri in enumerate(Fd):
         for v in tri:
@@ -524,8 +525,9 @@ def _local_detail_reference(Vd, Fd, b, P):
     return out
 
 
-@pytest.mark.parametrize("size", [(60, 30), (30, 14)], ids=["rims", "unbound"])
-def test_local_detail_search_on_a_coarse_dense_mesh_uses_the_two_ring(size):
+@pytest.mark.parametrize("size,isolated", [((60, 30), 0), ((30, 14), 0), ((60, 30), 300)],
+                         ids=["rims", "unbound", "isolated vertices"])
+def test_local_detail_search_on_a_coarse_dense_mesh_uses_the_two_ring(size, isolated):
     """Dense meshes about as coarse as the fine surface: fan points land on the
     rim (60x30: 26 take the two-ring path) or fine vertices have no dense
     vertex bound around them (30x14: 65, answered by the exact index); the
@@ -534,6 +536,9 @@ def test_local_detail_search_on_a_coarse_dense_mesh_uses_the_two_ring(size):
     rng = np.random.default_rng(3)
     Vd, Fd = torus(*size, bump=0.01, bump_waves=(10, 5))
     Vd = Vd + 0.01 * rng.standard_normal(Vd.shape)
+    if isolated:                   # vertices no face uses, amid the others
+        Vd = np.vstack([Vd[:500], 0.4 * rng.standard_normal((isolated, 3)), Vd[500:]])
+        Fd = np.where(Fd >= 500, Fd + isolated, Fd)
     Vc, Fc = torus(12, 6)
     b = bind(Vd, Fd, Vc, Fc, levels=2, detail_search="local")
     Vf = b.operator.apply(Vc)
