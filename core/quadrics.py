@@ -143,13 +143,14 @@ def _plane_weights(area, area_power):
     return area
 
 
-def vertex_face_quadrics(V, F, n, area_power):
+def vertex_face_quadrics(V, F, n, area_power, *, scratch=None):
     """Sum of the face quadrics around each vertex, coefficient-major.
 
     The same numbers as ``accumulate(face_quadrics(V, F, area_power=p),
     F.T.ravel(), n, repeat=3)`` (same operations, same summation order),
     without the (m,11) stack: each coefficient row is made block by block
-    straight into the weights of its ``bincount``.
+    straight into the weights of its ``bincount``. ``scratch`` may pass a
+    (3m,) float64 buffer for those weights (overwritten).
 
     Returns
     -------
@@ -164,7 +165,7 @@ def vertex_face_quadrics(V, F, n, area_power):
     nx, ny, nz = unit[:, 0], unit[:, 1], unit[:, 2]
     rows = [(nx, nx), (nx, ny), (nx, nz), (ny, ny), (ny, nz), (nz, nz), (d, nx), (d, ny), (d, nz), (d, d)]
     QT = np.empty((N_COEFFS, n))
-    w3 = np.empty(3 * m)
+    w3 = np.empty(3 * m) if scratch is None else scratch
     index = F.T.ravel()
     spans = blocks(m, _BLOCK)
     for j in range(N_COEFFS):

@@ -212,13 +212,14 @@ def check_arguments(n, target_faces, ratio, max_error, feature_angle_deg, vertex
     return w, lk
 
 
-def _initial_quadrics(V, F, twin, preserve_boundary, feature_angle_deg, tun):
+def _initial_quadrics(V, F, twin, preserve_boundary, feature_angle_deg, tun, scratch=None):
     """Vertex quadrics (n,11) with boundary and crease planes, the crease
     flags per half-edge, and the unnormalised face normals (m,3) (as
     ``face_normals(V, F, normalize=False)``). The quadrics are the transposed
-    view of an (11,n) C-contiguous array (``State`` keeps that layout)."""
+    view of an (11,n) C-contiguous array (``State`` keeps that layout).
+    ``scratch``: a (3m,) float64 buffer to work in, or None."""
     n = V.shape[0]
-    QT, Nf, Nraw = vertex_face_quadrics(V, F, n, tun.area_power)  # (11, n)
+    QT, Nf, Nraw = vertex_face_quadrics(V, F, n, tun.area_power, scratch=scratch)  # (11, n)
     feat = np.zeros(twin.size, dtype=bool)
     items, ends = [], []
     if preserve_boundary:
@@ -271,13 +272,14 @@ def _sharp_edges(Nf, F, twin, cos_max):
             np.concatenate([empty] + [t for _, t in found]))
 
 
-def _normal_sums(F, N, n):
+def _normal_sums(F, N, n, scratch=None):
     """Sum of the face normals ``N`` (m,3) around each vertex, (n,3) float64
-    (each bin adds its faces in face order)."""
+    (each bin adds its faces in face order); ``scratch``: a (3m,) float64
+    buffer to work in, or None."""
     if F.shape[0] == 0:
         return np.zeros((n, 3))
     Fr = F.ravel()
-    w = np.empty(Fr.size)
+    w = np.empty(Fr.size) if scratch is None else scratch
     w3 = w.reshape(-1, 3)
     out = np.empty((n, 3))
     spans = blocks(F.shape[0], _SHARP_BLOCK)
@@ -396,8 +398,9 @@ def _set_up(clean, opts):
     Vn *= grid
     np.round(Vn, out=Vn)
     Vn /= grid
+    scratch = np.empty(twin.size)  # one (3m,) buffer for the quadrics' and the normals' sums
     Q, feat, Nf = _initial_quadrics(Vn, Fc, twin, opts["preserve_boundary"],
-                                    opts["feature_angle_deg"], tun)
+                                    opts["feature_angle_deg"], tun, scratch)
     # for the final relocation: the input's border edges and crease vertices, and its
     # faces when small enough for the backward pull (the engine rewrites Fc)
     Eb_in = np.stack(half_edge_ends(Fc, np.flatnonzero(twin == BOUNDARY)), axis=1)
@@ -405,8 +408,8 @@ def _set_up(clean, opts):
     Fin = Fc.copy() if m0 <= tun.relocate_back_max_faces else None
     if opts["weights"] is not None:
         Q *= opts["weights"][order][:, None]
-    Nref = _normal_sums(Fc, Nf, n)
-    del Nf
+    Nref = _normal_sums(Fc, Nf, n, scratch)
+    del Nf, scratch
     mesh = State(Vn, Fc, twin, Q, lock, feat, Nref, forig=forder)  # Fc is spatial_order's own array
     return _SetUp(mesh, clean.V, Vn, order, centre, scale, creases, Eb_in, Fin, m0,
                   {"set-up": time.perf_counter() - t0})
