@@ -465,12 +465,19 @@ def _edge_line_bound(T, A, s, c):
 
 def _probe(T, B):
     """Phase A: the tiles of the probe cells and, per point, the triangle of
-    the smallest bound in its probe cell's window."""
+    the smallest bound in its probe cell's window (the bound's float32 bits
+    with the column in the lowest ones, one minimum: about twice as fast as
+    an argmin over the last axis; which of two nearly equal bounds wins does
+    not matter, any probe gives the same answer)."""
     n = B.q.shape[0]
     tiles = _tiles(T, B.A, np.arange(n), B.probe)
     t0 = np.empty(n, dtype=np.int64)
     for tile in tiles:
-        col = np.argmin(tile.lb, axis=2)
+        W = tile.lb.shape[2]
+        low = (1 << max(1, (W - 1).bit_length())) - 1
+        key = tile.lb.view(np.int32) & np.int32(~low)         # bounds are >= 0: bits sort as values
+        key |= np.arange(W, dtype=np.int32)
+        col = np.minimum.reduce(key, axis=2) & low
         t0[tile.rows[tile.valid]] = np.take_along_axis(tile.tri, col, axis=1)[tile.valid]
     return tiles, t0
 
