@@ -68,9 +68,9 @@ _DEGENERATE = 1e-12
 _EXACT_DETAIL_FACES = 500_000
 _DETAIL_SEARCHES = ("auto", "exact", "local")
 
-#: dense vertices per block of the bind's closest-point query (one block per
-#: worker-thread task)
-_BIND_BLOCK = 131_072
+#: dense vertices per block of the bind's dense pass (closest points, offsets; one
+#: worker-thread task; 16 blocks for 1M vertices keep the two threads evenly busy)
+_BIND_BLOCK = 65_536
 
 #: fine vertices per block of the local detail search (``detail_search="local"``)
 _DETAIL_BLOCK = 8_192
