@@ -46,7 +46,7 @@ import numpy as np
 
 from ._clean import (BOUNDARY, NON_MANIFOLD, corner_fans, face_keys, half_edge_ends,
                      interior_edges, non_manifold_vertices, renumber_twins, twin_table)
-from ._parallel import blocks, run_blocks
+from ._parallel import blocks, run_blocks, run_each
 from .errors import InvalidArgumentError
 from .mesh import bounding_box, check_mesh, diagonal_length, face_normals
 from .topology import connected_labels, edge_keys
@@ -195,8 +195,9 @@ def clean_mesh(V, F, *, weld_distance=WELD_DISTANCE, min_component_area=MIN_COMP
     n_degenerate = int(np.count_nonzero(bad))
     if n_degenerate:
         F, faces, corners = F[~bad], faces[~bad], None
-    twin = twin_table(F, n_in)
-    shape = _shape(V, F, bounding_box(V if used.all() else V[used]))
+    box = bounding_box(V if used.all() else V[used])
+    # the twin table and the faces' shape are independent: side by side
+    twin, shape = run_each(lambda job: job(), [lambda: twin_table(F, n_in), lambda: _shape(V, F, box)])
     area = np.zeros(faces[-1] + 1 if faces.size else 0)
     area[faces] = shape.area                               # per input face, as it came
     rep = _weld_map(shape, F, twin, float(weld_distance))
