@@ -57,7 +57,7 @@ import numpy as np
 from numpy.lib.stride_tricks import sliding_window_view
 
 from .errors import InvalidArgumentError
-from .spatial import TriangleIndex, closest_on_triangles, closest_result
+from .spatial import PRUNE_SLACK, TriangleIndex, closest_on_triangles, closest_result
 
 __all__ = ["NearQuery"]
 
@@ -74,9 +74,6 @@ _TILE_SLOTS = 1 << 16
 
 #: the float32 bound is loosened by this fraction of the grid's extent
 _F32_EPS = 2.0 ** -16
-
-#: relative slack on the float64 cell tests (as ``spatial``'s)
-_SLACK = 1e-9
 
 #: grid cells of this many mean triangle extents (larger than the index's
 #: default: the batched bound makes a reference cheap, a neighbour cell less so)
@@ -510,7 +507,7 @@ def _neighbour_cells(T, B, u):
     leaves that block (answered by the index instead). The 6 face neighbours
     from one test per wall; the 20 edge and corner ones only for the points
     whose ball crosses two walls or more."""
-    ub = u * (1 + 4 * _SLACK)
+    ub = u * (1 + 4 * PRUNE_SLACK)
     u2 = ub * ub
     far = ub >= _block_clearance(T, B)
     d2 = np.empty((7, B.q.shape[0]))                # squared distance to each wall, then 0

@@ -66,7 +66,7 @@ The index (:class:`TriangleIndex`) answers "nearest triangle" exactly:
 Every (query, candidate) set is a ragged expansion (``np.repeat`` + ``cumsum``)
 evaluated in vectorised kernel calls; the per-query minimum comes from
 ``np.minimum.reduceat`` over contiguous groups. Pruning tests carry relative
-margins (``_SLACK``) so that rounding can only keep a candidate, never drop one.
+margins (``PRUNE_SLACK``) so that rounding can only keep a candidate, never drop one.
 """
 
 import threading
@@ -101,7 +101,7 @@ _QUERY_CHUNK = 1 << 16     # at most this many queries per chunk
 _KERNEL_BLOCK = 1 << 14    # pairs per kernel call (temporaries of 128 KiB)
 _BRUTE_PAIRS = 1 << 24     # fewer far (query, triangle) pairs than this: no BVH, scan all
 _FRONTIER_CAP = 1 << 21    # BVH frontier pairs before it is split and processed depth first
-_SLACK = 1e-9              # relative slack on pruning tests (keeps rounding conservative)
+PRUNE_SLACK = 1e-9         # relative slack on pruning tests (keeps rounding conservative)
 _THREADED_BUILD = 1 << 15  # from this many faces the build runs its two halves on two threads
 
 
@@ -555,7 +555,7 @@ class TriangleIndex:
         nrm = np.cross(B - A, C - A)
         off = np.einsum("ij,ij->i", nrm, A)
         l1 = np.abs(nrm).sum(axis=1)
-        reach = 0.5 * h * l1 + _SLACK * l1 * (np.abs(A).max(axis=1) + ext + 2 * h)
+        reach = 0.5 * h * l1 + PRUNE_SLACK * l1 * (np.abs(A).max(axis=1) + ext + 2 * h)
         x0 = self._lo + 0.5 * h
         dist = np.abs(nrm[tri, 0] * (x0[0] + cx * h) + nrm[tri, 1] * (x0[1] + cy * h)
                       + nrm[tri, 2] * (x0[2] + cz * h) - off[tri])
@@ -800,14 +800,14 @@ class TriangleIndex:
         reach = np.sqrt(bound)
         reach += r
         reach *= reach
-        keep = np.flatnonzero(dc2 <= reach * (1 + 4 * _SLACK))
+        keep = np.flatnonzero(dc2 <= reach * (1 + 4 * PRUNE_SLACK))
         if keep.size:
             X, t, dc2, bound = np.take(X, keep, axis=1), t[keep], dc2[keep], bound[keep]
-            sub = np.flatnonzero(self._disk_bound(X, t, dc2, r[keep]) <= bound * (1 + _SLACK))
+            sub = np.flatnonzero(self._disk_bound(X, t, dc2, r[keep]) <= bound * (1 + PRUNE_SLACK))
             keep = keep[sub]
             if edges:
                 X, t, dc2, bound = np.take(X, sub, axis=1), t[sub], dc2[sub], bound[sub]
-                keep = keep[self._prism_bound(X, t, dc2) <= bound * (1 + _SLACK)]
+                keep = keep[self._prism_bound(X, t, dc2) <= bound * (1 + PRUNE_SLACK)]
         return keep
 
     def _disk_bound(self, X, t, dc2, r):
@@ -870,7 +870,7 @@ class TriangleIndex:
             hh *= hh
             lat = np.sqrt(np.maximum(dc2[k] - hh, 0.0)) - S[3, k]
             lb = hh + np.square(np.maximum(lat, 0.0)) - 1e-14 * dc2[k]
-            lb[lb > pre[groups][own] * (1 + _SLACK)] = np.inf
+            lb[lb > pre[groups][own] * (1 + PRUNE_SLACK)] = np.inf
             probe = k[group_argmin(lb, counts[groups])]
             # where that pair is among the tied ones, it wins
             mine = np.flatnonzero(tied)
@@ -940,7 +940,7 @@ class TriangleIndex:
         # phase 2: every other cell within the bound
         u2 = best.d2[qi]
         finite = np.isfinite(u2)
-        u = np.sqrt(np.where(finite, u2, 0.0)) * (1 + _SLACK)
+        u = np.sqrt(np.where(finite, u2, 0.0)) * (1 + PRUNE_SLACK)
         p = PT[:, qi].T
         c_lo = np.clip(np.floor((p - u[:, None] - lo) / h), 0, dims - 1).astype(np.int64)
         c_hi = np.clip(np.floor((p + u[:, None] - lo) / h), 0, dims - 1).astype(np.int64)
@@ -959,7 +959,7 @@ class TriangleIndex:
             dd = np.maximum(np.maximum(cell_lo - pq, pq - (cell_lo + h)), 0.0)
             dd2 = np.einsum("ij,ij->i", dd, dd)
             keep = (g != c0[sel][own]) & (g != done[sel][own])
-            keep &= dd2 <= u2[sel][own] * (1 + 4 * _SLACK)
+            keep &= dd2 <= u2[sel][own] * (1 + 4 * PRUNE_SLACK)
             keep &= start[g + 1] > start[g]
             self._scan(PT, *self._cell_pairs(qi[sel][own[keep]], g[keep]), best, probe=False)
         return qi[far]
@@ -996,7 +996,7 @@ class TriangleIndex:
                     # the nearest leaf first (a tight exact bound), then the leaves within it
                     first = group_argmin(near2, _run_lengths(q))
                     self._scan_leaves(PT, q[first], node[first], best)
-                    rest = near2 <= best.d2[q] * (1 + 4 * _SLACK)
+                    rest = near2 <= best.d2[q] * (1 + 4 * PRUNE_SLACK)
                     rest[first] = False
                     self._scan_leaves(PT, q[rest], node[rest], best, probe=False)
                     continue
@@ -1028,12 +1028,12 @@ class TriangleIndex:
                 fl = lat + S[6]
                 fh = hh + S[7]
                 far2 = np.minimum(far2, fl * fl + fh * fh + 1e-14 * dc2)
-                far2 *= 1 + 4 * _SLACK
+                far2 *= 1 + 4 * PRUNE_SLACK
                 counts = _run_lengths(q)
                 starts = np.cumsum(counts) - counts
                 uq = q[starts]
                 ub[uq] = np.minimum(ub[uq], np.minimum.reduceat(far2, starts))
-                keep = near2 <= ub[q] * (1 + 4 * _SLACK)
+                keep = near2 <= ub[q] * (1 + 4 * PRUNE_SLACK)
                 q, child, near2 = q[keep], child[keep], near2[keep]
                 if q.size > _FRONTIER_CAP:
                     pieces = -(-q.size // _FRONTIER_CAP)

@@ -412,9 +412,9 @@ def test_the_pair_filters_never_exceed_the_exact_distance():
     S = index._ball[:, t]
     X = PT[:, q] - S[:3]
     dc2 = (X * X).sum(axis=0)
-    ok = d2 * (1 + spatial._SLACK)
+    ok = d2 * (1 + spatial.PRUNE_SLACK)
     sphere = np.maximum(np.sqrt(dc2) - S[3], 0.0) ** 2
-    assert (sphere <= ok * (1 + 4 * spatial._SLACK)).all()
+    assert (sphere <= ok * (1 + 4 * spatial.PRUNE_SLACK)).all()
     assert (index._disk_bound(X, t, dc2, S[3]) <= ok).all()
     assert (index._prism_bound(X, t, dc2) <= ok).all()
     # and the edge-line bound is tight where it matters: a point above the middle
