@@ -263,12 +263,12 @@ def _shape(V, F, box):
     m = F.shape[0]
     area, height = np.empty(m), np.empty(m)
     run_blocks(lambda a, b: _face_shape(cols, F[a:b], area[a:b], height[a:b]),
-               blocks(m, _SHAPE_BLOCK))
+               blocks(m, _FACE_BLOCK))
     return _Shape(cols.T, (hi - lo) / d, area, height)
 
 
-#: faces per block of :func:`_shape` (temporaries stay in cache)
-_SHAPE_BLOCK = 1 << 14
+#: faces per block of :func:`_shape` and the sheet candidates (temporaries stay in cache)
+_FACE_BLOCK = 1 << 14
 
 
 def _face_shape(cols, F, area, height):
@@ -361,7 +361,7 @@ def _unique_faces(F, twin, n):
     if F.shape[0] == 0:
         return keep, found
     cand = np.empty(F.shape[0], dtype=bool)
-    run_blocks(lambda a, b: _may_repeat(twin[3 * a:3 * b], cand[a:b]), blocks(F.shape[0], _SHAPE_BLOCK))
+    run_blocks(lambda a, b: _may_repeat(twin[3 * a:3 * b], cand[a:b]), blocks(F.shape[0], _FACE_BLOCK))
     ci = np.flatnonzero(cand)
     if ci.size < 2:
         return keep, found
