@@ -53,7 +53,7 @@ import numpy as np
 
 from ._clean import BOUNDARY, NON_MANIFOLD, edge_representatives, half_edge_ends, spatial_order
 from ._collapse import State, run
-from ._parallel import blocks, run_blocks
+from ._parallel import blocks, run_blocks, run_each
 from ._relax import close_smallest_hole, close_triangular_holes, drop_stuck_components
 from ._relocate import relocate, segment_triangles
 from .clean import MIN_COMPONENT_AREA, WELD_DISTANCE, CleanReport, clean_mesh
@@ -214,12 +214,24 @@ def check_arguments(n, target_faces, ratio, max_error, feature_angle_deg, vertex
 
 def _initial_quadrics(V, F, twin, preserve_boundary, feature_angle_deg, tun, scratch=None):
     """Vertex quadrics (n,11) with boundary and crease planes, the crease
-    flags per half-edge, and the unnormalised face normals (m,3) (as
-    ``face_normals(V, F, normalize=False)``). The quadrics are the transposed
-    view of an (11,n) C-contiguous array (``State`` keeps that layout).
-    ``scratch``: a (3m,) float64 buffer to work in, or None."""
+    flags per half-edge, and the summed face normals around each vertex
+    (:func:`_normal_sums` of ``face_normals(V, F, normalize=False)``). The
+    quadrics are the transposed view of an (11,n) C-contiguous array
+    (``State`` keeps that layout). ``scratch``: a (3m,) float64 buffer to
+    work in, or None."""
     n = V.shape[0]
     QT, Nf, Nraw = vertex_face_quadrics(V, F, n, tun.area_power, scratch=scratch)  # (11, n)
+    # the constraint planes and the normal sums are independent: side by side
+    feat, Nref = run_each(lambda job: job(), [
+        lambda: _constraint_planes(QT, V, F, twin, Nf, preserve_boundary, feature_angle_deg, tun),
+        lambda: _normal_sums(F, Nraw, n, scratch)])
+    return QT.T, feat, Nref  # (n,11) view of the coefficient-major array the engine uses
+
+
+def _constraint_planes(QT, V, F, twin, Nf, preserve_boundary, feature_angle_deg, tun):
+    """Add the boundary and crease constraint planes to the vertex quadrics
+    ``QT`` (11,n) in place (``Nf``: unit face normals); returns the crease
+    flags per half-edge."""
     feat = np.zeros(twin.size, dtype=bool)
     items, ends = [], []
     if preserve_boundary:
@@ -244,7 +256,7 @@ def _initial_quadrics(V, F, twin, preserve_boundary, feature_angle_deg, tun, scr
         # only the vertices on constraint edges change (adding 0.0 elsewhere is exact)
         vc, local = np.unique(Ec, return_inverse=True)
         QT[:, vc] += accumulate_coefficients(Qc, local.reshape(Ec.shape).T.ravel(), vc.size, 2)
-    return QT.T, feat, Nraw  # (n,11) view of the coefficient-major array the engine uses
+    return feat
 
 
 #: half-edges per block of :func:`_sharp_edges`
@@ -399,8 +411,9 @@ def _set_up(clean, opts):
     np.round(Vn, out=Vn)
     Vn /= grid
     scratch = np.empty(twin.size)  # one (3m,) buffer for the quadrics' and the normals' sums
-    Q, feat, Nf = _initial_quadrics(Vn, Fc, twin, opts["preserve_boundary"],
-                                    opts["feature_angle_deg"], tun, scratch)
+    Q, feat, Nref = _initial_quadrics(Vn, Fc, twin, opts["preserve_boundary"],
+                                      opts["feature_angle_deg"], tun, scratch)
+    del scratch
     # for the final relocation: the input's border edges and crease vertices, and its
     # faces when small enough for the backward pull (the engine rewrites Fc)
     Eb_in = np.stack(half_edge_ends(Fc, np.flatnonzero(twin == BOUNDARY)), axis=1)
@@ -408,8 +421,6 @@ def _set_up(clean, opts):
     Fin = Fc.copy() if m0 <= tun.relocate_back_max_faces else None
     if opts["weights"] is not None:
         Q *= opts["weights"][order][:, None]
-    Nref = _normal_sums(Fc, Nf, n, scratch)
-    del Nf, scratch
     mesh = State(Vn, Fc, twin, Q, lock, feat, Nref, forig=forder)  # Fc is spatial_order's own array
     return _SetUp(mesh, clean.V, Vn, order, centre, scale, creases, Eb_in, Fin, m0,
                   {"set-up": time.perf_counter() - t0})
