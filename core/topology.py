@@ -112,7 +112,7 @@ def connected_labels(n_nodes, pairs):
     dtype = np.int32 if n_nodes < 2 ** 31 else np.int64    # half the memory traffic
     parent = np.arange(n_nodes, dtype=dtype)
     ra, rb = pairs[:, 0].astype(dtype), pairs[:, 1].astype(dtype)
-    hooked = None
+    hooked, rounds = None, []    # the nodes each round hooked (pointing at its roots)
     while True:
         keep = ra != rb
         k = int(np.count_nonzero(keep))
@@ -125,14 +125,18 @@ def connected_labels(n_nodes, pairs):
         parent[hi] = lo                  # roots hooked below smaller roots
         if hooked is None:               # (the first round hooks most nodes)
             _jump_all(parent)
+            rounds.append(np.flatnonzero(parent != np.arange(n_nodes, dtype=dtype)))
             hooked = np.zeros(n_nodes, dtype=bool)
         else:                            # the hooked roots, once each, in order
             hooked[hi] = True
             nodes = np.flatnonzero(hooked)
             hooked[nodes] = False
             _jump(parent, nodes.astype(dtype))
+            rounds.append(nodes)
         ra, rb = parent[ra], parent[rb]  # roots again
-    _jump_all(parent)
+    # a round's nodes point at roots of that round, whose later rounds (done first) are final
+    for nodes in reversed(rounds):
+        parent[nodes] = parent[parent[nodes]]
     return parent.astype(np.int64)
 
 
