@@ -387,8 +387,24 @@ def _walk_fans(twin, Fr, v, e, corners):
         go = np.flatnonzero(~stop & (left > 0))
         v, t, jt, base0, left = v[go], t[go], jt[go], base0[go], left[go] - 1
         # leave the new face through its other edge at v (t's first end: U[t])
-        e = t + np.where(Fr[t + NEXT_OFFSET[jt]] == v, PREV_OFFSET[jt], NEXT_OFFSET[jt])
+        nxt = NEXT_OFFSET.take(jt)
+        e = t + np.where(Fr.take(t + nxt) == v, PREV_OFFSET.take(jt), nxt)
     return np.concatenate(found) if found else v[:0], v
+
+
+def _any_exit(F, walk):
+    """A half-edge leaving each vertex of the mask ``walk`` (n,) (-1 elsewhere,
+    int64): ``3 f + 2`` (it leaves ``F[f, 0]``) of a face with the vertex at
+    corner 0, else ``3 f`` (corner 1), else ``3 f + 1`` (corner 2)."""
+    start = np.full(walk.size, -1, dtype=np.int64)
+    start[F[:, 0]] = 3 * np.arange(F.shape[0], dtype=np.int64) + 2
+    for c, leaving in ((1, 0), (2, 1)):
+        missing = walk & (start < 0)
+        if not missing.any():
+            break
+        f = np.flatnonzero(missing.take(F[:, c]))
+        start[F[f, c]] = 3 * f + leaving
+    return start
 
 
 def non_manifold_vertices(F, n_vertices, twin, *, ends=None, corners=None):
@@ -421,11 +437,7 @@ def non_manifold_vertices(F, n_vertices, twin, *, ends=None, corners=None):
     walk = ~bad & (corners >= np.where(paths == 0, 6, 4))
     # start: the face after an open end, else any face (a walk around one fan
     # meets every face of it from any start), leaving through an edge at v
-    start = np.empty(n, dtype=np.int64)
-    f3 = 3 * np.arange(F.shape[0], dtype=np.int64)
-    for c, leaving in ((2, 1), (1, 0), (0, 2)):           # 3f+2 leaves F[f, 0], ...
-        start[F[:, c]] = f3 + leaving
-    del f3
+    start = _any_exit(F, walk)
     j = hopen % 3
     start[Uo] = hopen + PREV_OFFSET[j]                      # the other edge at U in that face
     start[Wo] = hopen + NEXT_OFFSET[j]                      # the other edge at W
