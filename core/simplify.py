@@ -286,14 +286,15 @@ def _sharp_edges(Nf, F, twin, cos_max):
 
 def _normal_sums(F, N, n, scratch=None):
     """Sum of the face normals ``N`` (m,3) around each vertex, (n,3) float64
-    (each bin adds its faces in face order); ``scratch``: a (3m,) float64
-    buffer to work in, or None."""
+    (each bin adds its faces in face order), the transposed view of a (3,n)
+    C-contiguous array (``State`` keeps that layout); ``scratch``: a (3m,)
+    float64 buffer to work in, or None."""
+    out = np.zeros((3, n))
     if F.shape[0] == 0:
-        return np.zeros((n, 3))
+        return out.T
     Fr = F.ravel()
     w = np.empty(Fr.size) if scratch is None else scratch
     w3 = w.reshape(-1, 3)
-    out = np.empty((n, 3))
     spans = blocks(F.shape[0], _SHARP_BLOCK)
     for k in range(3):
 
@@ -301,8 +302,8 @@ def _normal_sums(F, N, n, scratch=None):
             w3[a:b] = N[a:b, k, None]
 
         run_blocks(fill, spans)
-        out[:, k] = np.bincount(Fr, weights=w, minlength=n)
-    return out
+        out[k] = np.bincount(Fr, weights=w, minlength=n)
+    return out.T
 
 
 def _bend_cosines(mesh):
