@@ -343,17 +343,14 @@ def bind(V_dense, F_dense, V_cage, F_cage, *, levels=2, scheme="butterfly", crea
     Vf = op.apply(V_cage)
     VfT = np.ascontiguousarray(Vf.T)
     NfT = _vertex_normals_t(VfT, op.F_fine)
-    detail = None
-    if F_dense.shape[0]:
-        detail = "exact" if detail_search == "exact" or (
-            detail_search == "auto" and F_dense.shape[0] <= _EXACT_DETAIL_FACES) else "local"
+    detail = _detail_mode(detail_search, F_dense)
     if detail == "exact":
         # the fine surface's index and the dense one do not depend on each other:
         # built side by side on the worker threads
         query, dense_index = run_each(lambda build: build(), [
             lambda: NearQuery(Vf, op.F_fine), lambda: _exact_detail_index(V_dense, F_dense)])
     else:
-        query = NearQuery(Vf, op.F_fine)          # its two halves on the worker threads
+        query, dense_index = NearQuery(Vf, op.F_fine), None   # its halves on the threads
     d_face, d_bary = _vertex_corners(op.F_fine, op.n_fine)
     vfr = frames(Vf, NfT.T, op.F_fine[d_face], d_bary) if detail is not None else None
     near = _NearSearch(vfr.point, _used_vertices(F_dense, V_dense.shape[0])) \
@@ -367,14 +364,33 @@ def bind(V_dense, F_dense, V_cage, F_cage, *, levels=2, scheme="butterfly", crea
     elif detail == "local":
         q = _dense_points_near(V_dense, F_dense, dense.nearest, vfr.point)
         fine_detail = _to_frame(q - vfr.point, vfr)
-    cache = {"corners_t": dense.corners_t, "bary_t": dense.bary_t, "offset_t": dense.offset_t,
-             "detail_corners_t": np.ascontiguousarray(op.F_fine[d_face].T),
-             "detail_bary_t": np.ascontiguousarray(d_bary.T),
-             "detail_offset_t": np.ascontiguousarray(fine_detail.T)}
     return Binding(fine_face=dense.face, bary=dense.bary, offset=dense.offset,
                    fine_detail=fine_detail, F_cage=F_cage, n_cage=int(V_cage.shape[0]),
                    levels=int(levels), scheme=str(scheme), creases=creases,
-                   fingerprint=op.fingerprint, _operator=op, _cache=cache)
+                   fingerprint=op.fingerprint, _operator=op,
+                   _cache=_binding_cache(dense, op.F_fine, d_face, d_bary, fine_detail))
+
+
+def _detail_mode(detail_search, F_dense):
+    """How :func:`bind` finds the refine detail: ``"exact"`` (an index over
+    the dense mesh), ``"local"`` (:func:`_dense_points_near`), or None when
+    the dense mesh has no faces."""
+    if not F_dense.shape[0]:
+        return None
+    if detail_search == "exact" or (detail_search == "auto"
+                                    and F_dense.shape[0] <= _EXACT_DETAIL_FACES):
+        return "exact"
+    return "local"
+
+
+def _binding_cache(dense, F_fine, d_face, d_bary, fine_detail):
+    """The :class:`Binding` cache (the arrays deform and refine read,
+    transposed (3, q)) from the dense pass's :class:`_DenseBound` and the fine
+    vertices' corners: what ``Binding.__post_init__`` would build."""
+    return {"corners_t": dense.corners_t, "bary_t": dense.bary_t, "offset_t": dense.offset_t,
+            "detail_corners_t": np.ascontiguousarray(F_fine[d_face].T),
+            "detail_bary_t": np.ascontiguousarray(d_bary.T),
+            "detail_offset_t": np.ascontiguousarray(fine_detail.T)}
 
 
 def deform(binding, V_cage_edited, *, F_cage=None, moved=None, out=None):

@@ -551,3 +551,15 @@ def test_local_detail_search_on_a_coarse_dense_mesh_uses_the_two_ring(size, isol
     diag = bbox_diagonal(Vd)
     np.testing.assert_allclose(got, ref, rtol=0, atol=1e-12 * diag)
     assert closest_points(Vd, Fd, got).distance.max() <= 1e-9 * diag
+
+
+@pytest.mark.parametrize("name", ["sphere_binding", "torus_binding"])
+def test_bind_hands_over_the_cache_binding_would_build(name, request):
+    """bind passes the transposed arrays its dense pass wrote as the binding's
+    cache: the same as a Binding rebuilt from its arrays computes itself."""
+    *_, b = request.getfixturevalue(name)
+    rebuilt = Binding.from_arrays(b.to_arrays())
+    assert b._cache.keys() >= rebuilt._cache.keys()
+    for key, value in rebuilt._cache.items():
+        np.testing.assert_array_equal(b._cache[key], value)
+        assert b._cache[key].flags.c_contiguous and b._cache[key].dtype == value.dtype
