@@ -195,6 +195,8 @@ class NearQuery:
 
 
 def _check_points(P):
+    """``P`` as a (q,3) float64 array; raises :class:`~.errors.InvalidArgumentError`
+    naming the shape, or the first row that is not finite."""
     P = np.asarray(P, dtype=np.float64)
     if P.ndim != 2 or P.shape[1] != 3:
         raise InvalidArgumentError(
@@ -218,6 +220,7 @@ class _Best(NamedTuple):
 
     @classmethod
     def empty(cls, q):
+        """Room for ``q`` queries (filled block by block)."""
         return cls(np.zeros(q, dtype=np.int64), np.zeros(q), np.zeros(q), np.zeros(q))
 
 

@@ -501,6 +501,7 @@ class TriangleIndex:
         A, B, C, tlo, thi = A[order], B[order], C[order], tlo[order], thi[order]
 
         def rows_and_bounds():
+            """The kernel rows and the two lower-bound tables (_bounding_rows)."""
             D = triangle_rows(A, B, C)
             return (D,) + _bounding_rows(A, B, C, D[12:15].T)
         jobs = [rows_and_bounds,
