@@ -548,13 +548,10 @@ def _bold_rounds(st, pool, passes, haus, dihedral_cos, tun, target):
     from the stars (the checks read the current rows)."""
     n = st.V.shape[0]
     merged = np.zeros(n, dtype=bool)
-    active = np.arange(pool.key.size, dtype=np.int64)
-    faces, scratch, done = None, _scratch(n, pool.key.size), 0
-    for _ in range(tun.bold_rounds):
-        active = active[~merged[pool.A[active]] & ~merged[pool.B[active]]]
-        if active.size == 0 or (target is not None and st.m_live <= target):
-            break
-        sel, active, star, kf, faces = _pick_independent(st, pool, active, faces, tun, scratch)
+    scratch, done = _scratch(n, pool.key.size), 0
+    picked = _pick_independent(st, pool, np.arange(pool.key.size, dtype=np.int64), None, tun, scratch)
+    for rounds in range(1, tun.bold_rounds + 1):
+        sel, active, star, kf, faces = picked
         live = np.flatnonzero(_take(st.alive, star))   # (faces removed by earlier rounds)
         star, kf = _take(star, live), _take(kf, live)
         c = _check(st, pool.A[sel], pool.B[sel], pool.XT[:, sel], pool.interior[sel], star, kf, tun, haus,
@@ -562,15 +559,23 @@ def _bold_rounds(st, pool, passes, haus, dihedral_cos, tun, target):
         acc = _judge(st, pool, sel, c, passes, tun)
         if dihedral_cos is not None and acc.any():
             acc &= ~_next_to_another(st, pool.key[sel], c.rows, acc, np.zeros(st.F.shape[0], dtype=bool))
-        if not acc.any():
-            continue
-        a = _trim_to_target(pool, _Accepted(sel[acc], _keep_rows(c.rows, acc), c.wit[acc]), st.m_live,
-                            target)
-        st.vver[_take(st.F, a.rows[0], axis=0).ravel()] = passes
-        _apply_accepted(st, pool, a)
-        merged[pool.A[a.idx]] = True
-        merged[pool.B[a.idx]] = True
-        done += a.idx.size
+        jobs = []
+        if acc.any():
+            a = _trim_to_target(pool, _Accepted(sel[acc], _keep_rows(c.rows, acc), c.wit[acc]), st.m_live,
+                                target)
+            st.vver[_take(st.F, a.rows[0], axis=0).ravel()] = passes
+            merged[pool.A[a.idx]] = True
+            merged[pool.B[a.idx]] = True
+            done += a.idx.size
+            jobs.append(lambda a=a: _apply_accepted(st, pool, a))
+        active = active[~merged[pool.A[active]] & ~merged[pool.B[active]]]
+        more = rounds < tun.bold_rounds and active.size > 0
+        if more:    # the next pick reads no row the apply writes: both at once
+            jobs.append(lambda: _pick_independent(st, pool, active, faces, tun, scratch))
+        out = run_each(lambda job: job(), jobs)
+        if not more or (target is not None and st.m_live <= target):
+            break
+        picked = out[-1]
     return done
 
 
