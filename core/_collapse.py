@@ -44,6 +44,7 @@ import numpy as np
 
 from ._clean import BOUNDARY, NON_MANIFOLD, edge_representatives, half_edge_ends, renumber_twins
 from ._parallel import blocks, run_blocks, run_each
+from .mesh import cross_columns, dot_columns
 from .quadrics import place_columns, quadric_at, rms_distance
 from .spatial import closest_on_triangles, triangle_rows
 
@@ -188,11 +189,17 @@ def _corner(Fs, v):
     return c
 
 
+def _merged_area(st, a, b):
+    """The area of the merged quadrics of ``a[i]`` and ``b[i]`` (their
+    coefficient 10)."""
+    w = st.Q[:, 10]
+    return _take(w, a) + _take(w, b)
+
+
 def _distance(st, cost, a, b):
     """RMS distance ``sqrt(cost / w)`` of edge collapses (``w``: the merged
     quadric's area; 0 where it has none), in working units."""
-    w = st.Q[:, 10]
-    return rms_distance(cost, _take(w, a) + _take(w, b))
+    return rms_distance(cost, _merged_area(st, a, b))
 
 
 # ---------------------------------------------------------------- costs
@@ -429,7 +436,7 @@ def _pick_independent(st, pool, active, faces, tun, scratch, stars=True):
     disjoint). Returns ``(sel, active left, star, kf, faces)``: the chosen
     pool edges, the others, every face of the chosen edges' stars with the
     chosen edge it belongs to (None without ``stars``), and the faces still
-    in play. ``scratch``: :func:`_scratch` of the vertex count."""
+    in play. ``scratch``: :func:`_scratch` of the vertex count and the pool size."""
     F, P = st.F, pool.key.size
     ka, aa, ab = pool.key[active], pool.A[active], pool.B[active]
     vmin, vmin2, pos = scratch
@@ -854,25 +861,11 @@ class _Moved(NamedTuple):
     l1: np.ndarray       #: ... after
 
 
-def _cross_t(a, b):
-    """Cross products of the columns of two (3, r) arrays (as ``np.cross`` of rows)."""
-    out = np.empty(a.shape)
-    np.subtract(a[1] * b[2], a[2] * b[1], out=out[0])
-    np.subtract(a[2] * b[0], a[0] * b[2], out=out[1])
-    np.subtract(a[0] * b[1], a[1] * b[0], out=out[2])
-    return out
-
-
-def _dot_t(a, b):
-    """Dot products of the columns of two (3, r) arrays."""
-    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-
-
 def _squared_lengths(VT, a, b):
     """Squared lengths of the edges ``(a[i], b[i])`` from the (3, n) positions ``VT``."""
     D = _take(VT, b, axis=1)
     D -= _take(VT, a, axis=1)
-    return _dot_t(D, D)
+    return dot_columns(D, D)
 
 
 def _moved_faces(st, s, XT):
@@ -882,9 +875,9 @@ def _moved_faces(st, s, XT):
     P = _take(st.VT, FmT.ravel(), axis=1).reshape(3, 3, r).transpose(1, 0, 2)
     Xm = _take(XT, s.mk, axis=1)
     Q = tuple(np.where(s.cm == c, Xm, P[c]) for c in range(3))
-    N0 = _cross_t(P[1] - P[0], P[2] - P[0])
-    N1 = _cross_t(Q[1] - Q[0], Q[2] - Q[0])
-    return _Moved(FmT, P, Q, N0, N1, np.sqrt(_dot_t(N0, N0)), np.sqrt(_dot_t(N1, N1)))
+    N0 = cross_columns(P[1] - P[0], P[2] - P[0])
+    N1 = cross_columns(Q[1] - Q[0], Q[2] - Q[0])
+    return _Moved(FmT, P, Q, N0, N1, np.sqrt(dot_columns(N0, N0)), np.sqrt(dot_columns(N1, N1)))
 
 
 def _turned_faces(st, s, g, A, B, tun):
@@ -893,7 +886,7 @@ def _turned_faces(st, s, g, A, B, tun):
     (the summed normals of the input faces merged into its vertices: no
     slow drift)? A face already against its input (a fold of a noisy
     input) may move freely: holding it would freeze its neighbourhood."""
-    flip = (g.l0 > 0) & (_dot_t(g.N0, g.N1) <= tun.flip_cos * g.l0 * g.l1)
+    flip = (g.l0 > 0) & (dot_columns(g.N0, g.N1) <= tun.flip_cos * g.l0 * g.l1)
     if tun.ref_cos > -1.0:
         Nr = st.NrefT
         moved_v = _take(s.Fs.ravel(), 3 * s.mv + s.cm)
@@ -901,16 +894,16 @@ def _turned_faces(st, s, g, A, B, tun):
         ref0 = ref0[:, 0] + ref0[:, 1] + ref0[:, 2]
         AB = _take(Nr, A, axis=1) + _take(Nr, B, axis=1)
         ref = ref0 - _take(Nr, moved_v, axis=1) + _take(AB, s.mk, axis=1)
-        lr = np.sqrt(_dot_t(ref, ref))
-        flip |= _dot_t(ref, g.N1) < tun.ref_cos * lr * g.l1
-        flip &= _dot_t(ref0, g.N0) >= 0
+        lr = np.sqrt(dot_columns(ref, ref))
+        flip |= dot_columns(ref, g.N1) < tun.ref_cos * lr * g.l1
+        flip &= dot_columns(ref0, g.N0) >= 0
     return flip
 
 
 def _min_compactness(s, g):
     """Smallest compactness around each collapse, (before, after), (k,) each."""
     (P0, P1, P2), (Q0, Q1, Q2) = g.P, g.Q
-    sq = [_dot_t(D, D) for D in (P1 - P0, P2 - P1, P0 - P2, Q1 - Q0, Q2 - Q1, Q0 - Q2)]
+    sq = [dot_columns(D, D) for D in (P1 - P0, P2 - P1, P0 - P2, Q1 - Q0, Q2 - Q1, Q0 - Q2)]
     g_old = compactness(g.l0, sq[0] + sq[1] + sq[2])
     g_new = compactness(g.l1, sq[3] + sq[4] + sq[5])
     gmin_old = np.ones(s.k)
@@ -946,9 +939,8 @@ def _hausdorff_penalty(st, s, g, A, B, tun):
         return d
 
     dA, dB = nearest(wA), nearest(wB)
-    w = st.Q[:, 10]
-    Wq = _take(w, A) + _take(w, B)
-    return tun.haus_weight * Wq * np.maximum(dA, dB), np.where((dB > dA)[:, None], wB, wA)
+    penalty = tun.haus_weight * _merged_area(st, A, B) * np.maximum(dA, dB)
+    return penalty, np.where((dB > dA)[:, None], wB, wA)
 
 
 def _bends_too_far(st, s, g, dihedral_cos):
@@ -974,7 +966,7 @@ def _bends_too_far(st, s, g, dihedral_cos):
         b = b[pair]
         crease = (st.feat[3 * f[pair] + _take(_PREV, s.cm[pair])]
                   | st.feat[3 * f[b] + _take(_NEXT, s.cm[b])])
-        cos_ok = _dot_t(_take(N, pair, axis=1), _take(N, b, axis=1)) >= dihedral_cos * l[pair] * l[b]
+        cos_ok = dot_columns(_take(N, pair, axis=1), _take(N, b, axis=1)) >= dihedral_cos * l[pair] * l[b]
         bad[s.mk[pair[~cos_ok & ~crease]]] = True
     # the far edge of each moved face, against the (unchanged) face beyond it
     h = 3 * f + s.cm
@@ -983,9 +975,9 @@ def _bends_too_far(st, s, g, dihedral_cos):
     if out.size:
         Fo = _take(st.F, t[out] // 3, axis=0)
         Vo = [_take(st.VT, Fo[:, c], axis=1) for c in range(3)]
-        No = _cross_t(Vo[1] - Vo[0], Vo[2] - Vo[0])
-        lo = np.sqrt(_dot_t(No, No))
-        cos_ok = _dot_t(_take(N, out, axis=1), No) >= dihedral_cos * l[out] * lo
+        No = cross_columns(Vo[1] - Vo[0], Vo[2] - Vo[0])
+        lo = np.sqrt(dot_columns(No, No))
+        cos_ok = dot_columns(_take(N, out, axis=1), No) >= dihedral_cos * l[out] * lo
         bad[s.mk[out[~cos_ok]]] = True
     return bad
 

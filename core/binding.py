@@ -53,7 +53,7 @@ import numpy as np
 
 from .clean import clean_mesh
 from .errors import CancelledError, InvalidArgumentError, InvalidMeshError, TopologyMismatchError
-from .mesh import check_mesh
+from .mesh import check_mesh, cross_columns, dot_columns
 from .near_query import NearQuery
 from .spatial import TriangleIndex, point_triangle_closest
 from .subdivide import subdivision_operator
@@ -784,26 +784,26 @@ def _frames_finish(point, e1, e2, normal, tmp):
     (3, q) array; all are reused for the result."""
     bad = _normalise_t(normal, 1.0)
     if bad.any():
-        fn = _cross_t(e1[:, bad], e2[:, bad])
+        fn = cross_columns(e1[:, bad], e2[:, bad])
         fbad = _normalise_t(fn, _length_t(e1[:, bad]) * _length_t(e2[:, bad]))
         fn[:, fbad] = np.array([[0.0], [0.0], [1.0]])
         normal[:, bad] = fn
     e1_length = _length_t(e1)
-    np.multiply(_dot_t(e1, normal), normal, out=tmp)
+    np.multiply(dot_columns(e1, normal), normal, out=tmp)
     tangent = e1
     tangent -= tmp                                 # e1 - (e1.n) n
     bad = _normalise_t(tangent, e1_length)
     if bad.any():
         nb = normal[:, bad]
         t2 = e2[:, bad]
-        t2 -= _dot_t(t2, nb) * nb
+        t2 -= dot_columns(t2, nb) * nb
         bad2 = _normalise_t(t2, _length_t(e2[:, bad]))
         if bad2.any():
             # any unit vector perpendicular to the normal
             nn = nb[:, bad2]
             axis = np.zeros_like(nn)
             axis[np.argmin(np.abs(nn), axis=0), np.arange(nn.shape[1])] = 1.0
-            axis -= _dot_t(axis, nn) * nn
+            axis -= dot_columns(axis, nn) * nn
             _normalise_t(axis, 1.0)
             t2[:, bad2] = axis
         tangent[:, bad] = t2
@@ -1064,7 +1064,7 @@ def _bind_dense(query, V_dense, VfT, NfT, F_fine, report=None, near=None):
         d = np.ascontiguousarray(V_dense[start:stop].T)
         d -= p
         for k, axis in enumerate((t, bt, nrm)):
-            out.offset_t[k, start:stop] = _dot_t(d, axis)
+            out.offset_t[k, start:stop] = dot_columns(d, axis)
         out.offset[start:stop] = out.offset_t[:, start:stop].T
         if near is not None:
             return _nearest_parts(near, V_dense[start:stop], start, corners, hit.face, n)
@@ -1295,17 +1295,8 @@ def _dot(a, b):
     return a[:, 0] * b[:, 0] + a[:, 1] * b[:, 1] + a[:, 2] * b[:, 2]
 
 
-def _dot_t(a, b):
-    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-
-
 def _length_t(v):
-    return np.sqrt(_dot_t(v, v))
-
-
-def _cross_t(a, b):
-    return np.stack([a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2],
-                     a[0] * b[1] - a[1] * b[0]])
+    return np.sqrt(dot_columns(v, v))
 
 
 def _normalise_t(v, reference):

@@ -105,6 +105,22 @@ def diagonal_length(lo, hi):
     return s * float(np.sqrt(np.sum((d / s) ** 2)))
 
 
+def dot_columns(a, b):
+    """Dot products of the columns of two (3, k) arrays, (k,) (coordinates
+    first: each row a contiguous coordinate)."""
+    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+
+
+def cross_columns(a, b):
+    """Cross products of the columns of two (3, k) arrays, (3, k): the
+    products and differences of ``np.cross`` on rows, so the same bits."""
+    out = np.empty(np.broadcast_shapes(a.shape, b.shape), dtype=np.result_type(a, b))
+    np.subtract(a[1] * b[2], a[2] * b[1], out=out[0])
+    np.subtract(a[2] * b[0], a[0] * b[2], out=out[1])
+    np.subtract(a[0] * b[1], a[1] * b[0], out=out[2])
+    return out
+
+
 def face_normals(V, F, *, normalize=True):
     """Per-face normals, (m,3) float64; unnormalised normals have length
     twice the face area. Degenerate faces get a zero normal."""

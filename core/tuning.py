@@ -14,13 +14,6 @@ class Tuning:
     boundary_weight: float = 100.0   #: boundary plane weight, times the edge length squared
     feature_weight: float = 3.0      #: crease plane weight, times the edge length squared
     pool_share: float = 0.2          #: at most this share of the candidate edges per pass
-    #: a pass on a mesh of more than this many times the target faces is bold: each
-    #: selection round is applied before the next, and later rounds may take collapses
-    #: next to earlier ones (only the endpoints of applied collapses wait for the next
-    #: pass); closer to the target a pass is careful: every collapse's one-ring waits
-    bold_above: float = 4.0
-    bold_pool_share: float = 0.35    #: pool_share of a bold pass
-    bold_rounds: int = 16            #: selection rounds of a bold pass
     pool_goal_factor: float = 4.0    #: ... and at most this many times the collapses still needed
     #: a pass that removed less than this share of the faces still needed lets the next
     #: pass's goal bound grow by pool_growth (again after each such pass): near the
@@ -28,6 +21,13 @@ class Tuning:
     slow_pass_share: float = 0.25
     pool_growth: float = 4.0
     max_rounds: int = 16             #: selection rounds per pass
+    #: a pass on a mesh of more than this many times the target faces is bold: each
+    #: selection round is applied before the next, and later rounds may take collapses
+    #: next to earlier ones (only the endpoints of applied collapses wait for the next
+    #: pass); closer to the target a pass is careful: every collapse's one-ring waits
+    bold_above: float = 4.0
+    bold_pool_share: float = 0.35    #: pool_share of a bold pass
+    bold_rounds: int = 16            #: selection rounds of a bold pass
     #: once at most this many pool edges are left in a pass, check them all at once
     #: (the rounds then only pick: same results, far fewer small checks)
     check_ahead: int = 1024
