@@ -216,16 +216,16 @@ def _initial_quadrics(V, F, twin, preserve_boundary, feature_angle_deg, tun, scr
     """Vertex quadrics (n,11) with boundary and crease planes, the crease
     flags per half-edge, and the summed face normals around each vertex
     (:func:`_normal_sums` of ``face_normals(V, F, normalize=False)``). The
-    quadrics are the transposed view of an (11,n) C-contiguous array
-    (``State`` keeps that layout). ``scratch``: a (3m,) float64 buffer to
-    work in, or None."""
+    quadrics are the transposed view of the (11,n) C-contiguous array they
+    are summed in (``State`` makes its vertex-major copy). ``scratch``: a
+    (3m,) float64 buffer to work in, or None."""
     n = V.shape[0]
     QT, Nf, Nraw = vertex_face_quadrics(V, F, n, tun.area_power, scratch=scratch)  # (11, n)
     # the constraint planes and the normal sums are independent: side by side
     feat, Nref = run_each(lambda job: job(), [
         lambda: _constraint_planes(QT, V, F, twin, Nf, preserve_boundary, feature_angle_deg, tun),
         lambda: _normal_sums(F, Nraw, n, scratch)])
-    return QT.T, feat, Nref  # (n,11) view of the coefficient-major array the engine uses
+    return QT.T, feat, Nref  # (n,11) view of the coefficient-major sums
 
 
 def _constraint_planes(QT, V, F, twin, Nf, preserve_boundary, feature_angle_deg, tun):
@@ -259,8 +259,8 @@ def _constraint_planes(QT, V, F, twin, Nf, preserve_boundary, feature_angle_deg,
     return feat
 
 
-#: half-edges per block of :func:`_sharp_edges`
-_SHARP_BLOCK = 1 << 16
+#: half-edges (faces) per block of :func:`_sharp_edges` (:func:`_normal_sums`)
+_SET_UP_BLOCK = 1 << 16
 
 
 def _sharp_edges(Nf, F, twin, cos_max):
@@ -278,7 +278,7 @@ def _sharp_edges(Nf, F, twin, cos_max):
         sharp = np.flatnonzero(cosang < cos_max)
         return h[sharp], t[sharp]
 
-    found = run_blocks(block, blocks(twin.size, _SHARP_BLOCK))
+    found = run_blocks(block, blocks(twin.size, _SET_UP_BLOCK))
     empty = np.zeros(0, dtype=np.int64)
     return (np.concatenate([empty] + [h for h, _ in found]),
             np.concatenate([empty] + [t for _, t in found]))
@@ -295,7 +295,7 @@ def _normal_sums(F, N, n, scratch=None):
     Fr = F.ravel()
     w = np.empty(Fr.size) if scratch is None else scratch
     w3 = w.reshape(-1, 3)
-    spans = blocks(F.shape[0], _SHARP_BLOCK)
+    spans = blocks(F.shape[0], _SET_UP_BLOCK)
     for k in range(3):
 
         def fill(a, b):             # np.repeat(N[:, k], 3) without a new array, block by block
