@@ -127,20 +127,33 @@ def test_points_in_empty_cells_off_and_outside_the_grid():
     np.testing.assert_allclose(r.distance, np.sqrt(_brute(V, F, far)[3]), rtol=1e-12)
 
 
+def _degenerate_triangles(rng, k, slivers, segments, points):
+    """Corners ``A, B, C`` (k,3) of random triangles: the first ``slivers``
+    nearly flat (C close to the segment AB), up to ``segments`` zero-area
+    segments (C = B), up to ``points`` single points (B = C = A)."""
+    A = rng.normal(size=(k, 3))
+    B = A + rng.normal(size=(k, 3)) * 0.3
+    C = A + rng.normal(size=(k, 3)) * 0.3
+    s = slivers
+    C[:s] = A[:s] + (B[:s] - A[:s]) * rng.random((s, 1)) + 1e-8 * rng.normal(size=(s, 3))
+    C[s:segments] = B[s:segments]
+    B[segments:points] = C[segments:points] = A[segments:points]
+    return A, B, C
+
+
+def _soup(A, B, C, offset, scale):
+    """The triangles ``(A, B, C)`` as an unshared mesh, scaled and moved."""
+    k = A.shape[0]
+    return np.concatenate([A, B, C]) * scale + offset, np.arange(3 * k).reshape(3, k).T
+
+
 def test_degenerate_triangles_slivers_far_from_the_origin():
     """Slivers, segments and points; small triangles a long way from the
     origin (the float32 filters are relative to the grid and loosened)."""
     rng = np.random.default_rng(7)
-    k = 120
-    A = rng.normal(size=(k, 3))
-    B = A + rng.normal(size=(k, 3)) * 0.3
-    C = A + rng.normal(size=(k, 3)) * 0.3
-    C[:30] = A[:30] + (B[:30] - A[:30]) * rng.random((30, 1)) + 1e-8 * rng.normal(size=(30, 3))
-    C[30:45] = B[30:45]
-    B[45:55] = C[45:55] = A[45:55]
+    A, B, C = _degenerate_triangles(rng, 120, 30, 45, 55)
     for offset, scale in ((0.0, 1.0), (1e4, 1e-3)):
-        V = np.concatenate([A, B, C]) * scale + offset
-        F = np.arange(3 * k).reshape(3, k).T
+        V, F = _soup(A, B, C, offset, scale)
         P = V[rng.integers(0, V.shape[0], 500)] + rng.normal(size=(500, 3)) * 0.05 * scale
         query = NearQuery(V, F)
         _assert_exact(V, F, P, query.closest(P), faces=query.index.tables.face)
@@ -205,16 +218,9 @@ def test_the_float32_bound_never_exceeds_the_kernels_distance():
     points included, near and off the origin, is at most the kernel's squared
     distance of that pair (what it is compared with)."""
     rng = np.random.default_rng(9)
-    k = 80
-    A = rng.normal(size=(k, 3))
-    B = A + rng.normal(size=(k, 3)) * 0.3
-    C = A + rng.normal(size=(k, 3)) * 0.3
-    C[:20] = A[:20] + (B[:20] - A[:20]) * rng.random((20, 1)) + 1e-8 * rng.normal(size=(20, 3))
-    C[20:30] = B[20:30]
-    B[30:36] = C[30:36] = A[30:36]
+    A, B, C = _degenerate_triangles(rng, 80, 20, 30, 36)
     for offset, scale in ((0.0, 1.0), (-3e3, 1e-2)):
-        V = np.concatenate([A, B, C]) * scale + offset
-        F = np.arange(3 * k).reshape(3, k).T
+        V, F = _soup(A, B, C, offset, scale)
         query = NearQuery(V, F)
         T = query._t
         P = np.concatenate([V + rng.normal(size=V.shape) * 0.05 * scale, V])
