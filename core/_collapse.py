@@ -16,7 +16,8 @@ One pass, as stages (each a function below)::
     _choose_pool          the cheapest candidates (bounded share; bounded by the
                           collapses needed, a bound that grows after a pass that
                           fell short), ranked by _priority
-    far from the target (more than Tuning.bold_above times its faces), a bold
+    far from the target (more than Tuning.bold_above times its faces, and
+    times bold_min_target at least), a bold
     pass (_bold_rounds): each round picks, checks and applies at once, and
     later rounds may take collapses next to earlier ones (only merged ends
     wait): about 30% of the faces go per pass instead of about 12%;
@@ -1058,7 +1059,7 @@ def _run(st, target, max_err_n, preserve_boundary, progress, m0, tun, dihedral_c
         clock.lap("candidates")
         if ne == 0:
             return "no_valid_collapse", passes
-        bold = target is not None and m > tun.bold_above * target
+        bold = target is not None and m > tun.bold_above * max(target, tun.bold_min_target)
         P = _pool_size(ne, m, target, tun, bold, grow)
         _recost_cheapest(st, e, P, max_err_n, preserve_boundary, tun)
         clock.lap("recost")

@@ -29,7 +29,8 @@ of independent edges, each batch checked on the mesh as it is::
             lock their stars
         apply every accepted collapse with one remap (b -> a, V[a] = x,
         Q[a] += Q[b]); glue the half-edge twins of the removed faces
-        (a bold pass, while the mesh has over 4x the target faces, applies
+        (a bold pass, while the mesh has over 4x the target faces and over
+        256 faces, applies
         each round before the next and locks only the merged ends, so
         neighbouring collapses go in the same pass: about a third of the
         faces per pass instead of about an eighth)

@@ -26,6 +26,10 @@ class Tuning:
     #: next to earlier ones (only the endpoints of applied collapses wait for the next
     #: pass); closer to the target a pass is careful: every collapse's one-ring waits
     bold_above: float = 4.0
+    #: ... times at least this many faces: the last few hundred faces of any run go in
+    #: careful passes (bold ones there save a few ms, and a less even mesh near a small
+    #: target more often leaves only collapses that would fold a face)
+    bold_min_target: int = 64
     bold_pool_share: float = 0.35    #: pool_share of a bold pass
     bold_rounds: int = 16            #: selection rounds of a bold pass
     #: once at most this many pool edges are left in a pass, check them all at once
