@@ -580,7 +580,7 @@ def _bold_rounds(st, pool, passes, haus, dihedral_cos, tun, target):
         more = rounds < tun.bold_rounds and active.size > 0
         if more:    # the next pick reads no row the apply writes: both at once
             jobs.append(lambda: _pick_independent(st, pool, active, faces, tun, scratch))
-        out = run_each(lambda job: job(), jobs)
+        out = run_each(lambda job: job(), jobs, threads=active.size >= tun.threads_min_edges)
         if not more or (target is not None and st.m_live <= target):
             break
         picked = out[-1]

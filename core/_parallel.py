@@ -39,11 +39,13 @@ def blocks(n, size):
     return list(zip(edges[:-1], edges[1:]))
 
 
-def run_each(fn, items):
+def run_each(fn, items, threads=True):
     """``[fn(item) for item in items]``, on the worker threads when there are
-    several items (and this is not already a worker); results in item order."""
+    several items (and this is not already a worker, and ``threads``: False
+    for work too small to repay the hand-offs); results in item order."""
     items = list(items)
-    if len(items) <= 1 or WORKERS == 1 or threading.current_thread().name.startswith("meshadjust"):
+    if (not threads or len(items) <= 1 or WORKERS == 1
+            or threading.current_thread().name.startswith("meshadjust")):
         return [fn(item) for item in items]
     return list(_executor().map(fn, items))
 

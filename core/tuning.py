@@ -32,6 +32,9 @@ class Tuning:
     bold_min_target: int = 64
     bold_pool_share: float = 0.35    #: pool_share of a bold pass
     bold_rounds: int = 16            #: selection rounds of a bold pass
+    #: a bold round applies its collapses beside the next round's pick (on two threads)
+    #: only with at least this many pool edges left; below, the hand-offs cost more
+    threads_min_edges: int = 20000
     #: once at most this many pool edges are left in a pass, check them all at once
     #: (the rounds then only pick: same results, far fewer small checks)
     check_ahead: int = 1024

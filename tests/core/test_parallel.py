@@ -29,6 +29,17 @@ def test_each_in_order_runs_inline_on_a_worker_thread():
         assert all(n.startswith("meshadjust") for n in names)
 
 
+def test_run_each_keeps_item_order_and_runs_inline_when_told():
+    def name(i):
+        return i, threading.current_thread().name
+    threaded = parallel.run_each(name, range(5))
+    inline = parallel.run_each(name, range(5), threads=False)
+    assert [i for i, _ in threaded] == [i for i, _ in inline] == list(range(5))
+    assert all(n == threading.current_thread().name for _, n in inline)
+    if parallel.WORKERS > 1:
+        assert all(n.startswith("meshadjust") for _, n in threaded)
+
+
 @pytest.mark.skipif(parallel.WORKERS < 2, reason="needs worker threads")
 def test_leaving_early_cancels_the_items_not_started():
     started = []

@@ -390,9 +390,12 @@ def test_output_does_not_depend_on_threads_or_block_size(monkeypatch):
     parallel = importlib.import_module("core._parallel")
     V, F = torus(40, 20, bump=0.2)
     runs = []
-    for workers, block in ((1, 640), (2, 640), (2, 64), (2, TUNING.block)):   # 640: many blocks
+    # 640: many blocks; threads_min_edges 0: bold rounds apply beside the next pick
+    # even on this small mesh
+    for workers, block, fork in ((1, 640, 0), (2, 640, 0), (2, 64, 0), (2, TUNING.block, 0),
+                                 (2, TUNING.block, TUNING.threads_min_edges)):
         monkeypatch.setattr(parallel, "WORKERS", workers)
-        runs.append(simplify(V, F, target_faces=300, tuning=Tuning(block=block)))
+        runs.append(simplify(V, F, target_faces=300, tuning=Tuning(block=block, threads_min_edges=tmin)))
     a = runs[0]
     for b in runs[1:]:
         assert np.array_equal(a.F, b.F) and np.array_equal(a.V, b.V)
