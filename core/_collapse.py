@@ -499,6 +499,9 @@ def _check_rounds(st, pool, passes, haus, dihedral_cos, tun):
             break
         if ahead is None and active.size <= tun.check_ahead:
             ahead = _CheckedAhead.of(st, pool, active, faces, tun, haus, dihedral_cos)
+            active = _drop_invalid(st, pool, ahead, active, passes)
+            if active.size == 0:
+                break
         sel, active, star, kf, faces = _pick_independent(st, pool, active, faces, tun, scratch,
                                                          stars=ahead is None)
         if ahead is None:
@@ -623,6 +626,23 @@ class _CheckedAhead(NamedTuple):
         keep = np.zeros(self.found.ok.size, dtype=bool)
         keep[i] = True
         return self.found.subset(i, keep)
+
+
+def _drop_invalid(st, pool, ahead, active, passes):
+    """The ``active`` pool edges that their checked-ahead results
+    (:class:`_CheckedAhead`) find valid. The others are rejected at once, and
+    remembered as :func:`_judge` remembers them, instead of each taking a
+    round of the pass: picked alone (its key the smallest around), refused,
+    and meanwhile keeping every valid collapse near it waiting (the tail of
+    a flat mesh took 16 rounds a pass that way, one refusal per round)."""
+    i = _take(ahead.at, active)
+    ok = _take(ahead.found.ok, i)
+    bad = np.flatnonzero(~ok)
+    hr = pool.h[_take(active, bad)]
+    st.bent[hr] = _take(ahead.found.bent, _take(i, bad))
+    st.c_blk[hr] = np.inf
+    st.blk_pass[hr] = passes
+    return active[ok]
 
 
 def _whole_stars(F, fidx, A, B):

@@ -524,7 +524,6 @@ def _deform_rows(binding, P, N, hit, out):
     whole faces, about ``_ROW_BLOCK`` rows each. Each row goes through the
     operations of :func:`_frames_t` in the same order, so it is bit for bit
     what a full deform gives on the same fine positions and normals."""
-    op = binding._operator
     idx = binding._cache["incremental"]
     # per face: its first corner, edges and corner normals, as _frames_t takes them
     Fh = np.take(idx["corners_t"], hit.faces, axis=1)
@@ -581,7 +580,6 @@ def _influenced_dense(binding, ids):
     :meth:`Binding.influenced` followed by the deform of the same ids
     searches once).
     """
-    op = binding._operator
     idx = _incremental_index(binding)
     key = ids.tobytes()
     last = idx.get("last")

@@ -325,7 +325,6 @@ def collapsible_edges(F, n_vertices, em=None):
     e = E.shape[0]
     if e == 0:
         return em, np.zeros(0, dtype=bool)
-    n = np.int64(max(n_vertices, 1))
     key = edge_keys(E[:, 0], E[:, 1], n_vertices)     # sorted (edge_map's order)
     # adjacency lists: both directions of every edge, grouped by vertex
     src = np.concatenate([E[:, 0], E[:, 1]])

@@ -1,7 +1,6 @@
 """Every operator on real objects, headless: counts, links, in-place
 updates, errors reported, the source never touched."""
 
-import os
 import sys
 
 import bmesh
@@ -10,7 +9,7 @@ import numpy as np
 import pytest
 
 from tests.addon.conftest import MODULE, make_object
-from tests.mesh_factory import icosphere, load_shared, regular_grid, torus
+from tests.mesh_factory import icosphere, load_shared, regular_grid
 
 
 def mio():

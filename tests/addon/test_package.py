@@ -10,7 +10,6 @@ import tomllib
 import zipfile
 
 import bpy
-import pytest
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 

@@ -5,7 +5,6 @@ import subprocess
 import sys
 
 import numpy as np
-import pytest
 
 from tests.mesh_factory import icosphere, shared_mesh_path
 

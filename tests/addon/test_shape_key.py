@@ -2,13 +2,11 @@
 the cage (value 1.0) equal to the edited original, updated in place by
 Refine and by Live, never bound as if it were the artist's mesh."""
 
-import sys
-
 import bpy
 import numpy as np
 import pytest
 
-from tests.addon.conftest import MODULE, make_object
+from tests.addon.conftest import make_object
 from tests.addon.test_nothing_lost import lift_top, mod, orphans, pos
 from tests.addon.test_operators import bumpy_sphere, simplify
 

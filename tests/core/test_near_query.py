@@ -11,7 +11,7 @@ from hypothesis import HealthCheck, given, settings, strategies as st
 import core.near_query as near_query
 from core.errors import InvalidArgumentError, InvalidMeshError
 from core.near_query import NearQuery
-from core.spatial import TriangleIndex, closest_on_triangles, triangle_rows
+from core.spatial import closest_on_triangles, triangle_rows
 from core.subdivide import subdivision_operator
 from tests.mesh_factory import cube, icosphere, regular_grid, torus
 

@@ -392,7 +392,7 @@ def test_output_does_not_depend_on_threads_or_block_size(monkeypatch):
     runs = []
     # 640: many blocks; threads_min_edges 0: bold rounds apply beside the next pick
     # even on this small mesh
-    for workers, block, fork in ((1, 640, 0), (2, 640, 0), (2, 64, 0), (2, TUNING.block, 0),
+    for workers, block, tmin in ((1, 640, 0), (2, 640, 0), (2, 64, 0), (2, TUNING.block, 0),
                                  (2, TUNING.block, TUNING.threads_min_edges)):
         monkeypatch.setattr(parallel, "WORKERS", workers)
         runs.append(simplify(V, F, target_faces=300, tuning=Tuning(block=block, threads_min_edges=tmin)))
