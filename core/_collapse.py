@@ -537,10 +537,16 @@ def _judge(st, pool, sel, c, passes, tun):
     total = pool.raw[sel] + c.pen
     acc = c.ok & (total <= _acceptance_bound(pool.limit, total[c.ok], tun))
     rej = ~acc
-    hr = pool.h[sel[rej]]
-    st.c_blk[hr] = np.where(c.ok[rej], total[rej], np.inf)
-    st.blk_pass[hr] = passes
+    _remember_refused(st, pool.h[sel[rej]], np.where(c.ok[rej], total[rej], np.inf), passes)
     return acc
+
+
+def _remember_refused(st, h, total, passes):
+    """Remember the refused collapses of the representative half-edges ``h``
+    with their ``total`` (cost + penalties; inf when invalid) until their
+    neighbourhood changes."""
+    st.c_blk[h] = total
+    st.blk_pass[h] = passes
 
 
 def _bold_rounds(st, pool, passes, haus, dihedral_cos, tun, target):
@@ -631,7 +637,7 @@ class _CheckedAhead(NamedTuple):
 def _drop_invalid(st, pool, ahead, active, passes):
     """The ``active`` pool edges that their checked-ahead results
     (:class:`_CheckedAhead`) find valid. The others are rejected at once, and
-    remembered as :func:`_judge` remembers them, instead of each taking a
+    remembered as :func:`_judge` remembers them (:func:`_remember_refused`), instead of each taking a
     round of the pass: picked alone (its key the smallest around), refused,
     and meanwhile keeping every valid collapse near it waiting (the tail of
     a flat mesh took 16 rounds a pass that way, one refusal per round)."""
@@ -640,8 +646,7 @@ def _drop_invalid(st, pool, ahead, active, passes):
     bad = np.flatnonzero(~ok)
     hr = pool.h[_take(active, bad)]
     st.bent[hr] = _take(ahead.found.bent, _take(i, bad))
-    st.c_blk[hr] = np.inf
-    st.blk_pass[hr] = passes
+    _remember_refused(st, hr, np.inf, passes)
     return active[ok]
 
 

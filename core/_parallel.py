@@ -39,13 +39,19 @@ def blocks(n, size):
     return list(zip(edges[:-1], edges[1:]))
 
 
+def _inline(items, threads=True):
+    """Whether ``items`` run inline: fewer than two, one worker, already on
+    a worker, or ``threads`` False."""
+    return (not threads or len(items) <= 1 or WORKERS == 1
+            or threading.current_thread().name.startswith("meshadjust"))
+
+
 def run_each(fn, items, threads=True):
     """``[fn(item) for item in items]``, on the worker threads when there are
     several items (and this is not already a worker, and ``threads``: False
     for work too small to repay the hand-offs); results in item order."""
     items = list(items)
-    if (not threads or len(items) <= 1 or WORKERS == 1
-            or threading.current_thread().name.startswith("meshadjust")):
+    if _inline(items, threads):
         return [fn(item) for item in items]
     return list(_executor().map(fn, items))
 
@@ -61,7 +67,7 @@ def each_in_order(fn, items):
     :func:`run_each` would run them inline). Leaving the loop early (an
     exception, ``break``) cancels the items not yet started."""
     items = list(items)
-    if len(items) <= 1 or WORKERS == 1 or threading.current_thread().name.startswith("meshadjust"):
+    if _inline(items):
         for item in items:
             yield fn(item)
         return
