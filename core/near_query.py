@@ -182,7 +182,8 @@ class NearQuery:
         T = self._t
         q = P.shape[0]
         cell3 = np.clip(np.floor((P - T.lo) / T.h), 0, T.dims - 1).astype(np.int64)
-        order = np.argsort(cell3[:, 0] + T.dims[0] * (cell3[:, 1] + T.dims[1] * cell3[:, 2]))
+        key = cell3[:, 0] + T.dims[0] * (cell3[:, 1] + T.dims[1] * cell3[:, 2])
+        order = np.argsort(key, kind="stable")            # mesh order is coherent: stable is fast
         best = _Best.empty(q)
         far = [_block(T, P, order[s:s + _BLOCK], cell3, best) for s in range(0, q, _BLOCK)]
         far = np.concatenate(far) if far else np.zeros(0, dtype=np.int64)
@@ -402,21 +403,32 @@ def _wall_distances(T, wall):
 # --- tiles ---------------------------------------------------------------------------------------
 
 class _Tile(NamedTuple):
-    """Tiles of one window width: up to ``_TILE`` rows that share a cell, the
-    cell's window of triangles, and the bound of every (row, window entry)."""
+    """One set of tiles of one window width: tiles ``first .. first + t`` of
+    their :class:`_Tiles`, the cells' windows of triangles, and the bound of
+    every (row, window entry)."""
 
-    rows: np.ndarray    #: (t, _TILE) rows of the tiled set (a short tile repeats its last row)
-    valid: np.ndarray   #: (t, _TILE) bool, False for the repeats
-    tri: np.ndarray     #: (t, W) internal triangles of the cell's window
+    first: int          #: the set's first tile
+    tri: np.ndarray     #: (t, W) internal triangles of the cells' windows
     lb: np.ndarray      #: (t, _TILE, W) float32 squared edge-line bound (less eps)
 
 
+class _Tiles(NamedTuple):
+    """Rows grouped in tiles of up to ``_TILE`` rows that share a cell, the
+    tiles ordered by window width and cut into :class:`_Tile` sets."""
+
+    rows: np.ndarray    #: (tiles, _TILE) rows of the tiled set (a short tile repeats its last row)
+    valid: np.ndarray   #: (tiles, _TILE) bool, False for the repeats
+    sets: list          #: the :class:`_Tile` sets, in tile order
+
+
 def _tiles(T, A, point, cell):
-    """The rows ``(point[i], cell[i])`` grouped by cell into :class:`_Tile`
-    sets, one per window width class; ``A`` (k, 4) the points' [x, y, z, 1]."""
+    """The rows ``(point[i], cell[i])`` grouped by cell into :class:`_Tiles`,
+    the tiles cut into sets of one window width class; ``A`` (k, 4) the
+    points' [x, y, z, 1]. The index work is done once for all tiles (a set
+    only slices it): fewer, larger NumPy calls."""
     if point.size == 0:
-        return []
-    order = np.argsort(cell)
+        return _Tiles(np.zeros((0, _TILE), dtype=np.int64), np.zeros((0, _TILE), dtype=bool), [])
+    order = np.argsort(cell, kind="stable")          # cells come in sorted runs: stable is fast
     cs = cell[order]
     first = np.flatnonzero(np.concatenate([[True], cs[1:] != cs[:-1]]))
     size = np.diff(np.concatenate([first, [cs.shape[0]]]))
@@ -425,23 +437,22 @@ def _tiles(T, A, point, cell):
     k = np.arange(group.shape[0]) - np.repeat(np.cumsum(per) - per, per)
     begin = first[group] + _TILE * k
     length = np.minimum(_TILE, size[group] - _TILE * k)
-    tcell = cs[begin]
-    cls = np.searchsorted(T.widths, T.count[tcell]).astype(np.int16)
+    cls = np.searchsorted(T.widths, T.count[cs[begin]]).astype(np.int16)
     by_class = np.argsort(cls, kind="stable")
-    cuts = np.flatnonzero(np.concatenate([[True], np.diff(cls[by_class]) != 0, [True]]))
+    begin, length, cls = begin[by_class], length[by_class], cls[by_class]
+    lane = np.arange(_TILE)
+    rows = order[begin[:, None] + np.minimum(lane, length[:, None] - 1)]
+    start = T.start[cs[begin]]
+    Arows = A[point[rows]]
+    cuts = np.flatnonzero(np.concatenate([[True], np.diff(cls) != 0, [True]]))
     # at most _TILE_SLOTS (row, reference) pairs per set: its arrays stay in cache
     cuts = np.unique(np.concatenate([cuts] + [np.arange(a, b, max(1, _TILE_SLOTS // (
-        _TILE * int(T.widths[cls[by_class[a]]])))) for a, b in zip(cuts[:-1], cuts[1:])]))
-    lane = np.arange(_TILE)
-    out = []
-    for a, b in zip(cuts[:-1], cuts[1:]):
-        sel = by_class[a:b]
-        c = int(cls[sel[0]])
-        rows = order[begin[sel, None] + np.minimum(lane, length[sel, None] - 1)]
-        s = T.start[tcell[sel]]
-        out.append(_Tile(rows, lane < length[sel, None], T.tri[c][s],
-                         _edge_line_bound(T, A[point[rows]], s, c)))
-    return out
+        _TILE * int(T.widths[cls[a]])))) for a, b in zip(cuts[:-1], cuts[1:])]))
+    sets = []
+    for a, b in zip(cuts[:-1].tolist(), cuts[1:].tolist()):
+        c, s = int(cls[a]), start[a:b]
+        sets.append(_Tile(a, T.tri[c][s], _edge_line_bound(T, Arows[a:b], s, c)))
+    return _Tiles(rows, lane < length[:, None], sets)
 
 
 def _edge_line_bound(T, A, s, c):
@@ -471,31 +482,33 @@ def _probe(T, B):
     not matter, any probe gives the same answer)."""
     n = B.q.shape[0]
     tiles = _tiles(T, B.A, np.arange(n), B.probe)
-    t0 = np.empty(n, dtype=np.int64)
-    for tile in tiles:
+    best = [np.zeros((0, _TILE), dtype=np.int64)]
+    for tile in tiles.sets:
         W = tile.lb.shape[2]
         low = (1 << max(1, (W - 1).bit_length())) - 1
         key = tile.lb.view(np.int32) & np.int32(~low)         # bounds are >= 0: bits sort as values
         key |= np.arange(W, dtype=np.int32)
         col = np.minimum.reduce(key, axis=2) & low
-        t0[tile.rows[tile.valid]] = np.take_along_axis(tile.tri, col, axis=1)[tile.valid]
+        best.append(np.take_along_axis(tile.tri, col, axis=1))
+    t0 = np.empty(n, dtype=np.int64)
+    t0[tiles.rows[tiles.valid]] = np.concatenate(best)[tiles.valid]
     return tiles, t0
 
 
 def _within(tiles, who, u2):
     """(owner, triangle, bound) of the tile pairs whose bound is within the
     rows' ``u2``; ``who`` maps tile rows to points."""
+    pts = who[tiles.rows]
+    bound = np.where(tiles.valid, u2[pts], np.float32(-1.0))[:, :, None]   # repeats: none pass
     owners = [np.zeros(0, dtype=np.int64)]
     tris = [np.zeros(0, dtype=np.int64)]
     lbs = [np.zeros(0, dtype=np.float32)]
-    for tile in tiles:
-        pts = who[tile.rows]
-        bound = np.where(tile.valid, u2[pts], np.float32(-1.0))   # repeats: nothing passes
-        flat = np.flatnonzero(tile.lb <= bound[:, :, None])
-        W = tile.lb.shape[2]
+    for tile in tiles.sets:
+        t, _, W = tile.lb.shape
+        flat = np.flatnonzero(tile.lb <= bound[tile.first:tile.first + t])
         i, rest = np.divmod(flat, _TILE * W)
         j, col = np.divmod(rest, W)
-        owners.append(pts[i, j])
+        owners.append(pts[i + tile.first, j])
         tris.append(tile.tri[i, col])
         lbs.append(tile.lb.reshape(-1)[flat])
     return np.concatenate(owners), np.concatenate(tris), np.concatenate(lbs)

@@ -231,10 +231,13 @@ def test_the_float32_bound_never_exceeds_the_kernels_distance():
         point = np.repeat(np.arange(block.q.shape[0]), cells.shape[0])
         cell = np.tile(cells, block.q.shape[0])
         checked = 0
-        for tile in near_query._tiles(T, block.A, point, cell):
-            rows = point[tile.rows][tile.valid]
-            lb = tile.lb[tile.valid]                          # (r, W)
-            tri = np.repeat(tile.tri, tile.valid.sum(axis=1), axis=0)
+        tiles = near_query._tiles(T, block.A, point, cell)
+        for tile in tiles.sets:
+            span = slice(tile.first, tile.first + tile.lb.shape[0])
+            valid = tiles.valid[span]
+            rows = point[tiles.rows[span]][valid]
+            lb = tile.lb[valid]                               # (r, W)
+            tri = np.repeat(tile.tri, valid.sum(axis=1), axis=0)
             owner = np.repeat(rows, tri.shape[1])
             _, _, d2 = near_query._kernel(T, block.X, owner, tri.ravel())
             real = np.isfinite(lb.ravel())               # the table's padding is infinite
