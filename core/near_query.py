@@ -62,15 +62,18 @@ from .spatial import PRUNE_SLACK, TriangleIndex, closest_on_triangles, closest_r
 __all__ = ["NearQuery"]
 
 #: points per block (float32 temporaries of a few MiB; large blocks mean fewer NumPy
-#: calls, each a GIL hand-over when two threads query at once)
-_BLOCK = 32768
+#: calls, each a GIL hand-over when two threads query at once: the bind's 1M-point
+#: query was about 5% faster with 65,536 than with 32,768)
+_BLOCK = 65536
 
 #: rows (points, or (point, cell) pairs) per tile of one cell
 _TILE = 8
 
 #: (row, reference) pairs per set of tiles handled at once (float32 arrays of
-#: 256 KiB: they stay in cache)
-_TILE_SLOTS = 1 << 16
+#: 1 MiB). Smaller sets stay in cache and win on one thread; on two, each set's
+#: NumPy calls hold the GIL, and 4x fewer of them made the bind of a 1M-vertex
+#: scan about 10% faster (median of 12 alternating runs, 2026-12-02)
+_TILE_SLOTS = 1 << 18
 
 #: the float32 bound is loosened by this fraction of the grid's extent
 _F32_EPS = 2.0 ** -16
