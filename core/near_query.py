@@ -82,6 +82,12 @@ _F32_EPS = 2.0 ** -16
 #: default: the batched bound makes a reference cheap, a neighbour cell less so)
 _CELL_FACTOR = 2.5
 
+#: with ``reach`` (the queries' typical distance), cells are at least reach / this wide:
+#: a 1M-point query of a 2M-face fine mesh (five levels) took 4.9 s with cells of 2.5
+#: triangles (median distance 0.36 of a cell: many balls left the cells around their
+#: own) and 2.0-2.6 s with the median at 0.11-0.22 of a cell
+_REACH_SHARE = 0.15
+
 #: smallest window widths; beyond the last, each class is twice the previous
 _WIDTHS = (4, 8, 12, 16, 24, 32, 48, 64)
 
@@ -138,6 +144,11 @@ class NearQuery:
     ----------
     V : (n, 3) array_like of float
     F : (m, 3) array_like of int, m >= 1
+    reach : float or None, keyword-only
+        The typical (median) distance of the queries to come, if known:
+        the cells are then at least ``reach / _REACH_SHARE`` wide, so that most
+        balls stay in the cells around the point's own (the answers are
+        the same; only the time changes).
 
     Attributes
     ----------
@@ -157,8 +168,12 @@ class NearQuery:
     ([0], [[0.6, 0.2, 0.2]])
     """
 
-    def __init__(self, V, F):
-        self.index = TriangleIndex(V, F, cell_factor=_CELL_FACTOR)
+    def __init__(self, V, F, *, reach=None):
+        if reach is not None and not (isinstance(reach, (int, float)) and 0 <= reach < np.inf):
+            raise InvalidArgumentError(
+                f"NearQuery: reach must be a finite number >= 0 or None, got {reach!r}")
+        min_cell = reach / _REACH_SHARE if reach else None
+        self.index = TriangleIndex(V, F, cell_factor=_CELL_FACTOR, min_cell=min_cell)
         self._t = _build_tables(self.index.tables)
 
     def closest(self, P):

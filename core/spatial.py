@@ -456,6 +456,10 @@ class TriangleIndex:
         Grid cell size in mean triangle bounding-box extents (default 1.5;
         the answers are exact for any, ties among exactly equidistant
         triangles aside).
+    min_cell : float or None, keyword-only
+        Cells at least this wide (in the mesh's units): for queries that
+        lie farther from the surface than a few triangles (a ball crossing
+        many small cells costs more than larger cells' extra triangles).
 
     Attributes
     ----------
@@ -475,11 +479,16 @@ class TriangleIndex:
     ([0, 0], [0.707107, 2.0])
     """
 
-    def __init__(self, V, F, *, cell_factor=_CELL_FACTOR):
+    def __init__(self, V, F, *, cell_factor=_CELL_FACTOR, min_cell=None):
         V, F = check_mesh(V, F, where="TriangleIndex", allow_empty=False)
         if not (isinstance(cell_factor, (int, float)) and cell_factor > 0):
             raise InvalidArgumentError(
                 f"TriangleIndex: cell_factor must be a positive number, got {cell_factor!r}")
+        if min_cell is not None and not (isinstance(min_cell, (int, float))
+                                         and 0 < min_cell < np.inf):
+            raise InvalidArgumentError(
+                f"TriangleIndex: min_cell must be a positive finite number or None, "
+                f"got {min_cell!r}")
         self.V = V
         self.F = F
         m = F.shape[0]
@@ -505,7 +514,7 @@ class TriangleIndex:
             D = triangle_rows(A, B, C)
             return (D,) + _bounding_rows(A, B, C, D[12:15].T)
         jobs = [rows_and_bounds,
-                lambda: self._build_grid(tlo, thi, A, B, C, extent, cell_factor)]
+                lambda: self._build_grid(tlo, thi, A, B, C, extent, cell_factor, min_cell)]
         if m >= _THREADED_BUILD:     # the kernel rows and bounds beside the grid
             (self._D, self._ball, self._prism), _ = run_each(lambda job: job(), jobs)
         else:
@@ -516,10 +525,10 @@ class TriangleIndex:
         self.n_faces = m
 
     # -- grid ---------------------------------------------------------------------------------
-    def _build_grid(self, tlo, thi, A, B, C, extent, cell_factor):
+    def _build_grid(self, tlo, thi, A, B, C, extent, cell_factor, min_cell):
         m = tlo.shape[0]
         ext = (thi - tlo).max(axis=1)
-        h = cell_factor * float(ext.mean())
+        h = max(cell_factor * float(ext.mean()), min_cell or 0.0)
         span = float(extent.max())
         if not h > 0:
             h = span / 64 if span > 0 else 1.0

@@ -303,6 +303,34 @@ def test_levels_zero_binds_to_the_cage_itself():
     assert np.abs(deform(b, Vc) - Vd).max() <= 1e-9 * bbox_diagonal(Vd)
 
 
+def test_deep_levels_widen_the_query_cells_and_bind_the_same(monkeypatch):
+    """Above _REACH_LEVELS levels the bind tells its query the dense vertices'
+    typical distance to the fine surface (measured on the surface two levels
+    down): its cells grow to fit, and the binding is the one the plain query
+    gives, array for array."""
+    import core.binding as binding_module
+    import core.near_query as near_query_module
+    NearQuery = near_query_module.NearQuery
+    Vd, Fd = _bumpy_sphere(4, amp=0.02)
+    Vc, Fc = icosphere(1)
+    Vc = 0.97 * Vc
+    cells = []
+
+    class Recording(NearQuery):
+        def __init__(self, V, F, *, reach=None):
+            super().__init__(V, F, reach=reach)
+            cells.append((reach, self.index.tables.cell_size))
+    monkeypatch.setattr(binding_module, "NearQuery", Recording)
+    wide = bind(Vd, Fd, Vc, Fc, levels=3)
+    monkeypatch.setattr(binding_module, "_REACH_LEVELS", 3)
+    plain = bind(Vd, Fd, Vc, Fc, levels=3)
+    (reach, h_wide), (none, h_plain) = cells
+    assert none is None and reach > 0
+    assert h_wide >= reach / near_query_module._REACH_SHARE * (1 - 1e-12) and h_wide > h_plain
+    for key, value in wide.to_arrays().items():
+        np.testing.assert_array_equal(value, plain.to_arrays()[key], err_msg=key)
+
+
 # ------------------------------------------------------------------ refine
 @pytest.mark.parametrize("name", ["sphere_binding", "torus_binding"])
 def test_refine_of_unedited_cage_lies_on_dense_surface(name, request):

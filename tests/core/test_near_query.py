@@ -111,6 +111,31 @@ def test_agrees_with_the_index_up_to_exact_ties():
     np.testing.assert_array_equal(a.point[same], b.point[same])
 
 
+@pytest.mark.parametrize("name,V,F", list(_meshes())[:5], ids=[m[0] for m in _meshes()][:5])
+def test_a_reach_widens_the_cells_and_changes_no_answer(name, V, F):
+    """With ``reach``, the cells are at least reach / _REACH_SHARE wide and
+    the answers do not change: the brute-force minimum bit for bit near the
+    surface; the same distances for points several cells of the plain grid
+    away (some of which either grid leaves to the index: its face among
+    exactly equidistant ones may differ)."""
+    rng = np.random.default_rng(6)
+    plain = NearQuery(V, F)
+    h = plain.index.tables.cell_size
+    P = _near_points(V, F, rng, n=300)
+    centres = V[F[:200]].mean(axis=1)
+    far = centres + rng.normal(size=centres.shape) * 3 * h
+    for reach in (0.0, h, 4 * h):
+        query = NearQuery(V, F, reach=reach)
+        assert query.index.tables.cell_size >= max(reach / near_query._REACH_SHARE, h) * (1 - 1e-12)
+        _assert_exact(V, F, P, query.closest(P))
+        np.testing.assert_array_equal(query.closest(far).distance, plain.closest(far).distance)
+        np.testing.assert_array_equal(query.closest(far).distance, np.sqrt(_brute(V, F, far)[3]))
+    with pytest.raises(InvalidArgumentError, match="reach must be a finite number"):
+        NearQuery(V, F, reach=-1.0)
+    with pytest.raises(InvalidArgumentError, match="reach must be a finite number"):
+        NearQuery(V, F, reach=np.inf)
+
+
 def test_points_in_empty_cells_off_and_outside_the_grid():
     """Points in cells no triangle crosses (off a flat grid), beyond the
     grid's box, and far away (answered by the index): exact distances, and
