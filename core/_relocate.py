@@ -43,7 +43,7 @@ from ._collapse import compactness
 from ._face_tracker import FaceTracker, stable_argsort
 from ._groups import group_argmin, ragged_ranges
 from .cg import conjugate_gradient
-from .mesh import barycentric_gather, barycentric_scatter
+from .mesh import barycentric_gather, barycentric_scatter, face_normals
 
 #: the relocation's solves stop early only once converged this far (they run
 #: ``cg_iters`` steps otherwise: a few steps are enough to move towards the samples)
@@ -87,10 +87,6 @@ def block_matvec(G, M, x, lam):
     return np.ascontiguousarray(out.T)
 
 
-def _normals(V, F):
-    return np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]])
-
-
 def _squared_edges(V, F):
     """Squared lengths of the three edges of each face, (m,3)."""
     E = V[F[:, [1, 2, 0]]] - V[F]
@@ -124,7 +120,7 @@ def _back_rows(V, F, surface, total, cage_of=None):
     if surface.face is None and cage_of is not None:
         near = _merged_nearest(X, F, _BACK_BARY, V.shape[0], surface.V, cage_of)
     T = surface.closest(X, near).point
-    area = np.linalg.norm(_normals(V, F), axis=1)
+    area = np.linalg.norm(face_normals(V, F, normalize=False), axis=1)
     w = np.sqrt(np.repeat(area * (total / max(k * float(area.sum()), 1e-300)), k))
     return idx, b * w, T * w[:, None], np.repeat(np.arange(m, dtype=np.int64), k)
 
@@ -296,7 +292,7 @@ def relocate(V, F, P, movable, *, iters=2, cg_iters=15, reg=0.05, min_cos=0.2, N
     n = V.shape[0]
     if not movable.any() or F.shape[0] == 0 or P.shape[0] == 0:
         return V
-    N_ref = _normals(V, F)
+    N_ref = face_normals(V, F, normalize=False)
     g0 = _compactness(V, F, np.linalg.norm(N_ref, axis=1))  # of the cage as it came
     settled = min_move * float(np.sqrt(_squared_edges(V, F)).mean())
     pulls = _Pulls(F, n, P, P_near, surface, back, cage_of, border, border_near, walk_steps)
@@ -346,7 +342,7 @@ def _undo_bad_moves(V, F, D, N_ref, g0, N_keep, min_cos, min_compact):
     while faces.size:
         Fs = F[faces]
         Vn = V + D
-        N1 = _normals(Vn, Fs)
+        N1 = face_normals(Vn, Fs, normalize=False)
         l1 = np.linalg.norm(N1, axis=1)
         bad = np.einsum("ij,ij->i", N_ref[faces], N1) <= min_cos * l0[faces] * l1
         if N_keep is not None:

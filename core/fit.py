@@ -37,7 +37,7 @@ from .cg import conjugate_gradient
 from .clean import clean_mesh
 from .errors import InvalidArgumentError, InvalidMeshError
 from .mesh import (barycentric_gather, barycentric_scatter, bbox_diagonal, bounding_box, check_mesh,
-                   face_areas, vertex_normals)
+                   cross_rows, face_areas, vertex_normals)
 from .metrics import sample_surface
 from .mirror import axis_index, mirror_partners, symmetrize
 from .spatial import TriangleIndex
@@ -282,7 +282,7 @@ def _laplacian(V, F, kind):
             p = V[F[:, c]]
             u = V[F[:, (c + 1) % 3]] - p
             v = V[F[:, (c + 2) % 3]] - p
-            cr = np.linalg.norm(np.cross(u, v), axis=1)
+            cr = np.linalg.norm(cross_rows(u, v), axis=1)
             cot = np.einsum("ij,ij->i", u, v) / np.maximum(cr, 1e-300)
             w += np.bincount(em.face_edge[:, c], 0.5 * cot, E.shape[0])
         # clamp: negative cotangent weights (obtuse cages) would make the

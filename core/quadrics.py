@@ -20,6 +20,7 @@ units (an RMS distance to the planes the vertex stands for).
 import numpy as np
 
 from ._parallel import blocks, run_blocks
+from .mesh import cross_rows
 
 #: columns of a quadric stack
 N_COEFFS = 11
@@ -112,7 +113,7 @@ def _face_geometry(V, F):
         Fb = F[a:b]
         p0 = np.take(V, Fb[:, 0], axis=0)
         Nb = N[a:b]
-        _cross(np.take(V, Fb[:, 1], axis=0) - p0, np.take(V, Fb[:, 2], axis=0) - p0, out=Nb)
+        cross_rows(np.take(V, Fb[:, 1], axis=0) - p0, np.take(V, Fb[:, 2], axis=0) - p0, out=Nb)
         length = np.sqrt(np.einsum("ij,ij->i", Nb, Nb))
         ub = unit[a:b]
         ub[...] = 0.0
@@ -122,14 +123,6 @@ def _face_geometry(V, F):
 
     run_blocks(block, blocks(m, _BLOCK))
     return N, unit, d, area
-
-
-def _cross(e1, e2, out):
-    """``np.cross(e1, e2)`` of (k,3) rows into ``out`` (the same products and
-    differences, without its temporaries)."""
-    for c, i, j in ((0, 1, 2), (1, 2, 0), (2, 0, 1)):
-        np.multiply(e1[:, i], e2[:, j], out=out[:, c])
-        out[:, c] -= e1[:, j] * e2[:, i]
 
 
 def _plane_weights(area, area_power):
@@ -207,7 +200,7 @@ def edge_constraint_quadrics(V, E, face_normals, weights):
     Q : (k,11) float64
     """
     p = V[E[:, 0]]
-    t = np.cross(V[E[:, 1]] - p, face_normals)
+    t = cross_rows(V[E[:, 1]] - p, face_normals)
     length = np.linalg.norm(t, axis=1)
     unit = np.divide(t, length[:, None], out=np.zeros_like(t), where=length[:, None] > 0)
     d = -np.einsum("ij,ij->i", unit, p)

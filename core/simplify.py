@@ -59,7 +59,7 @@ from ._relax import close_smallest_hole, close_triangular_holes, drop_stuck_comp
 from ._relocate import relocate, segment_triangles
 from .clean import MIN_COMPONENT_AREA, WELD_DISTANCE, CleanReport, clean_mesh
 from .errors import InvalidArgumentError, InvalidMeshError, MeshAdjustError
-from .mesh import bounding_box, check_mesh, diagonal_length
+from .mesh import bounding_box, check_mesh, diagonal_length, face_normals
 from .metrics import surface_distance
 from .topology import boundary_loops_count, collapsible_edges, face_components
 from .quadrics import accumulate_coefficients, vertex_face_quadrics, edge_constraint_quadrics
@@ -314,7 +314,7 @@ def _bend_cosines(mesh):
     F, V, twin = mesh.F, mesh.V, mesh.twin
     h = edge_representatives(twin, boundary=False)
     h = h[~mesh.feat[h]]
-    N = np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]])
+    N = face_normals(V, F, normalize=False)
     Na, Nb = N[h // 3], N[twin[h] // 3]
     la = np.linalg.norm(Na, axis=1)
     lb = np.linalg.norm(Nb, axis=1)

@@ -75,9 +75,9 @@ from typing import NamedTuple
 import numpy as np
 
 from .errors import InvalidArgumentError
-from .mesh import check_mesh
+from .mesh import check_mesh, cross_rows
 from ._groups import group_argmin, ragged_ranges
-from ._parallel import run_each
+from ._parallel import blocks, run_each
 
 #: serialises the lazy BVH builds of indexes queried from several threads at once
 _LAZY_BUILD = threading.Lock()
@@ -103,6 +103,7 @@ _BRUTE_PAIRS = 1 << 24     # fewer far (query, triangle) pairs than this: no BVH
 _FRONTIER_CAP = 1 << 21    # BVH frontier pairs before it is split and processed depth first
 PRUNE_SLACK = 1e-9         # relative slack on pruning tests (keeps rounding conservative)
 _THREADED_BUILD = 1 << 15  # from this many faces the build runs its two halves on two threads
+_BUILD_BLOCK = 1 << 15     # triangles per block of the build's kernel rows and bounds
 
 
 class ClosestPoints(NamedTuple):
@@ -158,7 +159,7 @@ def triangle_rows(A, B, C):
     s_abac = np.einsum("ij,ij->i", ab, ac)
     bc = C - B
     s_bc = np.einsum("ij,ij->i", bc, bc)
-    n = np.cross(ab, ac)
+    n = cross_rows(ab, ac)
     nn = np.einsum("ij,ij->i", n, n)
     length = np.sqrt(nn)
     unit = np.divide(n, length[:, None], out=np.zeros_like(n), where=length[:, None] > 0)
@@ -435,7 +436,7 @@ def _bounding_rows(A, B, C, n):
     # edge k runs from corner k to corner k+1; (edge x n) points away from the third corner
     for k in range(3):
         a, b = corners[k] - centre, corners[(k + 1) % 3] - centre
-        mk = _unit(np.cross(b - a, n))
+        mk = _unit(cross_rows(b - a, n))
         o = np.maximum(np.einsum("ij,ij->i", a, mk), np.einsum("ij,ij->i", b, mk))
         prism[3 + 3 * k:6 + 3 * k] = mk.T
         prism[12 + k] = o * (1 + 1e-9) + 1e-9 * r
@@ -509,16 +510,20 @@ class TriangleIndex:
         self._order = order                       # internal id -> face id
         A, B, C, tlo, thi = A[order], B[order], C[order], tlo[order], thi[order]
 
-        def rows_and_bounds():
-            """The kernel rows and the two lower-bound tables (_bounding_rows)."""
-            D = triangle_rows(A, B, C)
-            return (D,) + _bounding_rows(A, B, C, D[12:15].T)
-        jobs = [rows_and_bounds,
-                lambda: self._build_grid(tlo, thi, A, B, C, extent, cell_factor, min_cell)]
-        if m >= _THREADED_BUILD:     # the kernel rows and bounds beside the grid
-            (self._D, self._ball, self._prism), _ = run_each(lambda job: job(), jobs)
-        else:
-            (self._D, self._ball, self._prism), _ = [job() for job in jobs]
+        self._D, self._ball, self._prism = np.empty((16, m)), np.empty((4, m)), np.empty((16, m))
+
+        def rows_and_bounds(start, stop):
+            """The kernel rows and the two lower-bound tables (_bounding_rows) of
+            the triangles start..stop (per triangle: a block's temporaries stay
+            in cache, where whole (m,3) arrays of a large mesh go to memory)."""
+            s = slice(start, stop)
+            self._D[:, s] = triangle_rows(A[s], B[s], C[s])
+            self._ball[:, s], self._prism[:, s] = _bounding_rows(A[s], B[s], C[s],
+                                                                 self._D[12:15, s].T)
+        # the grid on one worker, the blocks of rows on the other, then on both
+        jobs = [lambda: self._build_grid(tlo, thi, A, B, C, extent, cell_factor, min_cell)]
+        jobs += [lambda span=span: rows_and_bounds(*span) for span in blocks(m, _BUILD_BLOCK)]
+        run_each(lambda job: job(), jobs, threads=m >= _THREADED_BUILD)
         self._bvh = None                          # built on first need (far queries)
         self._bvh_ready = False                   # ... with its cylinder bounds
         self._normal = np.ascontiguousarray(self._D[12:15])      # the disk bound's rows
@@ -562,7 +567,7 @@ class TriangleIndex:
         # keep only the cells the triangle's plane passes through (conservatively): with the
         # unnormalised normal n and o = n.A, drop a cell whose centre x has
         # |n.x - o| > h/2 (|nx| + |ny| + |nz|) plus a rounding margin
-        nrm = np.cross(B - A, C - A)
+        nrm = cross_rows(B - A, C - A)
         off = np.einsum("ij,ij->i", nrm, A)
         l1 = np.abs(nrm).sum(axis=1)
         reach = 0.5 * h * l1 + PRUNE_SLACK * l1 * (np.abs(A).max(axis=1) + ext + 2 * h)
@@ -629,7 +634,7 @@ class TriangleIndex:
         pad = n_pad * _LEAF - m
         # padding repeats the last triangle: a real triangle, so every bound stays valid
         X = np.stack([A, B, C], axis=1)
-        N = np.cross(B - A, C - A)
+        N = cross_rows(B - A, C - A)
         if pad:
             X = np.concatenate([X, np.repeat(X[-1:], pad, axis=0)])
             N = np.concatenate([N, np.zeros((pad, 3))])
@@ -666,7 +671,7 @@ class TriangleIndex:
                 hc = np.einsum("ij,ij->i", d, n)
                 latc = np.sqrt(np.maximum(np.einsum("ij,ij->i", d, d) - hc * hc, 0.0))
                 cos = np.abs(np.einsum("ij,ij->i", ni, n))
-                sin = np.linalg.norm(np.cross(ni, n), axis=1)
+                sin = np.linalg.norm(cross_rows(ni, n), axis=1)
                 hk = np.abs(hc) + ri * sin + ti * cos
                 lk = latc + ri + ti
                 r = np.where(ok, np.maximum(r, lk), r)
