@@ -46,6 +46,12 @@ from .topology import edge_map
 
 _LAPLACIANS = ("uniform", "cotangent")
 
+#: the dense surface's index has cells at least this many mean fine edges wide: the
+#: fine vertices it answers lie a fraction of a fine edge from the dense surface, often
+#: many dense triangles away, and balls crossing many small cells cost more than larger
+#: cells' extra triangles (a 1M-face scan, 2,000-face cage: queries 2.6x faster)
+_DENSE_CELL_EDGES = 1.0
+
 
 class FitResult(NamedTuple):
     """Fitted cage and the distance record of :func:`fit_cage`."""
@@ -164,7 +170,8 @@ def fit_cage(V_dense, F_dense, V_cage, F_cage, *, levels=2, scheme="butterfly", 
     sampled = sample_surface(V_dense, F_dense, int(samples), seed=seed)
     P = np.asarray(sampled.points, dtype=np.float64)
     n_s = P.shape[0]
-    dense_index = TriangleIndex(V_dense, F_dense)
+    dense_index = TriangleIndex(V_dense, F_dense,
+                                min_cell=_DENSE_CELL_EDGES * _mean_edge(op.apply(V_cage), Ff))
     L_rows, L_cols, L_w = _laplacian(V_cage, F_cage, laplacian)
     lam = float(smoothness) / n_c
     LtL_X0 = _lt_l(L_rows, L_cols, L_w, n_c, V_cage)
@@ -259,6 +266,13 @@ def _interpolate(N, F, face, bary):
     out = barycentric_gather(N, corners, np.asarray(bary, dtype=np.float64))
     length = np.linalg.norm(out, axis=1)
     return np.divide(out, length[:, None], out=np.zeros_like(out), where=length[:, None] > 1e-12)
+
+
+def _mean_edge(V, F):
+    """Mean length of the edges of the triangles ``F`` (each counted once per
+    face side); the smallest positive float for a mesh of points."""
+    d = V[F] - V[F[:, [1, 2, 0]]]
+    return max(float(np.sqrt(np.einsum("ijk,ijk->ij", d, d)).mean()), np.finfo(float).tiny)
 
 
 def _vertex_areas(V, F, n):

@@ -89,6 +89,35 @@ def test_fit_moves_an_inscribed_cage_onto_the_sphere(sphere_case):
     assert (radius > 1.0).all() and radius.std() < 0.02 * radius.mean()
 
 
+def test_the_dense_index_cells_change_no_fit(monkeypatch):
+    """The dense surface's index has cells of at least a mean fine edge
+    (_DENSE_CELL_EDGES): the answers are exact either way, so the fit is the
+    one the default cells give (to rounding: a closest point on a shared
+    edge may come from either face)."""
+    import core.fit as fit_module
+    from core.spatial import TriangleIndex
+    Vd, Fd = torus(96, 48, bump=0.01, bump_waves=(12, 6))
+    Vc, Fc = torus(12, 6)
+    cells = []
+
+    def recording(V, F, **kw):
+        index = TriangleIndex(V, F, **kw)
+        cells.append(index.tables.cell_size)
+        return index
+    monkeypatch.setattr(fit_module, "TriangleIndex", recording)
+    wide = fit_cage(Vd, Fd, Vc, Fc, levels=2, iterations=3)
+    monkeypatch.setattr(fit_module, "TriangleIndex", lambda V, F, **kw: recording(V, F))
+    plain = fit_cage(Vd, Fd, Vc, Fc, levels=2, iterations=3)
+    n = len(cells) // 2                       # the dense index first, then one per iteration
+    assert cells[0] > cells[n]
+    op = subdivision_operator(Fc, Vc.shape[0], levels=2)
+    Vf = op.apply(Vc)
+    edge = np.linalg.norm(Vf[op.F_fine] - Vf[op.F_fine[:, [1, 2, 0]]], axis=2).mean()
+    assert cells[0] >= fit_module._DENSE_CELL_EDGES * edge * (1 - 1e-12)
+    np.testing.assert_allclose(wide.V, plain.V, rtol=0, atol=1e-12 * wide.diagonal)
+    np.testing.assert_allclose(wide.mean_distance, plain.mean_distance, rtol=1e-12)
+
+
 def test_fit_recovers_a_cage_whose_subdivision_is_the_dense_mesh():
     Vc, Fc = torus(10, 6)
     op = subdivision_operator(Fc, Vc.shape[0], levels=2)
