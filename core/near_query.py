@@ -59,7 +59,7 @@ from numpy.lib.stride_tricks import sliding_window_view
 from .errors import InvalidArgumentError
 from .spatial import PRUNE_SLACK, TriangleIndex, closest_on_triangles, closest_result
 
-__all__ = ["NearQuery"]
+__all__ = ["NearQuery", "cell_for_reach"]
 
 #: points per block (float32 temporaries of a few MiB; large blocks mean fewer NumPy
 #: calls, each a GIL hand-over when two threads query at once: the bind's 1M-point
@@ -172,8 +172,7 @@ class NearQuery:
         if reach is not None and not (isinstance(reach, (int, float)) and 0 <= reach < np.inf):
             raise InvalidArgumentError(
                 f"NearQuery: reach must be a finite number >= 0 or None, got {reach!r}")
-        min_cell = reach / _REACH_SHARE if reach else None
-        self.index = TriangleIndex(V, F, cell_factor=_CELL_FACTOR, min_cell=min_cell)
+        self.index = TriangleIndex(V, F, cell_factor=_CELL_FACTOR, min_cell=cell_for_reach(reach))
         self._t = _build_tables(self.index.tables)
 
     def closest(self, P):
@@ -211,6 +210,13 @@ class NearQuery:
             for out, value in zip(result, hit):
                 out[far] = value
         return result
+
+
+def cell_for_reach(reach):
+    """The smallest grid cell for queries at a typical distance ``reach``
+    (``reach / _REACH_SHARE``; None for None or 0: the default cells), as
+    :class:`~.spatial.TriangleIndex`'s ``min_cell``."""
+    return reach / _REACH_SHARE if reach else None
 
 
 def _check_points(P):
