@@ -390,7 +390,10 @@ def bind(V_dense, F_dense, V_cage, F_cage, *, levels=2, scheme="butterfly", crea
 def _typical_distance(V_dense, V_cage, F_cage, scheme, creases):
     """The median distance of ``_REACH_SAMPLES`` dense vertices (evenly by
     index) to the cage's subdivision surface ``_REACH_LEVELS`` levels down:
-    about their distance to any finer level, at the cost of a small index."""
+    about their distance to any finer level, at the cost of a small index
+    (None without dense vertices)."""
+    if V_dense.shape[0] == 0:
+        return None
     op = subdivision_operator(F_cage, V_cage.shape[0], levels=_REACH_LEVELS, scheme=scheme,
                               creases=creases)
     step = max(1, V_dense.shape[0] // _REACH_SAMPLES)
@@ -1204,10 +1207,10 @@ def _dense_points_near(V_dense, F_dense, nearest, P, reach=None):
     beyond it). Fine vertices with no bound dense vertex around them (a dense
     mesh coarser than the cage there) use an exact
     :class:`~.spatial.TriangleIndex` query (its cells sized for ``reach``, the
-    typical distance between the surfaces, when known). Every returned point lies on the
-    dense surface; it is the closest one whenever the closest triangle
-    lies in the two-ring of the nearest bound vertex (the usual case for a
-    cage near the surface).
+    typical distance between the surfaces, when known). Every returned point
+    lies on the dense surface; it is the closest one whenever the closest
+    triangle lies in the two-ring of the nearest bound vertex (the usual case
+    for a cage near the surface).
     """
     n_f = P.shape[0]
     q = np.empty((n_f, 3))
