@@ -291,8 +291,11 @@ def test_points_without_faces_and_empty_dense_mesh():
     b = bind(P, np.zeros((0, 3), np.int64), Vc, Fc, levels=1)
     assert np.abs(deform(b, Vc) - P).max() <= 1e-9 * bbox_diagonal(P)
     assert np.abs(refine(b, Vc).V - b.operator.apply(Vc)).max() <= 1e-14
-    e = bind(np.zeros((0, 3)), np.zeros((0, 3), np.int64), Vc, Fc, levels=1)
-    assert deform(e, Vc).shape == (0, 3) and not e.affected([0]).any()
+    for levels in (1, 3):          # above two levels the bind measures the points' distance
+        e = bind(np.zeros((0, 3)), np.zeros((0, 3), np.int64), Vc, Fc, levels=levels)
+        assert deform(e, Vc).shape == (0, 3) and not e.affected([0]).any()
+    b = bind(P, np.zeros((0, 3), np.int64), Vc, Fc, levels=3)
+    assert np.abs(deform(b, Vc) - P).max() <= 1e-9 * bbox_diagonal(P)
 
 
 def test_levels_zero_binds_to_the_cage_itself():
