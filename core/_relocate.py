@@ -43,7 +43,7 @@ from ._collapse import compactness
 from ._face_tracker import FaceTracker, stable_argsort
 from ._groups import group_argmin, ragged_ranges
 from .cg import conjugate_gradient
-from .mesh import barycentric_gather, barycentric_scatter, face_normals
+from .mesh import barycentric_gather, barycentric_scatter, face_normals, squared_edges
 
 #: the relocation's solves stop early only once converged this far (they run
 #: ``cg_iters`` steps otherwise: a few steps are enough to move towards the samples)
@@ -87,16 +87,10 @@ def block_matvec(G, M, x, lam):
     return np.ascontiguousarray(out.T)
 
 
-def _squared_edges(V, F):
-    """Squared lengths of the three edges of each face, (m,3)."""
-    E = V[F[:, [1, 2, 0]]] - V[F]
-    return np.einsum("ijk,ijk->ij", E, E)
-
-
 def _compactness(V, F, l):
     """Compactness (``core._collapse.compactness``) of each face, given ``l`` =
     twice the areas."""
-    return compactness(l, _squared_edges(V, F).sum(axis=1))
+    return compactness(l, squared_edges(V, F).sum(axis=1))
 
 
 #: barycentric points of each cage face for the backward term: the centroid and
@@ -294,7 +288,7 @@ def relocate(V, F, P, movable, *, iters=2, cg_iters=15, reg=0.05, min_cos=0.2, N
         return V
     N_ref = face_normals(V, F, normalize=False)
     g0 = _compactness(V, F, np.linalg.norm(N_ref, axis=1))  # of the cage as it came
-    settled = min_move * float(np.sqrt(_squared_edges(V, F)).mean())
+    settled = min_move * float(np.sqrt(squared_edges(V, F)).mean())
     pulls = _Pulls(F, n, P, P_near, surface, back, cage_of, border, border_near, walk_steps)
     for _ in range(iters):
         rows, G = pulls.rows(V)

@@ -37,7 +37,7 @@ from .cg import conjugate_gradient
 from .clean import clean_mesh
 from .errors import InvalidArgumentError, InvalidMeshError
 from .mesh import (barycentric_gather, barycentric_scatter, bbox_diagonal, bounding_box, check_mesh,
-                   cross_rows, face_areas, vertex_normals)
+                   cross_rows, face_areas, squared_edges, vertex_normals)
 from .metrics import sample_surface
 from .mirror import axis_index, mirror_partners, symmetrize
 from .spatial import TriangleIndex
@@ -271,8 +271,7 @@ def _interpolate(N, F, face, bary):
 def _mean_edge(V, F):
     """Mean length of the edges of the triangles ``F`` (each counted once per
     face side); the smallest positive float for a mesh of points."""
-    d = V[F] - V[F[:, [1, 2, 0]]]
-    return max(float(np.sqrt(np.einsum("ijk,ijk->ij", d, d)).mean()), np.finfo(float).tiny)
+    return max(float(np.sqrt(squared_edges(V, F)).mean()), np.finfo(float).tiny)
 
 
 def _vertex_areas(V, F, n):

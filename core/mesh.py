@@ -143,6 +143,13 @@ def face_normals(V, F, *, normalize=True):
     return N
 
 
+def squared_edges(V, F):
+    """Squared lengths of the three edges of each face (corner k to corner
+    k+1), (m,3)."""
+    E = V[F[:, [1, 2, 0]]] - V[F]
+    return np.einsum("ijk,ijk->ij", E, E)
+
+
 def face_areas(V, F):
     """Per-face areas, (m,) float64."""
     return 0.5 * np.linalg.norm(face_normals(V, F, normalize=False), axis=1)

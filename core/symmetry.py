@@ -42,7 +42,7 @@ import numpy as np
 
 from .clean import MIN_COMPONENT_AREA, WELD_DISTANCE
 from .errors import InvalidArgumentError
-from .mesh import bbox_diagonal, check_mesh, cross_rows, face_normals
+from .mesh import bbox_diagonal, check_mesh, face_normals
 from .metrics import surface_distance
 from .mirror import PARTNER_TOLERANCE, axis_index, mirror, mirror_partners  # noqa: F401 (example)
 from .simplify import (SimplifyResult, check_arguments, cleaned_input, debris_budget, simplify,
@@ -162,7 +162,7 @@ def _chords(F, n, weld):
 
 def _triangle_normals(V, A, B, C):
     """Unnormalised normals (q,3) of the triangles with corners ``V[A], V[B], V[C]``."""
-    return cross_rows(V[B] - V[A], V[C] - V[A])
+    return face_normals(V, np.stack([A, B, C], axis=1), normalize=False)
 
 
 def _remove_chords(V, F, weld, k, lift):
