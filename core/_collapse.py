@@ -1064,7 +1064,7 @@ def _progress(progress, m0, m, target):
 
 
 def _run(st, target, max_err_n, preserve_boundary, progress, m0, tun, dihedral_cos):
-    passes, grow, m_last = 0, 1.0, None
+    passes, grow, m_last, bold_on = 0, 1.0, None, True
     clock = _Clock(st.seconds)
     while passes < tun.max_passes:
         if st.m_live < tun.compact_share * st.F.shape[0]:
@@ -1084,7 +1084,7 @@ def _run(st, target, max_err_n, preserve_boundary, progress, m0, tun, dihedral_c
         clock.lap("candidates")
         if ne == 0:
             return "no_valid_collapse", passes
-        bold = target is not None and m > tun.bold_above * max(target, tun.bold_min_target)
+        bold = bold_on and target is not None and m > tun.bold_above * max(target, tun.bold_min_target)
         P = _pool_size(ne, m, target, tun, bold, grow)
         _recost_cheapest(st, e, P, max_err_n, preserve_boundary, tun)
         clock.lap("recost")
@@ -1105,6 +1105,7 @@ def _run(st, target, max_err_n, preserve_boundary, progress, m0, tun, dihedral_c
         haus = target is None or m <= tun.haus_phase * target
         if bold:
             _bold_rounds(st, pool, passes, haus, dihedral_cos, tun, target)
+            bold_on = m - st.m_live >= tun.bold_min_share * m
             clock.lap("pick, check and apply (bold)")
             continue
         acc, touched = _check_rounds(st, pool, passes, haus, dihedral_cos, tun)

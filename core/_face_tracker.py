@@ -26,7 +26,8 @@ face's prism has its true closest face (among those it can see). Otherwise --
 a mesh folded back over itself, a query farther from the mesh than a face is
 wide -- the walk ends at a local minimum: close to the answer when it starts
 close, which is what the relocation gives it. Ties between equidistant faces
-(a closest point on a shared edge) keep the face found first.
+(a closest point on a shared edge) keep the face found first. A mesh of at most
+``_EVERY_FACE`` faces is searched whole instead (exact, ties to the lowest face).
 """
 
 from typing import NamedTuple
@@ -40,6 +41,10 @@ from .spatial import TriangleIndex, closest_on_triangles, triangle_rows
 _BLOCK = 1 << 14
 #: a barycentric coordinate this small puts the closest point on the edge
 _ON_EDGE = 1e-12
+#: meshes of at most this many faces are searched whole (exact): a walk over a
+#: coarse mesh tries most of its faces anyway, a few times over (the bunny's
+#: 25-face cage: 20,000 relocation points walked in 40 ms, searched whole in 6 ms)
+_EVERY_FACE = 64
 
 
 def stable_argsort(x):
@@ -136,12 +141,15 @@ class FaceTracker:
         """
         QT = np.ascontiguousarray(Q.T)
         q = np.arange(Q.shape[0])
-        if self.face is None:
-            face, v, w, d2 = self._start(QT, near)
+        if self.F.shape[0] <= _EVERY_FACE:
+            face, v, w, d2 = self._every_face(QT)
         else:
-            face = self.face.copy()
-            v, w, d2 = self._pairs(QT, q, face)
-        face, v, w, d2 = self._walk(QT, face, v, w, d2)
+            if self.face is None:
+                face, v, w, d2 = self._start(QT, near)
+            else:
+                face = self.face.copy()
+                v, w, d2 = self._pairs(QT, q, face)
+            face, v, w, d2 = self._walk(QT, face, v, w, d2)
         self.face = face
         bary = np.stack([1.0 - v - w, v, w], axis=1)
         np.clip(bary, 0.0, 1.0, out=bary)
@@ -165,6 +173,22 @@ class FaceTracker:
             cp = TriangleIndex(self.V, self.F).closest(QT[:, q].T)
             face[q] = cp.face
             v[q], w[q], d2[q] = self._pairs(QT, q, cp.face)
+        return face, v, w, d2
+
+    def _every_face(self, QT):
+        """The exact closest face of every query among all faces (the first
+        of equidistant ones): ``face, v, w, d2`` per query."""
+        k, m = QT.shape[1], self.F.shape[0]
+        face = np.empty(k, dtype=np.int64)
+        v, w, d2 = np.empty(k), np.empty(k), np.empty(k)
+        per = max(1, _BLOCK // max(m, 1))
+        for s in range(0, k, per):
+            e = min(s + per, k)
+            q = np.repeat(np.arange(s, e), m)
+            t = np.tile(np.arange(m), e - s)
+            pv, pw, pd = self._pairs(QT, q, t)
+            best = group_argmin(pd, np.full(e - s, m))
+            face[s:e], v[s:e], w[s:e], d2[s:e] = t[best], pv[best], pw[best], pd[best]
         return face, v, w, d2
 
     def _pairs(self, QT, q, t):

@@ -333,6 +333,8 @@ def _relocate_cage(mesh, Vn, creases, Eb_in, surface, tun):
     Fm = mesh.F
     movable = ~mesh.locked
     samples = max(tun.relocate_samples, tun.relocate_per_vertex * mesh.V.shape[0])
+    if tun.relocate_max_per_vertex:
+        samples = min(samples, tun.relocate_max_per_vertex * mesh.V.shape[0])
     step = max(1, int(np.ceil(Vn.shape[0] / samples)))
     at = np.concatenate([np.arange(0, Vn.shape[0], step), creases[::step]])
     border = None

@@ -32,6 +32,10 @@ class Tuning:
     bold_min_target: int = 64
     bold_pool_share: float = 0.35    #: pool_share of a bold pass
     bold_rounds: int = 16            #: selection rounds of a bold pass
+    #: a bold pass that removed less than this share of the faces makes the rest of the
+    #: run careful (on CAD meshes most cheap collapses of a bold round are refused, and
+    #: its 16 rounds then cost several careful passes that remove more)
+    bold_min_share: float = 0.1
     #: a bold round applies its collapses beside the next round's pick (on two threads)
     #: only with at least this many pool edges left; below, the hand-offs cost more
     threads_min_edges: int = 20000
@@ -64,6 +68,7 @@ class Tuning:
     relocate_border_weight: float = 1.0  #: weight of each input border point (a surface sample: 1)
     relocate_samples: int = 20000    #: input vertices as relocation targets: this many ...
     relocate_per_vertex: int = 4     #: ... or this many per cage vertex, whichever is more
+    relocate_max_per_vertex: int = 100  #: ... but at most this many per cage vertex (0: no cap)
     relocate_reg: float = 1.0        #: pull of each vertex to its place, relative to its samples
     relocate_max_faces: int = 200000  #: ... only for cages up to this size
     relocate_max_share: float = 0.5  #: ... and at most this share of the input's faces

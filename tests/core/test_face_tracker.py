@@ -86,6 +86,34 @@ def test_queries_with_no_guess_are_searched_exactly():
     _assert_same_as_index(tracker.closest(Q), V, F, Q)
 
 
+def test_a_mesh_of_few_faces_is_searched_whole_whatever_the_guess():
+    # 20 faces: every answer is exact even with no walking and every guess at
+    # one vertex (a walk from there could not reach the far side), later calls
+    # too
+    import core._face_tracker as ft
+    from core.spatial import point_triangle_closest
+    rng = np.random.default_rng(5)
+    V, F = icosphere(0)
+    assert F.shape[0] <= ft._EVERY_FACE
+    Q = 2.0 * rng.standard_normal((600, 3))
+    tracker = FaceTracker(F, V.shape[0], steps=0)
+    for call in range(2):
+        tracker.place(V)
+        got = tracker.closest(Q, np.zeros(600, dtype=np.int64) if call == 0 else None)
+        every = point_triangle_closest(np.repeat(Q, F.shape[0], axis=0), *(np.tile(V[F[:, k]], (600, 1))
+                                                                          for k in range(3)))
+        d = every.distance.reshape(600, F.shape[0])
+        np.testing.assert_allclose(d[np.arange(600), got.face], d.min(axis=1), rtol=1e-12, atol=1e-15)
+        A, B, C = (V[F[got.face, k]] for k in range(3))
+        np.testing.assert_allclose(got.bary[:, :1] * A + got.bary[:, 1:2] * B + got.bary[:, 2:] * C,
+                                   got.point, atol=1e-14)
+        np.testing.assert_allclose(np.linalg.norm(got.point - Q, axis=1), d.min(axis=1),
+                                   rtol=1e-12, atol=1e-15)
+        np.testing.assert_allclose(TriangleIndex(V, F).closest(Q).distance, d.min(axis=1),
+                                   rtol=1e-12, atol=1e-15)
+        V = V + 0.05 * rng.standard_normal(V.shape)
+
+
 def test_stable_argsort_is_numpys_stable_argsort():
     from core._face_tracker import stable_argsort
     rng = np.random.default_rng(6)

@@ -107,6 +107,31 @@ def test_singular_quadrics_fall_back_to_the_best_point_of_the_edge():
     assert np.all(X[2, 2] == 0.0)
 
 
+def test_placement_of_many_edges_is_each_edge_placed_alone():
+    # a mix of well-posed (three planes), singular (one plane) and far-drifting
+    # (nearly parallel planes) quadrics, more than two blocks of columns: the same
+    # bits as one edge at a time, and never worse than either end
+    import core.quadrics as quadrics
+    rng = np.random.default_rng(7)
+    k = 2 * quadrics._PLACE_BLOCK + 37
+    Q = np.zeros((k, N_COEFFS))
+    for j in range(3):
+        n, d, w = random_planes(k, rng)
+        if j:
+            kind = rng.integers(0, 3, k)
+            n[kind == 1] = [0.0, 0.0, 1.0]                                  # singular: one plane
+            n[kind == 2] += 1e-9 * rng.standard_normal((int((kind == 2).sum()), 3))
+        Q += plane_quadrics(n, d, w)
+    P0 = rng.standard_normal((k, 3))
+    P1 = P0 + 0.1 * rng.standard_normal((k, 3))
+    X, err = optimal_placement(Q, P0, P1)
+    alone = [optimal_placement(Q[i:i + 1], P0[i:i + 1], P1[i:i + 1]) for i in range(0, k, 97)]
+    np.testing.assert_array_equal(X[::97], np.concatenate([x for x, _ in alone]))
+    np.testing.assert_array_equal(err[::97], np.concatenate([e for _, e in alone]))
+    for P in (P0, P1):
+        assert np.all(err <= quadric_error(Q, P) + 1e-12)
+
+
 def test_cube_corner_quadric_pins_the_corner():
     V, F = cube(2)
     Qf = face_quadrics(V, F)

@@ -625,3 +625,50 @@ def test_bold_passes_take_a_hundredfold_reduction_in_about_twenty_passes_and_no_
     for mesh in (regular_grid(100, 100), cube(40)):
         r = simplify(*mesh, target_faces=4)
         assert r.F.shape[0] == 4 and r.n_passes <= 100
+
+
+def test_a_bold_pass_that_removes_too_little_makes_the_rest_of_the_run_careful(monkeypatch):
+    # bold passes of a sphere remove 20-36% of the faces each: with the bar at 50%
+    # the first is the only one, with no bar they go on down to 4x the target
+    import core._collapse as engine
+    V, F = icosphere(5)
+    runs = {}
+    for bar in (0.0, 0.5):
+        seen = []
+        bold = engine._bold_rounds
+
+        def spy(st, *args, seen=seen, bold=bold):
+            before = st.m_live
+            done = bold(st, *args)
+            seen.append((before, st.m_live))
+            return done
+        monkeypatch.setattr(engine, "_bold_rounds", spy)
+        r = simplify(V, F, target_faces=200, tuning=Tuning(bold_min_share=bar))
+        assert r.stopped_because == "target" and r.F.shape[0] == 200
+        assert manifold_report(r.F, r.V.shape[0]).is_manifold
+        runs[bar] = (seen, r.n_passes)
+    never, once = runs[0.0][0], runs[0.5][0]
+    assert len(once) == 1 and once[0][0] - once[0][1] < 0.5 * once[0][0]
+    assert len(never) > 3 and all(a - b >= 0.15 * a for a, b in never)
+    assert runs[0.5][1] > runs[0.0][1]
+
+
+def test_the_final_relocation_takes_at_most_relocate_max_per_vertex_samples_a_cage_vertex(monkeypatch):
+    # a 30-face cage of a 41k-vertex sphere fits its 17 vertices to at most 1,700
+    # input points (plus creases: none here), not 20,000; without the cap, 20,000
+    import importlib
+    simplify_module = importlib.import_module("core.simplify")
+    V, F = icosphere(6)
+    for cap, most in ((100, None), (0, TUNING.relocate_samples)):
+        sizes = []
+        relocate = simplify_module.relocate
+
+        def spy(Vc, Fc, P, *args, sizes=sizes, relocate=relocate, **kw):
+            sizes.append((Vc.shape[0], P.shape[0]))
+            return relocate(Vc, Fc, P, *args, **kw)
+        monkeypatch.setattr(simplify_module, "relocate", spy)
+        r = simplify(V, F, target_faces=30, tuning=Tuning(relocate_max_per_vertex=cap))
+        assert r.F.shape[0] == 30 and len(sizes) == 1
+        n_cage, n_points = sizes[0]
+        limit = cap * n_cage if most is None else most
+        assert limit // 2 < n_points <= limit
