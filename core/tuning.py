@@ -37,7 +37,8 @@ class Tuning:
     #: its 16 rounds then cost several careful passes that remove more)
     bold_min_share: float = 0.1
     #: a bold round applies its collapses beside the next round's pick (on two threads)
-    #: only with at least this many pool edges left; below, the hand-offs cost more
+    #: only with at least this many pool edges left, and compaction spreads its arrays
+    #: over the threads only with at least this many faces; below, the hand-offs cost more
     threads_min_edges: int = 20000
     #: once at most this many pool edges are left in a pass, check them all at once
     #: (the rounds then only pick: same results, far fewer small checks)
