@@ -256,7 +256,7 @@ def test_panel_state_reasons(scene):
     st = panel.panel_state(bpy.context)
     assert st["simplify"] == (False, "Select a mesh object")
     V, F = bumpy_sphere(3)
-    obj = make_object("dense", V, F)
+    make_object("dense", V, F)
     st = panel.panel_state(bpy.context)
     assert st["simplify"][0] and not st["refine"][0] and "Simplify" in st["refine"][1]
     simplify(200)
@@ -442,7 +442,7 @@ def test_panel_draw_uses_existing_properties_and_operators(scene):
     log = _draw_panel()                                   # nothing selected
     assert ("label", "Select a mesh object") in log
     V, F = bumpy_sphere(3)
-    obj = make_object("dense", V, F)
+    make_object("dense", V, F)
     bpy.context.scene.meshadjust.running = True           # the progress bar row
     log = _draw_panel()
     assert ("operator", "meshadjust.simplify") in log and any(e[0] == "progress" for e in log)

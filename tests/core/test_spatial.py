@@ -339,7 +339,6 @@ def test_bvh_bounds_contain_their_triangles(monkeypatch):
     assert index._bvh is None
     index.closest([[0.0, 0.0, 50.0]])                 # far: builds the BVH
     assert index._bvh is not None
-    m = F.shape[0]
     X = V[F[index._order]]                              # (m, 3, 3) in internal order
     for level in range(index._depth + 1):
         group = spatial._LEAF << (index._depth - level)
