@@ -200,9 +200,13 @@ sys.exit(batch.main(sys.argv[2:]))
 
 
 def _start(args, tmp_path):
+    # SIGINT back to its default in the child: a test run started in the background
+    # of a non-interactive shell ignores SIGINT, and children inherit that (the batch
+    # would then never see the Ctrl-C these tests send)
     env = dict(os.environ, HOME=str(tmp_path))
     return subprocess.Popen([sys.executable, SCRIPT, *args], stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, text=True, env=env, cwd=str(tmp_path))
+                            stderr=subprocess.PIPE, text=True, env=env, cwd=str(tmp_path),
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
 
 
 @pytest.mark.parametrize("mode", [["--jobs", "2"], ["--jobs", "1"], ["--dask", "local", "--jobs", "2"]],
