@@ -54,7 +54,6 @@ DEAD = -3  #: twin of a half-edge of a removed face (before compaction)
 _SQRT3x2 = 2.0 * np.sqrt(3.0)
 
 
-
 def _take(a, idx, axis=None):
     """``np.take(a, idx, axis)`` for an array ``a``, without the dispatch of
     the function form (about 1 us a call; the engine makes some 170 a pass)."""

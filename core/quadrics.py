@@ -257,9 +257,9 @@ def rms_distance(err, w):
     return np.where(w > 0, np.sqrt(np.maximum(err, 0.0) / np.where(w > 0, w, 1.0)), 0.0)
 
 
-#: columns per block of :func:`place_columns`: its some sixty temporaries then
-#: stay in cache and come from the allocator's free lists (30,000 columns at once:
-#: 9-10 ms; in blocks: about 3 ms)
+#: columns per block of :func:`place_columns`: its sixty-odd temporaries then stay
+#: in cache and come from the allocator's free lists (30,000 columns at once: 8-13 ms;
+#: in blocks: 4-7 ms, alternating runs)
 _PLACE_BLOCK = 4096
 
 
