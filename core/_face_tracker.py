@@ -42,8 +42,9 @@ _BLOCK = 1 << 14
 #: a barycentric coordinate this small puts the closest point on the edge
 _ON_EDGE = 1e-12
 #: meshes of at most this many faces are searched whole (exact): a walk over a
-#: coarse mesh tries most of its faces anyway, a few times over (the bunny's
-#: 25-face cage: 20,000 relocation points walked in 40 ms, searched whole in 6 ms)
+#: coarse mesh tries most of its faces anyway, a few times over (the bunny simplified
+#: to its 25-face floor: relocation 23-24 -> 19 ms, medians of 7; an index per call,
+#: as queries with no guess get, took 37 ms)
 _EVERY_FACE = 64
 
 

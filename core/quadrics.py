@@ -317,22 +317,22 @@ def _place_block(q, p0, p1):
     err = quadric_at(q, X[0], X[1], X[2])
     bad = np.flatnonzero(~ok)
     if bad.size:
-        X, err = _segment_fallback(q, p0, p1, d, X, err, None if bad.size == ok.size else bad)
+        if bad.size == ok.size:
+            X, err = _segment_fallback(q, p0, p1, d)
+        else:
+            X[:, bad], err[bad] = _segment_fallback(*(np.take(a, bad, axis=1) for a in (q, p0, p1, d)))
     return X, err
 
 
-def _segment_fallback(q, p0, p1, d, X, err, bad):
-    """:func:`place_columns`'s rule where the solve failed (the columns
-    ``bad``, or all for None): the best of the quadric's minimum on the
-    segment and its two ends (the first of equal ones, in that order),
-    written into ``X`` and ``err``."""
-    def cols(a):
-        return a if bad is None else np.take(a, bad, axis=1)
-    qb, s0, s1, db = cols(q), cols(p0), cols(p1), cols(d)
+def _segment_fallback(qb, s0, s1, db):
+    """:func:`place_columns`'s rule for columns where the solve failed
+    (quadrics ``qb``, ends ``s0``, ``s1``, ``db = s1 - s0``): the best of the
+    quadric's minimum on the segment and its two ends (the first of equal
+    ones, in that order). Returns the points (3,k) and their errors (k,)."""
     Ad = [qb[0] * db[0] + qb[1] * db[1] + qb[2] * db[2], qb[1] * db[0] + qb[3] * db[1] + qb[4] * db[2],
           qb[2] * db[0] + qb[4] * db[1] + qb[5] * db[2]]
     dAd = db[0] * Ad[0] + db[1] * Ad[1] + db[2] * Ad[2]
-    # derivative of E(p0 + t d) is 2 (d.(A p0 + b)) + 2 t dAd
+    # derivative of E(s0 + t db) is 2 (db.(A s0 + b)) + 2 t dAd
     g = Ad[0] * s0[0] + Ad[1] * s0[1] + Ad[2] * s0[2] + db[0] * qb[6] + db[1] * qb[7] + db[2] * qb[8]
     t = np.clip(np.where(dAd > 0, -g / np.where(dAd > 0, dAd, 1.0), 0.5), 0.0, 1.0)
     best = s0 + t * db
@@ -342,11 +342,7 @@ def _segment_fallback(q, p0, p1, d, X, err, bad):
         closer = e_end < e_best
         best = np.where(closer, end, best)
         e_best = np.where(closer, e_end, e_best)
-    if bad is None:
-        return best, e_best
-    X[:, bad] = best
-    err[bad] = e_best
-    return X, err
+    return best, e_best
 
 
 def optimal_placement(Q, P0, P1):
