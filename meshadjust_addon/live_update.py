@@ -9,6 +9,7 @@ float32 buffer handed to Blender. One update::
     moved  = cage vertices whose position differs from the last update's
     rows   = binding.influenced(moved, ordered=False)   dense vertices they move
     core.deform(binding, V, moved=moved, out=D)          only those rows
+    rows  += binding.repaired(D), before and after       the fold repair's rows
     buf[rows] = D[rows]                                  float32, only those rows
     position attribute <- buf (one foreach_set), mesh tagged for redraw
 
@@ -117,7 +118,11 @@ def update_edited(cage):
     else:
         D, buf = state.D, state.buf
         r = binding.influenced(moved, ordered=False)
+        before = binding.repaired(D)
         core.deform(binding, V, moved=moved, out=D)
+        after = binding.repaired(D)
+        if before.size or after.size:       # rows the fold repair wrote, or unwrote
+            r = np.union1d(r, np.union1d(before, after))
         t3 = time.perf_counter()
         buf[r] = np.take(D, r, axis=0)
         rows = r.shape[0]

@@ -121,6 +121,15 @@ def load_rest(cage):
         return _get_point_attr(mesh, REST, 'FLOAT_VECTOR')
 
 
+def _rest_or_none(cage):
+    """The cage's rest shape, or None when it has none (a binding made before
+    the rest shape was kept loads without the fold repair)."""
+    try:
+        return load_rest(cage)
+    except core.MeshAdjustError:
+        return None
+
+
 def save_binding(edited, binding):
     """Write ``binding`` onto the edited-original object ``edited``."""
     mesh = edited.data
@@ -180,6 +189,9 @@ def load_binding(edited, cage):
         "F_cage": F_cage, "n_cage": n_cage, "levels": state.levels, "scheme": state.scheme,
         "creases": creases if creases is not None else np.zeros((0, 2), np.int64),
         "fingerprint": state.fingerprint,
+        # for the fold repair: the edited copy has the source's faces, the cage its rest shape
+        "F_dense": mesh_io.read_triangles(edited.data)[0],
+        "V_cage_rest": _rest_or_none(cage),
     }
     try:
         binding = core.Binding.from_arrays(arrays)

@@ -189,12 +189,25 @@ def test_to_arrays_from_arrays_round_trip(sphere_binding):
     Vd, Fd, Vc, Fc, b = sphere_binding
     arrays = b.to_arrays()
     assert set(arrays) == {"fine_face", "bary", "offset", "fine_detail", "F_cage", "n_cage",
-                           "levels", "scheme", "creases", "fingerprint"}
+                           "levels", "scheme", "creases", "fingerprint", "F_dense", "V_cage_rest"}
+    assert np.array_equal(arrays["F_dense"], Fd) and np.array_equal(arrays["V_cage_rest"], Vc)
     b2 = Binding.from_arrays(arrays)
     Ve = Vc * np.array([1.2, 1.0, 0.9])
     assert np.array_equal(deform(b2, Ve), deform(b, Ve))
     assert np.array_equal(refine(b2, Ve).V, refine(b, Ve).V)
     assert b2.fingerprint == b.fingerprint and b2.creases is None
+
+
+def test_from_arrays_without_the_repair_keys_binds_without_repair(sphere_binding):
+    # a binding stored before the fold repair (or without the dense faces) still
+    # loads and deforms, the same as long as nothing turns over
+    Vd, Fd, Vc, Fc, b = sphere_binding
+    arrays = b.to_arrays()
+    del arrays["F_dense"], arrays["V_cage_rest"]
+    b2 = Binding.from_arrays(arrays)
+    assert b2.F_dense is None and b2.V_cage_rest is None and "F_dense" not in b2.to_arrays()
+    Ve = Vc * np.array([1.2, 1.0, 0.9])
+    assert np.array_equal(deform(b2, Ve), deform(b, Ve))
 
 
 def test_from_arrays_accepts_blender_attribute_dtypes(sphere_binding):

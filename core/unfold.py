@@ -1,0 +1,243 @@
+"""Fold repair: dense faces an edit turned over, put back (the guard of :func:`~.binding.deform`).
+
+A dense vertex follows the subdivision surface of the edited cage at its
+bound point. Where the cage is locally fine and an edit lifts one cage
+vertex against an unmoved neighbour, the surface's displacement changes by
+a large share of its own size over a short distance; a thin dense face
+standing across that slope (a wall of the scan nearly along the lift) can
+then turn over, whatever carries the detail: the bound points alone (no
+detail) fold it too.
+
+The repair, on the dense mesh itself:
+
+    detect   a face is *turned over* when its normal turned by more than 90
+             degrees from its rest normal, and also from its rest normal
+             turned by the frame rotation at its first corner (so a face
+             that only follows a large rotation of the edit, e.g. an arm
+             bent a half turn, is left alone)
+    region   the vertices of the turned-over faces and their one-ring
+    relax    ``SWEEPS`` Jacobi sweeps of ``x_i = mean(x_j) + R_i d_i`` over
+             the region (neighbours ``j`` around the faces of ``i``; ``d_i``
+             the rest offset from that mean, turned by the frame rotation
+             ``R_i``): the region takes its rest shape, moved with its
+             boundary
+    repeat   up to ``ROUNDS`` times, with the one-ring of any face still
+             turned over added to the region
+
+Nothing that does not turn a face over is changed: the identity and rigid
+motions stay exact. The repair depends only on the unrepaired positions
+(the "raw" deform) of the region and its one-ring, so an incremental
+deform that restores the last repair's raw rows and detects on the faces
+around its recomputed rows and those restored ones gives what a full
+deform gives.
+"""
+
+from typing import NamedTuple
+
+import numpy as np
+
+from ._groups import ragged_ranges
+from .mesh import cross_columns, dot_columns, vertex_normals
+
+__all__ = ["CageRings", "FaceStars", "Repair", "area_normals_rows", "area_normals_t", "away_rows",
+           "away_t", "nearest_rotations", "repair", "ring_rotations", "turned_over"]
+
+#: Jacobi sweeps per round of the repair
+SWEEPS = 8
+
+#: rounds of the repair at most (each re-detects and grows the region)
+ROUNDS = 4
+
+#: faces per block of :func:`away_t`
+_AWAY_BLOCK = 1 << 16
+
+
+class FaceStars(NamedTuple):
+    """The faces around each vertex (CSR): ``faces[start[v]:start[v + 1]]``."""
+
+    start: np.ndarray   #: (n+1,) int64
+    faces: np.ndarray   #: (3m,) int64, face ids grouped by vertex
+
+    @classmethod
+    def of(cls, F, n):
+        """The stars of the ``n`` vertices of the triangles ``F``."""
+        flat = F.ravel()
+        start = np.zeros(n + 1, dtype=np.int64)
+        np.cumsum(np.bincount(flat, minlength=n), out=start[1:])
+        return cls(start, np.argsort(flat, kind="stable") // 3)
+
+    def around(self, vertices):
+        """The distinct faces (ascending) touching any of ``vertices``."""
+        vertices = np.asarray(vertices, dtype=np.int64)
+        k, _ = ragged_ranges(self.start[vertices], self.start[vertices + 1] - self.start[vertices])
+        return np.unique(self.faces[k])
+
+
+class CageRings(NamedTuple):
+    """The cage's vertex one-rings (CSR over its distinct edges, both ways),
+    its faces and their stars, for :func:`ring_rotations`."""
+
+    start: np.ndarray   #: (n+1,) int64
+    other: np.ndarray   #: (2e,) int64, the ring of each vertex in turn
+    F: np.ndarray       #: (m,3) int64
+    stars: FaceStars    #: the faces around each cage vertex
+
+    @classmethod
+    def of(cls, F, n):
+        e = np.sort(np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]]), axis=1)
+        e = np.unique(e[:, 0] * np.int64(n) + e[:, 1])
+        a, b = e // n, e % n
+        src, dst = np.concatenate([a, b]), np.concatenate([b, a])
+        order = np.argsort(src, kind="stable")
+        start = np.zeros(n + 1, dtype=np.int64)
+        np.cumsum(np.bincount(src, minlength=n), out=start[1:])
+        return cls(start, dst[order], F, FaceStars.of(F, n))
+
+    def rotation_faces(self, vertices):
+        """The cage faces whose :func:`ring_rotations` at some corner change
+        when ``vertices`` move: those around the vertices and their rings."""
+        k, _ = ragged_ranges(self.start[vertices], self.start[vertices + 1] - self.start[vertices])
+        return self.stars.around(np.union1d(vertices, self.other[k]))
+
+
+def nearest_rotations(M):
+    """The rotations (k,3,3) nearest the matrices ``M`` (k,3,3) (polar
+    factor, a reflection made a rotation)."""
+    U, _, Vt = np.linalg.svd(M)
+    d = np.sign(np.linalg.det(U @ Vt))
+    U[:, :, 2] *= np.where(d == 0, 1.0, d)[:, None]
+    return U @ Vt
+
+
+def ring_rotations(V0, V1, rings, vertices):
+    """Per cage vertex of ``vertices``: the rotation (k,3,3) that best takes
+    its one-ring's edges (and its area normal, so a flat or straight ring
+    still has one) on ``V0`` to those on ``V1`` (least squares: Procrustes).
+    Exact for a rigid motion."""
+    counts = rings.start[vertices + 1] - rings.start[vertices]
+    k, owner = ragged_ranges(rings.start[vertices], counts)
+    j = rings.other[k]
+    a, b = V0[j] - V0[vertices[owner]], V1[j] - V1[vertices[owner]]
+    M = np.zeros((vertices.shape[0], 3, 3))
+    np.add.at(M, owner, b[:, :, None] * a[:, None, :])
+    n0, n1 = (vertex_normals(V, rings.F)[vertices] for V in (V0, V1))
+    scale = np.bincount(owner, np.einsum("ij,ij->i", a, a), vertices.shape[0])
+    M += scale[:, None, None] * n1[:, :, None] * n0[:, None, :]
+    return nearest_rotations(M)
+
+
+class Repair(NamedTuple):
+    """What a repair changed: the rows and their unrepaired ("raw") positions."""
+
+    rows: np.ndarray    #: (k,) int64, ascending
+    raw: np.ndarray     #: (k,3) float64
+
+    @classmethod
+    def none(cls):
+        return cls(np.zeros(0, dtype=np.int64), np.zeros((0, 3)))
+
+
+def area_normals_t(PT, T):
+    """Area normals (3,k) of the triangles ``T`` (3,k) (corner index rows)
+    over positions ``PT`` (3,n) (the operations of ``np.cross``)."""
+    a = np.take(PT, T[0], axis=1)
+    e1 = np.take(PT, T[1], axis=1)
+    e1 -= a
+    e2 = np.take(PT, T[2], axis=1)
+    e2 -= a
+    return cross_columns(e1, e2)
+
+
+def area_normals_rows(X, T):
+    """:func:`area_normals_t` over positions ``X`` (n,3) (the same values)."""
+    a = X[T[0]]
+    return cross_columns((X[T[1]] - a).T, (X[T[2]] - a).T)
+
+
+def away_t(PT, FT, rest_normals):
+    """Every face (ascending) whose area normal over ``PT`` (3,n) points away
+    from its rest normal (negative dot product), the faces ``FT`` (3,m)
+    taken ``_AWAY_BLOCK`` at a time (temporaries that stay in cache)."""
+    out = []
+    for s in range(0, FT.shape[1], _AWAY_BLOCK):
+        n = area_normals_t(PT, FT[:, s:s + _AWAY_BLOCK])
+        out.append(np.flatnonzero(dot_columns(n, rest_normals[:, s:s + _AWAY_BLOCK]) < 0) + s)
+    return np.concatenate(out) if out else np.zeros(0, dtype=np.int64)
+
+
+def away_rows(X, FT, faces, rest_normals):
+    """:func:`away_t` over positions ``X`` (n,3), among ``faces`` (ascending)."""
+    n = area_normals_rows(X, np.take(FT, faces, axis=1))
+    return faces[dot_columns(n, np.take(rest_normals, faces, axis=1)) < 0]
+
+
+def turned_over(X, FT, away, rest_normals, rotate):
+    """The faces among ``away`` (faces :func:`away_t` gives, ascending) turned
+    over on ``X`` (n,3): their normal also points away from their rest
+    normal turned by ``rotate(vertices, vectors)`` (the frame rotation at
+    their first corner)."""
+    if away.shape[0] == 0:
+        return away
+    n = area_normals_rows(X, np.take(FT, away, axis=1))
+    turned = rotate(FT[0, away], np.ascontiguousarray(np.take(rest_normals, away, axis=1).T))
+    return away[np.einsum("ij,ji->i", turned, n) < 0]
+
+
+def ring(stars, F, faces):
+    """The vertices of ``faces`` and their one-ring (ascending)."""
+    return np.unique(F[stars.around(np.unique(F[faces]))])
+
+
+def neighbour_means(X, F, stars, region):
+    """Per vertex of ``region``: the mean of the other corners of its faces
+    (each counted once per face), (r,3)."""
+    around = stars.around(region)
+    T = F[around]
+    slot = np.full(X.shape[0], -1, dtype=np.int64)
+    slot[region] = np.arange(region.shape[0])
+    total = np.zeros((region.shape[0], 3))
+    count = np.zeros(region.shape[0])
+    for k in range(3):
+        s = slot[T[:, k]]
+        keep = s >= 0
+        other = X[T[keep, (k + 1) % 3]] + X[T[keep, (k + 2) % 3]]
+        for d in range(3):
+            total[:, d] += np.bincount(s[keep], other[:, d], region.shape[0])
+        count += 2 * np.bincount(s[keep], minlength=region.shape[0])
+    return total / count[:, None]
+
+
+def relax(X, V_rest, F, stars, region, rotate):
+    """``SWEEPS`` Jacobi sweeps of ``x_i = mean(x_j) + R_i d_i`` over
+    ``region`` of ``X`` (in place)."""
+    offset = rotate(region, V_rest[region] - neighbour_means(V_rest, F, stars, region))
+    for _ in range(SWEEPS):
+        X[region] = neighbour_means(X, F, stars, region) + offset
+
+
+def repair(X, V_rest, F, FT, stars, folded, rest_normals, rotate):
+    """Put the turned-over faces ``folded`` of ``X`` back (in place).
+
+    Returns
+    -------
+    Repair
+        The rows changed and their positions before the repair.
+    """
+    if folded.shape[0] == 0:
+        return Repair.none()
+    region = np.zeros(0, dtype=np.int64)
+    rows, raw = [], []
+    for _ in range(ROUNDS):
+        grown = np.union1d(region, ring(stars, F, folded))
+        new = np.setdiff1d(grown, region, assume_unique=True)
+        rows.append(new)
+        raw.append(X[new])
+        region = grown
+        relax(X, V_rest, F, stars, region, rotate)
+        away = away_rows(X, FT, stars.around(region), rest_normals)
+        folded = turned_over(X, FT, away, rest_normals, rotate)
+        if folded.shape[0] == 0:
+            break
+    rows = np.concatenate(rows)
+    order = np.argsort(rows)
+    return Repair(rows[order], np.concatenate(raw)[order])
