@@ -24,6 +24,20 @@ def ragged_ranges(starts, counts):
     return idx, owner
 
 
+def ragged_entries(starts, counts):
+    """The entries of :func:`ragged_ranges` without their owners (one
+    ``repeat`` instead of two).
+
+    Examples
+    --------
+    >>> ragged_entries(np.array([5, 0]), np.array([2, 3])).tolist()
+    [5, 6, 0, 1, 2]
+    """
+    offsets = np.cumsum(counts) - counts
+    return np.arange(int(offsets[-1] + counts[-1]) if counts.shape[0] else 0,
+                     dtype=np.int64) + np.repeat(starts - offsets, counts)
+
+
 def group_argmin(values, counts):
     """Index (into ``values``) of the first minimum of each contiguous group;
     every count must be > 0.

@@ -67,7 +67,7 @@ from .spatial import TriangleIndex, point_triangle_closest
 from .subdivide import subdivision_operator
 from .unfold import (CageRings, FaceStars, Repair, area_normals_t, away_rows, away_t,
                      nearest_rotations, repair, ring_rotations, turned_over)
-from ._groups import group_argmin, ragged_ranges
+from ._groups import group_argmin, ragged_entries, ragged_ranges
 from ._parallel import WORKERS, blocks, each_in_order, run_blocks, run_each
 
 #: relative length under which a normal or tangent counts as degenerate
@@ -564,7 +564,7 @@ def deform(binding, V_cage_edited, *, F_cage=None, moved=None, out=None):
                 if hit.rows.size:
                     _deform_rows(binding, P, N, hit, out)
                 _keep_repair(binding, out, _unfold(
-                    binding, out, Vc, _repair_rows(binding, ids, hit.rows, last.rows)))
+                    binding, out, Vc, np.concatenate([hit.rows, last.rows]), also=last.away))
         return out
     Vc = _check_cage(binding, V_cage_edited, F_cage, "deform")
     X = _fine_levels(binding, Vc)
@@ -605,23 +605,6 @@ def _repair_state(binding):
     return c["repair"]
 
 
-def _repair_rows(binding, ids, rows, last_rows):
-    """The dense rows around whose faces an incremental deform moving the
-    cage vertices ``ids`` tests for the fold repair: the rows it
-    recomputed, those of the last repair, and those whose repair rotation
-    changes (bound over a cage face :meth:`~.unfold.CageRings.rotation_faces`
-    gives); None when the binding cannot repair."""
-    state = _repair_state(binding)
-    if state is None:
-        return None
-    coarse = state["cage_rings"].rotation_faces(ids)
-    per = 4 ** binding.levels
-    fine, _ = ragged_ranges(coarse * per, np.full(coarse.shape[0], per))
-    idx = binding._cache["incremental"]
-    k = _ranges(idx["dense_start"][fine], idx["dense_count"][fine])
-    return np.union1d(np.union1d(rows, last_rows), idx["dense_by_face"][k])
-
-
 def _stars(binding, state):
     """The dense vertex -> faces index of the repair state (built on first use)."""
     if state["stars"] is None:
@@ -643,7 +626,7 @@ def _keep_repair(binding, D, repaired):
     kept = _REPAIRS.setdefault(binding, {})
     for key in [k for k, (ref, _) in kept.items() if ref() is None]:
         del kept[key]
-    if repaired.rows.size:
+    if repaired.rows.size or repaired.away.size:
         kept[id(D)] = (weakref.ref(D), repaired)
     else:
         kept.pop(id(D), None)
@@ -656,23 +639,30 @@ def _rotation(binding, Vc):
     rest cage to ``Vc``, made a rotation again. A rigid motion of the cage
     turns them by exactly its rotation (to rounding)."""
     rings = _repair_state(binding)["cage_rings"]
+    every = []          # the rotations of every cage vertex, computed on first use
 
     def rotate(vertices, vectors):
+        if not every:
+            every.append(ring_rotations(binding.V_cage_rest, Vc, rings,
+                                        np.arange(binding.n_cage)))
         corners = binding.F_cage[binding.fine_face[vertices] // 4 ** binding.levels]
-        cage, at = np.unique(corners, return_inverse=True)
-        R = ring_rotations(binding.V_cage_rest, Vc, rings, cage)[at.reshape(corners.shape)]
-        return np.einsum("kij,kj->ki", nearest_rotations(R.sum(axis=1)), vectors)
+        R = every[0][corners].sum(axis=1)
+        return np.einsum("kij,kj->ki", nearest_rotations(R), vectors)
     return rotate
 
 
-def _unfold(binding, D, Vc, rows=None, DT=None):
+def _unfold(binding, D, Vc, rows=None, DT=None, also=None):
     """Repair the faces of ``D`` (in place), deformed on the cage ``Vc``,
     turned over (:mod:`.unfold`); returns the :class:`~.unfold.Repair`
-    (callers hold ``_INCREMENTAL_LOCK``). The faces tested: with ``rows``,
-    those around them; else those around the dense vertices the cage
-    vertices moved from rest influence (the others are where they were at
-    rest, bit for bit), or every face (over ``DT``, ``D`` transposed) when
-    more than ``_REPAIR_ALL_SHARE`` of the cage moved."""
+    (callers hold ``_INCREMENTAL_LOCK``). The faces tested: with ``rows``
+    (an incremental deform: the rows it wrote and those of the last
+    repair), those around them and the faces ``also`` (those the last one
+    found away from rest: their rotation may have changed; every other face
+    is as it was then, so not turned over); else those around the dense
+    vertices the cage vertices moved from rest influence (the others are
+    where they were at rest, bit for bit), or every face (over ``DT``,
+    ``D`` transposed) when more than ``_REPAIR_ALL_SHARE`` of the cage
+    moved."""
     state = _repair_state(binding)
     if state is None:
         return Repair.none()
@@ -684,11 +674,14 @@ def _unfold(binding, D, Vc, rows=None, DT=None):
         else:
             rows = _influenced_dense(binding, moved).rows if moved.size else moved
     if rows is not None:
-        away = away_rows(D, FT, _stars(binding, state).around(rows), rest)
+        faces = _stars(binding, state).around(rows)
+        if also is not None and also.size:
+            faces = np.union1d(faces, also)
+        away = away_rows(D, FT, faces, rest)
     rotate = _rotation(binding, Vc)
     folded = turned_over(D, FT, away, rest, rotate)
     return repair(D, state["V_rest"], binding.F_dense, FT,
-                  _stars(binding, state) if folded.size else None, folded, rest, rotate)
+                  _stars(binding, state) if folded.size else None, folded, rest, rotate, away)
 
 
 def _check_out(binding, out):
@@ -802,13 +795,14 @@ def _influenced_dense(binding, ids):
         return last[1]
     changed, pos_changed = [], ids
     for T in idx["levels_t"]:        # level by level: the rows reading a changed vertex
-        k = _ranges(T.indptr[pos_changed], T.indptr[pos_changed + 1] - T.indptr[pos_changed])
+        start = T.indptr[pos_changed]
+        k = ragged_entries(start, T.indptr[pos_changed + 1] - start)
         pos_changed = _distinct(T.cols[k], idx)
         changed.append(pos_changed)
     touched = _faces_around(idx, pos_changed)
     normal_changed = _distinct(np.take(idx["corners_t"], touched, axis=1).ravel(), idx)
     faces = _faces_around(idx, normal_changed, with_rows=True)      # ascending
-    k = _ranges(idx["dense_start"][faces], idx["dense_count"][faces])
+    k = ragged_entries(idx["dense_start"][faces], idx["dense_count"][faces])
     result = _Influenced(idx["dense_by_face"][k], k, faces, tuple(changed), normal_changed)
     idx["last"] = (key, result)
     return result
@@ -871,17 +865,8 @@ def _faces_around(idx, vertices, with_rows=False):
     """Distinct fine faces incident to the given distinct fine vertices
     (ascending); with ``with_rows``, only faces some dense vertex is bound to."""
     pre = "row_" if with_rows else ""
-    k = _ranges(idx[pre + "vertex_start"][vertices], idx[pre + "vertex_count"][vertices])
+    k = ragged_entries(idx[pre + "vertex_start"][vertices], idx[pre + "vertex_count"][vertices])
     return _distinct(idx[pre + "faces_by_vertex"][k], idx)
-
-
-def _ranges(starts, counts):
-    """Concatenated ``arange(starts[i], starts[i] + counts[i])``: the entries
-    of :func:`~._groups.ragged_ranges` without their owners (one ``repeat``
-    instead of two)."""
-    offsets = np.cumsum(counts) - counts
-    return np.arange(int(offsets[-1] + counts[-1]) if counts.shape[0] else 0,
-                     dtype=np.int64) + np.repeat(starts - offsets, counts)
 
 
 def _distinct(values, idx):
@@ -1167,7 +1152,7 @@ def _normals_at(idx, PT, vertices):
     and summed with ``np.add.reduceat``: in another order than there, so
     equal to it to rounding), normalised as there."""
     counts = idx["vertex_count"][vertices]
-    around = idx["faces_by_vertex"][_ranges(idx["vertex_start"][vertices], counts)]
+    around = idx["faces_by_vertex"][ragged_entries(idx["vertex_start"][vertices], counts)]
     faces = _distinct(around, idx)
     stamp = idx["stamp"]
     T = np.take(idx["corners_t"], faces, axis=1)

@@ -36,11 +36,11 @@ from typing import NamedTuple
 
 import numpy as np
 
-from ._groups import ragged_ranges
-from .mesh import cross_columns, dot_columns, vertex_normals
+from ._groups import ragged_entries, ragged_ranges
+from .mesh import cross_columns, cross_rows, dot_columns, vertex_normals
 
-__all__ = ["CageRings", "FaceStars", "Repair", "area_normals_rows", "area_normals_t", "away_rows",
-           "away_t", "nearest_rotations", "repair", "ring_rotations", "turned_over"]
+__all__ = ["CageRings", "FaceStars", "Neighbours", "Repair", "area_normals_rows", "area_normals_t",
+           "away_rows", "away_t", "nearest_rotations", "repair", "ring_rotations", "turned_over"]
 
 #: Jacobi sweeps per round of the repair
 SWEEPS = 8
@@ -51,12 +51,17 @@ ROUNDS = 4
 #: faces per block of :func:`away_t`
 _AWAY_BLOCK = 1 << 16
 
+#: :meth:`FaceStars.around` marks its faces in a mask and scans their span when it
+#: is at most this many times their count (else it sorts them)
+_MASK_SPAN = 32
+
 
 class FaceStars(NamedTuple):
     """The faces around each vertex (CSR): ``faces[start[v]:start[v + 1]]``."""
 
     start: np.ndarray   #: (n+1,) int64
     faces: np.ndarray   #: (3m,) int64, face ids grouped by vertex
+    seen: np.ndarray    #: (m,) bool scratch of :meth:`around`, all False between calls
 
     @classmethod
     def of(cls, F, n):
@@ -64,23 +69,35 @@ class FaceStars(NamedTuple):
         flat = F.ravel()
         start = np.zeros(n + 1, dtype=np.int64)
         np.cumsum(np.bincount(flat, minlength=n), out=start[1:])
-        return cls(start, np.argsort(flat, kind="stable") // 3)
+        return cls(start, np.argsort(flat, kind="stable") // 3, np.zeros(F.shape[0], dtype=bool))
 
     def around(self, vertices):
-        """The distinct faces (ascending) touching any of ``vertices``."""
+        """The distinct faces (ascending) touching any of ``vertices``
+        (duplicates allowed): sorted when few for their span, else marked in
+        the scratch mask and its span read back (no sort). Not for two
+        threads at once (the repair runs under the binding's lock)."""
         vertices = np.asarray(vertices, dtype=np.int64)
-        k, _ = ragged_ranges(self.start[vertices], self.start[vertices + 1] - self.start[vertices])
-        return np.unique(self.faces[k])
+        faces = self.faces[ragged_entries(self.start[vertices],
+                                          self.start[vertices + 1] - self.start[vertices])]
+        if faces.shape[0] == 0:
+            return faces
+        lo, hi = int(faces.min()), int(faces.max()) + 1
+        if faces.shape[0] * _MASK_SPAN < hi - lo:
+            return np.unique(faces)
+        self.seen[faces] = True
+        out = np.flatnonzero(self.seen[lo:hi])
+        out += lo
+        self.seen[out] = False
+        return out
 
 
 class CageRings(NamedTuple):
-    """The cage's vertex one-rings (CSR over its distinct edges, both ways),
-    its faces and their stars, for :func:`ring_rotations`."""
+    """The cage's vertex one-rings (CSR over its distinct edges, both ways)
+    and its faces, for :func:`ring_rotations`."""
 
     start: np.ndarray   #: (n+1,) int64
     other: np.ndarray   #: (2e,) int64, the ring of each vertex in turn
     F: np.ndarray       #: (m,3) int64
-    stars: FaceStars    #: the faces around each cage vertex
 
     @classmethod
     def of(cls, F, n):
@@ -91,13 +108,7 @@ class CageRings(NamedTuple):
         order = np.argsort(src, kind="stable")
         start = np.zeros(n + 1, dtype=np.int64)
         np.cumsum(np.bincount(src, minlength=n), out=start[1:])
-        return cls(start, dst[order], F, FaceStars.of(F, n))
-
-    def rotation_faces(self, vertices):
-        """The cage faces whose :func:`ring_rotations` at some corner change
-        when ``vertices`` move: those around the vertices and their rings."""
-        k, _ = ragged_ranges(self.start[vertices], self.start[vertices + 1] - self.start[vertices])
-        return self.stars.around(np.union1d(vertices, self.other[k]))
+        return cls(start, dst[order], F)
 
 
 def nearest_rotations(M):
@@ -127,14 +138,19 @@ def ring_rotations(V0, V1, rings, vertices):
 
 
 class Repair(NamedTuple):
-    """What a repair changed: the rows and their unrepaired ("raw") positions."""
+    """What a repair changed: the rows and their unrepaired ("raw")
+    positions; and the faces found pointing away from their rest normal
+    (those turned over, and those only turned with the cage: a later move
+    of the cage elsewhere may change their rotation, so an incremental
+    deform tests them again)."""
 
     rows: np.ndarray    #: (k,) int64, ascending
     raw: np.ndarray     #: (k,3) float64
+    away: np.ndarray    #: (j,) int64, ascending
 
     @classmethod
     def none(cls):
-        return cls(np.zeros(0, dtype=np.int64), np.zeros((0, 3)))
+        return cls(np.zeros(0, dtype=np.int64), np.zeros((0, 3)), np.zeros(0, dtype=np.int64))
 
 
 def area_normals_t(PT, T):
@@ -149,9 +165,14 @@ def area_normals_t(PT, T):
 
 
 def area_normals_rows(X, T):
-    """:func:`area_normals_t` over positions ``X`` (n,3) (the same values)."""
-    a = X[T[0]]
-    return cross_columns((X[T[1]] - a).T, (X[T[2]] - a).T)
+    """:func:`area_normals_t` over positions ``X`` (n,3), as rows (k,3) (the
+    same values)."""
+    a = np.take(X, T[0], axis=0)
+    e1 = np.take(X, T[1], axis=0)
+    e1 -= a
+    e2 = np.take(X, T[2], axis=0)
+    e2 -= a
+    return cross_rows(e1, e2, out=a)
 
 
 def away_t(PT, FT, rest_normals):
@@ -168,7 +189,7 @@ def away_t(PT, FT, rest_normals):
 def away_rows(X, FT, faces, rest_normals):
     """:func:`away_t` over positions ``X`` (n,3), among ``faces`` (ascending)."""
     n = area_normals_rows(X, np.take(FT, faces, axis=1))
-    return faces[dot_columns(n, np.take(rest_normals, faces, axis=1)) < 0]
+    return faces[dot_columns(n.T, np.take(rest_normals, faces, axis=1)) < 0]
 
 
 def turned_over(X, FT, away, rest_normals, rotate):
@@ -180,7 +201,7 @@ def turned_over(X, FT, away, rest_normals, rotate):
         return away
     n = area_normals_rows(X, np.take(FT, away, axis=1))
     turned = rotate(FT[0, away], np.ascontiguousarray(np.take(rest_normals, away, axis=1).T))
-    return away[np.einsum("ij,ji->i", turned, n) < 0]
+    return away[np.einsum("ij,ij->i", turned, n) < 0]
 
 
 def ring(stars, F, faces):
@@ -188,35 +209,49 @@ def ring(stars, F, faces):
     return np.unique(F[stars.around(np.unique(F[faces]))])
 
 
-def neighbour_means(X, F, stars, region):
-    """Per vertex of ``region``: the mean of the other corners of its faces
-    (each counted once per face), (r,3)."""
-    around = stars.around(region)
-    T = F[around]
-    slot = np.full(X.shape[0], -1, dtype=np.int64)
-    slot[region] = np.arange(region.shape[0])
-    total = np.zeros((region.shape[0], 3))
-    count = np.zeros(region.shape[0])
-    for k in range(3):
-        s = slot[T[:, k]]
-        keep = s >= 0
-        other = X[T[keep, (k + 1) % 3]] + X[T[keep, (k + 2) % 3]]
-        for d in range(3):
-            total[:, d] += np.bincount(s[keep], other[:, d], region.shape[0])
-        count += 2 * np.bincount(s[keep], minlength=region.shape[0])
-    return total / count[:, None]
+class Neighbours(NamedTuple):
+    """Per vertex of a region, the other corners of its faces (each counted
+    once per face), as (owner slot, neighbour vertex) pairs."""
+
+    owner: np.ndarray   #: (p,) int64, slot in the region
+    other: np.ndarray   #: (p,) int64, neighbour vertex
+    count: np.ndarray   #: (r,) float64, pairs per region vertex
+
+    @classmethod
+    def of(cls, F, stars, region, n):
+        T = F[stars.around(region)]
+        slot = np.full(n, -1, dtype=np.int64)
+        slot[region] = np.arange(region.shape[0])
+        owner, other = [], []
+        for k in range(3):
+            s = slot[T[:, k]]
+            keep = s >= 0
+            for j in (1, 2):
+                owner.append(s[keep])
+                other.append(T[keep, (k + j) % 3])
+        owner, other = np.concatenate(owner), np.concatenate(other)
+        return cls(owner, other, np.bincount(owner, minlength=region.shape[0]).astype(np.float64))
+
+    def means(self, X):
+        """The mean neighbour position of each region vertex, (r,3)."""
+        P = X[self.other]
+        r = self.count.shape[0]
+        return np.stack([np.bincount(self.owner, P[:, d], r) for d in range(3)], axis=1) \
+            / self.count[:, None]
 
 
 def relax(X, V_rest, F, stars, region, rotate):
     """``SWEEPS`` Jacobi sweeps of ``x_i = mean(x_j) + R_i d_i`` over
     ``region`` of ``X`` (in place)."""
-    offset = rotate(region, V_rest[region] - neighbour_means(V_rest, F, stars, region))
+    near = Neighbours.of(F, stars, region, X.shape[0])
+    offset = rotate(region, V_rest[region] - near.means(V_rest))
     for _ in range(SWEEPS):
-        X[region] = neighbour_means(X, F, stars, region) + offset
+        X[region] = near.means(X) + offset
 
 
-def repair(X, V_rest, F, FT, stars, folded, rest_normals, rotate):
-    """Put the turned-over faces ``folded`` of ``X`` back (in place).
+def repair(X, V_rest, F, FT, stars, folded, rest_normals, rotate, away):
+    """Put the turned-over faces ``folded`` of ``X`` back (in place);
+    ``away`` the faces found pointing away from rest (kept in the result).
 
     Returns
     -------
@@ -224,7 +259,7 @@ def repair(X, V_rest, F, FT, stars, folded, rest_normals, rotate):
         The rows changed and their positions before the repair.
     """
     if folded.shape[0] == 0:
-        return Repair.none()
+        return Repair.none()._replace(away=away)
     region = np.zeros(0, dtype=np.int64)
     rows, raw = [], []
     for _ in range(ROUNDS):
@@ -234,10 +269,10 @@ def repair(X, V_rest, F, FT, stars, folded, rest_normals, rotate):
         raw.append(X[new])
         region = grown
         relax(X, V_rest, F, stars, region, rotate)
-        away = away_rows(X, FT, stars.around(region), rest_normals)
-        folded = turned_over(X, FT, away, rest_normals, rotate)
+        left = away_rows(X, FT, stars.around(region), rest_normals)
+        folded = turned_over(X, FT, left, rest_normals, rotate)
         if folded.shape[0] == 0:
             break
     rows = np.concatenate(rows)
     order = np.argsort(rows)
-    return Repair(rows[order], np.concatenate(raw)[order])
+    return Repair(rows[order], np.concatenate(raw)[order], away)

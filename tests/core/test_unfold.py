@@ -57,10 +57,12 @@ def test_repair_puts_a_pushed_vertex_back_and_writes_only_its_region():
     FT = np.ascontiguousarray(F.T)
     rest = _rest_normals(V, F)
     stars = FaceStars.of(F, V.shape[0])
-    folded = turned_over(X, FT, away_t(np.ascontiguousarray(X.T), FT, rest), rest, _identity)
+    away = away_t(np.ascontiguousarray(X.T), FT, rest)
+    folded = turned_over(X, FT, away, rest, _identity)
     assert folded.size > 0 and np.isin(centre, F[folded]).all()
     Y = X.copy()
-    rep = repair(Y, V, F, FT, stars, folded, rest, _identity)
+    rep = repair(Y, V, F, FT, stars, folded, rest, _identity, away)
+    assert np.array_equal(rep.away, away)
     assert _turned_from_rest(V, Y, F) == 0
     changed = np.flatnonzero((Y != X).any(axis=1))
     assert np.isin(changed, rep.rows).all() and np.array_equal(rep.rows, np.unique(rep.rows))
@@ -78,7 +80,8 @@ def test_nothing_to_repair_changes_nothing():
     rest = _rest_normals(V, F)
     away = away_rows(X, FT, np.arange(F.shape[0]), rest)
     assert away.size == 0
-    rep = repair(X, V, F, FT, None, turned_over(X, FT, away, rest, _identity), rest, _identity)
+    rep = repair(X, V, F, FT, None, turned_over(X, FT, away, rest, _identity), rest, _identity,
+                 away)
     assert rep.rows.size == 0 and rep.raw.shape == (0, 3)
     assert np.array_equal(X, V + 0.01)
 
