@@ -158,9 +158,12 @@ def test_incremental_equals_full_through_repairs(rough_torus):
     for _ in range(8):
         ids = rng.choice(ring, rng.integers(1, ring.size + 1), replace=False)
         cur[ids] = cage.V[ids] + rng.random() * lift
-        before = b.repaired(D)
+        before, previous = b.repaired(D), D.copy()
         deform(b, cur, moved=ids, out=D)
         after = b.repaired(D)
+        # what the live update copies covers every row that changed
+        copied = np.union1d(b.influenced(ids), np.union1d(before, after))
+        assert np.isin(np.flatnonzero((D != previous).any(axis=1)), copied).all()
         full = deform(b, cur)
         assert np.abs(D - full).max() <= 1e-12 * bbox_diagonal(Vd)
         assert np.array_equal(after, b.repaired(full))
