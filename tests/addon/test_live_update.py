@@ -82,3 +82,44 @@ def test_edit_mode_and_transform_changes_are_followed(bound_cage):
     before = mio.read_positions(edited.data)
     assert lu.update_edited(cage).full
     assert np.allclose(mio.read_positions(edited.data)[:, 0] - before[:, 0], 0.25, atol=1e-4)
+
+
+def test_live_update_follows_the_fold_repair(scene):
+    """A rough torus bound with butterfly: a large one-ring lift turns dense
+    faces over, the fold repair moves rows outside what the moved cage
+    vertices influence through the subdivision, and the live update writes
+    them too (equal to a full refine), also when the lift is undone."""
+    from tests.mesh_factory import torus
+    lu, mio, store = _mod("live_update"), _mod("mesh_io"), _mod("store")
+    V, F = torus(96, 48, bump=0.01)
+    V = V + 0.01 * np.random.default_rng(0).standard_normal(V.shape)
+    dense = make_object("dense", V, F)
+    assert bpy.ops.meshadjust.simplify(target_mode='FACES', target_faces=200, fit=False,
+                                       bind=True, levels=2, scheme='butterfly') == {'FINISHED'}
+    lu.forget()
+    cage = dense.meshadjust.cage
+    edited = cage.meshadjust.edited
+    lu.update_edited(cage)
+    binding = store.load_binding(edited, cage)
+    Vc = mio.read_positions(cage.data)
+    Fc = mio.read_triangles(cage.data)[0]
+    core = _mod("live_update").core
+    N = core.vertex_normals(Vc, Fc)
+    diag = float(np.linalg.norm(V.max(axis=0) - V.min(axis=0)))
+    lifted = None
+    for v in range(0, Vc.shape[0], 7):        # a cage vertex whose one-ring lift needs a repair
+        ring = np.unique(Fc[(Fc == v).any(axis=1)])
+        Ve = Vc.copy()
+        Ve[ring] += 0.08 * diag * N[v]
+        D = core.deform(binding, Ve)
+        if binding.repaired(D).size:
+            lifted = Ve
+            break
+    assert lifted is not None
+    for positions in (lifted, Vc):
+        mio.write_positions(cage.data, positions)
+        t = lu.update_edited(cage)
+        assert not t.full
+        live = mio.read_positions(edited.data)
+        assert bpy.ops.meshadjust.refine(output='EDITED') == {'FINISHED'}
+        assert np.abs(live - mio.read_positions(edited.data)).max() <= 1e-6
