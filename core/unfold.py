@@ -39,7 +39,7 @@ import numpy as np
 from ._groups import ragged_entries, ragged_ranges
 from .mesh import cross_columns, cross_rows, dot_columns, vertex_normals
 
-__all__ = ["CageRings", "FaceStars", "Neighbours", "Repair", "area_normals_rows", "area_normals_t",
+__all__ = ["CageRings", "FaceStars", "FineFaceGroups", "Neighbours", "Repair", "area_normals_rows", "area_normals_t",
            "away_rows", "away_t", "nearest_rotations", "repair", "ring_rotations", "turned_over"]
 
 #: Jacobi sweeps per round of the repair
@@ -89,6 +89,42 @@ class FaceStars(NamedTuple):
         out += lo
         self.seen[out] = False
         return out
+
+
+class FineFaceGroups(NamedTuple):
+    """Per fine face of a binding, the dense faces with a corner bound to it
+    (a face under each of its distinct fine faces), with their corner rows
+    and rest normals laid out in that order: the faces around the rows an
+    incremental deform rewrote (the rows of some fine faces) are then a few
+    contiguous runs, not a search around each row."""
+
+    start: np.ndarray   #: (m_fine+1,) int64
+    faces: np.ndarray   #: (e,) int64
+    corners: np.ndarray  #: (3,e) int32 (int64 past 2^31 vertices), the faces' corners
+    rest: np.ndarray    #: (3,e) the faces' rest normals
+
+    @classmethod
+    def of(cls, F, fine_face, m_fine, rest_normals):
+        g = fine_face[F]
+        second = np.flatnonzero(g[:, 1] != g[:, 0])
+        third = np.flatnonzero((g[:, 2] != g[:, 0]) & (g[:, 2] != g[:, 1]))
+        group = np.concatenate([g[:, 0], g[second, 1], g[third, 2]])
+        faces = np.concatenate([np.arange(F.shape[0]), second, third])[
+            np.argsort(group, kind="stable")]
+        start = np.zeros(m_fine + 1, dtype=np.int64)
+        np.cumsum(np.bincount(group, minlength=m_fine), out=start[1:])
+        corners = np.ascontiguousarray(
+            F[faces].T, dtype=np.int32 if F.shape[0] and F.max() < 2**31 else np.int64)
+        return cls(start, faces, corners, np.ascontiguousarray(np.take(rest_normals, faces, axis=1)))
+
+    def away(self, X, fine_faces):
+        """The faces (distinct, ascending) with a corner bound to one of
+        ``fine_faces`` whose normal on ``X`` points away from rest (the
+        values of :func:`away_rows`)."""
+        first = self.start[fine_faces]
+        k = ragged_entries(first, self.start[fine_faces + 1] - first)
+        n = area_normals_rows(X, np.take(self.corners, k, axis=1))
+        return np.unique(self.faces[k[dot_columns(n.T, np.take(self.rest, k, axis=1)) < 0]])
 
 
 class CageRings(NamedTuple):

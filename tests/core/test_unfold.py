@@ -20,8 +20,8 @@ from core.binding import bind, deform
 from core.fit import fit_cage
 from core.mesh import bbox_diagonal, face_normals, vertex_normals
 from core.simplify import simplify
-from core.unfold import (CageRings, FaceStars, away_rows, away_t, nearest_rotations,
-                         repair, ring_rotations, turned_over)
+from core.unfold import (CageRings, FaceStars, FineFaceGroups, away_rows, away_t,
+                         nearest_rotations, repair, ring_rotations, turned_over)
 from tests.mesh_factory import load_shared, regular_grid, torus
 
 
@@ -105,6 +105,47 @@ def test_nearest_rotation_of_a_reflection_is_a_rotation():
     R = nearest_rotations(M)
     assert np.isclose(np.linalg.det(R[0]), 1.0)
     assert np.abs(R[0] @ R[0].T - np.eye(3)).max() < 1e-12
+
+
+def test_fine_face_groups_find_the_faces_around_the_rows(rough_torus):
+    # the two ways an incremental deform tests the faces around its rows agree
+    Vd, Fd, cage, b, normal, ring = rough_torus
+    Ve = cage.V.copy()
+    Ve[ring] += 0.08 * bbox_diagonal(Vd) * normal
+    D = deform(dataclasses.replace(b, F_dense=None, _cache=None), Ve)
+    FT = np.ascontiguousarray(Fd.T)
+    rest = _rest_normals(Vd, Fd)
+    groups = FineFaceGroups.of(Fd, b.fine_face, b.operator.F_fine.shape[0], rest)
+    fine = np.unique(b.fine_face[b.influenced(ring)])
+    rows = np.flatnonzero(np.isin(b.fine_face, fine))
+    expected = away_rows(D, FT, FaceStars.of(Fd, Vd.shape[0]).around(rows), rest)
+    assert expected.size > 0
+    assert np.array_equal(groups.away(D, fine), expected)
+    # every face appears under each of its distinct fine faces
+    assert groups.faces.shape[0] == sum(np.unique(b.fine_face[f]).size for f in Fd)
+
+
+@pytest.mark.parametrize("levels", [1, 2])
+def test_incremental_equals_full_through_repairs_at_both_test_paths(levels):
+    # one level: the fine mesh is 4x coarser than the dense one, the faces are
+    # found by fine face groups; two: around each row
+    Vd, Fd = torus(96, 48, bump=0.01)
+    Vd = Vd + 0.01 * np.random.default_rng(0).standard_normal(Vd.shape)
+    cage = simplify(Vd, Fd, target_faces=200)
+    b = bind(Vd, Fd, cage.V, cage.F, levels=levels, scheme="butterfly")
+    normal = vertex_normals(cage.V, cage.F)[50]
+    ring = np.unique(cage.F[(cage.F == 50).any(axis=1)])
+    rng = np.random.default_rng(7)
+    cur = cage.V.copy()
+    D = deform(b, cur)
+    seen = 0
+    for _ in range(6):
+        ids = rng.choice(ring, rng.integers(1, ring.size + 1), replace=False)
+        cur[ids] = cage.V[ids] + rng.random() * 0.1 * bbox_diagonal(Vd) * normal
+        deform(b, cur, moved=ids, out=D)
+        assert np.abs(D - deform(b, cur)).max() <= 1e-12 * bbox_diagonal(Vd)
+        seen += b.repaired(D).size > 0
+    assert seen > 0
 
 
 # ------------------------------------------------------------------ through deform
