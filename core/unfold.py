@@ -11,14 +11,17 @@ detail) fold it too.
 The repair, on the dense mesh itself:
 
     detect   a face is *turned over* when its normal turned by more than 90
-             degrees from its rest normal, and also from its rest normal
-             turned by the frame rotation at its first corner (so a face
-             that only follows a large rotation of the edit, e.g. an arm
-             bent a half turn, is left alone)
+             degrees from its rest normal ("away", the cheap test, on the
+             faces the deform may have changed: :func:`away_t`,
+             :func:`away_rows`, :class:`FineFaceGroups`), and also from its
+             rest normal turned by the cage's rotation at its first corner
+             (:func:`ring_rotations`: so a face that only follows a large
+             rotation of the edit, e.g. an arm bent a half turn, is left
+             alone)
     region   the vertices of the turned-over faces and their one-ring
     relax    ``SWEEPS`` Jacobi sweeps of ``x_i = mean(x_j) + R_i d_i`` over
              the region (neighbours ``j`` around the faces of ``i``; ``d_i``
-             the rest offset from that mean, turned by the frame rotation
+             the rest offset from that mean, turned by the cage's rotation
              ``R_i``): the region takes its rest shape, moved with its
              boundary
     repeat   up to ``ROUNDS`` times, with the one-ring of any face still
@@ -28,8 +31,8 @@ Nothing that does not turn a face over is changed: the identity and rigid
 motions stay exact. The repair depends only on the unrepaired positions
 (the "raw" deform) of the region and its one-ring, so an incremental
 deform that restores the last repair's raw rows and detects on the faces
-around its recomputed rows and those restored ones gives what a full
-deform gives.
+around its recomputed rows and those restored ones, and on the faces the
+last one found away from rest, gives what a full deform gives.
 """
 
 from typing import NamedTuple
@@ -39,8 +42,9 @@ import numpy as np
 from ._groups import ragged_entries, ragged_ranges
 from .mesh import cross_columns, cross_rows, dot_columns, vertex_normals
 
-__all__ = ["CageRings", "FaceStars", "FineFaceGroups", "Neighbours", "Repair", "area_normals_rows", "area_normals_t",
-           "away_rows", "away_t", "nearest_rotations", "repair", "ring_rotations", "turned_over"]
+__all__ = ["CageRings", "FaceStars", "FineFaceGroups", "Neighbours", "Repair", "area_normals_rows",
+           "area_normals_t", "away_rows", "away_t", "nearest_rotations", "repair", "ring_rotations",
+           "turned_over"]
 
 #: Jacobi sweeps per round of the repair
 SWEEPS = 8
@@ -115,7 +119,8 @@ class FineFaceGroups(NamedTuple):
         np.cumsum(np.bincount(group, minlength=m_fine), out=start[1:])
         corners = np.ascontiguousarray(
             F[faces].T, dtype=np.int32 if F.shape[0] and F.max() < 2**31 else np.int64)
-        return cls(start, faces, corners, np.ascontiguousarray(np.take(rest_normals, faces, axis=1)))
+        rest = np.ascontiguousarray(np.take(rest_normals, faces, axis=1))
+        return cls(start, faces, corners, rest)
 
     def away(self, X, fine_faces):
         """The faces (distinct, ascending) with a corner bound to one of
