@@ -327,8 +327,9 @@ class Binding:
 
         The first call (also with an empty list) builds the indices the
         incremental deform uses (fine face -> dense vertices, fine vertex ->
-        fine faces, each level's stencil transposed), so a caller can pay for
-        them up front.
+        fine faces, each level's stencil transposed, and the fold repair's
+        faces around the dense vertices), so a caller can pay for them up
+        front.
 
         Parameters
         ----------
@@ -350,6 +351,7 @@ class Binding:
         """
         ids = _check_moved(self, cage_vertex_ids, "Binding.influenced")
         _incremental_index(self)            # built on first use, also for an empty list
+        _repair_index(self)
         if ids.size == 0:
             return np.zeros(0, dtype=np.int64)
         with _INCREMENTAL_LOCK:
@@ -609,6 +611,21 @@ def _repair_state(binding):
     return c["repair"]
 
 
+def _repair_index(binding):
+    """Build the fold repair's state and the index its incremental test
+    uses (see :func:`_away_around`) now, if the binding can repair."""
+    state = _repair_state(binding)
+    if state is not None:
+        _stars(binding, state)
+        if _by_groups(binding):
+            _groups(binding, state)
+
+
+def _by_groups(binding):
+    """Whether the fold test finds the faces around rows by fine face groups."""
+    return binding._operator.F_fine.shape[0] <= _GROUPS_SHARE * binding.F_dense.shape[0]
+
+
 def _away_around(binding, state, D, hit):
     """The faces around the rows of ``hit`` (an :class:`_Influenced`) whose
     normal on ``D`` points away from rest: by the fine faces' groups
@@ -617,7 +634,7 @@ def _away_around(binding, state, D, hit):
     one or two fine faces; 1.7x faster on the bunny x16 at two levels),
     else around each row (at five levels, as many fine faces as dense ones,
     the groups repeat each face 2-3 times: 1.8x slower)."""
-    if binding._operator.F_fine.shape[0] <= _GROUPS_SHARE * binding.F_dense.shape[0]:
+    if _by_groups(binding):
         return _groups(binding, state).away(D, hit.faces)
     return away_rows(D, state["F_t"], _stars(binding, state).around(hit.rows), state["normals"])
 
