@@ -360,6 +360,10 @@ def refine_object(cage, *, output='EDITED', levels=None, scheme=None):
         V_edited = None
         if output in ('EDITED', 'BOTH', 'SHAPE_KEY'):
             V_edited = core.deform(binding, V_cage)
+            repaired = binding.repaired(V_edited).size
+            if repaired:
+                parts.append(f"{repaired:,} dense vertices put back where the edit turned "
+                             f"faces over")
         if output in ('EDITED', 'BOTH'):
             rb.keep(edited.data)
             mesh_io.write_positions(edited.data, V_edited)
