@@ -593,8 +593,8 @@ def _repair_state(binding):
     """The fold repair's rest data, built on first use and cached (None when
     the binding was made without the dense faces or the cage): the dense
     positions on the rest cage, the dense faces' corner rows and rest area
-    normals (3, m; float32), the cage's one-rings, the dense vertex -> faces index
-    (built when first needed) and the last repair."""
+    normals (3, m; float32), the cage's one-rings, and the indices of the
+    faces around dense vertices (built when first needed)."""
     if binding.F_dense is None or binding.V_cage_rest is None or not binding.F_dense.shape[0]:
         return None
     c = binding._cache
