@@ -38,6 +38,45 @@ def ragged_entries(starts, counts):
                      dtype=np.int64) + np.repeat(starts - offsets, counts)
 
 
+#: :func:`distinct` marks a set in a boolean mask and scans its span when the span
+#: is at most this many times the set's size
+MASK_SPAN = 32
+
+
+def distinct(values, seen, stamp=None):
+    """The distinct values of the int array ``values``, ascending, as int64.
+
+    Values spanning at most ``MASK_SPAN`` times their count (the large sets
+    of an incremental deform or of the fold repair's test) are marked in
+    the boolean scratch ``seen`` (longer than the largest value, all False
+    between calls), the marks of the span read back in one sequential scan
+    and cleared: 1.4-1.7x faster than the stamp for 80-200k values over
+    1-2M. Sparser ones go through the int64 scratch ``stamp`` when given
+    (each value's slot receives the position of one of its occurrences and
+    exactly that occurrence is kept, O(len(values)) whatever their range,
+    then sorted), else ``np.unique``. Not for two threads sharing a scratch.
+
+    Examples
+    --------
+    >>> distinct(np.array([4, 2, 4, 3]), np.zeros(8, dtype=bool)).tolist()
+    [2, 3, 4]
+    """
+    if values.shape[0] == 0:
+        return values.astype(np.int64)
+    lo, hi = int(values.min()), int(values.max()) + 1
+    if hi - lo <= MASK_SPAN * values.shape[0]:
+        seen[values] = True
+        out = np.flatnonzero(seen[lo:hi])
+        out += lo
+        seen[out] = False
+        return out
+    if stamp is None:
+        return np.unique(values).astype(np.int64, copy=False)
+    pos = np.arange(values.shape[0], dtype=np.int64)
+    stamp[values] = pos
+    return np.sort(values[stamp[values] == pos]).astype(np.int64, copy=False)
+
+
 def group_argmin(values, counts):
     """Index (into ``values``) of the first minimum of each contiguous group;
     every count must be > 0.

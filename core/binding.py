@@ -61,13 +61,13 @@ import numpy as np
 
 from .clean import clean_mesh
 from .errors import CancelledError, InvalidArgumentError, InvalidMeshError, TopologyMismatchError
-from .mesh import check_mesh, cross_columns, dot_columns
+from .mesh import area_normals_t, check_mesh, cross_columns, dot_columns
 from .near_query import NearQuery, cell_for_reach
 from .spatial import TriangleIndex, point_triangle_closest
 from .subdivide import subdivision_operator
-from .unfold import (CageRings, FaceStars, FineFaceGroups, Repair, area_normals_t, away_rows,
-                     away_t, nearest_rotations, repair, ring_rotations, turned_over)
-from ._groups import group_argmin, ragged_entries, ragged_ranges
+from .unfold import (CageRings, FaceStars, FineFaceGroups, Repair, away_rows, away_t,
+                     nearest_rotations, repair, ring_rotations, turned_over)
+from ._groups import distinct, group_argmin, ragged_entries, ragged_ranges
 from ._parallel import WORKERS, blocks, each_in_order, run_blocks, run_each
 
 #: relative length under which a normal or tangent counts as degenerate
@@ -102,9 +102,6 @@ _RING_BLOCK = 2_048
 #: temporaries: (3, 16384) float64 is 384 KiB)
 _ROW_BLOCK = 16_384
 
-#: :func:`_distinct` marks a set in a boolean mask and scans its span when the
-#: span is at most this many times the set's size (else: the stamp array)
-_MASK_SPAN = 32
 
 #: serialises incremental deforms (they share scratch tables in the binding's
 #: cache; a module lock, not one per binding, so a Binding stays picklable)
@@ -914,30 +911,9 @@ def _faces_around(idx, vertices, with_rows=False):
 
 
 def _distinct(values, idx):
-    """The distinct values of the int array ``values``, ascending, as int64.
-
-    Values spanning at most ``_MASK_SPAN`` times their count (the large
-    sets of an update: the fine mesh's neighbourhoods) are marked in the
-    index's boolean scratch ``seen`` (all False between calls), the marks
-    of the span read back in one sequential scan and cleared: 1.4-1.7x
-    faster than the stamp for 80-200k values over 1-2M. Sparser ones go through
-    the scratch array ``stamp`` (longer than the largest value): each value's
-    slot receives the position of one of its occurrences and exactly that
-    occurrence is kept, O(len(values)) whatever their range, then sorted."""
-    if values.shape[0] == 0:
-        return values.astype(np.int64)
-    lo, hi = int(values.min()), int(values.max()) + 1
-    if hi - lo <= _MASK_SPAN * values.shape[0]:
-        seen = idx["seen"]
-        seen[values] = True
-        out = np.flatnonzero(seen[lo:hi])
-        out += lo
-        seen[out] = False
-        return out
-    stamp = idx["stamp"]
-    pos = np.arange(values.shape[0], dtype=np.int64)
-    stamp[values] = pos
-    return np.sort(values[stamp[values] == pos]).astype(np.int64, copy=False)
+    """:func:`~._groups.distinct` over the incremental index's scratch arrays
+    (``seen`` and ``stamp``, over fine vertices and faces)."""
+    return distinct(values, idx["seen"], idx["stamp"])
 
 
 def refine(binding, V_cage_edited, *, F_cage=None):

@@ -133,10 +133,32 @@ def cross_columns(a, b):
     return out
 
 
+def area_normals_t(PT, T):
+    """Area normals (3,k) of the triangles ``T`` (3,k) (corner index rows)
+    over positions ``PT`` (3,n) (the operations of ``np.cross``)."""
+    a = np.take(PT, T[0], axis=1)
+    e1 = np.take(PT, T[1], axis=1)
+    e1 -= a
+    e2 = np.take(PT, T[2], axis=1)
+    e2 -= a
+    return cross_columns(e1, e2)
+
+
+def area_normals_rows(X, T):
+    """:func:`area_normals_t` over positions ``X`` (n,3), as rows (k,3) (the
+    same values)."""
+    a = np.take(X, T[0], axis=0)
+    e1 = np.take(X, T[1], axis=0)
+    e1 -= a
+    e2 = np.take(X, T[2], axis=0)
+    e2 -= a
+    return cross_rows(e1, e2, out=a)
+
+
 def face_normals(V, F, *, normalize=True):
     """Per-face normals, (m,3) float64; unnormalised normals have length
     twice the face area. Degenerate faces get a zero normal."""
-    N = cross_rows(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]])
+    N = area_normals_rows(V, F.T)
     if normalize:
         length = np.linalg.norm(N, axis=1)
         N = np.divide(N, length[:, None], out=np.zeros_like(N), where=length[:, None] > 0)

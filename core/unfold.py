@@ -39,12 +39,12 @@ from typing import NamedTuple
 
 import numpy as np
 
-from ._groups import ragged_entries, ragged_ranges
-from .mesh import cross_columns, cross_rows, dot_columns, vertex_normals
+from ._groups import distinct, ragged_entries, ragged_ranges
+from .mesh import area_normals_rows, area_normals_t, dot_columns, vertex_normals
+from .topology import edge_map
 
-__all__ = ["CageRings", "FaceStars", "FineFaceGroups", "Neighbours", "Repair", "area_normals_rows",
-           "area_normals_t", "away_rows", "away_t", "nearest_rotations", "repair", "ring_rotations",
-           "turned_over"]
+__all__ = ["CageRings", "FaceStars", "FineFaceGroups", "Neighbours", "Repair", "away_rows",
+           "away_t", "nearest_rotations", "repair", "ring_rotations", "turned_over"]
 
 #: Jacobi sweeps per round of the repair
 SWEEPS = 8
@@ -54,10 +54,6 @@ ROUNDS = 4
 
 #: faces per block of :func:`away_t`
 _AWAY_BLOCK = 1 << 16
-
-#: :meth:`FaceStars.around` marks its faces in a mask and scans their span when it
-#: is at most this many times their count (else it sorts them)
-_MASK_SPAN = 32
 
 
 class FaceStars(NamedTuple):
@@ -79,23 +75,14 @@ class FaceStars(NamedTuple):
         return cls(start, faces, np.zeros(F.shape[0], dtype=bool))
 
     def around(self, vertices):
-        """The distinct faces (ascending) touching any of ``vertices``
-        (duplicates allowed): sorted when few for their span, else marked in
-        the scratch mask and its span read back (no sort). Not for two
-        threads at once (the repair runs under the binding's lock)."""
+        """The distinct faces (ascending, int64) touching any of ``vertices``
+        (duplicates allowed), by :func:`~._groups.distinct` over the scratch
+        mask ``seen``. Not for two threads at once (the repair runs under the
+        binding's lock)."""
         vertices = np.asarray(vertices, dtype=np.int64)
-        faces = self.faces[ragged_entries(self.start[vertices],
-                                          self.start[vertices + 1] - self.start[vertices])]
-        if faces.shape[0] == 0:
-            return faces.astype(np.int64)
-        lo, hi = int(faces.min()), int(faces.max()) + 1
-        if faces.shape[0] * _MASK_SPAN < hi - lo:
-            return np.unique(faces).astype(np.int64)
-        self.seen[faces] = True
-        out = np.flatnonzero(self.seen[lo:hi])
-        out += lo
-        self.seen[out] = False
-        return out
+        first = self.start[vertices]
+        return distinct(self.faces[ragged_entries(first, self.start[vertices + 1] - first)],
+                        self.seen)
 
 
 class FineFaceGroups(NamedTuple):
@@ -145,9 +132,8 @@ class CageRings(NamedTuple):
 
     @classmethod
     def of(cls, F, n):
-        e = np.sort(np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]]), axis=1)
-        e = np.unique(e[:, 0] * np.int64(n) + e[:, 1])
-        a, b = e // n, e % n
+        E = edge_map(F, n).E
+        a, b = E[:, 0], E[:, 1]
         src, dst = np.concatenate([a, b]), np.concatenate([b, a])
         order = np.argsort(src, kind="stable")
         start = np.zeros(n + 1, dtype=np.int64)
@@ -195,28 +181,6 @@ class Repair(NamedTuple):
     @classmethod
     def none(cls):
         return cls(np.zeros(0, dtype=np.int64), np.zeros((0, 3)), np.zeros(0, dtype=np.int64))
-
-
-def area_normals_t(PT, T):
-    """Area normals (3,k) of the triangles ``T`` (3,k) (corner index rows)
-    over positions ``PT`` (3,n) (the operations of ``np.cross``)."""
-    a = np.take(PT, T[0], axis=1)
-    e1 = np.take(PT, T[1], axis=1)
-    e1 -= a
-    e2 = np.take(PT, T[2], axis=1)
-    e2 -= a
-    return cross_columns(e1, e2)
-
-
-def area_normals_rows(X, T):
-    """:func:`area_normals_t` over positions ``X`` (n,3), as rows (k,3) (the
-    same values)."""
-    a = np.take(X, T[0], axis=0)
-    e1 = np.take(X, T[1], axis=0)
-    e1 -= a
-    e2 = np.take(X, T[2], axis=0)
-    e2 -= a
-    return cross_rows(e1, e2, out=a)
 
 
 def away_t(PT, FT, rest_normals):
