@@ -401,8 +401,8 @@ def _acceptance_bound(limit, totals, tun):
     where every cost is 0 and only the penalties differ -- that median (the
     cheaper half goes; otherwise every pass would take only the collapses
     without any penalty)."""
-    if totals.size == 0:
-        return limit
+    if totals.size == 0 or limit >= tun.plateau_share * float(totals.max()):
+        return limit             # (the median is at most the largest: no plateau)
     med = float(np.median(totals))
     return med if limit < tun.plateau_share * med else limit
 
@@ -954,14 +954,17 @@ def _compactness_penalty(st, s, g, A, B, gmin_old, gmin_new, tun):
     return tun.compact_weight * area * L2 * short * short
 
 
-def _hausdorff_penalty(st, s, g, A, B, tun):
+def _hausdorff_penalty(st, s, g, A, B, ok, tun):
     """Distance of the witnesses of A and B (the input points merged into
     them that were farthest from the surface) to the new faces: the penalty
     ``haus_weight * merged area * max distance^2`` (k,), and the survivor's
-    witness (k,3): the farther of the two."""
+    witness (k,3): the farther of the two. Measured for the valid collapses
+    (``ok``) only: a refused one's penalty and witness are never read (0 and A's)."""
     wA, wB = _take(st.wit, A, axis=0), _take(st.wit, B, axis=0)
-    mk, k = s.mk, s.k
-    D = triangle_rows(*(q.T for q in g.Q))  # the new faces, once for both witnesses
+    k = s.k
+    rows = np.flatnonzero(_take(ok, s.mk))
+    mk = _take(s.mk, rows)
+    D = triangle_rows(*(_take(q, rows, axis=1).T for q in g.Q))  # the new faces, once for both witnesses
 
     def nearest(w):
         P = np.ascontiguousarray(_take(w, mk, axis=0).T)
@@ -1039,7 +1042,7 @@ def _check_block(st, A, B, XT, interior, star, kf, tun, haus=True, dihedral_cos=
     penalty = _compactness_penalty(st, s, g, A, B, gmin_old, gmin_new, tun)
     wnew = _take(st.wit, A, axis=0)
     if haus and tun.haus_weight > 0.0 and s.mk.size:
-        pen_h, wnew = _hausdorff_penalty(st, s, g, A, B, tun)
+        pen_h, wnew = _hausdorff_penalty(st, s, g, A, B, ok, tun)
         penalty = penalty + pen_h
     return _Checked(ok, penalty, (star, kf, s.coll, s.cA, s.cB), wnew, bent)
 
