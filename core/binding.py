@@ -676,17 +676,25 @@ def _rotation(binding, Vc):
     of the cage where each dense vertex lies (over its fine face's coarse
     face): the mean of its corners' :func:`~.unfold.ring_rotations` from the
     rest cage to ``Vc``, made a rotation again. A rigid motion of the cage
-    turns them by exactly its rotation (to rounding)."""
+    turns them by exactly its rotation (to rounding). Each cage vertex's
+    rotation is computed once, when a coarse face it is a corner of is first
+    asked for, and each coarse face's once per call (every dense vertex over
+    it shares it)."""
     rings = _repair_state(binding)["cage_rings"]
-    every = []          # the rotations of every cage vertex, computed on first use
+    ring_R = np.empty((binding.n_cage, 3, 3))
+    known = np.zeros(binding.n_cage, dtype=bool)
+    per_face = 4 ** binding.levels
 
     def rotate(vertices, vectors):
-        if not every:
-            every.append(ring_rotations(binding.V_cage_rest, Vc, rings,
-                                        np.arange(binding.n_cage)))
-        corners = binding.F_cage[binding.fine_face[vertices] // 4 ** binding.levels]
-        R = every[0][corners].sum(axis=1)
-        return np.einsum("kij,kj->ki", nearest_rotations(R), vectors)
+        faces, at = np.unique(binding.fine_face[vertices] // per_face, return_inverse=True)
+        corners = binding.F_cage[faces]
+        new = np.unique(corners)
+        new = new[~known[new]]
+        if new.size:
+            ring_R[new] = ring_rotations(binding.V_cage_rest, Vc, rings, new)
+            known[new] = True
+        R = nearest_rotations(ring_R[corners].sum(axis=1))
+        return np.einsum("kij,kj->ki", R[at.ravel()], vectors)
     return rotate
 
 

@@ -219,39 +219,37 @@ def ring(stars, F, faces):
 
 class Neighbours(NamedTuple):
     """Per vertex of a region, the other corners of its faces (each counted
-    once per face), as (owner slot, neighbour vertex) pairs."""
+    once per face), grouped by region vertex: ``other[start[i]:start[i] + count[i]]``."""
 
-    owner: np.ndarray   #: (p,) int64, slot in the region
-    other: np.ndarray   #: (p,) int64, neighbour vertex
-    count: np.ndarray   #: (r,) float64, pairs per region vertex
+    other: np.ndarray   #: (p,) int64, neighbour vertices, region vertex by region vertex
+    start: np.ndarray   #: (r,) int64, where each region vertex's run begins
+    count: np.ndarray   #: (r,) float64, its length (at least 2: every vertex is on a face)
 
     @classmethod
-    def of(cls, F, stars, region, n):
+    def of(cls, F, stars, region):
+        """The neighbours of ``region`` (distinct vertices, ascending) on the faces ``F``."""
         T = F[stars.around(region)]
-        slot = np.full(n, -1, dtype=np.int64)
-        slot[region] = np.arange(region.shape[0])
         owner, other = [], []
         for k in range(3):
-            s = slot[T[:, k]]
-            keep = s >= 0
+            s = np.minimum(np.searchsorted(region, T[:, k]), region.shape[0] - 1)
+            keep = region[s] == T[:, k]
             for j in (1, 2):
                 owner.append(s[keep])
                 other.append(T[keep, (k + j) % 3])
         owner, other = np.concatenate(owner), np.concatenate(other)
-        return cls(owner, other, np.bincount(owner, minlength=region.shape[0]).astype(np.float64))
+        count = np.bincount(owner, minlength=region.shape[0])
+        return cls(other[np.argsort(owner, kind="stable")], np.cumsum(count) - count,
+                   count.astype(np.float64))
 
     def means(self, X):
         """The mean neighbour position of each region vertex, (r,3)."""
-        P = X[self.other]
-        r = self.count.shape[0]
-        return np.stack([np.bincount(self.owner, P[:, d], r) for d in range(3)], axis=1) \
-            / self.count[:, None]
+        return np.add.reduceat(X[self.other], self.start, axis=0) / self.count[:, None]
 
 
 def relax(X, V_rest, F, stars, region, rotate):
     """``SWEEPS`` Jacobi sweeps of ``x_i = mean(x_j) + R_i d_i`` over
     ``region`` of ``X`` (in place)."""
-    near = Neighbours.of(F, stars, region, X.shape[0])
+    near = Neighbours.of(F, stars, region)
     offset = rotate(region, V_rest[region] - near.means(V_rest))
     for _ in range(SWEEPS):
         X[region] = near.means(X) + offset
