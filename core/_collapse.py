@@ -1059,7 +1059,7 @@ def run(st, target, max_err_n, preserve_boundary, progress, m0, tun, dihedral_co
     try:
         stopped, passes = _run(st, target, max_err_n, preserve_boundary, progress, m0, tun, dihedral_cos)
     finally:
-        compact(st, threads=st.F.shape[0] >= tun.threads_min_edges)
+        compact(st, tun.threads_min_edges)
     if stopped == "no_valid_collapse" and dihedral_cos is not None:
         if st.bent[edge_representatives(st.twin)].any():
             stopped = "max_dihedral"
@@ -1077,7 +1077,7 @@ def _run(st, target, max_err_n, preserve_boundary, progress, m0, tun, dihedral_c
     clock = _Clock(st.seconds)
     while passes < tun.max_passes:
         if st.m_live < tun.compact_share * st.F.shape[0]:
-            compact(st, threads=st.F.shape[0] >= tun.threads_min_edges)
+            compact(st, tun.threads_min_edges)
             clock.lap("compact")
         m = st.m_live
         if target is not None and m <= target:
@@ -1200,9 +1200,11 @@ def survivors(st):
         c = nxt
 
 
-def compact(st, threads=True):
+def compact(st, threads_min_faces=0):
     """Drop the dead faces and vertices from every declared array (one job
-    per array, on the worker threads unless ``threads`` is False)."""
+    per array, on the worker threads when the arrays have at least
+    ``threads_min_faces`` faces: below, the hand-offs cost more)."""
+    threads = st.F.shape[0] >= threads_min_faces
     keep_f, keep_v = st.alive, ~st.dead_v
     if keep_f.all() and keep_v.all():
         return
