@@ -119,6 +119,10 @@ _REPAIR_ALL_SHARE = 0.25
 #: the dense faces (see _away_around)
 _GROUPS_SHARE = 0.25
 
+#: a drag's linear map (changed fine positions x moved cage vertices) is kept up to
+#: this many entries (32 MB)
+_DRAG_ENTRIES = 1 << 22
+
 #: keys of :meth:`Binding.to_arrays`
 _ARRAY_KEYS = ("fine_face", "bary", "offset", "fine_detail", "F_cage", "n_cage", "levels",
                "scheme", "creases", "fingerprint")
@@ -577,6 +581,7 @@ def deform(binding, V_cage_edited, *, F_cage=None, moved=None, out=None):
     # kept for the incremental deforms that follow (a new object: one in use
     # by an incremental deform is never changed under it)
     c["geometry"] = _Geometry.of(Vc, X, Nf)
+    c.pop("drag", None)
     with _INCREMENTAL_LOCK:
         repaired = _unfold(binding, D, Vc, DT=DT)
         if out is not None:
@@ -1139,7 +1144,9 @@ def _update_fine_geometry(binding, Vc, ids, hit):
     stale. Each value is recomputed from the level below, never updated
     by a difference, so nothing drifts over many updates (rows sum in
     another order than the apply plan's tables: equal to a full evaluation
-    to about 1e-16). Otherwise (nothing kept yet, or another cage)
+    to about 1e-16); when the same vertices moved in the last incremental
+    deform too (a drag), from the linear map of them made then
+    (:class:`_Drag`). Otherwise (nothing kept yet, or another cage)
     everything is evaluated and kept."""
     c = binding._cache
     g = c.get("geometry")
@@ -1152,15 +1159,19 @@ def _update_fine_geometry(binding, Vc, ids, hit):
         g = _Geometry.of(Vc, X, _vertex_normals_t(X[-1], binding._operator.F_fine))
         c["geometry"] = g
         return g.levels[-1], g.normals
-    op = binding._operator
     X = g.levels
     X[0][:, ids] = Vc[ids].T
     g.V_cage[ids] = Vc[ids]
-    for S, r, below, level in zip(op.stencils, hit.changed, X[:-1], X[1:]):
-        k, owner = ragged_ranges(S.indptr[r], S.indptr[r + 1] - S.indptr[r])
-        w, cols = S.weights[k], S.cols[k]
-        for d in range(3):
-            level[d, r] = np.bincount(owner, weights=w * below[d].take(cols), minlength=r.shape[0])
+    key, drag = ids.tobytes(), c.get("drag")
+    if drag is not None and drag.key == key and drag.geometry is g:
+        drag.move(X, hit, Vc[ids])
+    else:
+        _restencil(binding._operator, X, hit)
+        # the same cage vertices moved twice in a row: a drag, whose next moves
+        # are cheaper as a linear map
+        c["drag"] = _Drag.of(binding._operator, g, ids, hit, Vc) \
+            if c.get("last_moved") == key else None
+    c["last_moved"] = key
     VfT, NfT = X[-1], g.normals
     g.stale[hit.normals] = True
     idx = c["incremental"]
@@ -1170,6 +1181,60 @@ def _update_fine_geometry(binding, Vc, ids, hit):
         NfT[:, redo] = _normals_at(idx, VfT, redo)
         g.stale[redo] = False
     return VfT, NfT
+
+
+def _restencil(op, X, hit):
+    """Each level's changed positions (``hit.changed``) of the kept levels
+    ``X`` recomputed in place from their stencil rows over the level below."""
+    for S, r, below, level in zip(op.stencils, hit.changed, X[:-1], X[1:]):
+        k, owner = ragged_ranges(S.indptr[r], S.indptr[r + 1] - S.indptr[r])
+        w, cols = S.weights[k], S.cols[k]
+        for d in range(3):
+            level[d, r] = np.bincount(owner, weights=w * below[d].take(cols), minlength=r.shape[0])
+
+
+class _Drag(NamedTuple):
+    """The changed positions of every level as a linear function of the
+    moved cage vertices (a drag: the same ones moved again and again):
+    ``base + cols @ (V - V0)`` per level, each value from the positions when
+    the drag began, so nothing drifts over many moves (equal to the stencil
+    rows to about 1e-16). Kept while the next incremental deform moves the
+    same vertices of the same kept geometry."""
+
+    key: bytes           #: the moved cage vertex ids' bytes
+    geometry: object     #: the :class:`_Geometry` it belongs to
+    V0: np.ndarray       #: (k,3) the moved vertices then
+    base: tuple          #: per level, (3, r_l) the changed positions then
+    cols: tuple          #: per level, (r_l, k) each moved vertex's weight in each
+
+    @classmethod
+    def of(cls, op, g, ids, hit, Vc):
+        """The drag of the moved cage vertices ``ids`` (distinct, ascending)
+        whose changed positions ``hit.changed`` were just computed in ``g``;
+        None when its maps would have more than ``_DRAG_ENTRIES`` entries."""
+        k = ids.shape[0]
+        if k * sum(r.shape[0] for r in hit.changed) > _DRAG_ENTRIES:
+            return None
+        below, weights = ids, np.eye(k)
+        cols = []
+        for S, r in zip(op.stencils, hit.changed):
+            e, owner = ragged_ranges(S.indptr[r], S.indptr[r + 1] - S.indptr[r])
+            at = np.minimum(np.searchsorted(below, S.cols[e]), below.shape[0] - 1)
+            on = np.flatnonzero(below[at] == S.cols[e])     # (the other entries do not move)
+            w, owner, at = S.weights[e[on]], owner[on], at[on]
+            C = np.empty((r.shape[0], k))
+            for j in range(k):
+                C[:, j] = np.bincount(owner, weights=w * weights[at, j], minlength=r.shape[0])
+            cols.append(C)
+            below, weights = r, C
+        base = tuple(level[:, r].copy() for level, r in zip(g.levels[1:], hit.changed))
+        return cls(ids.tobytes(), g, Vc[ids].copy(), base, tuple(cols))
+
+    def move(self, X, hit, V):
+        """The changed positions of the levels ``X`` for the moved vertices at ``V`` (k,3)."""
+        dV = V - self.V0
+        for level, r, base, C in zip(X[1:], hit.changed, self.base, self.cols):
+            level[:, r] = base + (C @ dV).T
 
 
 def _normals_at(idx, PT, vertices):
