@@ -581,7 +581,8 @@ def deform(binding, V_cage_edited, *, F_cage=None, moved=None, out=None):
     # kept for the incremental deforms that follow (a new object: one in use
     # by an incremental deform is never changed under it)
     c["geometry"] = _Geometry.of(Vc, X, Nf)
-    c.pop("drag", None)
+    c.pop("drag", None)                   # (the next incremental deform starts a new one)
+    c.pop("last_moved", None)
     with _INCREMENTAL_LOCK:
         repaired = _unfold(binding, D, Vc, DT=DT)
         if out is not None:
