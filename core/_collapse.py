@@ -562,7 +562,9 @@ def _bold_rounds(st, pool, passes, haus, dihedral_cos, tun, target):
     accepted at once, so a later round may take a collapse next to an
     earlier one (its cost is still exact: neither end changed). About three
     times the collapses of a careful pass (:func:`_check_rounds`), for a
-    slightly less even mesh. Returns the number of collapses applied.
+    slightly less even mesh. The pass ends after ``Tuning.bold_rounds``
+    rounds, or after a round that took fewer than ``bold_round_share`` of the
+    first round's collapses. Returns the number of collapses applied.
 
     The picks read the faces in play as they were at the start of the pass:
     a collapse only renames a merged vertex (no longer the end of any active
@@ -582,17 +584,19 @@ def _bold_rounds(st, pool, passes, haus, dihedral_cos, tun, target):
         acc = _judge(st, pool, sel, c, passes, tun)
         if dihedral_cos is not None and acc.any():
             acc &= ~_next_to_another(st, pool.key[sel], c.rows, acc, np.zeros(st.F.shape[0], dtype=bool))
-        jobs = []
+        jobs, took = [], 0
         if acc.any():
             a = _trim_to_target(pool, _Accepted(sel[acc], _keep_rows(c.rows, acc), c.wit[acc]), st.m_live,
                                 target)
+            took = a.idx.size
             st.vver[_take(st.F, a.rows[0], axis=0).ravel()] = passes
             merged[pool.A[a.idx]] = True
             merged[pool.B[a.idx]] = True
             done += a.idx.size
             jobs.append(lambda a=a: _apply_accepted(st, pool, a))
         active = active[~merged[pool.A[active]] & ~merged[pool.B[active]]]
-        more = rounds < tun.bold_rounds and active.size > 0
+        first = took if rounds == 1 else first
+        more = rounds < tun.bold_rounds and active.size > 0 and took >= tun.bold_round_share * first
         if more:    # the next pick reads no row the apply writes: both at once
             jobs.append(lambda: _pick_independent(st, pool, active, faces, tun, scratch))
         out = run_each(lambda job: job(), jobs, threads=active.size >= tun.threads_min_edges)
