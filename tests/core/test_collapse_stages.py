@@ -275,6 +275,29 @@ def test_a_bold_pass_is_its_collapses_applied_one_at_a_time_each_valid_on_the_me
     assert next_to_earlier > 0.1 * sum(r.size for r in rounds[1:])   # the pass went where a careful one stops
 
 
+def test_a_bold_pass_ends_after_a_round_under_its_share_of_the_first(monkeypatch):
+    # Tuning.bold_round_share: every round but the last took at least that share of
+    # the first round's collapses; the last is the first under it (or round
+    # bold_rounds, or no edge left). Without the share the same pass runs longer.
+    V, F = icosphere(4)
+    V = V * (1.0 + 0.05 * np.random.default_rng(5).random((V.shape[0], 1)))
+    real = engine._apply_accepted
+    counts = {}
+    for share in (0.0, 0.5):
+        st = engine_state(V, F)
+        tun = replace(TUNING, bold_round_share=share)
+        pool = pool_of(st, replace(tun, pool_share=tun.bold_pool_share))
+        took = counts[share] = []
+        monkeypatch.setattr(engine, "_apply_accepted",
+                            lambda st_, pool_, acc, took=took: (took.append(acc.idx.size),
+                                                               real(st_, pool_, acc)))
+        assert engine._bold_rounds(st, pool, 1, False, None, tun, None) == sum(took)
+        assert all(t >= share * took[0] for t in took[:-1])
+    half = counts[0.5]
+    assert half[-1] < 0.5 * half[0] and len(half) < TUNING.bold_rounds
+    assert len(counts[0.0]) > len(half) and counts[0.0][:len(half)] == half
+
+
 def test_holes_are_capped_shortest_first_and_the_mesh_stays_closed_and_manifold():
     # a sphere with a wide hole and a small one: the small rim is capped first
     V, F = icosphere(3)
