@@ -1172,7 +1172,7 @@ def _update_fine_geometry(binding, Vc, ids, hit):
         _restencil(binding._operator, X, hit)
         # the same cage vertices moved twice in a row: a drag, whose next moves
         # are cheaper as a linear map
-        c["drag"] = _Drag.of(binding._operator, g, ids, hit, Vc) \
+        c["drag"] = _Drag.of(binding._operator, g, ids, hit, Vc, c["incremental"]) \
             if c.get("last_moved") == key else None
     c["last_moved"] = key
     VfT, NfT = X[-1], g.normals
@@ -1199,45 +1199,50 @@ def _restencil(op, X, hit):
 class _Drag(NamedTuple):
     """The changed positions of every level as a linear function of the
     moved cage vertices (a drag: the same ones moved again and again):
-    ``base + cols @ (V - V0)`` per level, each value from the positions when
-    the drag began, so nothing drifts over many moves (equal to the stencil
-    rows to about 1e-16). Kept while the next incremental deform moves the
-    same vertices of the same kept geometry."""
+    ``base + (V - V0)^T @ weights`` per level, each value from the positions
+    when the drag began, so nothing drifts over many moves (equal to the
+    stencil rows to about 1e-16). Kept while the next incremental deform
+    moves the same vertices of the same kept geometry."""
 
     key: bytes           #: the moved cage vertex ids' bytes
     geometry: object     #: the :class:`_Geometry` it belongs to
     V0: np.ndarray       #: (k,3) the moved vertices then
     base: tuple          #: per level, (3, r_l) the changed positions then
-    cols: tuple          #: per level, (r_l, k) each moved vertex's weight in each
+    weights: tuple       #: per level, (k, r_l) each moved vertex's weight in each
 
     @classmethod
-    def of(cls, op, g, ids, hit, Vc):
+    def of(cls, op, g, ids, hit, Vc, idx):
         """The drag of the moved cage vertices ``ids`` (distinct, ascending)
-        whose changed positions ``hit.changed`` were just computed in ``g``;
-        None when its maps would have more than ``_DRAG_ENTRIES`` entries."""
+        whose changed positions ``hit.changed`` were just computed in ``g``
+        (``idx``: the incremental index, for its scratch); None when its maps
+        would have more than ``_DRAG_ENTRIES`` entries."""
         k = ids.shape[0]
         if k * sum(r.shape[0] for r in hit.changed) > _DRAG_ENTRIES:
             return None
+        seen, slot = idx["seen"], idx["stamp"]
         below, weights = ids, np.eye(k)
-        cols = []
+        out = []
         for S, r in zip(op.stencils, hit.changed):
-            e, owner = ragged_ranges(S.indptr[r], S.indptr[r + 1] - S.indptr[r])
-            at = np.minimum(np.searchsorted(below, S.cols[e]), below.shape[0] - 1)
-            on = np.flatnonzero(below[at] == S.cols[e])     # (the other entries do not move)
-            w, owner, at = S.weights[e[on]], owner[on], at[on]
-            C = np.empty((r.shape[0], k))
-            for j in range(k):
-                C[:, j] = np.bincount(owner, weights=w * weights[at, j], minlength=r.shape[0])
-            cols.append(C)
-            below, weights = r, C
+            count = S.indptr[r + 1] - S.indptr[r]           # (every stencil row has entries)
+            e = ragged_entries(S.indptr[r], count)
+            col = S.cols[e]
+            slot[below] = np.arange(below.shape[0])
+            seen[below] = True
+            on = seen[col]                                  # (the other entries do not move)
+            seen[below] = False
+            W = np.take(weights, np.where(on, slot[col], 0), axis=1)
+            W *= np.where(on, S.weights[e], 0.0)
+            weights = np.add.reduceat(W, np.cumsum(count) - count, axis=1)
+            out.append(weights)
+            below = r
         base = tuple(level[:, r].copy() for level, r in zip(g.levels[1:], hit.changed))
-        return cls(ids.tobytes(), g, Vc[ids].copy(), base, tuple(cols))
+        return cls(ids.tobytes(), g, Vc[ids].copy(), base, tuple(out))
 
     def move(self, X, hit, V):
         """The changed positions of the levels ``X`` for the moved vertices at ``V`` (k,3)."""
-        dV = V - self.V0
-        for level, r, base, C in zip(X[1:], hit.changed, self.base, self.cols):
-            level[:, r] = base + (C @ dV).T
+        dVT = np.ascontiguousarray((V - self.V0).T)
+        for level, r, base, W in zip(X[1:], hit.changed, self.base, self.weights):
+            level[:, r] = base + dVT @ W
 
 
 def _normals_at(idx, PT, vertices):
