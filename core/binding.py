@@ -612,7 +612,9 @@ def _repair_state(binding):
                        # float32: every test reads these same values (half the bytes)
                        "normals": area_normals_t(rest, FT).astype(np.float32),
                        "cage_rings": CageRings.of(binding.F_cage, binding.n_cage),
-                       "stars": None, "groups": None}
+                       "stars": None, "groups": None,
+                       # the faces around the last rows tested, by their _Influenced
+                       "around": None}
     return c["repair"]
 
 
@@ -641,7 +643,10 @@ def _away_around(binding, state, D, hit):
     the groups repeat each face 2-3 times: 1.8x slower)."""
     if _by_groups(binding):
         return _groups(binding, state).away(D, hit.faces)
-    return away_rows(D, state["F_t"], _stars(binding, state).around(hit.rows), state["normals"])
+    last = state.get("around")
+    if last is None or last[0] is not hit:   # (a drag asks again for the same rows)
+        last = state["around"] = (hit, _stars(binding, state).around(hit.rows))
+    return away_rows(D, state["F_t"], last[1], state["normals"])
 
 
 def _groups(binding, state):
