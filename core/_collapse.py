@@ -573,7 +573,7 @@ def _bold_rounds(st, pool, passes, haus, dihedral_cos, tun, target):
     from the stars (the checks read the current rows)."""
     n = st.V.shape[0]
     merged = np.zeros(n, dtype=bool)
-    scratch, done = _scratch(n, pool.key.size), 0
+    scratch, done, first = _scratch(n, pool.key.size), 0, 0
     picked = _pick_independent(st, pool, np.arange(pool.key.size, dtype=np.int64), None, tun, scratch)
     for rounds in range(1, tun.bold_rounds + 1):
         sel, active, star, kf, faces = picked
@@ -595,7 +595,8 @@ def _bold_rounds(st, pool, passes, haus, dihedral_cos, tun, target):
             done += a.idx.size
             jobs.append(lambda a=a: _apply_accepted(st, pool, a))
         active = active[~merged[pool.A[active]] & ~merged[pool.B[active]]]
-        first = took if rounds == 1 else first
+        if rounds == 1:
+            first = took
         more = rounds < tun.bold_rounds and active.size > 0 and took >= tun.bold_round_share * first
         if more:    # the next pick reads no row the apply writes: both at once
             jobs.append(lambda: _pick_independent(st, pool, active, faces, tun, scratch))
