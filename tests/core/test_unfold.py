@@ -120,15 +120,29 @@ def test_fine_face_groups_find_the_faces_around_the_rows(rough_torus):
     rows = np.flatnonzero(np.isin(b.fine_face, fine))
     expected = away_rows(D, FT, FaceStars.of(Fd, Vd.shape[0]).around(rows), rest)
     assert expected.size > 0
-    assert np.array_equal(groups.away(D, fine), expected)
-    # every face appears under each of its distinct fine faces
+    entries = groups.entries(fine)
+    assert np.array_equal(groups.away(D, entries), expected)
+    # the entries are the faces around the rows, each once but for a face over three fine
+    # faces, two of them asked for and not the one of its first corner
+    around = FaceStars.of(Fd, Vd.shape[0]).around(rows)
+    faces, count = np.unique(groups.faces[entries], return_counts=True)
+    assert np.array_equal(faces, around)
+    over = b.fine_face[Fd[faces]]
+    asked = np.isin(over, fine)
+    twice = (asked[:, 1:].sum(axis=1) == 2) & ~asked[:, 0] & (over[:, 1] != over[:, 2])
+    assert np.array_equal(count, 1 + twice)
+    assert not groups.seen.any()
+    # every face appears under each of its distinct fine faces, owned by its first corner's
     assert groups.faces.shape[0] == sum(np.unique(b.fine_face[f]).size for f in Fd)
+    assert groups.start[-1] == Fd.shape[0] == groups.shared_start[0]
+    owned = np.repeat(np.arange(groups.start.shape[0] - 1), np.diff(groups.start))
+    assert np.array_equal(b.fine_face[Fd[groups.faces[:Fd.shape[0]], 0]], owned)
 
 
 @pytest.mark.parametrize("levels", [1, 2])
-def test_incremental_equals_full_through_repairs_at_both_test_paths(levels):
-    # one level: the fine mesh is 4x coarser than the dense one, the faces are
-    # found by fine face groups; two: around each row
+def test_incremental_equals_full_through_repairs_at_one_and_two_levels(levels):
+    # one level: the fine mesh is 4x coarser than the dense one (a dense face over one
+    # or two fine faces); two: about as fine (faces over two or three, shared entries)
     Vd, Fd = torus(96, 48, bump=0.01)
     Vd = Vd + 0.01 * np.random.default_rng(0).standard_normal(Vd.shape)
     cage = simplify(Vd, Fd, target_faces=200)
