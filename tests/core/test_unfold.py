@@ -140,9 +140,9 @@ def test_fine_face_groups_find_the_faces_around_the_rows(rough_torus):
 
 
 @pytest.mark.parametrize("levels", [1, 2])
-def test_incremental_equals_full_through_repairs_at_one_and_two_levels(levels):
-    # one level: the fine mesh is 4x coarser than the dense one (a dense face over one
-    # or two fine faces); two: about as fine (faces over two or three, shared entries)
+def test_incremental_equals_full_through_repairs_at_both_test_paths(levels):
+    # one level: the fine mesh is 4x coarser than the dense one, the faces are
+    # found by fine face groups; two: around each row
     Vd, Fd = torus(96, 48, bump=0.01)
     Vd = Vd + 0.01 * np.random.default_rng(0).standard_normal(Vd.shape)
     cage = simplify(Vd, Fd, target_faces=200)
