@@ -21,7 +21,8 @@ from core.fit import fit_cage
 from core.mesh import bbox_diagonal, face_normals, vertex_normals
 from core.simplify import simplify
 from core.unfold import (CageRings, FaceStars, FineFaceGroups, away_rows, away_t,
-                         nearest_rotations, repair, ring_rotations, turned_over)
+                         nearest_rotations, repair, ring_rotations, turned_over,
+                         TURNED_DEG)
 from tests.mesh_factory import load_shared, regular_grid, torus
 
 
@@ -71,6 +72,29 @@ def test_repair_puts_a_pushed_vertex_back_and_writes_only_its_region():
     assert rep.rows.shape[0] <= 25 and np.isin(centre, rep.rows)
     # identity rotation, flat rest: the fixed point is the rest grid, nearly reached
     assert np.abs(Y - V).max() < np.abs(X - V).max()
+
+
+def test_turned_over_means_away_from_rest_and_far_from_the_cage_rotation():
+    # one triangle, its normal turned by 100 degrees about x; the cage's rotation there
+    # turns rest normals by 0, 20 and 50 degrees: turned over while the normal is more
+    # than TURNED_DEG from the rotated rest normal (80, 50 degrees), away from rest in all
+    V = np.array([[0.0, 0, 0], [1, 0, 0], [0, 1, 0]])
+    F = np.array([[0, 1, 2]])
+    FT = np.ascontiguousarray(F.T)
+    rest = _rest_normals(V, F)
+
+    def about_x(deg):
+        t = np.radians(deg)
+        return np.array([[1, 0, 0], [0, np.cos(t), -np.sin(t)], [0, np.sin(t), np.cos(t)]])
+
+    X = V @ about_x(100).T
+    away = away_t(np.ascontiguousarray(X.T), FT, rest)
+    assert away.tolist() == [0]
+    for deg in (0, 20, 50):
+        expected = [0] if 100 - deg > TURNED_DEG else []
+        turn = (lambda d: lambda vertices, vectors: vectors @ about_x(d).T)(deg)
+        assert turned_over(X, FT, away, rest, turn).tolist() == expected, deg
+    assert 100 - 50 < TURNED_DEG < 100 - 20
 
 
 def test_nothing_to_repair_changes_nothing():
