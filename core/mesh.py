@@ -155,14 +155,17 @@ def area_normals_rows(X, T):
     return cross_rows(e1, e2, out=a)
 
 
+def unit_rows(X):
+    """The rows of ``X`` (k,3) normalised, a new array (zero rows stay zero)."""
+    length = np.linalg.norm(X, axis=1)
+    return np.divide(X, length[:, None], out=np.zeros_like(X), where=length[:, None] > 0)
+
+
 def face_normals(V, F, *, normalize=True):
     """Per-face normals, (m,3) float64; unnormalised normals have length
     twice the face area. Degenerate faces get a zero normal."""
     N = area_normals_rows(V, F.T)
-    if normalize:
-        length = np.linalg.norm(N, axis=1)
-        N = np.divide(N, length[:, None], out=np.zeros_like(N), where=length[:, None] > 0)
-    return N
+    return unit_rows(N) if normalize else N
 
 
 def squared_edges(V, F):
@@ -188,8 +191,7 @@ def vertex_normals(V, F):
     for k in range(3):
         out[:, k] = (np.bincount(F[:, 0], N[:, k], n) + np.bincount(F[:, 1], N[:, k], n)
                      + np.bincount(F[:, 2], N[:, k], n))
-    length = np.linalg.norm(out, axis=1)
-    return np.divide(out, length[:, None], out=np.zeros_like(out), where=length[:, None] > 0)
+    return unit_rows(out)
 
 
 def enclosed_volume(V, F):

@@ -75,7 +75,7 @@ from typing import NamedTuple
 import numpy as np
 
 from .errors import InvalidArgumentError
-from .mesh import check_mesh, cross_rows
+from .mesh import check_mesh, cross_rows, unit_rows
 from ._groups import group_argmin, ragged_ranges
 from ._parallel import blocks, run_each
 
@@ -361,11 +361,6 @@ def closest_result(tables, t, v, w, d2):
 
 # --- small vectorised helpers --------------------------------------------------------------------
 
-def _unit(X):
-    """Rows of X normalised (zero rows stay zero)."""
-    length = np.linalg.norm(X, axis=1)
-    return np.divide(X, length[:, None], out=np.zeros_like(X), where=length[:, None] > 0)
-
 
 def _spread_bits(x):
     """Spread the low 21 bits of uint64 ``x`` to every third bit (for Morton codes)."""
@@ -436,7 +431,7 @@ def _bounding_rows(A, B, C, n):
     # edge k runs from corner k to corner k+1; (edge x n) points away from the third corner
     for k in range(3):
         a, b = corners[k] - centre, corners[(k + 1) % 3] - centre
-        mk = _unit(cross_rows(b - a, n))
+        mk = unit_rows(cross_rows(b - a, n))
         o = np.maximum(np.einsum("ij,ij->i", a, mk), np.einsum("ij,ij->i", b, mk))
         prism[3 + 3 * k:6 + 3 * k] = mk.T
         prism[12 + k] = o * (1 + 1e-9) + 1e-9 * r
@@ -647,7 +642,7 @@ class TriangleIndex:
             cnt = valid.reshape(g, -1).sum(axis=1)
             c = Xg.mean(axis=1)
             nsum = N.reshape(g, -1, 3).sum(axis=1)
-            n = _unit(nsum)
+            n = unit_rows(nsum)
             rel = Xg - c[:, None, :]
             h = np.einsum("gkj,gj->gk", rel, n)
             lat2 = np.einsum("gkj,gkj->gk", rel, rel) - h * h
@@ -661,7 +656,7 @@ class TriangleIndex:
             w0 = (cnt[0::2] / np.maximum(cnt2, 1))[:, None]
             c = w0 * cc[0::2] + (1 - w0) * cc[1::2]
             nsum = ns[0::2] + ns[1::2]
-            n = _unit(nsum)
+            n = unit_rows(nsum)
             r = np.full(c.shape[0], -np.inf)
             t = np.full(c.shape[0], -np.inf)
             size = np.zeros(c.shape[0])

@@ -41,7 +41,7 @@ from typing import NamedTuple
 import numpy as np
 
 from ._groups import distinct, ragged_entries, ragged_ranges
-from .mesh import area_normals_rows, area_normals_t, dot_columns, vertex_normals
+from .mesh import area_normals_rows, area_normals_t, dot_columns, unit_rows
 from .topology import edge_map
 
 __all__ = ["CageRings", "FaceStars", "FineFaceGroups", "Neighbours", "Repair", "away_rows",
@@ -157,12 +157,13 @@ class FineFaceGroups(NamedTuple):
 
 
 class CageRings(NamedTuple):
-    """The cage's vertex one-rings (CSR over its distinct edges, both ways)
-    and its faces, for :func:`ring_rotations`."""
+    """The cage's vertex one-rings (CSR over its distinct edges, both ways),
+    its faces and the faces around each vertex, for :func:`ring_rotations`."""
 
     start: np.ndarray   #: (n+1,) int64
     other: np.ndarray   #: (2e,) int64, the ring of each vertex in turn
     F: np.ndarray       #: (m,3) int64
+    stars: FaceStars    #: the faces around each vertex
 
     @classmethod
     def of(cls, F, n):
@@ -172,7 +173,18 @@ class CageRings(NamedTuple):
         order = np.argsort(src, kind="stable")
         start = np.zeros(n + 1, dtype=np.int64)
         np.cumsum(np.bincount(src, minlength=n), out=start[1:])
-        return cls(start, dst[order], F)
+        return cls(start, dst[order], F, FaceStars.of(F, n))
+
+    def normals(self, V, vertices):
+        """The area-weighted unit normals (k,3) at the cage ``vertices`` on
+        positions ``V`` (those of :func:`~.mesh.vertex_normals`, from their own
+        faces only, summed in another order)."""
+        first = self.stars.start[vertices]
+        k, owner = ragged_ranges(first, self.stars.start[vertices + 1] - first)
+        n = area_normals_rows(V, self.F[self.stars.faces[k]].T)
+        total = np.stack([np.bincount(owner, n[:, c], vertices.shape[0]) for c in range(3)],
+                         axis=1)
+        return unit_rows(total)
 
 
 def nearest_rotations(M):
@@ -195,7 +207,7 @@ def ring_rotations(V0, V1, rings, vertices):
     a, b = V0[j] - V0[vertices[owner]], V1[j] - V1[vertices[owner]]
     M = np.zeros((vertices.shape[0], 3, 3))
     np.add.at(M, owner, b[:, :, None] * a[:, None, :])
-    n0, n1 = (vertex_normals(V, rings.F)[vertices] for V in (V0, V1))
+    n0, n1 = (rings.normals(V, vertices) for V in (V0, V1))
     scale = np.bincount(owner, np.einsum("ij,ij->i", a, a), vertices.shape[0])
     M += scale[:, None, None] * n1[:, :, None] * n0[:, None, :]
     return nearest_rotations(M)

@@ -110,6 +110,14 @@ def test_nothing_to_repair_changes_nothing():
     assert np.array_equal(X, V + 0.01)
 
 
+def test_cage_rings_give_the_vertex_normals_at_a_few_vertices():
+    for V, F in (torus(12, 6), regular_grid(5, 4)):
+        V = V + 0.05 * np.random.default_rng(1).standard_normal(V.shape)
+        rings = CageRings.of(F, V.shape[0])
+        some = np.array([0, 3, V.shape[0] - 1, 7])
+        assert np.abs(rings.normals(V, some) - vertex_normals(V, F)[some]).max() < 1e-14
+
+
 def test_ring_rotations_are_exact_for_a_rigid_motion_and_always_rotations():
     V, F = torus(12, 6)
     rings = CageRings.of(F, V.shape[0])
