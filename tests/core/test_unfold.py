@@ -194,6 +194,30 @@ def test_incremental_equals_full_through_repairs_at_both_test_paths(levels):
     assert seen > 0
 
 
+@pytest.mark.parametrize("levels", [1, 2])
+def test_a_drag_through_repairs_equals_full_at_both_test_paths(levels):
+    # the same cage vertices moved again and again (the faces or group entries around
+    # the rows are kept between the moves), the lift growing until faces fold and are
+    # repaired, then shrinking back: each step equals a full deform of the same cage
+    Vd, Fd = torus(96, 48, bump=0.01)
+    Vd = Vd + 0.01 * np.random.default_rng(0).standard_normal(Vd.shape)
+    cage = simplify(Vd, Fd, target_faces=200)
+    b = bind(Vd, Fd, cage.V, cage.F, levels=levels, scheme="butterfly")
+    normal = vertex_normals(cage.V, cage.F)[50]
+    ring = np.unique(cage.F[(cage.F == 50).any(axis=1)])
+    cur = cage.V.copy()
+    D = deform(b, cur)
+    b.influenced([])
+    repaired = []
+    for lift in (0.02, 0.05, 0.08, 0.1, 0.05, 0.0):
+        cur[ring] = cage.V[ring] + lift * bbox_diagonal(Vd) * normal
+        deform(b, cur, moved=ring, out=D)
+        assert np.abs(D - deform(b, cur)).max() <= 1e-12 * bbox_diagonal(Vd)
+        repaired.append(b.repaired(D).size)
+    assert max(repaired) > 0 and repaired[-1] == 0
+    assert np.abs(D - Vd).max() <= 1e-12 * bbox_diagonal(Vd)     # back at rest: the scan
+
+
 # ------------------------------------------------------------------ through deform
 @pytest.fixture(scope="module")
 def rough_torus():
