@@ -1409,8 +1409,12 @@ def _nearest_of(parts, n_dense):
     the blocks' :func:`_nearest_parts` (in block order): the smallest squared
     distance over the blocks, the smallest key among the blocks at it."""
     none = np.iinfo(np.int64).max
-    best = np.min([d2 for d2, _ in parts], axis=0)
-    key = np.min([np.where(d2 == best, low, none) for d2, low in parts], axis=0)
+    best = parts[0][0].copy()
+    for d2, _ in parts[1:]:            # (in place: no (blocks, n_fine) stack)
+        np.minimum(best, d2, out=best)
+    key = np.full(best.shape[0], none)
+    for d2, low in parts:
+        np.minimum(key, low, out=key, where=d2 == best)
     return np.where(key == none, -1, key % n_dense)
 
 
