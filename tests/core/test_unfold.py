@@ -40,6 +40,17 @@ def _rest_normals(V, F):
     return np.ascontiguousarray(face_normals(V, F, normalize=False).T)
 
 
+def _rough_torus_at(levels):
+    """A rough torus (noise 1% of its size), its 200-face cage, bound with butterfly at
+    ``levels``, a cage vertex's normal and its one-ring: (Vd, Fd, cage, b, normal, ring)."""
+    Vd, Fd = torus(96, 48, bump=0.01)
+    Vd = Vd + 0.01 * np.random.default_rng(0).standard_normal(Vd.shape)
+    cage = simplify(Vd, Fd, target_faces=200)
+    b = bind(Vd, Fd, cage.V, cage.F, levels=levels, scheme="butterfly")
+    normal = vertex_normals(cage.V, cage.F)[50]
+    return Vd, Fd, cage, b, normal, np.unique(cage.F[(cage.F == 50).any(axis=1)])
+
+
 # ------------------------------------------------------------------ stages
 def test_face_stars_list_the_faces_around_vertices():
     V, F = regular_grid(4, 4)
@@ -175,12 +186,7 @@ def test_fine_face_groups_find_the_faces_around_the_rows(rough_torus):
 def test_incremental_equals_full_through_repairs_at_both_test_paths(levels):
     # one level: the fine mesh is 4x coarser than the dense one, the faces are
     # found by fine face groups; two: around each row
-    Vd, Fd = torus(96, 48, bump=0.01)
-    Vd = Vd + 0.01 * np.random.default_rng(0).standard_normal(Vd.shape)
-    cage = simplify(Vd, Fd, target_faces=200)
-    b = bind(Vd, Fd, cage.V, cage.F, levels=levels, scheme="butterfly")
-    normal = vertex_normals(cage.V, cage.F)[50]
-    ring = np.unique(cage.F[(cage.F == 50).any(axis=1)])
+    Vd, Fd, cage, b, normal, ring = _rough_torus_at(levels)
     rng = np.random.default_rng(7)
     cur = cage.V.copy()
     D = deform(b, cur)
@@ -199,12 +205,7 @@ def test_a_drag_through_repairs_equals_full_at_both_test_paths(levels):
     # the same cage vertices moved again and again (the faces or group entries around
     # the rows are kept between the moves), the lift growing until faces fold and are
     # repaired, then shrinking back: each step equals a full deform of the same cage
-    Vd, Fd = torus(96, 48, bump=0.01)
-    Vd = Vd + 0.01 * np.random.default_rng(0).standard_normal(Vd.shape)
-    cage = simplify(Vd, Fd, target_faces=200)
-    b = bind(Vd, Fd, cage.V, cage.F, levels=levels, scheme="butterfly")
-    normal = vertex_normals(cage.V, cage.F)[50]
-    ring = np.unique(cage.F[(cage.F == 50).any(axis=1)])
+    Vd, Fd, cage, b, normal, ring = _rough_torus_at(levels)
     cur = cage.V.copy()
     D = deform(b, cur)
     b.influenced([])
@@ -224,13 +225,7 @@ def rough_torus():
     """A rough torus (noise 1% of its size) whose butterfly surface folds
     dense faces when a one-ring of its 200-face cage is lifted by 6-8% of
     the diagonal."""
-    Vd, Fd = torus(96, 48, bump=0.01)
-    Vd = Vd + 0.01 * np.random.default_rng(0).standard_normal(Vd.shape)
-    cage = simplify(Vd, Fd, target_faces=200)
-    b = bind(Vd, Fd, cage.V, cage.F, levels=2, scheme="butterfly")
-    N = vertex_normals(cage.V, cage.F)
-    ring = np.unique(cage.F[(cage.F == 50).any(axis=1)])
-    return Vd, Fd, cage, b, N[50], ring
+    return _rough_torus_at(2)
 
 
 @pytest.mark.parametrize("pct", [6, 8])
