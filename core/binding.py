@@ -645,14 +645,13 @@ def _away_around(binding, state, D, hit):
     scan, and save 2 of 25 ms a live update). The faces or entries are kept
     for the next call with the same ``hit`` (a drag asks again for the same
     rows)."""
+    by_groups = _by_groups(binding)
     last = state.get("around")
-    if _by_groups(binding):
-        groups = _groups(binding, state)
-        if last is None or last[0] is not hit:
-            last = state["around"] = (hit, groups.entries(hit.faces))
-        return groups.away(D, last[1])
     if last is None or last[0] is not hit:
-        last = state["around"] = (hit, _stars(binding, state).around(hit.rows))
+        last = state["around"] = (hit, _groups(binding, state).entries(hit.faces) if by_groups
+                                  else _stars(binding, state).around(hit.rows))
+    if by_groups:
+        return _groups(binding, state).away(D, last[1])
     return away_rows(D, state["F_t"], last[1], state["normals"])
 
 
