@@ -168,6 +168,25 @@ def face_normals(V, F, *, normalize=True):
     return unit_rows(N) if normalize else N
 
 
+def turned_faces(V_rest, V_new, F):
+    """The faces (ascending, int64) of ``F`` whose normal on ``V_new`` turned by
+    more than 90 degrees from their normal on ``V_rest`` (negative dot product
+    of the area normals): the faces an edit folded over. Faces degenerate at
+    rest (no normal) are never counted.
+
+    Examples
+    --------
+    >>> V = np.array([[0.0, 0, 0], [1, 0, 0], [0, 1, 0]])
+    >>> mirrored = V * [-1, 1, 1]
+    >>> turned_faces(V, V, [[0, 1, 2]]).tolist(), turned_faces(V, mirrored, [[0, 1, 2]]).tolist()
+    ([], [0])
+    """
+    F = np.asarray(F, dtype=np.int64).reshape(-1, 3)
+    n0 = area_normals_rows(np.asarray(V_rest, dtype=np.float64), F.T)
+    n1 = area_normals_rows(np.asarray(V_new, dtype=np.float64), F.T)
+    return np.flatnonzero(np.einsum("ij,ij->i", n0, n1) < 0)
+
+
 def squared_edges(V, F):
     """Squared lengths of the three edges of each face (corner k to corner
     k+1), (m,3)."""

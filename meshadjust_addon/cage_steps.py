@@ -27,6 +27,8 @@ MAX_AUTO_LEVELS = 5
 #: the binding still uses all the levels asked for
 MAX_FIT_LEVELS = 2
 OUTPUT_NAMES = tuple(item[0] for item in settings.OUTPUTS)
+#: cage faces a report names (then "...")
+_LISTED_FACES = 5
 
 
 def fit_levels(levels):
@@ -319,6 +321,23 @@ def _density_note(n_refined, n_source):
     return f", the source has {about(n_source)}"
 
 
+def turned_cage_note(cage, binding, V_cage):
+    """A warning when the edit turned faces of the cage itself over (normal
+    more than 90 degrees from its rest normal): the results fold there
+    whatever the scheme, and only the edit can undo it. Empty otherwise, or
+    when the binding has no rest shape."""
+    if binding.V_cage_rest is None:
+        return ""
+    turned = core.turned_faces(binding.V_cage_rest, V_cage, binding.F_cage)
+    if not turned.size:
+        return ""
+    listed = ", ".join(str(f) for f in turned[:_LISTED_FACES].tolist())
+    more = ", ..." if turned.size > _LISTED_FACES else ""
+    return (f"the edit turns {turned.size:,} face{'s' if turned.size > 1 else ''} of "
+            f"'{cage.name}' over (face index {listed}{more}): the result folds there; "
+            f"move those vertices back a little")
+
+
 def refine_object(cage, *, output='EDITED', levels=None, scheme=None):
     """Update the results of an edited cage; returns a :class:`Report`.
 
@@ -353,6 +372,9 @@ def refine_object(cage, *, output='EDITED', levels=None, scheme=None):
                          f"{job.scheme} x{job.levels}), the edit kept")
         binding = store.load_binding(edited, cage)
         V_cage = _cage_in_source_space(cage, source)
+        turned = turned_cage_note(cage, binding, V_cage)
+        if turned:
+            warnings.append(turned)
         if output == 'SHAPE_KEY':
             why = results.shape_key_unavailable(source, binding.n_dense)
             if why:

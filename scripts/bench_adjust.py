@@ -60,7 +60,7 @@ from core.binding import bind, deform, refine  # noqa: E402
 from core.fit import fit_cage  # noqa: E402
 from core.io_obj import read_obj  # noqa: E402
 from core.errors import MeshAdjustError  # noqa: E402
-from core.mesh import bbox_diagonal, enclosed_volume, face_normals, vertex_normals  # noqa: E402
+from core.mesh import bbox_diagonal, enclosed_volume, turned_faces, vertex_normals  # noqa: E402
 from core.metrics import surface_distance  # noqa: E402
 from core.simplify import simplify  # noqa: E402
 from core.spatial import closest_points  # noqa: E402
@@ -282,12 +282,8 @@ def artist_edits(Vc, Fc, diag, centres):
 
 
 def count_folds(V_rest, V_new, F):
-    """Faces whose normal turned by more than 90 degrees (degenerate rest faces
-    not counted)."""
-    n0 = face_normals(V_rest, F, normalize=False)
-    n1 = face_normals(V_new, F, normalize=False)
-    ok = np.einsum("ij,ij->i", n0, n0) > 0
-    return int(((np.einsum("ij,ij->i", n0, n1) < 0) & ok).sum())
+    """Faces whose normal turned by more than 90 degrees (``core.turned_faces``)."""
+    return int(turned_faces(V_rest, V_new, F).size)
 
 
 def surface_deform_many(V_dense, F_dense, V_cage, F_cage, edits):

@@ -110,6 +110,29 @@ def test_edit_moves_result_smoothly_and_in_place(dense):
     assert mio().read_positions(edited.data)[:, 2].max() > V1[:, 2].max()
 
 
+def test_refine_warns_when_the_edit_turns_cage_faces_over(dense):
+    simplify(300)
+    cage = dense.meshadjust.cage
+    core = sys.modules[MODULE + ".core"]
+    Vc = mio().read_positions(cage.data)
+    Fc = mio().read_triangles(cage.data)[0]
+    top = int(np.argmax(Vc[:, 2]))
+    Vc[top, 2] += 0.1                                     # a gentle lift: no warning
+    mio().write_positions(cage.data, Vc)
+    assert bpy.ops.meshadjust.refine(output='EDITED') == {'FINISHED'}
+    assert "WARNING" not in cage.meshadjust.last_report
+    V_rest = Vc.copy()
+    V_rest[top, 2] -= 0.1
+    Vc[top] = [0.0, 0.0, -0.5]                            # pushed through the middle
+    mio().write_positions(cage.data, Vc)
+    turned = core.turned_faces(V_rest.astype(np.float64), Vc.astype(np.float64), Fc)
+    assert turned.size >= 3
+    assert bpy.ops.meshadjust.refine(output='EDITED') == {'FINISHED'}
+    report = cage.meshadjust.last_report
+    assert f"WARNING: the edit turns {turned.size} faces of '{cage.name}' over" in report
+    assert f"(face index {turned[0]}, {turned[1]}" in report
+
+
 def test_refine_syncs_edit_mode(dense):
     simplify(300)
     cage = dense.meshadjust.cage

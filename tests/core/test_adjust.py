@@ -478,9 +478,8 @@ def _artist_edits(Vc, Fc, diag, v):
 
 
 def _folds(V0, V1, F):
-    from core.mesh import face_normals
-    n0, n1 = face_normals(V0, F, normalize=False), face_normals(V1, F, normalize=False)
-    return int((np.einsum("ij,ij->i", n0, n1) < 0).sum())
+    from core.mesh import turned_faces
+    return turned_faces(V0, V1, F).size
 
 
 @pytest.fixture(scope="module", params=["sphere", "torus"])

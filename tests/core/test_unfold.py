@@ -18,7 +18,7 @@ import pytest
 
 from core.binding import bind, deform
 from core.fit import fit_cage
-from core.mesh import bbox_diagonal, face_normals, vertex_normals
+from core.mesh import bbox_diagonal, face_normals, turned_faces, vertex_normals
 from core.simplify import simplify
 from core.unfold import (CageRings, FaceStars, FineFaceGroups, away_rows, away_t,
                          nearest_rotations, repair, ring_rotations, turned_over,
@@ -26,10 +26,8 @@ from core.unfold import (CageRings, FaceStars, FineFaceGroups, away_rows, away_t
 from tests.mesh_factory import load_shared, regular_grid, torus
 
 
-def _turned_from_rest(V0, V1, F):
-    a = face_normals(V0, F, normalize=False)
-    b = face_normals(V1, F, normalize=False)
-    return int((np.einsum("ij,ij->i", a, b) < 0).sum())
+def _turned(V0, V1, F):
+    return turned_faces(V0, V1, F).size
 
 
 def _identity(vertices, vectors):
@@ -52,6 +50,30 @@ def _rough_torus_at(levels):
 
 
 # ------------------------------------------------------------------ stages
+def test_turned_faces_are_the_faces_an_edit_folds_over():
+    # a hexagon fan: its centre pushed out past rim vertex 1 folds exactly the two
+    # faces on rim vertex 1's edges; a motion turning every normal by less than 90
+    # degrees (here 0.5 rad, scaled, moved) folds none, mirroring a flat fan folds all
+    angles = np.radians(60.0 * np.arange(6))
+    V = np.vstack([[0.0, 0.0, 0.0], np.stack([np.cos(angles), np.sin(angles),
+                                              np.zeros(6)], axis=1)])
+    F = np.array([[0, 1 + k, 1 + (k + 1) % 6] for k in range(6)])
+    pushed = V.copy()
+    pushed[0] = 1.5 * V[1]
+    assert turned_faces(V, pushed, F).tolist() == [0, 5]
+    c, s = np.cos(0.5), np.sin(0.5)
+    R = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]]) @ \
+        np.array([[1.0, 0.0, 0.0], [0.0, c, -s], [0.0, s, c]])
+    Vt, Ft = torus(24, 12)
+    assert turned_faces(Vt, 2.0 * Vt @ R.T + [3.0, -1.0, 2.0], Ft).size == 0
+    assert turned_faces(V, V * [-1.0, 1.0, 1.0], F).tolist() == list(range(6))  # (flat)
+    # a face degenerate at rest has no normal to turn from: never counted
+    flat = V.copy()
+    flat[0] = V[1]                     # faces 0 and 5 have two corners at one place
+    assert turned_faces(flat, flat * [-1.0, 1.0, 1.0], F).tolist() == [1, 2, 3, 4]
+    assert turned_faces(V, pushed, F.tolist()).dtype == np.int64   # lists are taken
+
+
 def test_face_stars_list_the_faces_around_vertices():
     V, F = regular_grid(4, 4)
     stars = FaceStars.of(F, V.shape[0])
@@ -75,7 +97,7 @@ def test_repair_puts_a_pushed_vertex_back_and_writes_only_its_region():
     Y = X.copy()
     rep = repair(Y, V, F, FT, stars, folded, rest, _identity, away)
     assert np.array_equal(rep.away, away)
-    assert _turned_from_rest(V, Y, F) == 0
+    assert _turned(V, Y, F) == 0
     changed = np.flatnonzero((Y != X).any(axis=1))
     assert np.isin(changed, rep.rows).all() and np.array_equal(rep.rows, np.unique(rep.rows))
     assert np.array_equal(rep.raw, X[rep.rows])
@@ -235,7 +257,7 @@ def test_deform_repairs_folds_and_reports_the_rows(rough_torus, pct):
     Ve[ring] += pct / 100 * bbox_diagonal(Vd) * normal
     plain = deform(dataclasses.replace(b, F_dense=None, _cache=None), Ve)
     D = deform(b, Ve)
-    before, after = _turned_from_rest(Vd, plain, Fd), _turned_from_rest(Vd, D, Fd)
+    before, after = _turned(Vd, plain, Fd), _turned(Vd, D, Fd)
     assert before > 0 and after < before
     rows = b.repaired(D)
     assert rows.size > 0 and b.repaired(plain).size == 0
@@ -249,7 +271,7 @@ def test_a_half_turn_repairs_nothing_and_stays_exact(rough_torus):
     Vd, Fd, cage, b, normal, ring = rough_torus
     R = np.diag([-1.0, -1.0, 1.0]) @ np.array([[1.0, 0, 0], [0, 0, -1], [0, 1, 0]])
     D = deform(b, cage.V @ R.T + 1.0)
-    assert _turned_from_rest(Vd, D, Fd) > 0.5 * Fd.shape[0]    # turned, yet not folded
+    assert _turned(Vd, D, Fd) > 0.5 * Fd.shape[0]    # turned, yet not folded
     assert b.repaired(D).size == 0
     assert np.abs(D - (Vd @ R.T + 1.0)).max() <= 1e-12 * bbox_diagonal(Vd)
 
@@ -295,5 +317,5 @@ def test_a_scan_edit_that_folded_a_face_folds_none():
     Ve = Vc.copy()
     Ve[ring] += 0.01 * diag * vertex_normals(Vc, cage.F)[v]
     plain = deform(dataclasses.replace(b, F_dense=None, _cache=None), Ve)
-    assert _turned_from_rest(V, plain, F) >= 1
-    assert _turned_from_rest(V, deform(b, Ve), F) == 0
+    assert _turned(V, plain, F) >= 1
+    assert _turned(V, deform(b, Ve), F) == 0
