@@ -30,6 +30,7 @@ import numpy as np
 
 from .. import core
 from . import store
+from .cage_steps import turned_cage_note
 
 #: above this fraction of moved cage vertices a full deform is cheaper
 FULL_FRACTION = 0.25
@@ -49,12 +50,14 @@ class LiveTiming(NamedTuple):
     convert: float     #: float64 -> float32 of the recomputed rows
     write: float       #: foreach_set of the position attribute and the update tag
     total: float
+    warning: str = ""  #: the edit turns cage faces over (:func:`~.cage_steps.turned_cage_note`)
 
     def summary(self):
         what = "full deform" if self.full else f"{self.moved} cage vertices moved"
         return (f"live: {what}, {self.rows:,} dense vertices updated in "
                 f"{1e3 * self.total:.1f} ms (deform {1e3 * self.deform:.1f}, "
-                f"write {1e3 * self.write:.1f})")
+                f"write {1e3 * self.write:.1f})"
+                + (f"; WARNING: {self.warning}" if self.warning else ""))
 
 
 class _State(NamedTuple):
@@ -135,7 +138,8 @@ def update_edited(cage):
     t5 = time.perf_counter()
     timing = LiveTiming(moved=V.shape[0] if moved is None else int(moved.size), rows=int(rows),
                         full=moved is None, read_cage=t1 - t0, compare=t2 - t1,
-                        deform=t3 - t2, convert=t4 - t3, write=t5 - t4, total=t5 - t0)
+                        deform=t3 - t2, convert=t4 - t3, write=t5 - t4, total=t5 - t0,
+                        warning=turned_cage_note(cage, binding, V))
     cs.last_report = timing.summary()
     return timing
 

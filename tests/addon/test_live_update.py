@@ -49,6 +49,25 @@ def test_incremental_live_update_equals_a_full_refine(bound_cage):
     assert np.array_equal(mio.read_positions(edited.data), full)
 
 
+def test_live_report_warns_while_the_edit_turns_cage_faces_over(bound_cage):
+    lu, mio = _mod("live_update"), _mod("mesh_io")
+    cage = bound_cage
+    lu.update_edited(cage)
+    assert not lu.update_edited(cage).warning
+    Vc = mio.read_positions(cage.data)
+    top = int(np.argmax(Vc[:, 2]))
+    rest = Vc[top].copy()
+    Vc[top] = [0.0, 0.0, -0.5]                  # through the middle: its faces turn over
+    mio.write_positions(cage.data, Vc)
+    t = lu.update_edited(cage)
+    assert t.warning.startswith("the edit turns ") and f"of '{cage.name}' over" in t.warning
+    assert cage.meshadjust.last_report.endswith("; WARNING: " + t.warning)
+    Vc[top] = rest                              # put back: the warning goes
+    mio.write_positions(cage.data, Vc)
+    assert not lu.update_edited(cage).warning
+    assert "WARNING" not in cage.meshadjust.last_report
+
+
 def test_rebind_starts_from_a_full_deform(bound_cage):
     lu = _mod("live_update")
     cage = bound_cage
