@@ -57,6 +57,18 @@ _WHERE = "clean_mesh"
 #: largest component's area)
 WELD_DISTANCE = 1e-6
 MIN_COMPONENT_AREA = 1e-4
+#: with the automatic weld distance: when welding at ``WELD_DISTANCE`` leaves more
+#: than ``OPEN_SHARE`` of the half-edges open (a soup whose copies of a vertex drifted
+#: apart, a seam-split export), each wider distance in turn, kept while it closes at
+#: least half of the open ones (a scan's own holes do not close: it is not kept).
+#: A rocker-arm soup jittered by 1e-6 of its size kept 7% of its half-edges open, by
+#: 3e-6 or more every one (the budget's debris rule then left 3 of its 20,088 faces)
+WIDER_WELDS = (1e-5, 1e-4)
+OPEN_SHARE = 0.005
+#: the face budget's debris rule drops its components only when together they hold at
+#: most this share of the total area: beyond, they are the mesh itself in pieces, not
+#: specks, and are kept (simplify then says how far it could go and why)
+BUDGET_DEBRIS_SHARE = 0.1
 #: cells per axis above which the weld grid's key would not fit in 21 bits
 _GRID_BITS = 21
 
@@ -79,13 +91,16 @@ class CleanReport:
     n_debris_components: int = 0      #: tiny components dropped ...
     n_debris_faces: int = 0           #: ... with this many faces
     n_unreferenced_vertices: int = 0  #: vertices no kept face uses
+    #: the weld distance used (share of the diagonal): ``WELD_DISTANCE``, or wider
+    #: when the automatic weld found the input in pieces (see :func:`clean_mesh`)
+    weld_distance: float = WELD_DISTANCE
 
     def to_dict(self):
         """The counts as a plain ``dict`` (for JSON reports)."""
         return asdict(self)
 
     def __bool__(self):
-        return any(getattr(self, f.name) for f in fields(self))
+        return any(getattr(self, f.name) for f in fields(self) if f.name != "weld_distance")
 
     def summary(self):
         """One line of what was done, e.g. ``"welded 4,012 vertices, split 3
@@ -97,7 +112,9 @@ class CleanReport:
             if count:
                 parts.append(f"{text.format(f'{count:,}')}{extra}")
 
-        add(self.n_welded_vertices, "welded {} vertices")
+        add(self.n_welded_vertices, "welded {} vertices",
+            f" (within {self.weld_distance:g} of the size: the input came in pieces)"
+            if self.weld_distance > WELD_DISTANCE else "")
         add(self.n_non_manifold_edges, "cut {} non-manifold edges into sheets")
         add(self.n_split_vertices, "split {} bow-tie vertices")
         add(self.n_double_sided_sheets, "removed {} double-sided sheets",
@@ -136,7 +153,7 @@ class CleanResult(NamedTuple):
     report: CleanReport
 
 
-def clean_mesh(V, F, *, weld_distance=WELD_DISTANCE, min_component_area=MIN_COMPONENT_AREA,
+def clean_mesh(V, F, *, weld_distance=None, min_component_area=MIN_COMPONENT_AREA,
                face_budget=None, protected=None):
     """Clean a triangle mesh into an edge- and vertex-manifold surface.
 
@@ -144,13 +161,17 @@ def clean_mesh(V, F, *, weld_distance=WELD_DISTANCE, min_component_area=MIN_COMP
     ----------
     V : (n,3) float array_like
     F : (m,3) int array_like
-    weld_distance : float >= 0
+    weld_distance : float >= 0 or None
         Vertices on open or non-manifold edges closer than this share of the
         bounding-box diagonal (along every axis) are welded; exact duplicates
         always are (also with 0); so are the two ends of an edge that short,
         and the corners of faces no taller than it (collapsed clusters).
         Other vertices inside a closed surface are not welded: two of them at
         one place are two sheets touching, which is already manifold.
+        None (the default): ``WELD_DISTANCE``, or when that leaves more than
+        ``OPEN_SHARE`` of the half-edges open, the first of ``WIDER_WELDS``
+        that closes at least half of them (then the next, likewise); the
+        report's ``weld_distance`` says which was used.
     min_component_area : float >= 0
         Components whose area is below this share of the largest
         component's area are debris and dropped (0 keeps everything).
@@ -158,7 +179,8 @@ def clean_mesh(V, F, *, weld_distance=WELD_DISTANCE, min_component_area=MIN_COMP
         The face count the mesh is meant for (``simplify``'s target):
         components too small to get one face of it, by their share of the
         total area, are debris too (they cannot be represented, and each
-        would take at least one face, four when closed).
+        would take at least one face, four when closed), unless together they
+        hold more than ``BUDGET_DEBRIS_SHARE`` of the total area.
     protected : (n,) bool, optional
         Components with a protected vertex (e.g. a locked one) are never debris.
 
@@ -181,7 +203,7 @@ def clean_mesh(V, F, *, weld_distance=WELD_DISTANCE, min_component_area=MIN_COMP
     ([[0, 1, 2], [1, 3, 2]], 'welded 2 vertices')
     """
     V, F = check_mesh(V, F, where=_WHERE)
-    for name, value in (("weld_distance", weld_distance),
+    for name, value in (("weld_distance", WELD_DISTANCE if weld_distance is None else weld_distance),
                         ("min_component_area", min_component_area)):
         if not (isinstance(value, (int, float, np.number)) and np.isfinite(value) and value >= 0):
             raise InvalidArgumentError(
@@ -200,16 +222,15 @@ def clean_mesh(V, F, *, weld_distance=WELD_DISTANCE, min_component_area=MIN_COMP
     twin, shape = run_each(lambda job: job(), [lambda: twin_table(F, n_in), lambda: _shape(V, F, box)])
     area = np.zeros(faces[-1] + 1 if faces.size else 0)
     area[faces] = shape.area                               # per input face, as it came
-    rep = _weld_map(shape, F, twin, float(weld_distance))
+    weld = _weld(shape, F, twin, faces, float(weld_distance)) if weld_distance is not None \
+        else _automatic_weld(shape, F, twin, faces)
     del shape
+    rep = weld.rep
     counts["n_welded_vertices"] = int(np.count_nonzero(rep != np.arange(n_in)))
-    if counts["n_welded_vertices"]:
-        F = rep[F]
-        bad = _degenerate(F)
-        n_degenerate += int(np.count_nonzero(bad))
-        F, faces, corners = F[~bad], faces[~bad], None
-        twin = twin_table(F, n_in)
-    counts["n_degenerate_faces"] = n_degenerate
+    counts["weld_distance"] = weld.distance
+    if weld.F is not F:
+        F, faces, twin, corners = weld.F, weld.faces, weld.twin, None
+    counts["n_degenerate_faces"] = n_degenerate + weld.n_degenerate
     keep, found = _unique_faces(F, twin, n_in)
     counts.update(found)
     if not keep.all():
@@ -239,6 +260,46 @@ def clean_mesh(V, F, *, weld_distance=WELD_DISTANCE, min_component_area=MIN_COMP
 def _degenerate(F):
     """Faces with a repeated vertex index, (m,) bool."""
     return (F[:, 0] == F[:, 1]) | (F[:, 1] == F[:, 2]) | (F[:, 0] == F[:, 2])
+
+
+class _Welded(NamedTuple):
+    """The faces after a weld (:func:`_weld`)."""
+
+    rep: np.ndarray     #: (n,) the weld's representative of every vertex
+    F: np.ndarray       #: the faces welded, degenerate ones dropped (``F`` itself: no weld)
+    faces: np.ndarray   #: input face of each
+    twin: np.ndarray    #: their twin table
+    n_degenerate: int   #: faces degenerate after the weld (dropped)
+    distance: float     #: the weld distance
+
+
+def _weld(shape, F, twin, faces, distance):
+    """The :class:`_Welded` faces ``F`` (twin table ``twin``, input faces
+    ``faces``) at the weld distance ``distance``."""
+    n = shape.V.shape[0]
+    rep = _weld_map(shape, F, twin, distance)
+    if not (rep != np.arange(n)).any():
+        return _Welded(rep, F, faces, twin, 0, distance)
+    W = rep[F]
+    bad = _degenerate(W)
+    return _Welded(rep, W[~bad], faces[~bad], twin_table(W[~bad], n),
+                   int(np.count_nonzero(bad)), distance)
+
+
+def _automatic_weld(shape, F, twin, faces):
+    """:func:`_weld` at ``WELD_DISTANCE``, then at each of ``WIDER_WELDS``
+    while the last weld kept leaves more than ``OPEN_SHARE`` of the
+    half-edges open and the wider one closes at least half of them."""
+    best = _weld(shape, F, twin, faces, WELD_DISTANCE)
+    for distance in WIDER_WELDS:
+        still_open = np.count_nonzero(best.twin == BOUNDARY)
+        if still_open <= OPEN_SHARE * best.twin.size:
+            break
+        wider = _weld(shape, F, twin, faces, distance)
+        if np.count_nonzero(wider.twin == BOUNDARY) > 0.5 * still_open:
+            break
+        best = wider
+    return best
 
 
 class _Shape(NamedTuple):
@@ -639,7 +700,7 @@ def _debris(area, F, inner, min_component_area, face_budget, protected):
     roots = np.flatnonzero(labels == np.arange(F.shape[0]))
     tiny = comp_area < min_component_area * comp_area.max()
     if face_budget:
-        tiny |= comp_area * face_budget < comp_area.sum() * (1 - 1e-9)  # (equal parts: none)
+        tiny |= _budget_debris(comp_area, roots, face_budget)
     tiny[np.argmax(comp_area)] = False
     if protected is not None:
         tiny[labels[protected[F].any(axis=1)]] = False
@@ -647,6 +708,19 @@ def _debris(area, F, inner, min_component_area, face_budget, protected):
     found["n_debris_components"] = int(np.count_nonzero(tiny[roots]))
     found["n_debris_faces"] = int(np.count_nonzero(~keep))
     return keep, found
+
+
+def _budget_debris(comp_area, roots, face_budget):
+    """(m,) bool over component labels: the components too small for one
+    face of ``face_budget`` by their share of the total area (equal parts:
+    none) -- or none of them when together they hold more than
+    ``BUDGET_DEBRIS_SHARE`` of the area (then they are the mesh in pieces)."""
+    total = comp_area.sum()
+    small = roots[comp_area[roots] * face_budget < total * (1 - 1e-9)]
+    out = np.zeros(comp_area.shape[0], dtype=bool)
+    if comp_area[small].sum() <= BUDGET_DEBRIS_SHARE * total:
+        out[small] = True
+    return out
 
 
 def _keep_twins(twin, keep):

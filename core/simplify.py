@@ -57,7 +57,7 @@ from ._collapse import State, run
 from ._parallel import blocks, run_blocks, run_each
 from ._relax import close_smallest_hole, close_triangular_holes, drop_stuck_components
 from ._relocate import relocate, segment_triangles
-from .clean import MIN_COMPONENT_AREA, WELD_DISTANCE, CleanReport, clean_mesh
+from .clean import MIN_COMPONENT_AREA, CleanReport, clean_mesh
 from .errors import InvalidArgumentError, InvalidMeshError, MeshAdjustError
 from .mesh import bounding_box, check_mesh, diagonal_length, face_normals
 from .metrics import surface_distance
@@ -152,6 +152,9 @@ class SimplifyResult:
                                  f"or squash a face",
             "cancelled": f"cancelled: the cleaned input returned unchanged ({m:,} faces)",
         }[self.stopped_because]
+        if self.stopped_because == "topology_floor" and self.n_components > 0.5 * m:
+            text += (f"; the input is in {self.n_components:,} separate pieces: weld it "
+                     f"first (Merge by Distance in Blender, or a larger weld_distance)")
         done = self.cleaning.summary()
         return f"{text}; {done}" if done else text
 
@@ -568,7 +571,7 @@ def _within_max_error(su, clean, target, max_error, opts, progress):
 
 def simplify(V, F, *, target_faces=None, ratio=None, max_error=None, preserve_boundary=True,
              preserve_topology=True, feature_angle_deg=60.0, vertex_weights=None, locked=None,
-             weld_distance=WELD_DISTANCE, min_component_area=MIN_COMPONENT_AREA, symmetry=None,
+             weld_distance=None, min_component_area=MIN_COMPONENT_AREA, symmetry=None,
              max_dihedral_deg=None, progress=None, tuning=None):
     """Simplify a triangle mesh to a coarse, clean manifold cage (QEM).
 
@@ -622,9 +625,10 @@ def simplify(V, F, *, target_faces=None, ratio=None, max_error=None, preserve_bo
         Importance of each input vertex: scales its quadric.
     locked : (n,) bool, optional
         Locked vertices are never moved or removed.
-    weld_distance, min_component_area : float >= 0
+    weld_distance, min_component_area : float >= 0 (weld_distance: or None)
         Cleaning tolerances, see :func:`core.clean.clean_mesh` (shares of the
-        bounding-box diagonal and of the largest component's area). With a
+        bounding-box diagonal and of the largest component's area; the
+        default weld widens itself on an input that comes in pieces). With a
         target and no ``max_error``, components too small for one face of
         the target (by their share of the area) are dropped as debris too,
         and reported; never one with a locked vertex.

@@ -40,7 +40,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from .clean import MIN_COMPONENT_AREA, WELD_DISTANCE
+from .clean import MIN_COMPONENT_AREA
 from .errors import InvalidArgumentError
 from .mesh import bbox_diagonal, check_mesh, face_normals
 from .metrics import surface_distance
@@ -360,7 +360,7 @@ def _mirror_face_sources(clean, s, V, F, k):
 
 def simplify_symmetric(V, F, *, axis="X", target_faces=None, ratio=None, max_error=None,
                        preserve_boundary=True, preserve_topology=True, feature_angle_deg=60.0,
-                       vertex_weights=None, locked=None, weld_distance=WELD_DISTANCE,
+                       vertex_weights=None, locked=None, weld_distance=None,
                        min_component_area=MIN_COMPONENT_AREA, max_dihedral_deg=None, progress=None,
                        tuning=None):
     """A mirror-symmetric cage (what ``simplify(..., symmetry=axis)`` runs).

@@ -15,11 +15,12 @@ from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 
 import core
-from core.clean import CleanReport, clean_mesh
+from core.clean import (BUDGET_DEBRIS_SHARE, OPEN_SHARE, WELD_DISTANCE, WIDER_WELDS, CleanReport,
+                        clean_mesh)
 from core.errors import InvalidArgumentError, InvalidMeshError
 from core.topology import manifold_report, topology_summary
-from tests.mesh_factory import (icosphere, load_shared, pinched, shared_mesh_names, torus, unwelded,
-                                with_debris, with_fins, with_sheets)
+from tests.mesh_factory import (icosphere, load_shared, pinched, regular_grid, shared_mesh_names, torus,
+                                unwelded, with_debris, with_fins, with_sheets)
 
 
 def assert_manifold(V, F):
@@ -33,10 +34,11 @@ def summary(F, n):
     return s.euler, s.components, s.boundary_loops
 
 
-def assert_maps(r, V, F):
+def assert_maps(r, V, F, weld=1e-5):
     """Every clean vertex sits on its input vertex; every clean face is an input face
-    (as a set of positions); every used input vertex maps to a clean vertex there."""
-    tol = 1e-5 * core.bbox_diagonal(V)               # welds move a vertex by their distance
+    (as a set of positions); every used input vertex maps to a clean vertex there
+    (within ``weld`` of the diagonal: welds move a vertex by about their distance)."""
+    tol = weld * core.bbox_diagonal(V)
     np.testing.assert_array_equal(r.V, V[r.clean_to_input])
     np.testing.assert_allclose(np.sort(V[F[r.face_to_input]], axis=1),
                                np.sort(r.V[r.F], axis=1), rtol=0, atol=tol)
@@ -68,11 +70,39 @@ def test_soups_weld_back_to_the_mesh(jitter):
 def test_weld_distance_is_relative_to_the_diagonal_and_zero_welds_exact_duplicates_only():
     V, F = icosphere(2)
     S, FS = unwelded(V, F, 1e-4)
-    assert clean_mesh(S, FS).report.n_welded_vertices == 0          # 1e-4 >> 1e-6: a soup still
+    assert clean_mesh(S, FS, weld_distance=1e-6).report.n_welded_vertices == 0   # a soup still
     assert clean_mesh(S, FS, weld_distance=1e-2).F.shape == F.shape
     assert clean_mesh(S * 1e4, FS, weld_distance=1e-2).F.shape == F.shape
     E, FE = unwelded(V, F, 0.0)
     assert clean_mesh(E, FE, weld_distance=0.0).report.n_welded_vertices == FE.size - V.shape[0]
+
+
+@pytest.mark.parametrize("jitter, used", [(1e-6, 1e-5), (1e-5, 1e-4)])
+def test_the_automatic_weld_widens_for_a_soup_whose_copies_drifted_apart(jitter, used):
+    V, F = icosphere(3)
+    S, FS = unwelded(V, F, jitter, seed=1)
+    plain = clean_mesh(S, FS, weld_distance=1e-6)
+    assert np.count_nonzero(plain.twin == core._clean.BOUNDARY) > OPEN_SHARE * plain.twin.size
+    r = clean_mesh(S, FS)
+    assert r.report.weld_distance == used
+    assert r.F.shape == F.shape and summary(r.F, r.V.shape[0]) == (2, 1, 0)
+    assert_manifold(r.V, r.F)
+    assert_maps(r, S, FS, weld=8 * used)         # (pairs up to 4 weld distances per axis)
+    assert r.report.summary() == (f"welded {FS.size - V.shape[0]:,} vertices (within {used:g} "
+                                  f"of the size: the input came in pieces)")
+
+
+def test_the_automatic_weld_leaves_real_borders_and_far_drift_alone():
+    # a scan's own holes do not close at a wider weld: the same as the default's weld
+    for V, F in (regular_grid(12, 12), load_shared("beetle.obj")):
+        fixed, auto = clean_mesh(V, F, weld_distance=WELD_DISTANCE), clean_mesh(V, F)
+        assert auto.report.weld_distance == WELD_DISTANCE and not auto.report.summary().count("pieces")
+        assert np.array_equal(auto.F, fixed.F) and np.array_equal(auto.V, fixed.V)
+    # drift beyond the widest step: nothing welds (a soup, which simplify names as such)
+    V, F = icosphere(2)
+    S, FS = unwelded(V, F, 30 * WIDER_WELDS[-1], seed=1)
+    r = clean_mesh(S, FS)
+    assert r.report.weld_distance == WELD_DISTANCE and r.F.shape == FS.shape
 
 
 def test_bowties_are_split_one_vertex_per_fan():
@@ -148,16 +178,21 @@ def test_debris_is_dropped_by_area_and_by_face_budget():
     assert r.report.n_debris_components == 3000 and r.report.n_debris_faces == 12000
     assert r.F.shape == F.shape and summary(r.F, r.V.shape[0]) == (2, 1, 0)
     assert np.all(r.input_to_clean[V.shape[0]:] == -1)
-    # ten equal shells: each gets a tenth of a 10-face budget, none is debris
+    # ten equal shells: each gets a tenth of a 10-face budget, none is debris; with 9
+    # faces each is too small, but together they are the mesh, not specks: all kept
     T, FT = icosphere(0)
     Vm = np.concatenate([T + [3.0 * k, 0, 0] for k in range(10)])
     Fm = np.concatenate([FT + 12 * k for k in range(10)])
     assert clean_mesh(Vm, Fm, face_budget=10).report.n_debris_components == 0
-    assert clean_mesh(Vm, Fm, face_budget=9).report.n_debris_components == 9
+    assert clean_mesh(Vm, Fm, face_budget=9).report.n_debris_components == 0
+    # one large shell and nine small ones holding under BUDGET_DEBRIS_SHARE of the area
+    scale = np.sqrt(0.9 * BUDGET_DEBRIS_SHARE / 9)
+    Vs = np.concatenate([T * (1.0 if k == 0 else scale) + [3.0 * k, 0, 0] for k in range(10)])
+    assert clean_mesh(Vs, Fm, face_budget=20).report.n_debris_components == 9
     # a protected vertex keeps its component
-    prot = np.zeros(Vm.shape[0], dtype=bool)
+    prot = np.zeros(Vs.shape[0], dtype=bool)
     prot[-1] = True
-    assert clean_mesh(Vm, Fm, face_budget=9, protected=prot).report.n_debris_components == 8
+    assert clean_mesh(Vs, Fm, face_budget=20, protected=prot).report.n_debris_components == 8
 
 
 def test_collapsed_clusters_answer_quickly():

@@ -12,7 +12,7 @@ from core.simplify import SimplifyResult, simplify
 from core.topology import manifold_report, topology_summary
 from core.tuning import TUNING, Tuning
 from tests.mesh_factory import (boundary_edges, cube, double_torus, icosphere, load_shared, regular_grid,
-                                tetrahedron, torus)
+                                tetrahedron, torus, unwelded)
 
 
 # ---------------------------------------------------------------- helpers
@@ -463,6 +463,24 @@ def test_components_too_small_for_the_target_are_debris():
     assert kept.stopped_because == "topology_floor" and kept.F.shape[0] == 8
     assert kept.message == "stopped at 8 faces of 4 asked: the topology floor (0 border loops, " \
         "2 components kept)"
+
+
+def test_a_soup_is_welded_or_named_never_thrown_away_as_debris():
+    V, F = icosphere(3)
+    # copies of a vertex drifted 1e-6 of the size apart: the weld widens itself
+    S, FS = unwelded(V, F, 1e-6, seed=2)
+    r = simplify(S, FS, target_faces=100)
+    assert r.F.shape[0] == 100 and r.stopped_because == "target"
+    assert topology_summary(r.F, r.V.shape[0])[:3] == topology_summary(F, V.shape[0])[:3]
+    assert "(within 1e-05 of the size: the input came in pieces)" in r.message
+    # drifted beyond any automatic weld: the pieces are the mesh, not debris (each
+    # is too small for a face of the target, together they are all of it): kept,
+    # and the message says what to do
+    S, FS = unwelded(V, F, 3e-3, seed=2)
+    r = simplify(S, FS, target_faces=100)
+    assert r.cleaning.n_debris_faces == 0 and r.F.shape[0] == F.shape[0]
+    assert r.stopped_because == "topology_floor" and r.n_components == F.shape[0]
+    assert f"the input is in {F.shape[0]:,} separate pieces: weld it first" in r.message
 
 
 def test_relaxed_topology_drops_a_component_that_cannot_shrink():
