@@ -35,7 +35,7 @@ from typing import NamedTuple
 import numpy as np
 
 from ._groups import group_argmin, ragged_ranges
-from .spatial import TriangleIndex, closest_on_triangles, triangle_rows
+from .spatial import TriangleIndex, closest_pairs, triangle_rows
 
 #: (query, face) pairs per kernel call (temporaries that stay in cache)
 _BLOCK = 1 << 14
@@ -194,14 +194,7 @@ class FaceTracker:
 
     def _pairs(self, QT, q, t):
         """The kernel on the pairs (queries ``q``, faces ``t``): ``v, w, d2``."""
-        k = q.size
-        v, w, d2 = np.empty(k), np.empty(k), np.empty(k)
-        for s in range(0, k, _BLOCK):
-            e = min(s + _BLOCK, k)
-            X = np.take(QT, q[s:e], axis=1)
-            v[s:e], w[s:e], d2[s:e] = closest_on_triangles(
-                X[0], X[1], X[2], np.take(self._D, t[s:e], axis=1))
-        return v, w, d2
+        return closest_pairs(QT, q, self._D, t)
 
     def _around(self, QT, q, verts, counts):
         """Best face among those around ``verts``, ``counts[i]`` of them for

@@ -8,7 +8,8 @@ from hypothesis import given, settings, strategies as st, HealthCheck
 
 import core.spatial as spatial
 from core.errors import InvalidArgumentError, InvalidMeshError
-from core.spatial import ClosestPoints, TriangleIndex, closest_points, point_triangle_closest
+from core.spatial import (KERNEL_BLOCK, ClosestPoints, TriangleIndex, closest_on_triangles,
+                          closest_pairs, closest_points, point_triangle_closest, triangle_rows)
 from tests.mesh_factory import cube, icosphere, load_shared, regular_grid, torus
 
 
@@ -149,6 +150,24 @@ def test_kernel_degenerate_triangles(shape):
     np.testing.assert_allclose(r.bary.sum(axis=1), 1.0, atol=1e-12)
     rec = r.bary[:, :1] * A + r.bary[:, 1:2] * B + r.bary[:, 2:] * C
     np.testing.assert_allclose(rec, r.point, atol=1e-12)
+
+
+def test_closest_pairs_in_blocks_is_the_kernel_on_every_pair():
+    # more pairs than a block (the last block short), repeated points and triangles,
+    # slivers among them: the same bits as one call of the kernel on all of them
+    rng = np.random.default_rng(3)
+    A, B, C = (rng.normal(size=(50, 3)) for _ in range(3))
+    C[:5] = A[:5] + 1e-9 * (B[:5] - A[:5])                  # slivers (robust path)
+    D = triangle_rows(A, B, C)
+    PT = rng.normal(size=(3, 400))
+    k = 3 * KERNEL_BLOCK + 17
+    q, t = rng.integers(0, 400, k), rng.integers(0, 50, k)
+    got = closest_pairs(PT, q, D, t)
+    want = closest_on_triangles(PT[0, q], PT[1, q], PT[2, q], D[:, t])
+    for g, w in zip(got, want):
+        assert np.array_equal(g, w)
+    small = closest_pairs(PT, q[:10], D, t[:10])
+    assert all(np.array_equal(g, w[:10]) for g, w in zip(small, want))
 
 
 def test_kernel_bad_input():
