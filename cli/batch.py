@@ -67,6 +67,10 @@ def parse_args(argv, prog=PROG):
     p.add_argument("--max-dihedral", type=float, default=None, metavar="DEG",
                    help="stop before a collapse would bend two adjacent cage faces by more than "
                         "DEG degrees away from the creases (0 < DEG < 180; default: no bound)")
+    p.add_argument("--weld-distance", type=float, default=None, metavar="D",
+                   help="weld vertices on open edges closer than D of the bounding-box "
+                        "diagonal (default: automatic, 1e-6 widening to 1e-5 or 1e-4 when "
+                        "the input comes in pieces)")
     p.add_argument("--symmetry", choices=("X", "Y", "Z"), default=None,
                    help="make the cage mirror-symmetric about the plane through the origin "
                         "normal to this axis, in the file's coordinates (the fit keeps it so)")
@@ -98,6 +102,8 @@ def parse_args(argv, prog=PROG):
         p.error("--max-error must be positive")
     if args.max_dihedral is not None and not 0 < args.max_dihedral < 180:
         p.error("--max-dihedral must be in (0, 180) degrees")
+    if args.weld_distance is not None and not 0 <= args.weld_distance < 1:
+        p.error("--weld-distance must be in [0, 1) (a share of the bounding-box diagonal)")
     if args.refine < 0 or args.jobs < 1:
         p.error("--refine must be >= 0 and --jobs >= 1")
     return args
@@ -107,7 +113,8 @@ def options(args):
     return _convert.Options(faces=args.faces, ratio=args.ratio, max_error_pct=args.max_error,
                             fit=args.fit, refine=args.refine, scheme=args.scheme,
                             feature_angle_deg=args.feature_angle, format=args.format,
-                            symmetry=args.symmetry, max_dihedral_deg=args.max_dihedral)
+                            symmetry=args.symmetry, max_dihedral_deg=args.max_dihedral,
+                            weld_distance=args.weld_distance)
 
 
 def _is_output(name):
