@@ -17,9 +17,12 @@ a time::
     phase B      the same bound on every other cell within u of the point
                  (box distance)
     exact        the kernel (float64) on the pairs whose bound is within u:
-                 first each point's smallest bound, then the others within
-                 the bound that gives; the smallest squared distance wins,
-                 exact ties go to the lowest face index
+                 first each point's smallest bound, then (a point with more
+                 than ``_CROWDED`` pairs left: the bound is loose past sharp
+                 corners) its nearest centroid, then the others within the
+                 bound that gives; the smallest squared distance wins, exact
+                 ties go to the lowest face index. A block with more than
+                 ``_CROWDED_BLOCK`` pairs a point is answered in halves
 
 Tiles: points (or (point, cell) pairs) that share a cell go in tiles of
 ``_TILE`` rows. The references of cell ``c`` are a run of the cell-ordered
