@@ -243,17 +243,6 @@ def closest_on_triangles(px, py, pz, D):
     return v, w, dist2
 
 
-def ball_within(dc2, r, bound):
-    """(k,) bool: the pairs whose bounding-sphere lower bound is within the
-    squared distance ``bound``: ``|x - c| - r <= sqrt(bound)``, from the
-    squared centroid distances ``dc2`` and the sphere radii ``r`` (kept
-    conservative by ``PRUNE_SLACK``)."""
-    reach = np.sqrt(bound)
-    reach += r
-    reach *= reach
-    return dc2 <= reach * (1 + 4 * PRUNE_SLACK)
-
-
 def closest_pairs(PT, q, D, t):
     """:func:`closest_on_triangles` on the pairs (columns ``q`` of the points
     ``PT`` (3,n), columns ``t`` of the triangle rows ``D`` (16,m)), gathered
@@ -837,7 +826,10 @@ class TriangleIndex:
         """Indices of the pairs (offsets X from the centroids (3, k), squared
         lengths dc2, triangles t) whose lower bounds (sphere, disk and, with
         ``edges``, edge lines) are all within ``bound``."""
-        keep = np.flatnonzero(ball_within(dc2, r, bound))
+        reach = np.sqrt(bound)
+        reach += r
+        reach *= reach
+        keep = np.flatnonzero(dc2 <= reach * (1 + 4 * PRUNE_SLACK))
         if keep.size:
             X, t, dc2, bound = np.take(X, keep, axis=1), t[keep], dc2[keep], bound[keep]
             sub = np.flatnonzero(self._disk_bound(X, t, dc2, r[keep]) <= bound * (1 + PRUNE_SLACK))
