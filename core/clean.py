@@ -46,6 +46,7 @@ import numpy as np
 
 from ._clean import (BOUNDARY, NON_MANIFOLD, corner_fans, face_keys, half_edge_ends,
                      interior_edges, non_manifold_vertices, renumber_twins, twin_table)
+from ._groups import ragged_entries
 from ._parallel import blocks, run_blocks, run_each
 from .errors import InvalidArgumentError
 from .mesh import bounding_box, check_mesh, diagonal_length, face_normals
@@ -87,7 +88,8 @@ class CleanReport:
     n_added_vertices: int = 0         #: ... adding this many vertices
     n_detached_faces: int = 0         #: faces cut loose where pairing could not resolve an edge
     n_flipped_faces: int = 0          #: faces turned to agree with their component
-    n_non_orientable_components: int = 0  #: components with no consistent orientation (kept)
+    n_non_orientable_components: int = 0  #: one-sided components (a Moebius strip), cut open ...
+    n_seam_edges: int = 0             #: ... along this many edges, so they can be oriented
     n_debris_components: int = 0      #: tiny components dropped ...
     n_debris_faces: int = 0           #: ... with this many faces
     n_unreferenced_vertices: int = 0  #: vertices no kept face uses
@@ -125,7 +127,8 @@ class CleanReport:
         add(self.n_duplicate_faces, "removed {} duplicate faces")
         add(self.n_detached_faces, "detached {} faces")
         add(self.n_flipped_faces, "flipped {} faces to a consistent orientation")
-        add(self.n_non_orientable_components, "kept {} non-orientable components as they are")
+        add(self.n_non_orientable_components, "cut {} one-sided (non-orientable) components open",
+            f" along {self.n_seam_edges:,} edges to orient them")
         add(self.n_unreferenced_vertices, "dropped {} unreferenced vertices")
         return ", ".join(parts)
 
@@ -241,7 +244,11 @@ def clean_mesh(V, F, *, weld_distance=None, min_component_area=MIN_COMPONENT_ARE
     inner = interior_edges(twin)
     F, twin, found = _orient(F, twin, inner)
     counts.update(found)
-    if found["n_flipped_faces"]:
+    if found["n_seam_edges"]:
+        # the seam's edges are open in twin: their ends get one vertex per side
+        V, F, to_input, _, _ = _split_fans(V, F, twin, to_input)
+        twin = twin_table(F, V.shape[0])
+    if found["n_flipped_faces"] or found["n_seam_edges"]:
         inner = interior_edges(twin)
     if protected is not None:
         protected = np.asarray(protected, dtype=bool)[to_input]
@@ -632,17 +639,21 @@ def _make_manifold(V, F, twin, corners=None):
 
 
 def _orient(F, twin, inner):
-    """Flip faces so that every orientable component is consistent, keeping
-    the orientation most of its faces have.
+    """Flip faces so that every component is consistent, keeping the
+    orientation most of its faces have; a one-sided (non-orientable)
+    component is cut open along a seam first.
 
     The faces' orientations are the components of a double cover: node
     ``2f`` is face ``f`` as it is, ``2f+1`` flipped; two faces on an edge
     that agree join (as is, as is) and (flipped, flipped), two that disagree
     (as is, flipped) and (flipped, as is). A component whose face meets
-    itself flipped is non-orientable (left as it is). ``inner``: the interior
-    edges, ``interior_edges(twin)``.
+    itself flipped is one-sided: its faces are oriented along a spanning
+    tree (:func:`_tree_flips`) and the edges that tree leaves inconsistent,
+    its seam, are opened in the returned twin table (their vertices are
+    still shared: the caller splits them, one per side). ``inner``: the
+    interior edges, ``interior_edges(twin)``. Returns F, twin and the counts.
     """
-    found = {"n_flipped_faces": 0, "n_non_orientable_components": 0}
+    found = {"n_flipped_faces": 0, "n_non_orientable_components": 0, "n_seam_edges": 0}
     h, t = inner
     if h.size == 0:
         return F, twin, found
@@ -652,10 +663,10 @@ def _orient(F, twin, inner):
     if agree.all():
         return F, twin, found
     m = F.shape[0]
-    fh, ft = 2 * (h // 3), 2 * (t // 3)
+    fh, ft = h // 3, t // 3
     other = np.where(agree, 0, 1)
-    pairs = np.concatenate([np.stack([fh, ft + other], axis=1),
-                            np.stack([fh + 1, ft + 1 - other], axis=1)])
+    pairs = np.concatenate([np.stack([2 * fh, 2 * ft + other], axis=1),
+                            np.stack([2 * fh + 1, 2 * ft + 1 - other], axis=1)])
     labels = connected_labels(2 * m, pairs)
     as_is, flipped = labels[0::2], labels[1::2]
     orientable = as_is != flipped
@@ -665,10 +676,17 @@ def _orient(F, twin, inner):
     n_low = np.bincount(comp, weights=orientable & on_low, minlength=2 * m)
     n_all = np.bincount(comp, weights=orientable, minlength=2 * m)
     flip = orientable & (on_low != (n_low[comp] * 2 >= n_all[comp]))
-    if not flip.any() and orientable.all():
+    seam = np.zeros(0, dtype=np.int64)
+    if not orientable.all():
+        one_sided = ~orientable
+        # (a one-sided component's smallest node is 2 f for its lowest face f)
+        flip |= one_sided & _tree_flips(m, fh, ft, agree, one_sided, np.unique(comp[one_sided]) // 2)
+        seam = np.flatnonzero(one_sided[fh] & (agree != (flip[fh] == flip[ft])))
+        found["n_non_orientable_components"] = int(np.unique(comp[one_sided]).size)
+        found["n_seam_edges"] = int(seam.size)
+    if not flip.any() and seam.size == 0:
         return F, twin, found
-    found["n_flipped_faces"] = int(np.count_nonzero(flip))
-    found["n_non_orientable_components"] = int(np.unique(comp[~orientable]).size)
+    found["n_flipped_faces"] = int(np.count_nonzero(flip & orientable))   # (the seam's are its own)
     F = F.copy()
     F[flip, 1], F[flip, 2] = F[flip, 2], F[flip, 1].copy()
     # a flipped face's half-edges 1 and 2 swap places (0 stays: corners 1 and 2 swapped)
@@ -677,7 +695,41 @@ def _orient(F, twin, inner):
     perm = perm.ravel()
     new_twin = np.empty_like(twin)
     new_twin[perm] = np.where(twin >= 0, perm[np.maximum(twin, 0)], twin)
+    new_twin[perm[h[seam]]] = BOUNDARY
+    new_twin[perm[t[seam]]] = BOUNDARY
     return F, new_twin, found
+
+
+def _tree_flips(m, fa, fb, agree, faces, roots):
+    """(m,) bool: which of the ``faces`` (mask) to flip so that each face
+    agrees with the one it was reached from, breadth first from ``roots``
+    (one per component, kept as it is) over the edges between faces ``fa``
+    and ``fb`` (``agree``: whether they agree as they are). The loop runs
+    over the tree's levels (at most the number of faces), each level one
+    set of array operations; a face reached from several at once takes the
+    first edge (in edge order) that reaches it."""
+    inside = faces[fa]
+    src = np.concatenate([fa[inside], fb[inside]])
+    dst = np.concatenate([fb[inside], fa[inside]])
+    keeps = np.concatenate([agree[inside], agree[inside]])
+    order = np.argsort(src, kind="stable")
+    dst, keeps = dst[order], keeps[order]
+    start = np.zeros(m + 1, dtype=np.int64)
+    np.cumsum(np.bincount(src, minlength=m), out=start[1:])
+    src = src[order]
+    flip = np.zeros(m, dtype=bool)
+    seen = np.zeros(m, dtype=bool)
+    seen[roots] = True
+    frontier = roots
+    while frontier.size:
+        e = ragged_entries(start[frontier], start[frontier + 1] - start[frontier])
+        e = e[~seen[dst[e]]]
+        reached, first = np.unique(dst[e], return_index=True)
+        e = e[first]
+        flip[reached] = flip[src[e]] != ~keeps[e]
+        seen[reached] = True
+        frontier = reached
+    return flip
 
 
 def _debris(area, F, inner, min_component_area, face_budget, protected):

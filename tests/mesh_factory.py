@@ -127,6 +127,44 @@ def torus(n_major=24, n_minor=12, R=1.0, r=0.35, bump=0.0, bump_waves=(40, 12)):
     return V, F
 
 
+def mobius_strip(n_around=120, n_across=12, width=0.3, bump=0.0):
+    """A one-sided (non-orientable) strip of ``2 n_around (n_across - 1)``
+    faces: the ring's last column is joined to its first turned over (row
+    ``j`` to row ``n_across - 1 - j``); ``bump`` adds ``bump sin(9u) cos(7s)``
+    along the normal-ish z axis (detail)."""
+    u = np.arange(n_around) * 2 * np.pi / n_around
+    s = np.linspace(-width, width, n_across)
+    U, S = np.meshgrid(u, s, indexing="ij")
+    r = 1 + S * np.cos(U / 2)
+    V = np.stack([r * np.cos(U), r * np.sin(U),
+                  S * np.sin(U / 2) + bump * np.sin(9 * U) * np.cos(7 * S / width)], -1).reshape(-1, 3)
+    i, j = np.meshgrid(np.arange(n_around), np.arange(n_across - 1), indexing="ij")
+    a = i * n_across + j
+    c = np.where(i < n_around - 1, (i + 1) * n_across + j, n_across - 1 - j)       # the twist
+    d = np.where(i < n_around - 1, c + 1, n_across - 2 - j)
+    F = np.concatenate([np.stack([a, c, a + 1], -1).reshape(-1, 3),
+                        np.stack([a + 1, c, d], -1).reshape(-1, 3)])
+    return V, F.astype(np.int64)
+
+
+def klein_bottle(n_u=80, n_v=40, r=2.0):
+    """A closed one-sided surface (the figure-8 immersion of the Klein bottle,
+    ``2 n_u n_v`` faces; it passes through itself, as a scan's sheets may)."""
+    u = np.arange(n_u) * 2 * np.pi / n_u
+    v = np.arange(n_v) * 2 * np.pi / n_v
+    U, W = np.meshgrid(u, v, indexing="ij")
+    rad = r + np.cos(U / 2) * np.sin(W) - np.sin(U / 2) * np.sin(2 * W)
+    V = np.stack([rad * np.cos(U), rad * np.sin(U),
+                  np.sin(U / 2) * np.sin(W) + np.cos(U / 2) * np.sin(2 * W)], -1).reshape(-1, 3)
+    i, j = np.meshgrid(np.arange(n_u), np.arange(n_v), indexing="ij")
+    a, b = i * n_v + j, i * n_v + (j + 1) % n_v
+    c = np.where(i < n_u - 1, (i + 1) * n_v + j, (-j) % n_v)                      # the twist
+    d = np.where(i < n_u - 1, (i + 1) * n_v + (j + 1) % n_v, (-(j + 1)) % n_v)
+    F = np.concatenate([np.stack([a, c, b], -1).reshape(-1, 3),
+                        np.stack([b, c, d], -1).reshape(-1, 3)])
+    return V, F.astype(np.int64)
+
+
 def cube(n=1, size=1.0):
     """Closed axis-aligned cube [-size/2, size/2]^3, each side an n x n grid
     of quads split into triangles; vertices shared along the cube edges."""

@@ -19,8 +19,8 @@ from core.clean import (BUDGET_DEBRIS_SHARE, OPEN_SHARE, WELD_DISTANCE, WIDER_WE
                         clean_mesh)
 from core.errors import InvalidArgumentError, InvalidMeshError
 from core.topology import manifold_report, topology_summary
-from tests.mesh_factory import (icosphere, load_shared, pinched, regular_grid, shared_mesh_names, torus,
-                                unwelded, with_debris, with_fins, with_sheets)
+from tests.mesh_factory import (icosphere, klein_bottle, load_shared, mobius_strip, pinched, regular_grid,
+                                shared_mesh_names, torus, unwelded, with_debris, with_fins, with_sheets)
 
 
 def assert_manifold(V, F):
@@ -169,6 +169,64 @@ def test_inconsistent_orientation_is_fixed_by_the_majority():
     np.testing.assert_array_equal(np.sort(r.F, axis=1), np.sort(F, axis=1))
     assert core.enclosed_volume(r.V, r.F) > 0
     assert_manifold(r.V, r.F)
+
+
+@pytest.mark.parametrize("scramble", [False, True])
+def test_a_moebius_strip_is_cut_open_across_into_an_oriented_disk(scramble):
+    V, F = mobius_strip(120, 12)
+    if scramble:                                 # and its faces' orientations at random
+        F = F.copy()
+        flip = np.random.default_rng(3).random(F.shape[0]) < 0.5
+        F[flip] = F[flip][:, ::-1]
+    r = clean_mesh(V, F)
+    rep = r.report
+    assert rep.n_non_orientable_components == 1 and rep.n_seam_edges >= 11
+    # a seam from border to border: its k edges and k + 1 vertices, each vertex once per side
+    assert rep.n_flipped_faces == 0 and r.V.shape[0] == V.shape[0] + rep.n_seam_edges + 1
+    assert_manifold(r.V, r.F)
+    assert summary(r.F, r.V.shape[0]) == (1, 1, 1)              # a disk
+    assert_maps(r, V, F, weld=0.0)
+    assert "cut 1 one-sided (non-orientable) components open along" in rep.summary()
+    # cleaned again, the seam's coincident copies weld and it is cut open the same way
+    again = clean_mesh(r.V, r.F)
+    assert again.report.n_welded_vertices == rep.n_seam_edges + 1
+    assert again.report.n_seam_edges == rep.n_seam_edges and again.V.shape == r.V.shape
+    assert summary(again.F, again.V.shape[0]) == (1, 1, 1)
+
+
+def test_a_klein_bottle_is_cut_open_into_one_oriented_piece_and_a_sphere_beside_it_is_untouched():
+    V, F = klein_bottle(80, 40)
+    Vs, Fs = icosphere(3)
+    Vs = Vs * 0.5 + [0.0, 0.0, 5.0]
+    Va, Fa = np.vstack([Vs, V]), np.vstack([Fs, F + Vs.shape[0]])
+    r = clean_mesh(Va, Fa)
+    assert r.report.n_non_orientable_components == 1
+    assert_manifold(r.V, r.F)
+    # the bottle (closed, Euler 0) cut along closed seams: Euler 0 still, one piece with borders
+    euler, components, loops = summary(r.F, r.V.shape[0])
+    assert (euler, components) == (2 + 0, 2) and loops >= 1
+    assert r.V.shape[0] - Va.shape[0] == r.report.n_seam_edges
+    sphere = r.face_to_input < Fs.shape[0]
+    np.testing.assert_array_equal(r.V[r.F[sphere]], Va[Fa[r.face_to_input[sphere]]])
+    assert_maps(r, Va, Fa, weld=0.0)
+
+
+@pytest.mark.parametrize("scheme", ["butterfly", "loop"])
+def test_a_one_sided_scan_goes_through_the_chain(scheme):
+    V, F = mobius_strip(240, 24, bump=0.01)
+    r = core.simplify(V, F, target_faces=400)
+    assert r.stopped_because == "target" and abs(r.F.shape[0] - 400) <= 20, r.message
+    assert "one-sided" in r.message
+    assert manifold_report(r.F, r.V.shape[0]).is_oriented_manifold
+    assert topology_summary(r.F, r.V.shape[0]).euler == 1
+    fit = core.fit_cage(V, F, r.V, r.F, levels=1, scheme=scheme)
+    b = core.bind(V, F, fit.V, r.F, levels=1, scheme=scheme)
+    d = core.bbox_diagonal(V)
+    assert np.abs(core.deform(b, fit.V) - V).max() <= 1e-12 * d
+    Ve = fit.V.copy()
+    Ve[r.F[0]] += 0.01 * d
+    D = core.deform(b, Ve)
+    assert np.isfinite(D).all() and 0 < np.abs(D - V).max() <= 0.05 * d
 
 
 def test_debris_is_dropped_by_area_and_by_face_budget():
