@@ -14,7 +14,7 @@ import pytest
 from tests.addon.conftest import MODULE, make_object
 from tests.addon.test_nothing_lost import assert_unchanged, mod, scene_snapshot
 from tests.addon.test_operators import bumpy_sphere, simplify
-from tests.mesh_factory import icosphere, torus
+from tests.mesh_factory import icosphere, mobius_strip, torus
 
 
 def test_simplify_report_says_what_the_cleaning_did(scene):
@@ -24,6 +24,19 @@ def test_simplify_report_says_what_the_cleaning_did(scene):
     assert "cleaned the input: welded" in report.message
     assert report.cleaning["n_welded_vertices"] > 0 and report.level == 'INFO'
     assert len(cage.data.polygons) == 100
+
+
+def test_a_one_sided_scan_is_cut_open_said_so_and_refines_to_itself(scene):
+    V, F = mobius_strip(240, 24, bump=0.01)
+    obj = make_object("strip", V, F)
+    cage, report = mod("api").simplify_object(obj, target_faces=400, fit=True, bind=True)
+    assert "cut 1 one-sided (non-orientable) components open along" in report.message
+    assert report.cleaning["n_non_orientable_components"] == 1 and report.level == 'INFO'
+    assert abs(len(cage.data.polygons) - 400) <= 1          # (a collapse takes one or two faces)
+    assert bpy.ops.meshadjust.refine(output='EDITED') == {'FINISHED'}
+    mio = sys.modules[MODULE + ".meshadjust_addon.mesh_io"]
+    got = mio.read_positions(cage.meshadjust.edited.data)
+    assert np.abs(got - V).max() <= 1e-5 * np.linalg.norm(np.ptp(V, axis=0))    # float32 in Blender
 
 
 def test_a_missed_target_is_a_warning_with_the_cores_reason(scene):
