@@ -96,13 +96,16 @@ class CleanReport:
     #: the weld distance used (share of the diagonal): ``WELD_DISTANCE``, or wider
     #: when the automatic weld found the input in pieces (see :func:`clean_mesh`)
     weld_distance: float = WELD_DISTANCE
+    #: whether the automatic weld (``weld_distance=None``) went wider than
+    #: ``WELD_DISTANCE``: the input came in pieces
+    weld_widened: bool = False
 
     def to_dict(self):
         """The counts as a plain ``dict`` (for JSON reports)."""
         return asdict(self)
 
     def __bool__(self):
-        return any(getattr(self, f.name) for f in fields(self) if f.name != "weld_distance")
+        return any(getattr(self, f.name) for f in fields(self) if f.name.startswith("n_"))
 
     def summary(self):
         """One line of what was done, e.g. ``"welded 4,012 vertices, split 3
@@ -114,9 +117,10 @@ class CleanReport:
             if count:
                 parts.append(f"{text.format(f'{count:,}')}{extra}")
 
+        within = f" (within {self.weld_distance:g} of the size" if self.weld_distance != WELD_DISTANCE \
+            else ""
         add(self.n_welded_vertices, "welded {} vertices",
-            f" (within {self.weld_distance:g} of the size: the input came in pieces)"
-            if self.weld_distance > WELD_DISTANCE else "")
+            within + (": the input came in pieces)" if self.weld_widened else ")" if within else ""))
         add(self.n_non_manifold_edges, "cut {} non-manifold edges into sheets")
         add(self.n_split_vertices, "split {} bow-tie vertices")
         add(self.n_double_sided_sheets, "removed {} double-sided sheets",
@@ -231,6 +235,7 @@ def clean_mesh(V, F, *, weld_distance=None, min_component_area=MIN_COMPONENT_ARE
     rep = weld.rep
     counts["n_welded_vertices"] = int(np.count_nonzero(rep != np.arange(n_in)))
     counts["weld_distance"] = weld.distance
+    counts["weld_widened"] = weld_distance is None and weld.distance > WELD_DISTANCE
     if weld.F is not F:
         F, faces, twin, corners = weld.F, weld.faces, weld.twin, None
     counts["n_degenerate_faces"] = n_degenerate + weld.n_degenerate

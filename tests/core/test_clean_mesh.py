@@ -90,6 +90,11 @@ def test_the_automatic_weld_widens_for_a_soup_whose_copies_drifted_apart(jitter,
     assert_maps(r, S, FS, weld=8 * used)         # (pairs up to 4 weld distances per axis)
     assert r.report.summary() == (f"welded {FS.size - V.shape[0]:,} vertices (within {used:g} "
                                   f"of the size: the input came in pieces)")
+    assert r.report.weld_widened
+    # the same weld asked for: said as asked, not as a finding about the input
+    asked = clean_mesh(S, FS, weld_distance=used)
+    assert np.array_equal(asked.F, r.F) and not asked.report.weld_widened
+    assert asked.report.summary() == f"welded {FS.size - V.shape[0]:,} vertices (within {used:g} of the size)"
 
 
 def test_the_automatic_weld_leaves_real_borders_and_far_drift_alone():
