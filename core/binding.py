@@ -98,8 +98,7 @@ _DETAIL_BLOCK = 8_192
 #: blocks' temporaries stay in cache; 54k fine vertices in one went 2x slower)
 _RING_BLOCK = 2_048
 
-#: dense rows (faces) per block of a deform's frame rebuild, full or incremental, and of the
-#: fold repair's rest normals (bounds the
+#: dense rows per block of a deform's frame rebuild, full or incremental (bounds the
 #: temporaries: (3, 16384) float64 is 384 KiB; a full deform of 1M rows at once made
 #: five fresh (3, n) arrays: 90 ms against 61 in blocks, 2026-12-03)
 _ROW_BLOCK = 16_384
@@ -608,12 +607,9 @@ def _repair_state(binding):
         NrT = _vertex_normals_t(VrT, binding._operator.F_fine)
         rest = _positions_t(c["offset_t"], c["corners_t"], c["bary_t"], VrT, NrT)
         FT = np.ascontiguousarray(binding.F_dense.T)
-        # float32: every test reads these same values (half the bytes); in blocks
-        # (the temporaries of 2M faces at once were four fresh (3, m) float64 arrays)
-        normals = np.empty(FT.shape, dtype=np.float32)
-        for s in range(0, FT.shape[1], _ROW_BLOCK):
-            normals[:, s:s + _ROW_BLOCK] = area_normals_t(rest, FT[:, s:s + _ROW_BLOCK])
-        c["repair"] = {"V_rest": np.ascontiguousarray(rest.T), "F_t": FT, "normals": normals,
+        c["repair"] = {"V_rest": np.ascontiguousarray(rest.T), "F_t": FT,
+                       # float32: every test reads these same values (half the bytes)
+                       "normals": area_normals_t(rest, FT, out=np.empty(FT.shape, np.float32)),
                        "cage_rings": CageRings.of(binding.F_cage, binding.n_cage),
                        "stars": None, "groups": None,
                        # the faces (or group entries) around the last rows tested, by their _Influenced

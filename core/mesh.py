@@ -10,6 +10,11 @@ import numpy as np
 
 from .errors import InvalidMeshError
 
+#: triangles per block of :func:`area_normals_t` (its temporaries stay small and are
+#: reused: 2M faces at once made four fresh (3, m) float64 arrays, which this machine
+#: pays for dearly the first time they are touched)
+NORMALS_BLOCK = 1 << 14
+
 
 def check_mesh(V, F, *, where, allow_empty=True):
     """Validate and copy a triangle mesh.
@@ -133,13 +138,27 @@ def cross_columns(a, b):
     return out
 
 
-def area_normals_t(PT, T):
-    """Area normals (3,k) of the triangles ``T`` (3,k) (corner index rows)
-    over positions ``PT`` (3,n) (the operations of ``np.cross``)."""
-    a = np.take(PT, T[0], axis=1)
-    e1 = np.take(PT, T[1], axis=1)
+def area_normals_t(PT, T, out=None):
+    """Area normals (3,k) of the triangles ``T`` (3,k) (corner index rows,
+    or a sequence of three index arrays) over positions ``PT`` (3,n) (the
+    operations of ``np.cross``), ``NORMALS_BLOCK`` triangles at a time, into
+    ``out`` when given (any float dtype: e.g. float32 for half the bytes)."""
+    k = T[0].shape[0]
+    if k <= NORMALS_BLOCK and out is None:
+        return _area_normals_block(PT, T[0], T[1], T[2])
+    out = np.empty((3, k)) if out is None else out
+    for s in range(0, k, NORMALS_BLOCK):
+        e = s + NORMALS_BLOCK
+        out[:, s:e] = _area_normals_block(PT, T[0][s:e], T[1][s:e], T[2][s:e])
+    return out
+
+
+def _area_normals_block(PT, i0, i1, i2):
+    """:func:`area_normals_t` of one block (corner index arrays i0, i1, i2)."""
+    a = np.take(PT, i0, axis=1)
+    e1 = np.take(PT, i1, axis=1)
     e1 -= a
-    e2 = np.take(PT, T[2], axis=1)
+    e2 = np.take(PT, i2, axis=1)
     e2 -= a
     return cross_columns(e1, e2)
 
