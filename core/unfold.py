@@ -151,8 +151,8 @@ class FineFaceGroups(NamedTuple):
         """The faces (distinct, ascending, int64) of ``entries`` (from
         :meth:`entries`) whose normal on ``X`` points away from rest (the
         values of :func:`away_rows`)."""
-        n = area_normals_rows(X, np.take(self.corners, entries, axis=1))
-        away = dot_columns(n.T, np.take(self.rest, entries, axis=1)) < 0
+        away = _facing(X, np.take(self.corners, entries, axis=1),
+                       np.take(self.rest, entries, axis=1)) < 0
         return np.unique(self.faces[entries[away]]).astype(np.int64, copy=False)
 
 
@@ -242,8 +242,24 @@ def away_t(PT, FT, rest_normals):
 
 def away_rows(X, FT, faces, rest_normals):
     """:func:`away_t` over positions ``X`` (n,3), among ``faces`` (ascending)."""
-    n = area_normals_rows(X, np.take(FT, faces, axis=1))
-    return faces[dot_columns(n.T, np.take(rest_normals, faces, axis=1)) < 0]
+    return faces[_facing(X, np.take(FT, faces, axis=1), np.take(rest_normals, faces, axis=1)) < 0]
+
+
+def _facing(X, T, rest):
+    """``rest . n`` (k,) for the faces with corner rows ``T`` (3,k) over
+    positions ``X`` (n,3), ``n`` their area normal, ``rest`` (3,k): the
+    products and sums of ``area_normals_rows`` then ``dot_columns`` in the
+    same order (the same bits), without the normals' (k,3) array and its
+    strided reads (0.5 of 1.9 ms for 52k faces)."""
+    a = np.take(X, T[0], axis=0)
+    e1 = np.take(X, T[1], axis=0)
+    e1 -= a
+    e2 = np.take(X, T[2], axis=0)
+    e2 -= a
+    out = rest[0] * (e1[:, 1] * e2[:, 2] - e1[:, 2] * e2[:, 1])
+    out += rest[1] * (e1[:, 2] * e2[:, 0] - e1[:, 0] * e2[:, 2])
+    out += rest[2] * (e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0])
+    return out
 
 
 def turned_over(X, FT, away, rest_normals, rotate):
