@@ -586,9 +586,11 @@ def deform(binding, V_cage_edited, *, F_cage=None, moved=None, out=None):
     c.pop("drag", None)                   # (the next incremental deform starts a new one)
     c.pop("last_moved", None)
     with _INCREMENTAL_LOCK:
-        D = np.ascontiguousarray(DT.T) if out is None else out
-        if out is not None:
+        if out is None:
+            D = np.ascontiguousarray(DT.T)
+        else:
             out[...] = DT.T
+            D = out
         _keep_repair(binding, D, _unfold(binding, D, Vc, DT=DT))
     return D
 

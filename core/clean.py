@@ -685,9 +685,10 @@ def _orient(F, twin, inner):
     if not orientable.all():
         one_sided = ~orientable
         # (a one-sided component's smallest node is 2 f for its lowest face f)
-        flip |= one_sided & _tree_flips(m, fh, ft, agree, one_sided, np.unique(comp[one_sided]) // 2)
+        roots = np.unique(comp[one_sided]) // 2
+        flip |= one_sided & _tree_flips(m, fh, ft, agree, one_sided, roots)
         seam = np.flatnonzero(one_sided[fh] & (agree != (flip[fh] == flip[ft])))
-        found["n_non_orientable_components"] = int(np.unique(comp[one_sided]).size)
+        found["n_non_orientable_components"] = int(roots.size)
         found["n_seam_edges"] = int(seam.size)
     if not flip.any() and seam.size == 0:
         return F, twin, found
