@@ -458,6 +458,43 @@ def _bounding_rows(A, B, C, n):
     return np.ascontiguousarray(np.vstack([centre.T, r])), prism
 
 
+def _cell_range(X, lo, h, dims):
+    """Grid cell (k,3) int64 of the points ``X`` (k,3), clipped to the grid:
+    ``clip(floor((X - lo) / h), 0, dims - 1)``, with one float temporary."""
+    t = X - lo
+    t /= h
+    np.floor(t, out=t)
+    cell = t.astype(np.int64)
+    return np.clip(cell, 0, dims - 1, out=cell)
+
+
+def _plane_cells(A, B, C, ext, c0, nr, lo, h, dims, first, dtype):
+    """The grid references of the triangles ``(A, B, C)`` (numbered from
+    ``first``; ``ext`` their boxes' largest sides): every cell of each one's
+    box (first cell ``c0``, ``nr`` cells per axis, in x, then y, then z
+    order) that its plane passes through, conservatively: with the
+    unnormalised normal n and o = n.A, a cell whose centre x has
+    |n.x - o| > h/2 (|nx| + |ny| + |nz|) plus a rounding margin is left out.
+    Returns (cell, triangle), in triangle order, as ``dtype``."""
+    nrm = cross_rows(B - A, C - A)
+    off = np.einsum("ij,ij->i", nrm, A)
+    l1 = np.abs(nrm).sum(axis=1)
+    reach = 0.5 * h * l1 + PRUNE_SLACK * l1 * (np.abs(A).max(axis=1) + ext + 2 * h)
+    cnt = np.prod(nr, axis=1)
+    local, tri = ragged_ranges(np.zeros(cnt.shape[0], dtype=np.int64), cnt)   # 0..cnt-1 each
+    nx = nr[tri, 0]
+    ny = nr[tri, 1]
+    cx = c0[tri, 0] + local % nx
+    cy = c0[tri, 1] + (local // nx) % ny
+    cz = c0[tri, 2] + local // (nx * ny)
+    x0 = lo + 0.5 * h
+    dist = np.abs(nrm[tri, 0] * (x0[0] + cx * h) + nrm[tri, 1] * (x0[1] + cy * h)
+                  + nrm[tri, 2] * (x0[2] + cz * h) - off[tri])
+    keep = dist <= reach[tri]
+    tri, cx, cy, cz = tri[keep], cx[keep], cy[keep], cz[keep]
+    return (cx + dims[0] * (cy + dims[1] * cz)).astype(dtype), (tri + first).astype(dtype)
+
+
 class TriangleIndex:
     """Exact nearest-triangle queries on a triangle mesh (pure NumPy).
 
@@ -522,7 +559,12 @@ class TriangleIndex:
             # or every query would scan them all
             order = order[_first_of_each_triangle(V, F[order])]
         self._order = order                       # internal id -> face id
-        A, B, C, tlo, thi = A[order], B[order], C[order], tlo[order], thi[order]
+        # one at a time: each unordered copy is freed before the next is ordered
+        A = A[order]
+        B = B[order]
+        C = C[order]
+        tlo = tlo[order]
+        thi = thi[order]
 
         self._D, self._ball, self._prism = np.empty((16, m)), np.empty((4, m)), np.empty((16, m))
 
@@ -559,40 +601,25 @@ class TriangleIndex:
                 continue
             dims = dims_f.astype(np.int64)
             ncell = int(np.prod(dims))
-            c0 = np.floor((tlo - self._lo) / h).astype(np.int64)
-            c1 = np.floor((thi - self._lo) / h).astype(np.int64)
-            c0 = np.clip(c0, 0, dims - 1)
-            c1 = np.clip(c1, 0, dims - 1)
-            nr = c1 - c0 + 1
+            c0, nr = _cell_range(tlo, self._lo, h, dims), _cell_range(thi, self._lo, h, dims)
+            nr -= c0
+            nr += 1
             nrefs = int(np.prod(nr, axis=1).sum())
             if ncell <= _MAX_CELLS and nrefs <= _MAX_REFS_PER_FACE * m + 1024:
                 break
             h *= 1.25
         self._h = h
         self._dims = dims
-        cnt = np.prod(nr, axis=1)
-        idx, tri = ragged_ranges(np.zeros(m, dtype=np.int64), cnt)
-        local = idx                                   # 0..cnt-1 within each triangle
-        nx = nr[tri, 0]
-        ny = nr[tri, 1]
-        cx = c0[tri, 0] + local % nx
-        cy = c0[tri, 1] + (local // nx) % ny
-        cz = c0[tri, 2] + local // (nx * ny)
-        # keep only the cells the triangle's plane passes through (conservatively): with the
-        # unnormalised normal n and o = n.A, drop a cell whose centre x has
-        # |n.x - o| > h/2 (|nx| + |ny| + |nz|) plus a rounding margin
-        nrm = cross_rows(B - A, C - A)
-        off = np.einsum("ij,ij->i", nrm, A)
-        l1 = np.abs(nrm).sum(axis=1)
-        reach = 0.5 * h * l1 + PRUNE_SLACK * l1 * (np.abs(A).max(axis=1) + ext + 2 * h)
-        x0 = self._lo + 0.5 * h
-        dist = np.abs(nrm[tri, 0] * (x0[0] + cx * h) + nrm[tri, 1] * (x0[1] + cy * h)
-                      + nrm[tri, 2] * (x0[2] + cz * h) - off[tri])
-        keep = dist <= reach[tri]
-        tri, cx, cy, cz = tri[keep], cx[keep], cy[keep], cz[keep]
-        cell = cx + dims[0] * (cy + dims[1] * cz)
+        # a block of triangles at a time: the references before the plane test are up to
+        # 12 a triangle, and their arrays for 2M faces at once held 800 MB
+        small = np.int32 if m < 2**31 else np.int64        # (ncell <= _MAX_CELLS < 2**31)
+        parts = [_plane_cells(A[a:b], B[a:b], C[a:b], ext[a:b], c0[a:b], nr[a:b], self._lo, h, dims, a,
+                              small) for a, b in blocks(m, _BUILD_BLOCK)]
+        cell = np.concatenate([p[0] for p in parts])
+        tri = np.concatenate([p[1] for p in parts])
+        del parts
         o = np.argsort(cell, kind="stable")
-        self._cell_tri = tri[o].astype(np.int32 if m < 2**31 else np.int64)
+        self._cell_tri = tri[o]
         self._cell_start = np.zeros(ncell + 1, dtype=np.int64)
         np.cumsum(np.bincount(cell, minlength=ncell), out=self._cell_start[1:])
 
