@@ -517,6 +517,9 @@ class TriangleIndex:
     ----------
     V, F : the checked copies of the mesh (float64 / int64).
     n_faces : int
+        Triangles indexed: the faces of F, less repeated copies of one
+        triangle's geometry where more than ``_MAX_SAME_CODE`` share a cell
+        of the Morton order (a degenerate cluster).
 
     Raises
     ------
@@ -559,6 +562,7 @@ class TriangleIndex:
             # or every query would scan them all
             order = order[_first_of_each_triangle(V, F[order])]
         self._order = order                       # internal id -> face id
+        m = order.shape[0]                        # internal triangles (duplicates dropped)
         # one at a time: each unordered copy is freed before the next is ordered
         A = A[order]
         B = B[order]

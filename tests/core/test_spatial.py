@@ -266,6 +266,24 @@ def test_index_single_triangle_and_duplicates():
     _check_result(V, F, P, TriangleIndex(V, F).closest(P))
 
 
+@pytest.mark.parametrize("copies", [100, 1000])
+def test_index_of_a_mesh_with_many_copies_of_a_face_answers_as_without_them(copies):
+    """More than _MAX_SAME_CODE copies of a face in one Morton cell are indexed
+    once (the build used to size its tables for every face and fail: a scan
+    with duplicated faces reached it through closest_points / surface_distance)."""
+    V, F = icosphere(3)
+    F2 = np.vstack([F, np.repeat(F[:1], copies, axis=0), np.repeat(F[5:6, ::-1], copies, axis=0)])
+    assert copies > spatial._MAX_SAME_CODE
+    P = np.random.default_rng(2).normal(size=(500, 3))
+    index = TriangleIndex(V, F2)
+    assert index.n_faces == F.shape[0]              # (a reversed copy is the same geometry)
+    got, ref = index.closest(P), TriangleIndex(V, F).closest(P)
+    np.testing.assert_array_equal(got.distance, ref.distance)
+    np.testing.assert_array_equal(got.point, ref.point)
+    np.testing.assert_array_equal(np.sort(V[F2[got.face]], axis=1), np.sort(V[F[ref.face]], axis=1))
+    _check_result(V, F2, P, got)
+
+
 def test_index_far_from_origin_and_unit_invariance():
     V, F = torus(16, 8)
     rng = np.random.default_rng(9)
