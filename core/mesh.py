@@ -166,12 +166,33 @@ def _area_normals_block(PT, i0, i1, i2):
 def area_normals_rows(X, T):
     """:func:`area_normals_t` over positions ``X`` (n,3), as rows (k,3) (the
     same values)."""
+    a, e1, e2 = _corner_edges(X, T)
+    return cross_rows(e1, e2, out=a)
+
+
+def normal_dots(X, T, reference):
+    """``reference . n`` (k,) for the triangles ``T`` (3,k) over positions
+    ``X`` (n,3), ``n`` their area normal, ``reference`` (3,k) (rows of
+    directions): the products and sums of :func:`area_normals_rows` then
+    :func:`dot_columns` in the same order (the same bits), without the
+    normals' (k,3) array and its strided reads (0.5 of 1.9 ms for 52k
+    faces). Negative: the face points away from its reference."""
+    _, e1, e2 = _corner_edges(X, T)
+    out = reference[0] * (e1[:, 1] * e2[:, 2] - e1[:, 2] * e2[:, 1])
+    out += reference[1] * (e1[:, 2] * e2[:, 0] - e1[:, 0] * e2[:, 2])
+    out += reference[2] * (e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0])
+    return out
+
+
+def _corner_edges(X, T):
+    """The first corner ``a`` and the edges ``b - a``, ``c - a`` (each (k,3),
+    new arrays) of the triangles ``T`` (3,k) over positions ``X`` (n,3)."""
     a = np.take(X, T[0], axis=0)
     e1 = np.take(X, T[1], axis=0)
     e1 -= a
     e2 = np.take(X, T[2], axis=0)
     e2 -= a
-    return cross_rows(e1, e2, out=a)
+    return a, e1, e2
 
 
 def unit_rows(X):
@@ -201,9 +222,8 @@ def turned_faces(V_rest, V_new, F):
     ([], [0])
     """
     F = np.asarray(F, dtype=np.int64).reshape(-1, 3)
-    n0 = area_normals_rows(np.asarray(V_rest, dtype=np.float64), F.T)
-    n1 = area_normals_rows(np.asarray(V_new, dtype=np.float64), F.T)
-    return np.flatnonzero(np.einsum("ij,ij->i", n0, n1) < 0)
+    rest = area_normals_rows(np.asarray(V_rest, dtype=np.float64), F.T)
+    return np.flatnonzero(normal_dots(np.asarray(V_new, dtype=np.float64), F.T, rest.T) < 0)
 
 
 def squared_edges(V, F):
