@@ -446,7 +446,7 @@ def bind(V_dense, F_dense, V_cage, F_cage, *, levels=2, scheme="butterfly", crea
     elif detail == "local":
         q = _dense_points_near(V_dense, F_dense, dense.nearest, vfr.point, reach)
         fine_detail = _to_frame(q - vfr.point, vfr)
-    return Binding(fine_face=dense.face, bary=dense.bary, offset=dense.offset,
+    return Binding(fine_face=dense.face, bary=dense.bary_t.T, offset=dense.offset_t.T,
                    fine_detail=fine_detail, F_cage=F_cage, n_cage=int(V_cage.shape[0]),
                    levels=int(levels), scheme=str(scheme), creases=creases,
                    fingerprint=op.fingerprint, F_dense=F_dense, V_cage_rest=V_cage,
@@ -1322,13 +1322,12 @@ def _closest_on(index, P, report=None, point=False):
 
 
 class _DenseBound(NamedTuple):
-    """Every dense vertex's fine face, barycentric coordinates and offset (the
-    binding's fields: views of the transposed arrays its cache holds, not
-    copies: 48 bytes a dense vertex less to write and to keep)."""
+    """Every dense vertex's fine face, corners, barycentric coordinates and
+    offset, transposed as the binding's cache holds them (its ``bary`` and
+    ``offset`` fields are views of these: no second layout to write and keep,
+    48 bytes a dense vertex)."""
 
     face: np.ndarray        #: (n,) int64
-    bary: np.ndarray        #: (n,3) float64, ``bary_t.T``
-    offset: np.ndarray      #: (n,3) float64, ``offset_t.T``
     corners_t: np.ndarray   #: (3,n) int64 corners of each fine face
     bary_t: np.ndarray      #: (3,n) float64
     offset_t: np.ndarray    #: (3,n) float64
@@ -1362,9 +1361,8 @@ def _bind_dense(query, V_dense, VfT, NfT, F_fine, report=None, near=None):
     offers its vertices as the nearest bound ones of its faces' corners
     (:func:`_nearest_parts`), combined into ``nearest``."""
     n = V_dense.shape[0]
-    bary_t, offset_t = np.empty((3, n)), np.empty((3, n))
-    out = _DenseBound(np.empty(n, dtype=np.int64), bary_t.T, offset_t.T,
-                      np.empty((3, n), dtype=np.int64), bary_t, offset_t, None)
+    out = _DenseBound(np.empty(n, dtype=np.int64), np.empty((3, n), dtype=np.int64),
+                      np.empty((3, n)), np.empty((3, n)), None)
     parts = []
 
     def block(start, stop):
