@@ -35,10 +35,8 @@ from typing import NamedTuple
 import numpy as np
 
 from ._groups import group_argmin, ragged_ranges
-from .spatial import TriangleIndex, closest_pairs, triangle_rows
+from .spatial import KERNEL_BLOCK, TriangleIndex, closest_pairs, triangle_rows
 
-#: (query, face) pairs per kernel call (temporaries that stay in cache)
-_BLOCK = 1 << 14
 #: a barycentric coordinate this small puts the closest point on the edge
 _ON_EDGE = 1e-12
 #: meshes of at most this many faces are searched whole (exact): a walk over a
@@ -182,7 +180,7 @@ class FaceTracker:
         k, m = QT.shape[1], self.F.shape[0]
         face = np.empty(k, dtype=np.int64)
         v, w, d2 = np.empty(k), np.empty(k), np.empty(k)
-        per = max(1, _BLOCK // max(m, 1))
+        per = max(1, KERNEL_BLOCK // max(m, 1))     # queries whose pairs make one kernel block
         for s in range(0, k, per):
             e = min(s + per, k)
             q = np.repeat(np.arange(s, e), m)
