@@ -69,6 +69,7 @@ from .unfold import (CageRings, FaceStars, FineFaceGroups, Repair, away_rows, aw
                      nearest_rotations, repair, ring_rotations, turned_over)
 from ._groups import distinct, group_argmin, ragged_entries, ragged_ranges
 from ._parallel import WORKERS, blocks, each_in_order, run_blocks, run_each
+from .pages import plain_pages
 
 #: relative length under which a normal or tangent counts as degenerate
 _DEGENERATE = 1e-12
@@ -361,6 +362,7 @@ class Binding:
         return np.sort(rows) if ordered else rows.copy()
 
 
+@plain_pages
 def bind(V_dense, F_dense, V_cage, F_cage, *, levels=2, scheme="butterfly", creases=None,
          detail_search="auto", progress=None):
     """Bind a dense mesh to the subdivision surface of a cage.
@@ -490,6 +492,7 @@ def _binding_cache(dense, F_fine, d_face, d_bary, fine_detail):
             "detail_offset_t": np.ascontiguousarray(fine_detail.T)}
 
 
+@plain_pages
 def deform(binding, V_cage_edited, *, F_cage=None, moved=None, out=None):
     """Place the dense vertices on the subdivision of an edited cage.
 
@@ -944,6 +947,7 @@ def _distinct(values, idx):
     return distinct(values, idx["seen"], idx["stamp"])
 
 
+@plain_pages
 def refine(binding, V_cage_edited, *, F_cage=None):
     """The subdivided edited cage with the dense mesh's detail as displacements.
 

@@ -51,6 +51,7 @@ from ._parallel import blocks, run_blocks, run_each
 from .errors import InvalidArgumentError
 from .mesh import bounding_box, check_mesh, diagonal_length, face_normals
 from .topology import connected_labels, edge_keys
+from .pages import plain_pages
 
 _WHERE = "clean_mesh"
 
@@ -160,6 +161,7 @@ class CleanResult(NamedTuple):
     report: CleanReport
 
 
+@plain_pages
 def clean_mesh(V, F, *, weld_distance=None, min_component_area=MIN_COMPONENT_AREA,
                face_budget=None, protected=None):
     """Clean a triangle mesh into an edge- and vertex-manifold surface.

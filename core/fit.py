@@ -43,6 +43,7 @@ from .mirror import axis_index, mirror_partners, symmetrize
 from .spatial import TriangleIndex
 from .subdivide import subdivision_operator
 from .topology import edge_map
+from .pages import plain_pages
 
 _LAPLACIANS = ("uniform", "cotangent")
 
@@ -65,6 +66,7 @@ class FitResult(NamedTuple):
     cancelled: bool = False     #: True when ``progress`` asked to stop (V is then the last iterate)
 
 
+@plain_pages
 def fit_cage(V_dense, F_dense, V_cage, F_cage, *, levels=2, scheme="butterfly", creases=None,
              iterations=8, smoothness=0.05, point_to_point=0.1, laplacian="uniform",
              samples=None, seed=0, symmetry=None,

@@ -31,6 +31,7 @@ from typing import NamedTuple
 import numpy as np
 
 from .errors import InvalidArgumentError, InvalidMeshError
+from .pages import plain_pages
 
 #: the extensions :func:`read_mesh` and :func:`write_mesh` understand
 MESH_EXTENSIONS = (".obj", ".smf")
@@ -213,6 +214,7 @@ def _extension(fn, path):
     return ext
 
 
+@plain_pages
 def read_mesh(path):
     """Read an OBJ or SMF file, chosen by its extension.
 
@@ -278,6 +280,7 @@ def write_obj(path, V, F):
     _write(os.fspath(path), V, F, "write_obj")
 
 
+@plain_pages
 def write_mesh(path, V, F):
     """Write an OBJ or SMF file, chosen by the extension of ``path``.
 

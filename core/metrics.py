@@ -28,6 +28,7 @@ import numpy as np
 from .errors import InvalidArgumentError
 from .mesh import bbox_diagonal, check_mesh, face_areas
 from .spatial import TriangleIndex
+from .pages import plain_pages
 
 __all__ = ["SurfaceSamples", "SurfaceDistance", "sample_surface", "surface_distance"]
 
@@ -111,6 +112,7 @@ def _check_count(n, where, name):
     return int(n)
 
 
+@plain_pages
 def sample_surface(V, F, n_samples, *, seed=0):
     """Draw points uniformly (area-weighted) on a triangle mesh.
 
@@ -160,6 +162,7 @@ def _one_side(index, P_samples, P_vertices):
     return dmax, mean, rms
 
 
+@plain_pages
 def surface_distance(V_a, F_a, V_b, F_b, *, samples=None, seed=0):
     """Two-sided Hausdorff, mean and RMS distance between two triangle meshes (Metro).
 

@@ -61,6 +61,7 @@ from numpy.lib.stride_tricks import sliding_window_view
 
 from .errors import InvalidArgumentError
 from .spatial import PRUNE_SLACK, TriangleIndex, closest_pairs, closest_result
+from .pages import plain_pages
 
 __all__ = ["NearQuery", "cell_for_reach"]
 
@@ -180,6 +181,7 @@ class NearQuery:
     ([0], [[0.6, 0.2, 0.2]])
     """
 
+    @plain_pages
     def __init__(self, V, F, *, reach=None):
         if reach is not None and not (isinstance(reach, (int, float)) and 0 <= reach < np.inf):
             raise InvalidArgumentError(

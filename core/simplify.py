@@ -64,6 +64,7 @@ from .metrics import surface_distance
 from .topology import boundary_loops_count, collapsible_edges, face_components
 from .quadrics import accumulate_coefficients, vertex_face_quadrics, edge_constraint_quadrics
 from .tuning import TUNING, Tuning
+from .pages import plain_pages
 
 _WHERE = "simplify"
 
@@ -569,6 +570,7 @@ def _within_max_error(su, clean, target, max_error, opts, progress):
     return _unchanged(clean)._replace(stopped="max_error"), 0.0
 
 
+@plain_pages
 def simplify(V, F, *, target_faces=None, ratio=None, max_error=None, preserve_boundary=True,
              preserve_topology=True, feature_angle_deg=60.0, vertex_weights=None, locked=None,
              weld_distance=None, min_component_area=MIN_COMPONENT_AREA, symmetry=None,

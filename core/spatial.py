@@ -78,6 +78,7 @@ from .errors import InvalidArgumentError
 from .mesh import check_mesh, cross_rows, unit_rows
 from ._groups import group_argmin, ragged_ranges
 from ._parallel import blocks, run_each
+from .pages import plain_pages
 
 #: serialises the lazy BVH builds of indexes queried from several threads at once
 _LAZY_BUILD = threading.Lock()
@@ -534,6 +535,7 @@ class TriangleIndex:
     ([0, 0], [0.707107, 2.0])
     """
 
+    @plain_pages
     def __init__(self, V, F, *, cell_factor=_CELL_FACTOR, min_cell=None):
         V, F = check_mesh(V, F, where="TriangleIndex", allow_empty=False)
         if not (isinstance(cell_factor, (int, float)) and cell_factor > 0):
@@ -741,6 +743,7 @@ class TriangleIndex:
 
 
     # -- queries -------------------------------------------------------------------------------
+    @plain_pages
     def closest(self, P):
         """Nearest point on the mesh for every query point.
 
@@ -1117,6 +1120,7 @@ def _run_lengths(q):
     return np.diff(np.concatenate([[0], brk, [q.size]]))
 
 
+@plain_pages
 def closest_points(V, F, P):
     """Nearest point on the mesh ``(V, F)`` for every row of ``P`` (builds a
     :class:`TriangleIndex` and queries it once; build the index yourself to

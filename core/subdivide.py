@@ -156,6 +156,7 @@ from . import _refine as _rf
 from . import _stencils as _st
 from .errors import InvalidArgumentError
 from .mesh import check_mesh
+from .pages import plain_pages
 
 SCHEMES = ("butterfly", "loop")
 
@@ -404,6 +405,7 @@ def _build(F, n, levels, scheme, creases, where):
         stencils=tuple(stencils))
 
 
+@plain_pages
 def subdivision_operator(F, n_vertices, *, levels=1, scheme="butterfly", creases=None):
     """Build the coarse-to-fine subdivision operator of a triangle mesh.
 
@@ -451,6 +453,7 @@ def subdivision_operator(F, n_vertices, *, levels=1, scheme="butterfly", creases
     return _build(F, n, levels, scheme, creases, where)
 
 
+@plain_pages
 def subdivide(V, F, *, levels=1, scheme="butterfly", creases=None):
     """Subdivide a triangle mesh with the modified butterfly or Loop scheme.
 

@@ -49,6 +49,7 @@ from .simplify import (SimplifyResult, check_arguments, cleaned_input, debris_bu
                        target_count)
 from .spatial import TriangleIndex
 from .topology import boundary_loops_count, edge_map, face_components
+from .pages import plain_pages
 
 _WHERE = "simplify"
 
@@ -358,6 +359,7 @@ def _mirror_face_sources(clean, s, V, F, k):
     return neg[TriangleIndex(clean.V, clean.F[neg]).closest(C).face]
 
 
+@plain_pages
 def simplify_symmetric(V, F, *, axis="X", target_faces=None, ratio=None, max_error=None,
                        preserve_boundary=True, preserve_topology=True, feature_angle_deg=60.0,
                        vertex_weights=None, locked=None, weld_distance=None,
