@@ -132,15 +132,91 @@ def fit_cage(V_dense, F_dense, V_cage, F_cage, *, levels=2, scheme="butterfly", 
     >>> r.mean_distance[-1] < r.mean_distance[0]                      # doctest: +SKIP
     True
     """
+    pb = _set_up(V_dense, F_dense, V_cage, F_cage, levels=levels, scheme=scheme, creases=creases,
+                 smoothness=smoothness, point_to_point=point_to_point, laplacian=laplacian,
+                 samples=samples, seed=seed, symmetry=symmetry, iterations=iterations)
+    X = pb.X0.copy()
+    f2d, d2f, cg_its = [], [], []
+    cancelled = False
+    for it in range(int(iterations) + 1):
+        m = _match(pb, X)
+        f2d.append(float(np.dot(m.area, m.near.distance)))
+        d2f.append(float(np.mean(m.hit.distance)))
+        if it == int(iterations):
+            break
+        X, n_cg = _solve(pb, m, X, cg_rtol, cg_max_iterations)
+        cg_its.append(n_cg)
+        if progress is not None and progress((it + 1) / (int(iterations) + 1)) is False:
+            cancelled = True
+            break
+    f2d = np.array(f2d)
+    d2f = np.array(d2f)
+    return FitResult(X + pb.centre, 0.5 * (f2d + d2f), f2d, d2f, np.array(cg_its, dtype=np.int64),
+                     bbox_diagonal(pb.V_dense), cancelled)
+
+
+class _Problem(NamedTuple):
+    """What every iteration of the fit reads (built once by :func:`_set_up`;
+    positions relative to ``centre``)."""
+
+    op: object              #: the cage's SubdivisionOperator
+    V_dense: np.ndarray     #: (n,3) the cleaned dense surface
+    F_dense: np.ndarray     #: (m,3)
+    N_dense: np.ndarray     #: (n,3) its vertex normals
+    dense_index: object     #: TriangleIndex of the dense surface
+    P: np.ndarray           #: (n_s,3) area-weighted samples of the dense surface
+    N_samples: np.ndarray   #: (n_s,3) the dense normals there
+    X0: np.ndarray          #: (n_c,3) the starting cage (its Laplacian is the reference)
+    laplacian: tuple        #: (rows, cols, weights) of the cage Laplacian L
+    lam: float              #: weight of |L (X - X0)|^2 (smoothness / n_c)
+    mu: float               #: point-to-point weight
+    sym: object             #: the symmetric projection, or None
+    centre: np.ndarray      #: (3,) the working origin (dense bounding-box centre)
+
+
+def _set_up(V_dense, F_dense, V_cage, F_cage, *, levels, scheme, creases, smoothness,
+            point_to_point, laplacian, samples, seed, symmetry, iterations):
+    """Check the arguments and build the :class:`_Problem`: the dense surface
+    cleaned as ``simplify`` saw it (welded, so vertex normals cross seams;
+    without double-sided sheets, whose normals cancel, or debris), everything
+    moved to the dense bounding-box centre (the result then does not depend
+    on where the mesh sits; the CG stopping rule is relative), its samples
+    and index, and the cage's operator and Laplacian."""
     V_dense, F_dense = check_mesh(V_dense, F_dense, where="fit_cage", allow_empty=False)
     V_cage, F_cage = check_mesh(V_cage, F_cage, where="fit_cage", allow_empty=False)
-    # the surface to match, as simplify saw it: welded (vertex normals across seams),
-    # without double-sided sheets (their normals cancel) or debris
     dense = clean_mesh(V_dense, F_dense)
     if dense.F.shape[0] == 0:
         raise InvalidMeshError(f"fit_cage: nothing of the dense mesh is left after cleaning "
                                f"({dense.report.summary()})")
-    V_dense, F_dense = dense.V, dense.F
+    _check_weights(iterations, smoothness, point_to_point, laplacian)
+    centre = 0.5 * np.add(*bounding_box(dense.V))
+    sym = None
+    if symmetry is not None:
+        k, sym = _symmetric_projection(V_cage, symmetry)
+        centre[k] = 0.0          # the mirror plane through the working origin: sym stays linear
+        V_cage = sym(V_cage)
+    V_dense, V_cage = dense.V - centre, V_cage - centre
+    if creases is not None and np.asarray(creases).size == 0:
+        creases = None                      # as bind does: same operator, same fingerprint
+    op = subdivision_operator(F_cage, V_cage.shape[0], levels=levels, scheme=scheme,
+                              creases=creases)
+    if samples is None:
+        samples = int(np.clip(2 * op.n_fine, 5000, 200000))
+    if int(samples) < 1:
+        raise InvalidArgumentError(f"fit_cage: samples must be >= 1, got {samples}")
+    sampled = sample_surface(V_dense, dense.F, int(samples), seed=seed)
+    index = TriangleIndex(V_dense, dense.F,
+                          min_cell=_DENSE_CELL_EDGES * _mean_edge(op.apply(V_cage), op.F_fine))
+    N_dense = vertex_normals(V_dense, dense.F)
+    return _Problem(op, V_dense, dense.F, N_dense, index,
+                    np.asarray(sampled.points, dtype=np.float64),
+                    _interpolate(N_dense, dense.F, sampled.face, sampled.bary), V_cage,
+                    _laplacian(V_cage, F_cage, laplacian), float(smoothness) / V_cage.shape[0],
+                    float(point_to_point), sym, centre)
+
+
+def _check_weights(iterations, smoothness, point_to_point, laplacian):
+    """Raise :class:`~.errors.InvalidArgumentError` for an out-of-range setting."""
     if int(iterations) != iterations or iterations < 0:
         raise InvalidArgumentError(f"fit_cage: iterations must be an integer >= 0, got {iterations}")
     if not smoothness >= 0:
@@ -150,96 +226,70 @@ def fit_cage(V_dense, F_dense, V_cage, F_cage, *, levels=2, scheme="butterfly", 
     if laplacian not in _LAPLACIANS:
         raise InvalidArgumentError(
             f"fit_cage: laplacian must be one of {_LAPLACIANS}, got {laplacian!r}")
-    # work around the dense bounding-box centre: the result then does not
-    # depend on where the mesh sits (the CG stopping rule is relative)
-    centre = 0.5 * np.add(*bounding_box(V_dense))
-    sym = None
-    if symmetry is not None:
-        k, sym = _symmetric_projection(V_cage, symmetry)
-        centre[k] = 0.0          # the mirror plane through the working origin: sym stays linear
-        V_cage = sym(V_cage)
-    V_dense = V_dense - centre
-    V_cage = V_cage - centre
-    n_c = V_cage.shape[0]
-    if creases is not None and np.asarray(creases).size == 0:
-        creases = None                      # as bind does: same operator, same fingerprint
-    op = subdivision_operator(F_cage, n_c, levels=levels, scheme=scheme, creases=creases)
-    Ff = op.F_fine
-    if samples is None:
-        samples = int(np.clip(2 * op.n_fine, 5000, 200000))
-    if int(samples) < 1:
-        raise InvalidArgumentError(f"fit_cage: samples must be >= 1, got {samples}")
-    sampled = sample_surface(V_dense, F_dense, int(samples), seed=seed)
-    P = np.asarray(sampled.points, dtype=np.float64)
-    n_s = P.shape[0]
-    dense_index = TriangleIndex(V_dense, F_dense,
-                                min_cell=_DENSE_CELL_EDGES * _mean_edge(op.apply(V_cage), Ff))
-    L_rows, L_cols, L_w = _laplacian(V_cage, F_cage, laplacian)
-    lam = float(smoothness) / n_c
-    LtL_X0 = _lt_l(L_rows, L_cols, L_w, n_c, V_cage)
-    L_diag = _lt_l_diagonal(L_rows, L_cols, L_w, n_c)
 
-    X = V_cage.copy()
-    mu = float(point_to_point)
-    N_dense = vertex_normals(V_dense, F_dense)
-    N_samples = _interpolate(N_dense, F_dense, sampled.face, sampled.bary)
-    ws = 1.0 / n_s
-    f2d, d2f, cg_its = [], [], []
-    cancelled = False
-    for it in range(int(iterations) + 1):
-        Vf = op.apply(X)
-        area = _vertex_areas(Vf, Ff, op.n_fine)
-        a = area / area.sum() if area.sum() > 0 else np.full(op.n_fine, 1.0 / op.n_fine)
-        near = dense_index.closest(Vf)
-        hit = TriangleIndex(Vf, Ff).closest(P)
-        f2d.append(float(np.dot(a, near.distance)))
-        d2f.append(float(np.mean(hit.distance)))
-        if it == int(iterations):
-            break
-        N_near = _interpolate(N_dense, F_dense, near.face, near.bary)
-        corners = Ff[np.asarray(hit.face, dtype=np.int64)]
-        bary = np.asarray(hit.bary, dtype=np.float64)
 
-        def B(Y):
-            return barycentric_gather(Y, corners, bary)
+class _Matches(NamedTuple):
+    """One iteration's correspondences (:func:`_match`)."""
 
-        def Bt(Z):
-            return barycentric_scatter(Z, corners, bary, op.n_fine)
+    area: np.ndarray     #: (n_fine,) the fine vertices' area shares (sum 1)
+    near: object         #: ClosestPoints of the fine vertices on the dense surface
+    hit: object          #: ClosestPoints of the dense samples on the fine surface
 
-        def metric(N, Y):
-            # (mu I + n n^T) y per row: point-to-plane plus a little point-to-point
-            return mu * Y + N * np.einsum("ij,ij->i", N, Y)[:, None]
 
-        def A(x):
-            Xc = x.reshape(n_c, 3)
-            Y = op.apply(Xc)
-            G = a[:, None] * metric(N_near, Y) + Bt(ws * metric(N_samples, B(Y)))
-            out = op.apply_transpose(G) + lam * _lt_l(L_rows, L_cols, L_w, n_c, Xc)
-            return out.ravel()
+def _match(pb, X):
+    """The correspondences of the cage ``X``: each fine vertex's closest
+    point on the dense surface (weighted by its area share) and each dense
+    sample's closest point on the fine surface."""
+    Vf = pb.op.apply(X)
+    Ff = pb.op.F_fine
+    area = _vertex_areas(Vf, Ff, pb.op.n_fine)
+    total = area.sum()
+    area = area / total if total > 0 else np.full(pb.op.n_fine, 1.0 / pb.op.n_fine)
+    return _Matches(area, pb.dense_index.closest(Vf), TriangleIndex(Vf, Ff).closest(pb.P))
 
-        rhs = (op.apply_transpose(a[:, None] * metric(N_near, near.point)
-                                  + Bt(ws * metric(N_samples, P)))
-               + lam * LtL_X0)
-        # lumped (row-sum) diagonal of the isotropic part: S 1 = 1 and B 1 = 1
-        lumped = (1.0 + mu) * op.apply_transpose(a + Bt(np.full((n_s, 1), ws))[:, 0]) \
-            + lam * L_diag
-        lumped = np.maximum(lumped, 1e-3 * max(float(lumped.max()), 1e-300))
-        inv = np.repeat(1.0 / lumped, 3)
-        precondition = lambda r: r * inv                               # noqa: E731
-        if sym is not None:
-            A, rhs, precondition = _restricted(sym, A, rhs, precondition, n_c)
-        sol = conjugate_gradient(A, rhs.ravel(), X0=X.ravel(), rtol=cg_rtol,
-                                 max_iterations=cg_max_iterations, preconditioner=precondition)
-        X = sol.X.reshape(n_c, 3) if sym is None else sym(sol.X.reshape(n_c, 3))
-        cg_its.append(sol.iterations)
-        if progress is not None and progress((it + 1) / (int(iterations) + 1)) is False:
-            cancelled = True
-            break
-    f2d = np.array(f2d)
-    d2f = np.array(d2f)
-    diag = bbox_diagonal(V_dense)
-    return FitResult(X + centre, 0.5 * (f2d + d2f), f2d, d2f, np.array(cg_its, dtype=np.int64), diag,
-                     cancelled)
+
+def _metric(mu, N, Y):
+    """``(mu I + n n^T) y`` per row: point-to-plane plus a little point-to-point."""
+    return mu * Y + N * np.einsum("ij,ij->i", N, Y)[:, None]
+
+
+def _solve(pb, m, X, cg_rtol, cg_max_iterations):
+    """Minimise the module docstring's energy for the correspondences ``m``
+    by conjugate gradients from ``X`` (preconditioned by the lumped diagonal
+    of the isotropic part; on the symmetric positions when the fit keeps a
+    symmetry): (the new cage, CG iterations)."""
+    op, n_c, ws = pb.op, pb.X0.shape[0], 1.0 / pb.P.shape[0]
+    rows, cols, w = pb.laplacian
+    N_near = _interpolate(pb.N_dense, pb.F_dense, m.near.face, m.near.bary)
+    corners = op.F_fine[np.asarray(m.hit.face, dtype=np.int64)]
+    bary = np.asarray(m.hit.bary, dtype=np.float64)
+
+    def B_t(Z):
+        return barycentric_scatter(Z, corners, bary, op.n_fine)
+
+    def A(x):
+        Xc = x.reshape(n_c, 3)
+        Y = op.apply(Xc)
+        G = m.area[:, None] * _metric(pb.mu, N_near, Y) \
+            + B_t(ws * _metric(pb.mu, pb.N_samples, barycentric_gather(Y, corners, bary)))
+        return (op.apply_transpose(G) + pb.lam * _lt_l(rows, cols, w, n_c, Xc)).ravel()
+
+    rhs = (op.apply_transpose(m.area[:, None] * _metric(pb.mu, N_near, m.near.point)
+                              + B_t(ws * _metric(pb.mu, pb.N_samples, pb.P)))
+           + pb.lam * _lt_l(rows, cols, w, n_c, pb.X0))
+    # lumped (row-sum) diagonal of the isotropic part: S 1 = 1 and B 1 = 1
+    ones = np.full((pb.P.shape[0], 1), ws)
+    lumped = (1.0 + pb.mu) * op.apply_transpose(m.area + B_t(ones)[:, 0]) \
+        + pb.lam * _lt_l_diagonal(rows, cols, w, n_c)
+    lumped = np.maximum(lumped, 1e-3 * max(float(lumped.max()), 1e-300))
+    inv = np.repeat(1.0 / lumped, 3)
+    precondition = lambda r: r * inv                               # noqa: E731
+    if pb.sym is not None:
+        A, rhs, precondition = _restricted(pb.sym, A, rhs, precondition, n_c)
+    sol = conjugate_gradient(A, rhs.ravel(), X0=X.ravel(), rtol=cg_rtol,
+                             max_iterations=cg_max_iterations, preconditioner=precondition)
+    X = sol.X.reshape(n_c, 3)
+    return (X if pb.sym is None else pb.sym(X)), sol.iterations
 
 
 def _symmetric_projection(V_cage, symmetry):
