@@ -27,7 +27,7 @@ as the corner of its first incident fine face (barycentric coordinates a unit
 vector), its frame is built exactly like a dense vertex's, and the offset to
 the dense surface is stored in it: the closest point (an index over the dense
 mesh), or for very large dense meshes a point found by a local search
-around the bound dense vertices (no index: see :func:`_dense_points_near`).
+around the bound dense vertices (no index: see :func:`.detail_search.dense_points_near`).
 
 Incremental deform (``deform(b, V, moved=ids, out=D)``, for live editing):
 the dependency chain cage vertex -> fine positions (the operator's support)
@@ -59,15 +59,15 @@ from typing import NamedTuple
 
 import numpy as np
 
-from .clean import clean_mesh
+from .detail_search import dense_points_near, exact_detail_index
 from .errors import CancelledError, InvalidArgumentError, InvalidMeshError, TopologyMismatchError
 from .mesh import area_normals_t, check_mesh, cross_columns, dot_columns
-from .near_query import NearQuery, cell_for_reach
-from .spatial import TriangleIndex, point_triangle_closest
+from .near_query import NearQuery
+from .spatial import TriangleIndex
 from .subdivide import subdivision_operator
 from .unfold import (CageRings, FaceStars, FineFaceGroups, Repair, away_rows, away_t,
                      nearest_rotations, repair, ring_rotations, turned_over)
-from ._groups import distinct, group_argmin, ragged_entries, ragged_ranges
+from ._groups import distinct, ragged_entries, ragged_ranges
 from ._parallel import WORKERS, blocks, each_in_order, run_blocks, run_each
 from .pages import plain_pages
 
@@ -91,13 +91,6 @@ _REACH_LEVELS = 2
 
 #: dense vertices sampled (evenly by index) for :func:`_typical_distance`
 _REACH_SAMPLES = 4096
-
-#: fine vertices per block of the local detail search (``detail_search="local"``)
-_DETAIL_BLOCK = 8_192
-
-#: fine vertices per block of its two-ring search (about 24 candidate faces each: the
-#: blocks' temporaries stay in cache; 54k fine vertices in one went 2x slower)
-_RING_BLOCK = 2_048
 
 #: dense rows per block of a deform's frame rebuild, full or incremental (bounds the
 #: temporaries: (3, 16384) float64 is 384 KiB; a full deform of 1M rows at once made
@@ -432,7 +425,7 @@ def bind(V_dense, F_dense, V_cage, F_cage, *, levels=2, scheme="butterfly", crea
         # built side by side on the worker threads
         query, dense_index = run_each(lambda build: build(), [
             lambda: NearQuery(Vf, op.F_fine, reach=reach),
-            lambda: _exact_detail_index(V_dense, F_dense)])
+            lambda: exact_detail_index(V_dense, F_dense)])
     else:
         query, dense_index = NearQuery(Vf, op.F_fine, reach=reach), None   # halves on the threads
     d_face, d_bary = _vertex_corners(op.F_fine, op.n_fine)
@@ -446,7 +439,7 @@ def bind(V_dense, F_dense, V_cage, F_cage, *, levels=2, scheme="butterfly", crea
         q = _closest_on(dense_index, vfr.point, _reporter(progress, 0.65, 0.95), point=True)
         fine_detail = _to_frame(q - vfr.point, vfr)
     elif detail == "local":
-        q = _dense_points_near(V_dense, F_dense, dense.nearest, vfr.point, reach)
+        q = dense_points_near(V_dense, F_dense, op.F_fine, dense.nearest, vfr.point, reach)
         fine_detail = _to_frame(q - vfr.point, vfr)
     return Binding(fine_face=dense.face, bary=dense.bary_t.T, offset=dense.offset_t.T,
                    fine_detail=fine_detail, F_cage=F_cage, n_cage=int(V_cage.shape[0]),
@@ -472,7 +465,7 @@ def _typical_distance(V_dense, V_cage, F_cage, scheme, creases):
 
 def _detail_mode(detail_search, F_dense):
     """How :func:`bind` finds the refine detail: ``"exact"`` (an index over
-    the dense mesh), ``"local"`` (:func:`_dense_points_near`), or None when
+    the dense mesh), ``"local"`` (:func:`.detail_search.dense_points_near`), or None when
     the dense mesh has no faces."""
     if not F_dense.shape[0]:
         return None
@@ -1445,131 +1438,6 @@ def _reporter(progress, lo, hi):
         if progress(lo + (hi - lo) * fraction) is False:
             raise CancelledError("bind: cancelled")
     return report
-
-
-def _exact_detail_index(V_dense, F_dense):
-    """The :class:`~.spatial.TriangleIndex` the exact refine detail search
-    queries: over the dense surface as simplify saw it (cleaned: no debris to
-    pull a fine vertex off the scan, no double-sided sheets)."""
-    surface = clean_mesh(V_dense, F_dense)
-    Vs, Fs = (surface.V, surface.F) if surface.F.shape[0] else (V_dense, F_dense)
-    return TriangleIndex(Vs, Fs)
-
-
-class _Fans(NamedTuple):
-    """The faces around some vertices of a mesh (CSR over ``vertices``, each
-    fan's faces ascending)."""
-
-    vertices: np.ndarray  #: (k,) int64 the vertices, ascending
-    start: np.ndarray     #: (k + 1,) int64 fan of vertices[i]: faces[start[i]:start[i+1]]
-    faces: np.ndarray     #: (entries,) int64
-
-    def of(self, v):
-        """(first entry, count) of the fans of the vertices ``v`` (each in ``vertices``)."""
-        i = np.searchsorted(self.vertices, v)
-        return self.start[i], self.start[i + 1] - self.start[i]
-
-
-def _fans_of(F, vertices):
-    """:class:`_Fans` of the distinct ``vertices`` of the triangles ``F``: one
-    scan of F for the corners at them, then those (vertex, face) entries
-    sorted by vertex (stable: faces ascending, as a full vertex -> face
-    table lists them)."""
-    vertices = np.unique(vertices)
-    flat = F.ravel()
-    mark = np.zeros(int(flat.max()) + 1 if flat.size else 0, dtype=bool)
-    mark[vertices[vertices < mark.shape[0]]] = True
-    hit = np.flatnonzero(mark[flat])
-    v = flat[hit]
-    order = np.argsort(v, kind="stable")
-    counts = np.bincount(np.searchsorted(vertices, v), minlength=vertices.shape[0])
-    return _Fans(vertices, np.concatenate([[0], np.cumsum(counts)]), hit[order] // 3)
-
-
-def _dense_points_near(V_dense, F_dense, nearest, P, reach=None):
-    """A point of the dense surface near each fine vertex position ``P[j]``.
-
-    Searched without a spatial index over the dense mesh, using the binding:
-    take ``nearest[j]``, the dense vertex nearest to ``P[j]`` among those
-    bound to the fine faces around ``j`` (found by the dense pass,
-    :func:`_nearest_parts`), and return the closest point
-    of ``P[j]`` on that vertex's triangle fan, or on its two-ring where the
-    fan's best point lies on the fan's rim (the surface may come closer
-    beyond it). Fine vertices with no bound dense vertex around them (a dense
-    mesh coarser than the cage there) use an exact
-    :class:`~.spatial.TriangleIndex` query (its cells sized for ``reach``, the
-    typical distance between the surfaces, when known). Every returned point
-    lies on the dense surface; it is the closest one whenever the closest
-    triangle lies in the two-ring of the nearest bound vertex (the usual case
-    for a cage near the surface).
-    """
-    n_f = P.shape[0]
-    q = np.empty((n_f, 3))
-    has = np.flatnonzero(nearest >= 0)
-    fans = _fans_of(F_dense, nearest[has])
-    rim = np.zeros(n_f, dtype=bool)
-
-    def on_fan(s, e):
-        # fine vertices has[s:e]: the closest point on the fan of their nearest vertex;
-        # where it lands on the fan's rim (zero weight on the centre), the two-ring
-        j, k = has[s:e], nearest[has[s:e]]
-        first, count = fans.of(k)
-        idx, owner = ragged_ranges(first, count)
-        point, corners, bary = _closest_in_groups(V_dense, F_dense, P, j[owner],
-                                                  fans.faces[idx], count)
-        q[j] = point
-        rim[j] = (bary * (corners == k[:, None])).sum(axis=1) <= 0.0
-
-    run_blocks(on_fan, blocks(has.shape[0], _DETAIL_BLOCK))
-    if rim.any():
-        _two_ring_points(V_dense, F_dense, P, np.flatnonzero(rim), nearest, fans, q)
-    missing = np.flatnonzero(nearest < 0)
-    if missing.size:
-        index = TriangleIndex(V_dense, F_dense, min_cell=cell_for_reach(reach))
-        q[missing] = index.closest(P[missing]).point
-    return q
-
-
-def _two_ring_points(V_dense, F_dense, P, js, nearest, fans, q):
-    """For the fine vertices ``js`` whose fan point lies on the rim, the
-    closest point over the two-ring of their nearest dense vertex (the fans
-    of the fan's vertices), into ``q``."""
-    n_d = V_dense.shape[0]
-    first, count = fans.of(nearest[js])
-    idx, owner = ragged_ranges(first, count)
-    ring_j, ring_v = _unique_pairs(np.repeat(js[owner], 3),
-                                   F_dense[fans.faces[idx]].ravel(), n_d)
-    ring = _fans_of(F_dense, ring_v)
-    first, count = ring.of(ring_v)
-    idx, owner = ragged_ranges(first, count)
-    cand_j, cand_f = _unique_pairs(ring_j[owner], ring.faces[idx], F_dense.shape[0])
-    counts = np.bincount(cand_j)
-    j = np.flatnonzero(counts)
-    starts = np.concatenate([[0], np.cumsum(counts[j])])
-
-    def block(a, b):
-        # fine vertices j[a:b], their candidates contiguous (sorted by fine vertex)
-        s, e = starts[a], starts[b]
-        q[j[a:b]] = _closest_in_groups(V_dense, F_dense, P, cand_j[s:e], cand_f[s:e],
-                                       counts[j[a:b]])[0]
-    run_blocks(block, blocks(j.shape[0], _RING_BLOCK))
-
-
-def _closest_in_groups(V, F, P, j, face, counts):
-    """Closest point of ``P[j[k]]`` over the candidate faces ``face[k]``,
-    grouped contiguously by ``j`` (``counts`` per group, each > 0). Returns
-    the best point, its face's corners and barycentric coordinates per group."""
-    T = np.take(F, face, axis=0)
-    hit = point_triangle_closest(np.take(P, j, axis=0), np.take(V, T[:, 0], axis=0),
-                                 np.take(V, T[:, 1], axis=0), np.take(V, T[:, 2], axis=0))
-    best = group_argmin(hit.distance, counts)
-    return hit.point[best], T[best], hit.bary[best]
-
-
-def _unique_pairs(a, b, n_b):
-    """Distinct pairs ``(a[k], b[k])`` sorted by ``a`` then ``b``."""
-    key = np.unique(a * np.int64(n_b) + b)
-    return key // n_b, key % n_b
 
 
 def _vertex_corners(F, n):
