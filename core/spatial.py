@@ -427,6 +427,66 @@ def _first_of_each_triangle(V, F):
     return keep
 
 
+def _used_box(V, F):
+    """The lower and upper corners (3,) of the box of the vertices ``F`` uses."""
+    used = np.zeros(V.shape[0], dtype=bool)
+    used[F.ravel()] = True
+    Vu = V[used]
+    return Vu.min(axis=0), Vu.max(axis=0)
+
+
+def _corners(V, F):
+    """The corners ``A, B, C`` (k,3) of the triangles ``F`` (k,3)."""
+    return (np.take(V, F[:, 0], axis=0), np.take(V, F[:, 1], axis=0),
+            np.take(V, F[:, 2], axis=0))
+
+
+def _box_of(A, B, C):
+    """The triangles' boxes: lower and upper corners (k,3)."""
+    lo = np.minimum(A, B)
+    np.minimum(lo, C, out=lo)
+    hi = np.maximum(A, B)
+    np.maximum(hi, C, out=hi)
+    return lo, hi
+
+
+def _largest_sides(V, F, out):
+    """Each triangle's largest box side, into ``out`` (k,)."""
+    lo, hi = _box_of(*_corners(V, F))
+    hi -= lo
+    np.maximum(np.maximum(hi[:, 0], hi[:, 1], out=out), hi[:, 2], out=out)
+
+
+def _cell_ranges(A, B, C, lo, h, dims):
+    """Each triangle's first cell (k,3) and cells per axis (k,3) of its box."""
+    tlo, thi = _box_of(A, B, C)
+    c0 = _cell_range(tlo, lo, h, dims)
+    nr = _cell_range(thi, lo, h, dims)
+    nr -= c0
+    nr += 1
+    return c0, nr
+
+
+def _morton_order(V, F, lo, extent):
+    """The triangles of ``F`` in Morton order of their boxes' centres
+    (stable), a block at a time; where more than ``_MAX_SAME_CODE`` share a
+    code (a degenerate cluster: faces on a few points), one of each distinct
+    triangle only, or every query would scan them all."""
+    m = F.shape[0]
+    codes = np.empty(m, dtype=np.uint64)
+
+    def code(span):
+        tlo, thi = _box_of(*_corners(V, F[span[0]:span[1]]))
+        tlo += thi
+        tlo *= 0.5
+        codes[span[0]:span[1]] = morton_codes(tlo, lo, extent)
+    run_each(code, blocks(m, _BUILD_BLOCK), threads=m >= _THREADED_BUILD)
+    order = np.argsort(codes, kind="stable")
+    if _longest_run(codes[order]) > _MAX_SAME_CODE:
+        order = order[_first_of_each_triangle(V, F[order])]
+    return order
+
+
 def _bounding_rows(A, B, C, n):
     """The two lower-bound tables of the triangles ``(A, B, C)`` (each (m,3)) with
     unit normals ``n`` (m,3) (zero for thin triangles, as in :func:`triangle_rows`).
@@ -548,86 +608,71 @@ class TriangleIndex:
                 f"got {min_cell!r}")
         self.V = V
         self.F = F
-        m = F.shape[0]
-        A, B, C = V[F[:, 0]], V[F[:, 1]], V[F[:, 2]]
-        tlo = np.minimum(np.minimum(A, B), C)
-        thi = np.maximum(np.maximum(A, B), C)
-        lo = tlo.min(axis=0)
-        hi = thi.max(axis=0)
-        extent = hi - lo
-        self._lo, self._hi = lo, hi
-        # Morton order of the triangles (by bounding-box centre)
-        codes = morton_codes(0.5 * (tlo + thi), lo, extent)
-        order = np.argsort(codes, kind="stable")
-        if _longest_run(codes[order]) > _MAX_SAME_CODE:
-            # a degenerate cluster (faces on a few points): one of each distinct triangle,
-            # or every query would scan them all
-            order = order[_first_of_each_triangle(V, F[order])]
+        self._lo, self._hi = _used_box(V, F)
+        extent = self._hi - self._lo
+        order = _morton_order(V, F, self._lo, extent)
         self._order = order                       # internal id -> face id
         m = order.shape[0]                        # internal triangles (duplicates dropped)
-        # one at a time: each unordered copy is freed before the next is ordered
-        A = A[order]
-        B = B[order]
-        C = C[order]
-        tlo = tlo[order]
-        thi = thi[order]
-
+        Fo = F[order]
+        spans = blocks(m, _BUILD_BLOCK)
+        # the triangles' largest box sides, then the cells (every other per-triangle
+        # array is made a block at a time: a 2M-face build made 850 MB of whole-mesh
+        # temporaries, each page of which this machine's kernel was slow to hand out)
+        ext = np.empty(m)
+        run_each(lambda span: _largest_sides(V, Fo[span[0]:span[1]], ext[span[0]:span[1]]),
+                 spans, threads=m >= _THREADED_BUILD)
+        h, dims = self._cell_size(V, Fo, spans, ext, extent, cell_factor, min_cell)
+        self._h, self._dims = h, dims
         self._D, self._ball, self._prism = np.empty((16, m)), np.empty((4, m)), np.empty((16, m))
+        small = np.int32 if m < 2**31 else np.int64        # (cells <= _MAX_CELLS < 2**31)
 
-        def rows_and_bounds(start, stop):
-            """The kernel rows and the two lower-bound tables (_bounding_rows) of
-            the triangles start..stop (per triangle: a block's temporaries stay
-            in cache, where whole (m,3) arrays of a large mesh go to memory)."""
-            s = slice(start, stop)
-            self._D[:, s] = triangle_rows(A[s], B[s], C[s])
-            self._ball[:, s], self._prism[:, s] = _bounding_rows(A[s], B[s], C[s],
-                                                                 self._D[12:15, s].T)
-        # the grid on one worker, the blocks of rows on the other, then on both
-        jobs = [lambda: self._build_grid(tlo, thi, A, B, C, extent, cell_factor, min_cell)]
-        jobs += [lambda span=span: rows_and_bounds(*span) for span in blocks(m, _BUILD_BLOCK)]
-        run_each(lambda job: job(), jobs, threads=m >= _THREADED_BUILD)
+        def build_block(span):
+            """The kernel rows, the two lower-bound tables (_bounding_rows) and
+            the grid references (:func:`_plane_cells`) of the triangles of ``span``."""
+            s = slice(*span)
+            A, B, C = _corners(V, Fo[s])
+            self._D[:, s] = triangle_rows(A, B, C)
+            self._ball[:, s], self._prism[:, s] = _bounding_rows(A, B, C, self._D[12:15, s].T)
+            c0, nr = _cell_ranges(A, B, C, self._lo, h, dims)
+            return _plane_cells(A, B, C, ext[s], c0, nr, self._lo, h, dims, span[0], small)
+        parts = run_each(build_block, spans, threads=m >= _THREADED_BUILD)
+        cell = np.concatenate([p[0] for p in parts])
+        tri = np.concatenate([p[1] for p in parts])
+        del parts
+        self._cell_tri = tri[np.argsort(cell, kind="stable")]
+        self._cell_start = np.zeros(int(np.prod(dims)) + 1, dtype=np.int64)
+        np.cumsum(np.bincount(cell, minlength=int(np.prod(dims))), out=self._cell_start[1:])
         self._bvh = None                          # built on first need (far queries)
         self._bvh_ready = False                   # ... with its cylinder bounds
         self._normal = np.ascontiguousarray(self._D[12:15])      # the disk bound's rows
         self.n_faces = m
 
     # -- grid ---------------------------------------------------------------------------------
-    def _build_grid(self, tlo, thi, A, B, C, extent, cell_factor, min_cell):
-        m = tlo.shape[0]
-        ext = (thi - tlo).max(axis=1)
+    def _cell_size(self, V, Fo, spans, ext, extent, cell_factor, min_cell):
+        """The grid's cell size and cells per axis: ``cell_factor`` mean
+        largest box sides (at least ``min_cell``), grown by 1.25 until the
+        grid has at most ``_MAX_CELLS`` cells and the triangles' boxes cover
+        at most ``_MAX_REFS_PER_FACE`` cells each on average."""
+        m = ext.shape[0]
         h = max(cell_factor * float(ext.mean()), min_cell or 0.0)
         span = float(extent.max())
         if not h > 0:
             h = span / 64 if span > 0 else 1.0
-        # grow the cells until the dense grid and the references fit their caps
         for _ in range(200):
             dims_f = np.floor(extent / h) + 1
             if float(np.prod(dims_f)) > _MAX_CELLS:
                 h *= 1.25
                 continue
             dims = dims_f.astype(np.int64)
-            ncell = int(np.prod(dims))
-            c0, nr = _cell_range(tlo, self._lo, h, dims), _cell_range(thi, self._lo, h, dims)
-            nr -= c0
-            nr += 1
-            nrefs = int(np.prod(nr, axis=1).sum())
-            if ncell <= _MAX_CELLS and nrefs <= _MAX_REFS_PER_FACE * m + 1024:
+
+            def covered(span):
+                c0, nr = _cell_ranges(*_corners(V, Fo[span[0]:span[1]]), self._lo, h, dims)
+                return int(np.prod(nr, axis=1).sum())
+            nrefs = sum(run_each(covered, spans, threads=m >= _THREADED_BUILD))
+            if int(np.prod(dims)) <= _MAX_CELLS and nrefs <= _MAX_REFS_PER_FACE * m + 1024:
                 break
             h *= 1.25
-        self._h = h
-        self._dims = dims
-        # a block of triangles at a time: the references before the plane test are up to
-        # 12 a triangle, and their arrays for 2M faces at once held 800 MB
-        small = np.int32 if m < 2**31 else np.int64        # (ncell <= _MAX_CELLS < 2**31)
-        parts = [_plane_cells(A[a:b], B[a:b], C[a:b], ext[a:b], c0[a:b], nr[a:b], self._lo, h, dims, a,
-                              small) for a, b in blocks(m, _BUILD_BLOCK)]
-        cell = np.concatenate([p[0] for p in parts])
-        tri = np.concatenate([p[1] for p in parts])
-        del parts
-        o = np.argsort(cell, kind="stable")
-        self._cell_tri = tri[o]
-        self._cell_start = np.zeros(ncell + 1, dtype=np.int64)
-        np.cumsum(np.bincount(cell, minlength=ncell), out=self._cell_start[1:])
+        return h, dims
 
     # -- BVH ----------------------------------------------------------------------------------
     def _build_hierarchy(self):
