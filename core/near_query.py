@@ -353,7 +353,7 @@ def _block(T, P, q, cell3, best):
     u2 = np.square(_bound32(T, d0))
     owner_a, tri_a, lb_a = _within(tiles, np.arange(n), u2)
     point_b, cell_b, far = _neighbour_cells(T, B, np.sqrt(d0))
-    owner_b, tri_b, lb_b = _within(_tiles(T, B.A, point_b, cell_b), point_b, u2)
+    owner_b, tri_b, lb_b = _within(_tiles(T, B.A, point_b, cell_b, once=True), point_b, u2)
     if owner_a.size + owner_b.size > _CROWDED_BLOCK * n and n > _MIN_BLOCK:
         # hundreds of pairs a point: halves, whose arrays stay in cache (a point's
         # answer does not depend on its block)
@@ -489,14 +489,17 @@ class _Tiles(NamedTuple):
 
     rows: np.ndarray    #: (tiles, _TILE) rows of the tiled set (a short tile repeats its last row)
     valid: np.ndarray   #: (tiles, _TILE) bool, False for the repeats
-    sets: list          #: the :class:`_Tile` sets, in tile order
+    sets: object        #: the :class:`_Tile` sets, in tile order (a list, or an iterator)
 
 
-def _tiles(T, A, point, cell):
+def _tiles(T, A, point, cell, once=False):
     """The rows ``(point[i], cell[i])`` grouped by cell into :class:`_Tiles`,
     the tiles cut into sets of one window width class; ``A`` (k, 4) the
     points' [x, y, z, 1]. The index work is done once for all tiles (a set
-    only slices it): fewer, larger NumPy calls."""
+    only slices it): fewer, larger NumPy calls. With ``once`` (tiles read
+    once), ``sets`` is an iterator that makes each set as it is read: one
+    set's bounds in memory at a time, not all of them (a 65,536-point block
+    of a five-level bind held tens of MB of them, fresh pages every block)."""
     if point.size == 0:
         return _Tiles(np.zeros((0, _TILE), dtype=np.int64), np.zeros((0, _TILE), dtype=bool), [])
     order = np.argsort(cell, kind="stable")          # cells come in sorted runs: stable is fast
@@ -519,11 +522,16 @@ def _tiles(T, A, point, cell):
     # at most _TILE_SLOTS (row, reference) pairs per set: its arrays stay in cache
     cuts = np.unique(np.concatenate([cuts] + [np.arange(a, b, max(1, _TILE_SLOTS // (
         _TILE * int(T.widths[cls[a]])))) for a, b in zip(cuts[:-1], cuts[1:])]))
-    sets = []
+    sets = _tile_sets(T, Arows, cls, start, cuts)
+    return _Tiles(rows, lane < length[:, None], sets if once else list(sets))
+
+
+def _tile_sets(T, Arows, cls, start, cuts):
+    """Yield the :class:`_Tile` sets between the ``cuts`` (tile indices),
+    each made when asked for."""
     for a, b in zip(cuts[:-1].tolist(), cuts[1:].tolist()):
         c, s = int(cls[a]), start[a:b]
-        sets.append(_Tile(a, T.tri[c][s], _edge_line_bound(T, Arows[a:b], s, c)))
-    return _Tiles(rows, lane < length[:, None], sets)
+        yield _Tile(a, T.tri[c][s], _edge_line_bound(T, Arows[a:b], s, c))
 
 
 def _edge_line_bound(T, A, s, c):
