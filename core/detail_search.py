@@ -184,7 +184,10 @@ def _faces_near(V, F, P, r):
         return lo, 0.5 * float(np.sqrt(np.einsum("ij,ij->i", hi, hi).max(initial=0.0)))
     rho = max(boxes(a, b)[1] for a, b in spans)
     lo, hi = P.min(axis=0), P.max(axis=0)
-    s = max((r + rho) * (1 + 1e-9), 1e-12 * float(np.abs(np.concatenate([lo, hi])).max() + 1))
+    # a margin for the rounding of the centres and cells (relative to the coordinates'
+    # size), and cells few enough for int64 keys
+    size = max(float(np.abs(V).max(initial=0.0)), float(np.abs(P).max(initial=0.0)), 1e-300)
+    s = max((r + rho) * (1 + 1e-6) + 1e-9 * size, float((hi - lo).max()) / 2e6)
     dims = np.floor((hi - lo) / s).astype(np.int64) + 3        # a cell of margin each side
     pc = np.floor((P - lo) / s).astype(np.int64) + 1
     near = pc[:, None, :] + np.array(list(np.ndindex(3, 3, 3))) - 1

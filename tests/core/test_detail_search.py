@@ -32,9 +32,11 @@ def _case(V_dense, F_dense, unbound, seed=0, lift=0.02):
     return Fs, nearest, P
 
 
-@pytest.mark.parametrize("unbound", [0.01, 0.2, 0.7, 1.0])
-def test_unbound_fine_vertices_get_their_exact_closest_point(unbound):
+@pytest.mark.parametrize("unbound,offset", [(0.01, 0.0), (0.2, 0.0), (0.7, 0.0), (1.0, 0.0),
+                                            (0.2, 1e4)], ids=["1%", "20%", "70%", "all", "far from 0"])
+def test_unbound_fine_vertices_get_their_exact_closest_point(unbound, offset):
     Vd, Fd = torus(60, 30, bump=0.02)
+    Vd = Vd + offset                          # (the cells' rounding margin scales with this)
     Ff, nearest, P = _case(Vd, Fd, unbound)
     q = dense_points_near(Vd, Fd, Ff, nearest, P)
     missing = nearest < 0
