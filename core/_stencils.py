@@ -246,108 +246,129 @@ def _rings(T, verts_mask):
 
 
 def butterfly_level(T):
-    """Modified butterfly stencil for one level (see core.subdivide)."""
-    n, E = T.n, T.E
-    e = E.shape[0]
-    F = T.F
+    """Modified butterfly stencil for one level (see core.subdivide): even
+    vertices keep their position; an odd (edge) vertex takes the 4-point
+    rule on a sharp edge (:func:`_butterfly_sharp`), the 8-point stencil
+    where neither end is extraordinary (:func:`_butterfly_regular`), else
+    its extraordinary ends' ring stencils (:func:`_butterfly_extraordinary`)."""
+    n = T.n
     ar_n = np.arange(n, dtype=np.int64)
-    tables = [_Table(ar_n, [ar_n], [1.0])]
-    patches = []
-    a_all, b_all = E[:, 0], E[:, 1]
-
-    # --- sharp edges: 4-point rule along the curve, reflected at corners
-    ks = np.flatnonzero(T.sharp)
-    if ks.size:
-        a, b = a_all[ks], b_all[ks]
-        ca = T.n_sharp[a] != 2
-        cb = T.n_sharp[b] != 2
-        # a corner end x is reflected, x' = 2x - y: the slot of x' holds (x, -2/16)
-        # and the +1/16 on y goes to y's own weight (no zero weights, no missing point)
-        a2 = np.where(ca, a, T.nb_sum[a] - b)
-        b2 = np.where(cb, b, T.nb_sum[b] - a)
-        wa = 9 / 16 + 1 / 16 * cb
-        wb = 9 / 16 + 1 / 16 * ca
-        tables.append(_Table(n + ks, [a, b, a2, b2],
-                             [wa, wb, np.where(ca, -2 / 16, -1 / 16), np.where(cb, -2 / 16, -1 / 16)]))
-
     smooth_x = (T.n_sharp == 0) & (T.valence != 6) & (T.valence > 0)
     not_sharp = ~T.sharp
-    xa = smooth_x[a_all] & not_sharp
-    xb = smooth_x[b_all] & not_sharp
+    xa = smooth_x[T.E[:, 0]] & not_sharp
+    xb = smooth_x[T.E[:, 1]] & not_sharp
+    tables = [_Table(ar_n, [ar_n], [1.0])] + _butterfly_sharp(T)
+    regular, patches = _butterfly_regular(T, np.flatnonzero(not_sharp & ~xa & ~xb))
+    tables += regular + _butterfly_extraordinary(T, smooth_x, xa, xb)
+    S = _assemble(n + T.E.shape[0], n, tables, patches)
+    return S._replace(plan=make_plan(S, [0, n, n + T.E.shape[0]]))
 
-    # --- 8-point stencil (both ends regular, or touching a sharp vertex), reflected wings
-    kr = np.flatnonzero(not_sharp & ~xa & ~xb)
-    if kr.size:
-        f0, c0 = T.faces[kr, 0], T.corners[kr, 0]
-        f1, c1 = T.faces[kr, 1], T.corners[kr, 1]
-        x0, x1 = 3 * f0, 3 * f1
-        n0, nn0 = NEXT_CORNER[c0], NEXT_CORNER[NEXT_CORNER[c0]]
-        n1, nn1 = NEXT_CORNER[c1], NEXT_CORNER[NEXT_CORNER[c1]]
-        # 32-bit copies of the arrays read at random: half the cache footprint
-        small = max(n, 3 * T.F.shape[0]) < 2 ** 31 - 1
-        Ff = T.F.ravel().astype(np.int32) if small else T.F.ravel()
-        P0, Q0 = Ff[x0 + n0], Ff[x0 + nn0]
-        c, d = Ff[x0 + c0], Ff[x1 + c1]
-        # slot A: apex P0, edge (Q0, c); B: apex Q0, edge (c, P0);
-        # C: apex Q0 (=P1), edge (P0, d); D: apex P0 (=Q1), edge (d, Q0)
-        # the corner across each half-edge, -1 where that edge is sharp (never read across)
-        wing_opp = np.where(T.sharp[T.face_edge.ravel()], -1, T.opp)
-        if small:
-            wing_opp = wing_opp.astype(np.int32)
-        wings, miss = [], []
-        for h in (x0 + n0, x0 + nn0, x1 + n1, x1 + nn1):
-            t = wing_opp[h]
-            ok = t >= 0
-            wings.append(Ff[t])
-            miss.append(~ok)
-        tables.append(_Table(n + kr, [P0, Q0, c, d] + wings, [0.5, 0.5, 0.125, 0.125] + [-1 / 16] * 4))
-        sel = np.flatnonzero(miss[0] | miss[1] | miss[2] | miss[3])
-        if sel.size:
-            # rows with reflected wings, same slots: -1/16 (P + Q - R) for a missing
-            # wing keeps -1/16 on the face's third vertex (c or d) in the wing's slot
-            # and moves the +-1/16 on the edge's ends into their weights, so no
-            # weight is ever zero (a row may name c or d twice)
-            c_s = c[sel]
-            mA, mB, mC, mD = (mk[sel].astype(np.float64) for mk in miss)
-            s16 = 1 / 16
-            wP = 0.5 + s16 * (mA - mB + mD - mC)
-            wQ = 0.5 + s16 * (mB - mA + mC - mD)
-            d_s = d[sel]
-            wing_c = [np.where(mk[sel], cd, w[sel]) for w, mk, cd in zip(wings, miss, (c_s, c_s, d_s, d_s))]
-            patches.append(_Table(n + kr[sel], [P0[sel], Q0[sel], c_s, d_s] + wing_c,
-                                  [wP, wQ, 0.125, 0.125] + [-s16] * 4))
 
-    # --- extraordinary ends: their own ring stencil (halved when both ends are)
+def _butterfly_sharp(T):
+    """The odd vertices of sharp edges: the 4-point rule along the curve,
+    reflected at corners (a list of :class:`_Table`, empty without sharp
+    edges). A corner end x is reflected, x' = 2x - y: the slot of x' holds
+    (x, -2/16) and the +1/16 on y goes to y's own weight (no zero weights,
+    no missing point)."""
+    ks = np.flatnonzero(T.sharp)
+    if not ks.size:
+        return []
+    a, b = T.E[ks, 0], T.E[ks, 1]
+    ca = T.n_sharp[a] != 2
+    cb = T.n_sharp[b] != 2
+    a2 = np.where(ca, a, T.nb_sum[a] - b)
+    b2 = np.where(cb, b, T.nb_sum[b] - a)
+    wa = 9 / 16 + 1 / 16 * cb
+    wb = 9 / 16 + 1 / 16 * ca
+    return [_Table(T.n + ks, [a, b, a2, b2],
+                   [wa, wb, np.where(ca, -2 / 16, -1 / 16), np.where(cb, -2 / 16, -1 / 16)])]
+
+
+def _butterfly_regular(T, kr):
+    """The odd vertices of the edges ``kr`` (both ends regular, or touching
+    a sharp vertex): the 8-point stencil, (tables, patches). Slot A: apex
+    P0, edge (Q0, c); B: apex Q0, edge (c, P0); C: apex Q0 (=P1), edge (P0,
+    d); D: apex P0 (=Q1), edge (d, Q0). A wing across a sharp edge is
+    reflected (:func:`_reflected_wings`, a patch of those rows)."""
+    if not kr.size:
+        return [], []
+    n = T.n
+    f0, c0 = T.faces[kr, 0], T.corners[kr, 0]
+    f1, c1 = T.faces[kr, 1], T.corners[kr, 1]
+    x0, x1 = 3 * f0, 3 * f1
+    n0, nn0 = NEXT_CORNER[c0], NEXT_CORNER[NEXT_CORNER[c0]]
+    n1, nn1 = NEXT_CORNER[c1], NEXT_CORNER[NEXT_CORNER[c1]]
+    # 32-bit copies of the arrays read at random: half the cache footprint
+    small = max(n, 3 * T.F.shape[0]) < 2 ** 31 - 1
+    Ff = T.F.ravel().astype(np.int32) if small else T.F.ravel()
+    P0, Q0 = Ff[x0 + n0], Ff[x0 + nn0]
+    c, d = Ff[x0 + c0], Ff[x1 + c1]
+    # the corner across each half-edge, -1 where that edge is sharp (never read across)
+    wing_opp = np.where(T.sharp[T.face_edge.ravel()], -1, T.opp)
+    if small:
+        wing_opp = wing_opp.astype(np.int32)
+    wings, miss = [], []
+    for h in (x0 + n0, x0 + nn0, x1 + n1, x1 + nn1):
+        t = wing_opp[h]
+        wings.append(Ff[t])
+        miss.append(t < 0)
+    tables = [_Table(n + kr, [P0, Q0, c, d] + wings, [0.5, 0.5, 0.125, 0.125] + [-1 / 16] * 4)]
+    sel = np.flatnonzero(miss[0] | miss[1] | miss[2] | miss[3])
+    if not sel.size:
+        return tables, []
+    return tables, [_reflected_wings(n + kr[sel], P0[sel], Q0[sel], c[sel], d[sel],
+                                     [w[sel] for w in wings], [mk[sel] for mk in miss])]
+
+
+def _reflected_wings(rows, P, Q, c, d, wings, miss):
+    """The 8-point rows ``rows`` with a missing wing (``miss``, per slot A-D),
+    same slots: -1/16 (P + Q - R) for a missing wing keeps -1/16 on the
+    face's third vertex (c or d) in the wing's slot and moves the +-1/16 on
+    the edge's ends into their weights, so no weight is ever zero (a row may
+    name c or d twice)."""
+    mA, mB, mC, mD = (mk.astype(np.float64) for mk in miss)
+    s16 = 1 / 16
+    wP = 0.5 + s16 * (mA - mB + mD - mC)
+    wQ = 0.5 + s16 * (mB - mA + mC - mD)
+    wing_c = [np.where(mk, cd, w) for w, mk, cd in zip(wings, miss, (c, c, d, d))]
+    return _Table(rows, [P, Q, c, d] + wing_c, [wP, wQ, 0.125, 0.125] + [-s16] * 4)
+
+
+def _butterfly_extraordinary(T, smooth_x, xa, xb):
+    """The odd vertices of edges with an extraordinary end (``xa``, ``xb``
+    per edge; ``smooth_x`` per vertex): each such end's ring stencil
+    (Zorin et al.'s weights, :func:`butterfly_weights`), halved when both
+    ends are; a list of :class:`_Table`, one per end side and valence."""
     kx = np.flatnonzero(xa | xb)
-    if kx.size:
-        start, ring, rank_of_corner = _rings(T, smooth_x)
-        f0, c0 = T.faces[kx, 0], T.corners[kx, 0]
-        f1, c1 = T.faces[kx, 1], T.corners[kx, 1]
-        y0 = 3 * f0 + NEXT_CORNER[c0]   # corner of P0 in f0, its next vertex is Q0
-        y1 = 3 * f1 + NEXT_CORNER[c1]   # corner of Q0 in f1, its next vertex is P0
-        P0 = F[f0, NEXT_CORNER[c0]]
-        a, b = a_all[kx], b_all[kx]
-        ya = np.where(P0 == a, y0, y1)
-        yb = np.where(P0 == a, y1, y0)
-        both = xa[kx] & xb[kx]
-        for v, u, y, is_x in ((a, b, ya, xa[kx]), (b, a, yb, xb[kx])):
-            val = T.valence[v]
-            for k in np.unique(val[is_x]):
-                sel = np.flatnonzero(is_x & (val == k))
-                f = np.where(both[sel], 0.5, 1.0)
-                vs = v[sel]
-                if k < 3:   # only in degenerate meshes (a vertex in two faces): midpoint
-                    tables.append(_Table(n + kx[sel], [vs, u[sel]], [0.5 * f, 0.5 * f]))
-                    continue
-                r = rank_of_corner[y[sel]]
-                base = start[vs]
-                sj = butterfly_weights(k)
-                js = np.flatnonzero(sj)          # the valence-4 stencil has two zeros
-                cols = [vs] + [ring[base + (r + j) % k] for j in js]
-                ws = [0.75 * f] + [sj[j] * f for j in js]
-                tables.append(_Table(n + kx[sel], cols, ws))
-    S = _assemble(n + e, n, tables, patches)
-    return S._replace(plan=make_plan(S, [0, n, n + e]))
+    if not kx.size:
+        return []
+    start, ring, rank_of_corner = _rings(T, smooth_x)
+    f0, c0 = T.faces[kx, 0], T.corners[kx, 0]
+    f1, c1 = T.faces[kx, 1], T.corners[kx, 1]
+    y0 = 3 * f0 + NEXT_CORNER[c0]   # corner of P0 in f0, its next vertex is Q0
+    y1 = 3 * f1 + NEXT_CORNER[c1]   # corner of Q0 in f1, its next vertex is P0
+    P0 = T.F[f0, NEXT_CORNER[c0]]
+    a, b = T.E[kx, 0], T.E[kx, 1]
+    ya = np.where(P0 == a, y0, y1)
+    yb = np.where(P0 == a, y1, y0)
+    both = xa[kx] & xb[kx]
+    tables = []
+    for v, u, y, is_x in ((a, b, ya, xa[kx]), (b, a, yb, xb[kx])):
+        val = T.valence[v]
+        for k in np.unique(val[is_x]):
+            sel = np.flatnonzero(is_x & (val == k))
+            f = np.where(both[sel], 0.5, 1.0)
+            vs = v[sel]
+            if k < 3:   # only in degenerate meshes (a vertex in two faces): midpoint
+                tables.append(_Table(T.n + kx[sel], [vs, u[sel]], [0.5 * f, 0.5 * f]))
+                continue
+            r = rank_of_corner[y[sel]]
+            base = start[vs]
+            sj = butterfly_weights(k)
+            js = np.flatnonzero(sj)          # the valence-4 stencil has two zeros
+            cols = [vs] + [ring[base + (r + j) % k] for j in js]
+            tables.append(_Table(T.n + kx[sel], cols, [0.75 * f] + [sj[j] * f for j in js]))
+    return tables
 
 
 def loop_beta(k):
@@ -357,60 +378,78 @@ def loop_beta(k):
 
 
 def loop_level(T):
-    """Loop stencil for one level (see core.subdivide)."""
-    n, E = T.n, T.E
-    e = E.shape[0]
-    F = T.F
+    """Loop stencil for one level (see core.subdivide): even vertices by
+    :func:`_loop_even`, odd (edge) vertices by :func:`_loop_odd`."""
+    n, e = T.n, T.E.shape[0]
+    S = _assemble(n + e, n, _loop_even(T) + _loop_odd(T))
+    return S._replace(plan=make_plan(S, [0, n, n + e]))
+
+
+def _loop_even(T):
+    """The even vertices' tables: corners, darts and isolated vertices stay;
+    a vertex on a crease curve takes (1, 6, 1) / 8 of its curve; a smooth one
+    (1 - k beta) v + beta * its k neighbours (:func:`loop_beta`), grouped by
+    valence."""
+    n, ns = T.n, T.n_sharp
     tables = []
-    ns = T.n_sharp
-    fixed = (ns == 1) | (ns >= 3) | (T.valence == 0)
-    kf = np.flatnonzero(fixed)
+    kf = np.flatnonzero((ns == 1) | (ns >= 3) | (T.valence == 0))
     if kf.size:
         tables.append(_Table(kf, [kf], [1.0]))
-    # curve vertices: (1, 6, 1) / 8
     kc = np.flatnonzero(ns == 2)
     if kc.size:
-        Es = E[T.sharp]
+        Es = T.E[T.sharp]
         nb_max = np.full(n, -1, dtype=np.int64)
         np.maximum.at(nb_max, Es[:, 0], Es[:, 1])
         np.maximum.at(nb_max, Es[:, 1], Es[:, 0])
         hi = nb_max[kc]
         lo = T.nb_sum[kc] - hi
         tables.append(_Table(kc, [kc, lo, hi], [0.75, 0.125, 0.125]))
-    # smooth vertices: (1 - k beta) v + beta * sum of neighbours, grouped by valence
-    smooth = (ns == 0) & (T.valence > 0)
-    if smooth.any():
-        # neighbours grouped by vertex without sorting: the lo-side ends of E are
-        # already grouped (E is sorted), the hi-side ends are placed by counting
-        lo, hi = E[:, 0], E[:, 1]
+    sv = np.flatnonzero((ns == 0) & (T.valence > 0))
+    if sv.size:
+        start, nbr = _neighbours(T)
         val = T.valence
-        start = np.zeros(n + 1, dtype=np.int64)
-        np.cumsum(val, out=start[1:])
-        cnt_hi = np.bincount(hi, minlength=n)
-        lo_first = np.zeros(n + 1, dtype=np.int64)
-        np.cumsum(np.bincount(lo, minlength=n), out=lo_first[1:])
-        nbr = np.empty(2 * e, dtype=np.int64)
-        ar_e = np.arange(e, dtype=np.int64)
-        nbr[start[lo] + cnt_hi[lo] + ar_e - lo_first[lo]] = hi
-        order_hi = np.argsort(hi, kind="stable")
-        hs = hi[order_hi]
-        hi_first = np.zeros(n + 1, dtype=np.int64)
-        np.cumsum(cnt_hi, out=hi_first[1:])
-        nbr[start[hs] + ar_e - hi_first[hs]] = lo[order_hi]
-        sv = np.flatnonzero(smooth)
         for k in np.unique(val[sv]):
             vs = sv[val[sv] == k]
             beta = float(loop_beta(k))
             base = start[vs]
-            tables.append(_Table(vs, [vs] + [nbr[base + j] for j in range(k)], [1 - k * beta] + [beta] * k))
-    # odd vertices
+            tables.append(_Table(vs, [vs] + [nbr[base + j] for j in range(k)],
+                                 [1 - k * beta] + [beta] * k))
+    return tables
+
+
+def _neighbours(T):
+    """Every vertex's neighbours, grouped by vertex (CSR: ``start`` (n+1,),
+    ``nbr`` (2e,)) without sorting: the lo-side ends of E are already
+    grouped (E is sorted), the hi-side ends are placed by counting."""
+    n, e = T.n, T.E.shape[0]
+    lo, hi = T.E[:, 0], T.E[:, 1]
+    start = np.zeros(n + 1, dtype=np.int64)
+    np.cumsum(T.valence, out=start[1:])
+    cnt_hi = np.bincount(hi, minlength=n)
+    lo_first = np.zeros(n + 1, dtype=np.int64)
+    np.cumsum(np.bincount(lo, minlength=n), out=lo_first[1:])
+    nbr = np.empty(2 * e, dtype=np.int64)
+    ar_e = np.arange(e, dtype=np.int64)
+    nbr[start[lo] + cnt_hi[lo] + ar_e - lo_first[lo]] = hi
+    order_hi = np.argsort(hi, kind="stable")
+    hs = hi[order_hi]
+    hi_first = np.zeros(n + 1, dtype=np.int64)
+    np.cumsum(cnt_hi, out=hi_first[1:])
+    nbr[start[hs] + ar_e - hi_first[hs]] = lo[order_hi]
+    return start, nbr
+
+
+def _loop_odd(T):
+    """The odd vertices' tables: the midpoint of a sharp edge, (3, 3, 1, 1) / 8
+    of an interior edge's ends and opposite corners."""
+    tables = []
     ks = np.flatnonzero(T.sharp)
     if ks.size:
-        tables.append(_Table(n + ks, [E[ks, 0], E[ks, 1]], [0.5, 0.5]))
+        tables.append(_Table(T.n + ks, [T.E[ks, 0], T.E[ks, 1]], [0.5, 0.5]))
     ki = np.flatnonzero(~T.sharp)
     if ki.size:
-        c = F[T.faces[ki, 0], T.corners[ki, 0]]
-        d = F[T.faces[ki, 1], T.corners[ki, 1]]
-        tables.append(_Table(n + ki, [E[ki, 0], E[ki, 1], c, d], [0.375, 0.375, 0.125, 0.125]))
-    S = _assemble(n + e, n, tables)
-    return S._replace(plan=make_plan(S, [0, n, n + e]))
+        c = T.F[T.faces[ki, 0], T.corners[ki, 0]]
+        d = T.F[T.faces[ki, 1], T.corners[ki, 1]]
+        tables.append(_Table(T.n + ki, [T.E[ki, 0], T.E[ki, 1], c, d],
+                             [0.375, 0.375, 0.125, 0.125]))
+    return tables
