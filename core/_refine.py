@@ -247,32 +247,55 @@ def refine_topology(T):
     index is smaller), then the edges inside faces ``(n+k1, n+k2)``, ``k1 < k2``,
     grouped by ``k1``.
     """
-    F, n, E, FE = T.F, T.n, T.E, T.face_edge
-    m, e = F.shape[0], E.shape[0]
-    n2 = n + e
-    F2 = split_faces(F, n, FE)
+    n, e = T.n, T.E.shape[0]
+    halves = _half_edges(T)
+    inner, kmin, kmax = _inner_edges(T)
     ar_e = np.arange(e, dtype=np.int64)
-    lo, hi = E[:, 0], E[:, 1]
+    E2 = np.empty((2 * e + 3 * T.F.shape[0], 2), dtype=np.int64)
+    E2[halves[0], 0], E2[halves[0], 1] = T.E[:, 0], n + ar_e
+    E2[halves[1], 0], E2[halves[1], 1] = T.E[:, 1], n + ar_e
+    E2[inner.ravel(), 0] = n + kmin.ravel()
+    E2[inner.ravel(), 1] = n + kmax.ravel()
+    faces2, corners2 = _fine_edge_faces(T, halves, inner, E2.shape[0])
+    T2 = Topology(split_faces(T.F, n, T.face_edge), n + e, E2, _fine_face_edges(T, halves, inner),
+                  faces2, corners2, _opp(faces2, corners2, 4 * T.F.shape[0]),
+                  None, None, None, None, None)
+    return mark_sharp(T2, np.zeros(0, dtype=np.int64))
+
+
+def _half_edges(T):
+    """The fine edges of each coarse edge's halves: (at its lower end, at
+    its higher end), each (e,): grouped by old vertex, where the vertex is
+    the higher end first."""
+    n, e = T.n, T.E.shape[0]
+    lo, hi = T.E[:, 0], T.E[:, 1]
     cnt_lo = np.bincount(lo, minlength=n)
     cnt_hi = np.bincount(hi, minlength=n)
     start1 = np.zeros(n + 1, dtype=np.int64)
     np.cumsum(cnt_lo + cnt_hi, out=start1[1:])
     lo_first = np.zeros(n + 1, dtype=np.int64)
     np.cumsum(cnt_lo, out=lo_first[1:])
-    child_lo = start1[lo] + cnt_hi[lo] + (ar_e - lo_first[lo])
+    child_lo = start1[lo] + cnt_hi[lo] + (np.arange(e, dtype=np.int64) - lo_first[lo])
     order_hi = np.argsort(hi, kind="stable")
     hi_first = np.zeros(n + 1, dtype=np.int64)
     np.cumsum(cnt_hi, out=hi_first[1:])
     rank_hi = np.empty(e, dtype=np.int64)
     rank_hi[order_hi] = np.arange(e, dtype=np.int64) - hi_first[hi[order_hi]]
-    child_hi = start1[hi] + rank_hi
+    return child_lo, start1[hi] + rank_hi
 
-    # edges inside faces: group by the smaller coarse edge, rank by the larger
+
+def _inner_edges(T):
+    """The edges inside faces: ``inner`` (m,3), the fine edge opposite corner
+    c of the middle child, joining the midpoints of coarse edges ``kmin``,
+    ``kmax`` (m,3); grouped by the smaller coarse edge, ranked by the larger."""
+    FE, e = T.face_edge, T.E.shape[0]
+    ar_e = np.arange(e, dtype=np.int64)
     f0, c0, f1, c1 = T.faces[:, 0], T.corners[:, 0], T.faces[:, 1], T.corners[:, 1]
     has1 = f1 >= 0
     f1s, c1s = np.where(has1, f1, 0), np.where(has1, c1, 0)
     M = np.stack([FE[f0, NEXT_CORNER[c0]], FE[f0, NEXT_CORNER[NEXT_CORNER[c0]]],
-                  np.where(has1, FE[f1s, NEXT_CORNER[c1s]], -1), np.where(has1, FE[f1s, NEXT_CORNER[NEXT_CORNER[c1s]]], -1)], 1)
+                  np.where(has1, FE[f1s, NEXT_CORNER[c1s]], -1),
+                  np.where(has1, FE[f1s, NEXT_CORNER[NEXT_CORNER[c1s]]], -1)], 1)
     M = np.where(M > ar_e[:, None], M, -1)
     g = (M >= 0).sum(axis=1)
     gstart = np.zeros(e + 1, dtype=np.int64)
@@ -283,18 +306,17 @@ def refine_topology(T):
     kmin, kmax = np.minimum(k1, k2), np.maximum(k1, k2)
     Mk = M[kmin]                                   # (m,3,4)
     rank = ((Mk >= 0) & (Mk < kmax[..., None])).sum(axis=2)
-    inner = gstart[kmin] + rank                   # (m,3) fine edge opposite corner c of child 3
+    return gstart[kmin] + rank, kmin, kmax
 
-    E2 = np.empty((2 * e + 3 * m, 2), dtype=np.int64)
-    E2[child_lo, 0], E2[child_lo, 1] = lo, n + ar_e
-    E2[child_hi, 0], E2[child_hi, 1] = hi, n + ar_e
-    E2[inner.ravel(), 0] = n + kmin.ravel()
-    E2[inner.ravel(), 1] = n + kmax.ravel()
 
-    # face_edge: child j < 3 keeps corner j = F[f, j]; its edge opposite corner c != j
-    # is the half of FE[f, c] at F[f, j]; its edge opposite j is inner[f, j]
-    # the half of edge FE[f, c] at F[f, c+1] (A) and at F[f, c+2] (B)
-    first_is_lo = E[FE, 0] == F[:, [1, 2, 0]]
+def _fine_face_edges(T, halves, inner):
+    """The fine faces' edges (4m,3): child j < 3 keeps corner j = F[f, j]; its
+    edge opposite corner c != j is the half of FE[f, c] at F[f, j]; its edge
+    opposite j is inner[f, j]; the middle child's are ``inner``."""
+    F, FE, m = T.F, T.face_edge, T.F.shape[0]
+    child_lo, child_hi = halves
+    # the half of edge FE[f, c] at F[f, c+1] (a) and at F[f, c+2] (b)
+    first_is_lo = T.E[FE, 0] == F[:, [1, 2, 0]]
     cl, ch = child_lo[FE], child_hi[FE]
     half_a = np.where(first_is_lo, cl, ch)
     half_b = np.where(first_is_lo, ch, cl)
@@ -304,15 +326,21 @@ def refine_topology(T):
         FE2[:, (c + 2) % 3, c] = half_b[:, c]
         FE2[:, c, c] = inner[:, c]
     FE2[:, 3, :] = inner
-    FE2 = FE2.reshape(4 * m, 3)
+    return FE2.reshape(4 * m, 3)
 
-    # faces / corners of each fine edge, in edge_faces order (smaller half-edge first).
-    # In f0 the edge runs P0 -> Q0 (corners c0+1, c0+2), in f1 (if any) Q0 -> P0.
+
+def _fine_edge_faces(T, halves, inner, e2):
+    """Faces and corners (each (e2,2)) of each fine edge, in edge_faces order
+    (smaller half-edge first; -1 for none). In f0 the coarse edge runs
+    P0 -> Q0 (corners c0+1, c0+2), in f1 (if any) Q0 -> P0."""
+    F, m = T.F, T.F.shape[0]
+    child_lo, child_hi = halves
+    f0, c0, f1, c1 = T.faces[:, 0], T.corners[:, 0], T.faces[:, 1], T.corners[:, 1]
+    has1 = f1 >= 0
     j1, j2 = NEXT_CORNER[c0], NEXT_CORNER[NEXT_CORNER[c0]]
-    p_is_lo = lo == F[f0, j1]
+    p_is_lo = T.E[:, 0] == F[f0, j1]
     half_p = np.where(p_is_lo, child_lo, child_hi)    # the half at P0
     half_q = np.where(p_is_lo, child_hi, child_lo)    # the half at Q0
-    e2 = E2.shape[0]
     faces2 = np.empty((e2, 2), dtype=np.int64)
     corners2 = np.empty((e2, 2), dtype=np.int64)
     faces2[half_p, 0], corners2[half_p, 0] = 4 * f0 + j1, c0
@@ -329,9 +357,7 @@ def refine_topology(T):
     faces2[inner, 1] = 4 * fm + 3
     corners2[inner, 0] = jj
     corners2[inner, 1] = jj
-    opp2 = _opp(faces2, corners2, 4 * m)
-    T2 = Topology(F2, n2, E2, FE2, faces2, corners2, opp2, None, None, None, None, None)
-    return mark_sharp(T2, np.zeros(0, dtype=np.int64))
+    return faces2, corners2
 
 
 def split_faces(F, n, face_edge):
