@@ -436,76 +436,28 @@ def simplify_symmetric(V, F, *, axis="X", target_faces=None, ratio=None, max_err
     diag = bbox_diagonal(clean.V) or 1.0
     s = clean.V[:, k].copy()
     s[np.abs(s) <= SNAP * diag] = 0.0
-    used = np.unique(clean.F)
-    if not ((s[used] > 0).any() and (s[used] < 0).any()):
-        side = ("is flat in it" if (s[used] == 0).all() else
-                "lies on its positive side" if (s[used] >= 0).all() else "lies on its negative side")
-        raise InvalidArgumentError(
-            f"{_WHERE}: symmetry {axis!r} needs a mesh that crosses the {axis} = 0 plane "
-            f"(the object's local mirror plane), but the mesh {side} "
-            f"({axis} from {clean.V[used, k].min():.6g} to {clean.V[used, k].max():.6g}): "
-            f"center it on the plane or pick another axis")
-    Vs = clean.V.copy()
-    Vs[:, k] = np.where(s == 0.0, 0.0, Vs[:, k])
-    half = _cut_half(Vs, clean.F, s, k)
-    neg_to_half = _negative_to_half(clean, half, k)
-    w_half, lk_half = _half_inputs(half, clean, weights, lk, neg_to_half)
-    seam_in = np.zeros(half.V.shape[0], dtype=bool)
-    seam_in[_seam_edges(half.F, half.V.shape[0], half.on_plane).ravel()] = True
-    if lk_half is not None:
-        lk_half &= ~seam_in
-    half = half._replace(V=_symmetrised(half, Vs, clean.F, s, k, keep=lk_half))
+    _check_crosses(clean, s, k, axis)
+    hs = _half_set_up(clean, s, k, weights, lk)
     more = {} if tuning is None else {"tuning": tuning}
 
     def run(half_target, bound):
-        r = simplify(half.V, half.F, target_faces=half_target, max_error=bound, **more,
+        r = simplify(hs.half.V, hs.half.F, target_faces=half_target, max_error=bound, **more,
                      preserve_boundary=True, preserve_topology=preserve_topology,
-                     feature_angle_deg=feature_angle_deg, vertex_weights=w_half, locked=lk_half,
-                     weld_distance=weld_distance, min_component_area=min_component_area,
+                     feature_angle_deg=feature_angle_deg, vertex_weights=hs.weights,
+                     locked=hs.locked, weld_distance=weld_distance,
+                     min_component_area=min_component_area,
                      max_dihedral_deg=max_dihedral_deg, progress=progress)
         if r.stopped_because == "cancelled":
             return r, None
         seam_from = np.zeros(r.V.shape[0], dtype=bool)
-        hit = r.vertex_map[seam_in]
+        hit = r.vertex_map[hs.seam]
         seam_from[hit[hit >= 0]] = True
         return r, _mirror_cage(r.V, r.F, seam_from, k, LIFT * diag)
 
-    hausdorff = None
-    for share in (MAX_ERROR_SHARES if max_error is not None else (None,)):
-        bound = None if share is None else share * float(max_error)
-        half_target = None if target is None else target // 2
-        for _ in range(TARGET_RETRIES + 1):
-            r, cage = run(half_target, bound)
-            if cage is None:
-                return _cancelled(clean, n_in, F.shape[0], target)
-            over = 0 if target is None else cage.F.shape[0] - target
-            if over <= 0 or r.stopped_because != "target" or half_target == 0:
-                break
-            # the chords split before mirroring added faces: ask the half for fewer
-            half_target = max(0, half_target - (over + 1) // 2)
-        if max_error is None:
-            break
-        hausdorff = surface_distance(clean.V, clean.F, cage.V, cage.F).hausdorff
-        if hausdorff <= max_error:
-            break
-    # maps: clean vertex -> cage (positive side directly, negative side through its mirror)
-    of_clean = np.full(clean.V.shape[0], -1, dtype=np.int64)
-    pos = half.of_clean >= 0
-    at = np.append(cage.of_half, -1)                       # r's vertex -> cage vertex (-1 -> -1)
-    of_clean[pos] = at[r.vertex_map[half.of_clean[pos]]]
-    neg = neg_to_half >= 0
-    via = at[r.vertex_map[neg_to_half[neg]]]
-    of_clean[neg] = np.where(via >= 0, cage.copy_of[np.maximum(via, 0)], -1)
-    kept = clean.input_to_clean >= 0
-    vertex_map = np.full(n_in, -1, dtype=np.int64)
-    vertex_map[kept] = of_clean[clean.input_to_clean[kept]]
-    mh = cage.n_half_faces
-    face_from = np.concatenate([half.face_from[r.face_map[cage.half_face_from]],
-                                _mirror_face_sources(clean, s, cage.V, cage.F[mh:], k)])
-    fe = cage.of_half[r.feature_edges]
-    fe = fe[(fe >= 0).all(axis=1)]
-    fe = np.concatenate([fe, cage.copy_of[fe]])
-    fe = np.unique(np.sort(fe, axis=1), axis=0).astype(np.int64).reshape(-1, 2)
+    r, cage, hausdorff = _simplify_half(run, clean, target, max_error)
+    if cage is None:
+        return _cancelled(clean, n_in, F.shape[0], target)
+    vertex_map, face_from, fe = _whole_maps(clean, hs, r, cage, s, k, n_in)
     _, n_comp = face_components(cage.F, cage.V.shape[0])
     return SimplifyResult(
         V=cage.V, F=cage.F, vertex_map=vertex_map, face_map=clean.face_to_input[face_from],
@@ -513,6 +465,100 @@ def simplify_symmetric(V, F, *, axis="X", target_faces=None, ratio=None, max_err
         cleaning=clean.report, n_input_faces=int(F.shape[0]), target=target, hausdorff=hausdorff,
         n_boundary_loops=boundary_loops_count(cage.F, cage.V.shape[0]), n_components=n_comp,
         n_passes=r.n_passes)
+
+
+def _check_crosses(clean, s, k, axis):
+    """Raise :class:`~.errors.InvalidArgumentError` unless the cleaned mesh has
+    vertices on both sides of the plane (``s``: its snapped coordinates on
+    axis ``k``), naming the side it lies on and its extent."""
+    used = np.unique(clean.F)
+    if (s[used] > 0).any() and (s[used] < 0).any():
+        return
+    side = ("is flat in it" if (s[used] == 0).all() else
+            "lies on its positive side" if (s[used] >= 0).all() else "lies on its negative side")
+    raise InvalidArgumentError(
+        f"{_WHERE}: symmetry {axis!r} needs a mesh that crosses the {axis} = 0 plane "
+        f"(the object's local mirror plane), but the mesh {side} "
+        f"({axis} from {clean.V[used, k].min():.6g} to {clean.V[used, k].max():.6g}): "
+        f"center it on the plane or pick another axis")
+
+
+class _HalfInput(NamedTuple):
+    """The positive half the engine simplifies (:func:`_half_set_up`)."""
+
+    half: object            #: the cut half (its positions symmetrised)
+    neg_to_half: np.ndarray  #: clean vertex on the negative side -> its mirror's half vertex
+    weights: object         #: the half's vertex weights, or None
+    locked: object          #: the half's locked mask (not on the seam), or None
+    seam: np.ndarray        #: (n_half,) bool, half vertices on the mirror plane's seam
+
+
+def _half_set_up(clean, s, k, weights, lk):
+    """Cut the cleaned mesh at the plane (plane vertices snapped onto it),
+    carry the weights and locks to the half (a seam vertex is never locked:
+    it must stay on the plane) and symmetrise the half's positions."""
+    Vs = clean.V.copy()
+    Vs[:, k] = np.where(s == 0.0, 0.0, Vs[:, k])
+    half = _cut_half(Vs, clean.F, s, k)
+    neg_to_half = _negative_to_half(clean, half, k)
+    w_half, lk_half = _half_inputs(half, clean, weights, lk, neg_to_half)
+    seam = np.zeros(half.V.shape[0], dtype=bool)
+    seam[_seam_edges(half.F, half.V.shape[0], half.on_plane).ravel()] = True
+    if lk_half is not None:
+        lk_half &= ~seam
+    half = half._replace(V=_symmetrised(half, Vs, clean.F, s, k, keep=lk_half))
+    return _HalfInput(half, neg_to_half, w_half, lk_half, seam)
+
+
+def _simplify_half(run, clean, target, max_error):
+    """Simplify the half (``run(half_target, bound)`` -> (result, mirrored
+    cage or None when cancelled)): half the target, asked again for fewer
+    while the mirrored cage is over it (the chords split before mirroring
+    add faces); with ``max_error``, the engine's bound raised in
+    ``MAX_ERROR_SHARES`` steps until the whole cage's Hausdorff distance is
+    within it. Returns (result, cage, Hausdorff distance or None)."""
+    hausdorff = None
+    for share in (MAX_ERROR_SHARES if max_error is not None else (None,)):
+        bound = None if share is None else share * float(max_error)
+        half_target = None if target is None else target // 2
+        for _ in range(TARGET_RETRIES + 1):
+            r, cage = run(half_target, bound)
+            if cage is None:
+                return r, None, None
+            over = 0 if target is None else cage.F.shape[0] - target
+            if over <= 0 or r.stopped_because != "target" or half_target == 0:
+                break
+            half_target = max(0, half_target - (over + 1) // 2)
+        if max_error is None:
+            break
+        hausdorff = surface_distance(clean.V, clean.F, cage.V, cage.F).hausdorff
+        if hausdorff <= max_error:
+            break
+    return r, cage, hausdorff
+
+
+def _whole_maps(clean, hs, r, cage, s, k, n_in):
+    """The whole cage's vertex map (input vertex -> cage: the positive side
+    directly, the negative side through its mirror), its faces' sources in
+    the cleaned mesh, and its feature edges (the half's and their mirrors)."""
+    of_clean = np.full(clean.V.shape[0], -1, dtype=np.int64)
+    pos = hs.half.of_clean >= 0
+    at = np.append(cage.of_half, -1)                       # r's vertex -> cage vertex (-1 -> -1)
+    of_clean[pos] = at[r.vertex_map[hs.half.of_clean[pos]]]
+    neg = hs.neg_to_half >= 0
+    via = at[r.vertex_map[hs.neg_to_half[neg]]]
+    of_clean[neg] = np.where(via >= 0, cage.copy_of[np.maximum(via, 0)], -1)
+    kept = clean.input_to_clean >= 0
+    vertex_map = np.full(n_in, -1, dtype=np.int64)
+    vertex_map[kept] = of_clean[clean.input_to_clean[kept]]
+    mh = cage.n_half_faces
+    face_from = np.concatenate([hs.half.face_from[r.face_map[cage.half_face_from]],
+                                _mirror_face_sources(clean, s, cage.V, cage.F[mh:], k)])
+    fe = cage.of_half[r.feature_edges]
+    fe = fe[(fe >= 0).all(axis=1)]
+    fe = np.concatenate([fe, cage.copy_of[fe]])
+    fe = np.unique(np.sort(fe, axis=1), axis=0).astype(np.int64).reshape(-1, 2)
+    return vertex_map, face_from, fe
 
 
 def _cancelled(clean, n_in, m_in, target):
