@@ -233,30 +233,68 @@ def main(argv=None, *, entry=None, prog=PROG):
     entry = MODULE_ENTRY if entry is None else entry
     t0 = time.perf_counter()
     started = datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds")
-    problems = check_paths(args)
+    opts, tasks, problems = _planned(args)
     if problems:
         for msg in problems:
             print(f"{prog}: {msg}", file=sys.stderr)
         return 2
+    results, todo = _skipped(tasks, args.skip_existing)
+    interrupted = _run(args, opts, entry, tasks, todo, results)
+    if interrupted:
+        sys.stderr.write("\n")
+        print(f"{prog}: interrupted; the files not finished are cancelled", file=sys.stderr)
+    results = [r if r is not None else runners.cancelled_report(t)
+               for r, t in zip(results, tasks)]
+    print(report.summary_table(results))
+    print(report.summary_line(results, args.out))
+    c = report.counts(results)
+    status = 130 if interrupted else 1 if c["failed"] or (args.strict and c["warn"]) else 0
+    if args.report:
+        report.write_json(args.report, {
+            "tool": prog, "started": started, "arguments": argv, "options": asdict(opts),
+            "out": os.path.abspath(args.out), "log": os.path.abspath(args.log) if args.log else None,
+            "seconds": round(time.perf_counter() - t0, 3), "interrupted": interrupted,
+            "exit_status": status, "counts": c, "files": [report.json_safe(r) for r in results]})
+    return status
+
+
+def _planned(args):
+    """(options, tasks, problems) of the batch: ``problems`` the messages of
+    why it cannot run (paths missing, no input, an output path that is a
+    folder), empty when it can."""
+    problems = check_paths(args)
+    if problems:
+        return None, None, problems
     files = collect_inputs(args.inputs, args.out)
     if not files:
-        print(f"{prog}: no input files found", file=sys.stderr)
-        return 2
+        return None, None, ["no input files found"]
     opts = options(args)
     tasks = plan(files, opts, os.path.abspath(args.out))
     blocked = [p for t in tasks for p in (t["cage"], t["refined"]) if p and os.path.isdir(p)]
     if blocked:
-        print(f"{prog}: {len(blocked)} output path(s) are folders, e.g. {blocked[0]}",
-              file=sys.stderr)
-        return 2
+        return None, None, [f"{len(blocked)} output path(s) are folders, e.g. {blocked[0]}"]
+    return opts, tasks, []
+
+
+def _skipped(tasks, skip_existing):
+    """(results, todo): the reports of the tasks skipped because their outputs
+    exist (with ``skip_existing``; None for the others) and the indices of
+    the tasks to run."""
     results = [None] * len(tasks)
     todo = []
     for i, task in enumerate(tasks):
         outs = [p for p in (task["cage"], task["refined"]) if p]
-        if args.skip_existing and all(os.path.isfile(p) for p in outs):
+        if skip_existing and all(os.path.isfile(p) for p in outs):
             results[i] = dict(runners.cancelled_report(task), status="skipped", outputs=outs)
         else:
             todo.append(i)
+    return results, todo
+
+
+def _run(args, opts, entry, tasks, todo, results):
+    """Run the tasks ``todo`` (on Dask, worker processes or here), each
+    result into ``results`` as it comes, with the progress bar and the
+    per-file log; returns whether the run was interrupted."""
     log_fh = open(args.log, "w", encoding="utf-8") if args.log else None
     done = [len(tasks) - len(todo)]
     report.progress_bar(done[0], len(tasks), "")
@@ -279,33 +317,16 @@ def main(argv=None, *, entry=None, prog=PROG):
 
     try:
         if not sub:
-            interrupted = False
-        elif args.dask is not None:
-            interrupted = runners.run_dask(sub, payload, entry, args.dask, args.jobs, on_done)
-        elif args.jobs > 1:
-            interrupted = runners.run_processes(sub, payload, lambda p: worker_command(entry, p),
-                                                args.jobs, on_done)
-        else:
-            interrupted = runners.run_serial(sub, lambda t: _convert.convert(t, opts), on_done)
+            return False
+        if args.dask is not None:
+            return runners.run_dask(sub, payload, entry, args.dask, args.jobs, on_done)
+        if args.jobs > 1:
+            return runners.run_processes(sub, payload, lambda p: worker_command(entry, p),
+                                         args.jobs, on_done)
+        return runners.run_serial(sub, lambda t: _convert.convert(t, opts), on_done)
     finally:
         if log_fh is not None:
             log_fh.close()
-    if interrupted:
-        sys.stderr.write("\n")
-        print(f"{prog}: interrupted; the files not finished are cancelled", file=sys.stderr)
-    results = [r if r is not None else runners.cancelled_report(t)
-               for r, t in zip(results, tasks)]
-    print(report.summary_table(results))
-    print(report.summary_line(results, args.out))
-    c = report.counts(results)
-    status = 130 if interrupted else 1 if c["failed"] or (args.strict and c["warn"]) else 0
-    if args.report:
-        report.write_json(args.report, {
-            "tool": prog, "started": started, "arguments": argv, "options": asdict(opts),
-            "out": os.path.abspath(args.out), "log": os.path.abspath(args.log) if args.log else None,
-            "seconds": round(time.perf_counter() - t0, 3), "interrupted": interrupted,
-            "exit_status": status, "counts": c, "files": [report.json_safe(r) for r in results]})
-    return status
 
 
 def worker_command(entry, payload_json):
