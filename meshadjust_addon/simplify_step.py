@@ -151,33 +151,21 @@ def compute_simplify(job, *, progress=None):
     """Run the core on a :class:`SimplifyJob` (pure NumPy, any thread).
 
     ``progress(fraction)`` returning False cancels; ``job.cancelled`` says so.
-    Measure, fit and bind take the last 30% of the bar. A fit or bind that
-    fails with the core's error is recorded (``fit_error``, ``bind_error``)
-    and the cage is kept: nothing computed is thrown away.
+    Simplify takes the first 70% of the bar; measure, fit and bind the rest
+    (the bind reports from inside its searches: at Auto levels on a
+    1M-vertex scan it is the longest step, and Esc there stops it). A fit or
+    bind that fails with the core's error is recorded (``fit_error``,
+    ``bind_error``) and the cage is kept: nothing computed is thrown away.
     """
     p = job.params
     t0 = time.perf_counter()
-    max_error = None
-    if p.max_error_pct is not None:
-        max_error = p.max_error_pct / 100.0 * _diag(job.V)
-
-    def simplify_progress(f):
-        return True if progress is None else progress(0.7 * f)
 
     def cancelled_at(f):
         if progress is not None and progress(f) is False:
             job.cancelled = True
         return job.cancelled
 
-    res = core.simplify(job.V, job.F, target_faces=p.target_faces, ratio=p.ratio,
-                        max_error=max_error, preserve_boundary=p.preserve_boundary,
-                        preserve_topology=p.preserve_topology,
-                        feature_angle_deg=None if p.feature_angle_deg >= 180.0
-                        else p.feature_angle_deg,
-                        max_dihedral_deg=None if p.max_dihedral_deg >= 180.0
-                        else p.max_dihedral_deg,
-                        vertex_weights=job.weights, locked=job.locked, symmetry=p.symmetry,
-                        progress=simplify_progress)
+    res = _simplify_cage(job, progress)
     job.result = res
     if res.stopped_because == "cancelled":
         job.cancelled = True
@@ -192,39 +180,74 @@ def compute_simplify(job, *, progress=None):
         job.distance = core.surface_distance(job.V, job.F, res.V, res.F, samples=MEASURE_SAMPLES)
     creases = res.feature_edges if len(res.feature_edges) else None
     if p.fit and res.F.shape[0] >= 4:
-        if cancelled_at(0.8):
+        if cancelled_at(0.8) or not _fit_cage(job, res, creases, progress):
             return job
-        fit_progress = None if progress is None else (lambda f: progress(0.8 + 0.12 * f))
-        try:
-            fit = core.fit_cage(job.V, job.F, res.V, res.F, levels=fit_levels(job.levels),
-                                scheme=p.scheme, creases=creases, symmetry=p.symmetry,
-                                progress=fit_progress)
-        except core.MeshAdjustError as exc:
-            job.fit_error = user_cause(exc, "fitting", f"{job.source_name}_cage")
-        else:
-            if fit.cancelled:
-                job.cancelled = True
-                return job
-            job.fit = fit
-            job.V_cage = fit.V
     # the cage as its mesh will hold it (float32), so the binding is the one a
     # re-bind of the unedited cage makes
     job.V_cage = job.V_cage.astype(np.float32).astype(np.float64)
     if p.bind:
-        if cancelled_at(0.93):
-            return job
-        try:
-            job.binding = core.bind(job.V, job.F, job.V_cage, res.F, levels=job.levels,
-                                    scheme=p.scheme, creases=creases)
-        except core.MeshAdjustError as exc:
-            job.bind_error = user_cause(exc, f"binding '{job.source_name}' to",
-                                        f"{job.source_name}_cage")
-        if cancelled_at(0.99):
+        if cancelled_at(0.93) or not _bind_cage(job, res, creases, progress) \
+                or cancelled_at(0.99):
             return job
     job.seconds = time.perf_counter() - t0
     if progress is not None:
         progress(1.0)
     return job
+
+
+def _simplify_cage(job, progress):
+    """``core.simplify`` with the job's settings (the first 70% of the bar)."""
+    p = job.params
+    max_error = None
+    if p.max_error_pct is not None:
+        max_error = p.max_error_pct / 100.0 * _diag(job.V)
+    return core.simplify(job.V, job.F, target_faces=p.target_faces, ratio=p.ratio,
+                         max_error=max_error, preserve_boundary=p.preserve_boundary,
+                         preserve_topology=p.preserve_topology,
+                         feature_angle_deg=None if p.feature_angle_deg >= 180.0
+                         else p.feature_angle_deg,
+                         max_dihedral_deg=None if p.max_dihedral_deg >= 180.0
+                         else p.max_dihedral_deg,
+                         vertex_weights=job.weights, locked=job.locked, symmetry=p.symmetry,
+                         progress=None if progress is None else (lambda f: progress(0.7 * f)))
+
+
+def _fit_cage(job, res, creases, progress):
+    """Fit the cage (80-92% of the bar) into ``job.fit`` / ``job.V_cage``, or
+    record the core's error in ``job.fit_error``; False when cancelled."""
+    p = job.params
+    try:
+        fit = core.fit_cage(job.V, job.F, res.V, res.F, levels=fit_levels(job.levels),
+                            scheme=p.scheme, creases=creases, symmetry=p.symmetry,
+                            progress=None if progress is None
+                            else (lambda f: progress(0.8 + 0.12 * f)))
+    except core.MeshAdjustError as exc:
+        job.fit_error = user_cause(exc, "fitting", f"{job.source_name}_cage")
+        return True
+    if fit.cancelled:
+        job.cancelled = True
+        return False
+    job.fit = fit
+    job.V_cage = fit.V
+    return True
+
+
+def _bind_cage(job, res, creases, progress):
+    """Bind the source to the cage (93-99% of the bar) into ``job.binding``,
+    or record the core's error in ``job.bind_error``; False when cancelled."""
+    p = job.params
+    try:
+        job.binding = core.bind(job.V, job.F, job.V_cage, res.F, levels=job.levels,
+                                scheme=p.scheme, creases=creases,
+                                progress=None if progress is None
+                                else (lambda f: progress(0.93 + 0.06 * f)))
+    except core.CancelledError:
+        job.cancelled = True
+        return False
+    except core.MeshAdjustError as exc:
+        job.bind_error = user_cause(exc, f"binding '{job.source_name}' to",
+                                    f"{job.source_name}_cage")
+    return True
 
 
 def _cleaning_notes(res):

@@ -170,6 +170,26 @@ def test_simplify_keeps_the_cage_when_the_bind_fails_and_warns(scene, monkeypatc
     assert "kept" in rep and "fitted" in rep        # the fit was done and is kept
 
 
+def test_esc_inside_the_bind_of_simplify_cancels_it_and_changes_nothing(scene):
+    # Simplify (+ fit + bind, the panel's defaults): the bind reports from inside its
+    # searches (93-99% of the bar); Esc there stops it and nothing is created
+    V, F = bumpy_sphere(3)
+    dense = make_object("dense", V, F)
+    api = mod("api")
+    before = scene_snapshot()
+    seen = []
+
+    def stop_in_bind(f):
+        seen.append(f)
+        return not (0.93 < f < 0.99)
+    job = api.prepare_simplify(dense, api.SimplifyParams(target_faces=200))
+    api.compute_simplify(job, progress=stop_in_bind)
+    assert job.cancelled and job.binding is None and not job.bind_error
+    assert job.fit is not None                      # it got that far
+    assert any(0.93 < f < 0.99 for f in seen)
+    assert_unchanged(before)
+
+
 def test_non_manifold_failures_name_the_object_and_the_cause(addon):
     api = mod("api")
     core = sys.modules[MODULE + ".core"]
