@@ -288,50 +288,8 @@ def commit_simplify(source, job):
     res = job.result
     p = job.params
     with all_or_nothing():
-        name = f"{source.name}_cage"
-        mesh = mesh_io.new_mesh(name, job.V_cage, res.F)
-        n_creases = mesh_io.set_edge_flags(mesh, res.feature_edges, CREASE)
-        if n_creases:
-            sharp = (mesh.attributes.get("sharp_edge")
-                     or mesh.attributes.new("sharp_edge", 'BOOLEAN', 'EDGE'))
-            flags = np.zeros(len(mesh.edges), dtype=bool)
-            mesh.attributes[CREASE].data.foreach_get("value", flags)
-            sharp.data.foreach_set("value", flags)
-        cage = bpy.data.objects.new(name, mesh)
-        cage.matrix_world = source.matrix_world.copy()
-        results.link_like(cage, source)
-        cage.show_wire = True
-        cs = cage.meshadjust
-        cs.role = 'CAGE'
-        cs.source = source
-        cs.levels = job.levels
-        cs.scheme = p.scheme
-        cs.symmetry = p.symmetry or 'NONE'
-        faces_in = job.F.shape[0]
-        dev = float("nan")
-        msg = f"{faces_in:,} -> {res.F.shape[0]:,} faces"
-        if job.distance is not None:
-            dev = 100.0 * job.distance.hausdorff / max(_diag(job.V), 1e-300)
-            msg += (f", max deviation {dev:.2f}% of size (mean "
-                    f"{100.0 * job.distance.mean / max(_diag(job.V), 1e-300):.3f}%)")
-        if p.symmetry:
-            msg += f", mirror-symmetric in {p.symmetry}"
-        msg += f", {job.seconds:.1f} s"
-        warnings = []
-        target_note, missed = _target_note(job)
-        if target_note:
-            msg += f"; {target_note}"
-            if missed:
-                warnings.append(target_note)
-        notes = _cleaning_notes(res) + job.notes
-        if job.fit is not None:
-            d = job.fit.mean_distance
-            msg += (f"; fitted: mean distance of the refined cage "
-                    f"{100 * d[0] / job.fit.diagonal:.3f}% -> {100 * d[-1] / job.fit.diagonal:.3f}%")
-            if fit_levels(job.levels) < job.levels:
-                msg += f" (at {fit_levels(job.levels)} levels)"
-        if job.fit_error:
-            warnings.append(f"{job.fit_error}; the cage is kept unfitted")
+        cage = _new_cage(source, job)
+        msg, dev, warnings = _summary(job)
         if job.binding is not None:
             bjob = CageJob(cage.name, job.V, job.F, job.V_cage, res.F,
                            res.feature_edges if len(res.feature_edges) else None, job.levels,
@@ -342,6 +300,7 @@ def commit_simplify(source, job):
             msg += f"; bound '{source.name}' (levels {job.levels}{auto}, {p.scheme})"
         elif job.bind_error:
             warnings.append(f"{job.bind_error}; the cage is kept, not bound")
+        notes = _cleaning_notes(res) + job.notes
         if notes:
             msg += "; " + "; ".join(notes)
         if warnings:
@@ -351,10 +310,67 @@ def commit_simplify(source, job):
         source.meshadjust.cage = cage
         if p.hide_source:
             source.hide_set(True)
-        cs.last_report = msg
+        cage.meshadjust.last_report = msg
     cleaning = res.cleaning.to_dict() if getattr(res, "cleaning", None) is not None else {}
-    return cage, Report(msg, faces_in, res.F.shape[0], dev, job.seconds,
+    return cage, Report(msg, job.F.shape[0], res.F.shape[0], dev, job.seconds,
                         'WARNING' if warnings else 'INFO', tuple(warnings), cleaning)
+
+
+def _new_cage(source, job):
+    """The cage object: its mesh (the job's cage positions, the feature edges
+    marked as creases and sharp), placed and linked like ``source``, its
+    MeshAdjust settings (role, source, levels, scheme, symmetry)."""
+    res, p = job.result, job.params
+    name = f"{source.name}_cage"
+    mesh = mesh_io.new_mesh(name, job.V_cage, res.F)
+    if mesh_io.set_edge_flags(mesh, res.feature_edges, CREASE):
+        sharp = (mesh.attributes.get("sharp_edge")
+                 or mesh.attributes.new("sharp_edge", 'BOOLEAN', 'EDGE'))
+        flags = np.zeros(len(mesh.edges), dtype=bool)
+        mesh.attributes[CREASE].data.foreach_get("value", flags)
+        sharp.data.foreach_set("value", flags)
+    cage = bpy.data.objects.new(name, mesh)
+    cage.matrix_world = source.matrix_world.copy()
+    results.link_like(cage, source)
+    cage.show_wire = True
+    cs = cage.meshadjust
+    cs.role = 'CAGE'
+    cs.source = source
+    cs.levels = job.levels
+    cs.scheme = p.scheme
+    cs.symmetry = p.symmetry or 'NONE'
+    return cage
+
+
+def _summary(job):
+    """``(message, deviation %, warnings)`` of a simplify: the face counts,
+    the cage's deviation from the source, the symmetry, the time, a target
+    missed, the fit's distances or its failure."""
+    res, p = job.result, job.params
+    dev = float("nan")
+    msg = f"{job.F.shape[0]:,} -> {res.F.shape[0]:,} faces"
+    if job.distance is not None:
+        dev = 100.0 * job.distance.hausdorff / max(_diag(job.V), 1e-300)
+        msg += (f", max deviation {dev:.2f}% of size (mean "
+                f"{100.0 * job.distance.mean / max(_diag(job.V), 1e-300):.3f}%)")
+    if p.symmetry:
+        msg += f", mirror-symmetric in {p.symmetry}"
+    msg += f", {job.seconds:.1f} s"
+    warnings = []
+    target_note, missed = _target_note(job)
+    if target_note:
+        msg += f"; {target_note}"
+        if missed:
+            warnings.append(target_note)
+    if job.fit is not None:
+        d = job.fit.mean_distance
+        msg += (f"; fitted: mean distance of the refined cage "
+                f"{100 * d[0] / job.fit.diagonal:.3f}% -> {100 * d[-1] / job.fit.diagonal:.3f}%")
+        if fit_levels(job.levels) < job.levels:
+            msg += f" (at {fit_levels(job.levels)} levels)"
+    if job.fit_error:
+        warnings.append(f"{job.fit_error}; the cage is kept unfitted")
+    return msg, dev, warnings
 
 
 def simplify_object(source, *, progress=None, **kwargs):
