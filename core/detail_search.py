@@ -20,9 +20,10 @@ from typing import NamedTuple
 
 import numpy as np
 
+from ._clean import half_edge_ends
 from .clean import clean_mesh
 from .near_query import cell_for_reach
-from .spatial import TriangleIndex, point_triangle_closest
+from .spatial import TriangleIndex, point_triangle_closest, triangle_boxes
 from ._groups import group_argmin, ragged_ranges
 from ._parallel import blocks, run_blocks
 
@@ -150,9 +151,8 @@ def _distance_bound(V_dense, F_fine, nearest, P, missing):
     missing vertex takes the dense vertex of a neighbour that has one);
     None when no fine vertex has one."""
     # the edges into missing vertices lie on the fine faces with a missing corner
-    T = F_fine[(nearest[F_fine] < 0).any(axis=1)]
-    src = np.concatenate([T[:, 0], T[:, 1], T[:, 2], T[:, 1], T[:, 2], T[:, 0]])
-    dst = np.concatenate([T[:, 1], T[:, 2], T[:, 0], T[:, 0], T[:, 1], T[:, 2]])
+    U, W = half_edge_ends(F_fine[(nearest[F_fine] < 0).any(axis=1)])
+    src, dst = np.concatenate([U, W]), np.concatenate([W, U])      # both ways along each
     into = nearest[dst] < 0
     src, dst = src[into], dst[into]
     found = nearest.copy()
@@ -177,8 +177,7 @@ def _faces_near(V, F, P, r):
     spans = blocks(F.shape[0], _FACE_BLOCK)
 
     def boxes(a, b):
-        A, B, C = (np.take(V, F[a:b, k], axis=0) for k in range(3))
-        lo, hi = np.minimum(np.minimum(A, B), C), np.maximum(np.maximum(A, B), C)
+        lo, hi = triangle_boxes(V, F[a:b])
         hi -= lo
         lo += 0.5 * hi
         return lo, 0.5 * float(np.sqrt(np.einsum("ij,ij->i", hi, hi).max(initial=0.0)))

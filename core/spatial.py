@@ -84,7 +84,7 @@ from .pages import plain_pages
 _LAZY_BUILD = threading.Lock()
 
 __all__ = ["ClosestPoints", "IndexTables", "TriangleClosest", "TriangleIndex", "closest_points",
-           "point_triangle_closest"]
+           "point_triangle_closest", "triangle_boxes"]
 
 # --- tolerances and tuning, in one place -------------------------------------------------------
 _THIN_SIN2 = 1e-4          # |ab x ac|^2 < this * |ab|^2 |ac|^2 (and same at B): robust path
@@ -450,9 +450,15 @@ def _box_of(A, B, C):
     return lo, hi
 
 
+def triangle_boxes(V, F):
+    """The boxes of the triangles ``F`` (k,3) over positions ``V`` (n,3):
+    lower and upper corners, each (k,3) (new arrays)."""
+    return _box_of(*_corners(V, F))
+
+
 def _largest_sides(V, F, out):
     """Each triangle's largest box side, into ``out`` (k,)."""
-    lo, hi = _box_of(*_corners(V, F))
+    lo, hi = triangle_boxes(V, F)
     hi -= lo
     np.maximum(np.maximum(hi[:, 0], hi[:, 1], out=out), hi[:, 2], out=out)
 
@@ -476,7 +482,7 @@ def _morton_order(V, F, lo, extent):
     codes = np.empty(m, dtype=np.uint64)
 
     def code(span):
-        tlo, thi = _box_of(*_corners(V, F[span[0]:span[1]]))
+        tlo, thi = triangle_boxes(V, F[span[0]:span[1]])
         tlo += thi
         tlo *= 0.5
         codes[span[0]:span[1]] = morton_codes(tlo, lo, extent)
