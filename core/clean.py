@@ -94,6 +94,8 @@ class CleanReport:
     n_debris_components: int = 0      #: tiny components dropped ...
     n_debris_faces: int = 0           #: ... with this many faces
     n_unreferenced_vertices: int = 0  #: vertices no kept face uses
+    n_pinholes: int = 0               #: holes too small for one cage face, capped (by simplify) ...
+    n_pinhole_faces: int = 0          #: ... with this many faces
     #: the weld distance used (share of the diagonal): ``WELD_DISTANCE``, or wider
     #: when the automatic weld found the input in pieces (see :func:`clean_mesh`)
     weld_distance: float = WELD_DISTANCE
@@ -128,6 +130,7 @@ class CleanReport:
             f" ({self.n_double_sided_faces:,} faces)")
         add(self.n_debris_components, "dropped {} debris components",
             f" ({self.n_debris_faces:,} faces)")
+        add(self.n_pinholes, "closed {} pinholes", f" ({self.n_pinhole_faces:,} faces)")
         add(self.n_degenerate_faces, "removed {} degenerate faces")
         add(self.n_duplicate_faces, "removed {} duplicate faces")
         add(self.n_detached_faces, "detached {} faces")

@@ -63,6 +63,7 @@ from .mesh import bounding_box, check_mesh, diagonal_length, face_normals
 from .metrics import surface_distance
 from .topology import boundary_loops_count, collapsible_edges, face_components
 from .quadrics import accumulate_coefficients, vertex_face_quadrics, edge_constraint_quadrics
+from .pinholes import cap_pinholes
 from .tuning import TUNING, Tuning
 from .pages import plain_pages
 
@@ -150,7 +151,7 @@ class SimplifyResult:
                             f"faces beyond the dihedral bound",
             "topology_floor": f"stopped at {m:,} faces{asked}: the topology floor ({kept})",
             "no_valid_collapse": f"stopped at {m:,} faces{asked}: every collapse left would fold "
-                                 f"or squash a face",
+                                 f"or squash a face" + (f" ({kept})" if self.n_boundary_loops else ""),
             "cancelled": f"cancelled: the cleaned input returned unchanged ({m:,} faces)",
         }[self.stopped_because]
         if self.stopped_because == "topology_floor" and self.n_components > 0.5 * m:
@@ -611,7 +612,8 @@ def simplify(V, F, *, target_faces=None, ratio=None, max_error=None, preserve_bo
         an interior edge with one boundary endpoint collapses onto it.
     preserve_topology : bool
         Enforce the link condition: genus, boundary loops and components
-        kept; a target below what that allows stops at the topology floor
+        kept (pinholes aside: see ``min_component_area``); a target below
+        what that allows stops at the topology floor
         (``stopped_because == "topology_floor"``). With ``False``, once the
         link condition stops every collapse before the target, holes bounded
         by three edges are closed with a triangle and components that cannot
@@ -633,7 +635,11 @@ def simplify(V, F, *, target_faces=None, ratio=None, max_error=None, preserve_bo
         default weld widens itself on an input that comes in pieces). With a
         target and no ``max_error``, components too small for one face of
         the target (by their share of the area) are dropped as debris too,
-        and reported; never one with a locked vertex.
+        and reported, never one with a locked vertex. When the collapse
+        stops short of the target with the topology kept, holes smaller than
+        one face of the target (pinholes, see :mod:`core.pinholes`) are
+        capped, reported, and the input simplified again: a scan with
+        thousands of tiny holes still reaches its target.
     symmetry : {None, 'X', 'Y', 'Z'}
         Make the cage mirror-symmetric about the plane through the origin
         normal to this axis (see :func:`core.symmetry.simplify_symmetric`).
@@ -700,16 +706,58 @@ def simplify(V, F, *, target_faces=None, ratio=None, max_error=None, preserve_bo
     hausdorff = None
     if clean.F.shape[0] == 0:
         cage = _unchanged(clean)._replace(stopped="target")
+    elif max_error is None:
+        cage, clean = _through_pinholes(*_collapsed(clean, target, opts, progress), target, opts,
+                                        progress)
     else:
         su = _set_up(clean, opts)
         clean = clean._replace(twin=None, area=None)   # (3m,) and (m,): not needed past the set-up
-        if max_error is None:
-            cage = _collapse(su, clean, target, opts, progress)
-        else:
-            cage, hausdorff = _within_max_error(su, clean, target, max_error, opts, progress)
-    cage = cage._replace(stopped=_stop_reason(cage, target, opts),
-                         seconds={"clean": t_clean, **cage.seconds})
+        cage, hausdorff = _within_max_error(su, clean, target, max_error, opts, progress)
+        cage = cage._replace(stopped=_stop_reason(cage, target, opts))
+    cage = cage._replace(seconds={"clean": t_clean, **cage.seconds})
     return _result(cage, clean, m_in, n_in, target, hausdorff, t0)
+
+
+def _collapsed(clean, target, opts, progress):
+    """The cage of ``clean`` at ``target`` (set up, collapsed, its stop reason
+    said), and ``clean`` without its twin table and face areas (not needed past
+    the set-up)."""
+    su = _set_up(clean, opts)
+    clean = clean._replace(twin=None, area=None)
+    cage = _collapse(su, clean, target, opts, progress)
+    return cage._replace(stopped=_stop_reason(cage, target, opts)), clean
+
+
+def _through_pinholes(cage, clean, target, opts, progress):
+    """When the cage of ``clean`` stopped short of the target with the
+    topology kept (every hole keeps three vertices of its own) and
+    ``clean`` has pinholes, holes smaller than one face of the target
+    (:mod:`core.pinholes`): they are capped and the input simplified again,
+    ``progress`` going on from where the first run left it; the closer of the
+    two cages to the target wins. Returns the cage and the cleaned input it
+    was made from."""
+    if (target is None or cage.F.shape[0] <= target or not opts["preserve_topology"]
+            or cage.stopped not in ("no_valid_collapse", "topology_floor")):
+        return cage, clean
+    capped = cap_pinholes(clean, target)
+    if capped is None:
+        return cage, clean
+    done = (clean.F.shape[0] - cage.F.shape[0]) / max(clean.F.shape[0] - target, 1)
+    again, capped = _collapsed(capped, target, opts, _going_on(progress, done))
+    if again.stopped == "cancelled":
+        return _unchanged(clean), clean
+    if again.F.shape[0] >= cage.F.shape[0]:
+        return cage, clean
+    first = sum(v for k, v in cage.seconds.items() if k != "total")
+    return again._replace(seconds={**again.seconds, "stopped short (pinholes)": first}), capped
+
+
+def _going_on(progress, done):
+    """``progress`` for a second run mapped onto what is left after ``done`` (0..1)."""
+    if progress is None:
+        return None
+    done = min(max(done, 0.0), 1.0)
+    return lambda fraction: progress(done + (1.0 - done) * fraction)
 
 
 def cleaned_input(V, F, weld_distance, min_component_area, budget, locked):
