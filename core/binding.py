@@ -66,7 +66,7 @@ from .near_query import NearQuery
 from .spatial import TriangleIndex
 from .subdivide import subdivision_operator
 from .unfold import (CageRings, FaceStars, FineFaceGroups, Repair, away_rows, away_t,
-                     nearest_rotations, repair, ring_rotations, turned_over)
+                     nearest_rotations, repair, rest_normals, ring_rotations, turned_over)
 from ._groups import distinct, ragged_entries, ragged_ranges
 from ._parallel import WORKERS, blocks, each_in_order, run_blocks, run_each
 from .pages import plain_pages
@@ -607,7 +607,7 @@ def _repair_state(binding):
         FT = np.ascontiguousarray(binding.F_dense.T)
         c["repair"] = {"V_rest": np.ascontiguousarray(rest.T), "F_t": FT,
                        # float32: every test reads these same values (half the bytes)
-                       "normals": area_normals_t(rest, FT, out=np.empty(FT.shape, np.float32)),
+                       "normals": rest_normals(rest, FT),
                        "cage_rings": CageRings.of(binding.F_cage, binding.n_cage),
                        "stars": None, "groups": None,
                        # the faces (or group entries) around the last rows tested, by their _Influenced
