@@ -575,7 +575,7 @@ def _within_max_error(su, clean, target, max_error, opts, progress):
 def simplify(V, F, *, target_faces=None, ratio=None, max_error=None, preserve_boundary=True,
              preserve_topology=True, feature_angle_deg=60.0, vertex_weights=None, locked=None,
              weld_distance=None, min_component_area=MIN_COMPONENT_AREA, symmetry=None,
-             max_dihedral_deg=None, progress=None, tuning=None):
+             max_dihedral_deg=None, close_pinholes=True, progress=None, tuning=None):
     """Simplify a triangle mesh to a coarse, clean manifold cage (QEM).
 
     The input is cleaned first (:func:`core.clean.clean_mesh`: welded,
@@ -639,7 +639,10 @@ def simplify(V, F, *, target_faces=None, ratio=None, max_error=None, preserve_bo
         stops short of the target with the topology kept, holes smaller than
         one face of the target (pinholes, see :mod:`core.pinholes`) are
         capped, reported, and the input simplified again: a scan with
-        thousands of tiny holes still reaches its target.
+        thousands of tiny holes still reaches its target (``close_pinholes``).
+    close_pinholes : bool
+        Cap the pinholes when they stop the cage short of its target (see
+        ``min_component_area``); False keeps every hole.
     symmetry : {None, 'X', 'Y', 'Z'}
         Make the cage mirror-symmetric about the plane through the origin
         normal to this axis (see :func:`core.symmetry.simplify_symmetric`).
@@ -681,7 +684,8 @@ def simplify(V, F, *, target_faces=None, ratio=None, max_error=None, preserve_bo
             preserve_boundary=preserve_boundary, preserve_topology=preserve_topology,
             feature_angle_deg=feature_angle_deg, vertex_weights=vertex_weights, locked=locked,
             weld_distance=weld_distance, min_component_area=min_component_area,
-            max_dihedral_deg=max_dihedral_deg, progress=progress, tuning=tuning)
+            max_dihedral_deg=max_dihedral_deg, close_pinholes=close_pinholes, progress=progress,
+            tuning=tuning)
     if tuning is not None and not isinstance(tuning, Tuning):
         raise InvalidArgumentError(f"{_WHERE}: tuning must be a core.tuning.Tuning, not "
                                    f"{type(tuning).__name__}")
@@ -707,8 +711,9 @@ def simplify(V, F, *, target_faces=None, ratio=None, max_error=None, preserve_bo
     if clean.F.shape[0] == 0:
         cage = _unchanged(clean)._replace(stopped="target")
     elif max_error is None:
-        cage, clean = _through_pinholes(*_collapsed(clean, target, opts, progress), target, opts,
-                                        progress)
+        cage, clean = _collapsed(clean, target, opts, progress)
+        if close_pinholes:
+            cage, clean = _through_pinholes(cage, clean, target, opts, progress)
     else:
         su = _set_up(clean, opts)
         clean = clean._replace(twin=None, area=None)   # (3m,) and (m,): not needed past the set-up

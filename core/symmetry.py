@@ -50,6 +50,7 @@ from .simplify import (SimplifyResult, check_arguments, cleaned_input, debris_bu
 from .spatial import TriangleIndex
 from .topology import boundary_loops_count, edge_map, face_components
 from .pages import plain_pages
+from .pinholes import cap_pinholes
 
 _WHERE = "simplify"
 
@@ -363,8 +364,8 @@ def _mirror_face_sources(clean, s, V, F, k):
 def simplify_symmetric(V, F, *, axis="X", target_faces=None, ratio=None, max_error=None,
                        preserve_boundary=True, preserve_topology=True, feature_angle_deg=60.0,
                        vertex_weights=None, locked=None, weld_distance=None,
-                       min_component_area=MIN_COMPONENT_AREA, max_dihedral_deg=None, progress=None,
-                       tuning=None):
+                       min_component_area=MIN_COMPONENT_AREA, max_dihedral_deg=None,
+                       close_pinholes=True, progress=None, tuning=None):
     """A mirror-symmetric cage (what ``simplify(..., symmetry=axis)`` runs).
 
     Every cage vertex has an exact mirror partner about the plane through
@@ -396,6 +397,9 @@ def simplify_symmetric(V, F, *, axis="X", target_faces=None, ratio=None, max_err
     max_dihedral_deg : float, optional
         As :func:`core.simplify`, on the half; bends across the mirror plane
         (between a seam face and its mirror) are not bounded by it.
+    close_pinholes : bool
+        As :func:`core.simplify`: the whole input's pinholes are capped when
+        the cage stops short of its target (never the halves' seams).
     vertex_weights, locked : (n,) optional
         As :func:`core.simplify`, read on both sides: a negative-side vertex
         weighs on (and locks) the positive-side vertex its mirror lands on.
@@ -433,20 +437,53 @@ def simplify_symmetric(V, F, *, axis="X", target_faces=None, ratio=None, max_err
     clean = cleaned_input(V, F, weld_distance, min_component_area,
                           debris_budget(target_faces, ratio, max_error, F.shape[0]), lk)
     target = target_count(target_faces, ratio, clean.F.shape[0])
+    options = dict(preserve_topology=preserve_topology, feature_angle_deg=feature_angle_deg,
+                   weld_distance=weld_distance, min_component_area=min_component_area,
+                   max_dihedral_deg=max_dihedral_deg, progress=progress,
+                   **({} if tuning is None else {"tuning": tuning}))
+    whole = _Whole(clean, k, axis, weights, lk, target, max_error, n_in, F.shape[0])
+    r = _symmetric(whole, options)
+    if (close_pinholes and max_error is None and preserve_topology and target is not None
+            and r.F.shape[0] > target and r.stopped_because in ("no_valid_collapse",
+                                                                 "topology_floor")):
+        # pinholes (core.pinholes) of the whole: the halves' seams are holes of theirs
+        capped = cap_pinholes(clean, target)
+        if capped is not None:
+            again = _symmetric(whole._replace(clean=capped), options)
+            if again.stopped_because != "cancelled" and again.F.shape[0] < r.F.shape[0]:
+                return again
+    return r
+
+
+class _Whole(NamedTuple):
+    """The cleaned whole input of a symmetric run and what its result needs."""
+
+    clean: object          #: the cleaned input (a CleanResult)
+    k: int                 #: the mirror axis
+    axis: str
+    weights: object        #: per input vertex, or None
+    locked: object         #: per input vertex, or None
+    target: object         #: the face count asked for, or None
+    max_error: object
+    n_in: int              #: input vertices
+    m_in: int              #: input faces
+
+
+def _symmetric(whole, options):
+    """The mirror-symmetric cage of ``whole`` (a :class:`_Whole`): its
+    positive half cut, simplified (``options``: :func:`core.simplify`'s
+    arguments passed on) and mirrored, mapped back to the input."""
+    clean, k = whole.clean, whole.k
     diag = bbox_diagonal(clean.V) or 1.0
     s = clean.V[:, k].copy()
     s[np.abs(s) <= SNAP * diag] = 0.0
-    _check_crosses(clean, s, k, axis)
-    hs = _half_set_up(clean, s, k, weights, lk)
-    more = {} if tuning is None else {"tuning": tuning}
+    _check_crosses(clean, s, k, whole.axis)
+    hs = _half_set_up(clean, s, k, whole.weights, whole.locked)
 
     def run(half_target, bound):
-        r = simplify(hs.half.V, hs.half.F, target_faces=half_target, max_error=bound, **more,
-                     preserve_boundary=True, preserve_topology=preserve_topology,
-                     feature_angle_deg=feature_angle_deg, vertex_weights=hs.weights,
-                     locked=hs.locked, weld_distance=weld_distance,
-                     min_component_area=min_component_area,
-                     max_dihedral_deg=max_dihedral_deg, progress=progress)
+        r = simplify(hs.half.V, hs.half.F, target_faces=half_target, max_error=bound,
+                     preserve_boundary=True, vertex_weights=hs.weights, locked=hs.locked,
+                     close_pinholes=False, **options)
         if r.stopped_because == "cancelled":
             return r, None
         seam_from = np.zeros(r.V.shape[0], dtype=bool)
@@ -454,17 +491,17 @@ def simplify_symmetric(V, F, *, axis="X", target_faces=None, ratio=None, max_err
         seam_from[hit[hit >= 0]] = True
         return r, _mirror_cage(r.V, r.F, seam_from, k, LIFT * diag)
 
-    r, cage, hausdorff = _simplify_half(run, clean, target, max_error)
+    r, cage, hausdorff = _simplify_half(run, clean, whole.target, whole.max_error)
     if cage is None:
-        return _cancelled(clean, n_in, F.shape[0], target)
-    vertex_map, face_from, fe = _whole_maps(clean, hs, r, cage, s, k, n_in)
+        return _cancelled(clean, whole.n_in, whole.m_in, whole.target)
+    vertex_map, face_from, fe = _whole_maps(clean, hs, r, cage, s, k, whole.n_in)
     _, n_comp = face_components(cage.F, cage.V.shape[0])
     return SimplifyResult(
         V=cage.V, F=cage.F, vertex_map=vertex_map, face_map=clean.face_to_input[face_from],
         max_error=r.max_error, stopped_because=r.stopped_because, feature_edges=fe,
-        cleaning=clean.report, n_input_faces=int(F.shape[0]), target=target, hausdorff=hausdorff,
-        n_boundary_loops=boundary_loops_count(cage.F, cage.V.shape[0]), n_components=n_comp,
-        n_passes=r.n_passes)
+        cleaning=clean.report, n_input_faces=int(whole.m_in), target=whole.target,
+        hausdorff=hausdorff, n_boundary_loops=boundary_loops_count(cage.F, cage.V.shape[0]),
+        n_components=n_comp, n_passes=r.n_passes)
 
 
 def _check_crosses(clean, s, k, axis):

@@ -246,3 +246,30 @@ def test_progress_goes_on_through_the_second_run_and_cancel_there_changes_nothin
     assert c.stopped_because == "cancelled"
     assert c.F.shape[0] == clean_mesh(V, Fh).F.shape[0] == Fh.shape[0]
     assert c.cleaning.n_pinholes == 0 and c.n_boundary_loops == 300
+
+
+def test_close_pinholes_false_keeps_every_hole():
+    V, F = icosphere(4)
+    Fh = without(F, apart_faces(F, 300, seed=2))
+    r = simplify(V, Fh, target_faces=60, close_pinholes=False)
+    assert r.cleaning.n_pinholes == 0 and r.n_boundary_loops == 300 and r.F.shape[0] > 60
+    assert "300 border loops" in r.message
+
+
+def test_a_symmetric_run_caps_the_wholes_pinholes_never_its_seam():
+    """A symmetric run caps the pinholes of the whole input (its halves are
+    simplified with their seam open: a hole of theirs): a long tube with 40
+    pinholes, cut across its middle, reaches a few faces, mirror-symmetric and
+    manifold (it stopped at 244 faces with the pinholes kept)."""
+    from core import mirror_partners
+    from tests.mesh_factory import bumpy_tube
+    V, F = bumpy_tube(120, 24)
+    V[:, 0] = 3.0 * (V[:, 0] - 1.5)                  # long, across x = 0: a short seam
+    Fh = without(F, apart_faces(F, 40, seed=9))
+    kept = simplify(V, Fh, target_faces=24, symmetry="X", close_pinholes=False)
+    assert kept.F.shape[0] > 24 and kept.n_boundary_loops >= 40
+    r = simplify(V, Fh, target_faces=24, symmetry="X")
+    assert r.F.shape[0] <= 24 and r.cleaning.n_pinholes >= 40
+    assert (mirror_partners(r.V, "X") >= 0).all()
+    s = topology_summary(r.F, r.V.shape[0])
+    assert s.non_manifold_edges == 0 and s.non_manifold_vertices == 0
