@@ -50,18 +50,27 @@ def parse_args(argv, prog=PROG):
                "options after '--': blender -b -P scripts/meshadjust_batch.py -- IN... --faces N.")
     p.add_argument("inputs", nargs="+", help="mesh files or folders (.obj .smf: NumPy only; "
                    ".ply .stl .gltf .glb: Blender's importers)")
-    target = p.add_mutually_exclusive_group(required=True)
-    target.add_argument("--faces", type=int, metavar="N", help="cage face count")
-    target.add_argument("--ratio", type=float, metavar="R", help="cage faces as a fraction "
-                        "(0 < R <= 1) of the input's")
-    target.add_argument("--max-error", type=float, metavar="E", help="stop before the error "
-                        "exceeds E percent of the bounding-box diagonal")
+    _cage_arguments(p)
     p.add_argument("--fit", action="store_true", help="fit the cage so its subdivision "
                    "matches the input (undoes QEM's shrinkage)")
     p.add_argument("--refine", type=int, metavar="LEVELS", default=0,
                    help="also write the cage refined LEVELS times with the input's detail")
     p.add_argument("--scheme", choices=("butterfly", "loop"), default="butterfly",
                    help="subdivision scheme for --fit and --refine (default: butterfly)")
+    _run_arguments(p)
+    args = p.parse_args(argv)
+    _check(p, args)
+    return args
+
+
+def _cage_arguments(p):
+    """The arguments of the simplify step: the target and the cage's options."""
+    target = p.add_mutually_exclusive_group(required=True)
+    target.add_argument("--faces", type=int, metavar="N", help="cage face count")
+    target.add_argument("--ratio", type=float, metavar="R", help="cage faces as a fraction "
+                        "(0 < R <= 1) of the input's")
+    target.add_argument("--max-error", type=float, metavar="E", help="stop before the error "
+                        "exceeds E percent of the bounding-box diagonal")
     p.add_argument("--feature-angle", type=float, default=60.0, metavar="DEG",
                    help="dihedral angle above which edges are kept sharp (default 60)")
     p.add_argument("--max-dihedral", type=float, default=None, metavar="DEG",
@@ -71,9 +80,17 @@ def parse_args(argv, prog=PROG):
                    help="weld vertices on open edges closer than D of the bounding-box "
                         "diagonal (default: automatic, 1e-6 widening to 1e-5 or 1e-4 when "
                         "the input comes in pieces)")
+    p.add_argument("--keep-pinholes", action="store_true",
+                   help="keep every hole: by default, when holes keep the cage from its target, "
+                        "those smaller than one cage face (a scan's dropouts) are capped and "
+                        "the file simplified again (the report counts them)")
     p.add_argument("--symmetry", choices=("X", "Y", "Z"), default=None,
                    help="make the cage mirror-symmetric about the plane through the origin "
                         "normal to this axis, in the file's coordinates (the fit keeps it so)")
+
+
+def _run_arguments(p):
+    """The arguments of the run: outputs, workers, the report."""
     p.add_argument("--out", default="out", metavar="DIR", help="output folder (default: out)")
     p.add_argument("--format", choices=_convert.OUTPUT_FORMATS, default=None,
                    help="output format (default: the input's own, glTF as glb)")
@@ -93,7 +110,10 @@ def parse_args(argv, prog=PROG):
                    help="skip a file whose outputs all exist already (to resume a batch)")
     p.add_argument("--strict", action="store_true",
                    help="exit 1 when a file only warned (missed target, unchanged cage)")
-    args = p.parse_args(argv)
+
+
+def _check(p, args):
+    """Refuse values the run could not use (``p.error``: exit status 2)."""
     if args.faces is not None and args.faces < 4:
         p.error("--faces must be at least 4")
     if args.ratio is not None and not 0 < args.ratio <= 1:
@@ -106,7 +126,6 @@ def parse_args(argv, prog=PROG):
         p.error("--weld-distance must be in [0, 1) (a share of the bounding-box diagonal)")
     if args.refine < 0 or args.jobs < 1:
         p.error("--refine must be >= 0 and --jobs >= 1")
-    return args
 
 
 def options(args):
@@ -114,7 +133,8 @@ def options(args):
                             fit=args.fit, refine=args.refine, scheme=args.scheme,
                             feature_angle_deg=args.feature_angle, format=args.format,
                             symmetry=args.symmetry, max_dihedral_deg=args.max_dihedral,
-                            weld_distance=args.weld_distance)
+                            weld_distance=args.weld_distance,
+                            close_pinholes=not args.keep_pinholes)
 
 
 def _is_output(name):

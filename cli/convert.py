@@ -50,6 +50,7 @@ class Options:
     symmetry: str = None             #: 'X', 'Y' or 'Z': a cage mirror-symmetric about that plane
     max_dihedral_deg: float = None   #: no collapse bends adjacent cage faces more than this
     weld_distance: float = None      #: simplify's weld (share of the diagonal); None: automatic
+    close_pinholes: bool = True      #: cap holes smaller than a cage face when they stop the cage
 
     @property
     def levels(self):
@@ -192,7 +193,8 @@ def convert(task, opts):
         res = run.step("simplify", core.simplify, V, F, target_faces=opts.faces,
                        ratio=opts.ratio, max_error=max_error,
                        feature_angle_deg=opts.feature_angle_deg, symmetry=opts.symmetry,
-                       max_dihedral_deg=opts.max_dihedral_deg, weld_distance=opts.weld_distance)
+                       max_dihedral_deg=opts.max_dihedral_deg, weld_distance=opts.weld_distance,
+                       close_pinholes=opts.close_pinholes)
         r["faces_out"] = int(res.F.shape[0])
         r["target_faces"] = res.target
         r["stopped_because"] = res.stopped_because

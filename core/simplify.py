@@ -711,9 +711,13 @@ def simplify(V, F, *, target_faces=None, ratio=None, max_error=None, preserve_bo
     if clean.F.shape[0] == 0:
         cage = _unchanged(clean)._replace(stopped="target")
     elif max_error is None:
+        capped = cap_pinholes(clean, target) if close_pinholes and target is not None \
+            and opts["preserve_topology"] else None
+        if capped is not None and 5 * capped.report.n_pinholes - 4 > target:
+            clean, capped = capped, None        # kept, they could not reach it: see below
         cage, clean = _collapsed(clean, target, opts, progress)
-        if close_pinholes:
-            cage, clean = _through_pinholes(cage, clean, target, opts, progress)
+        if capped is not None:
+            cage, clean = _through_pinholes(cage, clean, capped, target, progress, opts)
     else:
         su = _set_up(clean, opts)
         clean = clean._replace(twin=None, area=None)   # (3m,) and (m,): not needed past the set-up
@@ -733,19 +737,19 @@ def _collapsed(clean, target, opts, progress):
     return cage._replace(stopped=_stop_reason(cage, target, opts)), clean
 
 
-def _through_pinholes(cage, clean, target, opts, progress):
-    """When the cage of ``clean`` stopped short of the target with the
-    topology kept (every hole keeps three vertices of its own) and
-    ``clean`` has pinholes, holes smaller than one face of the target
-    (:mod:`core.pinholes`): they are capped and the input simplified again,
-    ``progress`` going on from where the first run left it; the closer of the
-    two cages to the target wins. Returns the cage and the cleaned input it
-    was made from."""
-    if (target is None or cage.F.shape[0] <= target or not opts["preserve_topology"]
-            or cage.stopped not in ("no_valid_collapse", "topology_floor")):
-        return cage, clean
-    capped = cap_pinholes(clean, target)
-    if capped is None:
+def _through_pinholes(cage, clean, capped, target, progress, opts):
+    """When the cage of ``clean`` stopped short of the target (every hole
+    keeps three vertices of its own): the cage of ``capped``, ``clean`` with
+    its pinholes (holes smaller than one face of the target,
+    :func:`~.pinholes.cap_pinholes`) capped, ``progress`` going on from where
+    the first run left it; the closer of the two cages to the target wins.
+    Returns the cage and the cleaned input it was made from. (When the
+    pinholes alone rule the target out, :func:`simplify` starts from
+    ``capped``: a surface of genus 0 with h holes of three edges or more has
+    at least 5h - 4 faces, by Euler's formula F = 2V - B - 4 + 2h with V >= B
+    >= 3h border vertices; the bunny with 5% of its faces missing has 2,491
+    pinholes for a 50-face target.)"""
+    if cage.F.shape[0] <= target or cage.stopped not in ("no_valid_collapse", "topology_floor"):
         return cage, clean
     done = (clean.F.shape[0] - cage.F.shape[0]) / max(clean.F.shape[0] - target, 1)
     again, capped = _collapsed(capped, target, opts, _going_on(progress, done))

@@ -37,8 +37,8 @@ def simplify_fields(s):
     """The scene settings the Simplify panel shows, in order (the target
     field follows the target mode; the vertex groups are drawn apart)."""
     target = {'FACES': "target_faces", 'RATIO': "ratio", 'ERROR': "max_error_pct"}[s.target_mode]
-    return [target, "preserve_boundary", "preserve_topology", "feature_angle_deg", "max_dihedral_deg",
-            "use_symmetry", "symmetry_axis", "fit", "bind", "levels", "scheme", "hide_source"]
+    return [target, "preserve_boundary", "preserve_topology", "close_pinholes", "feature_angle_deg",
+            "max_dihedral_deg", "use_symmetry", "symmetry_axis", "fit", "bind", "levels", "scheme", "hide_source"]
 
 
 def refine_messages(context):

@@ -86,6 +86,9 @@ SETTINGS = {
     "preserve_topology": Setting('BOOL', "Keep topology", "Keep genus, holes and components. "
                                  "Off: once nothing else can collapse, holes of three edges close "
                                  "and tiny pieces that cannot shrink go", True),
+    "close_pinholes": Setting('BOOL', "Close pinholes", "When holes keep the cage from its target, "
+                              "cap those smaller than one cage face (a scan's dropouts) and "
+                              "simplify again; the report counts them", True),
     "feature_angle_deg": Setting('FLOAT', "Feature angle", "Edges sharper than this (degrees) "
                                  "are kept as creases (180 turns it off)", 60.0,
                                  {"min": 0.0, "max": 180.0}),
@@ -146,10 +149,9 @@ def _same(*keys):
 
 #: operator property name -> setting key, per operator
 SIMPLIFY = _same("target_mode", "target_faces", "ratio", "max_error_pct", "preserve_boundary",
-                 "preserve_topology", "feature_angle_deg", "max_dihedral_deg", "use_symmetry",
-                 "symmetry_axis",
-                 "weight_group", "lock_group", "fit",
-                 "bind", "levels", "scheme", "hide_source")
+                 "preserve_topology", "close_pinholes", "feature_angle_deg", "max_dihedral_deg",
+                 "use_symmetry", "symmetry_axis", "weight_group", "lock_group", "fit", "bind",
+                 "levels", "scheme", "hide_source")
 FIT = _same("rebind")
 BIND = {"levels": "levels", "scheme": "refine_scheme", "keep_edit": "keep_edit"}
 REFINE = {"output": "output", "levels": "levels", "scheme": "refine_scheme"}
@@ -162,8 +164,8 @@ OPERATORS = {"meshadjust.simplify": SIMPLIFY, "meshadjust.fit_cage": FIT,
 SCENE = _same(*SIMPLIFY, "refine_scheme", "output", "subdivide_levels", "subdivide_scheme")
 #: the add-on preferences, and those of them copied into every scene's settings
 PREFERENCES = _same("target_mode", "target_faces", "ratio", "max_error_pct", "preserve_boundary",
-                    "preserve_topology", "feature_angle_deg", "max_dihedral_deg", "fit", "bind",
-                    "hide_source", "levels", "scheme", "output", "subdivide_levels",
+                    "preserve_topology", "close_pinholes", "feature_angle_deg", "max_dihedral_deg",
+                    "fit", "bind", "hide_source", "levels", "scheme", "output", "subdivide_levels",
                     "subdivide_scheme", "live_interval")
 SEEDED = tuple(k for k in PREFERENCES if k in SCENE)
 

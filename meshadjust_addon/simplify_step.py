@@ -50,6 +50,7 @@ class SimplifyParams:
     max_error_pct: float = None      #: % of the bounding-box diagonal
     preserve_boundary: bool = _d("preserve_boundary")
     preserve_topology: bool = _d("preserve_topology")
+    close_pinholes: bool = _d("close_pinholes")
     feature_angle_deg: float = _d("feature_angle_deg")
     max_dihedral_deg: float = _d("max_dihedral_deg")   #: 180: off
     use_symmetry: bool = _d("use_symmetry")
@@ -72,7 +73,7 @@ class SimplifyParams:
             ratio=s.ratio if s.target_mode == 'RATIO' else None,
             max_error_pct=s.max_error_pct if s.target_mode == 'ERROR' else None,
             preserve_boundary=s.preserve_boundary, preserve_topology=s.preserve_topology,
-            feature_angle_deg=s.feature_angle_deg, max_dihedral_deg=s.max_dihedral_deg,
+            close_pinholes=s.close_pinholes, feature_angle_deg=s.feature_angle_deg, max_dihedral_deg=s.max_dihedral_deg,
             use_symmetry=s.use_symmetry,
             symmetry_axis=s.symmetry_axis, weight_group=s.weight_group,
             lock_group=s.lock_group, fit=s.fit, bind=s.bind, levels=s.levels, scheme=s.scheme,
@@ -203,7 +204,7 @@ def _simplify_cage(job, progress):
         max_error = p.max_error_pct / 100.0 * _diag(job.V)
     return core.simplify(job.V, job.F, target_faces=p.target_faces, ratio=p.ratio,
                          max_error=max_error, preserve_boundary=p.preserve_boundary,
-                         preserve_topology=p.preserve_topology,
+                         preserve_topology=p.preserve_topology, close_pinholes=p.close_pinholes,
                          feature_angle_deg=None if p.feature_angle_deg >= 180.0
                          else p.feature_angle_deg,
                          max_dihedral_deg=None if p.max_dihedral_deg >= 180.0

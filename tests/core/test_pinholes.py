@@ -230,22 +230,45 @@ def test_bunny_with_missing_triangles(target):
     assert topology_summary(r.F, r.V.shape[0]).non_manifold_edges == 0
 
 
+def wide_and_small_hole():
+    """A sphere with a wide hole and a small one: too few pinholes to rule a
+    4-face target out (5h - 4 = 1 face), so the first run goes on until the
+    two holes stop it (at least 6 faces), then the small one is capped."""
+    V, F = icosphere(3)
+    C = V[F].mean(axis=1)
+    return V, F[(C[:, 2] < 0.7) & ~((C[:, 0] > 0.93) & (np.abs(C[:, 2]) < 0.2))]
+
+
 def test_progress_goes_on_through_the_second_run_and_cancel_there_changes_nothing():
-    V, F = icosphere(4)
-    Fh = without(F, apart_faces(F, 300, seed=2))
+    V, Fh = wide_and_small_hole()
     seen = []
-    r = simplify(V, Fh, target_faces=60, progress=lambda f: seen.append(f) or True)
-    assert r.cleaning.n_pinholes == 300 and r.F.shape[0] <= 60
+    r = simplify(V, Fh, target_faces=4, progress=lambda f: seen.append(f) or True)
+    assert r.cleaning.n_pinholes == 1 and r.F.shape[0] <= 4 and r.n_boundary_loops == 1
+    assert "stopped short (pinholes)" in r.seconds
     assert np.all(np.diff(seen) >= -1e-12) and 0.0 <= seen[0] and seen[-1] <= 1.0
+    first_calls = []
+    first = simplify(V, Fh, target_faces=4, close_pinholes=False,
+                     progress=lambda f: first_calls.append(f) or True)
+    assert first.F.shape[0] >= 6 and first.n_boundary_loops == 2
+    assert len(seen) > len(first_calls) + 1
     calls = []
 
     def late_cancel(f):
         calls.append(f)
-        return len(calls) < len(seen) - 1      # a call of the second run
-    c = simplify(V, Fh, target_faces=60, progress=late_cancel)
+        return len(calls) <= len(first_calls) + 1      # stop at the second run's second call
+    c = simplify(V, Fh, target_faces=4, progress=late_cancel)
     assert c.stopped_because == "cancelled"
-    assert c.F.shape[0] == clean_mesh(V, Fh).F.shape[0] == Fh.shape[0]
-    assert c.cleaning.n_pinholes == 0 and c.n_boundary_loops == 300
+    assert c.F.shape[0] == clean_mesh(V, Fh).F.shape[0]
+    assert c.cleaning.n_pinholes == 0 and c.n_boundary_loops == 2
+
+
+def test_holes_that_rule_the_target_out_are_capped_before_any_run():
+    """300 one-triangle holes need at least 5 * 300 - 4 faces: capped first,
+    one run (no 'stopped short' stage)."""
+    V, F = icosphere(4)
+    r = simplify(V, without(F, apart_faces(F, 300, seed=2)), target_faces=60)
+    assert r.cleaning.n_pinholes == 300 and r.F.shape[0] <= 60
+    assert "stopped short (pinholes)" not in r.seconds
 
 
 def test_close_pinholes_false_keeps_every_hole():
