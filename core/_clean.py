@@ -451,3 +451,41 @@ def non_manifold_vertices(F, n_vertices, twin, *, ends=None, corners=None):
         U, W = half_edge_ends(F) if ends is None else ends
         bad[rest[_fans_union_find(F, twin, U, W, rest, n)[rest] > 1]] = True
     return bad
+
+
+#: bits per axis of the packed grid keys of :func:`coincident_pairs`
+GRID_BITS = 21
+
+
+def coincident_pairs(P, distance, extent):
+    """Pairs (k,2) of rows of the points ``P`` (k,3) that share a cell of one
+    of four grids of cell ``4 distance``, each shifted by a quarter cell along
+    the diagonal: two points closer than ``distance`` along every axis share
+    a cell in at least one grid (each axis can separate them in at most one),
+    and no pair farther than ``4 distance`` per axis does. Within a cell the
+    pairs chain the points in sorted order (join them with
+    :func:`~.topology.connected_labels`). ``extent``: the largest coordinate
+    range of P; with ``distance`` 0, or a grid too fine for packed keys,
+    exactly equal points."""
+    P = P + 0.0                                    # -0.0 and 0.0 are the same place
+    cell = 4.0 * distance
+    if cell > 0 and float(extent) / cell + 2 < 2 ** GRID_BITS:
+        found = [_same_cell_pairs(np.floor(P / cell + k / 4.0).astype(np.int64)) for k in range(4)]
+    else:
+        found = [_same_cell_pairs(None, P)]
+    return np.concatenate(found)
+
+
+def _same_cell_pairs(Q, P=None):
+    """Pairs (k,2) of row indices that are neighbours in sorted order and
+    equal: integer cells ``Q`` (k,3) packed into one key, or exact points ``P``."""
+    if Q is not None:
+        key = (Q[:, 0] << 2 * GRID_BITS) | (Q[:, 1] << GRID_BITS) | Q[:, 2]
+        order = np.argsort(key, kind="stable")
+        same = key[order[1:]] == key[order[:-1]]
+    else:
+        order = np.lexsort((P[:, 2], P[:, 1], P[:, 0]))
+        S = P[order]
+        same = (S[1:] == S[:-1]).all(axis=1)
+    i = np.flatnonzero(same)
+    return np.stack([order[i], order[i + 1]], axis=1)

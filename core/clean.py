@@ -23,6 +23,8 @@ edge- and vertex-manifold triangle mesh that :func:`~.simplify.simplify`,
     orient each component consistently (the majority's orientation wins)
     drop   debris: components whose area is below min_component_area of the
            largest component's
+    drop   coincident copies: components whose vertices all coincide (within
+           weld_distance) with vertices of another one (:mod:`core.copies`)
     drop   unreferenced vertices
 
 Nothing is averaged or moved: every output vertex sits exactly on an input
@@ -44,13 +46,15 @@ from typing import NamedTuple
 
 import numpy as np
 
-from ._clean import (BOUNDARY, NON_MANIFOLD, corner_fans, face_keys, half_edge_ends,
-                     interior_edges, non_manifold_vertices, renumber_twins, twin_table)
+from ._clean import (BOUNDARY, NON_MANIFOLD, coincident_pairs, corner_fans, face_keys,
+                     half_edge_ends, interior_edges, non_manifold_vertices, renumber_twins,
+                     twin_table)
 from ._groups import ragged_entries
 from ._parallel import blocks, run_blocks, run_each
 from .errors import InvalidArgumentError
 from .mesh import bounding_box, check_mesh, diagonal_length, face_normals
 from .topology import connected_labels, edge_keys
+from .copies import coincident_copies
 from .pages import plain_pages
 
 _WHERE = "clean_mesh"
@@ -71,8 +75,6 @@ OPEN_SHARE = 0.005
 #: most this share of the total area: beyond, they are the mesh itself in pieces, not
 #: specks, and are kept (simplify then says how far it could go and why)
 BUDGET_DEBRIS_SHARE = 0.1
-#: cells per axis above which the weld grid's key would not fit in 21 bits
-_GRID_BITS = 21
 
 
 @dataclass(frozen=True)
@@ -93,6 +95,8 @@ class CleanReport:
     n_seam_edges: int = 0             #: ... along this many edges, so they can be oriented
     n_debris_components: int = 0      #: tiny components dropped ...
     n_debris_faces: int = 0           #: ... with this many faces
+    n_copies: int = 0                 #: components lying on another, vertex for vertex, dropped ...
+    n_copy_faces: int = 0             #: ... with this many faces
     n_unreferenced_vertices: int = 0  #: vertices no kept face uses
     n_pinholes: int = 0               #: holes too small for one cage face, capped (by simplify) ...
     n_pinhole_faces: int = 0          #: ... with this many faces
@@ -130,6 +134,8 @@ class CleanReport:
             f" ({self.n_double_sided_faces:,} faces)")
         add(self.n_debris_components, "dropped {} debris components",
             f" ({self.n_debris_faces:,} faces)")
+        add(self.n_copies, "dropped {} coincident copies", f" ({self.n_copy_faces:,} faces: "
+            "components lying on another, vertex for vertex)")
         add(self.n_pinholes, "closed {} pinholes", f" ({self.n_pinhole_faces:,} faces)")
         add(self.n_degenerate_faces, "removed {} degenerate faces")
         add(self.n_duplicate_faces, "removed {} duplicate faces")
@@ -264,10 +270,18 @@ def clean_mesh(V, F, *, weld_distance=None, min_component_area=MIN_COMPONENT_ARE
         protected = np.asarray(protected, dtype=bool)[to_input]
     # areas of the faces as they came (welds move corners by at most weld_distance)
     area = area[faces]
-    keep, found = _debris(area, F, inner, float(min_component_area), face_budget, protected)
+    keep, found, labels = _debris(area, F, inner, float(min_component_area), face_budget,
+                                  protected)
     del inner
     counts.update(found)
     if not keep.all():
+        F, faces, twin, area = F[keep], faces[keep], _keep_twins(twin, keep), area[keep]
+        labels = labels[keep]
+    copies, found = _copies(V, F, twin, labels, area, box, weld.distance, protected)
+    del labels
+    counts.update(found)
+    if copies is not None:
+        keep = ~copies
         F, faces, twin, area = F[keep], faces[keep], _keep_twins(twin, keep), area[keep]
     V, F, input_to_clean, clean_to_input = _compact(V, F, to_input, rep)
     return CleanResult(V, F, input_to_clean, clean_to_input, faces, twin, area,
@@ -385,34 +399,13 @@ def _weld_map(shape, F, twin, weld_distance):
     if h.size == 0 and flat.size == 0:
         return rep
     cand = np.unique(np.concatenate([*half_edge_ends(F, h), F[flat].ravel()]))
-    P = V[cand] + 0.0                              # -0.0 and 0.0 are the same place
-    cell = 4.0 * tol
-    if cell > 0 and float(np.max(shape.extent)) / cell + 2 < 2 ** _GRID_BITS:
-        found = [_same_cell_pairs(np.floor(P / cell + k / 4.0).astype(np.int64)) for k in range(4)]
-    else:
-        found = [_same_cell_pairs(None, P)]
-    pairs = np.concatenate([cand[p] for p in found])
+    pairs = cand[coincident_pairs(V[cand], tol, np.max(shape.extent))]
     if pairs.shape[0] == 0:
         return rep
     used = np.unique(pairs)
     labels = connected_labels(used.size, np.searchsorted(used, pairs))
     rep[used] = used[labels]
     return rep
-
-
-def _same_cell_pairs(Q, P=None):
-    """Pairs (k,2) of row indices that are neighbours in sorted order and
-    equal: integer cells ``Q`` (k,3) packed into one key, or exact points ``P``."""
-    if Q is not None:
-        key = (Q[:, 0] << 2 * _GRID_BITS) | (Q[:, 1] << _GRID_BITS) | Q[:, 2]
-        order = np.argsort(key, kind="stable")
-        same = key[order[1:]] == key[order[:-1]]
-    else:
-        order = np.lexsort((P[:, 2], P[:, 1], P[:, 0]))
-        S = P[order]
-        same = (S[1:] == S[:-1]).all(axis=1)
-    i = np.flatnonzero(same)
-    return np.stack([order[i], order[i + 1]], axis=1)
 
 
 def _orientation_sign(F):
@@ -752,7 +745,7 @@ def _debris(area, F, inner, min_component_area, face_budget, protected):
     keep = np.ones(F.shape[0], dtype=bool)
     found = {"n_debris_components": 0, "n_debris_faces": 0}
     if (min_component_area <= 0 and not face_budget) or F.shape[0] == 0:
-        return keep, found
+        return keep, found, None
     h, t = inner
     pairs = np.empty((h.size, 2), dtype=np.int32 if F.shape[0] < 2 ** 31 else np.int64)
     np.floor_divide(h, 3, out=pairs[:, 0], casting="unsafe")
@@ -770,7 +763,29 @@ def _debris(area, F, inner, min_component_area, face_budget, protected):
     keep = ~tiny[labels]
     found["n_debris_components"] = int(np.count_nonzero(tiny[roots]))
     found["n_debris_faces"] = int(np.count_nonzero(~keep))
-    return keep, found
+    return keep, found, labels
+
+
+def _copies(V, F, twin, labels, area, box, distance, protected):
+    """The faces of coincident copies (:mod:`core.copies`; None when there is
+    none) and the counts for the report. ``labels``: the faces' components
+    (None: found here from ``twin``), ``box`` the input's bounding box (the
+    unit of ``distance``)."""
+    found = {"n_copies": 0, "n_copy_faces": 0}
+    if F.shape[0] == 0:
+        return None, found
+    if labels is None:
+        h, t = interior_edges(twin)
+        labels = connected_labels(F.shape[0], np.stack([h // 3, t // 3], axis=1))
+    if (labels == labels[0]).all():
+        return None, found
+    drop = coincident_copies((V - box[0]) / (diagonal_length(*box) or 1.0), F, labels, area,
+                             distance, protected)
+    if drop is None:
+        return None, found
+    found["n_copies"] = int(np.unique(labels[drop]).shape[0])
+    found["n_copy_faces"] = int(np.count_nonzero(drop))
+    return drop, found
 
 
 def _budget_debris(comp_area, roots, face_budget):

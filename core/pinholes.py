@@ -84,9 +84,10 @@ def cap_pinholes(clean, face_budget):
     when it has no pinhole."""
     n = clean.V.shape[0]
     twin = clean.twin if clean.twin is not None else twin_table(clean.F, n)
-    unit = diagonal_length(*bounding_box(clean.V)) or 1.0
-    area = 0.5 * np.linalg.norm(face_normals(clean.V, clean.F, normalize=False), axis=1) / unit ** 2
-    capped = close_pinholes(clean.V, clean.F, twin, area, face_budget, unit)
+    lo, hi = bounding_box(clean.V)
+    Vs = (clean.V - lo) / (diagonal_length(lo, hi) or 1.0)    # unit-free: no overflow at 1e200
+    area = 0.5 * np.linalg.norm(face_normals(Vs, clean.F, normalize=False), axis=1)
+    capped = close_pinholes(Vs, clean.F, twin, area, face_budget)
     if capped is None:
         return None
     report = replace(clean.report, n_pinholes=capped.n_holes,

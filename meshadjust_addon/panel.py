@@ -38,7 +38,8 @@ def simplify_fields(s):
     field follows the target mode; the vertex groups are drawn apart)."""
     target = {'FACES': "target_faces", 'RATIO': "ratio", 'ERROR': "max_error_pct"}[s.target_mode]
     return [target, "preserve_boundary", "preserve_topology", "close_pinholes", "feature_angle_deg",
-            "max_dihedral_deg", "use_symmetry", "symmetry_axis", "fit", "bind", "levels", "scheme", "hide_source"]
+            "max_dihedral_deg", "use_symmetry", "symmetry_axis", "fit", "bind", "levels", "scheme",
+            "hide_source"]
 
 
 def refine_messages(context):

@@ -73,8 +73,8 @@ class SimplifyParams:
             ratio=s.ratio if s.target_mode == 'RATIO' else None,
             max_error_pct=s.max_error_pct if s.target_mode == 'ERROR' else None,
             preserve_boundary=s.preserve_boundary, preserve_topology=s.preserve_topology,
-            close_pinholes=s.close_pinholes, feature_angle_deg=s.feature_angle_deg, max_dihedral_deg=s.max_dihedral_deg,
-            use_symmetry=s.use_symmetry,
+            close_pinholes=s.close_pinholes, feature_angle_deg=s.feature_angle_deg,
+            max_dihedral_deg=s.max_dihedral_deg, use_symmetry=s.use_symmetry,
             symmetry_axis=s.symmetry_axis, weight_group=s.weight_group,
             lock_group=s.lock_group, fit=s.fit, bind=s.bind, levels=s.levels, scheme=s.scheme,
             hide_source=s.hide_source)

@@ -7,8 +7,8 @@ rotation always), and through deform: a rough torus whose butterfly
 surface folds under a large one-ring lift has fewer faces turned over
 with the repair and only the reported rows change; a half-turn of the cage
 (every face turned by more than 90 degrees from rest, none folded)
-repairs nothing; incremental == full through folds; a real scan's edit
-that folded a face does not.
+repairs nothing; incremental == full through folds; a real scan's edits
+that fold dense faces mostly fold none with it.
 """
 
 import dataclasses
@@ -299,10 +299,11 @@ def test_incremental_equals_full_through_repairs(rough_torus):
     assert repaired > 0
 
 
-def test_a_scan_edit_that_folded_a_face_folds_none():
-    # the beetle, its 2,000-face-target cage fitted for Loop, the one-ring of
-    # cage vertex 158 lifted by 1% of the diagonal: without the repair one
-    # dense face turned over (Surface Deform: none); with it, none
+def test_scan_edits_that_fold_faces_mostly_fold_none():
+    # the beetle, its cage fitted for Loop, the one-ring of each of its first 150
+    # cage vertices lifted by 1% of the diagonal, the edits that leave the cage
+    # itself unfolded: without the repair 21 of them fold 29 dense faces; with it
+    # 16 of those fold none and 9 faces are left (2026-12-03)
     mesh = load_shared("beetle.obj")
     if mesh is None:
         pytest.skip("../shared/meshes/beetle.obj is absent")
@@ -312,13 +313,22 @@ def test_a_scan_edit_that_folded_a_face_folds_none():
     creases = cage.feature_edges if len(cage.feature_edges) else None
     Vc = fit_cage(V, F, cage.V, cage.F, levels=2, scheme="loop", creases=creases).V
     b = bind(V, F, Vc, cage.F, levels=2, scheme="loop", creases=creases)
-    v = np.sort(np.random.default_rng(1).choice(cage.V.shape[0], 2, replace=False))[0]
-    ring = np.unique(cage.F[(cage.F == v).any(axis=1)])
-    Ve = Vc.copy()
-    Ve[ring] += 0.01 * diag * vertex_normals(Vc, cage.F)[v]
-    plain = deform(dataclasses.replace(b, F_dense=None, _cache=None), Ve)
-    assert _turned(V, plain, F) >= 1
-    assert _turned(V, deform(b, Ve), F) == 0
+    plain_binding = dataclasses.replace(b, F_dense=None, _cache=None)
+    normals = vertex_normals(Vc, cage.F)
+    plain, repaired = [], []
+    for v in range(min(150, cage.V.shape[0])):
+        ring = np.unique(cage.F[(cage.F == v).any(axis=1)])
+        Ve = Vc.copy()
+        Ve[ring] += 0.01 * diag * normals[v]
+        if _turned(Vc, Ve, cage.F):
+            continue
+        p = _turned(V, deform(plain_binding, Ve), F)
+        if p:
+            plain.append(p)
+            repaired.append(_turned(V, deform(b, Ve), F))
+    assert len(plain) >= 10
+    assert sum(repaired) <= 0.5 * sum(plain)
+    assert sum(r == 0 for r in repaired) >= 0.6 * len(plain)
 
 
 def test_faces_flat_at_rest_have_no_normal_to_turn():

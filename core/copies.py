@@ -1,0 +1,98 @@
+"""Coincident copies: components that lie on another component, vertex for vertex.
+
+A mesh exported with an object duplicated in place, or a scan with a patch
+stacked twice, has components whose vertices all coincide (exactly, or
+within the weld distance) with vertices of another component. The weld
+leaves them apart (vertices inside a closed surface are not welded: two of
+them at one place are two sheets touching), so each became a cage of its own
+lying on the other: the cow twice gave a 300-face cage of two coincident
+150-face shells. :func:`~.clean.clean_mesh` drops such a copy and reports it.
+
+A component A is a *copy* of a component B when every vertex of A coincides
+with a vertex of B (shares a cell of :func:`~._clean.coincident_pairs` with
+one, directly or through other coincident vertices); of two components that
+are copies of each other, the one of smaller area goes (of equal areas, to
+``_SAME_AREA``, the later one). Components touching at some vertices (bow-ties split into two
+pieces, a lid on a rim) keep vertices of their own and stay.
+"""
+
+import numpy as np
+
+from ._clean import coincident_pairs
+from ._groups import ragged_ranges
+from .topology import connected_labels
+
+__all__ = ["coincident_copies"]
+
+#: two components whose areas differ by less than this share have the same area (a copy
+#: moved by a weld distance rounds its area differently): the later one goes
+_SAME_AREA = 1e-6
+
+
+def coincident_copies(V, F, labels, area, distance, protected=None):
+    """(m,) bool mask of the faces of coincident copies (see the module
+    docstring), or None when there is none. ``V`` (n,3) positions in units of
+    the bounding-box diagonal, ``F`` (m,3) a vertex-manifold mesh whose faces
+    are in the components ``labels`` (m,) (any integers), ``area`` (m,) the
+    faces' areas, ``distance`` the weld distance; components with a
+    ``protected`` (n,) vertex never go."""
+    comp, lab = np.unique(labels, return_inverse=True)
+    k = comp.shape[0]
+    if k < 2:
+        return None
+    vc = np.full(V.shape[0], -1, dtype=np.int64)
+    vc[F.ravel()] = np.repeat(lab, 3)
+    comp_area = np.bincount(lab, weights=area, minlength=k)
+    points = _candidates(V, vc, comp_area, distance)
+    pairs = points[coincident_pairs(V[points], distance, 1.0)]
+    cross = pairs[vc[pairs[:, 0]] != vc[pairs[:, 1]]]
+    if cross.shape[0] == 0:
+        return None
+    shared = _shared_counts(pairs, vc, k)
+    nverts = np.bincount(vc[vc >= 0], minlength=k)
+    a, b, count = shared
+    copy = count == nverts[a]
+    same = np.abs(comp_area[a] - comp_area[b]) <= _SAME_AREA * comp_area[b]
+    copy &= (comp_area[a] < comp_area[b]) & ~same | same & (a > b)
+    gone = np.zeros(k, dtype=bool)
+    gone[a[copy]] = True
+    if protected is not None:
+        gone[np.unique(vc[np.flatnonzero(protected & (vc >= 0))])] = False
+    return gone[lab] if gone.any() else None
+
+
+def _candidates(V, vc, comp_area, distance):
+    """The vertices that can be in a copy or under one: those of every
+    component but the largest, and those of the largest inside the others'
+    bounding box (grown by the grid's reach)."""
+    used = np.flatnonzero(vc >= 0)
+    big = int(np.argmax(comp_area))
+    others = used[vc[used] != big]
+    if others.size == 0:
+        return others
+    reach = 8.0 * distance
+    lo, hi = V[others].min(axis=0) - reach, V[others].max(axis=0) + reach
+    mine = used[vc[used] == big]
+    inside = ((V[mine] >= lo) & (V[mine] <= hi)).all(axis=1)
+    return np.concatenate([others, mine[inside]])
+
+
+def _shared_counts(pairs, vc, k):
+    """Per ordered pair of components (A, B) sharing coincident vertices: how
+    many vertices of A coincide with some vertex of B, as arrays (a, b, count).
+    Coincident vertices are grouped (connected through ``pairs``); each group
+    counts its vertices of A towards every other component it holds."""
+    used = np.unique(pairs)
+    group = connected_labels(used.shape[0], np.searchsorted(used, pairs))
+    key, cnt = np.unique(group * np.int64(k) + vc[used], return_counts=True)
+    g, c = np.divmod(key, k)
+    # each (group, component) entry against every other entry of its group
+    start = np.flatnonzero(np.concatenate([[True], g[1:] != g[:-1]]))
+    size = np.diff(np.concatenate([start, [g.shape[0]]]))
+    other, mine = ragged_ranges(np.repeat(start, size), np.repeat(size, size))
+    keep = other != mine
+    mine, other = mine[keep], other[keep]
+    pair_key, inverse = np.unique(c[mine] * np.int64(k) + c[other], return_inverse=True)
+    total = np.bincount(inverse, weights=cnt[mine]).astype(np.int64)
+    a, b = np.divmod(pair_key, k)
+    return a, b, total

@@ -1,0 +1,93 @@
+"""Coincident copies (``core.copies``, a stage of ``clean_mesh``): a component
+lying on another one vertex for vertex (an object duplicated in place, a patch
+stacked twice) is dropped and reported; components that only touch stay."""
+
+import numpy as np
+import pytest
+
+from core import bbox_diagonal, simplify, topology_summary
+from core.clean import clean_mesh
+from tests.mesh_factory import icosphere, load_shared
+
+
+def twice(V, F, offset=0.0, faces=None):
+    """``(V, F)`` and a copy of its ``faces`` (all by default) on vertices of
+    their own, moved by ``offset`` diagonals."""
+    sel = np.arange(F.shape[0]) if faces is None else faces
+    used, inv = np.unique(F[sel], return_inverse=True)
+    shift = offset * bbox_diagonal(V) * np.array([0.3, 0.5, 0.8])
+    return (np.concatenate([V, V[used] + shift]),
+            np.concatenate([F, inv.reshape(-1, 3) + V.shape[0]]))
+
+
+def components(r):
+    return topology_summary(r.F, r.V.shape[0]).components
+
+
+@pytest.mark.parametrize("offset", [0.0, 1e-7])
+def test_an_object_duplicated_in_place_is_dropped(offset):
+    V, F = icosphere(3)
+    r = clean_mesh(*twice(V, F, offset))
+    assert r.report.n_copies == 1 and r.report.n_copy_faces == F.shape[0]
+    assert "dropped 1 coincident copies (1,280 faces" in r.report.summary()
+    # the first one stays, as it came: the clean mesh of the sphere alone
+    alone = clean_mesh(V, F)
+    np.testing.assert_array_equal(r.F, alone.F)
+    np.testing.assert_array_equal(r.V, alone.V)
+    np.testing.assert_array_equal(r.face_to_input, alone.face_to_input)
+
+
+def test_copies_farther_than_a_weld_stay():
+    V, F = icosphere(3)
+    r = clean_mesh(*twice(V, F, 1e-3))
+    assert r.report.n_copies == 0 and components(r) == 2
+
+
+def test_a_stacked_patch_goes_and_three_copies_leave_one():
+    V, F = icosphere(3)
+    top = np.flatnonzero(V[F].mean(axis=1)[:, 2] > 0.5)
+    r = clean_mesh(*twice(V, F, 1e-7, faces=top))
+    assert r.report.n_copies == 1 and r.report.n_copy_faces == top.size
+    assert r.F.shape[0] == F.shape[0] and components(r) == 1
+    V3, F3 = twice(*twice(V, F), 0.0, faces=np.arange(F.shape[0]))
+    r = clean_mesh(V3, F3)
+    assert r.report.n_copies == 2 and r.F.shape[0] == F.shape[0] and components(r) == 1
+
+
+def test_components_that_touch_stay():
+    """Two spheres touching at one vertex (a bow-tie, split) and a sphere with
+    a lid sharing its rim: some vertices coincide, not all."""
+    V, F = icosphere(2)
+    top = int(np.argmax(V[:, 2]))
+    above = V * [1, 1, -1] + [0, 0, 2 * V[top, 2]]              # touches at the pole
+    r = clean_mesh(np.concatenate([V, above]), np.concatenate([F, F[:, ::-1] + V.shape[0]]))
+    assert r.report.n_copies == 0 and components(r) == 2
+    # a lid: the sphere's top cap again as its own disk, its centre lifted
+    cap = np.flatnonzero(V[F].mean(axis=1)[:, 2] > 0.7)
+    V3, F3 = twice(V, F, 0.0, faces=cap)
+    V3[V.shape[0] + np.unique(F[cap], return_inverse=True)[1].reshape(-1, 3)[:, 0]] += [0, 0, 0.05]
+    r = clean_mesh(V3, F3)
+    assert r.report.n_copies == 0 and components(r) == 2
+
+
+def test_a_protected_copy_stays():
+    V, F = icosphere(2)
+    V2, F2 = twice(V, F)
+    protected = np.zeros(V2.shape[0], dtype=bool)
+    protected[V.shape[0]] = True
+    r = clean_mesh(V2, F2, protected=protected)
+    assert r.report.n_copies == 0 and components(r) == 2
+
+
+def test_the_cow_twice_gives_the_cows_cage():
+    mesh = load_shared("cow.obj")
+    if mesh is None:
+        pytest.skip("../shared/meshes/cow.obj is absent")
+    V, F = mesh
+    one = simplify(V, F, target_faces=300)
+    two = simplify(*twice(V, F, 1e-7), target_faces=300)
+    assert two.cleaning.n_copies == 1 and two.n_components == 1
+    np.testing.assert_array_equal(two.F, one.F)
+    np.testing.assert_array_equal(two.V, one.V)
+    np.testing.assert_array_equal(two.vertex_map[:V.shape[0]], one.vertex_map)
+    assert (two.vertex_map[V.shape[0]:] == -1).all()
