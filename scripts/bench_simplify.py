@@ -206,7 +206,7 @@ def run_case(name, V, F, target, use_blender=True, repeat=1):
     return row
 
 
-MESSY = ("soup", "jittered soup", "debris", "bowties", "sheets")
+MESSY = ("soup", "jittered soup", "debris", "bowties", "sheets", "pinholes", "copy in place")
 
 #: the small-mesh section's meshes (each to 2,000, 200 and 4 faces)
 SMALL = ("flat grid 100x100", "cube 40x40 per side", "fandisk", "stanford-bunny")
@@ -257,7 +257,8 @@ def messy_variant(V, F, how):
     from tests import mesh_factory as mf
     return {"soup": lambda: mf.unwelded(V, F), "jittered soup": lambda: mf.unwelded(V, F, 1e-7),
             "debris": lambda: mf.with_debris(V, F), "bowties": lambda: mf.pinched(V, F),
-            "sheets": lambda: mf.with_sheets(V, F)}[how]()
+            "sheets": lambda: mf.with_sheets(V, F), "pinholes": lambda: mf.with_pinholes(V, F),
+            "copy in place": lambda: mf.duplicated(V, F)}[how]()
 
 
 def run_messy(name, V, F, target, use_blender=True):

@@ -343,6 +343,41 @@ def with_sheets(V, F, k=5, seed=3):
     return V.copy(), np.concatenate([F, F[faces][:, ::-1]])
 
 
+def apart_faces(F, k, seed=0):
+    """Up to ``k`` faces of ``F`` sharing no vertex with each other nor with
+    a border of ``F`` (random)."""
+    from core._clean import BOUNDARY, half_edge_ends, twin_table
+    rng = np.random.default_rng(seed)
+    used = np.zeros(int(F.max()) + 1, dtype=bool)
+    border = np.flatnonzero(twin_table(F, used.shape[0]) == BOUNDARY)
+    for ends in half_edge_ends(F, border):
+        used[ends] = True
+    out = []
+    for f in rng.permutation(F.shape[0]):
+        if not used[F[f]].any():
+            used[F[f]] = True
+            out.append(f)
+            if len(out) == k:
+                break
+    return np.array(out, dtype=np.int64)
+
+
+def with_pinholes(V, F, share=0.02, seed=5):
+    """A ``share`` of the faces missing, one here and one there (no two
+    sharing a vertex, none at a border): a scan's dropouts, one-triangle holes."""
+    keep = np.ones(F.shape[0], dtype=bool)
+    keep[apart_faces(F, int(round(share * F.shape[0])), seed)] = False
+    return V.copy(), F[keep]
+
+
+def duplicated(V, F, offset=1e-7, seed=6):
+    """The mesh and a copy of it on vertices of its own, moved by ``offset``
+    of the diagonal (an object exported twice, in place)."""
+    rng = np.random.default_rng(seed)
+    d = float(np.linalg.norm(V.max(axis=0) - V.min(axis=0)))
+    return np.concatenate([V, V + offset * d * rng.normal(size=3)]), np.concatenate([F, F + len(V)])
+
+
 def with_fins(V, F, k=4, seed=4):
     """``k`` fins: a triangle on an existing edge, sticking out (the edge then
     has three faces)."""

@@ -5,8 +5,8 @@ the holes stay and the report says the cage stopped short, and why."""
 import bpy
 
 from tests.addon.conftest import make_object
-from tests.core.test_pinholes import apart_faces, without
-from tests.mesh_factory import icosphere
+from tests.core.test_pinholes import without
+from tests.mesh_factory import apart_faces, icosphere
 
 
 def test_close_pinholes_reaches_the_target_and_off_keeps_the_holes(scene):

@@ -7,8 +7,8 @@ import json
 
 import core
 from tests.cli.test_batch import run_batch
-from tests.core.test_pinholes import apart_faces, without
-from tests.mesh_factory import icosphere
+from tests.core.test_pinholes import without
+from tests.mesh_factory import apart_faces, icosphere
 
 
 def test_pinholes_are_capped_unless_kept(tmp_path):

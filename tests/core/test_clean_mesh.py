@@ -19,8 +19,9 @@ from core.clean import (BUDGET_DEBRIS_SHARE, OPEN_SHARE, WELD_DISTANCE, WIDER_WE
                         clean_mesh)
 from core.errors import InvalidArgumentError, InvalidMeshError
 from core.topology import manifold_report, topology_summary
-from tests.mesh_factory import (icosphere, klein_bottle, load_shared, mobius_strip, pinched, regular_grid,
-                                shared_mesh_names, torus, unwelded, with_debris, with_fins, with_sheets)
+from tests.mesh_factory import (duplicated, icosphere, klein_bottle, load_shared, mobius_strip,
+                                pinched, regular_grid, shared_mesh_names, torus, unwelded,
+                                with_debris, with_fins, with_pinholes, with_sheets)
 
 
 def assert_manifold(V, F):
@@ -375,7 +376,8 @@ def test_random_defects_give_a_manifold_cage_and_an_exact_identity(seed, shape, 
 
 
 # ---------------------------------------------------------------- the whole chain, real meshes
-MESSY = ["as is", "soup", "jittered soup", "bowties", "debris", "sheets"]
+MESSY = ["as is", "soup", "jittered soup", "bowties", "debris", "sheets", "pinholes",
+         "copy in place"]
 
 
 def _messy(V, F, how):
@@ -389,6 +391,10 @@ def _messy(V, F, how):
         return with_debris(V, F)
     if how == "sheets":
         return with_sheets(V, F)
+    if how == "pinholes":
+        return with_pinholes(V, F)
+    if how == "copy in place":
+        return duplicated(V, F)
     return V, F
 
 

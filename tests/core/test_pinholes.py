@@ -14,25 +14,7 @@ from core._clean import BOUNDARY, NON_MANIFOLD, half_edge_ends, twin_table
 from core.clean import clean_mesh
 from core.pinholes import PINHOLE_FACES, PINHOLE_SURFACE, cap_pinholes
 from core.topology import manifold_report
-from tests.mesh_factory import icosphere, load_shared, regular_grid
-
-
-def apart_faces(F, k, seed=0):
-    """Up to ``k`` faces of ``F`` sharing no vertex with each other nor with
-    a border of ``F`` (random)."""
-    rng = np.random.default_rng(seed)
-    used = np.zeros(int(F.max()) + 1, dtype=bool)
-    border = np.flatnonzero(twin_table(F, used.shape[0]) == BOUNDARY)
-    for ends in half_edge_ends(F, border):
-        used[ends] = True
-    out = []
-    for f in rng.permutation(F.shape[0]):
-        if not used[F[f]].any():
-            used[F[f]] = True
-            out.append(f)
-            if len(out) == k:
-                break
-    return np.array(out)
+from tests.mesh_factory import apart_faces, icosphere, load_shared, regular_grid
 
 
 def without(F, faces):
