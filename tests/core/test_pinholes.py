@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from core import simplify, topology_summary
-from core._clean import BOUNDARY, NON_MANIFOLD, half_edge_ends, twin_table
+from core._clean import BOUNDARY, NON_MANIFOLD, twin_table
 from core.clean import clean_mesh
 from core.pinholes import PINHOLE_FACES, PINHOLE_SURFACE, cap_pinholes
 from core.topology import manifold_report
