@@ -54,7 +54,7 @@ from ._parallel import blocks, run_blocks, run_each
 from .errors import InvalidArgumentError
 from .mesh import bounding_box, check_mesh, diagonal_length, face_normals
 from .topology import connected_labels, edge_keys
-from .copies import coincident_copies
+from .copies import coincident_copies, pillow_layers
 from .pages import plain_pages
 
 _WHERE = "clean_mesh"
@@ -258,7 +258,11 @@ def clean_mesh(V, F, *, weld_distance=None, min_component_area=MIN_COMPONENT_ARE
     V, F, twin, to_input, found = _make_manifold(V, F, twin, corners)
     counts.update(found)
     inner = interior_edges(twin)
+    unoriented = F
     F, twin, found = _orient(F, twin, inner)
+    # faces the orientation turned (a pillow's layer to drop is the turned one)
+    turned = (F != unoriented).any(axis=1) if found["n_flipped_faces"] else None
+    del unoriented
     counts.update(found)
     if found["n_seam_edges"]:
         # the seam's edges are open in twin: their ends get one vertex per side
@@ -277,12 +281,16 @@ def clean_mesh(V, F, *, weld_distance=None, min_component_area=MIN_COMPONENT_ARE
     if not keep.all():
         F, faces, twin, area = F[keep], faces[keep], _keep_twins(twin, keep), area[keep]
         labels = labels[keep]
-    copies, found = _copies(V, F, twin, labels, area, box, weld.distance, protected)
+        turned = None if turned is None else turned[keep]
+    copies, found = _copies(V, F, twin, labels, area, box, weld.distance, protected,
+                            pillows=counts["n_welded_vertices"] > 0, turned=turned)
     del labels
     counts.update(found)
     if copies is not None:
         keep = ~copies
-        F, faces, twin, area = F[keep], faces[keep], _keep_twins(twin, keep), area[keep]
+        # (a pillow's layers share its rim edges: the twins are found again, not renumbered)
+        F, faces, area = F[keep], faces[keep], area[keep]
+        twin = twin_table(F, V.shape[0])
     V, F, input_to_clean, clean_to_input = _compact(V, F, to_input, rep)
     return CleanResult(V, F, input_to_clean, clean_to_input, faces, twin, area,
                        CleanReport(**counts))
@@ -766,21 +774,26 @@ def _debris(area, F, inner, min_component_area, face_budget, protected):
     return keep, found, labels
 
 
-def _copies(V, F, twin, labels, area, box, distance, protected):
-    """The faces of coincident copies (:mod:`core.copies`; None when there is
-    none) and the counts for the report. ``labels``: the faces' components
-    (None: found here from ``twin``), ``box`` the input's bounding box (the
-    unit of ``distance``)."""
+def _copies(V, F, twin, labels, area, box, distance, protected, pillows, turned):
+    """The faces of coincident copies and, with ``pillows`` (only a weld
+    makes them), of the second layers of flat pillows (:mod:`core.copies`;
+    None when there is none), and the counts for the report. ``labels``: the
+    faces' components (None: found here from ``twin``), ``box`` the input's
+    bounding box (the unit of ``distance``), ``turned`` the faces the
+    orientation turned (None: none)."""
     found = {"n_copies": 0, "n_copy_faces": 0}
     if F.shape[0] == 0:
         return None, found
     if labels is None:
         h, t = interior_edges(twin)
         labels = connected_labels(F.shape[0], np.stack([h // 3, t // 3], axis=1))
-    if (labels == labels[0]).all():
-        return None, found
-    drop = coincident_copies((V - box[0]) / (diagonal_length(*box) or 1.0), F, labels, area,
-                             distance, protected)
+    Vs = (V - box[0]) / (diagonal_length(*box) or 1.0)
+    drop = None
+    if not (labels == labels[0]).all():
+        drop = coincident_copies(Vs, F, labels, area, distance, protected)
+    layers = pillow_layers(Vs, F, labels, twin, distance, turned) if pillows else None
+    if layers is not None:
+        drop = layers if drop is None else drop | layers
     if drop is None:
         return None, found
     found["n_copies"] = int(np.unique(labels[drop]).shape[0])

@@ -8,6 +8,12 @@ them at one place are two sheets touching), so each became a cage of its own
 lying on the other: the cow twice gave a 300-face cage of two coincident
 150-face shells. :func:`~.clean.clean_mesh` drops such a copy and reports it.
 
+An open surface twice in place is one component: the weld joins the two
+layers along their open borders (open-edge vertices that coincide are
+welded) into a closed, flat *pillow*. :func:`pillow_layers` finds closed
+components with next to no volume and drops the second layer: every face
+whose three vertices coincide with those of an earlier face.
+
 A component A is a *copy* of a component B when every vertex of A coincides
 with a vertex of B (shares a cell of :func:`~._clean.coincident_pairs` with
 one, directly or through other coincident vertices); of two components that
@@ -18,15 +24,19 @@ pieces, a lid on a rim) keep vertices of their own and stay.
 
 import numpy as np
 
-from ._clean import coincident_pairs
+from ._clean import BOUNDARY, coincident_pairs
 from ._groups import ragged_ranges
 from .topology import connected_labels
 
-__all__ = ["coincident_copies"]
+__all__ = ["coincident_copies", "pillow_layers"]
 
 #: two components whose areas differ by less than this share have the same area (a copy
 #: moved by a weld distance rounds its area differently): the later one goes
 _SAME_AREA = 1e-6
+
+#: a closed component whose volume is below this share of (its area)^(3/2) is flat: a
+#: pillow (a sphere's share is 0.094, a cube's 0.068; two layers 1e-7 apart, about 1e-7)
+FLAT_VOLUME = 1e-4
 
 #: components tried as the original of a copy: the largest this many (by area)
 _CONTAINERS = 64
@@ -118,3 +128,48 @@ def _shared_counts(pairs, vc, k):
     total = np.bincount(inverse, weights=cnt[mine]).astype(np.int64)
     a, b = np.divmod(pair_key, k)
     return a, b, total
+
+
+def pillow_layers(V, F, labels, twin, distance, turned=None):
+    """(m,) bool mask of the faces of the second layers of flat pillows (see
+    the module docstring), or None. ``V`` in units of the bounding-box
+    diagonal, ``labels`` the faces' components, ``twin`` their twin table,
+    ``distance`` the weld distance, ``turned`` (m,) bool the faces the
+    cleaning's orientation turned over (None: none). Of faces whose corners
+    coincide in turn, the first one not turned stays: the layer that stays
+    faces the way the input did (the orientation of a pillow, two equal
+    layers, is a coin toss: the bunny twice came back inside out)."""
+    m = F.shape[0]
+    present = np.zeros(int(labels.max()) + 1, dtype=bool)
+    present[labels] = True
+    k = int(np.count_nonzero(present))
+    lab = (np.cumsum(present) - 1)[labels]
+    closed = np.ones(k, dtype=bool)
+    closed[lab[np.flatnonzero(twin == BOUNDARY) // 3]] = False
+    if not closed.any():
+        return None
+    a, b, c = (V[F[:, i]] for i in range(3))
+    area = 0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=1)
+    volume = np.einsum("ij,ij->i", a, np.cross(b, c)) / 6.0
+    comp_area = np.bincount(lab, weights=area, minlength=k)
+    flat = closed & (np.abs(np.bincount(lab, weights=volume, minlength=k))
+                     <= FLAT_VOLUME * comp_area ** 1.5) & (comp_area > 0)
+    faces = np.flatnonzero(flat[lab])
+    if faces.size == 0:
+        return None
+    points = np.unique(F[faces])
+    pairs = coincident_pairs(V[points], distance, 1.0)
+    if pairs.shape[0] == 0:
+        return None
+    group = np.arange(V.shape[0])
+    group[points] = points[connected_labels(points.shape[0], pairs)]
+    key = np.sort(group[F[faces]], axis=1)
+    first = np.zeros(faces.shape[0], dtype=bool) if turned is None else turned[faces]
+    order = np.lexsort((first, *key.T[::-1]))
+    ks = key[order]
+    again = np.concatenate([[False], (ks[1:] == ks[:-1]).all(axis=1)])
+    if not again.any():
+        return None
+    drop = np.zeros(m, dtype=bool)
+    drop[faces[order[again]]] = True        # (stable: among equal ones, the first face stays)
+    return drop

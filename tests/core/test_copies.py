@@ -5,7 +5,8 @@ stacked twice) is dropped and reported; components that only touch stay."""
 import numpy as np
 import pytest
 
-from core import bbox_diagonal, simplify, topology_summary
+from core import bbox_diagonal, simplify, surface_distance, topology_summary
+from core._clean import twin_table
 from core.clean import clean_mesh
 from tests.mesh_factory import icosphere, load_shared
 
@@ -91,3 +92,35 @@ def test_the_cow_twice_gives_the_cows_cage():
     np.testing.assert_array_equal(two.V, one.V)
     np.testing.assert_array_equal(two.vertex_map[:V.shape[0]], one.vertex_map)
     assert (two.vertex_map[V.shape[0]:] == -1).all()
+
+
+def test_an_open_surface_twice_in_place_keeps_one_layer_facing_as_it_came():
+    """The weld joins two copies of an open surface along their borders into
+    one flat closed pillow; its second layer goes, and the layer that stays
+    faces the way the input did (the pillow's orientation is a coin toss)."""
+    V, F = icosphere(3)
+    bowl = F[V[F].mean(axis=1)[:, 2] < 0.3]
+    for flip in (False, True):
+        G = bowl[:, ::-1] if flip else bowl
+        alone = clean_mesh(V, G)
+        r = clean_mesh(*twice(V, G, 1e-7))
+        assert r.report.n_copies == 1 and r.report.n_copy_faces == G.shape[0]
+        np.testing.assert_array_equal(r.F, alone.F)
+        np.testing.assert_array_equal(r.V, alone.V)
+        np.testing.assert_array_equal(r.twin, twin_table(r.F, r.V.shape[0]))
+
+
+def test_the_bunny_twice_in_place_gives_the_bunnys_cage():
+    mesh = load_shared("stanford-bunny.obj")
+    if mesh is None:
+        pytest.skip("../shared/meshes/stanford-bunny.obj is absent")
+    V, F = mesh
+    one = simplify(V, F, target_faces=1000)
+    two = simplify(*twice(V, F, 1e-7), target_faces=1000)
+    s = topology_summary(two.F, two.V.shape[0])
+    assert (s.non_manifold_edges, s.non_manifold_vertices) == (0, 0)
+    assert two.n_boundary_loops == one.n_boundary_loops == 5 and two.n_components == 1
+    assert two.F.shape[0] <= 1000 and two.cleaning.n_copy_faces >= F.shape[0] - 4
+    d_one = surface_distance(V, F, one.V, one.F)
+    d_two = surface_distance(V, F, two.V, two.F)
+    assert d_two.mean <= 1.1 * d_one.mean and d_two.hausdorff <= 1.5 * d_one.hausdorff
