@@ -285,12 +285,13 @@ def clean_mesh(V, F, *, weld_distance=None, min_component_area=MIN_COMPONENT_ARE
     copies, found = _copies(V, F, twin, labels, area, box, weld.distance, protected,
                             pillows=counts["n_welded_vertices"] > 0, turned=turned)
     del labels
-    counts.update(found)
     if copies is not None:
-        keep = ~copies
         # (a pillow's layers share its rim edges: the twins are found again, not renumbered)
-        F, faces, area = F[keep], faces[keep], area[keep]
-        twin = twin_table(F, V.shape[0])
+        kept = ~copies
+        twin_kept = twin_table(F[kept], V.shape[0])
+        if not non_manifold_vertices(F[kept], V.shape[0], twin_kept).any():    # else: kept
+            F, faces, area, twin = F[kept], faces[kept], area[kept], twin_kept
+            counts.update(found)
     V, F, input_to_clean, clean_to_input = _compact(V, F, to_input, rep)
     return CleanResult(V, F, input_to_clean, clean_to_input, faces, twin, area,
                        CleanReport(**counts))

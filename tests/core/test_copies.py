@@ -124,3 +124,23 @@ def test_the_bunny_twice_in_place_gives_the_bunnys_cage():
     d_one = surface_distance(V, F, one.V, one.F)
     d_two = surface_distance(V, F, two.V, two.F)
     assert d_two.mean <= 1.1 * d_one.mean and d_two.hausdorff <= 1.5 * d_one.hausdorff
+
+
+@pytest.mark.parametrize("source", ["icosphere", "cow.obj"])
+def test_a_mesh_squashed_flat_is_not_a_pillow(source):
+    """Squashed to a millionth of its size across (x 1e3, z 1e-3), a closed
+    mesh has next to no volume and faces that coincide here and there, but it
+    is not two whole layers: nothing is dropped as a copy, and the cleaned mesh
+    stays vertex-manifold (dropping those faces left the cow with 163
+    non-manifold vertices)."""
+    if source == "icosphere":
+        V, F = icosphere(4)
+    else:
+        mesh = load_shared(source)
+        if mesh is None:
+            pytest.skip(f"../shared/meshes/{source} is absent")
+        V, F = mesh
+    r = clean_mesh(V * [1e3, 1.0, 1e-3], F)
+    assert r.report.n_copies == 0
+    s = topology_summary(r.F, r.V.shape[0])
+    assert (s.non_manifold_edges, s.non_manifold_vertices) == (0, 0)
