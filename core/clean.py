@@ -788,10 +788,11 @@ def _copies(V, F, twin, labels, area, box, distance, protected, pillows, turned)
     if labels is None:
         h, t = interior_edges(twin)
         labels = connected_labels(F.shape[0], np.stack([h // 3, t // 3], axis=1))
+    several = not (labels == labels[0]).all()
+    if not (several or pillows):
+        return None, found
     Vs = (V - box[0]) / (diagonal_length(*box) or 1.0)
-    drop = None
-    if not (labels == labels[0]).all():
-        drop = coincident_copies(Vs, F, labels, area, distance, protected)
+    drop = coincident_copies(Vs, F, labels, area, distance, protected) if several else None
     layers = pillow_layers(Vs, F, labels, twin, distance, turned) if pillows else None
     if layers is not None:
         drop = layers if drop is None else drop | layers

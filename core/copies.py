@@ -28,6 +28,7 @@ import numpy as np
 
 from ._clean import BOUNDARY, coincident_pairs
 from ._groups import ragged_ranges
+from .mesh import face_areas
 from .topology import connected_labels
 
 __all__ = ["coincident_copies", "pillow_layers"]
@@ -51,12 +52,9 @@ def coincident_copies(V, F, labels, area, distance, protected=None):
     are in the components ``labels`` (m,) (any integers), ``area`` (m,) the
     faces' areas, ``distance`` the weld distance; components with a
     ``protected`` (n,) vertex never go."""
-    present = np.zeros(int(labels.max()) + 1, dtype=bool)     # (no sort of m labels)
-    present[labels] = True
-    k = int(np.count_nonzero(present))
+    lab, k = _numbered(labels)
     if k < 2:
         return None
-    lab = (np.cumsum(present) - 1)[labels]
     vc = np.full(V.shape[0], -1, dtype=np.int64)
     vc[F.ravel()] = np.repeat(lab, 3)
     comp_area = np.bincount(lab, weights=area, minlength=k)
@@ -78,6 +76,14 @@ def coincident_copies(V, F, labels, area, distance, protected=None):
     if protected is not None:
         gone[np.unique(vc[np.flatnonzero(protected & (vc >= 0))])] = False
     return gone[lab] if gone.any() else None
+
+
+def _numbered(labels):
+    """The component labels ``labels`` (any integers >= 0) as 0 .. k-1, and
+    k: from a mask of the labels present, not a sort of the m labels."""
+    present = np.zeros(int(labels.max()) + 1, dtype=bool)
+    present[labels] = True
+    return (np.cumsum(present) - 1)[labels], int(np.count_nonzero(present))
 
 
 def _candidates(V, vc, comp_area, distance):
@@ -142,16 +148,13 @@ def pillow_layers(V, F, labels, twin, distance, turned=None):
     faces the way the input did (the orientation of a pillow, two equal
     layers, is a coin toss: the bunny twice came back inside out)."""
     m = F.shape[0]
-    present = np.zeros(int(labels.max()) + 1, dtype=bool)
-    present[labels] = True
-    k = int(np.count_nonzero(present))
-    lab = (np.cumsum(present) - 1)[labels]
+    lab, k = _numbered(labels)
     closed = np.ones(k, dtype=bool)
     closed[lab[np.flatnonzero(twin == BOUNDARY) // 3]] = False
     if not closed.any():
         return None
     a, b, c = (V[F[:, i]] for i in range(3))
-    area = 0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=1)
+    area = face_areas(V, F)
     volume = np.einsum("ij,ij->i", a, np.cross(b, c)) / 6.0
     comp_area = np.bincount(lab, weights=area, minlength=k)
     flat = closed & (np.abs(np.bincount(lab, weights=volume, minlength=k))

@@ -36,7 +36,7 @@ from typing import NamedTuple
 import numpy as np
 
 from ._clean import BOUNDARY, half_edge_ends, interior_edges, twin_table
-from .mesh import bounding_box, diagonal_length, face_normals
+from .mesh import bounding_box, diagonal_length, face_areas
 from .topology import connected_labels, edge_keys
 
 __all__ = ["PINHOLE_FACES", "PINHOLE_SURFACE", "MAX_PINHOLE_EDGES", "Pinholes", "cap_pinholes",
@@ -86,7 +86,7 @@ def cap_pinholes(clean, face_budget):
     twin = clean.twin if clean.twin is not None else twin_table(clean.F, n)
     lo, hi = bounding_box(clean.V)
     Vs = (clean.V - lo) / (diagonal_length(lo, hi) or 1.0)    # unit-free: no overflow at 1e200
-    area = 0.5 * np.linalg.norm(face_normals(Vs, clean.F, normalize=False), axis=1)
+    area = face_areas(Vs, clean.F)
     capped = close_pinholes(Vs, clean.F, twin, area, face_budget)
     if capped is None:
         return None
@@ -98,15 +98,14 @@ def cap_pinholes(clean, face_budget):
         area=None if clean.area is None else np.concatenate([clean.area, clean.area[capped.beside]]))
 
 
-def close_pinholes(V, F, twin, face_area, face_budget, unit=1.0):
+def close_pinholes(V, F, twin, face_area, face_budget):
     """Cap the pinholes (see the module docstring) of the oriented
     vertex-manifold mesh ``(V, F)`` with twin table ``twin``; ``face_area``
-    (m,) the faces' areas in squares of the length ``unit`` (of V's units),
-    ``face_budget`` the cage's face count. Returns :class:`Pinholes`, or
+    (m,) the faces' areas, ``face_budget`` the cage's face count. Returns :class:`Pinholes`, or
     None when there is none."""
     if not face_budget or F.shape[0] == 0:
         return None
-    loops = _border_loops(V, F, twin, unit)
+    loops = _border_loops(V, F, twin)
     if loops is None:
         return None
     longest = np.sqrt(4.0 * np.pi * PINHOLE_FACES * float(face_area.sum()) / face_budget)
@@ -127,9 +126,8 @@ def close_pinholes(V, F, twin, face_area, face_budget, unit=1.0):
     return Pinholes(F2, twin_table(F2, V.shape[0]), beside[:, 0], n_holes)
 
 
-def _border_loops(V, F, twin, unit):
-    """The :class:`_Loops` of the mesh, lengths in ``unit`` (None without
-    border half-edges). In a vertex-manifold mesh each rim vertex starts
+def _border_loops(V, F, twin):
+    """The :class:`_Loops` of the mesh (None without border half-edges). In a vertex-manifold mesh each rim vertex starts
     exactly one border half-edge, so the successor of ``u -> w`` is the one
     starting at ``w``."""
     h = np.flatnonzero(twin == BOUNDARY)
@@ -143,7 +141,7 @@ def _border_loops(V, F, twin, unit):
         return None
     pos = np.arange(h.shape[0], dtype=np.int64)
     label = connected_labels(h.shape[0], np.stack([pos, succ], axis=1))
-    length = np.linalg.norm(V[w] - V[u], axis=1) / unit
+    length = np.linalg.norm(V[w] - V[u], axis=1)
     count = np.bincount(label, minlength=h.shape[0])
     perimeter = np.bincount(label, weights=length, minlength=h.shape[0])
     return _Loops(h, u, succ, label, count, perimeter)

@@ -42,7 +42,7 @@ import numpy as np
 
 from ._groups import distinct, ragged_entries, ragged_ranges
 from .mesh import (NORMALS_BLOCK, area_normals_rows, area_normals_t, dot_columns, normal_dots,
-                   unit_rows)
+                   squared_edges, unit_rows)
 from .topology import edge_map
 
 __all__ = ["CageRings", "FaceStars", "FineFaceGroups", "Neighbours", "Repair", "away_rows",
@@ -247,11 +247,7 @@ def rest_normals(PT, FT):
     2,054, 0.4% of the diagonal apart (64 rows now, in both)."""
     out = area_normals_t(PT, FT, out=np.empty(FT.shape, np.float32))
     for s in range(0, FT.shape[1], NORMALS_BLOCK):
-        T = FT[:, s:s + NORMALS_BLOCK]
-        longest = np.zeros(T.shape[1])
-        for a, b in ((0, 1), (1, 2), (2, 0)):
-            d = np.take(PT, T[a], axis=1) - np.take(PT, T[b], axis=1)
-            np.maximum(longest, dot_columns(d, d), out=longest)
+        longest = squared_edges(PT.T, FT[:, s:s + NORMALS_BLOCK].T).max(axis=1)
         n = out[:, s:s + NORMALS_BLOCK].astype(np.float64)
         flat = dot_columns(n, n) <= FLAT_AT_REST ** 2 * longest * longest
         out[:, s + np.flatnonzero(flat)] = 0.0

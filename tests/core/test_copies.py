@@ -81,10 +81,7 @@ def test_a_protected_copy_stays():
 
 
 def test_the_cow_twice_gives_the_cows_cage():
-    mesh = load_shared("cow.obj")
-    if mesh is None:
-        pytest.skip("../shared/meshes/cow.obj is absent")
-    V, F = mesh
+    V, F = load_shared("cow.obj")
     one = simplify(V, F, target_faces=300)
     two = simplify(*twice(V, F, 1e-7), target_faces=300)
     assert two.cleaning.n_copies == 1 and two.n_components == 1
@@ -111,10 +108,7 @@ def test_an_open_surface_twice_in_place_keeps_one_layer_facing_as_it_came():
 
 
 def test_the_bunny_twice_in_place_gives_the_bunnys_cage():
-    mesh = load_shared("stanford-bunny.obj")
-    if mesh is None:
-        pytest.skip("../shared/meshes/stanford-bunny.obj is absent")
-    V, F = mesh
+    V, F = load_shared("stanford-bunny.obj")
     one = simplify(V, F, target_faces=1000)
     two = simplify(*twice(V, F, 1e-7), target_faces=1000)
     s = topology_summary(two.F, two.V.shape[0])
@@ -136,10 +130,7 @@ def test_a_mesh_squashed_flat_is_not_a_pillow(source):
     if source == "icosphere":
         V, F = icosphere(4)
     else:
-        mesh = load_shared(source)
-        if mesh is None:
-            pytest.skip(f"../shared/meshes/{source} is absent")
-        V, F = mesh
+        V, F = load_shared(source)
     r = clean_mesh(V * [1e3, 1.0, 1e-3], F)
     assert r.report.n_copies == 0
     s = topology_summary(r.F, r.V.shape[0])

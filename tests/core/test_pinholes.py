@@ -67,10 +67,7 @@ def test_cleaning_alone_caps_nothing():
 def test_holes_stay_when_the_target_is_reached_without_capping():
     """Holes are capped only when they stop the cage short: the bunny's own
     five holes are pinholes for 200 faces, yet the cage reaches 200 with them."""
-    mesh = load_shared("stanford-bunny.obj")
-    if mesh is None:
-        pytest.skip("../shared/meshes/stanford-bunny.obj is absent")
-    V, F = mesh
+    V, F = load_shared("stanford-bunny.obj")
     assert capped(V, F, 200).report.n_pinholes >= 1
     r = simplify(V, F, target_faces=200)
     assert r.stopped_because == "target" and r.F.shape[0] <= 200
@@ -199,10 +196,7 @@ def test_bunny_with_missing_triangles(target):
     """The real bunny with 1,000 scattered one-triangle holes: the cage of the
     asked size, the bunny's own five holes (0.12-0.45 of its diagonal around)
     kept, every pinhole closed."""
-    mesh = load_shared("stanford-bunny.obj")
-    if mesh is None:
-        pytest.skip("../shared/meshes/stanford-bunny.obj is absent")
-    V, F = mesh
+    V, F = load_shared("stanford-bunny.obj")
     gone = apart_faces(F, 1000, seed=7)
     r = simplify(V, without(F, gone), target_faces=target)
     assert r.stopped_because == "target" and r.F.shape[0] <= target

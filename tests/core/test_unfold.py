@@ -304,10 +304,7 @@ def test_scan_edits_that_fold_faces_mostly_fold_none():
     # cage vertices lifted by 1% of the diagonal, the edits that leave the cage
     # itself unfolded: without the repair 21 of them fold 29 dense faces; with it
     # 16 of those fold none and 9 faces are left (2026-12-03)
-    mesh = load_shared("beetle.obj")
-    if mesh is None:
-        pytest.skip("../shared/meshes/beetle.obj is absent")
-    V, F = mesh
+    V, F = load_shared("beetle.obj")
     diag = bbox_diagonal(V)
     cage = simplify(V, F, target_faces=min(2000, F.shape[0] // 4))
     creases = cage.feature_edges if len(cage.feature_edges) else None
@@ -357,10 +354,7 @@ def test_collinear_faces_repair_the_same_in_full_and_incremental_deforms(source)
         V, F = icosphere(4)
         V = V * [1.0, 0.8, 0.6]
     else:
-        mesh = load_shared(source)
-        if mesh is None:
-            pytest.skip(f"../shared/meshes/{source} is absent")
-        V, F = mesh
+        V, F = load_shared(source)
     rng = np.random.default_rng(3)
     V = V.copy()
     pick = rng.choice(F.shape[0], F.shape[0] // 30, replace=False)
