@@ -380,7 +380,7 @@ def test_random_defects_give_a_manifold_cage_and_an_exact_identity(seed, shape, 
 
 # ---------------------------------------------------------------- the whole chain, real meshes
 MESSY = ["as is", "soup", "jittered soup", "bowties", "debris", "sheets", "pinholes",
-         "copy in place"]
+         "copy in place", "holed copy in place"]
 
 
 def _messy(V, F, how):
@@ -398,6 +398,8 @@ def _messy(V, F, how):
         return with_pinholes(V, F)
     if how == "copy in place":
         return duplicated(V, F)
+    if how == "holed copy in place":
+        return duplicated(*with_pinholes(V, F))
     return V, F
 
 
