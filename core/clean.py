@@ -443,12 +443,10 @@ def _weld_map(shape, F, twin, weld_distance):
     if h.size == 0 and flat.size == 0:
         return rep
     cand = np.unique(np.concatenate([*half_edge_ends(F, h), F[flat].ravel()]))
-    pairs = cand[coincident_pairs(V[cand], tol, np.max(shape.extent))]
+    pairs = coincident_pairs(V[cand], tol, np.max(shape.extent))     # (rows of cand)
     if pairs.shape[0] == 0:
         return rep
-    used = np.unique(pairs)
-    labels = connected_labels(used.size, np.searchsorted(used, pairs))
-    rep[used] = used[labels]
+    rep[cand] = cand[connected_labels(cand.size, pairs)]
     return rep
 
 

@@ -69,11 +69,10 @@ def coincident_copies(V, F, labels, area, distance, protected=None):
     points = _candidates(V, vc, comp_area, distance)
     if points.shape[0] < 2:
         return None
-    pairs = points[coincident_pairs(V[points], distance, 1.0)]
-    cross = pairs[vc[pairs[:, 0]] != vc[pairs[:, 1]]]
-    if cross.shape[0] == 0:
+    pairs = coincident_pairs(V[points], distance, 1.0)          # (rows of points)
+    if not (vc[points[pairs[:, 0]]] != vc[points[pairs[:, 1]]]).any():
         return None
-    shared = _shared_counts(pairs, vc, k)
+    shared = _shared_counts(pairs, vc[points], k)
     nverts = np.bincount(vc[vc >= 0], minlength=k)
     a, b, count = shared
     copy = count == nverts[a]
@@ -184,11 +183,11 @@ def _candidates(V, vc, comp_area, distance):
 def _shared_counts(pairs, vc, k):
     """Per ordered pair of components (A, B) sharing coincident vertices: how
     many vertices of A coincide with some vertex of B, as arrays (a, b, count).
-    Coincident vertices are grouped (connected through ``pairs``); each group
-    counts its vertices of A towards every other component it holds."""
-    used = np.unique(pairs)
-    group = connected_labels(used.shape[0], np.searchsorted(used, pairs))
-    key, cnt = np.unique(group * np.int64(k) + vc[used], return_counts=True)
+    Coincident vertices (``pairs`` of rows of ``vc``, the points' components)
+    are grouped; each group counts its vertices of A towards every other
+    component it holds."""
+    group = connected_labels(vc.shape[0], pairs)
+    key, cnt = np.unique(group * np.int64(k) + vc, return_counts=True)
     g, c = np.divmod(key, k)
     # each (group, component) entry against every other entry of its group
     start = np.flatnonzero(np.concatenate([[True], g[1:] != g[:-1]]))
