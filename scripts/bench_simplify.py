@@ -28,7 +28,8 @@ fixed cost per pass that small meshes feel, and a 4-face target against a
 
 The messy section runs every shared mesh as real scans arrive (an exact soup,
 a soup jittered by 1e-7 of the diagonal, 300 specks of debris, 3 pinched
-bow-tie vertices, double-sided sheets; built by ``tests/mesh_factory``) at
+bow-tie vertices, double-sided sheets, 2% of the faces missing, the mesh twice
+in place, whole and with 2% of its faces missing; built by ``tests/mesh_factory``) at
 1,000 faces (10% for the small ones): ours and Decimate on the messy mesh,
 both measured against the clean mesh (the scan alone), beside our cage of
 the clean mesh; whether each result is a manifold, and what our cleaning did.
@@ -206,7 +207,8 @@ def run_case(name, V, F, target, use_blender=True, repeat=1):
     return row
 
 
-MESSY = ("soup", "jittered soup", "debris", "bowties", "sheets", "pinholes", "copy in place")
+MESSY = ("soup", "jittered soup", "debris", "bowties", "sheets", "pinholes", "copy in place",
+         "holed copy in place")
 
 #: the small-mesh section's meshes (each to 2,000, 200 and 4 faces)
 SMALL = ("flat grid 100x100", "cube 40x40 per side", "fandisk", "stanford-bunny")
@@ -258,7 +260,8 @@ def messy_variant(V, F, how):
     return {"soup": lambda: mf.unwelded(V, F), "jittered soup": lambda: mf.unwelded(V, F, 1e-7),
             "debris": lambda: mf.with_debris(V, F), "bowties": lambda: mf.pinched(V, F),
             "sheets": lambda: mf.with_sheets(V, F), "pinholes": lambda: mf.with_pinholes(V, F),
-            "copy in place": lambda: mf.duplicated(V, F)}[how]()
+            "copy in place": lambda: mf.duplicated(V, F),
+            "holed copy in place": lambda: mf.duplicated(*mf.with_pinholes(V, F))}[how]()
 
 
 def run_messy(name, V, F, target, use_blender=True):
