@@ -40,7 +40,7 @@ from .mesh import bounding_box, diagonal_length, face_areas
 from .topology import connected_labels, edge_keys
 
 __all__ = ["PINHOLE_FACES", "PINHOLE_SURFACE", "MAX_PINHOLE_EDGES", "Pinholes", "cap_pinholes",
-           "close_pinholes"]
+           "close_pinholes", "face_floor"]
 
 #: a disk of a pinhole's perimeter has at most this many times the area of a mean cage face
 #: (a perimeter of about 2.3 mean cage edges)
@@ -124,6 +124,34 @@ def close_pinholes(V, F, twin, face_area, face_budget):
     F2 = np.concatenate([F, caps])
     n_holes = int(np.unique(beside[:, 1]).shape[0])
     return Pinholes(F2, twin_table(F2, V.shape[0]), beside[:, 0], n_holes)
+
+
+def face_floor(V, F, twin):
+    """The fewest faces a cage of the oriented vertex-manifold mesh ``(V, F)``
+    (twin table ``twin``) can have and keep its topology, by
+    Euler's formula: a component with Euler characteristic chi, b border loops
+    and B border edges has F = 2V - B - 2 chi faces, and V >= B >= 3b, so at
+    least 3b - 2 chi (a sphere with h holes: 5h - 4); a closed one at least 4.
+    Summed over the components (see ``Tuning.pinhole_floor_share``)."""
+    n, m = V.shape[0], F.shape[0]
+    if m == 0:
+        return 0
+    ih, it = interior_edges(twin)
+    comp = connected_labels(m, np.stack([ih // 3, it // 3], axis=1))
+    faces = np.bincount(comp, minlength=m)
+    border = np.flatnonzero(twin == BOUNDARY)
+    edges = np.bincount(comp[border // 3], minlength=m)             # border edges per component
+    vc = np.full(n, -1, dtype=np.int64)
+    vc[F.ravel()] = np.repeat(comp, 3)
+    verts = np.bincount(vc[vc >= 0], minlength=m)
+    loops = np.zeros(m, dtype=np.int64)
+    found = _border_loops(V, F, twin)
+    if found is not None:
+        heads = found.h[found.label == np.arange(found.h.shape[0])]
+        loops = np.bincount(comp[heads // 3], minlength=m)
+    chi = verts - (3 * faces + edges) // 2 + faces
+    floor = np.where(loops > 0, 3 * loops - 2 * chi, 4)
+    return int(floor[faces > 0].sum())
 
 
 def _border_loops(V, F, twin):

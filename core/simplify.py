@@ -63,7 +63,7 @@ from .mesh import bounding_box, check_mesh, diagonal_length, face_normals
 from .metrics import surface_distance
 from .topology import boundary_loops_count, collapsible_edges, face_components
 from .quadrics import accumulate_coefficients, vertex_face_quadrics, edge_constraint_quadrics
-from .pinholes import cap_pinholes
+from .pinholes import cap_pinholes, face_floor
 from .tuning import TUNING, Tuning
 from .pages import plain_pages
 
@@ -713,8 +713,9 @@ def simplify(V, F, *, target_faces=None, ratio=None, max_error=None, preserve_bo
     elif max_error is None:
         capped = cap_pinholes(clean, target) if close_pinholes and target is not None \
             and opts["preserve_topology"] else None
-        if capped is not None and 5 * capped.report.n_pinholes - 4 > target:
-            clean, capped = capped, None        # kept, they could not reach it: see below
+        if capped is not None and \
+                face_floor(clean.V, clean.F, clean.twin) > opts["tuning"].pinhole_floor_share * target:
+            clean, capped = capped, None        # kept, the holes could not reach it: see below
         cage, clean = _collapsed(clean, target, opts, progress)
         if capped is not None:
             cage, clean = _through_pinholes(cage, clean, capped, target, progress, opts)
@@ -744,11 +745,13 @@ def _through_pinholes(cage, clean, capped, target, progress, opts):
     :func:`~.pinholes.cap_pinholes`) capped, ``progress`` going on from where
     the first run left it; the closer of the two cages to the target wins.
     Returns the cage and the cleaned input it was made from. (When the
-    pinholes alone rule the target out, :func:`simplify` starts from
-    ``capped``: a surface of genus 0 with h holes of three edges or more has
-    at least 5h - 4 faces, by Euler's formula F = 2V - B - 4 + 2h with V >= B
-    >= 3h border vertices; the bunny with 5% of its faces missing has 2,491
-    pinholes for a 50-face target.)"""
+    topology rules the target out, :func:`simplify` starts from ``capped``:
+    :func:`~.pinholes.face_floor`, the fewest faces Euler's formula allows a
+    cage of ``clean`` with all its holes and handles, is above
+    ``Tuning.pinhole_floor_share`` of the target; the
+    bunny with 5% of its faces missing has 2,491 pinholes for a 50-face
+    target. The second run is then left for targets just under that floor,
+    where the collapse may still stop short.)"""
     if cage.F.shape[0] <= target or cage.stopped not in ("no_valid_collapse", "topology_floor"):
         return cage, clean
     done = (clean.F.shape[0] - cage.F.shape[0]) / max(clean.F.shape[0] - target, 1)

@@ -6,15 +6,18 @@ floor (the bunny with 5% of its faces missing: 12,578 faces when 50 were
 asked); holes as large as the cage can show, and any hole of a cage that
 reaches its target without capping, are kept."""
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
 from core import simplify, topology_summary
 from core._clean import BOUNDARY, NON_MANIFOLD, twin_table
 from core.clean import clean_mesh
-from core.pinholes import PINHOLE_FACES, PINHOLE_SURFACE, cap_pinholes
+from core.pinholes import PINHOLE_FACES, PINHOLE_SURFACE, cap_pinholes, face_floor
 from core.topology import manifold_report
-from tests.mesh_factory import apart_faces, icosphere, load_shared, regular_grid
+from core.tuning import TUNING
+from tests.mesh_factory import apart_faces, icosphere, load_shared, regular_grid, torus, with_pinholes
 
 
 def without(F, faces):
@@ -207,20 +210,28 @@ def test_bunny_with_missing_triangles(target):
 
 
 def wide_and_small_hole():
-    """A sphere with a wide hole and a small one: too few pinholes to rule a
-    4-face target out (5h - 4 = 1 face), so the first run goes on until the
-    two holes stop it (at least 6 faces), then the small one is capped."""
+    """A sphere with a wide hole and a small one: at least 6 faces (Euler),
+    so a 4-face target caps the small one before any run; with the floor test
+    off (``pinhole_floor_share`` inf) the first run goes on until the two
+    holes stop it, then the small one is capped."""
     V, F = icosphere(3)
     C = V[F].mean(axis=1)
     return V, F[(C[:, 2] < 0.7) & ~((C[:, 0] > 0.93) & (np.abs(C[:, 2]) < 0.2))]
 
 
+#: the floor test off: every capping waits for a first run that stops short
+TWO_RUNS = replace(TUNING, pinhole_floor_share=np.inf)
+
+
 def test_progress_goes_on_through_the_second_run_and_cancel_there_changes_nothing():
     V, Fh = wide_and_small_hole()
+    up_front = simplify(V, Fh, target_faces=4)
+    assert up_front.cleaning.n_pinholes == 1 and "stopped short (pinholes)" not in up_front.seconds
     seen = []
-    r = simplify(V, Fh, target_faces=4, progress=lambda f: seen.append(f) or True)
+    r = simplify(V, Fh, target_faces=4, tuning=TWO_RUNS, progress=lambda f: seen.append(f) or True)
     assert r.cleaning.n_pinholes == 1 and r.F.shape[0] <= 4 and r.n_boundary_loops == 1
     assert "stopped short (pinholes)" in r.seconds
+    np.testing.assert_array_equal(r.F, up_front.F)          # the same cage, a run later
     assert np.all(np.diff(seen) >= -1e-12) and 0.0 <= seen[0] and seen[-1] <= 1.0
     first_calls = []
     first = simplify(V, Fh, target_faces=4, close_pinholes=False,
@@ -232,7 +243,7 @@ def test_progress_goes_on_through_the_second_run_and_cancel_there_changes_nothin
     def late_cancel(f):
         calls.append(f)
         return len(calls) <= len(first_calls) + 1      # stop at the second run's second call
-    c = simplify(V, Fh, target_faces=4, progress=late_cancel)
+    c = simplify(V, Fh, target_faces=4, tuning=TWO_RUNS, progress=late_cancel)
     assert c.stopped_because == "cancelled"
     assert c.F.shape[0] == clean_mesh(V, Fh).F.shape[0]
     assert c.cleaning.n_pinholes == 0 and c.n_boundary_loops == 2
@@ -272,3 +283,40 @@ def test_a_symmetric_run_caps_the_wholes_pinholes_never_its_seam():
     assert (mirror_partners(r.V, "X") >= 0).all()
     s = topology_summary(r.F, r.V.shape[0])
     assert s.non_manifold_edges == 0 and s.non_manifold_vertices == 0
+
+
+@pytest.mark.parametrize("h", [0, 1, 2, 7, 40])
+def test_the_face_floor_is_eulers(h):
+    """A sphere with h holes: at least 5h - 4 faces (4 when closed); a torus
+    with h holes 5h; a disk 1; components add up."""
+    def holed(F):
+        return without(F, apart_faces(F, h, seed=1)) if h else F
+    V, F = icosphere(3)
+    clean = clean_mesh(V, holed(F))
+    assert face_floor(clean.V, clean.F, clean.twin) == (5 * h - 4 if h else 4)
+    V, F = torus(24, 12)
+    clean = clean_mesh(V, holed(F))
+    assert face_floor(clean.V, clean.F, clean.twin) == (5 * h if h else 4)
+    V, F = regular_grid(6, 6)
+    assert face_floor(V, F, twin_table(F, V.shape[0])) == 1
+    Vs, Fs = icosphere(2)
+    V2, F2 = np.concatenate([V, Vs + 5.0]), np.concatenate([F, Fs + V.shape[0]])
+    assert face_floor(V2, F2, twin_table(F2, V2.shape[0])) == 1 + 4
+
+
+def test_a_target_near_the_holes_floor_caps_them_in_one_run():
+    """The cow with 2% of its faces missing (116 pinholes: at least 576 faces)
+    asked for 580: the collapse would stop short (at 600), so the pinholes are
+    capped before any run (it took a second, whole run)."""
+    V, F = with_pinholes(*load_shared("cow.obj"))
+    clean = clean_mesh(V, F)
+    floor = face_floor(clean.V, clean.F, clean.twin)
+    assert floor == 5 * 116 - 4
+    r = simplify(V, F, target_faces=580)
+    assert r.F.shape[0] <= 580 and r.cleaning.n_pinholes > 100
+    assert "stopped short (pinholes)" not in r.seconds
+    two = simplify(V, F, target_faces=580, tuning=TWO_RUNS)
+    assert "stopped short (pinholes)" in two.seconds and two.F.shape[0] <= 580
+    # far above the floor the holes are kept (a cage that reaches its target keeps them)
+    kept = simplify(V, F, target_faces=int(floor / 0.9))
+    assert kept.cleaning.n_pinholes == 0 and kept.n_boundary_loops == 116
