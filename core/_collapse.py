@@ -38,7 +38,7 @@ One pass, as stages (each a function below)::
 
 import threading
 import time
-from dataclasses import dataclass, field, fields
+from dataclasses import dataclass, field, fields, replace
 from typing import NamedTuple
 
 import numpy as np
@@ -87,6 +87,7 @@ class State:
     VT: np.ndarray = _array("vertex_t")          #: (3,n) copy of V for column gathers
     Q: np.ndarray = _array("vertex")             #: (n,11) quadrics, one row of coefficients per vertex
     NrefT: np.ndarray = _array("vertex_t")       #: (3,n) summed area normals of the input faces merged in
+    Aref: np.ndarray = _array("vertex")          #: ... and the sum of their lengths (areas x 2)
     wit: np.ndarray = _array("vertex")           #: witness: merged input point farthest from the surface
     locked: np.ndarray = _array("vertex")
     moved: np.ndarray = _array("vertex")         #: position changed (else the input's exact one)
@@ -119,11 +120,13 @@ class State:
     seconds: dict = None                         #: time spent per engine stage
 
     def __init__(self, V, F, twin, Q, locked, feat, Nref, forig=None):
+        """``Nref`` (n,4): per vertex the summed area normals of its faces and their lengths."""
         n, m = V.shape[0], F.shape[0]
         self.V = V.copy()                          # (the input V stays: relocation samples it)
         self.VT = np.ascontiguousarray(V.T)
         self.Q = np.ascontiguousarray(Q)
-        self.NrefT, self.wit, self.locked = np.ascontiguousarray(Nref.T), V.copy(), locked
+        self.NrefT, self.wit, self.locked = np.ascontiguousarray(Nref.T[:3]), V.copy(), locked
+        self.Aref = np.ascontiguousarray(Nref.T[3])
         self.moved = np.zeros(n, dtype=bool)
         self.orig = np.arange(n, dtype=np.int64)
         self.vver = np.full(n, -1, dtype=np.int64)
@@ -932,7 +935,15 @@ def _turned_faces(st, s, g, A, B, tun):
         AB = _take(Nr, A, axis=1) + _take(Nr, B, axis=1)
         ref = ref0 - _take(Nr, moved_v, axis=1) + _take(AB, s.mk, axis=1)
         lr = np.sqrt(dot_columns(ref, ref))
-        flip |= dot_columns(ref, g.N1) < tun.ref_cos * lr * g.l1
+        against = dot_columns(ref, g.N1) < tun.ref_cos * lr * g.l1
+        if tun.ref_agree > 0.0:
+            # where the input under the face agrees on a side: on a thin part (a
+            # plate's rim, its two sides merged) the normals cancel and say nothing
+            Ar = st.Aref
+            area = _take(Ar, g.FT.ravel()).reshape(3, -1).sum(axis=0) - _take(Ar, moved_v) \
+                + _take(_take(Ar, A) + _take(Ar, B), s.mk)
+            against &= lr >= tun.ref_agree * area
+        flip |= against
         flip &= dot_columns(ref0, g.N0) >= 0
     return flip
 
@@ -1097,7 +1108,9 @@ def _run(st, target, max_err_n, preserve_boundary, progress, m0, tun, dihedral_c
         ne = int(np.count_nonzero(np.isfinite(e.cost)))
         clock.lap("candidates")
         if ne == 0:
-            return "no_valid_collapse", passes
+            if (tun := _unstuck(st, tun)) is None:
+                return "no_valid_collapse", passes
+            continue
         bold = bold_on and target is not None and m > tun.bold_above * max(target, tun.bold_min_target)
         P = _pool_size(ne, m, target, tun, bold, grow)
         _recost_cheapest(st, e, P, max_err_n, preserve_boundary, tun)
@@ -1112,7 +1125,9 @@ def _run(st, target, max_err_n, preserve_boundary, progress, m0, tun, dihedral_c
         if ci.size == 0:
             if e.stale.any():
                 continue
-            return "no_valid_collapse", passes
+            if (tun := _unstuck(st, tun)) is None:
+                return "no_valid_collapse", passes
+            continue
         pool = _choose_pool(st, e, ci, P, tun)
         clock.lap("pool")
         # the Hausdorff penalty matters once the cage is coarse: skip it before
@@ -1130,6 +1145,17 @@ def _run(st, target, max_err_n, preserve_boundary, progress, m0, tun, dihedral_c
         _apply_accepted(st, pool, _trim_to_target(pool, acc, m, target))
         clock.lap("apply")
     return "no_valid_collapse", passes
+
+
+def _unstuck(st, tun):
+    """When no valid collapse is left short of the target: the tuning with
+    the reference-normal test held only where the input agrees on a side
+    (``Tuning.ref_agree_stuck``), every remembered refusal forgotten so each
+    edge is checked again; None when that is already so (the run stops)."""
+    if tun.ref_agree >= tun.ref_agree_stuck or tun.ref_cos <= -1.0:
+        return None
+    st.c_blk[:] = -1.0
+    return replace(tun, ref_agree=tun.ref_agree_stuck)
 
 
 class _Clock:
@@ -1178,6 +1204,7 @@ def _apply(st, A, B, XT, rows):
     st.moved[A] |= (XT[0] != VA[0]) | (XT[1] != VA[1]) | (XT[2] != VA[2])
     st.Q[A] = _take(st.Q, A, axis=0) + _take(st.Q, B, axis=0)   # (A are distinct)
     st.NrefT[:, A] = _take(st.NrefT, A, axis=1) + _take(st.NrefT, B, axis=1)
+    st.Aref[A] = _take(st.Aref, A) + _take(st.Aref, B)
     st.V[A] = XT.T
     st.VT[:, A] = XT
     st.fresh[A] = True

@@ -59,7 +59,7 @@ from ._relax import close_smallest_hole, close_triangular_holes, drop_stuck_comp
 from ._relocate import relocate, segment_triangles
 from .clean import MIN_COMPONENT_AREA, CleanReport, clean_mesh
 from .errors import InvalidArgumentError, InvalidMeshError, MeshAdjustError
-from .mesh import bounding_box, check_mesh, diagonal_length, face_normals
+from .mesh import bounding_box, check_mesh, diagonal_length, dot_columns, face_normals
 from .metrics import surface_distance
 from .topology import boundary_loops_count, collapsible_edges, face_components
 from .quadrics import accumulate_coefficients, vertex_face_quadrics, edge_constraint_quadrics
@@ -220,8 +220,8 @@ def check_arguments(n, target_faces, ratio, max_error, feature_angle_deg, vertex
 
 def _initial_quadrics(V, F, twin, preserve_boundary, feature_angle_deg, tun, scratch=None):
     """Vertex quadrics (n,11) with boundary and crease planes, the crease
-    flags per half-edge, and the summed face normals around each vertex
-    (:func:`_normal_sums` of ``face_normals(V, F, normalize=False)``). The
+    flags per half-edge, and the summed face normals around each vertex and
+    their lengths (:func:`_normal_sums` of ``face_normals(V, F, normalize=False)``). The
     quadrics are the transposed view of the (11,n) C-contiguous array they
     are summed in (``State`` makes its vertex-major copy). ``scratch``: a
     (3m,) float64 buffer to work in, or None."""
@@ -291,21 +291,21 @@ def _sharp_edges(Nf, F, twin, cos_max):
 
 
 def _normal_sums(F, N, n, scratch=None):
-    """Sum of the face normals ``N`` (m,3) around each vertex, (n,3) float64
-    (each bin adds its faces in face order), the transposed view of a (3,n)
-    C-contiguous array (``State`` keeps that layout); ``scratch``: a (3m,)
-    float64 buffer to work in, or None."""
-    out = np.zeros((3, n))
+    """Sum of the face normals ``N`` (m,3) around each vertex and of their
+    lengths, (n,4) float64 (each bin adds its faces in face order), the
+    transposed view of a (4,n) C-contiguous array (``State`` keeps that
+    layout); ``scratch``: a (3m,) float64 buffer to work in, or None."""
+    out = np.zeros((4, n))
     if F.shape[0] == 0:
         return out.T
     Fr = F.ravel()
     w = np.empty(Fr.size) if scratch is None else scratch
     w3 = w.reshape(-1, 3)
     spans = blocks(F.shape[0], _SET_UP_BLOCK)
-    for k in range(3):
+    for k in range(4):
 
         def fill(a, b):             # np.repeat(N[:, k], 3) without a new array, block by block
-            w3[a:b] = N[a:b, k, None]
+            w3[a:b] = N[a:b, k, None] if k < 3 else np.sqrt(dot_columns(N[a:b].T, N[a:b].T))[:, None]
 
         run_blocks(fill, spans)
         out[k] = np.bincount(Fr, weights=w, minlength=n)

@@ -22,9 +22,9 @@ def engine_state(V, F):
     F = np.asarray(F, dtype=np.int64).copy()
     n = V.shape[0]
     QT, _, N = vertex_face_quadrics(V, F, n, TUNING.area_power)
-    Nref = np.zeros((n, 3))
+    Nref = np.zeros((n, 4))        # the summed area normals and their lengths
     for c in range(3):
-        np.add.at(Nref, F[:, c], N)
+        np.add.at(Nref, F[:, c], np.column_stack([N, np.linalg.norm(N, axis=1)]))
     twin = twin_table(F, n)
     return engine.State(V, F, twin, QT.T, np.zeros(n, dtype=bool), np.zeros(twin.size, dtype=bool), Nref)
 
