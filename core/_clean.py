@@ -463,8 +463,8 @@ def coincident_pairs(P, distance, extent):
     the diagonal: two points closer than ``distance`` along every axis share
     a cell in at least one grid (each axis can separate them in at most one),
     and no pair farther than ``4 distance`` per axis does. Within a cell the
-    pairs chain the points of each cell (join them with
-    :func:`~.topology.connected_labels`). ``extent``: the largest coordinate
+    pairs chain its points in some order (join them with
+    :func:`~.topology.connected_labels`: the groups are the same in any). ``extent``: the largest coordinate
     range of P; with ``distance`` 0, or a grid too fine for packed keys,
     exactly equal points."""
     P = P + 0.0                                    # -0.0 and 0.0 are the same place
