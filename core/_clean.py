@@ -464,17 +464,55 @@ def coincident_pairs(P, distance, extent):
     a cell in at least one grid (each axis can separate them in at most one),
     and no pair farther than ``4 distance`` per axis does. Within a cell the
     pairs chain its points in some order (join them with
-    :func:`~.topology.connected_labels`: the groups are the same in any). ``extent``: the largest coordinate
-    range of P; with ``distance`` 0, or a grid too fine for packed keys,
-    exactly equal points."""
+    :func:`~.topology.connected_labels`: the groups are the same in any);
+    exact copies of a point pair with one of them and skip the grids.
+    ``extent``: the largest coordinate range of P; with ``distance`` 0, or a
+    grid too fine for packed keys, exactly equal points."""
     P = P + 0.0                                    # -0.0 and 0.0 are the same place
+    first = _first_of_equal(P)
+    dup = np.flatnonzero(first != np.arange(P.shape[0]))
+    found = [np.stack([dup, first[dup]], axis=1)]  # exact copies: to the first, no grid
+    if dup.size:
+        rows = np.flatnonzero(first == np.arange(P.shape[0]))
+        P = P[rows]
     cell = 4.0 * distance
     if cell > 0 and float(extent) / cell + 2 < 2 ** GRID_BITS:
         Pc = P / cell
-        found = [_same_cell_pairs(np.floor(Pc + k / 4.0).astype(np.int64)) for k in range(4)]
+        grids = [_same_cell_pairs(np.floor(Pc + k / 4.0).astype(np.int64)) for k in range(4)]
     else:
-        found = [_same_cell_pairs(None, P)]
+        grids = [_same_cell_pairs(None, P)]
+    found += [rows[g] for g in grids] if dup.size else grids
     return np.concatenate(found)
+
+
+def _first_of_equal(P):
+    """For every row of ``P`` (k,3) a row exactly equal to it, the same for
+    all of them (the first of their hash's run; itself when it has no equal):
+    one sort of a hash of the coordinates' bits, equal hashes checked
+    coordinate by coordinate (a collision only leaves rows apart, for the
+    grids to pair). A triangle soup as an STL file stores it, each vertex
+    once per face, goes to the grids with a sixth of its rows."""
+    k = P.shape[0]
+    first = np.arange(k, dtype=np.int64)
+    if k < 2:
+        return first
+    bits = np.ascontiguousarray(P).view(np.uint64)   # (equal bits: equal points, -0.0 gone)
+    h = bits[:, 0] * np.uint64(0x9E3779B97F4A7C15)
+    h ^= bits[:, 1] * np.uint64(0xC2B2AE3D27D4EB4F)
+    h ^= bits[:, 2] * np.uint64(0x165667B19E3779F9)
+    hs = np.sort(h)                                  # (values only: a fast sort)
+    if not (hs[1:] == hs[:-1]).any():
+        return first                                 # no two alike (a jittered soup: +7%)
+    order = np.argsort(h)
+    hs = h[order]
+    head = np.concatenate([[True], hs[1:] != hs[:-1]])
+    at = np.flatnonzero(head)[np.cumsum(head) - 1]   # sorted position of each run's first
+    same = np.ones(k, dtype=bool)
+    for c in range(3):
+        col = bits[:, c][order]
+        same &= col == col[at]
+    first[order[same]] = order[at[same]]
+    return first
 
 
 def _same_cell_pairs(Q, P=None):

@@ -6,7 +6,7 @@ table and the corner union-find fan count the simplifier used before."""
 import numpy as np
 import pytest
 
-from core._clean import (BOUNDARY, NON_MANIFOLD, _MAX_WALK, half_edge_ends, non_manifold_vertices,
+from core._clean import (BOUNDARY, NON_MANIFOLD, _MAX_WALK, coincident_pairs, half_edge_ends, non_manifold_vertices,
                          spatial_order, twin_table)
 from core.clean import clean_mesh
 from core.topology import connected_labels
@@ -328,3 +328,30 @@ def test_non_manifold_vertices_with_the_callers_corner_counts(make):
     corners = np.bincount(F.ravel(), minlength=n)
     np.testing.assert_array_equal(non_manifold_vertices(F, n, twin, corners=corners),
                                   ref_non_manifold_vertices(F, n, twin))
+
+
+@pytest.mark.parametrize("distance", [0.0, 1e-6, 1e-3])
+def test_coincident_pairs_group_exact_copies_and_near_points_as_brute_force(distance):
+    """Exact copies (a soup as STL stores it: each point up to 6 times, -0.0 and
+    0.0 alike) pair with one of them before the grids, which see one of each:
+    the groups are those of every pair within ``distance`` per axis (and none
+    beyond 4 ``distance``)."""
+    rng = np.random.default_rng(3)
+    base = rng.random((300, 3))
+    base[:5, 0] = 0.0
+    P = base[rng.integers(0, 300, 1500)]
+    P[:5] = base[:5]
+    P[5:10] = base[:5] * [-1.0, 1.0, 1.0]                  # -0.0: the same place as 0.0
+    P[rng.random(1500) < 0.2] += rng.normal(scale=0.3 * distance, size=3) if distance else 0.0
+    pairs = coincident_pairs(P, distance, 1.0)
+    got = connected_labels(P.shape[0], pairs)
+    D = np.abs(P[:, None, :] - P[None, :, :]).max(axis=2)
+    near = np.argwhere(np.triu(D <= distance, 1))
+    want = connected_labels(P.shape[0], near)
+    # every pair within distance is joined ...
+    assert (got[near[:, 0]] == got[near[:, 1]]).all()
+    # ... and no pair farther than 4 distance per axis is a direct pair
+    assert (D[pairs[:, 0], pairs[:, 1]] <= 4 * distance * (1 + 1e-9) + 1e-300).all()
+    assert (got[:5] == got[5:10]).all()
+    if distance == 0.0:
+        np.testing.assert_array_equal(got, want)
