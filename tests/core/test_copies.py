@@ -117,7 +117,7 @@ def test_every_shared_mesh_twice_in_place_gives_its_own_cage(name, holed):
     with its dropouts): before the weld looks at the holes' rims, the second
     copy goes, so it is never stitched to the first (the bunny's cage stopped
     at 20,711 faces of 300 that way; the beetle's, with its own non-manifold
-    edges, came out 2.3 times the asked size)."""
+    edges, was 2.3 times its own cage's distance from the input)."""
     V, F = load_shared(name)
     if holed:
         V, F = with_pinholes(V, F)
