@@ -470,10 +470,11 @@ def coincident_pairs(P, distance, extent):
     grid too fine for packed keys, exactly equal points."""
     P = P + 0.0                                    # -0.0 and 0.0 are the same place
     first = _first_of_equal(P)
-    dup = np.flatnonzero(first != np.arange(P.shape[0]))
+    own = first == np.arange(P.shape[0])
+    dup = np.flatnonzero(~own)
     found = [np.stack([dup, first[dup]], axis=1)]  # exact copies: to the first, no grid
     if dup.size:
-        rows = np.flatnonzero(first == np.arange(P.shape[0]))
+        rows = np.flatnonzero(own)
         P = P[rows]
     cell = 4.0 * distance
     if cell > 0 and float(extent) / cell + 2 < 2 ** GRID_BITS:

@@ -17,7 +17,7 @@ import numpy as np
 
 from ._clean import BOUNDARY, edge_representatives, face_keys, half_edge_ends
 from ._collapse import append_faces, compact, survivors
-from .topology import connected_labels, edge_keys, face_components
+from .topology import connected_labels, edge_keys, face_components, vertex_labels
 
 
 def _border(st):
@@ -176,8 +176,7 @@ def drop_stuck_components(st, need, max_size):
         return 0
     comp, k = face_components(F, n)
     size = np.bincount(comp, minlength=k)
-    vcomp = np.full(n, -1, dtype=np.int64)
-    vcomp[F.ravel()] = np.repeat(comp, 3)
+    vcomp = vertex_labels(F, comp, n)
     used = vcomp >= 0
     lo = np.full((k, 3), np.inf)
     hi = np.full((k, 3), -np.inf)

@@ -24,7 +24,9 @@ edge- and vertex-manifold triangle mesh that :func:`~.simplify.simplify`,
     drop   debris: components whose area is below min_component_area of the
            largest component's
     drop   coincident copies: components whose vertices all coincide (within
-           weld_distance) with vertices of another one (:mod:`core.copies`)
+           weld_distance) with vertices of another one, and, when the weld
+           leaves non-manifold edges, pieces lying on another face for face
+           before it (:mod:`core.copies`)
     drop   unreferenced vertices
 
 Nothing is averaged or moved: every output vertex sits exactly on an input
@@ -53,8 +55,8 @@ from ._groups import ragged_entries
 from ._parallel import blocks, run_blocks, run_each
 from .errors import InvalidArgumentError
 from .mesh import bounding_box, check_mesh, diagonal_length, face_normals
-from .topology import connected_labels, edge_keys
-from .copies import coincident_copies, pieces, pillow_layers, stacked_copies
+from .topology import connected_labels, edge_keys, face_components
+from .copies import coincident_copies, pillow_layers, stacked_copies
 from .pages import plain_pages
 
 _WHERE = "clean_mesh"
@@ -357,7 +359,7 @@ def _stacked(shape, F, weld, protected):
     drop = stacked_copies(shape.V, F, shape.area, weld.distance, protected)
     if drop is None:
         return None, found
-    found["n_copies"] = pieces(F[drop], shape.V.shape[0])[1]
+    found["n_copies"] = face_components(F[drop], shape.V.shape[0])[1]
     found["n_copy_faces"] = int(np.count_nonzero(drop))
     return drop, found
 

@@ -37,9 +37,9 @@ import numpy as np
 from ._clean import BOUNDARY, coincident_pairs
 from ._groups import ragged_ranges
 from .mesh import face_areas
-from .topology import connected_labels
+from .topology import connected_labels, face_components, numbered, vertex_labels
 
-__all__ = ["coincident_copies", "pieces", "pillow_layers", "stacked_copies"]
+__all__ = ["coincident_copies", "pillow_layers", "stacked_copies"]
 
 #: two components whose areas differ by less than this share have the same area (a copy
 #: moved by a weld distance rounds its area differently): the later one goes
@@ -60,11 +60,10 @@ def coincident_copies(V, F, labels, area, distance, protected=None):
     are in the components ``labels`` (m,) (any integers), ``area`` (m,) the
     faces' areas, ``distance`` the weld distance; components with a
     ``protected`` (n,) vertex never go."""
-    lab, k = _numbered(labels)
+    lab, k = numbered(labels)
     if k < 2:
         return None
-    vc = np.full(V.shape[0], -1, dtype=np.int64)
-    vc[F.ravel()] = np.repeat(lab, 3)
+    vc = vertex_labels(F, lab, V.shape[0])
     comp_area = np.bincount(lab, weights=area, minlength=k)
     points = _candidates(V, vc, comp_area, distance)
     if points.shape[0] < 2:
@@ -99,11 +98,10 @@ def stacked_copies(V, F, area, distance, protected=None):
     n, m = V.shape[0], F.shape[0]
     if m < 2:
         return None
-    lab, k = pieces(F, n)
+    lab, k = face_components(F, n)
     if k < 2 or k > m // 2:
         return None
-    vc = np.full(n, -1, dtype=np.int64)
-    vc[F.ravel()] = np.repeat(lab, 3)
+    vc = vertex_labels(F, lab, n)
     comp_area = np.bincount(lab, weights=area, minlength=k)
     points = _candidates(V, vc, comp_area, distance)
     if points.shape[0] < 6:
@@ -128,25 +126,6 @@ def stacked_copies(V, F, area, distance, protected=None):
     if protected is not None:
         gone[np.unique(vc[np.flatnonzero(protected & (vc >= 0))])] = False
     return gone[lab] if gone.any() else None
-
-
-def pieces(F, n):
-    """The piece of every face (faces joined by shared vertex indices,
-    over the ``n`` vertices) numbered 0 .. k-1, and k."""
-    used = np.zeros(n, dtype=bool)
-    used[F.ravel()] = True
-    at = np.cumsum(used) - 1                 # (over the used vertices only: a scan's
-    Fu = at[F]                               #  garbage vertices cost nothing)
-    vl = connected_labels(int(at[-1]) + 1, np.concatenate([Fu[:, :2], Fu[:, 1:]]))
-    return _numbered(vl[Fu[:, 0]])
-
-
-def _numbered(labels):
-    """The component labels ``labels`` (any integers >= 0) as 0 .. k-1, and
-    k: from a mask of the labels present, not a sort of the m labels."""
-    present = np.zeros(int(labels.max()) + 1, dtype=bool)
-    present[labels] = True
-    return (np.cumsum(present) - 1)[labels], int(np.count_nonzero(present))
 
 
 def _candidates(V, vc, comp_area, distance):
@@ -211,7 +190,7 @@ def pillow_layers(V, F, labels, twin, distance, turned=None):
     faces the way the input did (the orientation of a pillow, two equal
     layers, is a coin toss: the bunny twice came back inside out)."""
     m = F.shape[0]
-    lab, k = _numbered(labels)
+    lab, k = numbered(labels)
     closed = np.ones(k, dtype=bool)
     closed[lab[np.flatnonzero(twin == BOUNDARY) // 3]] = False
     if not closed.any():

@@ -37,7 +37,7 @@ import numpy as np
 
 from ._clean import BOUNDARY, half_edge_ends, interior_edges, twin_table
 from .mesh import bounding_box, diagonal_length, face_areas
-from .topology import connected_labels, edge_keys
+from .topology import connected_labels, edge_keys, vertex_labels
 
 __all__ = ["PINHOLE_FACES", "PINHOLE_SURFACE", "MAX_PINHOLE_EDGES", "Pinholes", "cap_pinholes",
            "close_pinholes", "face_floor"]
@@ -75,6 +75,10 @@ class _Loops(NamedTuple):
     count: np.ndarray      #: (b,) int64 per label: edges of the loop
     perimeter: np.ndarray  #: (b,) float64 per label: its length
 
+    def heads(self):
+        """(b,) bool: the first border half-edge of each loop (its label)."""
+        return self.label == np.arange(self.h.shape[0])
+
 
 def cap_pinholes(clean, face_budget):
     """The :class:`~.clean.CleanResult` ``clean`` with its pinholes for a cage
@@ -109,8 +113,7 @@ def close_pinholes(V, F, twin, face_area, face_budget):
     if loops is None:
         return None
     longest = np.sqrt(4.0 * np.pi * PINHOLE_FACES * float(face_area.sum()) / face_budget)
-    heads = np.flatnonzero((loops.label == np.arange(loops.h.shape[0]))
-                           & (loops.count >= 3) & (loops.count <= MAX_PINHOLE_EDGES)
+    heads = np.flatnonzero(loops.heads() & (loops.count >= 3) & (loops.count <= MAX_PINHOLE_EDGES)
                            & (loops.perimeter <= longest))
     if heads.size == 0:
         return None
@@ -136,19 +139,16 @@ def face_floor(V, F, twin):
     n, m = V.shape[0], F.shape[0]
     if m == 0:
         return 0
-    ih, it = interior_edges(twin)
-    comp = connected_labels(m, np.stack([ih // 3, it // 3], axis=1))
+    comp = _surfaces(m, twin)
     faces = np.bincount(comp, minlength=m)
     border = np.flatnonzero(twin == BOUNDARY)
     edges = np.bincount(comp[border // 3], minlength=m)             # border edges per component
-    vc = np.full(n, -1, dtype=np.int64)
-    vc[F.ravel()] = np.repeat(comp, 3)
+    vc = vertex_labels(F, comp, n)
     verts = np.bincount(vc[vc >= 0], minlength=m)
     loops = np.zeros(m, dtype=np.int64)
     found = _border_loops(V, F, twin)
     if found is not None:
-        heads = found.h[found.label == np.arange(found.h.shape[0])]
-        loops = np.bincount(comp[heads // 3], minlength=m)
+        loops = np.bincount(comp[found.h[found.heads()] // 3], minlength=m)
     chi = verts - (3 * faces + edges) // 2 + faces
     floor = np.where(loops > 0, 3 * loops - 2 * chi, 4)
     return int(floor[faces > 0].sum())
@@ -175,11 +175,17 @@ def _border_loops(V, F, twin):
     return _Loops(h, u, succ, label, count, perimeter)
 
 
+def _surfaces(m, twin):
+    """The surface of each of the ``m`` faces: its component across the
+    interior edges of ``twin`` (the label of its smallest face)."""
+    ih, it = interior_edges(twin)
+    return connected_labels(m, np.stack([ih // 3, it // 3], axis=1))
+
+
 def _on_large_surface(F, twin, face_area, loops, heads):
     """Mask of the loops ``heads`` whose component's area is at least
     ``PINHOLE_SURFACE`` times that of a disk of the loop's perimeter."""
-    ih, it = interior_edges(twin)
-    faces = connected_labels(F.shape[0], np.stack([ih // 3, it // 3], axis=1))
+    faces = _surfaces(F.shape[0], twin)
     area = np.bincount(faces, weights=face_area, minlength=F.shape[0])
     p = loops.perimeter[heads]
     return area[faces[loops.h[heads] // 3]] >= PINHOLE_SURFACE * p * p / (4.0 * np.pi)

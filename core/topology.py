@@ -161,17 +161,39 @@ def _jump_all(parent):
 
 def face_components(F, n_vertices):
     """Label of each face's connected component (faces joined through
-    shared vertices), and the number of components."""
+    shared vertices), numbered in the order of their smallest vertex, and
+    the number of components. The graph is over the used vertices only (a
+    scan's unreferenced vertices cost nothing), joined along two edges of
+    every face."""
     F = np.asarray(F, dtype=np.int64)
-    m = F.shape[0]
-    if m == 0:
+    if F.shape[0] == 0:
         return np.zeros(0, dtype=np.int64), 0
-    # vertices and faces in one graph: node n_vertices + f is face f
-    f_ids = np.arange(m, dtype=np.int64) + n_vertices
-    pairs = np.stack([np.repeat(f_ids, 3), F.ravel()], axis=1)
-    labels = connected_labels(n_vertices + m, pairs)[n_vertices:]
-    _, comp = np.unique(labels, return_inverse=True)
-    return comp.astype(np.int64), int(comp.max()) + 1
+    used = np.zeros(n_vertices, dtype=bool)
+    used[F.ravel()] = True
+    at = np.cumsum(used) - 1
+    Fu = at[F]
+    roots = connected_labels(int(at[-1]) + 1, np.concatenate([Fu[:, :2], Fu[:, 1:]]))
+    return numbered(roots[Fu[:, 0]])
+
+
+def numbered(labels):
+    """The labels ``labels`` (any integers >= 0) as 0 .. k-1 in their order,
+    and k: from a mask of the labels present, not a sort of them."""
+    labels = np.asarray(labels, dtype=np.int64)
+    if labels.size == 0:
+        return labels, 0
+    present = np.zeros(int(labels.max()) + 1, dtype=bool)
+    present[labels] = True
+    return (np.cumsum(present) - 1)[labels], int(np.count_nonzero(present))
+
+
+def vertex_labels(F, face_labels, n_vertices):
+    """The label of each vertex from the faces' ``face_labels`` (m,) (one
+    label per connected piece: any face of it will do), -1 for vertices no
+    face uses; (n_vertices,) int64."""
+    out = np.full(n_vertices, -1, dtype=np.int64)
+    out[np.asarray(F).ravel()] = np.repeat(face_labels, 3)
+    return out
 
 
 def boundary_loops_count(F, n_vertices, em=None):
