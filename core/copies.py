@@ -68,7 +68,7 @@ def coincident_copies(V, F, labels, area, distance, protected=None):
     points = _candidates(V, vc, comp_area, distance)
     if points.shape[0] < 2:
         return None
-    pairs = coincident_pairs(V[points], distance, 1.0)          # (rows of points)
+    pairs = coincident_pairs(V[points], distance)          # (rows of points)
     if not (vc[points[pairs[:, 0]]] != vc[points[pairs[:, 1]]]).any():
         return None
     shared = _shared_counts(pairs, vc[points], k)
@@ -106,7 +106,7 @@ def stacked_copies(V, F, area, distance, protected=None):
     points = _candidates(V, vc, comp_area, distance)
     if points.shape[0] < 6:
         return None
-    pairs = coincident_pairs(V[points], distance, 1.0)
+    pairs = coincident_pairs(V[points], distance)
     if pairs.shape[0] == 0:
         return None
     group = np.full(n, -1, dtype=np.int64)
@@ -205,7 +205,7 @@ def pillow_layers(V, F, labels, twin, distance, turned=None):
     if faces.size == 0:
         return None
     points = np.unique(F[faces])
-    pairs = coincident_pairs(V[points], distance, 1.0)
+    pairs = coincident_pairs(V[points], distance)
     if pairs.shape[0] == 0:
         return None
     group = np.arange(V.shape[0])

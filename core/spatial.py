@@ -92,6 +92,16 @@ _FLAT_SIN2 = 1e-16         # below this sin^2 at A a triangle is treated as its 
 _CELL_FACTOR = 1.5         # grid cell size = this * mean triangle bounding-box extent
 _MAX_CELLS = 1 << 23       # dense grid cap (int64 offsets: 64 MiB)
 _MAX_REFS_PER_FACE = 12    # grow the cells if triangles would be referenced more often
+_MIN_REF_BUDGET = 1 << 22  # ... and more than this often in all (32 MiB)
+#: thin triangles (no taller than this share of their longest edge) do not set the cell
+#: size when they would make it 25% larger (a degenerate cluster of needles across the
+#: mesh made cells 5x wider than the mesh's own triangles: every query met 1,500 of them)
+_THIN_HEIGHT = 0.01
+#: a triangle no taller (over its longest edge) than this share of a cell, and whose
+#: box spans more than _LINE_CELLS cells, is referenced only in the cells near its
+#: longest edge (a needle lies along it; its plane test keeps its whole box)
+_NEEDLE_HEIGHT = 0.25
+_LINE_CELLS = 27
 _MAX_PHASE2_CELLS = 64     # queries whose ball spans more cells go to the BVH
 _MAX_SAME_CODE = 64        # more triangles than this with one Morton code: drop repeated ones
 _LEAF = 8                  # BVH leaf size (triangles)
@@ -456,11 +466,19 @@ def triangle_boxes(V, F):
     return _box_of(*_corners(V, F))
 
 
-def _largest_sides(V, F, out):
-    """Each triangle's largest box side, into ``out`` (k,)."""
-    lo, hi = triangle_boxes(V, F)
+def _largest_sides(V, F, out, thin):
+    """Each triangle's largest box side, into ``out`` (k,), and whether it
+    is thin (no taller than ``_THIN_HEIGHT`` of its longest edge), into
+    ``thin`` (k,) bool."""
+    A, B, C = _corners(V, F)
+    lo, hi = _box_of(A, B, C)
     hi -= lo
     np.maximum(np.maximum(hi[:, 0], hi[:, 1], out=out), hi[:, 2], out=out)
+    n = cross_rows(B - A, C - A)
+    longest = np.maximum(np.maximum(np.einsum("ij,ij->i", B - A, B - A),
+                                    np.einsum("ij,ij->i", C - B, C - B)),
+                         np.einsum("ij,ij->i", A - C, A - C))
+    np.less(np.einsum("ij,ij->i", n, n), _THIN_HEIGHT ** 2 * longest * longest, out=thin)
 
 
 def _cell_ranges(A, B, C, lo, h, dims):
@@ -558,8 +576,58 @@ def _plane_cells(A, B, C, ext, c0, nr, lo, h, dims, first, dtype):
     dist = np.abs(nrm[tri, 0] * (x0[0] + cx * h) + nrm[tri, 1] * (x0[1] + cy * h)
                   + nrm[tri, 2] * (x0[2] + cz * h) - off[tri])
     keep = dist <= reach[tri]
+    needles = _needles(A, B, C, nrm, cnt, h)
+    if needles is not None:
+        keep &= _near_needle(needles, tri, x0 + h * np.stack([cx, cy, cz], axis=1), h, ext)
     tri, cx, cy, cz = tri[keep], cx[keep], cy[keep], cz[keep]
     return (cx + dims[0] * (cy + dims[1] * cz)).astype(dtype), (tri + first).astype(dtype)
+
+
+class _Needles(NamedTuple):
+    """The needles among some triangles (:func:`_needles`): each one's
+    longest edge and height over it."""
+
+    is_needle: np.ndarray  #: (k,) bool over the triangles
+    P: np.ndarray          #: (k,3) one end of each triangle's longest edge
+    U: np.ndarray          #: (k,3) the edge (to its other end)
+    height: np.ndarray     #: (k,) the triangle's height over it
+
+
+def _needles(A, B, C, nrm, cnt, h):
+    """The :class:`_Needles` of the triangles ``(A, B, C)`` (area normals
+    ``nrm``, boxes of ``cnt`` cells of side ``h``): those no taller than
+    ``_NEEDLE_HEIGHT h`` over their longest edge whose box spans more than
+    ``_LINE_CELLS`` cells; None when there is none."""
+    edges = np.stack([B - A, C - B, A - C], axis=1)                    # (k,3 edges,3)
+    length2 = np.einsum("ijk,ijk->ij", edges, edges)
+    longest = np.argmax(length2, axis=1)
+    rows = np.arange(A.shape[0])
+    l2 = length2[rows, longest]
+    height = np.sqrt(np.einsum("ij,ij->i", nrm, nrm) / np.where(l2 > 0, l2, 1.0))
+    is_needle = (cnt > _LINE_CELLS) & (height <= _NEEDLE_HEIGHT * h)
+    if not is_needle.any():
+        return None
+    start = np.stack([A, B, C], axis=1)[rows, longest]
+    return _Needles(is_needle, start, edges[rows, longest], height)
+
+
+def _near_needle(needles, tri, X, h, ext):
+    """(q,) bool: the cell centres ``X`` (q,3) of the references ``tri`` are
+    not of a needle, or lie within the needle's height plus half a cell's
+    diagonal of its longest edge (every point of a triangle lies within its
+    height of its longest edge; a rounding margin added)."""
+    ok = ~needles.is_needle[tri]
+    k = np.flatnonzero(~ok)
+    t = tri[k]
+    U = needles.U[t]
+    D = X[k] - needles.P[t]
+    u2 = np.einsum("ij,ij->i", U, U)
+    s = np.clip(np.einsum("ij,ij->i", D, U) / np.where(u2 > 0, u2, 1.0), 0.0, 1.0)
+    D -= s[:, None] * U
+    reach = needles.height[t] + 0.5 * np.sqrt(3.0) * h
+    reach += PRUNE_SLACK * (np.abs(X[k]).max(axis=1) + ext[t] + 2 * h)
+    ok[k] = np.einsum("ij,ij->i", D, D) <= reach * reach
+    return ok
 
 
 class TriangleIndex:
@@ -624,10 +692,11 @@ class TriangleIndex:
         # the triangles' largest box sides, then the cells (every other per-triangle
         # array is made a block at a time: a 2M-face build made 850 MB of whole-mesh
         # temporaries, each page of which this machine's kernel was slow to hand out)
-        ext = np.empty(m)
-        run_each(lambda span: _largest_sides(V, Fo[span[0]:span[1]], ext[span[0]:span[1]]),
+        ext, thin = np.empty(m), np.empty(m, dtype=bool)
+        run_each(lambda span: _largest_sides(V, Fo[span[0]:span[1]], ext[span[0]:span[1]],
+                                             thin[span[0]:span[1]]),
                  spans, threads=m >= _THREADED_BUILD)
-        h, dims = self._cell_size(V, Fo, spans, ext, extent, cell_factor, min_cell)
+        h, dims = self._cell_size(V, Fo, spans, ext, thin, extent, cell_factor, min_cell)
         self._h, self._dims = h, dims
         self._D, self._ball, self._prism = np.empty((16, m)), np.empty((4, m)), np.empty((16, m))
         small = np.int32 if m < 2**31 else np.int64        # (cells <= _MAX_CELLS < 2**31)
@@ -654,13 +723,17 @@ class TriangleIndex:
         self.n_faces = m
 
     # -- grid ---------------------------------------------------------------------------------
-    def _cell_size(self, V, Fo, spans, ext, extent, cell_factor, min_cell):
+    def _cell_size(self, V, Fo, spans, ext, thin, extent, cell_factor, min_cell):
         """The grid's cell size and cells per axis: ``cell_factor`` mean
-        largest box sides (at least ``min_cell``), grown by 1.25 until the
+        largest box sides (of the triangles not ``thin``, when theirs is 25%
+        smaller; at least ``min_cell``), grown by 1.25 until the
         grid has at most ``_MAX_CELLS`` cells and the triangles' boxes cover
         at most ``_MAX_REFS_PER_FACE`` cells each on average."""
         m = ext.shape[0]
-        h = max(cell_factor * float(ext.mean()), min_cell or 0.0)
+        mean = float(ext.mean())
+        if thin.any() and not thin.all():
+            mean = min(mean, 1.25 * float(ext[~thin].mean()))
+        h = max(cell_factor * mean, min_cell or 0.0)
         span = float(extent.max())
         if not h > 0:
             h = span / 64 if span > 0 else 1.0
@@ -672,10 +745,17 @@ class TriangleIndex:
             dims = dims_f.astype(np.int64)
 
             def covered(span):
-                c0, nr = _cell_ranges(*_corners(V, Fo[span[0]:span[1]]), self._lo, h, dims)
-                return int(np.prod(nr, axis=1).sum())
+                A, B, C = _corners(V, Fo[span[0]:span[1]])
+                c0, nr = _cell_ranges(A, B, C, self._lo, h, dims)
+                cnt = np.prod(nr, axis=1)
+                needles = _needles(A, B, C, cross_rows(B - A, C - A), cnt, h)
+                if needles is not None:      # (about the cells of a tube around a line through it)
+                    line = 6 * nr.max(axis=1)
+                    cnt = np.where(needles.is_needle, np.minimum(cnt, line), cnt)
+                return int(cnt.sum())
             nrefs = sum(run_each(covered, spans, threads=m >= _THREADED_BUILD))
-            if int(np.prod(dims)) <= _MAX_CELLS and nrefs <= _MAX_REFS_PER_FACE * m + 1024:
+            if int(np.prod(dims)) <= _MAX_CELLS and nrefs <= max(_MAX_REFS_PER_FACE * m,
+                                                                 _MIN_REF_BUDGET):
                 break
             h *= 1.25
         return h, dims

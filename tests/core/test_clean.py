@@ -330,12 +330,14 @@ def test_non_manifold_vertices_with_the_callers_corner_counts(make):
                                   ref_non_manifold_vertices(F, n, twin))
 
 
+@pytest.mark.parametrize("far", [None, 1e6, -1e6], ids=["unit box", "far point", "far below"])
 @pytest.mark.parametrize("distance", [0.0, 1e-6, 1e-3])
-def test_coincident_pairs_group_exact_copies_and_near_points_as_brute_force(distance):
+def test_coincident_pairs_group_exact_copies_and_near_points_as_brute_force(distance, far):
     """Exact copies (a soup as STL stores it: each point up to 6 times, -0.0 and
     0.0 alike) pair with one of them before the grids, which see one of each:
     the groups are those of every pair within ``distance`` per axis (and none
-    beyond 4 ``distance``)."""
+    beyond 4 ``distance``); also with a point far off (a grid too wide for
+    packed keys) above or below the others."""
     rng = np.random.default_rng(3)
     base = rng.random((300, 3))
     base[:5, 0] = 0.0
@@ -343,7 +345,9 @@ def test_coincident_pairs_group_exact_copies_and_near_points_as_brute_force(dist
     P[:5] = base[:5]
     P[5:10] = base[:5] * [-1.0, 1.0, 1.0]                  # -0.0: the same place as 0.0
     P[rng.random(1500) < 0.2] += rng.normal(scale=0.3 * distance, size=3) if distance else 0.0
-    pairs = coincident_pairs(P, distance, 1.0)
+    if far is not None:
+        P[-1] = far
+    pairs = coincident_pairs(P, distance)
     got = connected_labels(P.shape[0], pairs)
     D = np.abs(P[:, None, :] - P[None, :, :]).max(axis=2)
     near = np.argwhere(np.triu(D <= distance, 1))

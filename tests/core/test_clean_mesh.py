@@ -15,7 +15,7 @@ from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 
 import core
-from core.clean import (BUDGET_DEBRIS_SHARE, OPEN_SHARE, WELD_DISTANCE, WIDER_WELDS, CleanReport,
+from core.clean import (BUDGET_DEBRIS_SHARE, bulk_box, OPEN_SHARE, WELD_DISTANCE, WIDER_WELDS, CleanReport,
                         clean_mesh)
 from core.errors import InvalidArgumentError, InvalidMeshError
 from core.topology import manifold_report, topology_summary
@@ -96,6 +96,64 @@ def test_the_automatic_weld_widens_for_a_soup_whose_copies_drifted_apart(jitter,
     asked = clean_mesh(S, FS, weld_distance=used)
     assert np.array_equal(asked.F, r.F) and not asked.report.weld_widened
     assert asked.report.summary() == f"welded {FS.size - V.shape[0]:,} vertices (within {used:g} of the size)"
+
+
+def with_stray_face(V, F, at):
+    """The mesh and one more triangle, its first at a tenth of the size, ``at`` (3,) off."""
+    tri = 0.1 * (V[F[0]] - V[F[0]].mean(axis=0)) + at
+    return np.vstack([V, tri]), np.vstack([F, np.arange(3) + V.shape[0]])
+
+
+@pytest.mark.parametrize("far", [10.0, 1e3, 1e6])
+@pytest.mark.parametrize("jitter", [None, 1e-7], ids=["mesh", "jittered soup"])
+def test_a_stray_face_far_off_is_debris_and_leaves_the_weld_alone(far, jitter):
+    """One triangle far from the scan (a stray speck, or a scan placed far
+    from the origin with a triangle left at 0): the weld's unit is the size
+    of the mesh's bulk, not the box the speck stretches (1,000 diagonals away
+    it welded away 965 of the bunny's faces, 10,000 away all of them). The
+    speck goes as debris; the rest cleans as without it, and the cage is the
+    same bit for bit."""
+    V, F = load_shared("stanford-bunny.obj") if jitter is None else icosphere(3)
+    if jitter is not None:
+        V, F = unwelded(V, F, jitter)
+    ref = clean_mesh(V, F)
+    W, G = with_stray_face(V, F, V.max(axis=0) + far * core.bbox_diagonal(V))
+    r = clean_mesh(W, G)
+    np.testing.assert_array_equal(r.V, ref.V)
+    np.testing.assert_array_equal(r.F, ref.F)
+    assert r.report.n_debris_faces == ref.report.n_debris_faces + 1
+    assert r.report.n_welded_vertices == ref.report.n_welded_vertices
+    cage, plain = core.simplify(W, G, target_faces=300), core.simplify(V, F, target_faces=300)
+    np.testing.assert_array_equal(cage.V, plain.V)
+    np.testing.assert_array_equal(cage.F, plain.F)
+
+
+def test_a_scan_far_from_the_origin_with_a_triangle_left_at_it():
+    V, F = icosphere(3)
+    W, G = with_stray_face(*unwelded(V + 1e6, F, 1e-7), np.zeros(3))     # (a soup: STL)
+    r = clean_mesh(W, G)
+    assert r.F.shape[0] == F.shape[0] and summary(r.F, r.V.shape[0]) == (2, 1, 0)
+    assert r.report.n_debris_faces == 1
+
+
+def test_the_bulk_box_leaves_out_far_specks_but_not_the_mesh():
+    V, F = load_shared("stanford-bunny.obj")
+    used = V[np.unique(F)]
+    hi = bulk_box(used)
+    box_lo, box_hi = used.min(axis=0), used.max(axis=0)
+    # the bulk is nearly the whole box (2% of the vertices left out along each axis) ...
+    assert np.all(hi[0] >= box_lo) and np.all(hi[1] <= box_hi)
+    assert np.linalg.norm(hi[1] - hi[0]) > 0.9 * np.linalg.norm(box_hi - box_lo)
+    # ... and the same with specks far off
+    specks = np.random.default_rng(0).random((used.shape[0] // 200, 3)) * 1e6
+    far = bulk_box(np.vstack([used, specks]))
+    assert np.linalg.norm(far[1] - far[0]) < 1.1 * np.linalg.norm(hi[1] - hi[0])
+    # a flat mesh keeps its flat axis; points all at one place but a few: the whole box
+    flat = bulk_box(np.c_[np.random.default_rng(1).random((500, 2)), np.zeros(500)])
+    assert flat[0][2] == flat[1][2] == 0.0 and np.all(flat[1][:2] > flat[0][:2])
+    P = np.zeros((1000, 3))
+    P[-3:] = np.eye(3)
+    np.testing.assert_array_equal(np.array(bulk_box(P)), np.array([np.zeros(3), np.ones(3)]))
 
 
 def test_the_automatic_weld_leaves_real_borders_and_far_drift_alone():

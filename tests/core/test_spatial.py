@@ -284,6 +284,29 @@ def test_index_of_a_mesh_with_many_copies_of_a_face_answers_as_without_them(copi
     _check_result(V, F2, P, got)
 
 
+@pytest.mark.parametrize("k", [60, 300])
+def test_a_cluster_of_needles_does_not_set_the_cells_and_answers_exactly(k):
+    """A degenerate cluster: the ``k`` vertices nearest one vertex moved to
+    random points of a segment across the sphere, their faces needles along
+    it. The cells stay those of the mesh's own triangles (the needles made
+    them 4x wider, every query near them scanning hundreds), each needle is
+    referenced only in the cells along its line, and the answers are exact."""
+    V, F = icosphere(4)
+    rng = np.random.default_rng(0)
+    near = np.argsort(np.linalg.norm(V - V[0], axis=1))[:k]
+    a, b = np.array([-0.9, -0.3, 0.1]), np.array([0.8, 0.4, -0.2])
+    W = V.copy()
+    W[near] = a + rng.random(k)[:, None] * (b - a)
+    needle = np.flatnonzero(np.isin(F, near).all(axis=1))
+    index, others = TriangleIndex(W, F), TriangleIndex(W, np.delete(F, needle, axis=0))
+    assert index._h <= 1.25 * others._h
+    refs = np.bincount(index._order[index._cell_tri], minlength=F.shape[0])
+    cells_along = np.ceil(np.abs(b - a).max() / index._h) + 1
+    assert refs[needle].max() <= 27 * cells_along          # a tube of cells, not the box
+    P = np.vstack([_random_queries(W, rng, 300), a + rng.random((100, 1)) * (b - a) + 1e-3])
+    _check_result(W, F, P, index.closest(P))
+
+
 def test_index_far_from_origin_and_unit_invariance():
     V, F = torus(16, 8)
     rng = np.random.default_rng(9)
