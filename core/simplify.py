@@ -96,9 +96,9 @@ class SimplifyResult:
         ``"max_error"`` (the next collapse would exceed it, or the measured
         distance did), ``"max_dihedral"`` (short of the target, the
         collapses left would bend adjacent faces beyond ``max_dihedral_deg``),
-        ``"topology_floor"`` (short of the target, every edge
-        left would change the topology: border loops, genus, components or
-        locked vertices are kept), ``"no_valid_collapse"`` (short of the
+        ``"topology_floor"`` (short of the target, or with ``max_error``,
+        every edge left would change the topology: border loops, genus,
+        components or locked vertices are kept), ``"no_valid_collapse"`` (short of the
         target, the geometric checks refuse the rest) or ``"cancelled"``
         (the cleaned input is returned unchanged).
     feature_edges : (k,2) int64, cage edges (sorted rows) that descend from the
@@ -507,9 +507,13 @@ def _run_all(mesh, target, max_err_n, opts, progress, m0):
 
 
 def _stop_reason(cage, target, opts):
-    """``"topology_floor"`` instead of ``"no_valid_collapse"`` when every
-    edge left would change the topology or touch only locked vertices."""
-    if cage.stopped != "no_valid_collapse" or target is None or cage.F.shape[0] <= target:
+    """``"topology_floor"`` instead of ``"no_valid_collapse"`` or
+    ``"max_error"`` when, short of the target (or with none), every edge left
+    would change the topology or touch only locked vertices: no bound could
+    have let another collapse through (a tetrahedron with a max_error said
+    "max_error" or "no_valid_collapse" by the bound's size)."""
+    if cage.stopped not in ("no_valid_collapse", "max_error") \
+            or (target is not None and cage.F.shape[0] <= target):
         return cage.stopped
     if not opts["preserve_topology"]:
         return cage.stopped

@@ -72,6 +72,19 @@ def nearest_vertex_distance(A, B):
 
 
 # ---------------------------------------------------------------- topology
+@pytest.mark.parametrize("bound", [dict(max_error=1e-9), dict(max_error=0.1), dict(max_error=10.0),
+                                   dict(target_faces=1), dict(max_error=0.1, target_faces=1)])
+def test_a_mesh_at_its_topology_floor_says_so_whatever_the_bound(bound):
+    """Tetrahedra (one, and two apart) cannot lose a face: the stop is the
+    topology floor, not "max_error" or "no_valid_collapse" by the bound's
+    size (a fuzz found all three for the same tetrahedron)."""
+    V, F = tetrahedron()
+    for W, G in ((V, F), (np.vstack([V, V + 10.0]), np.vstack([F, F + 4]))):
+        r = simplify(W, G, **bound)
+        assert r.F.shape[0] == G.shape[0] and r.stopped_because == "topology_floor"
+        assert r.message.startswith(f"stopped at {G.shape[0]} faces")
+
+
 def test_closed_genus0_goes_down_to_a_tetrahedron_and_no_further():
     V, F = icosphere(3)
     r = simplify(V, F, target_faces=0)
