@@ -9,7 +9,8 @@ edge- and vertex-manifold triangle mesh that :func:`~.simplify.simplify`,
 
     drop faces with a repeated vertex index
     weld   vertices on open or non-manifold edges or on collapsed faces (no
-           taller than weld_distance) that coincide (exactly, or within
+           taller than weld_distance, nor than FLAT_SHARE of the median
+           face) that coincide (exactly, or within
            weld_distance of the mesh's size, :func:`bulk_box`: soups, seams,
            collapsed clusters), and the ends of edges that short
     drop   faces degenerate after welding; of faces on the same three
@@ -186,7 +187,8 @@ def clean_mesh(V, F, *, weld_distance=None, min_component_area=MIN_COMPONENT_ARE
         mesh's size (the diagonal of :func:`bulk_box`: a speck far off does not
         count) along every axis are welded; exact duplicates
         always are (also with 0); so are the two ends of an edge that short,
-        and the corners of faces no taller than it (collapsed clusters).
+        and the corners of faces no taller than it and than ``FLAT_SHARE`` of
+        the median face's height (collapsed clusters).
         Other vertices inside a closed surface are not welded: two of them at
         one place are two sheets touching, which is already manifold.
         None (the default): ``WELD_DISTANCE``, or when that leaves more than
@@ -309,6 +311,10 @@ def clean_mesh(V, F, *, weld_distance=None, min_component_area=MIN_COMPONENT_ARE
                        CleanReport(**counts))
 
 
+#: a face is collapsed (its corners weld) only when no taller than the weld distance
+#: and than this share of the median face's height: a clean cow stretched 10,000 times
+#: along x had most of its faces below the weld distance and lost 81% of them
+FLAT_SHARE = 0.01
 #: the mesh's size leaves out this share of the vertices at each end of every axis
 BULK_SHARE = 0.01
 #: ... found on at most this many of them (evenly by index)
@@ -423,6 +429,7 @@ class _Shape(NamedTuple):
     extent: np.ndarray  #: (3,) the box's sides, in those units
     area: np.ndarray    #: (m,) float64
     height: np.ndarray  #: (m,) float64
+    typical_height: float  #: the median of ``height`` (of the faces as they came)
 
 
 def _shape(V, F, box):
@@ -437,7 +444,7 @@ def _shape(V, F, box):
     area, height = np.empty(m), np.empty(m)
     run_blocks(lambda a, b: _face_shape(cols, F[a:b], area[a:b], height[a:b]),
                blocks(m, _FACE_BLOCK))
-    return _Shape(cols.T, (hi - lo) / d, area, height)
+    return _Shape(cols.T, (hi - lo) / d, area, height, float(np.median(height)) if m else 0.0)
 
 
 #: faces per block of :func:`_shape` and the sheet candidates (temporaries stay in cache)
@@ -467,16 +474,17 @@ def _face_shape(cols, F, area, height):
 def _weld_map(shape, F, twin, weld_distance):
     """Representative of every vertex, (n,) int64: vertices on an open or
     non-manifold edge (``twin < 0``) or on a collapsed face (no taller than
-    ``weld_distance`` over its longest edge: a degenerate cluster, or an edge
-    that short, since a face is no taller than its shortest edge) that
-    coincide, exactly or within ``weld_distance`` of the diagonal (see the
+    ``weld_distance`` over its longest edge, nor than ``FLAT_SHARE`` of the
+    median face: a degenerate cluster, or an edge that short, since a face is
+    no taller than its shortest edge) that coincide, exactly or within
+    ``weld_distance`` of the size (see the
     module docstring), map to the smallest index of their group; every other
     vertex to itself."""
     V, tol = shape.V, weld_distance
     n = V.shape[0]
     rep = np.arange(n, dtype=np.int64)
     h = np.flatnonzero(twin < 0)
-    flat = np.flatnonzero(shape.height <= tol)
+    flat = np.flatnonzero(shape.height <= min(tol, FLAT_SHARE * shape.typical_height))
     if h.size == 0 and flat.size == 0:
         return rep
     cand = np.unique(np.concatenate([*half_edge_ends(F, h), F[flat].ravel()]))
