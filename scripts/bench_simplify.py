@@ -29,7 +29,8 @@ fixed cost per pass that small meshes feel, and a 4-face target against a
 The messy section runs every shared mesh as real scans arrive (an exact soup,
 a soup jittered by 1e-7 of the diagonal, 300 specks of debris, 3 pinched
 bow-tie vertices, double-sided sheets, 2% of the faces missing, the mesh twice
-in place, whole and with 2% of its faces missing; built by ``tests/mesh_factory``) at
+in place, whole and with 2% of its faces missing, one small triangle 1,000
+diagonals off; built by ``tests/mesh_factory``) at
 1,000 faces (10% for the small ones): ours and Decimate on the messy mesh,
 both measured against the clean mesh (the scan alone), beside our cage of
 the clean mesh; whether each result is a manifold, and what our cleaning did.
@@ -208,7 +209,7 @@ def run_case(name, V, F, target, use_blender=True, repeat=1):
 
 
 MESSY = ("soup", "jittered soup", "debris", "bowties", "sheets", "pinholes", "copy in place",
-         "holed copy in place")
+         "holed copy in place", "speck far off")
 
 #: the small-mesh section's meshes (each to 2,000, 200 and 4 faces)
 SMALL = ("flat grid 100x100", "cube 40x40 per side", "fandisk", "stanford-bunny")
@@ -261,7 +262,8 @@ def messy_variant(V, F, how):
             "debris": lambda: mf.with_debris(V, F), "bowties": lambda: mf.pinched(V, F),
             "sheets": lambda: mf.with_sheets(V, F), "pinholes": lambda: mf.with_pinholes(V, F),
             "copy in place": lambda: mf.duplicated(V, F),
-            "holed copy in place": lambda: mf.duplicated(*mf.with_pinholes(V, F))}[how]()
+            "holed copy in place": lambda: mf.duplicated(*mf.with_pinholes(V, F)),
+            "speck far off": lambda: mf.with_far_speck(V, F)}[how]()
 
 
 def run_messy(name, V, F, target, use_blender=True):

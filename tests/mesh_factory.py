@@ -335,6 +335,16 @@ def with_debris(V, F, k=300, size=1e-3, seed=2):
             np.concatenate([F, (tf[None] + 4 * np.arange(k)[:, None, None] + len(V)).reshape(-1, 3)]))
 
 
+def with_far_speck(V, F, far=1e3, at=None):
+    """The mesh and one more triangle, its first face at a tenth of its size,
+    ``far`` diagonals beyond its bounding box's upper corner (or at ``at``):
+    a stray speck, or a triangle left at the origin of a scan placed far off."""
+    d = float(np.linalg.norm(V.max(axis=0) - V.min(axis=0)))
+    at = V.max(axis=0) + far * d if at is None else np.asarray(at, dtype=np.float64)
+    tri = 0.1 * (V[F[0]] - V[F[0]].mean(axis=0)) + at
+    return np.vstack([V, tri]), np.vstack([F, np.arange(3) + V.shape[0]])
+
+
 def with_sheets(V, F, k=5, seed=3):
     """``k`` double-sided sheets: the faces around ``k`` vertices repeated
     with the opposite orientation."""

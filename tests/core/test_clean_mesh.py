@@ -21,7 +21,7 @@ from core.errors import InvalidArgumentError, InvalidMeshError
 from core.topology import manifold_report, topology_summary
 from tests.mesh_factory import (duplicated, icosphere, klein_bottle, load_shared, mobius_strip,
                                 pinched, regular_grid, shared_mesh_names, torus, unwelded,
-                                with_debris, with_fins, with_pinholes, with_sheets)
+                                with_debris, with_far_speck, with_fins, with_pinholes, with_sheets)
 
 
 def assert_manifold(V, F):
@@ -98,12 +98,6 @@ def test_the_automatic_weld_widens_for_a_soup_whose_copies_drifted_apart(jitter,
     assert asked.report.summary() == f"welded {FS.size - V.shape[0]:,} vertices (within {used:g} of the size)"
 
 
-def with_stray_face(V, F, at):
-    """The mesh and one more triangle, its first at a tenth of the size, ``at`` (3,) off."""
-    tri = 0.1 * (V[F[0]] - V[F[0]].mean(axis=0)) + at
-    return np.vstack([V, tri]), np.vstack([F, np.arange(3) + V.shape[0]])
-
-
 @pytest.mark.parametrize("far", [10.0, 1e3, 1e6])
 @pytest.mark.parametrize("jitter", [None, 1e-7], ids=["mesh", "jittered soup"])
 def test_a_stray_face_far_off_is_debris_and_leaves_the_weld_alone(far, jitter):
@@ -117,7 +111,7 @@ def test_a_stray_face_far_off_is_debris_and_leaves_the_weld_alone(far, jitter):
     if jitter is not None:
         V, F = unwelded(V, F, jitter)
     ref = clean_mesh(V, F)
-    W, G = with_stray_face(V, F, V.max(axis=0) + far * core.bbox_diagonal(V))
+    W, G = with_far_speck(V, F, far)
     r = clean_mesh(W, G)
     np.testing.assert_array_equal(r.V, ref.V)
     np.testing.assert_array_equal(r.F, ref.F)
@@ -130,7 +124,7 @@ def test_a_stray_face_far_off_is_debris_and_leaves_the_weld_alone(far, jitter):
 
 def test_a_scan_far_from_the_origin_with_a_triangle_left_at_it():
     V, F = icosphere(3)
-    W, G = with_stray_face(*unwelded(V + 1e6, F, 1e-7), np.zeros(3))     # (a soup: STL)
+    W, G = with_far_speck(*unwelded(V + 1e6, F, 1e-7), at=np.zeros(3))     # (a soup: STL)
     r = clean_mesh(W, G)
     assert r.F.shape[0] == F.shape[0] and summary(r.F, r.V.shape[0]) == (2, 1, 0)
     assert r.report.n_debris_faces == 1
@@ -453,7 +447,7 @@ def test_random_defects_give_a_manifold_cage_and_an_exact_identity(seed, shape, 
 
 # ---------------------------------------------------------------- the whole chain, real meshes
 MESSY = ["as is", "soup", "jittered soup", "bowties", "debris", "sheets", "pinholes",
-         "copy in place", "holed copy in place"]
+         "copy in place", "holed copy in place", "speck far off"]
 
 
 def _messy(V, F, how):
@@ -473,6 +467,8 @@ def _messy(V, F, how):
         return duplicated(V, F)
     if how == "holed copy in place":
         return duplicated(*with_pinholes(V, F))
+    if how == "speck far off":
+        return with_far_speck(V, F)
     return V, F
 
 
