@@ -466,19 +466,28 @@ def triangle_boxes(V, F):
     return _box_of(*_corners(V, F))
 
 
-def _largest_sides(V, F, out, thin):
-    """Each triangle's largest box side, into ``out`` (k,), and whether it
-    is thin (no taller than ``_THIN_HEIGHT`` of its longest edge), into
-    ``thin`` (k,) bool."""
-    A, B, C = _corners(V, F)
-    lo, hi = _box_of(A, B, C)
+def _largest_sides(V, F, out):
+    """Each triangle's largest box side, into ``out`` (k,)."""
+    lo, hi = triangle_boxes(V, F)
     hi -= lo
     np.maximum(np.maximum(hi[:, 0], hi[:, 1], out=out), hi[:, 2], out=out)
-    n = cross_rows(B - A, C - A)
-    longest = np.maximum(np.maximum(np.einsum("ij,ij->i", B - A, B - A),
-                                    np.einsum("ij,ij->i", C - B, C - B)),
-                         np.einsum("ij,ij->i", A - C, A - C))
-    np.less(np.einsum("ij,ij->i", n, n), _THIN_HEIGHT ** 2 * longest * longest, out=thin)
+
+
+def _long_thin(V, F, ext):
+    """(m,) bool: the triangles ``F`` (largest box sides ``ext``) more than
+    twice as long as the median one (of an even sample of 4,096) and no
+    taller than ``_THIN_HEIGHT`` of their longest edge (only those long ones
+    are measured: the needles that could widen the cells)."""
+    thin = np.zeros(ext.shape[0], dtype=bool)
+    if ext.size:
+        long = np.flatnonzero(ext > 2.0 * np.median(ext[::max(1, ext.shape[0] // 4096)]))
+        A, B, C = _corners(V, F[long])
+        n = cross_rows(B - A, C - A)
+        longest = np.maximum(np.maximum(np.einsum("ij,ij->i", B - A, B - A),
+                                        np.einsum("ij,ij->i", C - B, C - B)),
+                             np.einsum("ij,ij->i", A - C, A - C))
+        thin[long] = np.einsum("ij,ij->i", n, n) < _THIN_HEIGHT ** 2 * longest * longest
+    return thin
 
 
 def _cell_ranges(A, B, C, lo, h, dims):
@@ -576,7 +585,7 @@ def _plane_cells(A, B, C, ext, c0, nr, lo, h, dims, first, dtype):
     dist = np.abs(nrm[tri, 0] * (x0[0] + cx * h) + nrm[tri, 1] * (x0[1] + cy * h)
                   + nrm[tri, 2] * (x0[2] + cz * h) - off[tri])
     keep = dist <= reach[tri]
-    needles = _needles(A, B, C, nrm, cnt, h)
+    needles = _needles(A, B, C, cnt, h, nrm)
     if needles is not None:
         keep &= _near_needle(needles, tri, x0 + h * np.stack([cx, cy, cz], axis=1), h, ext)
     tri, cx, cy, cz = tri[keep], cx[keep], cy[keep], cz[keep]
@@ -593,22 +602,37 @@ class _Needles(NamedTuple):
     height: np.ndarray     #: (k,) the triangle's height over it
 
 
-def _needles(A, B, C, nrm, cnt, h):
-    """The :class:`_Needles` of the triangles ``(A, B, C)`` (area normals
-    ``nrm``, boxes of ``cnt`` cells of side ``h``): those no taller than
-    ``_NEEDLE_HEIGHT h`` over their longest edge whose box spans more than
-    ``_LINE_CELLS`` cells; None when there is none."""
+def _needles(A, B, C, cnt, h, nrm=None):
+    """The :class:`_Needles` of the triangles ``(A, B, C)`` (boxes of ``cnt``
+    cells of side ``h``; their area normals ``nrm`` when known): those no
+    taller than ``_NEEDLE_HEIGHT h`` over their longest edge whose box spans
+    more than ``_LINE_CELLS`` cells; None when there is none."""
+    rows = np.flatnonzero(cnt > _LINE_CELLS)
+    if rows.size == 0:
+        return None
+    A, B, C = A[rows], B[rows], C[rows]
+    nrm = cross_rows(B - A, C - A) if nrm is None else nrm[rows]
     edges = np.stack([B - A, C - B, A - C], axis=1)                    # (k,3 edges,3)
     length2 = np.einsum("ijk,ijk->ij", edges, edges)
     longest = np.argmax(length2, axis=1)
-    rows = np.arange(A.shape[0])
-    l2 = length2[rows, longest]
+    at = np.arange(rows.shape[0])
+    l2 = length2[at, longest]
     height = np.sqrt(np.einsum("ij,ij->i", nrm, nrm) / np.where(l2 > 0, l2, 1.0))
-    is_needle = (cnt > _LINE_CELLS) & (height <= _NEEDLE_HEIGHT * h)
-    if not is_needle.any():
+    needle = height <= _NEEDLE_HEIGHT * h
+    if not needle.any():
         return None
-    start = np.stack([A, B, C], axis=1)[rows, longest]
-    return _Needles(is_needle, start, edges[rows, longest], height)
+    is_needle = np.zeros(cnt.shape[0], dtype=bool)
+    is_needle[rows[needle]] = True
+    full = lambda x: _spread(x, rows, cnt.shape[0])                       # noqa: E731
+    return _Needles(is_needle, full(np.stack([A, B, C], axis=1)[at, longest]),
+                    full(edges[at, longest]), full(height))
+
+
+def _spread(x, rows, k):
+    """``x`` (r, ...) placed at ``rows`` of a zero array of ``k`` rows."""
+    out = np.zeros((k,) + x.shape[1:], dtype=x.dtype)
+    out[rows] = x
+    return out
 
 
 def _near_needle(needles, tri, X, h, ext):
@@ -692,11 +716,11 @@ class TriangleIndex:
         # the triangles' largest box sides, then the cells (every other per-triangle
         # array is made a block at a time: a 2M-face build made 850 MB of whole-mesh
         # temporaries, each page of which this machine's kernel was slow to hand out)
-        ext, thin = np.empty(m), np.empty(m, dtype=bool)
-        run_each(lambda span: _largest_sides(V, Fo[span[0]:span[1]], ext[span[0]:span[1]],
-                                             thin[span[0]:span[1]]),
+        ext = np.empty(m)
+        run_each(lambda span: _largest_sides(V, Fo[span[0]:span[1]], ext[span[0]:span[1]]),
                  spans, threads=m >= _THREADED_BUILD)
-        h, dims = self._cell_size(V, Fo, spans, ext, thin, extent, cell_factor, min_cell)
+        h, dims = self._cell_size(V, Fo, spans, ext, _long_thin(V, Fo, ext), extent, cell_factor,
+                                  min_cell)
         self._h, self._dims = h, dims
         self._D, self._ball, self._prism = np.empty((16, m)), np.empty((4, m)), np.empty((16, m))
         small = np.int32 if m < 2**31 else np.int64        # (cells <= _MAX_CELLS < 2**31)
@@ -748,7 +772,7 @@ class TriangleIndex:
                 A, B, C = _corners(V, Fo[span[0]:span[1]])
                 c0, nr = _cell_ranges(A, B, C, self._lo, h, dims)
                 cnt = np.prod(nr, axis=1)
-                needles = _needles(A, B, C, cross_rows(B - A, C - A), cnt, h)
+                needles = _needles(A, B, C, cnt, h)
                 if needles is not None:      # (about the cells of a tube around a line through it)
                     line = 6 * nr.max(axis=1)
                     cnt = np.where(needles.is_needle, np.minimum(cnt, line), cnt)
