@@ -9,7 +9,7 @@ edge- and vertex-manifold triangle mesh that :func:`~.simplify.simplify`,
 
     drop faces with a repeated vertex index
     weld   vertices on open or non-manifold edges or on collapsed faces (no
-           taller than weld_distance, nor than FLAT_SHARE of the median
+           taller than weld_distance, nor than FLAT_SHARE of the tallest
            face) that coincide (exactly, or within
            weld_distance of the mesh's size, :func:`bulk_box`: soups, seams,
            collapsed clusters), and the ends of edges that short
@@ -188,7 +188,7 @@ def clean_mesh(V, F, *, weld_distance=None, min_component_area=MIN_COMPONENT_ARE
         count) along every axis are welded; exact duplicates
         always are (also with 0); so are the two ends of an edge that short,
         and the corners of faces no taller than it and than ``FLAT_SHARE`` of
-        the median face's height (collapsed clusters).
+        the tallest face (collapsed clusters).
         Other vertices inside a closed surface are not welded: two of them at
         one place are two sheets touching, which is already manifold.
         None (the default): ``WELD_DISTANCE``, or when that leaves more than
@@ -312,8 +312,9 @@ def clean_mesh(V, F, *, weld_distance=None, min_component_area=MIN_COMPONENT_ARE
 
 
 #: a face is collapsed (its corners weld) only when no taller than the weld distance
-#: and than this share of the median face's height: a clean cow stretched 10,000 times
-#: along x had most of its faces below the weld distance and lost 81% of them
+#: and than this share of the tallest face: a clean cow stretched 100,000 times along x
+#: had most of its faces below the weld distance and lost 81% of them (the tallest, not
+#: a median: a cluster collapsed to a point can be most of a mesh's faces)
 FLAT_SHARE = 0.01
 #: the mesh's size leaves out this share of the vertices at each end of every axis
 BULK_SHARE = 0.01
@@ -429,7 +430,7 @@ class _Shape(NamedTuple):
     extent: np.ndarray  #: (3,) the box's sides, in those units
     area: np.ndarray    #: (m,) float64
     height: np.ndarray  #: (m,) float64
-    typical_height: float  #: the median of ``height`` (of the faces as they came)
+    tallest: float      #: the largest ``height`` (of the faces as they came)
 
 
 def _shape(V, F, box):
@@ -444,7 +445,7 @@ def _shape(V, F, box):
     area, height = np.empty(m), np.empty(m)
     run_blocks(lambda a, b: _face_shape(cols, F[a:b], area[a:b], height[a:b]),
                blocks(m, _FACE_BLOCK))
-    return _Shape(cols.T, (hi - lo) / d, area, height, float(np.median(height)) if m else 0.0)
+    return _Shape(cols.T, (hi - lo) / d, area, height, float(height.max(initial=0.0)))
 
 
 #: faces per block of :func:`_shape` and the sheet candidates (temporaries stay in cache)
@@ -475,7 +476,7 @@ def _weld_map(shape, F, twin, weld_distance):
     """Representative of every vertex, (n,) int64: vertices on an open or
     non-manifold edge (``twin < 0``) or on a collapsed face (no taller than
     ``weld_distance`` over its longest edge, nor than ``FLAT_SHARE`` of the
-    median face: a degenerate cluster, or an edge that short, since a face is
+    tallest face: a degenerate cluster, or an edge that short, since a face is
     no taller than its shortest edge) that coincide, exactly or within
     ``weld_distance`` of the size (see the
     module docstring), map to the smallest index of their group; every other
@@ -484,7 +485,7 @@ def _weld_map(shape, F, twin, weld_distance):
     n = V.shape[0]
     rep = np.arange(n, dtype=np.int64)
     h = np.flatnonzero(twin < 0)
-    flat = np.flatnonzero(shape.height <= min(tol, FLAT_SHARE * shape.typical_height))
+    flat = np.flatnonzero(shape.height <= min(tol, FLAT_SHARE * shape.tallest))
     if h.size == 0 and flat.size == 0:
         return rep
     cand = np.unique(np.concatenate([*half_edge_ends(F, h), F[flat].ravel()]))
