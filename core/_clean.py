@@ -478,7 +478,7 @@ def coincident_pairs(P, distance):
         rows = np.flatnonzero(own)
         P = P[rows]
     cell = 4.0 * distance
-    lo = np.minimum(P.min(axis=0, initial=0.0), 0.0)       # (P >= 0: the grid starts at 0)
+    lo = P.min(axis=0, initial=0.0)                        # (P >= 0: the grid starts at 0)
     extent = float((P.max(axis=0, initial=0.0) - lo).max(initial=0.0))
     if cell > 0 and extent / cell + 2 < 2.0 ** 62:
         Pc = (P - lo) / cell
@@ -523,17 +523,14 @@ def _same_cell_pairs(Q, P=None):
     """Pairs (k,2) of row indices that are neighbours in sorted order and
     equal: integer cells ``Q`` (k,3), >= 0 (packed into one key when they fit
     ``GRID_BITS`` per axis), or exact points ``P``."""
-    if Q is not None and (Q.max(initial=0) < 2 ** GRID_BITS):
+    if Q is not None and Q.max(initial=0) < 2 ** GRID_BITS:
         key = (Q[:, 0] << 2 * GRID_BITS) | (Q[:, 1] << GRID_BITS) | Q[:, 2]
         order = np.argsort(key)          # (not stable: 2.3x faster; the groups are the same)
         same = key[order[1:]] == key[order[:-1]]
-    elif Q is not None:
-        order = np.lexsort((Q[:, 2], Q[:, 1], Q[:, 0]))
-        S = Q[order]
-        same = (S[1:] == S[:-1]).all(axis=1)
     else:
-        order = np.lexsort((P[:, 2], P[:, 1], P[:, 0]))
-        S = P[order]
+        R = P if Q is None else Q
+        order = np.lexsort((R[:, 2], R[:, 1], R[:, 0]))
+        S = R[order]
         same = (S[1:] == S[:-1]).all(axis=1)
     i = np.flatnonzero(same)
     return np.stack([order[i], order[i + 1]], axis=1)

@@ -427,7 +427,6 @@ class _Shape(NamedTuple):
     its height over its longest edge."""
 
     V: np.ndarray       #: (n,3) float64, (V - lo) / diagonal
-    extent: np.ndarray  #: (3,) the box's sides, in those units
     area: np.ndarray    #: (m,) float64
     height: np.ndarray  #: (m,) float64
     tallest: float      #: the largest ``height`` (of the faces as they came)
@@ -445,7 +444,7 @@ def _shape(V, F, box):
     area, height = np.empty(m), np.empty(m)
     run_blocks(lambda a, b: _face_shape(cols, F[a:b], area[a:b], height[a:b]),
                blocks(m, _FACE_BLOCK))
-    return _Shape(cols.T, (hi - lo) / d, area, height, float(height.max(initial=0.0)))
+    return _Shape(cols.T, area, height, float(height.max(initial=0.0)))
 
 
 #: faces per block of :func:`_shape` and the sheet candidates (temporaries stay in cache)

@@ -50,16 +50,15 @@ def exact_detail_index(V_dense, F_dense):
 
 
 class _Fans(NamedTuple):
-    """The faces around some vertices of a mesh (CSR over ``vertices``, each
-    fan's faces ascending)."""
+    """The faces around some vertices of a mesh (CSR over those vertices in
+    ascending order, each fan's faces ascending)."""
 
-    vertices: np.ndarray  #: (k,) int64 the vertices, ascending
-    start: np.ndarray     #: (k + 1,) int64 fan of vertices[i]: faces[start[i]:start[i+1]]
+    start: np.ndarray     #: (k + 1,) int64 fan of the i-th vertex: faces[start[i]:start[i+1]]
     faces: np.ndarray     #: (entries,) int64
-    rank: np.ndarray      #: (n,) int64 the place of each vertex in ``vertices`` (-1: none)
+    rank: np.ndarray      #: (n,) int64 the place i of each vertex among them (-1: none)
 
     def of(self, v):
-        """(first entry, count) of the fans of the vertices ``v`` (each in ``vertices``)."""
+        """(first entry, count) of the fans of the vertices ``v`` (each one of them)."""
         i = self.rank[v]
         return self.start[i], self.start[i + 1] - self.start[i]
 
@@ -80,7 +79,7 @@ def _fans_of(F, vertices):
     r = r[hit]
     order = np.argsort(r, kind="stable")
     counts = np.bincount(r, minlength=vertices.shape[0])
-    return _Fans(vertices, np.concatenate([[0], np.cumsum(counts)]), hit[order] // 3, rank)
+    return _Fans(np.concatenate([[0], np.cumsum(counts)]), hit[order] // 3, rank)
 
 
 def dense_points_near(V_dense, F_dense, F_fine, nearest, P, reach=None):

@@ -481,13 +481,31 @@ def _long_thin(V, F, ext):
     thin = np.zeros(ext.shape[0], dtype=bool)
     if ext.size:
         long = np.flatnonzero(ext > 2.0 * np.median(ext[::max(1, ext.shape[0] // 4096)]))
-        A, B, C = _corners(V, F[long])
-        n = cross_rows(B - A, C - A)
-        longest = np.maximum(np.maximum(np.einsum("ij,ij->i", B - A, B - A),
-                                        np.einsum("ij,ij->i", C - B, C - B)),
-                             np.einsum("ij,ij->i", A - C, A - C))
-        thin[long] = np.einsum("ij,ij->i", n, n) < _THIN_HEIGHT ** 2 * longest * longest
+        edge = _LongestEdges.of(*_corners(V, F[long]))
+        thin[long] = edge.height2 < _THIN_HEIGHT ** 2 * edge.length2
     return thin
+
+
+class _LongestEdges(NamedTuple):
+    """Each triangle's longest edge and its height over it (every point of a
+    triangle lies within that height of that edge)."""
+
+    start: np.ndarray    #: (k,3) one end of the edge
+    edge: np.ndarray     #: (k,3) the edge, to its other end
+    length2: np.ndarray  #: (k,) its squared length
+    height2: np.ndarray  #: (k,) the squared height over it (0 for a point)
+
+    @classmethod
+    def of(cls, A, B, C, nrm=None):
+        """Of the triangles ``(A, B, C)`` (each (k,3); ``nrm`` their area normals when known)."""
+        nrm = cross_rows(B - A, C - A) if nrm is None else nrm
+        edges = np.stack([B - A, C - B, A - C], axis=1)                # (k,3 edges,3)
+        length2 = np.einsum("ijk,ijk->ij", edges, edges)
+        longest = np.argmax(length2, axis=1)
+        at = np.arange(A.shape[0])
+        l2 = length2[at, longest]
+        height2 = np.einsum("ij,ij->i", nrm, nrm) / np.where(l2 > 0, l2, 1.0)
+        return cls(np.stack([A, B, C], axis=1)[at, longest], edges[at, longest], l2, height2)
 
 
 def _cell_ranges(A, B, C, lo, h, dims):
@@ -610,22 +628,16 @@ def _needles(A, B, C, cnt, h, nrm=None):
     rows = np.flatnonzero(cnt > _LINE_CELLS)
     if rows.size == 0:
         return None
-    A, B, C = A[rows], B[rows], C[rows]
-    nrm = cross_rows(B - A, C - A) if nrm is None else nrm[rows]
-    edges = np.stack([B - A, C - B, A - C], axis=1)                    # (k,3 edges,3)
-    length2 = np.einsum("ijk,ijk->ij", edges, edges)
-    longest = np.argmax(length2, axis=1)
-    at = np.arange(rows.shape[0])
-    l2 = length2[at, longest]
-    height = np.sqrt(np.einsum("ij,ij->i", nrm, nrm) / np.where(l2 > 0, l2, 1.0))
+    edge = _LongestEdges.of(A[rows], B[rows], C[rows], None if nrm is None else nrm[rows])
+    height = np.sqrt(edge.height2)
     needle = height <= _NEEDLE_HEIGHT * h
     if not needle.any():
         return None
     is_needle = np.zeros(cnt.shape[0], dtype=bool)
     is_needle[rows[needle]] = True
-    full = lambda x: _spread(x, rows, cnt.shape[0])                       # noqa: E731
-    return _Needles(is_needle, full(np.stack([A, B, C], axis=1)[at, longest]),
-                    full(edges[at, longest]), full(height))
+    k = cnt.shape[0]
+    return _Needles(is_needle, _spread(edge.start, rows, k), _spread(edge.edge, rows, k),
+                    _spread(height, rows, k))
 
 
 def _spread(x, rows, k):

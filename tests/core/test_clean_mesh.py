@@ -15,8 +15,8 @@ from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 
 import core
-from core.clean import (BUDGET_DEBRIS_SHARE, bulk_box, OPEN_SHARE, WELD_DISTANCE, WIDER_WELDS, CleanReport,
-                        clean_mesh)
+from core.clean import (BUDGET_DEBRIS_SHARE, OPEN_SHARE, WELD_DISTANCE, WIDER_WELDS, CleanReport,
+                        bulk_box, clean_mesh)
 from core.errors import InvalidArgumentError, InvalidMeshError
 from core.topology import manifold_report, topology_summary
 from tests.mesh_factory import (duplicated, icosphere, klein_bottle, load_shared, mobius_strip,
@@ -162,15 +162,15 @@ def test_a_cluster_collapsed_to_a_point_welds_even_when_it_is_most_of_the_mesh(j
 def test_the_bulk_box_leaves_out_far_specks_but_not_the_mesh():
     V, F = load_shared("stanford-bunny.obj")
     used = V[np.unique(F)]
-    hi = bulk_box(used)
+    bulk = bulk_box(used)
     box_lo, box_hi = used.min(axis=0), used.max(axis=0)
     # the bulk is nearly the whole box (2% of the vertices left out along each axis) ...
-    assert np.all(hi[0] >= box_lo) and np.all(hi[1] <= box_hi)
-    assert np.linalg.norm(hi[1] - hi[0]) > 0.9 * np.linalg.norm(box_hi - box_lo)
+    assert np.all(bulk[0] >= box_lo) and np.all(bulk[1] <= box_hi)
+    assert np.linalg.norm(bulk[1] - bulk[0]) > 0.9 * np.linalg.norm(box_hi - box_lo)
     # ... and the same with specks far off
     specks = np.random.default_rng(0).random((used.shape[0] // 200, 3)) * 1e6
     far = bulk_box(np.vstack([used, specks]))
-    assert np.linalg.norm(far[1] - far[0]) < 1.1 * np.linalg.norm(hi[1] - hi[0])
+    assert np.linalg.norm(far[1] - far[0]) < 1.1 * np.linalg.norm(bulk[1] - bulk[0])
     # a flat mesh keeps its flat axis; points all at one place but a few: the whole box
     flat = bulk_box(np.c_[np.random.default_rng(1).random((500, 2)), np.zeros(500)])
     assert flat[0][2] == flat[1][2] == 0.0 and np.all(flat[1][:2] > flat[0][:2])
