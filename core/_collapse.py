@@ -1072,10 +1072,11 @@ def run(st, target, max_err_n, preserve_boundary, progress, m0, tun, dihedral_co
     bend two adjacent faces (off the input's creases) by more than its
     arccos are refused, and a stop for want of valid collapses while some
     were refused only for that reads ``"max_dihedral"``."""
-    try:
-        stopped, passes = _run(st, target, max_err_n, preserve_boundary, progress, m0, tun, dihedral_cos)
-    finally:
-        compact(st, tun.threads_min_edges)
+    # no compaction when _run raises (an interrupt may land mid-pass, the
+    # state half-updated: compacting it would hide the interrupt behind an
+    # IndexError, and the state is dropped anyway)
+    stopped, passes = _run(st, target, max_err_n, preserve_boundary, progress, m0, tun, dihedral_cos)
+    compact(st, tun.threads_min_edges)
     if stopped == "no_valid_collapse" and dihedral_cos is not None:
         if st.bent[edge_representatives(st.twin)].any():
             stopped = "max_dihedral"

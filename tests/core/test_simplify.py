@@ -246,6 +246,35 @@ def test_progress_reports_fractions_and_cancels():
     assert "cancelled" in first.message
 
 
+def test_an_interrupt_anywhere_surfaces_as_an_interrupt():
+    """The batch's workers turn SIGTERM into a KeyboardInterrupt raised
+    wherever the main thread is: mid-pass, the collapse state is half
+    updated, and nothing may tidy it up on the way out (an IndexError from
+    compacting it once replaced the interrupt). Interrupts at forty points
+    spread over one run must each come out as KeyboardInterrupt."""
+    import signal
+    import time
+    V, F = bumpy_sphere(5)                       # 20k faces
+    t = time.perf_counter()
+    simplify(V, F, target_faces=100)
+    whole = time.perf_counter() - t
+
+    def interrupt(signum, frame):
+        raise KeyboardInterrupt
+    old = signal.signal(signal.SIGALRM, interrupt)
+    try:
+        for k in range(1, 41):
+            signal.setitimer(signal.ITIMER_REAL, whole * k / 41)
+            try:
+                simplify(V, F, target_faces=100)
+            except KeyboardInterrupt:
+                pass
+            finally:
+                signal.setitimer(signal.ITIMER_REAL, 0)
+    finally:
+        signal.signal(signal.SIGALRM, old)
+
+
 def test_units_do_not_matter():
     V, F = bumpy_sphere(3, seed=4)
     ref = simplify(V, F, target_faces=120)
