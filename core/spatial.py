@@ -104,6 +104,15 @@ _NEEDLE_HEIGHT = 0.25
 _LINE_CELLS = 27
 _MAX_PHASE2_CELLS = 64     # queries whose ball spans more cells go to the BVH
 _MAX_SAME_CODE = 64        # more triangles than this with one Morton code: drop repeated ones
+#: a long thin triangle no taller than this share of the mesh's size over its longest
+#: edge is flat: a segment. Flat ones whose segment lies (within it) inside another's
+#: are not indexed (a region collapsed onto a line by a scanner: thousands of needles
+#: over one another, every query near the line met them all)
+_FLAT_HEIGHT = 1e-9
+#: ... grouped by line: directions and the lines' offsets from the origin rounded to
+#: this share (of a unit vector, of the mesh's size); rounding may split one line's
+#: segments into two groups (fewer dropped), never puts two lines in one
+_LINE_ROUNDING = 1e-6
 _LEAF = 8                  # BVH leaf size (triangles)
 _BVH_STEP = 2              # BVH levels descended per traversal step (4 children per node)
 _SLAB_LEVELS = 3           # lowest BVH levels that also get cylinder bounds
@@ -508,6 +517,63 @@ class _LongestEdges(NamedTuple):
         return cls(np.stack([A, B, C], axis=1)[at, longest], edges[at, longest], l2, height2)
 
 
+def _covered_needles(V, F, thin, size):
+    """(m,) bool: the triangles of ``F`` that are flat (no taller than
+    ``_FLAT_HEIGHT * size`` over their longest edge) and whose longest edge
+    lies inside another flat one's on the same line (both within that
+    height of it): every point of such a triangle is within twice that
+    height of the other one, so dropping it changes no distance by more.
+    Of identical segments the first is kept. Only the ``thin`` ones are
+    measured unless an even sample of 4,096 triangles has a flat one (a
+    region collapsed onto a line can be most of a mesh: its needles are
+    then no longer than the median triangle)."""
+    drop = np.zeros(F.shape[0], dtype=bool)
+    tol = _FLAT_HEIGHT * size
+    sample = _LongestEdges.of(*_corners(V, F[::max(1, F.shape[0] // 4096)]))
+    rows = np.arange(F.shape[0]) if (sample.height2 <= tol * tol).any() else np.flatnonzero(thin)
+    if rows.size < 2:
+        return drop
+    edge = _LongestEdges.of(*_corners(V, F[rows]))
+    flat = (edge.height2 <= tol * tol) & (edge.length2 > 0)
+    if np.count_nonzero(flat) < 2:
+        return drop
+    rows, P, E = rows[flat], edge.start[flat], edge.edge[flat]
+    group, a, b, tight = _on_lines(P, E, size, tol)
+    if np.count_nonzero(tight) < 2:
+        return drop
+    rows, group, lo, hi = rows[tight], group[tight], np.minimum(a, b)[tight], np.maximum(a, b)[tight]
+    order = np.lexsort((-hi, lo, group))
+    _, rank = np.unique(hi, return_inverse=True)
+    key = (group * np.int64(rank.max() + 1) + rank.ravel())[order]
+    # sorted by group, then start: one is inside an earlier one of its group when the
+    # largest end before it (a running maximum of keys stays within a group) reaches its own
+    before = np.concatenate([[-1], np.maximum.accumulate(key)[:-1]])
+    drop[rows[order[before >= key]]] = True
+    return drop
+
+
+def _on_lines(P, E, size, tol):
+    """The segments ``P`` -> ``P + E`` (k,3) grouped by line (rounded
+    direction and offset, ``_LINE_ROUNDING``): (group (k,) int64, the ends'
+    places a, b along the group's line (its first segment's), and whether
+    both ends lie within ``tol`` of that line)."""
+    U = unit_rows(E)
+    axis = np.argmax(np.abs(U), axis=1)
+    U *= np.sign(U[np.arange(U.shape[0]), axis])[:, None]       # one direction per line
+    foot = P - np.einsum("ij,ij->i", P, U)[:, None] * U            # the line's point nearest 0
+    key = np.round(np.hstack([U, foot / size]) / _LINE_ROUNDING).astype(np.int64)
+    _, first, group = np.unique(key, axis=0, return_index=True, return_inverse=True)
+    group = group.ravel()
+    p0, u0 = P[first][group], U[first][group]
+    ends = []
+    for X in (P - p0, P + E - p0):
+        t = np.einsum("ij,ij->i", X, u0)
+        off = X - t[:, None] * u0
+        ends.append((t, np.einsum("ij,ij->i", off, off) <= tol * tol))
+    (a, ok_a), (b, ok_b) = ends
+    return group, a, b, ok_a & ok_b
+
+
 def _cell_ranges(A, B, C, lo, h, dims):
     """Each triangle's first cell (k,3) and cells per axis (k,3) of its box."""
     tlo, thi = _box_of(A, B, C)
@@ -587,11 +653,17 @@ def _plane_cells(A, B, C, ext, c0, nr, lo, h, dims, first, dtype):
     order) that its plane passes through, conservatively: with the
     unnormalised normal n and o = n.A, a cell whose centre x has
     |n.x - o| > h/2 (|nx| + |ny| + |nz|) plus a rounding margin is left out.
+    The margin also covers the rounding of n itself, about eps |AB| |AC|: on
+    a needle with no height to speak of, n is all rounding and points
+    anywhere (a needle across a sphere was left out of most cells it crosses).
     Returns (cell, triangle), in triangle order, as ``dtype``."""
-    nrm = cross_rows(B - A, C - A)
+    AB, AC = B - A, C - A
+    nrm = cross_rows(AB, AC)
     off = np.einsum("ij,ij->i", nrm, A)
     l1 = np.abs(nrm).sum(axis=1)
-    reach = 0.5 * h * l1 + PRUNE_SLACK * l1 * (np.abs(A).max(axis=1) + ext + 2 * h)
+    sides = np.sqrt(np.einsum("ij,ij->i", AB, AB) * np.einsum("ij,ij->i", AC, AC))
+    reach = 0.5 * h * l1 + PRUNE_SLACK * (l1 * (np.abs(A).max(axis=1) + ext + 2 * h)
+                                          + sides * (ext + 2 * h))
     cnt = np.prod(nr, axis=1)
     local, tri = ragged_ranges(np.zeros(cnt.shape[0], dtype=np.int64), cnt)   # 0..cnt-1 each
     nx = nr[tri, 0]
@@ -731,8 +803,14 @@ class TriangleIndex:
         ext = np.empty(m)
         run_each(lambda span: _largest_sides(V, Fo[span[0]:span[1]], ext[span[0]:span[1]]),
                  spans, threads=m >= _THREADED_BUILD)
-        h, dims = self._cell_size(V, Fo, spans, ext, _long_thin(V, Fo, ext), extent, cell_factor,
-                                  min_cell)
+        thin = _long_thin(V, Fo, ext)
+        covered = _covered_needles(V, Fo, thin, float(extent.max()))
+        if covered.any():
+            keep = ~covered
+            order, Fo, ext, thin = order[keep], Fo[keep], ext[keep], thin[keep]
+            self._order, m = order, order.shape[0]
+            spans = blocks(m, _BUILD_BLOCK)
+        h, dims = self._cell_size(V, Fo, spans, ext, thin, extent, cell_factor, min_cell)
         self._h, self._dims = h, dims
         self._D, self._ball, self._prism = np.empty((16, m)), np.empty((4, m)), np.empty((16, m))
         small = np.int32 if m < 2**31 else np.int64        # (cells <= _MAX_CELLS < 2**31)

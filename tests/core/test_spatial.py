@@ -291,13 +291,9 @@ def test_a_cluster_of_needles_does_not_set_the_cells_and_answers_exactly(k):
     it. The cells stay those of the mesh's own triangles (the needles made
     them 4x wider, every query near them scanning hundreds), each needle is
     referenced only in the cells along its line, and the answers are exact."""
-    V, F = icosphere(4)
+    W, F, a, b, needle = _collapsed_onto_a_segment(k)
     rng = np.random.default_rng(0)
-    near = np.argsort(np.linalg.norm(V - V[0], axis=1))[:k]
-    a, b = np.array([-0.9, -0.3, 0.1]), np.array([0.8, 0.4, -0.2])
-    W = V.copy()
-    W[near] = a + rng.random(k)[:, None] * (b - a)
-    needle = np.flatnonzero(np.isin(F, near).all(axis=1))
+    rng.random(k)
     index, others = TriangleIndex(W, F), TriangleIndex(W, np.delete(F, needle, axis=0))
     assert index._h <= 1.25 * others._h
     refs = np.bincount(index._order[index._cell_tri], minlength=F.shape[0])
@@ -305,6 +301,54 @@ def test_a_cluster_of_needles_does_not_set_the_cells_and_answers_exactly(k):
     assert refs[needle].max() <= 27 * cells_along          # a tube of cells, not the box
     P = np.vstack([_random_queries(W, rng, 300), a + rng.random((100, 1)) * (b - a) + 1e-3])
     _check_result(W, F, P, index.closest(P))
+
+
+def _collapsed_onto_a_segment(k, seed=0):
+    """An icosphere whose ``k`` vertices nearest one vertex were moved to
+    random points of a segment across it (a region a scanner collapsed onto
+    a line): (W, F, the segment's ends, the needle faces)."""
+    V, F = icosphere(4)
+    rng = np.random.default_rng(seed)
+    near = np.argsort(np.linalg.norm(V - V[0], axis=1))[:k]
+    a, b = np.array([-0.9, -0.3, 0.1]), np.array([0.8, 0.4, -0.2])
+    W = V.copy()
+    W[near] = a + rng.random(k)[:, None] * (b - a)
+    return W, F, a, b, np.flatnonzero(np.isin(F, near).all(axis=1))
+
+
+def test_needles_inside_others_are_not_indexed_and_answers_stay_exact():
+    """Of needles along one line only those not inside another are indexed
+    (the rest are within rounding of them): 300 vertices on a segment make
+    about 560 needles, of which a few span the others; queries on the line
+    meet those few, and every answer is exact."""
+    W, F, a, b, needle = _collapsed_onto_a_segment(300)
+    index = TriangleIndex(W, F)
+    kept = np.zeros(F.shape[0], dtype=bool)
+    kept[index._order] = True
+    assert kept[np.setdiff1d(np.arange(F.shape[0]), needle)].all()
+    assert needle.size > 500 and np.count_nonzero(kept[needle]) <= 20
+    # every dropped needle lies inside a kept one
+    seg = lambda f: np.sort(((W[F[f]] - a) @ (b - a)) / ((b - a) @ (b - a)), axis=1)[:, [0, 2]]
+    inner, outer = seg(needle[~kept[needle]]), seg(needle[kept[needle]])
+    inside = (outer[None, :, 0] <= inner[:, None, 0] + 1e-12) & (inner[:, None, 1] <= outer[None, :, 1] + 1e-12)
+    assert inside.any(axis=1).all()
+    rng = np.random.default_rng(5)
+    P = np.vstack([_random_queries(W, rng, 300), a + rng.random((300, 1)) * (b - a)
+                   + 1e-3 * rng.standard_normal((300, 3))])
+    _check_result(W, F, P, index.closest(P))
+
+
+def test_a_needle_with_no_height_is_found_in_every_cell_it_crosses():
+    """One exactly flat needle across a sphere, its normal all rounding: the
+    plane test that picks a triangle's cells must not trust that normal
+    (it left the needle out of most cells along it, and queries next to the
+    needle got a face 3x farther)."""
+    W, F, a, b, needle = _collapsed_onto_a_segment(60)
+    span = np.ptp(((W[F[needle]] - a) @ (b - a)), axis=1)
+    F1 = np.delete(F, np.delete(needle, np.argmax(span)), axis=0)    # the longest needle only
+    rng = np.random.default_rng(6)
+    P = a + rng.random((400, 1)) * (b - a) + 1e-3 * rng.standard_normal((400, 3))
+    _check_result(W, F1, P, TriangleIndex(W, F1).closest(P))
 
 
 def test_index_far_from_origin_and_unit_invariance():
