@@ -72,11 +72,16 @@ def _fans_of(F, vertices):
     vertices = np.unique(vertices)
     flat = F.ravel()
     n = max(int(flat.max()) + 1 if flat.size else 0, int(vertices.max()) + 1 if vertices.size else 0)
-    rank = np.full(n, -1, dtype=np.int64)
+    rank = np.full(n, -1, dtype=np.int32 if vertices.shape[0] < 2**31 else np.int64)
     rank[vertices] = np.arange(vertices.shape[0])
-    r = rank[flat]
-    hit = np.flatnonzero(r >= 0)
-    r = r[hit]
+
+    def scan(s, e):          # the corners at the vertices among F's corners s:e
+        r = rank.take(flat[s:e])
+        hit = np.flatnonzero(r >= 0)
+        return hit + s, r[hit]
+    parts = run_blocks(scan, blocks(flat.shape[0], 3 * _FACE_BLOCK)) or [(np.zeros(0, np.int64),) * 2]
+    hit = np.concatenate([p[0] for p in parts])
+    r = np.concatenate([p[1] for p in parts]).astype(np.int64)
     order = np.argsort(r, kind="stable")
     counts = np.bincount(r, minlength=vertices.shape[0])
     return _Fans(np.concatenate([[0], np.cumsum(counts)]), hit[order] // 3, rank)

@@ -646,9 +646,9 @@ def _cell_range(X, lo, h, dims):
     return np.clip(cell, 0, dims - 1, out=cell)
 
 
-def _plane_cells(A, B, C, ext, c0, nr, lo, h, dims, first, dtype):
+def _plane_cells(A, B, C, sides, ext, c0, nr, lo, h, dims, first, dtype):
     """The grid references of the triangles ``(A, B, C)`` (numbered from
-    ``first``; ``ext`` their boxes' largest sides): every cell of each one's
+    ``first``; ``sides`` |AB| |AC|, ``ext`` their boxes' largest sides): every cell of each one's
     box (first cell ``c0``, ``nr`` cells per axis, in x, then y, then z
     order) that its plane passes through, conservatively: with the
     unnormalised normal n and o = n.A, a cell whose centre x has
@@ -657,11 +657,9 @@ def _plane_cells(A, B, C, ext, c0, nr, lo, h, dims, first, dtype):
     a needle with no height to speak of, n is all rounding and points
     anywhere (a needle across a sphere was left out of most cells it crosses).
     Returns (cell, triangle), in triangle order, as ``dtype``."""
-    AB, AC = B - A, C - A
-    nrm = cross_rows(AB, AC)
+    nrm = cross_rows(B - A, C - A)
     off = np.einsum("ij,ij->i", nrm, A)
     l1 = np.abs(nrm).sum(axis=1)
-    sides = np.sqrt(np.einsum("ij,ij->i", AB, AB) * np.einsum("ij,ij->i", AC, AC))
     reach = 0.5 * h * l1 + PRUNE_SLACK * (l1 * (np.abs(A).max(axis=1) + ext + 2 * h)
                                           + sides * (ext + 2 * h))
     cnt = np.prod(nr, axis=1)
@@ -823,7 +821,8 @@ class TriangleIndex:
             self._D[:, s] = triangle_rows(A, B, C)
             self._ball[:, s], self._prism[:, s] = _bounding_rows(A, B, C, self._D[12:15, s].T)
             c0, nr = _cell_ranges(A, B, C, self._lo, h, dims)
-            return _plane_cells(A, B, C, ext[s], c0, nr, self._lo, h, dims, span[0], small)
+            sides = np.sqrt(self._D[9, s] * self._D[10, s])
+            return _plane_cells(A, B, C, sides, ext[s], c0, nr, self._lo, h, dims, span[0], small)
         parts = run_each(build_block, spans, threads=m >= _THREADED_BUILD)
         cell = np.concatenate([p[0] for p in parts])
         tri = np.concatenate([p[1] for p in parts])
