@@ -295,11 +295,14 @@ def write_with_blender(path, V, F, log):
     (``.ply``, ``.stl`` or ``.glb``)."""
     bpy = _bpy(log)
     fmt = os.path.splitext(path)[1].lower()
+    # an empty scene, as for reading: the view layer of a scene whose objects an
+    # earlier write removed can still list them (None, or a crash when touched:
+    # a PLY input with --refine failed writing the refined mesh, or segfaulted)
+    with captured_output(log):
+        bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)
     mesh = _mesh_io().new_mesh(os.path.splitext(os.path.basename(path))[0], V, F)
     obj = bpy.data.objects.new(mesh.name, mesh)
     bpy.context.scene.collection.objects.link(obj)
-    for o in bpy.context.view_layer.objects:
-        o.select_set(False)
     obj.select_set(True)
     bpy.context.view_layer.objects.active = obj
     try:

@@ -99,7 +99,7 @@ def _read(path, fn, obj):
     tri_rows, tri_lines, tri_base = [], [], []   # faces as index strings
     poly = []                                    # (lineno, index strings, vertex count)
     skipped = {}
-    with open(path, "r", encoding="utf-8", errors="replace") as fh:
+    with open(path, "r", encoding="utf-8-sig", errors="replace") as fh:
         for lineno, line in enumerate(fh, 1):
             parts = line.split()
             if not parts:

@@ -69,6 +69,22 @@ def write_ascii_ply(path, V, F, *, faces_in_header=None, truncate=False):
     path.write_text("\n".join(lines) + "\n")
 
 
+def test_batch_ply_input_with_refine_writes_both_meshes(tmp_path):
+    """A PLY input, refined: the cage and the refined mesh both written
+    through Blender in one worker (the second write met the first one's
+    removed object in the view layer: AttributeError, or a segfault)."""
+    V, F = icosphere(2)
+    write_ascii_ply(tmp_path / "a.ply", V, F)
+    out = tmp_path / "out"
+    proc = run_script(["scripts/meshadjust_batch.py", str(tmp_path / "a.ply"), "--faces", "50",
+                       "--refine", "1", "--out", str(out)], tmp_path)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    assert sorted(os.listdir(out)) == ["a_cage.ply", "a_refined.ply"]
+    assert "1 converted, 0 failed" in proc.stdout
+    text = (out / "a_refined.ply").read_bytes()
+    assert b"element face 200" in text[:400]          # 50 faces, one level: 4 x 50
+
+
 def test_batch_quotes_blender_importer_errors_and_keeps_its_log_out_of_stdout(tmp_path):
     V, F = icosphere(3)
     write_ascii_ply(tmp_path / "good.ply", V, F)

@@ -51,6 +51,18 @@ def test_smf_comments_other_keywords_and_polygons(tmp_path):
     assert np.array_equal(F, m.F)
 
 
+def test_obj_with_a_byte_order_mark_keeps_its_first_vertex(tmp_path):
+    """Windows Notepad saves UTF-8 with a byte-order mark: the first line's
+    'v' must still read as a vertex (it read as an unknown keyword, and every
+    face then pointed one vertex on)."""
+    V, F = tetrahedron()
+    text = "".join(f"v {x!r} {y!r} {z!r}\n" for x, y, z in V.tolist())
+    text += "".join(f"f {a + 1} {b + 1} {c + 1}\n" for a, b, c in F.tolist())
+    (tmp_path / "bom.obj").write_bytes(b"\xef\xbb\xbf" + text.encode())
+    V2, F2 = core.read_obj(tmp_path / "bom.obj")[:2]
+    assert np.array_equal(V2, V) and np.array_equal(F2, F)
+
+
 def test_obj_slashes_negative_indices_and_extra_coordinates(tmp_path):
     path = tmp_path / "m.obj"
     path.write_text("o thing\nv 0 0 0 1.0\nv 1 0 0 1.0\nv 0 1 0\nvt 0 0\nvn 0 0 1\n"
