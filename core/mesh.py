@@ -16,6 +16,16 @@ from .errors import InvalidMeshError
 NORMALS_BLOCK = 1 << 14
 
 
+def _as_array(x, name, shape, where):
+    """``np.asarray(x)``; a ragged list (rows of different lengths) raises
+    :class:`InvalidMeshError` naming ``name`` instead of NumPy's error."""
+    try:
+        return np.asarray(x)
+    except ValueError as exc:
+        raise InvalidMeshError(f"{where}: {name} must be {shape}, got rows of different "
+                               f"lengths ({exc})") from None
+
+
 def check_mesh(V, F, *, where, allow_empty=True):
     """Validate and copy a triangle mesh.
 
@@ -46,8 +56,8 @@ def check_mesh(V, F, *, where, allow_empty=True):
     >>> V.dtype, F.dtype
     (dtype('float64'), dtype('int64'))
     """
-    V_in = np.asarray(V)
-    F_in = np.asarray(F)
+    V_in = _as_array(V, "V", "(n,3) floats", where)
+    F_in = _as_array(F, "F", "(m,3) integers", where)
     if V_in.size == 0 and V_in.ndim <= 1:
         V_in = V_in.reshape(0, 3)
     if F_in.size == 0 and F_in.ndim <= 1:

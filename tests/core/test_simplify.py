@@ -338,6 +338,8 @@ def test_non_manifold_input_gives_a_manifold_cage():
     (np.eye(3), np.zeros((120, 4)), r"F must be \(m,3\) integers, got \(120, 4\) float64"),
     (np.eye(3), np.array([[0.0, 1.0, 2.0]]), "F must be"),
     (np.ones((3, 2)), [[0, 1, 2]], "V must be"),
+    (np.eye(4), [[0, 1, 2], [0, 1, 2, 3]], r"F must be \(m,3\) integers, got rows of different"),
+    ([[0, 0, 0], [1, 0], [0, 1, 0]], [[0, 1, 2]], "V must be .*rows of different lengths"),
 ])
 def test_bad_meshes_raise(V, F, match):
     with pytest.raises(InvalidMeshError, match=match):
