@@ -509,6 +509,10 @@ def _check_crosses(clean, s, k, axis):
     vertices on both sides of the plane (``s``: its snapped coordinates on
     axis ``k``), naming the side it lies on and its extent."""
     used = np.unique(clean.F)
+    if used.size == 0:
+        raise InvalidArgumentError(
+            f"{_WHERE}: symmetry {axis!r} needs a mesh with faces to mirror, and none is "
+            f"left (the input has none, or cleaning removed every one as debris)")
     if (s[used] > 0).any() and (s[used] < 0).any():
         return
     side = ("is flat in it" if (s[used] == 0).all() else

@@ -249,6 +249,9 @@ def test_one_sided_mesh_and_bad_axis_are_clear_errors():
         simplify_symmetric(V, F, axis="W", target_faces=50)
     with pytest.raises(InvalidArgumentError, match="give at least one of"):
         simplify(V, F, symmetry="X")
+    # nothing to mirror: no faces at all (NumPy's bare ValueError before)
+    with pytest.raises(InvalidArgumentError, match="needs a mesh with faces to mirror"):
+        simplify(V, np.zeros((0, 3), dtype=np.int64), target_faces=10, symmetry="X")
 
 
 def test_mirror_partners():
