@@ -255,6 +255,14 @@ def import_mesh(path, log=None):
     return bpy.context.view_layer.objects.active
 
 
+def _empty_scene(log):
+    """Blender's module (:func:`_bpy`) with an empty scene loaded."""
+    bpy = _bpy(log)
+    with captured_output(log):
+        bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)
+    return bpy
+
+
 def read_with_blender(path, log):
     """``(V, F, n_polygons, warnings)`` of a file read by Blender's importer
     into an empty scene; ``warnings`` names faces the importer dropped and
@@ -266,9 +274,7 @@ def read_with_blender(path, log):
         raise BlenderIOError(f"{os.path.basename(path)}: {bad:,} {what} with a coordinate that "
                              f"is not a finite number (NaN or infinity; Blender's importer would "
                              f"read them as 0)")
-    bpy = _bpy(log)
-    with captured_output(log):
-        bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)
+    _empty_scene(log)
     obj = import_mesh(path, log)
     arrays = _mesh_io().read_object(obj)
     # in the file's (world) space: a glTF node's transform is applied
@@ -293,13 +299,11 @@ def read_with_blender(path, log):
 def write_with_blender(path, V, F, log):
     """Write a triangle mesh with Blender's exporter chosen by the extension
     (``.ply``, ``.stl`` or ``.glb``)."""
-    bpy = _bpy(log)
-    fmt = os.path.splitext(path)[1].lower()
     # an empty scene, as for reading: the view layer of a scene whose objects an
     # earlier write removed can still list them (None, or a crash when touched:
     # a PLY input with --refine failed writing the refined mesh, or segfaulted)
-    with captured_output(log):
-        bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)
+    bpy = _empty_scene(log)
+    fmt = os.path.splitext(path)[1].lower()
     mesh = _mesh_io().new_mesh(os.path.splitext(os.path.basename(path))[0], V, F)
     obj = bpy.data.objects.new(mesh.name, mesh)
     bpy.context.scene.collection.objects.link(obj)

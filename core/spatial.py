@@ -104,8 +104,8 @@ _NEEDLE_HEIGHT = 0.25
 _LINE_CELLS = 27
 _MAX_PHASE2_CELLS = 64     # queries whose ball spans more cells go to the BVH
 _MAX_SAME_CODE = 64        # more triangles than this with one Morton code: drop repeated ones
-#: a long thin triangle no taller than this share of the mesh's size over its longest
-#: edge is flat: a segment. Flat ones whose segment lies (within it) inside another's
+#: a triangle no taller than this share of the mesh's size over its longest edge is
+#: flat: a segment. Flat ones whose segment lies (within it) inside another's
 #: are not indexed (a region collapsed onto a line by a scanner: thousands of needles
 #: over one another, every query near the line met them all)
 _FLAT_HEIGHT = 1e-9
@@ -531,13 +531,9 @@ def _covered_needles(V, F, thin, size):
     tol = _FLAT_HEIGHT * size
     sample = _LongestEdges.of(*_corners(V, F[::max(1, F.shape[0] // 4096)]))
     rows = np.arange(F.shape[0]) if (sample.height2 <= tol * tol).any() else np.flatnonzero(thin)
+    rows, P, E = _flat_among(V, F, rows, tol)
     if rows.size < 2:
         return drop
-    edge = _LongestEdges.of(*_corners(V, F[rows]))
-    flat = (edge.height2 <= tol * tol) & (edge.length2 > 0)
-    if np.count_nonzero(flat) < 2:
-        return drop
-    rows, P, E = rows[flat], edge.start[flat], edge.edge[flat]
     group, a, b, tight = _on_lines(P, E, size, tol)
     if np.count_nonzero(tight) < 2:
         return drop
@@ -550,6 +546,23 @@ def _covered_needles(V, F, thin, size):
     before = np.concatenate([[-1], np.maximum.accumulate(key)[:-1]])
     drop[rows[order[before >= key]]] = True
     return drop
+
+
+def _flat_among(V, F, rows, tol):
+    """The triangles among ``rows`` of ``F`` no taller than ``tol`` over their
+    longest edge (of positive length): (rows, one end of that edge, the edge),
+    measured a block at a time on the worker threads (a scan with 0.2% of its
+    1.1M faces flat measured them all at once: 0.56 s, a quarter of its index
+    build; whole-mesh temporaries)."""
+    def part(span):
+        r = rows[span[0]:span[1]]
+        edge = _LongestEdges.of(*_corners(V, F[r]))
+        flat = (edge.height2 <= tol * tol) & (edge.length2 > 0)
+        return r[flat], edge.start[flat], edge.edge[flat]
+    parts = run_each(part, blocks(rows.shape[0], _BUILD_BLOCK), threads=rows.shape[0] >= _THREADED_BUILD)
+    if not parts:
+        return rows, np.zeros((0, 3)), np.zeros((0, 3))
+    return tuple(np.concatenate(col) for col in zip(*parts))
 
 
 def _on_lines(P, E, size, tol):
