@@ -19,6 +19,7 @@ import contextlib
 import ctypes
 import os
 import re
+import shutil
 import struct
 import sys
 import tempfile
@@ -26,6 +27,10 @@ import tempfile
 #: formats that need Blender, and the importer / exporter of each
 BLENDER_IMPORT = {".ply": "PLY", ".stl": "STL", ".gltf": "glTF", ".glb": "glTF"}
 BLENDER_EXPORT = {"ply", "stl", "glb"}
+#: a binary STL file: an 80-byte header and a little-endian uint32 triangle count, then
+#: 50 bytes a triangle (normal, three corners: 12 float32, and a uint16)
+STL_HEAD, STL_TRIANGLE = 84, 50
+_TEXT = frozenset(range(32, 127)) | {9, 10, 12, 13}    #: the bytes of an ASCII STL file
 _LOG_LIMIT = 20_000    #: characters of Blender's log kept per file
 _LOG_PREFIX = re.compile(r"^\s*\d+:\d+\.\d+\s+\S+\s+\|\s*")
 _TIMING = re.compile(r"(import|export) of .* took ")
@@ -137,8 +142,64 @@ def _ply_header(path):
     return fmt, length, elements
 
 
+def stl_triangle_counts(path):
+    """``(in_header, by_size)`` triangle counts of a binary STL file, None for
+    an ASCII one (a size that is not ``84 + 50 * count``, and text).
+
+    Blender's importer reads a file as binary only when its size is exactly
+    ``84 + 50 * count`` and as ASCII otherwise, so a binary file with a wrong
+    count came back as "no mesh with faces". Here a count of 0 with a size of
+    whole triangles (an exporter that left the field blank) gives the
+    triangles the size holds (``in_header`` 0, ``by_size`` k: read a copy
+    with k written in, :func:`_with_count`); any other disagreement raises
+    :class:`BlenderIOError` naming the file, the header's count and the
+    count its size implies."""
+    with open(path, "rb") as fh:
+        head = fh.read(1024)
+        size = os.fstat(fh.fileno()).st_size
+    count = struct.unpack("<I", head[80:84])[0] if size >= STL_HEAD else None
+    if count is not None and size == STL_HEAD + STL_TRIANGLE * count:
+        return count, count                      # binary, as Blender's importer decides
+    if head and set(head) <= _TEXT:
+        return None
+    name = os.path.basename(path)
+    if count is None:
+        raise BlenderIOError(f"{name}: {size:,} bytes, neither ASCII STL nor a binary STL file "
+                             f"(at least {STL_HEAD} bytes of header and triangle count)")
+    by_size, extra = divmod(size - STL_HEAD, STL_TRIANGLE)
+    if extra:
+        raise BlenderIOError(
+            f"{name}: a binary STL file of {size:,} bytes, which is no whole number of triangles "
+            f"({STL_HEAD} bytes of header and count, then {STL_TRIANGLE} a triangle; its header "
+            f"says {count:,}): cut short or damaged")
+    if count not in (by_size, 0):
+        raise BlenderIOError(
+            f"{name}: the header of this binary STL file says {count:,} triangles, but its size "
+            f"({size:,} bytes) holds {by_size:,} ({STL_HEAD} bytes of header and count, then "
+            f"{STL_TRIANGLE} a triangle): cut short, or a wrong count")
+    return count, by_size
+
+
+@contextlib.contextmanager
+def _with_count(path, counts):
+    """``path``, or when its STL header's triangle count is blank
+    (:func:`stl_triangle_counts` ``counts``) a temporary copy of the same name
+    with the count its size implies written in (the file itself is never changed)."""
+    if counts is None or counts[0] == counts[1]:
+        yield path
+        return
+    with tempfile.TemporaryDirectory(prefix="meshadjust-stl-") as folder:
+        copy = os.path.join(folder, os.path.basename(path))
+        shutil.copyfile(path, copy)
+        with open(copy, "r+b") as fh:
+            fh.seek(80)
+            fh.write(struct.pack("<I", counts[1]))
+        yield copy
+
+
 def header_face_count(path):
-    """Faces the file says it holds (PLY header, STL count), or None."""
+    """Faces the file says it holds (PLY header, STL count: for a binary STL
+    whose count is blank, what its size holds), or None."""
     ext = os.path.splitext(path)[1].lower()
     try:
         if ext == ".ply":
@@ -146,14 +207,11 @@ def header_face_count(path):
             counts = {name: n for name, n, _ in header[2]} if header else {}
             return counts.get("face")
         if ext == ".stl":
+            counts = stl_triangle_counts(path)
+            if counts is not None:
+                return counts[1]                                      # binary STL
             with open(path, "rb") as fh:
-                head = fh.read(84)
-                size = os.fstat(fh.fileno()).st_size
-            if len(head) == 84 and 84 + 50 * struct.unpack("<I", head[80:84])[0] == size:
-                return struct.unpack("<I", head[80:84])[0]           # binary STL
-            if head.lstrip().lower().startswith(b"solid"):
-                with open(path, "rb") as fh:
-                    return sum(line.lstrip().startswith(b"facet") for line in fh)
+                return sum(line.lstrip().startswith(b"facet") for line in fh)
     except OSError:
         return None
     return None
@@ -167,12 +225,10 @@ def count_nonfinite(path):
     import numpy as np
     ext = os.path.splitext(path)[1].lower()
     if ext == ".stl":
-        n = header_face_count(path)
-        with open(path, "rb") as fh:
-            binary = len(fh.read(84)) == 84 and 84 + 50 * (n or 0) == os.fstat(fh.fileno()).st_size
-        if binary:
+        counts = stl_triangle_counts(path)
+        if counts is not None:
             rec = np.dtype([("normal", "<f4", 3), ("v", "<f4", (3, 3)), ("attr", "<u2")])
-            v = np.fromfile(path, dtype=rec, count=n, offset=84)["v"]
+            v = np.fromfile(path, dtype=rec, count=counts[1], offset=STL_HEAD)["v"]
             return int((~np.isfinite(v).all(axis=(1, 2))).sum())
         with open(path, "rb") as fh:
             rows = [ln.split()[1:4] for ln in fh if ln.lstrip().startswith(b"vertex")]
@@ -235,9 +291,10 @@ def import_mesh(path, log=None):
            ".glb": bpy.ops.import_scene.gltf}
     if ext not in ops:
         raise BlenderIOError(f"{name}: unsupported file type '{ext}'")
+    counts = stl_triangle_counts(path) if ext == ".stl" else None
     before = set(bpy.data.objects)
-    with captured_output(log) as cap:
-        failure = _failure_of(lambda: ops[ext](filepath=path))
+    with _with_count(path, counts) as source, captured_output(log) as cap:
+        failure = _failure_of(lambda: ops[ext](filepath=source))
     if failure is not None:
         raise BlenderIOError(f"Blender's importer failed on {name}: {cap.explain(failure)}")
     meshes = [o for o in bpy.data.objects if o not in before and o.type == 'MESH'
@@ -264,9 +321,12 @@ def _empty_scene(log):
 
 
 def read_with_blender(path, log):
-    """``(V, F, n_polygons, warnings)`` of a file read by Blender's importer
-    into an empty scene; ``warnings`` names faces the importer dropped and
-    quotes the warnings in its log."""
+    """``(V, F, n_polygons, notes, warnings)`` of a file read by Blender's
+    importer into an empty scene; ``notes`` says when a binary STL's blank
+    triangle count was taken from its size, ``warnings`` names faces the
+    importer dropped and quotes the warnings in its log. A binary STL whose
+    count disagrees with its size otherwise raises :class:`BlenderIOError`
+    (:func:`stl_triangle_counts`), before Blender is loaded."""
     bad = count_nonfinite(path) if os.path.isfile(path) else None
     if bad:
         what = (("vertex", "vertices") if path.lower().endswith(".ply") else
@@ -285,7 +345,11 @@ def read_with_blender(path, log):
         import numpy as np
         M = np.array(M)
         V = V @ M[:3, :3].T + M[:3, 3]
-    warnings = []
+    notes, warnings = [], []
+    counts = stl_triangle_counts(path) if path.lower().endswith(".stl") else None
+    if counts is not None and counts[0] != counts[1]:
+        notes.append(f"the binary STL header's triangle count is 0 (left blank by its "
+                     f"exporter?): read the {counts[1]:,} triangles its size holds")
     expected = header_face_count(path)
     if expected is not None and arrays.n_polygons < expected:
         warnings.append(f"Blender's {BLENDER_IMPORT.get(os.path.splitext(path)[1].lower())} "
@@ -293,7 +357,7 @@ def read_with_blender(path, log):
     for line in dict.fromkeys(_LOG_PREFIX.sub("", x).strip() for x in "".join(log).splitlines()
                               if "WARNING" in x):
         warnings.append(f"Blender: {line[:200]}")
-    return V, arrays.F, arrays.n_polygons, warnings
+    return V, arrays.F, arrays.n_polygons, notes, warnings
 
 
 def write_with_blender(path, V, F, log):

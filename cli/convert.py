@@ -145,8 +145,7 @@ def _read(path, log):
     if ext not in blender_io.BLENDER_IMPORT:
         raise core.InvalidArgumentError(f"unsupported file type '{ext}' (use "
                                         f"{', '.join(sorted(INPUT_EXTENSIONS))})")
-    V, F, n_poly, warnings = blender_io.read_with_blender(path, log)
-    return V, F, n_poly, [], warnings
+    return blender_io.read_with_blender(path, log)
 
 
 def _check_target(r, res):

@@ -43,7 +43,7 @@ from ._collapse import compactness
 from ._face_tracker import FaceTracker, stable_argsort
 from ._groups import group_argmin, ragged_ranges
 from .cg import conjugate_gradient
-from .mesh import barycentric_gather, barycentric_scatter, face_normals, squared_edges
+from .mesh import area_normals_rows, barycentric_gather, barycentric_scatter, squared_edges
 
 #: the relocation's solves stop early only once converged this far (they run
 #: ``cg_iters`` steps otherwise: a few steps are enough to move towards the samples)
@@ -114,7 +114,7 @@ def _back_rows(V, F, surface, total, cage_of=None):
     if surface.face is None and cage_of is not None:
         near = _merged_nearest(X, F, _BACK_BARY, V.shape[0], surface.V, cage_of)
     T = surface.closest(X, near).point
-    area = np.linalg.norm(face_normals(V, F, normalize=False), axis=1)
+    area = np.linalg.norm(area_normals_rows(V, F.T), axis=1)
     w = np.sqrt(np.repeat(area * (total / max(k * float(area.sum()), 1e-300)), k))
     return idx, b * w, T * w[:, None], np.repeat(np.arange(m, dtype=np.int64), k)
 
@@ -286,7 +286,7 @@ def relocate(V, F, P, movable, *, iters=2, cg_iters=15, reg=0.05, min_cos=0.2, N
     n = V.shape[0]
     if not movable.any() or F.shape[0] == 0 or P.shape[0] == 0:
         return V
-    N_ref = face_normals(V, F, normalize=False)
+    N_ref = area_normals_rows(V, F.T)
     g0 = _compactness(V, F, np.linalg.norm(N_ref, axis=1))  # of the cage as it came
     settled = min_move * float(np.sqrt(squared_edges(V, F)).mean())
     pulls = _Pulls(F, n, P, P_near, surface, back, cage_of, border, border_near, walk_steps)
@@ -336,7 +336,7 @@ def _undo_bad_moves(V, F, D, N_ref, g0, N_keep, min_cos, min_compact):
     while faces.size:
         Fs = F[faces]
         Vn = V + D
-        N1 = face_normals(Vn, Fs, normalize=False)
+        N1 = area_normals_rows(Vn, Fs.T)
         l1 = np.linalg.norm(N1, axis=1)
         bad = np.einsum("ij,ij->i", N_ref[faces], N1) <= min_cos * l0[faces] * l1
         if N_keep is not None:

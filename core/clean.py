@@ -55,7 +55,8 @@ from ._clean import (BOUNDARY, NON_MANIFOLD, coincident_pairs, corner_fans, face
 from ._groups import ragged_entries
 from ._parallel import blocks, run_blocks, run_each
 from .errors import InvalidArgumentError
-from .mesh import bounding_box, check_mesh, diagonal_length, face_normals
+from .mesh import (bounding_box, check_count, check_mesh, check_vertex_mask, diagonal_length,
+                   face_normals)
 from .topology import connected_labels, edge_keys, face_components
 from .copies import coincident_copies, pillow_layers, stacked_copies
 from .pages import plain_pages
@@ -198,7 +199,7 @@ def clean_mesh(V, F, *, weld_distance=None, min_component_area=MIN_COMPONENT_ARE
     min_component_area : float >= 0
         Components whose area is below this share of the largest
         component's area are debris and dropped (0 keeps everything).
-    face_budget : int, optional
+    face_budget : int >= 0, optional
         The face count the mesh is meant for (``simplify``'s target):
         components too small to get one face of it, by their share of the
         total area, are debris too (they cannot be represented, and each
@@ -216,7 +217,8 @@ def clean_mesh(V, F, *, weld_distance=None, min_component_area=MIN_COMPONENT_ARE
     InvalidMeshError
         Malformed input (shapes, NaN coordinates, indices out of range).
     InvalidArgumentError
-        A negative or non-finite tolerance.
+        A negative or non-finite tolerance, ``face_budget`` not an integer
+        >= 0, ``protected`` not one flag per vertex.
 
     Examples
     --------
@@ -232,8 +234,10 @@ def clean_mesh(V, F, *, weld_distance=None, min_component_area=MIN_COMPONENT_ARE
             raise InvalidArgumentError(
                 f"{_WHERE}: {name} must be a finite number >= 0, got {value!r}")
     n_in = V.shape[0]
+    if face_budget is not None:
+        face_budget = check_count(face_budget, where=_WHERE, name="face_budget")
     if protected is not None:
-        protected = np.asarray(protected, dtype=bool)
+        protected = check_vertex_mask(protected, n_in, where=_WHERE, name="protected")
     corners = np.bincount(F.ravel(), minlength=n_in)       # of the current F (None once it changes)
     used = corners > 0
     counts = {"n_unreferenced_vertices": int(n_in - np.count_nonzero(used))}

@@ -68,18 +68,26 @@ def _line_error(fn, path, lineno, problem):
     return InvalidMeshError(f"{fn}: {path} line {lineno}: '{_line_text(path, lineno)}' {problem}")
 
 
-def _parsed(fn, path, rows, lines, dtype, problem):
+def _parsed(fn, path, rows, lines, dtype, problem, too_large=None):
     """The strings ``rows`` as one ``dtype`` array; the first line whose
-    strings do not parse is named with ``problem``."""
+    strings do not parse is named with ``problem``, or ``too_large`` when a
+    number does not fit ``dtype`` (an integer beyond 64 bits)."""
     try:
         return np.array(rows, dtype=dtype)
-    except ValueError:
+    except (ValueError, OverflowError):
         for row, lineno in zip(rows, lines):
             try:
                 np.array(row, dtype=dtype)
             except ValueError:
                 raise _line_error(fn, path, lineno, problem) from None
+            except OverflowError:
+                raise _line_error(fn, path, lineno, too_large or problem) from None
         raise
+
+
+def _missing_vertex(n):
+    """The problem of a face line indexing past the file's ``n`` vertices."""
+    return f"refers to a missing vertex (the file has {n:,})"
 
 
 def _vertices(fn, path, rows, lines):
@@ -137,7 +145,7 @@ def _read(path, fn, obj):
     if not tri_rows:
         return MeshFile(V, np.zeros((0, 3), dtype=np.int64), 0, skipped)
     R = _parsed(fn, path, tri_rows, tri_lines, np.int64,    # the file's indices
-                "has an index that is not an integer")
+                "has an index that is not an integer", _missing_vertex(n))
     del tri_rows
     lines = np.array(tri_lines, dtype=np.int64)
     base = np.array(tri_base, dtype=np.int64)
@@ -152,7 +160,7 @@ def _read(path, fn, obj):
     if bad.size:
         k = bad[0]
         problem = ("has vertex index 0 (indices are 1-based)" if (R[k] == 0).any() else
-                   f"refers to a missing vertex (the file has {n:,})")
+                   _missing_vertex(n))
         raise _line_error(fn, path, int(lines[k]), problem)
     n_polygons = F.shape[0] - sum(len(idx) - 3 for _, idx, _ in poly)
     return MeshFile(V, F, n_polygons, skipped)

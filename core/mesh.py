@@ -8,25 +8,31 @@ or raises :class:`~.errors.InvalidMeshError` naming the problem and an example.
 
 import numpy as np
 
-from .errors import InvalidMeshError
+from ._parallel import run_blocks
+from .errors import InvalidArgumentError, InvalidMeshError
 
 #: triangles per block of :func:`area_normals_t` (its temporaries stay small and are
 #: reused: 2M faces at once made four fresh (3, m) float64 arrays, which this machine
 #: pays for dearly the first time they are touched)
 NORMALS_BLOCK = 1 << 14
+#: a face is flat (its corners collinear, up to the rounding of their coordinates) when
+#: twice its area is at most this times its longest edge times the largest coordinate
+#: magnitude: the error of a cross product of edges between rounded coordinates is a few
+#: eps of that product (:func:`has_area`)
+FLAT_FACE = 64 * float(np.finfo(np.float64).eps)
 
 
-def _as_array(x, name, shape, where):
+def _as_array(x, name, shape, where, error=InvalidMeshError):
     """``np.asarray(x)``; a ragged list (rows of different lengths) raises
-    :class:`InvalidMeshError` naming ``name`` instead of NumPy's error."""
+    ``error`` naming ``name`` instead of NumPy's error."""
     try:
         return np.asarray(x)
     except ValueError as exc:
-        raise InvalidMeshError(f"{where}: {name} must be {shape}, got rows of different "
-                               f"lengths ({exc})") from None
+        raise error(f"{where}: {name} must be {shape}, got rows of different "
+                    f"lengths ({exc})") from None
 
 
-def check_mesh(V, F, *, where, allow_empty=True):
+def check_mesh(V, F, *, where, allow_empty=True, copy=True):
     """Validate and copy a triangle mesh.
 
     Parameters
@@ -39,11 +45,14 @@ def check_mesh(V, F, *, where, allow_empty=True):
         Name of the calling function, used as the message prefix.
     allow_empty : bool
         If False, a mesh with no faces raises.
+    copy : bool
+        If False, arrays that already are C-contiguous float64 / int64 come
+        back as they are (for functions that only read them).
 
     Returns
     -------
-    V : (n, 3) float64 ndarray, a new C-contiguous copy.
-    F : (m, 3) int64 ndarray, a new C-contiguous copy.
+    V : (n, 3) float64 ndarray, a new C-contiguous copy (with ``copy``).
+    F : (m, 3) int64 ndarray, a new C-contiguous copy (with ``copy``).
 
     Raises
     ------
@@ -56,39 +65,103 @@ def check_mesh(V, F, *, where, allow_empty=True):
     >>> V.dtype, F.dtype
     (dtype('float64'), dtype('int64'))
     """
-    V_in = _as_array(V, "V", "(n,3) floats", where)
-    F_in = _as_array(F, "F", "(m,3) integers", where)
+    V = _as_array(V, "V", "(n,3) floats", where)     # ragged lists first, V's then F's
+    F = _as_array(F, "F", "(m,3) integers", where)
+    V = check_vertices(V, where=where, copy=copy)
+    return V, check_faces(F, V.shape[0], where=where, allow_empty=allow_empty, copy=copy)
+
+
+def _converted(x, dtype, copy):
+    """``x`` as a C-contiguous ``dtype`` array: always a new one with ``copy``,
+    else only when it is not one already."""
+    return np.array(x, dtype=dtype, order="C") if copy else np.asarray(x, dtype=dtype, order="C")
+
+
+def check_vertices(V, *, where, name="V", copy=True):
+    """Vertex positions ``V`` (n,3) as float64, checked as :func:`check_mesh`
+    checks them (shape, numbers, finite); ``name`` is the argument named in
+    the message. Raises :class:`InvalidMeshError`."""
+    V_in = _as_array(V, name, "(n,3) floats", where)
     if V_in.size == 0 and V_in.ndim <= 1:
         V_in = V_in.reshape(0, 3)
-    if F_in.size == 0 and F_in.ndim <= 1:
-        F_in = F_in.reshape(0, 3).astype(np.int64)
-    if V_in.ndim != 2 or V_in.shape[1] != 3:
-        raise InvalidMeshError(f"{where}: V must be (n,3) floats, got {V_in.shape} {V_in.dtype}")
-    if not (np.issubdtype(V_in.dtype, np.floating) or np.issubdtype(V_in.dtype, np.integer)):
-        raise InvalidMeshError(f"{where}: V must be (n,3) floats, got {V_in.shape} {V_in.dtype}")
-    if F_in.ndim != 2 or F_in.shape[1] != 3 or not np.issubdtype(F_in.dtype, np.integer):
-        raise InvalidMeshError(f"{where}: F must be (m,3) integers, got {F_in.shape} {F_in.dtype}")
-    V_out = np.array(V_in, dtype=np.float64, order="C", copy=True)
-    F_out = np.array(F_in, dtype=np.int64, order="C", copy=True)
+    if V_in.ndim != 2 or V_in.shape[1] != 3 or not (
+            np.issubdtype(V_in.dtype, np.floating) or np.issubdtype(V_in.dtype, np.integer)):
+        raise InvalidMeshError(f"{where}: {name} must be (n,3) floats, got {V_in.shape} {V_in.dtype}")
+    V_out = _converted(V_in, np.float64, copy)
     if not np.isfinite(V_out).all():
-        bad = ~np.isfinite(V_out).all(axis=1)
-        rows = np.flatnonzero(bad)
+        rows = np.flatnonzero(~np.isfinite(V_out).all(axis=1))
         raise InvalidMeshError(
             f"{where}: {rows.size} vertices have NaN or infinite coordinates, "
             f"e.g. vertex {rows[0]} = {V_out[rows[0]].tolist()}"
         )
-    n = V_out.shape[0]
+    return V_out
+
+
+def check_faces(F, n_vertices, *, where, allow_empty=True, copy=True):
+    """Triangles ``F`` (m,3) as int64, checked as :func:`check_mesh` checks
+    them: integers, each in ``[0, n_vertices)`` (``n_vertices`` None: only
+    ``>= 0``). Raises :class:`InvalidMeshError` naming the first bad face.
+
+    Examples
+    --------
+    >>> check_faces([[0, 1, 2]], 3, where="demo").tolist()
+    [[0, 1, 2]]
+    """
+    F_in = _as_array(F, "F", "(m,3) integers", where)
+    if F_in.size == 0 and F_in.ndim <= 1:
+        F_in = F_in.reshape(0, 3).astype(np.int64)
+    if F_in.ndim != 2 or F_in.shape[1] != 3 or not np.issubdtype(F_in.dtype, np.integer):
+        raise InvalidMeshError(f"{where}: F must be (m,3) integers, got {F_in.shape} {F_in.dtype}")
+    F_out = _converted(F_in, np.int64, copy)
     if F_out.size:
-        if F_out.min() < 0 or F_out.max() >= n:
-            out = (F_out < 0) | (F_out >= n)
-            f, c = np.argwhere(out)[0]
+        n = n_vertices
+        if F_out.min() < 0 or (n is not None and F_out.max() >= n):
+            out = (F_out < 0) if n is None else (F_out < 0) | (F_out >= n)
+            f = int(np.flatnonzero(out.any(axis=1))[0])
+            span = "have negative indices" if n is None else f"index vertices outside [0, {n})"
             raise InvalidMeshError(
-                f"{where}: {int(out.any(axis=1).sum())} faces index vertices outside [0, {n}), "
+                f"{where}: {int(out.any(axis=1).sum())} faces {span}, "
                 f"e.g. face {f} = {F_out[f].tolist()}"
             )
     elif not allow_empty:
         raise InvalidMeshError(f"{where}: the mesh has no faces")
-    return V_out, F_out
+    return F_out
+
+
+def check_count(value, *, where, name):
+    """``value`` as an int, or :class:`InvalidArgumentError` naming ``name``
+    when it is not an integer >= 0 (a bool is not one)."""
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)) or value < 0:
+        raise InvalidArgumentError(f"{where}: {name} must be an integer >= 0, got {value!r}")
+    return int(value)
+
+
+def check_vertex_mask(mask, n, *, where, name):
+    """A per-vertex flag array (n,) as booleans, or
+    :class:`InvalidArgumentError` naming ``name`` and the length ``n`` it
+    needs (booleans or integers accepted)."""
+    a = _as_array(mask, name, f"({n},) booleans", where, InvalidArgumentError)
+    if a.shape != (n,) or not (a.dtype == bool or np.issubdtype(a.dtype, np.integer)):
+        raise InvalidArgumentError(f"{where}: {name} must be ({n},) booleans (one per vertex), "
+                                   f"got {a.shape} {a.dtype}")
+    return a.astype(bool)
+
+
+def check_vertex_indices(index, n, *, where, name):
+    """A per-vertex array of vertex indices (n,) as int64, each in ``[0, n)``,
+    or :class:`InvalidArgumentError` naming ``name`` and the first vertex
+    whose entry is out of range."""
+    a = _as_array(index, name, f"({n},) integers", where, InvalidArgumentError)
+    if a.shape != (n,) or not np.issubdtype(a.dtype, np.integer):
+        raise InvalidArgumentError(f"{where}: {name} must be ({n},) vertex indices (one per vertex), "
+                                   f"got {a.shape} {a.dtype}")
+    a = a.astype(np.int64)
+    bad = (a < 0) | (a >= n)
+    if bad.any():
+        i = int(np.flatnonzero(bad)[0])
+        raise InvalidArgumentError(f"{where}: {name} must hold vertex indices in [0, {n}), got "
+                                   f"{int(bad.sum())} outside, e.g. {name}[{i}] = {a[i]}")
+    return a
 
 
 def bounding_box(V):
@@ -151,15 +224,17 @@ def cross_columns(a, b):
 def area_normals_t(PT, T, out=None):
     """Area normals (3,k) of the triangles ``T`` (3,k) (corner index rows,
     or a sequence of three index arrays) over positions ``PT`` (3,n) (the
-    operations of ``np.cross``), ``NORMALS_BLOCK`` triangles at a time, into
-    ``out`` when given (any float dtype: e.g. float32 for half the bytes)."""
+    operations of ``np.cross``), ``NORMALS_BLOCK`` triangles at a time on the
+    worker threads, into ``out`` when given (any float dtype: e.g. float32
+    for half the bytes)."""
     k = T[0].shape[0]
     if k <= NORMALS_BLOCK and out is None:
         return _area_normals_block(PT, T[0], T[1], T[2])
     out = np.empty((3, k)) if out is None else out
-    for s in range(0, k, NORMALS_BLOCK):
-        e = s + NORMALS_BLOCK
+
+    def block(s, e):
         out[:, s:e] = _area_normals_block(PT, T[0][s:e], T[1][s:e], T[2][s:e])
+    run_blocks(block, [(s, min(s + NORMALS_BLOCK, k)) for s in range(0, k, NORMALS_BLOCK)])
     return out
 
 
@@ -213,7 +288,12 @@ def unit_rows(X):
 
 def face_normals(V, F, *, normalize=True):
     """Per-face normals, (m,3) float64; unnormalised normals have length
-    twice the face area. Degenerate faces get a zero normal."""
+    twice the face area. Degenerate faces get a zero normal.
+
+    Raises :class:`InvalidMeshError` for a malformed mesh (:func:`check_mesh`).
+    Inside ``core``, on checked arrays, :func:`area_normals_rows` of ``F.T``
+    is the same without the check."""
+    V, F = check_mesh(V, F, where="face_normals", copy=False)
     N = area_normals_rows(V, F.T)
     return unit_rows(N) if normalize else N
 
@@ -224,6 +304,9 @@ def turned_faces(V_rest, V_new, F):
     of the area normals): the faces an edit folded over. Faces degenerate at
     rest (no normal) are never counted.
 
+    Raises :class:`InvalidMeshError` for a malformed mesh (:func:`check_mesh`)
+    or a ``V_new`` not of the shape of ``V_rest``.
+
     Examples
     --------
     >>> V = np.array([[0.0, 0, 0], [1, 0, 0], [0, 1, 0]])
@@ -231,9 +314,14 @@ def turned_faces(V_rest, V_new, F):
     >>> turned_faces(V, V, [[0, 1, 2]]).tolist(), turned_faces(V, mirrored, [[0, 1, 2]]).tolist()
     ([], [0])
     """
-    F = np.asarray(F, dtype=np.int64).reshape(-1, 3)
-    rest = area_normals_rows(np.asarray(V_rest, dtype=np.float64), F.T)
-    return np.flatnonzero(normal_dots(np.asarray(V_new, dtype=np.float64), F.T, rest.T) < 0)
+    where = "turned_faces"
+    V_rest, F = check_mesh(V_rest, F, where=where, copy=False)
+    V_new = check_vertices(V_new, where=where, name="V_new", copy=False)
+    if V_new.shape != V_rest.shape:
+        raise InvalidMeshError(f"{where}: V_new must have the shape of V_rest {V_rest.shape}, "
+                               f"got {V_new.shape}")
+    rest = area_normals_rows(V_rest, F.T)
+    return np.flatnonzero(normal_dots(V_new, F.T, rest.T) < 0)
 
 
 def squared_edges(V, F):
@@ -244,17 +332,22 @@ def squared_edges(V, F):
 
 
 def face_areas(V, F):
-    """Per-face areas, (m,) float64."""
-    return 0.5 * np.linalg.norm(face_normals(V, F, normalize=False), axis=1)
+    """Per-face areas, (m,) float64.
+
+    Raises :class:`InvalidMeshError` for a malformed mesh (:func:`check_mesh`)."""
+    V, F = check_mesh(V, F, where="face_areas", copy=False)
+    return 0.5 * np.linalg.norm(area_normals_rows(V, F.T), axis=1)
 
 
 def vertex_normals(V, F):
     """Area-weighted, normalised per-vertex normals, (n,3) float64.
 
     Vertices in no face (or only degenerate faces) get a zero normal.
+    Raises :class:`InvalidMeshError` for a malformed mesh (:func:`check_mesh`).
     """
+    V, F = check_mesh(V, F, where="vertex_normals", copy=False)
     n = V.shape[0]
-    N = face_normals(V, F, normalize=False)
+    N = area_normals_rows(V, F.T)
     out = np.empty((n, 3))
     for k in range(3):
         out[:, k] = (np.bincount(F[:, 0], N[:, k], n) + np.bincount(F[:, 1], N[:, k], n)
@@ -264,9 +357,39 @@ def vertex_normals(V, F):
 
 def enclosed_volume(V, F):
     """Signed volume enclosed by a closed, consistently oriented mesh
-    (divergence theorem; positive for outward-facing normals)."""
+    (divergence theorem; positive for outward-facing normals).
+
+    Raises :class:`InvalidMeshError` for a malformed mesh (:func:`check_mesh`)."""
+    V, F = check_mesh(V, F, where="enclosed_volume", copy=False)
     a, b, c = V[F[:, 0]], V[F[:, 1]], V[F[:, 2]]
     return float(np.einsum("ij,ij->i", a, cross_rows(b, c)).sum() / 6.0)
+
+
+def has_area(V, F):
+    """Whether some face of ``F`` (checked arrays) has an area: more than
+    rounding leaves of three collinear corners (:data:`FLAT_FACE`; an exact
+    zero test misses collinear corners whose coordinates were rounded).
+    Unit-free (coordinates over the box diagonal: no overflow at 1e200);
+    ``NORMALS_BLOCK`` faces at a time, stopping at the first block with one
+    (an ordinary mesh stops at its first)."""
+    lo, hi = bounding_box(V)
+    d = diagonal_length(lo, hi)
+    if d == 0 or F.shape[0] == 0:            # every corner at one point
+        return False
+    if not np.isfinite(d):                   # a box beyond the floats: not measured here
+        return True
+    size = max(float(np.abs(np.concatenate([lo, hi])).max()) / d, 1.0)
+    for s in range(0, F.shape[0], NORMALS_BLOCK):
+        _, e1, e2 = _corner_edges(V, F[s:s + NORMALS_BLOCK].T)
+        e1 /= d
+        e2 /= d
+        e3 = e2 - e1
+        longest2 = np.maximum(np.maximum(np.einsum("ij,ij->i", e1, e1), np.einsum("ij,ij->i", e2, e2)),
+                              np.einsum("ij,ij->i", e3, e3))
+        twice = np.linalg.norm(cross_rows(e1, e2), axis=1)
+        if (twice > FLAT_FACE * size * np.sqrt(longest2)).any():
+            return True
+    return False
 
 
 def barycentric_gather(X, corners, bary):

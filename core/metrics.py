@@ -25,8 +25,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from .errors import InvalidArgumentError
-from .mesh import bbox_diagonal, check_mesh, face_areas
+from .mesh import bbox_diagonal, check_count, check_mesh, face_areas
 from .spatial import TriangleIndex
 from .pages import plain_pages
 
@@ -106,12 +105,6 @@ def _sample(V, F, n, rng):
     return SurfaceSamples(points, face.astype(np.int64), bary)
 
 
-def _check_count(n, where, name):
-    if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 0:
-        raise InvalidArgumentError(f"{where}: {name} must be an integer >= 0, got {n!r}")
-    return int(n)
-
-
 @plain_pages
 def sample_surface(V, F, n_samples, *, seed=0):
     """Draw points uniformly (area-weighted) on a triangle mesh.
@@ -145,7 +138,7 @@ def sample_surface(V, F, n_samples, *, seed=0):
     ((4, 3), True)
     """
     V, F = check_mesh(V, F, where="sample_surface", allow_empty=False)
-    n = _check_count(n_samples, "sample_surface", "n_samples")
+    n = check_count(n_samples, where="sample_surface", name="n_samples")
     return _sample(V, F, n, np.random.default_rng(seed))
 
 
@@ -203,7 +196,7 @@ def surface_distance(V_a, F_a, V_b, F_b, *, samples=None, seed=0):
     if samples is None:
         n = int(np.clip(2 * max(F_a.shape[0], F_b.shape[0]), _MIN_SAMPLES, _MAX_SAMPLES))
     else:
-        n = _check_count(samples, "surface_distance", "samples")
+        n = check_count(samples, where="surface_distance", name="samples")
     used_a = V_a[np.unique(F_a)]
     used_b = V_b[np.unique(F_b)]
     diagonal = bbox_diagonal(used_a)

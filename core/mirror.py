@@ -12,18 +12,24 @@ The mirror plane passes through the origin, normal to an axis given as
 import numpy as np
 
 from .errors import InvalidArgumentError
-from .mesh import bbox_diagonal
+from .mesh import bbox_diagonal, check_vertex_indices, check_vertices
 
 AXES = {"X": 0, "Y": 1, "Z": 2}
 #: a mirror partner is accepted this close (share of the diagonal; ``mirror_partners``)
 PARTNER_TOLERANCE = 1e-6
 
 
-def axis_index(axis, where="simplify"):
-    """0, 1 or 2 for ``'X'``, ``'Y'``, ``'Z'``; raises InvalidArgumentError otherwise."""
-    if not isinstance(axis, str) or axis not in AXES:
-        raise InvalidArgumentError(f"{where}: symmetry must be None, 'X', 'Y' or 'Z', got {axis!r}")
-    return AXES[axis]
+def axis_index(axis, where="simplify", name="symmetry"):
+    """The coordinate 0, 1 or 2 of a mirror axis given as ``'X'``, ``'Y'``,
+    ``'Z'`` or as that coordinate itself (0, 1, 2): the one parser of every
+    ``axis`` / ``symmetry`` argument. Raises :class:`InvalidArgumentError`
+    naming ``where`` and the argument ``name`` otherwise."""
+    if isinstance(axis, str) and axis in AXES:
+        return AXES[axis]
+    if isinstance(axis, (int, np.integer)) and not isinstance(axis, (bool, np.bool_)) \
+            and 0 <= axis < len(AXES):
+        return int(axis)
+    raise InvalidArgumentError(f"{where}: {name} must be 'X', 'Y' or 'Z' (or 0, 1, 2), got {axis!r}")
 
 
 def mirror(V, axis):
@@ -39,7 +45,7 @@ def mirror_partners(V, axis, *, tolerance=PARTNER_TOLERANCE, where="mirror_partn
     Parameters
     ----------
     V : (n,3) float array_like
-    axis : {'X', 'Y', 'Z'}
+    axis : {'X', 'Y', 'Z'} (or 0, 1, 2)
         The mirror plane goes through the origin, normal to this axis.
     tolerance : float
         Largest distance of a partner from the mirrored position, as a share
@@ -62,7 +68,8 @@ def mirror_partners(V, axis, *, tolerance=PARTNER_TOLERANCE, where="mirror_partn
     >>> mirror_partners([[1.0, 0, 0], [-1.0, 0, 0], [0, 1.0, 0]], 'X').tolist()
     [1, 0, 2]
     """
-    k = axis_index(axis, where)
+    k = axis_index(axis, where, name="axis")
+    axis = "XYZ"[k]
     V = np.asarray(V, dtype=np.float64)
     n = V.shape[0]
     if n == 0:
@@ -147,12 +154,40 @@ def _nearest_partners(V, Mq, cell):
 
 def symmetrize(V, partner, axis):
     """Exactly mirror-symmetric positions: each vertex averaged with its
-    partner's mirrored position (``partner`` from :func:`mirror_partners`,
-    ``axis`` 0, 1 or 2). Partners end up exact mirror images and vertices on
-    the plane (``partner[i] == i``) exactly on it. Returns a new (n,3) array.
+    partner's mirrored position.
+
+    Parameters
+    ----------
+    V : (n,3) float array_like
+    partner : (n,) int array_like
+        Every vertex's mirror partner, in ``[0, n)`` (:func:`mirror_partners`;
+        ``partner[i] == i`` for a vertex on the plane). There is no "no
+        partner" value: a vertex without one cannot be made symmetric.
+    axis : {'X', 'Y', 'Z'} or {0, 1, 2}
+        The mirror axis, as :func:`mirror_partners` takes it (or its coordinate).
+
+    Returns
+    -------
+    (n,3) float64, a new array: partners exact mirror images, vertices on
+    the plane exactly on it.
+
+    Raises
+    ------
+    InvalidMeshError
+        ``V`` not (n,3) finite numbers.
+    InvalidArgumentError
+        ``axis`` not one of the above; ``partner`` not (n,) integers in ``[0, n)``.
+
+    Examples
+    --------
+    >>> symmetrize([[1.0, 2, 0], [-1.2, 2, 0]], [1, 0], 'X').tolist()
+    [[1.1, 2.0, 0.0], [-1.1, 2.0, 0.0]]
     """
-    V = np.asarray(V, dtype=np.float64)
-    out = 0.5 * (V + mirror(V[partner], axis))
+    where = "symmetrize"
+    k = axis_index(axis, where, name="axis")
+    V = check_vertices(V, where=where, copy=False)
+    partner = check_vertex_indices(partner, V.shape[0], where=where, name="partner")
+    out = 0.5 * (V + mirror(V[partner], k))
     # 0.5 (a + (-b)) and 0.5 (b + (-a)) are exact negatives; (a + b) / 2 and (b + a) / 2 equal
-    out[partner == np.arange(V.shape[0]), axis] = 0.0
+    out[partner == np.arange(V.shape[0]), k] = 0.0
     return out

@@ -59,7 +59,8 @@ from ._relax import close_smallest_hole, close_triangular_holes, drop_stuck_comp
 from ._relocate import relocate, segment_triangles
 from .clean import MIN_COMPONENT_AREA, CleanReport, clean_mesh
 from .errors import InvalidArgumentError, InvalidMeshError, MeshAdjustError
-from .mesh import bounding_box, check_mesh, diagonal_length, dot_columns, face_normals
+from .mesh import (bounding_box, check_mesh, check_vertex_mask, diagonal_length, dot_columns,
+                   face_normals, has_area)
 from .metrics import surface_distance
 from .topology import boundary_loops_count, collapsible_edges, face_components
 from .quadrics import accumulate_coefficients, vertex_face_quadrics, edge_constraint_quadrics
@@ -206,13 +207,7 @@ def check_arguments(n, target_faces, ratio, max_error, feature_angle_deg, vertex
             i = int(np.flatnonzero(bad)[0])
             raise InvalidArgumentError(
                 f"{_WHERE}: vertex_weights must be finite and >= 0, e.g. vertex {i} has {w[i]}")
-    lk = None
-    if locked is not None:
-        lk = np.asarray(locked)
-        if lk.shape != (n,) or not (lk.dtype == bool or np.issubdtype(lk.dtype, np.integer)):
-            raise InvalidArgumentError(
-                f"{_WHERE}: locked must be ({n},) booleans, got {lk.shape} {lk.dtype}")
-        lk = lk.astype(bool)
+    lk = None if locked is None else check_vertex_mask(locked, n, where=_WHERE, name="locked")
     if progress is not None and not callable(progress):
         raise InvalidArgumentError(f"{_WHERE}: progress must be callable or None, got {type(progress)}")
     return w, lk
@@ -668,7 +663,8 @@ def simplify(V, F, *, target_faces=None, ratio=None, max_error=None, preserve_bo
     InvalidMeshError
         NaN/inf coordinates, indices out of range, wrong shapes or dtypes,
         nothing left after cleaning (every face degenerate or duplicate), or
-        no area at all (every corner on one line).
+        no face with an area (every face's corners on one line, up to
+        rounding: :func:`core.mesh.has_area`).
     InvalidArgumentError
         No target given, ``target_faces < 0``, ``ratio`` outside (0, 1],
         negative ``max_error``, badly shaped weights or lock mask.
@@ -785,7 +781,7 @@ def cleaned_input(V, F, weld_distance, min_component_area, budget, locked):
         raise InvalidMeshError(
             f"{_WHERE}: nothing is left after cleaning the {F.shape[0]:,} faces "
             f"({clean.report.summary() or 'no faces'}): no cage can be made")
-    if clean.F.shape[0] and not clean.area.any():
+    if clean.F.shape[0] and not has_area(clean.V, clean.F):
         raise InvalidMeshError(
             f"{_WHERE}: the {clean.F.shape[0]:,} faces left after cleaning have no area (their "
             f"corners are collinear): no cage can be made")

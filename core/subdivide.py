@@ -155,7 +155,7 @@ import numpy as np
 from . import _refine as _rf
 from . import _stencils as _st
 from .errors import InvalidArgumentError
-from .mesh import check_mesh
+from .mesh import check_count, check_faces, check_mesh
 from .pages import plain_pages
 
 SCHEMES = ("butterfly", "loop")
@@ -367,9 +367,7 @@ def _check_args(levels, scheme, where):
     if scheme not in SCHEMES:
         raise InvalidArgumentError(
             f"{where}: scheme must be one of {', '.join(map(repr, SCHEMES))}, got {scheme!r}")
-    if isinstance(levels, (bool, np.bool_)) or not isinstance(levels, (int, np.integer)) or levels < 0:
-        raise InvalidArgumentError(f"{where}: levels must be an integer >= 0, got {levels!r}")
-    return int(levels)
+    return check_count(levels, where=where, name="levels")
 
 
 def _fingerprint(F, n, levels, scheme, creases):
@@ -445,11 +443,8 @@ def subdivision_operator(F, n_vertices, *, levels=1, scheme="butterfly", creases
     """
     where = "subdivision_operator"
     levels = _check_args(levels, scheme, where)
-    if isinstance(n_vertices, (bool, np.bool_)) or not isinstance(n_vertices, (int, np.integer)) \
-            or n_vertices < 0:
-        raise InvalidArgumentError(f"{where}: n_vertices must be an integer >= 0, got {n_vertices!r}")
-    n = int(n_vertices)
-    _, F = check_mesh(np.zeros((n, 3)), F, where=where)
+    n = check_count(n_vertices, where=where, name="n_vertices")
+    F = check_faces(F, n, where=where)
     return _build(F, n, levels, scheme, creases, where)
 
 

@@ -42,7 +42,7 @@ import numpy as np
 
 from .clean import MIN_COMPONENT_AREA
 from .errors import InvalidArgumentError
-from .mesh import bbox_diagonal, check_mesh, face_normals
+from .mesh import area_normals_rows, bbox_diagonal, check_mesh
 from .metrics import surface_distance
 from .mirror import PARTNER_TOLERANCE, axis_index, mirror, mirror_partners  # noqa: F401 (example)
 from .simplify import (SimplifyResult, check_arguments, cleaned_input, debris_budget, simplify,
@@ -164,7 +164,7 @@ def _chords(F, n, weld):
 
 def _triangle_normals(V, A, B, C):
     """Unnormalised normals (q,3) of the triangles with corners ``V[A], V[B], V[C]``."""
-    return face_normals(V, np.stack([A, B, C], axis=1), normalize=False)
+    return area_normals_rows(V, (A, B, C))
 
 
 def _remove_chords(V, F, weld, k, lift):
@@ -325,9 +325,9 @@ def _symmetrised(half, Vs, F, s, k, keep=None):
     W[half.on_plane, k] = 0.0
     if keep is not None:
         W[keep] = half.V[keep]
-    N0 = face_normals(half.V, half.F, normalize=False)
+    N0 = area_normals_rows(half.V, half.F.T)
     for _ in range(SYMMETRISE_ROUNDS):
-        turned = np.einsum("ij,ij->i", face_normals(W, half.F, normalize=False), N0) <= 0
+        turned = np.einsum("ij,ij->i", area_normals_rows(W, half.F.T), N0) <= 0
         if not turned.any():
             break
         back = np.unique(half.F[turned])
@@ -430,6 +430,7 @@ def simplify_symmetric(V, F, *, axis="X", target_faces=None, ratio=None, max_err
     (True, True)
     """
     k = axis_index(axis)
+    axis = "XYZ"[k]
     V, F = check_mesh(V, F, where=_WHERE)
     n_in = V.shape[0]
     weights, lk = check_arguments(n_in, target_faces, ratio, max_error, feature_angle_deg,

@@ -15,6 +15,8 @@ from typing import NamedTuple
 
 import numpy as np
 
+from .mesh import check_count, check_faces
+
 
 class EdgeMap(NamedTuple):
     """Unique edges of a triangle mesh and how faces use them."""
@@ -36,12 +38,19 @@ def edge_map(F, n_vertices):
 
     Parameters
     ----------
-    F : (m,3) int64 ndarray
-    n_vertices : int
+    F : (m,3) int array_like, each index in ``[0, n_vertices)``
+    n_vertices : int >= 0
 
     Returns
     -------
     EdgeMap
+
+    Raises
+    ------
+    InvalidMeshError
+        ``F`` not (m,3) integers, or an index outside ``[0, n_vertices)``.
+    InvalidArgumentError
+        ``n_vertices`` not an integer >= 0.
 
     Examples
     --------
@@ -49,7 +58,19 @@ def edge_map(F, n_vertices):
     >>> em.E.tolist(), em.face_edge.tolist()
     ([[0, 1], [0, 2], [1, 2]], [[2, 1, 0]])
     """
-    F = np.asarray(F, dtype=np.int64)
+    F, n = _checked("edge_map", F, n_vertices)
+    return _edge_map(F, n)
+
+
+def _checked(where, F, n_vertices):
+    """``F`` (int64, not copied when it already is) and ``n_vertices`` checked
+    for the public function ``where`` (:func:`~.mesh.check_faces`)."""
+    n = check_count(n_vertices, where=where, name="n_vertices")
+    return check_faces(F, n, where=where, copy=False), n
+
+
+def _edge_map(F, n_vertices):
+    """:func:`edge_map` of a checked ``F`` (m,3) int64."""
     m = F.shape[0]
     half = F[:, [1, 2, 2, 0, 0, 1]].reshape(-1, 2)
     key = edge_keys(half[:, 0], half[:, 1], n_vertices)
@@ -198,7 +219,7 @@ def vertex_labels(F, face_labels, n_vertices):
 
 def boundary_loops_count(F, n_vertices, em=None):
     """Number of boundary loops (connected chains of boundary edges)."""
-    em = edge_map(F, n_vertices) if em is None else em
+    em = _edge_map(np.asarray(F, dtype=np.int64), n_vertices) if em is None else em
     B = em.E[em.edge_face_count == 1]
     if B.shape[0] == 0:
         return 0
@@ -234,8 +255,19 @@ def manifold_report(F, n_vertices):
     A vertex is manifold when its incident faces form a single fan, i.e. are
     connected to each other through manifold edges around the vertex (a disk,
     or a half-disk on the boundary). Isolated vertices are fine.
+
+    Raises
+    ------
+    InvalidMeshError
+        ``F`` not (m,3) integers, or an index outside ``[0, n_vertices)``.
+    InvalidArgumentError
+        ``n_vertices`` not an integer >= 0.
     """
-    F = np.asarray(F, dtype=np.int64)
+    return _manifold_report(*_checked("manifold_report", F, n_vertices))
+
+
+def _manifold_report(F, n_vertices):
+    """:func:`manifold_report` of a checked ``F`` (m,3) int64."""
     m = F.shape[0]
     empty2 = np.zeros((0, 2), dtype=np.int64)
     empty1 = np.zeros(0, dtype=np.int64)
@@ -250,7 +282,7 @@ def manifold_report(F, n_vertices):
     dup_mask[first_idx] = False
     duplicates = np.flatnonzero(dup_mask)
 
-    em = edge_map(F, n_vertices)
+    em = _edge_map(F, n_vertices)
     nm_edges = em.E[em.edge_face_count > 2]
 
     faces, corners = edge_faces(em)
@@ -289,14 +321,26 @@ def manifold_report(F, n_vertices):
 
 
 def euler_characteristic(F, n_vertices=None):
-    """V - E + F counting only the vertices referenced by ``F``."""
-    F = np.asarray(F, dtype=np.int64)
+    """V - E + F counting only the vertices referenced by ``F``.
+
+    ``n_vertices`` (optional) is checked: every index of ``F`` below it.
+    Raises :class:`InvalidMeshError` for a malformed ``F`` (see :func:`edge_map`).
+    """
+    if n_vertices is None:
+        F = check_faces(F, None, where="euler_characteristic", copy=False)
+    else:
+        F, _ = _checked("euler_characteristic", F, n_vertices)
+    return _euler(F)
+
+
+def _euler(F):
+    """:func:`euler_characteristic` of a checked ``F`` (m,3) int64 (over its
+    used vertices, renumbered: the edge keys stay small whatever the indices)."""
     if F.shape[0] == 0:
         return 0
-    n = int(F.max()) + 1 if n_vertices is None else n_vertices
-    em = edge_map(F, n)
-    n_used = np.unique(F).shape[0]
-    return int(n_used - em.E.shape[0] + F.shape[0])
+    used, Fu = np.unique(F, return_inverse=True)
+    em = _edge_map(Fu.reshape(-1, 3), used.shape[0])
+    return int(used.shape[0] - em.E.shape[0] + F.shape[0])
 
 
 class TopologySummary(NamedTuple):
@@ -311,13 +355,16 @@ class TopologySummary(NamedTuple):
 
 
 def topology_summary(F, n_vertices):
-    """Euler characteristic, components, boundary loops and defects of a mesh."""
-    F = np.asarray(F, dtype=np.int64)
-    em = edge_map(F, n_vertices)
-    rep = manifold_report(F, n_vertices)
+    """Euler characteristic, components, boundary loops and defects of a mesh.
+
+    Raises :class:`InvalidMeshError` / :class:`InvalidArgumentError` for a
+    malformed ``F`` or ``n_vertices`` (see :func:`edge_map`)."""
+    F, n_vertices = _checked("topology_summary", F, n_vertices)
+    em = _edge_map(F, n_vertices)
+    rep = _manifold_report(F, n_vertices)
     _, n_comp = face_components(F, n_vertices)
     return TopologySummary(
-        euler=euler_characteristic(F, n_vertices),
+        euler=_euler(F),
         components=n_comp,
         boundary_loops=boundary_loops_count(F, n_vertices, em),
         boundary_edges=int((em.edge_face_count == 1).sum()),
@@ -342,7 +389,7 @@ def collapsible_edges(F, n_vertices, em=None):
     ok : (e,) bool, edge ``k`` can collapse.
     """
     F = np.asarray(F, dtype=np.int64)
-    em = edge_map(F, n_vertices) if em is None else em
+    em = _edge_map(F, n_vertices) if em is None else em
     E, count = em.E, em.edge_face_count
     e = E.shape[0]
     if e == 0:

@@ -6,6 +6,7 @@ consistent orientation.
 """
 
 import os
+import struct
 
 import numpy as np
 import pytest
@@ -22,6 +23,15 @@ def shared_mesh_path(name):
     if not os.path.exists(path):
         pytest.skip(f"real mesh {name} not found in {SHARED_MESHES} (shared/ is not checked out)")
     return path
+
+
+def write_binary_stl(path, V, F, *, count=None, extra=b""):
+    """A binary STL file of the triangles ``V[F]``, its header's triangle
+    count ``count`` (None: the right one), ``extra`` bytes after them."""
+    rec = np.zeros(len(F), dtype=[("normal", "<f4", 3), ("v", "<f4", (3, 3)), ("attr", "<u2")])
+    rec["v"] = V[F]
+    n = len(F) if count is None else count
+    path.write_bytes(b"binary".ljust(80) + struct.pack("<I", n) + rec.tobytes() + extra)
 
 
 def load_shared(name):
@@ -107,6 +117,24 @@ def regular_grid(nx=10, ny=10, size=1.0, z=None):
     v10, v01, v11 = v00 + 1, v00 + nx + 1, v00 + nx + 2
     F = np.concatenate([np.stack([v00, v10, v11], 1), np.stack([v00, v11, v01], 1)]).astype(np.int64)
     return V, F
+
+
+def cad_cylinder(n_around=1000, height=10.0, radius=1.0):
+    """A closed cylinder as CAD programs export it: one row of side
+    triangles the whole height long (``n_around`` of them per side,
+    ``height / (2 pi radius / n_around)`` to 1: 1,600 to 1 by default) and
+    two fans of needles from the caps' centres."""
+    t = np.linspace(0, 2 * np.pi, n_around, endpoint=False)
+    ring = np.c_[radius * np.cos(t), radius * np.sin(t)]
+    V = np.vstack([np.c_[ring, np.zeros(n_around)], np.c_[ring, np.full(n_around, height)],
+                   [[0.0, 0.0, 0.0], [0.0, 0.0, height]]])
+    i = np.arange(n_around)
+    j = (i + 1) % n_around
+    bottom, top = 2 * n_around, 2 * n_around + 1
+    F = np.vstack([np.c_[i, j, j + n_around], np.c_[i, j + n_around, i + n_around],
+                   np.c_[np.full(n_around, bottom), j, i],
+                   np.c_[np.full(n_around, top), i + n_around, j + n_around]])
+    return V, F.astype(np.int64)
 
 
 def torus(n_major=24, n_minor=12, R=1.0, r=0.35, bump=0.0, bump_waves=(40, 12)):

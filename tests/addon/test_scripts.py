@@ -121,6 +121,26 @@ def test_batch_quotes_blender_importer_errors_and_keeps_its_log_out_of_stdout(tm
     assert all(f["log"] is None for f in files)           # it went to --log
 
 
+def test_batch_reads_a_binary_stl_whose_triangle_count_was_left_blank(tmp_path):
+    """Some exporters write 0 for the count: Blender's importer then reads the
+    file as ASCII and finds no faces. Its size holds whole triangles: they are
+    read (from a copy with the count written in; the file is left as it is)."""
+    import json
+    from tests.mesh_factory import write_binary_stl
+    V, F = icosphere(2)
+    write_binary_stl(tmp_path / "blank.stl", V, F, count=0)
+    before = (tmp_path / "blank.stl").read_bytes()
+    proc = run_script(["scripts/meshadjust_batch.py", str(tmp_path / "blank.stl"), "--faces", "100",
+                       "--out", str(tmp_path / "out"), "--report", str(tmp_path / "r.json")], tmp_path)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    assert "| blank.stl | 320 | 100 | 100 |" in proc.stdout
+    (rep,) = json.loads((tmp_path / "r.json").read_text())["files"]
+    assert rep["status"] == "ok" and rep["warnings"] == []
+    assert ("the binary STL header's triangle count is 0 (left blank by its exporter?): read the "
+            "320 triangles its size holds") in rep["notes"]
+    assert (tmp_path / "blank.stl").read_bytes() == before
+
+
 def test_batch_help_and_bad_arguments(tmp_path):
     proc = run_script(["scripts/meshadjust_batch.py", "--help"], tmp_path)
     assert proc.returncode == 0

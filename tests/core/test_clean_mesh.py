@@ -391,6 +391,11 @@ def test_inputs_are_not_modified():
     (dict(weld_distance=-1.0), "weld_distance must be a finite number >= 0"),
     (dict(weld_distance=float("nan")), "weld_distance"),
     (dict(min_component_area=-0.1), "min_component_area must be"),
+    (dict(face_budget=-1), r"^clean_mesh: face_budget must be an integer >= 0, got -1"),
+    (dict(face_budget=2.5), r"^clean_mesh: face_budget must be an integer >= 0, got 2\.5"),
+    (dict(protected=np.ones(3, dtype=bool)),
+     r"^clean_mesh: protected must be \(42,\) booleans \(one per vertex\), got \(3,\) bool"),
+    (dict(protected=np.ones(42)), r"^clean_mesh: protected must be \(42,\) booleans"),
 ])
 def test_bad_tolerances_raise(kwargs, match):
     with pytest.raises(InvalidArgumentError, match=match):

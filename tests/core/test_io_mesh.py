@@ -85,6 +85,11 @@ def test_obj_slashes_negative_indices_and_extra_coordinates(tmp_path):
     ("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2\n", 4, r"'f 1 2' needs at least 3 vertices"),
     ("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3.5\n", 4, r"'f 1 2 3\.5' has an index that is not an integer"),
     ("v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 2 3 99\n", 5, r"'f 1 2 3 99' refers to a missing vertex \(the file has 4\)"),
+    # beyond 64 bits (NumPy's bare OverflowError before)
+    ("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\nf 1 2 99999999999999999999999\n", 5,
+     r"'f 1 2 99999999999999999999999' refers to a missing vertex \(the file has 3\)"),
+    ("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 -99999999999999999999 3 2\n", 4,
+     r"'f 1 -99999999999999999999 3 2' refers to a missing vertex \(the file has 3\)"),
 ])
 def test_bad_lines_are_named(tmp_path, text, lineno, problem):
     path = tmp_path / "scan.smf"

@@ -4,6 +4,7 @@ import numpy as np
 import pytest
 from hypothesis import given, settings, strategies as st
 
+import core
 from core.errors import InvalidArgumentError, InvalidMeshError
 from core.metrics import SurfaceDistance, sample_surface, surface_distance
 from core.spatial import TriangleIndex
@@ -57,6 +58,47 @@ def test_sampling_zero_area_mesh_and_bad_input():
     with pytest.raises(InvalidMeshError, match="sample_surface: the mesh has no faces"):
         sample_surface(V, np.zeros((0, 3), dtype=np.int64), 10)
     assert sample_surface(V, [[0, 1, 2]], 0).points.shape == (0, 3)
+
+
+# --- the whole-mesh measures of core.mesh ---------------------------------------------------------
+
+MEASURES = {**{name: getattr(core, name) for name in ("face_areas", "face_normals",
+                                                      "vertex_normals", "enclosed_volume")},
+            "turned_faces": lambda V, F: core.turned_faces(V, V, F)}
+
+
+@pytest.mark.parametrize("name", list(MEASURES))
+def test_measures_check_their_mesh(name):
+    V, F = icosphere(1)
+    n = V.shape[0]
+    measure = MEASURES[name]
+    F_neg, F_out, V_nan = F.copy(), F.copy(), V.copy()
+    F_neg[3, 1], F_out[5, 2], V_nan[7, 0] = -1, n, np.nan
+    with pytest.raises(InvalidMeshError, match=rf"^{name}: 1 faces index vertices outside "
+                                               rf"\[0, {n}\), e\.g\. face 3 = \[.*-1"):
+        measure(V, F_neg)                                   # not vertex n-1 in silence
+    with pytest.raises(InvalidMeshError, match=rf"^{name}: .*e\.g\. face 5 = \[.*{n}\]"):
+        measure(V, F_out)
+    with pytest.raises(InvalidMeshError, match=rf"^{name}: 1 vertices have NaN .*vertex 7"):
+        measure(V_nan, F)
+    with pytest.raises(InvalidMeshError, match=rf"^{name}: F must be \(m,3\) integers, "
+                                               rf"got \(80, 2\)"):
+        measure(V, F[:, :2])
+    # lists and float32 are read as float64 (the results too), like everywhere in core
+    ref = measure(V, F)
+    np.testing.assert_array_equal(measure(V.tolist(), F.tolist()), ref)
+    out32 = measure(V.astype(np.float32), F.astype(np.int32))
+    assert np.asarray(out32).dtype == np.asarray(ref).dtype
+    if name != "turned_faces":
+        assert np.asarray(out32).dtype == np.float64
+
+
+def test_turned_faces_checks_the_shape_of_the_new_positions():
+    V, F = icosphere(1)
+    with pytest.raises(InvalidMeshError, match=r"turned_faces: V_new must have the shape of V_rest"):
+        core.turned_faces(V, V[:-1], F)
+    with pytest.raises(InvalidMeshError, match=r"turned_faces: V_new must be \(n,3\) floats"):
+        core.turned_faces(V, V[:, :2], F)
 
 
 # --- surface distance ----------------------------------------------------------------------------

@@ -368,6 +368,33 @@ def test_bad_arguments_raise(kwargs, match):
     assert issubclass(InvalidArgumentError, ValueError)
 
 
+def collinear_triples(k=100, seed=0):
+    """``k`` faces whose corners lie on one line each (lines in all
+    directions), their coordinates rounded: no area, though not exactly 0."""
+    rng = np.random.default_rng(seed)
+    P, t = rng.random((k, 3)), rng.random((k, 1))
+    d = np.array([1.0, 2.0, 3.0])
+    return np.vstack([P, P + t * d, P + 2 * t * d]), np.arange(3 * k).reshape(3, k).T
+
+
+@pytest.mark.parametrize("scale, offset", [(1.0, 0.0), (1e200, 0.0), (1.0, 1e6)])
+def test_faces_collinear_up_to_rounding_are_a_clear_error(scale, offset):
+    V, F = collinear_triples()
+    with pytest.raises(InvalidMeshError, match=r"^simplify: the \d+ faces left after cleaning have "
+                                               r"no area \(their corners are collinear\)"):
+        simplify(V * scale + offset, F, target_faces=50)
+    with pytest.raises(InvalidMeshError, match="have no area"):       # across the X = 0 plane
+        simplify((V - 0.5) * scale, F, target_faces=50, symmetry="X")
+
+
+def test_collinear_faces_beside_a_surface_are_only_degenerate_faces():
+    Vd, Fd = collinear_triples()
+    V, F = icosphere(3)
+    r = simplify(np.vstack([V, 0.1 * Vd]), np.vstack([F, Fd + V.shape[0]]), target_faces=200)
+    assert r.F.shape[0] == 200 and r.stopped_because == "target"
+    assert_clean(r)
+
+
 # ---------------------------------------------------------------- properties
 @settings(max_examples=25, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(seed=st.integers(0, 10_000), kind=st.sampled_from(["sphere", "grid", "torus"]),

@@ -7,7 +7,7 @@ import pytest
 from core import (InvalidArgumentError, bind, bbox_diagonal, deform, euler_characteristic,
                   fit_cage, manifold_report, simplify, surface_distance)
 from core.clean import clean_mesh
-from core.mirror import AXES, mirror, mirror_partners
+from core.mirror import AXES, mirror, mirror_partners, symmetrize
 from core.symmetry import simplify_symmetric
 from tests.mesh_factory import icosphere, load_shared, regular_grid, torus
 
@@ -245,7 +245,8 @@ def test_one_sided_mesh_and_bad_axis_are_clear_errors():
         simplify(V + [2.0, 0.0, 0.0], F, target_faces=50, symmetry="X")
     with pytest.raises(InvalidArgumentError, match="negative side"):
         simplify(V - [0.0, 0.0, 1.5], F, target_faces=50, symmetry="Z")
-    with pytest.raises(InvalidArgumentError, match="symmetry must be None, 'X', 'Y' or 'Z'"):
+    with pytest.raises(InvalidArgumentError, match=r"^simplify: symmetry must be 'X', 'Y' or 'Z' "
+                                                   r"\(or 0, 1, 2\), got 'W'"):
         simplify_symmetric(V, F, axis="W", target_faces=50)
     with pytest.raises(InvalidArgumentError, match="give at least one of"):
         simplify(V, F, symmetry="X")
@@ -262,6 +263,32 @@ def test_mirror_partners():
     assert mirror_partners(W, "X").tolist() == [1, 0, 2, 4, 3, 6, 5, 7, 9, 8]
     with pytest.raises(InvalidArgumentError, match="not mirror-symmetric about the Y plane"):
         mirror_partners(V, "Y", where="fit_cage")
+    assert mirror_partners(V, 0).tolist() == [1, 0, 2, 4, 3]     # the axis as symmetrize takes it
+    with pytest.raises(InvalidArgumentError, match="^mirror_partners: axis must be 'X', 'Y' or 'Z'"):
+        mirror_partners(V, "x")
+
+
+@pytest.mark.parametrize("axis", ["X", 0])
+def test_symmetrize_takes_the_axis_as_mirror_partners_does_and_checks_the_partners(axis):
+    V = np.array([[1.0, 2, 3], [-1.2, 2, 3], [0.1, 5, 1], [2.0, 0, 0], [-2.0, 0, 0]])
+    p = mirror_partners(V, "X", tolerance=0.1)
+    S = symmetrize(V, p, axis)
+    np.testing.assert_array_equal(S[p] * [-1, 1, 1], S)
+    assert S[2, 0] == 0.0 and S[0, 0] == 1.1
+    bad = p.copy()
+    bad[3] = -1                   # no "no partner" value: not vertex n-1 in silence
+    with pytest.raises(InvalidArgumentError, match=r"^symmetrize: partner must hold vertex indices "
+                                                   r"in \[0, 5\), got 1 outside, e\.g\. partner\[3\] = -1"):
+        symmetrize(V, bad, axis)
+    bad[3] = 5
+    with pytest.raises(InvalidArgumentError, match=r"partner\[3\] = 5"):
+        symmetrize(V, bad, axis)
+    with pytest.raises(InvalidArgumentError, match=r"^symmetrize: partner must be \(5,\) vertex indices"):
+        symmetrize(V, p[:4], axis)
+    for wrong in ("W", 3, -1, True, None):
+        with pytest.raises(InvalidArgumentError, match=r"^symmetrize: axis must be 'X', 'Y' or 'Z' "
+                                                       r"\(or 0, 1, 2\)"):
+            symmetrize(V, p, wrong)
 
 
 # ---------------------------------------------------------------- fit and bind
