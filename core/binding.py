@@ -532,7 +532,11 @@ def deform(binding, V_cage_edited, *, F_cage=None, moved=None, out=None):
     cache (each level's positions and the fine normals, about 57 bytes per
     fine vertex) for the incremental deforms that follow; an incremental
     deform whose ``V_cage_edited`` differs from the kept cage elsewhere than
-    at ``moved`` recomputes it whole first. Consecutive incremental deforms
+    at ``moved`` recomputes that subdivided cage whole first, but still
+    rewrites only the rows ``moved`` influences: ``moved`` is taken at its
+    word, so a cage vertex that changed and is not listed leaves the rows
+    it influences as they were (list every changed vertex, or make a full
+    deform). Consecutive incremental deforms
     moving the same vertices (a drag) take the fine positions from a linear
     map of them, made at the second (up to 32 MB; a full deform ends it).
 
@@ -1003,9 +1007,10 @@ def _positions_t(oT, cT, bT, VfT, NfT):
     bit the same as on the whole arrays."""
     n = oT.shape[1]
     out = np.empty((3, n))
-    for s in range(0, n, _ROW_BLOCK):
-        e = min(s + _ROW_BLOCK, n)
+
+    def block(s, e):
         out[:, s:e] = _compose_t(oT[:, s:e], *_frames_t(VfT, NfT, cT[:, s:e], bT[:, s:e]))
+    run_blocks(block, [(s, min(s + _ROW_BLOCK, n)) for s in range(0, n, _ROW_BLOCK)])
     return out
 
 

@@ -41,6 +41,7 @@ from typing import NamedTuple
 import numpy as np
 
 from ._groups import distinct, ragged_entries, ragged_ranges
+from ._parallel import run_blocks
 from .mesh import (NORMALS_BLOCK, area_normals_rows, area_normals_t, dot_columns, normal_dots,
                    squared_edges, unit_rows)
 from .topology import edge_map
@@ -257,11 +258,13 @@ def rest_normals(PT, FT):
 def away_t(PT, FT, rest_normals):
     """Every face (ascending) whose area normal over ``PT`` (3,n) points away
     from its rest normal (negative dot product), the faces ``FT`` (3,m)
-    taken ``_AWAY_BLOCK`` at a time (temporaries that stay in cache)."""
-    out = []
-    for s in range(0, FT.shape[1], _AWAY_BLOCK):
-        n = area_normals_t(PT, FT[:, s:s + _AWAY_BLOCK])
-        out.append(np.flatnonzero(dot_columns(n, rest_normals[:, s:s + _AWAY_BLOCK]) < 0) + s)
+    taken ``_AWAY_BLOCK`` at a time (temporaries that stay in cache) on the
+    worker threads."""
+    def block(s, e):
+        n = area_normals_t(PT, FT[:, s:e])
+        return np.flatnonzero(dot_columns(n, rest_normals[:, s:e]) < 0) + s
+    m = FT.shape[1]
+    out = run_blocks(block, [(s, min(s + _AWAY_BLOCK, m)) for s in range(0, m, _AWAY_BLOCK)])
     return np.concatenate(out) if out else np.zeros(0, dtype=np.int64)
 
 
