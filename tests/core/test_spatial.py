@@ -10,7 +10,7 @@ import core.spatial as spatial
 from core.errors import InvalidArgumentError, InvalidMeshError
 from core.spatial import (KERNEL_BLOCK, ClosestPoints, TriangleIndex, closest_on_triangles,
                           closest_pairs, closest_points, point_triangle_closest, triangle_rows)
-from tests.mesh_factory import cube, icosphere, load_shared, regular_grid, torus
+from tests.mesh_factory import cad_cylinder, cube, icosphere, load_shared, regular_grid, torus
 
 
 # --- references written independently of the module ---------------------------------------------
@@ -545,3 +545,31 @@ def test_index_any_cell_factor_is_exact(factor):
     for bad in (0, -1.0, np.inf, "1"):
         with pytest.raises(InvalidArgumentError, match="min_cell must be a positive finite"):
             TriangleIndex(V, F, min_cell=bad)
+
+
+def test_long_thin_triangles_are_searched_through_the_hierarchy(monkeypatch):
+    """A CAD cylinder (side triangles 1,600 times longer than wide, fans of
+    needles): every grid cell holds hundreds of them, so queries go to the
+    BVH, whose probe finds a tight first bound. Exact, and each query looks
+    at a few hundred triangles (the grid made each look at its whole cell:
+    3,000 here; 64k faces took 2 ms a query)."""
+    V, F = cad_cylinder(1000)
+    rng = np.random.default_rng(11)
+    P = V[rng.integers(0, V.shape[0], 300)] + 0.01 * rng.standard_normal((300, 3))
+    P[:100, 2] = rng.uniform(0.0, 10.0, 100)          # beside the sides, anywhere along them
+    index = TriangleIndex(V, F)
+    assert np.diff(index.tables.cell_start).max() > index.crowded_cell
+    pairs = []
+    scan = TriangleIndex._scan
+    monkeypatch.setattr(TriangleIndex, "_scan",
+                        lambda self, PT, q, *a, **k: (pairs.append(q.size), scan(self, PT, q, *a, **k))[1])
+    _check_result(V, F, P, index.closest(P))
+    assert sum(pairs) / P.shape[0] < 300
+
+
+@pytest.mark.parametrize("name,V,F", list(_meshes())[:3], ids=[m[0] for m in _meshes()][:3])
+def test_crowded_cells_path_matches_brute_force(monkeypatch, name, V, F):
+    """Every query counted as in a crowded cell: the BVH with its probe alone is exact."""
+    monkeypatch.setattr(spatial, "CROWDED_CELL", -1)
+    P = _random_queries(V, np.random.default_rng(7), 300)
+    _check_result(V, F, P, TriangleIndex(V, F).closest(P))
