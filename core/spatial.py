@@ -103,9 +103,11 @@ _THIN_HEIGHT = 0.01
 _NEEDLE_HEIGHT = 0.25
 _LINE_CELLS = 27
 _MAX_PHASE2_CELLS = 64     # queries whose ball spans more cells go to the BVH
-CROWDED_CELL = 1024        # ... and queries in a cell referencing more triangles than this
-#: (a BVH query costs about what scanning 800 references of a cell does: 20 against 2.8 us
-#: for 113 references; cells of ordinary meshes hold at most a few hundred)
+CROWDED_CELL = 256         # ... and queries in a cell referencing more triangles than this
+#: (on a 1M-face scan a BVH query costs about what scanning 800 references does, 20 against
+#: 2.8 us for 113; but slivers pass the bounds, so a crowded cell's references are mostly
+#: evaluated exactly: the 500-face cage of a CAD cylinder, one cell of 500, measured against
+#: it in 27.7 s at 1,024 and 13.2 s at 128. Cells of the shared meshes hold at most 126)
 _MAX_SAME_CODE = 64        # more triangles than this with one Morton code: drop repeated ones
 #: a triangle no taller than this share of the mesh's size over its longest edge is
 #: flat: a segment. Flat ones whose segment lies (within it) inside another's
