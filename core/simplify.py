@@ -53,14 +53,14 @@ from typing import NamedTuple
 import numpy as np
 
 from ._clean import BOUNDARY, NON_MANIFOLD, edge_representatives, half_edge_ends, spatial_order
-from ._collapse import State, run
+from ._collapse import State, compactness, run
 from ._parallel import blocks, run_blocks, run_each
 from ._relax import close_smallest_hole, close_triangular_holes, drop_stuck_components
 from ._relocate import relocate, segment_triangles
 from .clean import MIN_COMPONENT_AREA, CleanReport, clean_mesh
 from .errors import InvalidArgumentError, InvalidMeshError, MeshAdjustError
-from .mesh import (bounding_box, check_mesh, check_vertex_mask, diagonal_length, dot_columns,
-                   face_normals, has_area)
+from .mesh import (area_normals_rows, bounding_box, check_mesh, check_vertex_mask,
+                   diagonal_length, dot_columns, face_normals, has_area, squared_edges)
 from .metrics import surface_distance
 from .topology import boundary_loops_count, collapsible_edges, face_components
 from .quadrics import accumulate_coefficients, vertex_face_quadrics, edge_constraint_quadrics
@@ -158,8 +158,34 @@ class SimplifyResult:
         if self.stopped_because == "topology_floor" and self.n_components > 0.5 * m:
             text += (f"; the input is in {self.n_components:,} separate pieces: weld it "
                      f"first (Merge by Distance in Blender, or a larger weld_distance)")
+        if self.n_slivers:
+            text += f"; {self.sliver_note}"
         done = self.cleaning.summary()
         return f"{text}; {done}" if done else text
+
+    @property
+    def n_slivers(self):
+        """Cage faces less compact than ``Tuning.gamma_hard`` (Garland's
+        compactness: 1 for an equilateral triangle). A collapse never makes
+        one less compact than the faces it replaces, so they descend from
+        the input's own long thin triangles (a CAD cylinder's sides, with no
+        vertex between their ends for a cage vertex to sit on)."""
+        if not self.F.shape[0]:
+            return 0
+        twice_area = np.linalg.norm(area_normals_rows(self.V, self.F.T), axis=1)
+        g = compactness(twice_area, squared_edges(self.V, self.F).sum(axis=1))
+        return int(np.count_nonzero(g < TUNING.gamma_hard))
+
+    @property
+    def sliver_note(self):
+        """A sentence on the cage's slivers (:attr:`n_slivers`) and what to do
+        about them, or "" when it has none."""
+        n = self.n_slivers
+        if not n:
+            return ""
+        return (f"{n:,} of the cage's {self.F.shape[0]:,} faces are slivers, long and thin as "
+                f"the input's own triangles there (nothing lies between their ends for a cage "
+                f"vertex to sit on): subdivide or remesh the input for a cage without them")
 
 
 def check_arguments(n, target_faces, ratio, max_error, feature_angle_deg, vertex_weights, locked,

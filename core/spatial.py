@@ -51,10 +51,14 @@ The index (:class:`TriangleIndex`) answers "nearest triangle" exactly:
    within the best distance. Among exactly equidistant triangles the one
    with the smallest disk bound wins (the index's rule since its first
    version, kept so that results do not change).
-4. Queries with no triangle nearby, or whose ball spans more than
-   ``_MAX_PHASE2_CELLS`` cells (far from the surface, outside the grid), go to a
+4. Queries with no triangle nearby, whose ball spans more than
+   ``_MAX_PHASE2_CELLS`` cells (far from the surface, outside the grid), or whose
+   cell is crowded (more than ``crowded_cell`` references: long thin triangles,
+   as a CAD cylinder's sides, cross and crowd every cell) go to a
    bounding-volume hierarchy over the same Morton order (a balanced binary tree
-   of ``_LEAF``-triangle leaves, built on first need), descended
+   of ``_LEAF``-triangle leaves, built on first need). Each query first gets an
+   exact bound from the leaves a beam descent reaches (``_PROBE_BEAM`` nodes
+   per level), then the tree is descended
    ``_BVH_STEP`` levels at a time, breadth first, in lockstep for all queries.
    Each node has an axis-aligned box and a cylinder (centre, axis = summed
    normal, radius, half height) that is thin for tilted flat patches; a node is

@@ -371,6 +371,8 @@ def _summary(job):
             msg += f" (at {fit_levels(job.levels)} levels)"
     if job.fit_error:
         warnings.append(f"{job.fit_error}; the cage is kept unfitted")
+    if getattr(res, "n_slivers", 0):
+        warnings.append(res.sliver_note)
     return msg, dev, warnings
 
 

@@ -14,7 +14,7 @@ import pytest
 from tests.addon.conftest import MODULE, make_object
 from tests.addon.test_nothing_lost import assert_unchanged, mod, scene_snapshot
 from tests.addon.test_operators import bumpy_sphere, simplify
-from tests.mesh_factory import icosphere, mobius_strip, torus
+from tests.mesh_factory import cad_cylinder, icosphere, mobius_strip, torus
 
 
 def test_simplify_report_says_what_the_cleaning_did(scene):
@@ -46,6 +46,15 @@ def test_a_missed_target_is_a_warning_with_the_cores_reason(scene):
     assert report.level == 'WARNING' and len(cage.data.polygons) > 4
     assert f"stopped at {len(cage.data.polygons)} faces of 4 asked" in report.message
     assert report.warnings and "WARNING" in cage.meshadjust.last_report
+
+
+def test_a_cage_of_slivers_is_a_warning_saying_what_to_do(scene):
+    V, F = cad_cylinder(600)                # sides one row of long thin triangles
+    obj = make_object("cylinder", V, F)
+    cage, report = mod("api").simplify_object(obj, target_faces=200, fit=False, bind=False)
+    assert report.level == 'WARNING' and len(cage.data.polygons) == 200
+    assert "faces are slivers" in report.message and "remesh the input" in report.message
+    assert "WARNING" in cage.meshadjust.last_report
 
 
 def _job(stopped, m, target, message):

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 import core
-from tests.mesh_factory import (icosphere, octahedron, shared_mesh_path, tetrahedron,
+from tests.mesh_factory import (cad_cylinder, icosphere, octahedron, shared_mesh_path, tetrahedron,
                                 write_binary_stl)
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
@@ -342,3 +342,15 @@ def test_dask_scheduler_and_worker_processes(tmp_path):
         for p in reversed(procs):
             p.terminate()
             p.wait(timeout=30)
+
+
+def test_a_cage_of_slivers_is_a_warning(tmp_path):
+    """A CAD cylinder's cage keeps its long thin side faces: the row warns
+    (and --strict fails), naming the count and what to do."""
+    core.write_obj(tmp_path / "cyl.obj", *cad_cylinder(600))
+    proc = run_batch(["cyl.obj", "--faces", "200", "--out", "out", "--report", "r.json"], tmp_path)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    rep = json.loads((tmp_path / "r.json").read_text())["files"][0]
+    assert rep["status"] == "warn" and rep["faces_out"] == 200
+    assert any(w.startswith("the cage: ") and "faces are slivers" in w for w in rep["warnings"])
+    assert run_batch(["cyl.obj", "--faces", "200", "--out", "out2", "--strict"], tmp_path).returncode == 1

@@ -13,8 +13,8 @@ from core.clean import clean_mesh
 from core.simplify import SimplifyResult, simplify
 from core.topology import manifold_report, topology_summary
 from core.tuning import TUNING, Tuning
-from tests.mesh_factory import (boundary_edges, cube, double_torus, icosphere, load_shared, regular_grid,
-                                tetrahedron, torus, unwelded)
+from tests.mesh_factory import (boundary_edges, cad_cylinder, cube, double_torus, icosphere,
+                                load_shared, regular_grid, tetrahedron, torus, unwelded)
 
 
 # ---------------------------------------------------------------- helpers
@@ -818,3 +818,28 @@ def test_a_run_that_reaches_its_target_never_relaxes_the_guard():
         assert a.stopped_because == "target"
         np.testing.assert_array_equal(a.F, b.F)
         np.testing.assert_array_equal(a.V, b.V)
+
+
+def _compactness_of(V, F):
+    """Garland's compactness 4 sqrt(3) area / sum of squared edges, per face."""
+    a, b, c = V[F[:, 0]], V[F[:, 1]], V[F[:, 2]]
+    area = 0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=1)
+    sumsq = ((b - a) ** 2).sum(1) + ((c - b) ** 2).sum(1) + ((a - c) ** 2).sum(1)
+    return 4 * np.sqrt(3) * area / sumsq
+
+
+def test_a_cage_of_slivers_says_so():
+    """A CAD cylinder (sides one row of 1,600:1 triangles): its cage's
+    vertices stay on the rims, so its side faces are slivers too; the result
+    counts them (the faces less compact than Tuning.gamma_hard) and its
+    message says what to do. Well-shaped inputs give none."""
+    V, F = cad_cylinder(2000)
+    res = simplify(V, F, target_faces=500)
+    g = _compactness_of(res.V, res.F)
+    assert res.n_slivers == int((g < TUNING.gamma_hard).sum()) > 0.3 * res.F.shape[0]
+    assert f"{res.n_slivers:,} of the cage's 500 faces are slivers" in res.message
+    assert "remesh the input" in res.sliver_note
+    V, F = icosphere(4)
+    for target in (1000, 100, 20):
+        res = simplify(V, F, target_faces=target)
+        assert res.n_slivers == 0 and res.sliver_note == "" and "sliver" not in res.message
