@@ -334,7 +334,9 @@ def _pool_size(ne, m, target, tun, bold=False, grow=1.0):
     collapses still needed (see ``Tuning.slow_pass_share``)."""
     P = int(np.ceil((tun.bold_pool_share if bold else tun.pool_share) * ne))
     if target is not None:
-        P = min(P, int(np.ceil(grow * tun.pool_goal_factor * (m - target) / 2.0)) + 1)
+        goal = grow * tun.pool_goal_factor * (m - target) / 2.0    # (grow may reach inf)
+        if goal < P:
+            P = min(P, int(np.ceil(goal)) + 1)
     return max(1, min(P, ne))
 
 

@@ -315,3 +315,17 @@ def test_holes_are_capped_shortest_first_and_the_mesh_stays_closed_and_manifold(
     assert (closed.boundary_loops, closed.euler, closed.non_manifold_edges) == (0, 2, 0)
     h = np.arange(st.twin.size)
     assert np.array_equal(st.twin[st.twin], h)               # every half-edge has its twin
+
+
+def test_pool_size_after_hundreds_of_slow_passes():
+    """Each slow pass multiplies the goal bound's growth by pool_growth: after
+    about 512 of them (12 extruded star-shaped glyphs, whose cheapest edges
+    are fan spokes that would fold) it is inf, and the pool size was
+    int(inf): OverflowError out of simplify. Now the share of the candidates
+    bounds it, as any growth past it does."""
+    ne, m, target = 5000, 19200, 500
+    share = int(np.ceil(TUNING.pool_share * ne))
+    for grow in (TUNING.pool_growth ** 40, 1e300, np.inf):
+        assert engine._pool_size(ne, m, target, TUNING, grow=grow) == share
+    # the goal bound as before where it binds
+    assert engine._pool_size(ne, m, m - 10, TUNING) == int(np.ceil(TUNING.pool_goal_factor * 5)) + 1
