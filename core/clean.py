@@ -23,7 +23,7 @@ edge- and vertex-manifold triangle mesh that :func:`~.simplify.simplify`,
            ends of the edges just cut) into one vertex per fan
     orient each component consistently (the majority's orientation wins)
     drop   debris: components whose area is below min_component_area of the
-           largest component's
+           largest component's (unless they hold many faces: DEBRIS_MAX_FACES)
     drop   coincident copies: components whose vertices all coincide (within
            weld_distance) with vertices of another one, and, when the weld
            leaves non-manifold edges, pieces lying on another face for face
@@ -79,6 +79,12 @@ OPEN_SHARE = 0.005
 #: most this share of the total area: beyond, they are the mesh itself in pieces, not
 #: specks, and are kept (simplify then says how far it could go and why)
 BUDGET_DEBRIS_SHARE = 0.1
+#: a component with more faces than both of these (a count, a share of the faces) is
+#: never debris, however small its area: a sphere of 20,480 faces sharing a vertex with
+#: one stray triangle 1,000 times its size was dropped as debris of that triangle (the
+#: cage was the triangle, "on target"), a 9,408-face detail of a part 1e4 times larger too
+DEBRIS_MAX_FACES = 1000
+DEBRIS_MAX_FACE_SHARE = 0.01
 
 
 @dataclass(frozen=True)
@@ -204,7 +210,9 @@ def clean_mesh(V, F, *, weld_distance=None, min_component_area=MIN_COMPONENT_ARE
         components too small to get one face of it, by their share of the
         total area, are debris too (they cannot be represented, and each
         would take at least one face, four when closed), unless together they
-        hold more than ``BUDGET_DEBRIS_SHARE`` of the total area.
+        hold more than ``BUDGET_DEBRIS_SHARE`` of the total area. A component
+        with more than ``DEBRIS_MAX_FACES`` faces and ``DEBRIS_MAX_FACE_SHARE``
+        of them is never debris (the bulk of a mesh beside a stray huge face).
     protected : (n,) bool, optional
         Components with a protected vertex (e.g. a locked one) are never debris.
 
@@ -831,8 +839,9 @@ def _debris(area, F, inner, min_component_area, face_budget, protected):
     """Faces to keep: all but those of components (joined across the
     manifold edges ``inner``, ``interior_edges(twin)``) whose area (``area``:
     per face) is below ``min_component_area`` times the largest's, or below
-    the total over ``face_budget`` (never the largest, nor one with a
-    ``protected`` vertex)."""
+    the total over ``face_budget`` (never the largest, one with more than
+    ``DEBRIS_MAX_FACES`` and ``DEBRIS_MAX_FACE_SHARE`` of the faces, nor one
+    with a ``protected`` vertex)."""
     keep = np.ones(F.shape[0], dtype=bool)
     found = {"n_debris_components": 0, "n_debris_faces": 0}
     if (min_component_area <= 0 and not face_budget) or F.shape[0] == 0:
@@ -849,6 +858,8 @@ def _debris(area, F, inner, min_component_area, face_budget, protected):
     if face_budget:
         tiny |= _budget_debris(comp_area, roots, face_budget)
     tiny[np.argmax(comp_area)] = False
+    comp_faces = np.bincount(labels, minlength=F.shape[0])
+    tiny[comp_faces > max(DEBRIS_MAX_FACES, DEBRIS_MAX_FACE_SHARE * F.shape[0])] = False
     if protected is not None:
         tiny[labels[protected[F].any(axis=1)]] = False
     keep = ~tiny[labels]

@@ -15,8 +15,8 @@ from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 
 import core
-from core.clean import (BUDGET_DEBRIS_SHARE, OPEN_SHARE, WELD_DISTANCE, WIDER_WELDS, CleanReport,
-                        bulk_box, clean_mesh)
+from core.clean import (BUDGET_DEBRIS_SHARE, DEBRIS_MAX_FACE_SHARE, DEBRIS_MAX_FACES, OPEN_SHARE,
+                        WELD_DISTANCE, WIDER_WELDS, CleanReport, bulk_box, clean_mesh)
 from core.errors import InvalidArgumentError, InvalidMeshError
 from core.topology import manifold_report, topology_summary
 from tests.mesh_factory import (duplicated, icosphere, klein_bottle, load_shared, mobius_strip,
@@ -548,3 +548,25 @@ def test_a_collinear_soup_is_a_clear_error():
     P[:, 0] = rng.random(3000)
     with pytest.raises(InvalidMeshError, match="have no area"):
         core.simplify(P, np.arange(3000).reshape(-1, 3), target_faces=100)
+
+
+def test_the_bulk_of_a_mesh_is_never_debris_of_a_stray_huge_face():
+    """A sphere of 20,480 faces sharing a vertex with one stray triangle 1,000
+    times its size (a scan's bad point): by area the sphere was debris of the
+    triangle, and the cage was the triangle alone, said to be on target. A
+    component with more than DEBRIS_MAX_FACES faces and DEBRIS_MAX_FACE_SHARE
+    of them is kept; specks still go."""
+    V, F = icosphere(5)
+    n = V.shape[0]
+    V = np.vstack([V, [[1000.0, 0, 0], [0, 1000.0, 0]]])
+    F = np.vstack([F, [[0, n, n + 1]]])
+    out = clean_mesh(V, F)
+    assert out.F.shape[0] == F.shape[0] and out.report.n_debris_faces == 0
+    assert out.report.n_split_vertices == 1                  # the shared vertex, one per fan
+    res = core.simplify(V, F, target_faces=500)
+    assert res.n_components == 2 and res.F.shape[0] <= 500
+    assert (res.vertex_map[:n] >= 0).all()                   # every sphere vertex has a home
+    assert DEBRIS_MAX_FACES < 20480 and DEBRIS_MAX_FACE_SHARE * F.shape[0] < 20480
+    # specks on the sphere still go
+    Vd, Fd = with_debris(*icosphere(4), k=50)
+    assert clean_mesh(Vd, Fd).report.n_debris_components == 50
