@@ -137,6 +137,7 @@ _FRONTIER_CAP = 1 << 16    # BVH frontier pairs before it is split and processed
 PRUNE_SLACK = 1e-9         # relative slack on pruning tests (keeps rounding conservative)
 _THREADED_BUILD = 1 << 15  # from this many faces the build runs its two halves on two threads
 _BUILD_BLOCK = 1 << 15     # triangles per block of the build's kernel rows and bounds
+_CANDIDATE_CELLS = 1 << 20  # box cells a run of a block's triangles tests for grid references
 
 
 class ClosestPoints(NamedTuple):
@@ -680,28 +681,78 @@ def _plane_cells(A, B, C, sides, ext, c0, nr, lo, h, dims, first, dtype):
     The margin also covers the rounding of n itself, about eps |AB| |AC|: on
     a needle with no height to speak of, n is all rounding and points
     anywhere (a needle across a sphere was left out of most cells it crosses).
-    Returns (cell, triangle), in triangle order, as ``dtype``."""
+    Returns (cell, triangle), in triangle order, as ``dtype``; triangles
+    whose boxes hold more than ``_CANDIDATE_CELLS`` cells in all are taken a
+    run at a time (a logo's fan of 20k needles across a box's side: 12M
+    candidates, 2.8 GB at once)."""
+    box = np.prod(nr, axis=1)
+    if box.sum() > _CANDIDATE_CELLS and box.size > 1:
+        ends = np.searchsorted(np.cumsum(box), np.arange(1, box.sum() // _CANDIDATE_CELLS + 1)
+                               * _CANDIDATE_CELLS, side="right")
+        cuts = np.unique(np.concatenate([[0], np.maximum(ends, 1), [box.size]]))
+        parts = [_plane_cells(A[a:b], B[a:b], C[a:b], sides[a:b], ext[a:b], c0[a:b], nr[a:b], lo,
+                              h, dims, first + a, dtype) for a, b in zip(cuts[:-1], cuts[1:])]
+        return tuple(np.concatenate(col) for col in zip(*parts))
     nrm = cross_rows(B - A, C - A)
     off = np.einsum("ij,ij->i", nrm, A)
     l1 = np.abs(nrm).sum(axis=1)
     reach = 0.5 * h * l1 + PRUNE_SLACK * (l1 * (np.abs(A).max(axis=1) + ext + 2 * h)
                                           + sides * (ext + 2 * h))
-    cnt = np.prod(nr, axis=1)
-    local, tri = ragged_ranges(np.zeros(cnt.shape[0], dtype=np.int64), cnt)   # 0..cnt-1 each
-    nx = nr[tri, 0]
-    ny = nr[tri, 1]
-    cx = c0[tri, 0] + local % nx
-    cy = c0[tri, 1] + (local // nx) % ny
-    cz = c0[tri, 2] + local // (nx * ny)
-    x0 = lo + 0.5 * h
-    dist = np.abs(nrm[tri, 0] * (x0[0] + cx * h) + nrm[tri, 1] * (x0[1] + cy * h)
-                  + nrm[tri, 2] * (x0[2] + cz * h) - off[tri])
-    keep = dist <= reach[tri]
-    needles = _needles(A, B, C, cnt, h, nrm)
+    tri, cells = _slab_cells(nrm, off, reach, c0, nr, lo, h)
+    keep = None
+    needles = _needles(A, B, C, np.prod(nr, axis=1), h, nrm)
     if needles is not None:
-        keep &= _near_needle(needles, tri, x0 + h * np.stack([cx, cy, cz], axis=1), h, ext)
-    tri, cx, cy, cz = tri[keep], cx[keep], cy[keep], cz[keep]
-    return (cx + dims[0] * (cy + dims[1] * cz)).astype(dtype), (tri + first).astype(dtype)
+        keep = _near_needle(needles, tri, lo + h * (cells + 0.5), h, ext)
+        tri, cells = tri[keep], cells[keep]
+    cell = cells[:, 0] + dims[0] * (cells[:, 1] + dims[1] * cells[:, 2])
+    return cell.astype(dtype), (tri + first).astype(dtype)
+
+
+def _slab_cells(nrm, off, reach, c0, nr, lo, h):
+    """The cells of each triangle's box (first cell ``c0``, ``nr`` per axis)
+    whose centre x has ``|nrm . x - off| <= reach``: those its plane's slab
+    crosses. Enumerated by columns along the axis ``w`` of each normal's
+    largest component, where the slab is a range of cells found from the
+    plane's height over the column's centre (``|nrm_w| |x_w - w_c| <=
+    reach``), never the box's every cell: a triangle whose box spans 200
+    cells each way had 8M candidates of which 120k were kept (a scan spike's
+    five long faces: 3 GB). A triangle without a normal keeps its whole box.
+    Returns the triangle (k,) of each cell and the cells (k,3) (x, y, z)."""
+    w = np.argmax(np.abs(nrm), axis=1)
+    flat = np.abs(nrm[np.arange(w.size), w]) == 0        # no normal: every cell of the box
+    w[flat] = 2
+    u, v = (w + 1) % 3, (w + 2) % 3
+    rows = np.arange(w.size)
+    nu, nv, nw = nr[rows, u], nr[rows, v], nr[rows, w]
+    span = np.where(flat, nw, 1)                          # cells per column taken whole
+    local, tri = ragged_ranges(np.zeros(w.size, dtype=np.int64), nu * nv * span)
+    t_u, t_v, t_w = u[tri], v[tri], w[tri]
+    cu = c0[tri, t_u] + local % nu[tri]
+    cv = c0[tri, t_v] + (local // nu[tri]) % nv[tri]
+    first_w = c0[tri, t_w]
+    x0 = lo + 0.5 * h
+    n = nrm[tri]
+    ns = np.take_along_axis
+    n_u, n_v, n_w = (ns(n, a[:, None], axis=1)[:, 0] for a in (t_u, t_v, t_w))
+    centre_u, centre_v = x0[t_u] + cu * h, x0[t_v] + cv * h
+    with np.errstate(divide="ignore", invalid="ignore"):
+        wc = (off[tri] - n_u * centre_u - n_v * centre_v) / n_w
+        half = reach[tri] / np.abs(n_w)
+    # the column's cells with |w - wc| <= half (a hair wider: the test before was on products)
+    k_lo = np.ceil((wc - half * (1 + 1e-12) - x0[t_w]) / h)
+    k_hi = np.floor((wc + half * (1 + 1e-12) - x0[t_w]) / h)
+    last_w = first_w + nr[tri, t_w] - 1
+    flat_col = flat[tri]
+    k_lo = np.where(flat_col, first_w + local // (nu[tri] * nv[tri]), np.maximum(k_lo, first_w))
+    k_hi = np.where(flat_col, k_lo, np.minimum(k_hi, last_w))
+    count = np.where(k_hi >= k_lo, k_hi - k_lo + 1, 0).astype(np.int64)
+    step, col = ragged_ranges(np.zeros(count.size, dtype=np.int64), count)
+    cells = np.empty((col.size, 3), dtype=np.int64)
+    rows = np.arange(col.size)
+    cells[rows, t_u[col]] = cu[col]
+    cells[rows, t_v[col]] = cv[col]
+    cells[rows, t_w[col]] = k_lo[col].astype(np.int64) + step
+    return tri[col], cells
 
 
 class _Needles(NamedTuple):

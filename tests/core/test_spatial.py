@@ -573,3 +573,52 @@ def test_crowded_cells_path_matches_brute_force(monkeypatch, name, V, F):
     monkeypatch.setattr(spatial, "CROWDED_CELL", -1)
     P = _random_queries(V, np.random.default_rng(7), 300)
     _check_result(V, F, P, TriangleIndex(V, F).closest(P))
+
+
+def _slab_cells_by_box(nrm, off, reach, c0, nr, lo, h):
+    """Every cell of each box, kept when its centre is within ``reach`` of the plane."""
+    out = []
+    for t in range(nrm.shape[0]):
+        g = np.stack(np.meshgrid(*[np.arange(c0[t, a], c0[t, a] + nr[t, a]) for a in range(3)],
+                                 indexing="ij"), axis=-1).reshape(-1, 3)
+        x = lo + h * (g + 0.5)
+        keep = np.abs(x @ nrm[t] - off[t]) <= reach[t]
+        out += [(t, *c) for c in g[keep]]
+    return sorted(out)
+
+
+def test_slab_cells_are_the_box_cells_the_plane_crosses():
+    """The column enumeration gives exactly the cells of the box whose centre
+    is within reach of the plane (the test it replaced, cell by cell over the
+    whole box), for tilted, axis-aligned and normal-less triangles."""
+    rng = np.random.default_rng(12)
+    k = 40
+    nrm = rng.normal(size=(k, 3))
+    nrm[:5] = [[0, 0, 1.0]] * 5                      # axis-aligned
+    nrm[5:8] = 0.0                                   # no normal: the whole box
+    nrm[8:12, 0] = 0.0                               # along an axis
+    c0 = rng.integers(0, 5, size=(k, 3))
+    nr = rng.integers(1, 9, size=(k, 3))
+    lo, h = np.array([-1.0, 0.5, 2.0]), 0.7
+    centre = lo + h * (c0 + nr / 2.0)
+    off = np.einsum("ij,ij->i", nrm, centre + rng.normal(scale=h, size=(k, 3)))
+    reach = 0.5 * h * np.abs(nrm).sum(axis=1) + 1e-9
+    tri, cells = spatial._slab_cells(nrm, off, reach, c0, nr, lo, h)
+    got = sorted((int(t), *map(int, c)) for t, c in zip(tri, cells))
+    assert got == _slab_cells_by_box(nrm, off, reach, c0, nr, lo, h)
+
+
+def test_the_grid_references_are_the_same_a_run_of_triangles_at_a_time(monkeypatch):
+    """Blocks whose boxes hold many cells are cut into runs (_CANDIDATE_CELLS):
+    the same tables, bit for bit (a scan spike's long faces, a cylinder)."""
+    V, F = icosphere(3)
+    V = V.copy()
+    V[0] *= 300                                       # a spike: five faces across the grid
+    Vc, Fc = cad_cylinder(300)
+    for mesh in ((V, F), (Vc, Fc)):
+        whole = TriangleIndex(*mesh).tables
+        monkeypatch.setattr(spatial, "_CANDIDATE_CELLS", 64)
+        runs = TriangleIndex(*mesh).tables
+        monkeypatch.undo()
+        assert np.array_equal(whole.cell_start, runs.cell_start)
+        assert np.array_equal(whole.cell_tri, runs.cell_tri)
