@@ -1010,7 +1010,7 @@ def _positions_t(oT, cT, bT, VfT, NfT):
 
     def block(s, e):
         out[:, s:e] = _compose_t(oT[:, s:e], *_frames_t(VfT, NfT, cT[:, s:e], bT[:, s:e]))
-    run_blocks(block, [(s, min(s + _ROW_BLOCK, n)) for s in range(0, n, _ROW_BLOCK)])
+    run_blocks(block, blocks(n, _ROW_BLOCK))
     return out
 
 

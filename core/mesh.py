@@ -8,7 +8,7 @@ or raises :class:`~.errors.InvalidMeshError` naming the problem and an example.
 
 import numpy as np
 
-from ._parallel import run_blocks
+from ._parallel import blocks, run_blocks
 from .errors import InvalidArgumentError, InvalidMeshError
 
 #: triangles per block of :func:`area_normals_t` (its temporaries stay small and are
@@ -234,7 +234,7 @@ def area_normals_t(PT, T, out=None):
 
     def block(s, e):
         out[:, s:e] = _area_normals_block(PT, T[0][s:e], T[1][s:e], T[2][s:e])
-    run_blocks(block, [(s, min(s + NORMALS_BLOCK, k)) for s in range(0, k, NORMALS_BLOCK)])
+    run_blocks(block, blocks(k, NORMALS_BLOCK))
     return out
 
 

@@ -216,12 +216,9 @@ class NearQuery:
         key = cell3[:, 0] + T.dims[0] * (cell3[:, 1] + T.dims[1] * cell3[:, 2])
         # points in a crowded cell go to the index (whose hierarchy answers them: a cage
         # of long thin triangles, a CAD cylinder's, made cells of thousands)
-        start = T.tables.cell_start
-        crowded = start[key + 1] - start[key] > self.index.crowded_cell
-        order = np.flatnonzero(~crowded)
-        order = order[np.argsort(key[order], kind="stable")]   # mesh order is coherent: stable is fast
+        crowded, order, _ = self.index.split_crowded(key)
         best = _Best.empty(q)
-        far = [np.flatnonzero(crowded)]
+        far = [crowded]
         far += [_block(T, P, order[s:s + _BLOCK], cell3, best) for s in range(0, order.size, _BLOCK)]
         far = np.concatenate(far)
         result = closest_result(T.tables, best.t, best.v, best.w, best.d2)

@@ -158,8 +158,9 @@ class SimplifyResult:
         if self.stopped_because == "topology_floor" and self.n_components > 0.5 * m:
             text += (f"; the input is in {self.n_components:,} separate pieces: weld it "
                      f"first (Merge by Distance in Blender, or a larger weld_distance)")
-        if self.n_slivers:
-            text += f"; {self.sliver_note}"
+        slivers = self.sliver_note
+        if slivers:
+            text += f"; {slivers}"
         done = self.cleaning.summary()
         return f"{text}; {done}" if done else text
 

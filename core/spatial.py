@@ -699,8 +699,7 @@ def _plane_cells(A, B, C, sides, ext, c0, nr, lo, h, dims, first, dtype):
     reach = 0.5 * h * l1 + PRUNE_SLACK * (l1 * (np.abs(A).max(axis=1) + ext + 2 * h)
                                           + sides * (ext + 2 * h))
     tri, cells = _slab_cells(nrm, off, reach, c0, nr, lo, h)
-    keep = None
-    needles = _needles(A, B, C, np.prod(nr, axis=1), h, nrm)
+    needles = _needles(A, B, C, box, h, nrm)
     if needles is not None:
         keep = _near_needle(needles, tri, lo + h * (cells + 0.5), h, ext)
         tri, cells = tri[keep], cells[keep]
@@ -748,10 +747,10 @@ def _slab_cells(nrm, off, reach, c0, nr, lo, h):
     count = np.where(k_hi >= k_lo, k_hi - k_lo + 1, 0).astype(np.int64)
     step, col = ragged_ranges(np.zeros(count.size, dtype=np.int64), count)
     cells = np.empty((col.size, 3), dtype=np.int64)
-    rows = np.arange(col.size)
-    cells[rows, t_u[col]] = cu[col]
-    cells[rows, t_v[col]] = cv[col]
-    cells[rows, t_w[col]] = k_lo[col].astype(np.int64) + step
+    at = np.arange(col.size)
+    cells[at, t_u[col]] = cu[col]
+    cells[at, t_v[col]] = cv[col]
+    cells[at, t_w[col]] = k_lo[col].astype(np.int64) + step
     return tri[col], cells
 
 
@@ -1106,13 +1105,8 @@ class TriangleIndex:
             h, dims, lo = self._h, self._dims, self._lo
             cc = np.clip(np.floor((P - lo) / h), 0, dims - 1).astype(np.int64)
             cid = cc[:, 0] + dims[0] * (cc[:, 1] + dims[1] * cc[:, 2])
-            cnt = self._cell_start[cid + 1] - self._cell_start[cid]
-            # a query in a crowded cell (long thin triangles, as on a CAD cylinder's
-            # sides, cross many cells and crowd them all) goes to the BVH directly
-            crowded = cnt > self.crowded_cell
-            order = np.flatnonzero(~crowded)
-            order = order[np.argsort(cid[order], kind="stable")]
-            far = [np.flatnonzero(crowded)]
+            crowded, order, cnt = self.split_crowded(cid)
+            far = [crowded]
             if order.size:
                 csum = np.cumsum(cnt[order])
                 # chunks of about _PAIR_CHUNK own-cell pairs and at most _QUERY_CHUNK queries
@@ -1126,6 +1120,18 @@ class TriangleIndex:
             if far.size:
                 self._bvh_query(PT, far, best)
         return closest_result(self.tables, best.t, best.v, best.w, best.d2)
+
+    def split_crowded(self, cid):
+        """For queries in the grid cells ``cid``: those whose cell is crowded
+        (more than ``crowded_cell`` references: long thin triangles, as on a CAD
+        cylinder's sides, cross many cells and crowd them all), which the
+        hierarchy answers; the others in cell order (stable: a mesh's own
+        order is coherent, and stable sorts it fast); and each one's cell's
+        reference count."""
+        cnt = self._cell_start[cid + 1] - self._cell_start[cid]
+        crowded = cnt > self.crowded_cell
+        order = np.flatnonzero(~crowded)
+        return np.flatnonzero(crowded), order[np.argsort(cid[order], kind="stable")], cnt
 
     @property
     def tables(self):
@@ -1354,10 +1360,10 @@ class TriangleIndex:
         """Exact search of the queries ``far`` through the BVH.
 
         Breadth-first in lockstep. Each query keeps an upper bound ``ub``: its best exact
-        distance so far, tightened at every level by the smallest *farthest-point* distance
-        to a child box (every triangle in a box lies within that distance). Children
-        whose nearest-point distance exceeds ``ub`` are pruned, so the frontier stays
-        near the surface patch closest to the query without any initial guess.
+        distance so far (first from :meth:`_probe_leaves`), tightened at every level by
+        the smallest *farthest-point* distance to a child box (every triangle in a box
+        lies within that distance). Children whose nearest-point distance exceeds ``ub``
+        are pruned, so the frontier stays near the surface patch closest to the query.
         """
         m = self.n_faces
         if not self._bvh_ready and far.size * m <= _BRUTE_PAIRS and far.size <= _BRUTE_QUERIES:

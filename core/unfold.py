@@ -41,7 +41,7 @@ from typing import NamedTuple
 import numpy as np
 
 from ._groups import distinct, ragged_entries, ragged_ranges
-from ._parallel import run_blocks
+from ._parallel import blocks, run_blocks
 from .mesh import (NORMALS_BLOCK, area_normals_rows, area_normals_t, dot_columns, normal_dots,
                    squared_edges, unit_rows)
 from .topology import edge_map
@@ -263,8 +263,7 @@ def away_t(PT, FT, rest_normals):
     def block(s, e):
         n = area_normals_t(PT, FT[:, s:e])
         return np.flatnonzero(dot_columns(n, rest_normals[:, s:e]) < 0) + s
-    m = FT.shape[1]
-    out = run_blocks(block, [(s, min(s + _AWAY_BLOCK, m)) for s in range(0, m, _AWAY_BLOCK)])
+    out = run_blocks(block, blocks(FT.shape[1], _AWAY_BLOCK))
     return np.concatenate(out) if out else np.zeros(0, dtype=np.int64)
 
 

@@ -371,8 +371,9 @@ def _summary(job):
             msg += f" (at {fit_levels(job.levels)} levels)"
     if job.fit_error:
         warnings.append(f"{job.fit_error}; the cage is kept unfitted")
-    if getattr(res, "n_slivers", 0):
-        warnings.append(res.sliver_note)
+    slivers = getattr(res, "sliver_note", "")
+    if slivers:
+        warnings.append(slivers)
     return msg, dev, warnings
 
 
