@@ -11,7 +11,8 @@ One pass, as stages (each a function below)::
 
     _candidate_edges      every live edge once with its cached cost; those around
                           vertices the last pass changed become stale, remembered
-                          rejections raise the cost
+                          rejections raise the cost (_still_flips: a fan's folding
+                          spokes stay refused while the faces they flip stay)
     _recost_cheapest      recost the stale edges that could be among the cheapest
     _choose_pool          the cheapest candidates (bounded share; bounded by the
                           collapses needed, a bound that grows after a pass that
@@ -68,7 +69,7 @@ def _array(per, fill=None, values=None, reset=False):
     """Declare a :class:`State` array: indexed by ``per`` ("vertex", "face",
     "half_edge"; "vertex_t" / "half_edge_t" for coefficient-major (k, n)
     arrays), ``fill`` for new rows ("index": their own index, "unset": left
-    uninitialised, only ever read after being written), ``values`` ("vertex" or "half_edge")
+    uninitialised, only ever read after being written), ``values`` ("vertex", "face" or "half_edge")
     when its entries are indices that compaction renumbers, ``reset`` when
     compaction starts it afresh (from ``fill``) instead of keeping its rows."""
     return field(default=None, metadata=dict(per=per, fill=fill, values=values, reset=reset))
@@ -93,6 +94,7 @@ class State:
     moved: np.ndarray = _array("vertex")         #: position changed (else the input's exact one)
     orig: np.ndarray = _array("vertex")          #: clean index of each current vertex
     vver: np.ndarray = _array("vertex")          #: pass in which the one-ring last changed
+    vmov: np.ndarray = _array("vertex")          #: pass in which it last survived a collapse (moved)
     fresh: np.ndarray = _array("vertex")         #: quadric / position changed: recost its edges
     is_bnd: np.ndarray = _array("vertex")        #: on a boundary edge
     dead_v: np.ndarray = _array("vertex", False, reset=True)   #: removed since the last compaction
@@ -108,6 +110,9 @@ class State:
     swap: np.ndarray = _array("half_edge", False)
     blk_pass: np.ndarray = _array("half_edge", np.int32(-1))   #: (int32: a pass count)
     c_blk: np.ndarray = _array("half_edge", -1.0)
+    #: (3, 3m) faces the remembered rejection flips (-1: none): while one of them and the
+    #: ends stay as they are, so does the refusal (see _still_flips)
+    blk_face: np.ndarray = _array("half_edge_t", -1, values="face")
     c_cost: np.ndarray = _array("half_edge", 0.0)
     c_stale: np.ndarray = _array("half_edge", True)
     #: (3, 3m) cached collapse positions (read only where the cost is fresh, so new rows
@@ -130,6 +135,7 @@ class State:
         self.moved = np.zeros(n, dtype=bool)
         self.orig = np.arange(n, dtype=np.int64)
         self.vver = np.full(n, -1, dtype=np.int64)
+        self.vmov = np.full(n, -1, dtype=np.int64)
         self.fresh = np.ones(n, dtype=bool)
         self.is_bnd = np.zeros(n, dtype=bool)
         hb = np.flatnonzero(twin == BOUNDARY)
@@ -282,9 +288,33 @@ def _candidate_edges(st):
     bv = _take(st.c_blk, rep)
     mem = np.flatnonzero(bv >= 0)           # rejections remembered until the neighbourhood changes
     blocked = np.zeros(rep.size, dtype=bool)
-    blocked[mem] = _take(st.blk_pass, rep[mem]) > np.maximum(_take(st.vver, U[mem]), _take(st.vver, W[mem]))
+    since = _take(st.blk_pass, rep[mem])
+    blocked[mem] = (since > np.maximum(_take(st.vver, U[mem]), _take(st.vver, W[mem]))) \
+        | _still_flips(st, rep[mem], U[mem], W[mem], since)
     cost = np.where(blocked, np.maximum(cost, bv), cost)
     return _Edges(rep, U, W, cost, stale, blocked, bv)
+
+
+def _still_flips(st, h, U, W, since):
+    """Refusals (representative half-edges ``h``, ends ``U``, ``W``, made in
+    pass ``since``) one of whose remembered flipped faces is alive and
+    neither it nor the ends have moved since: the collapse would go to the
+    same place and flip that face again, whatever changed elsewhere around
+    it (a fan's hub then does not check its hundreds of folding spokes again
+    after every collapse on its rim). (k,) bool."""
+    out = np.zeros(h.size, dtype=bool)
+    ends = np.maximum(_take(st.vmov, U), _take(st.vmov, W))
+    for j in range(st.blk_face.shape[0]):
+        f = _take(st.blk_face[j], h)
+        r = np.flatnonzero((f >= 0) & ~out)
+        if r.size == 0:
+            continue
+        f = f[r]
+        live = np.flatnonzero(_take(st.alive, f))
+        r, f = r[live], f[live]
+        moved = _take(st.vmov, _take(st.F, f, axis=0).ravel()).reshape(-1, 3).max(axis=1)
+        out[r[_take(since, r) > np.maximum(_take(ends, r), moved)]] = True
+    return out
 
 
 def _recost_cheapest(st, e, P, max_err_n, preserve_boundary, tun):
@@ -548,16 +578,19 @@ def _judge(st, pool, sel, c, passes, tun):
     total = pool.raw[sel] + c.pen
     acc = c.ok & (total <= _acceptance_bound(pool.limit, total[c.ok], tun))
     rej = ~acc
-    _remember_refused(st, pool.h[sel[rej]], np.where(c.ok[rej], total[rej], np.inf), passes)
+    _remember_refused(st, pool.h[sel[rej]], np.where(c.ok[rej], total[rej], np.inf), passes, c.flip[rej])
     return acc
 
 
-def _remember_refused(st, h, total, passes):
+def _remember_refused(st, h, total, passes, flip):
     """Remember the refused collapses of the representative half-edges ``h``
     with their ``total`` (cost + penalties; inf when invalid) until their
-    neighbourhood changes."""
+    neighbourhood changes, or, for those that flip faces (``flip`` (k,3):
+    up to three of their ids, -1 for none), while one of those faces and the
+    collapse's ends stay as they are (:func:`_still_flips`)."""
     st.c_blk[h] = total
     st.blk_pass[h] = passes
+    st.blk_face[:, h] = flip.T
 
 
 def _bold_rounds(st, pool, passes, haus, dihedral_cos, tun, target):
@@ -598,7 +631,7 @@ def _bold_rounds(st, pool, passes, haus, dihedral_cos, tun, target):
             merged[pool.A[a.idx]] = True
             merged[pool.B[a.idx]] = True
             done += a.idx.size
-            jobs.append(lambda a=a: _apply_accepted(st, pool, a))
+            jobs.append(lambda a=a: _apply_accepted(st, pool, a, passes))
         active = active[~merged[pool.A[active]] & ~merged[pool.B[active]]]
         if rounds == 1:
             first = took
@@ -662,7 +695,7 @@ def _drop_invalid(st, pool, ahead, active, passes):
     bad = np.flatnonzero(~ok)
     hr = pool.h[_take(active, bad)]
     st.bent[hr] = _take(ahead.found.bent, _take(i, bad))
-    _remember_refused(st, hr, np.inf, passes)
+    _remember_refused(st, hr, np.inf, passes, _take(ahead.found.flip, _take(i, bad), axis=0))
     return active[ok]
 
 
@@ -746,11 +779,12 @@ class _Checked(NamedTuple):
     rows: tuple          #: star rows ``(star, kf, coll, cA, cB)``
     wit: np.ndarray      #: (k,3) the survivor's witness
     bent: np.ndarray     #: (k,) bool: refused only by the dihedral bound
+    flip: np.ndarray     #: (k,3) faces the collapse flips (-1: none; big stars only)
 
     def subset(self, i, keep):
         """The collapses ``i`` (ascending; ``keep``: the same as a (k,) mask)."""
         return _Checked(_take(self.ok, i), _take(self.pen, i), _keep_rows(self.rows, keep),
-                        _take(self.wit, i, axis=0), _take(self.bent, i))
+                        _take(self.wit, i, axis=0), _take(self.bent, i), _take(self.flip, i, axis=0))
 
 
 def _check(st, A, B, XT, interior, star, kf, tun, haus=True, dihedral_cos=None):
@@ -771,9 +805,9 @@ def _check(st, A, B, XT, interior, star, kf, tun, haus=True, dihedral_cos=None):
                             haus, dihedral_cos)
 
     res = run_each(block, range(len(spans)))
-    ok, pen, wit, bent = (np.concatenate([r[c] for r in res]) for c in (0, 1, 3, 4))
+    ok, pen, wit, bent, flip = (np.concatenate([r[c] for r in res]) for c in (0, 1, 3, 4, 5))
     coll, cA, cB = (np.concatenate([r[2][c] for r in res]) for c in (2, 3, 4))
-    return _Checked(ok, pen, (star, kf, coll, cA, cB), wit, bent)
+    return _Checked(ok, pen, (star, kf, coll, cA, cB), wit, bent, flip)
 
 
 class _Star(NamedTuple):
@@ -1045,12 +1079,26 @@ def _check_block(st, A, B, XT, interior, star, kf, tun, haus=True, dihedral_cos=
     ``(star, kf, coll, cA, cB)``: face ids, their collapse index, whether each
     face is removed, and the corners of A and B in it (-1: absent), the
     survivor's witness (k,3), and ``bent`` (k,) bool: refused only by the
-    dihedral bound (a :class:`_Checked`).
+    dihedral bound, and ``flip`` (k,3): three of the faces each collapse
+    flips, spread over them (-1: none; only for stars of at least
+    ``Tuning.hold_star`` faces, whose refusals are then held, see
+    :func:`_still_flips`). A :class:`_Checked`.
     """
     s = _star_of(st.F, A, B, star, kf)
     ok = _link_condition(st, s, interior)
     g = _moved_faces(st, s, XT)
-    ok[s.mk[_turned_faces(st, s, g, A, B, tun)]] = False
+    turned = np.flatnonzero(_turned_faces(st, s, g, A, B, tun))
+    ok[s.mk[turned]] = False
+    flip = np.full((s.k, 3), -1, dtype=np.int64)
+    if turned.size:     # at 1/6, 1/2 and 5/6 of each collapse's flipped faces (ascending)
+        turned = turned[np.argsort(s.mk[turned], kind="stable")]
+        tk = s.mk[turned]
+        cnt = np.bincount(tk, minlength=s.k)
+        first = np.cumsum(cnt) - cnt
+        has = np.flatnonzero(cnt)
+        for j, q in enumerate((1, 3, 5)):
+            flip[has, j] = s.star[s.mv[turned[first[has] + (cnt[has] * q) // 6]]]
+    flip[np.bincount(s.kf, minlength=s.k) < tun.hold_star, :] = -1
     gmin_old, gmin_new = _min_compactness(s, g)
     ok &= ~((gmin_new < tun.gamma_hard) & (gmin_new < 0.5 * gmin_old))   # no new sliver
     bent = np.zeros(s.k, dtype=bool)
@@ -1062,7 +1110,7 @@ def _check_block(st, A, B, XT, interior, star, kf, tun, haus=True, dihedral_cos=
     if haus and tun.haus_weight > 0.0 and s.mk.size:
         pen_h, wnew = _hausdorff_penalty(st, s, g, A, B, ok, tun)
         penalty = penalty + pen_h
-    return _Checked(ok, penalty, (star, kf, s.coll, s.cA, s.cB), wnew, bent)
+    return _Checked(ok, penalty, (star, kf, s.coll, s.cA, s.cB), wnew, bent, flip)
 
 
 # ---------------------------------------------------------------- the loop
@@ -1074,6 +1122,7 @@ def run(st, target, max_err_n, preserve_boundary, progress, m0, tun, dihedral_co
     bend two adjacent faces (off the input's creases) by more than its
     arccos are refused, and a stop for want of valid collapses while some
     were refused only for that reads ``"max_dihedral"``."""
+    _forget_refusals(st)
     # no compaction when _run raises (an interrupt may land mid-pass, the
     # state half-updated: compacting it would hide the interrupt behind an
     # IndexError, and the state is dropped anyway)
@@ -1083,6 +1132,15 @@ def run(st, target, max_err_n, preserve_boundary, progress, m0, tun, dihedral_co
         if st.bent[edge_representatives(st.twin)].any():
             stopped = "max_dihedral"
     return stopped, passes
+
+
+def _forget_refusals(st):
+    """Start a run with no remembered refusal: its passes count from 1
+    again, and the topology changes between runs (``core._relax``) may have
+    made any of them wrong."""
+    st.c_blk[:] = -1.0
+    st.vver[:] = -1
+    st.vmov[:] = -1
 
 
 def _progress(progress, m0, m, target):
@@ -1145,7 +1203,7 @@ def _run(st, target, max_err_n, preserve_boundary, progress, m0, tun, dihedral_c
         if acc is None:
             continue
         st.vver[touched] = passes
-        _apply_accepted(st, pool, _trim_to_target(pool, acc, m, target))
+        _apply_accepted(st, pool, _trim_to_target(pool, acc, m, target), passes)
         clock.lap("apply")
     return "no_valid_collapse", passes
 
@@ -1176,10 +1234,12 @@ class _Clock:
 # ---------------------------------------------------------------- applying, compacting
 
 
-def _apply_accepted(st, pool, acc):
-    """Apply the accepted collapses ``acc`` of ``pool`` (:class:`_Accepted`):
-    the largest error so far, the survivors' witnesses, then :func:`_apply`."""
+def _apply_accepted(st, pool, acc, passes):
+    """Apply the accepted collapses ``acc`` of ``pool`` (:class:`_Accepted`) in
+    pass ``passes``: the largest error so far, the survivors' witnesses and
+    pass, then :func:`_apply`."""
     i = acc.idx
+    st.vmov[pool.A[i]] = passes
     st.worst = max(st.worst, float(_distance(st, pool.raw[i], pool.A[i], pool.B[i]).max()))
     st.wit[pool.A[i]] = acc.wit
     _apply(st, pool.A[i], pool.B[i], _take(pool.XT, i, axis=1), acc.rows)
@@ -1248,7 +1308,8 @@ def compact(st, threads_min_faces=0):
     iv, ih = np.flatnonzero(keep_v), np.flatnonzero(np.repeat(keep_f, 3))
     rows = {"vertex": (iv, 0), "vertex_t": (iv, 1), "face": (np.flatnonzero(keep_f), 0),
             "half_edge": (ih, 0), "half_edge_t": (ih, 1)}
-    renumber = {"vertex": lambda a: _take(new_v, a), "half_edge": lambda a: renumber_twins(a, new_f)}
+    renumber = {"vertex": lambda a: _take(new_v, a), "half_edge": lambda a: renumber_twins(a, new_f),
+                "face": lambda a: _renumber_faces(a, keep_f, new_f)}
 
     def swap(name):  # each job replaces one array: the old one goes as soon as its job is done
         meta = _meta(name)
@@ -1262,6 +1323,12 @@ def compact(st, threads_min_faces=0):
     for name in _declared(reset=True):
         setattr(st, name, _fresh_rows(name, st.F.shape[0] if _per(name) == "face" else st.V.shape[0]))
     st.m_live = st.F.shape[0]
+
+
+def _renumber_faces(a, keep_f, new_f):
+    """Face ids ``a`` (-1: none) after compaction; a removed face's is -1."""
+    f = np.maximum(a, 0)
+    return np.where((a >= 0) & _take(keep_f, f), _take(new_f, f), -1)
 
 
 def append_faces(st, faces, forig):

@@ -137,6 +137,30 @@ def cad_cylinder(n_around=1000, height=10.0, radius=1.0):
     return V, F.astype(np.int64)
 
 
+def star_glyphs(count=3, spikes=200, depth=0.3):
+    """``count`` extruded star-shaped glyphs side by side, as CAD exports
+    text: each cap a fan of ``2 * spikes`` triangles from its centre (a hub
+    of valence ``2 * spikes``, the outline alternating between radius 1 and
+    0.15), one row of side quads; each glyph a closed genus-0 prism of
+    ``8 * spikes`` faces."""
+    m = 2 * spikes
+    t = np.linspace(0, 2 * np.pi, m, endpoint=False)
+    rad = np.where(np.arange(m) % 2 == 0, 1.0, 0.15)
+    ring = np.c_[rad * np.cos(t), rad * np.sin(t)]
+    i = np.arange(m)
+    j = (i + 1) % m
+    Vs, Fs = [], []
+    for g in range(count):
+        at = [2.5 * g, 0.0]
+        V = np.vstack([np.c_[ring + at, np.zeros(m)], np.c_[ring + at, np.full(m, depth)],
+                       [at + [0.0], at + [depth]]])
+        F = np.vstack([np.c_[np.full(m, 2 * m), j, i], np.c_[np.full(m, 2 * m + 1), i + m, j + m],
+                       np.c_[i, j, j + m], np.c_[i, j + m, i + m]])
+        Fs.append(F + g * V.shape[0])
+        Vs.append(V)
+    return np.vstack(Vs), np.vstack(Fs).astype(np.int64)
+
+
 def torus(n_major=24, n_minor=12, R=1.0, r=0.35, bump=0.0, bump_waves=(40, 12)):
     """Closed genus-1 torus, regular valence 6; ``bump`` adds a tube radius
     ``bump * sin(a u) sin(b v)`` with ``(a, b) = bump_waves`` (detail)."""

@@ -12,7 +12,9 @@ from core.tuning import TUNING
 from core._relax import close_smallest_hole
 from core.clean import clean_mesh
 from core.topology import topology_summary
-from tests.mesh_factory import icosphere, regular_grid, tetrahedron
+from core._clean import half_edge_ends
+from core.simplify import simplify
+from tests.mesh_factory import icosphere, regular_grid, star_glyphs, tetrahedron
 
 
 def engine_state(V, F):
@@ -254,7 +256,7 @@ def test_a_bold_pass_is_its_collapses_applied_one_at_a_time_each_valid_on_the_me
     rounds = []
     real = engine._apply_accepted
     monkeypatch.setattr(engine, "_apply_accepted",
-                        lambda st_, pool_, acc: (rounds.append(acc.idx.copy()), real(st_, pool_, acc)))
+                        lambda st_, pool_, acc, p: (rounds.append(acc.idx.copy()), real(st_, pool_, acc, p)))
     done = engine._bold_rounds(st, pool, 1, False, None, TUNING, None)
     assert done == sum(r.size for r in rounds) and len(rounds) >= 3
     merged = np.concatenate([np.concatenate([pool.A[r], pool.B[r]]) for r in rounds])
@@ -289,8 +291,8 @@ def test_a_bold_pass_ends_after_a_round_under_its_share_of_the_first(monkeypatch
         pool = pool_of(st, replace(tun, pool_share=tun.bold_pool_share))
         took = counts[share] = []
         monkeypatch.setattr(engine, "_apply_accepted",
-                            lambda st_, pool_, acc, took=took: (took.append(acc.idx.size),
-                                                               real(st_, pool_, acc)))
+                            lambda st_, pool_, acc, p, took=took: (took.append(acc.idx.size),
+                                                               real(st_, pool_, acc, p)))
         assert engine._bold_rounds(st, pool, 1, False, None, tun, None) == sum(took)
         assert all(t >= share * took[0] for t in took[:-1])
     half = counts[0.5]
@@ -329,3 +331,41 @@ def test_pool_size_after_hundreds_of_slow_passes():
         assert engine._pool_size(ne, m, target, TUNING, grow=grow) == share
     # the goal bound as before where it binds
     assert engine._pool_size(ne, m, m - 10, TUNING) == int(np.ceil(TUNING.pool_goal_factor * 5)) + 1
+
+
+def test_a_held_refusal_would_be_refused_again_and_a_fans_spokes_are_held(monkeypatch):
+    # _still_flips keeps a big star's refusal while one of the faces it flipped and
+    # its ends are unchanged: checked again on the mesh as it is, every held
+    # collapse is still invalid (the same place, the same face turned over).
+    V, F = star_glyphs(count=1, spikes=100)
+    real = engine._still_flips
+    held = []
+
+    def spy(st, h, U, W, since):
+        out = real(st, h, U, W, since)
+        hs = h[out]
+        if hs.size:
+            u, w = half_edge_ends(st.F, hs)
+            A, B = np.where(st.swap[hs], w, u), np.where(st.swap[hs], u, w)
+            star, kf = engine._whole_stars(st.F, np.flatnonzero(st.alive), A, B)
+            c = engine._check(st, A, B, st.c_x[:, hs], st.twin[hs] >= 0, star, kf, TUNING)
+            assert not c.ok.any()
+            held.append(int(np.median(np.bincount(kf, minlength=hs.size))))
+        return out
+
+    monkeypatch.setattr(engine, "_still_flips", spy)
+    res = simplify(V, F, target_faces=40)
+    assert res.F.shape[0] == 40
+    assert len(held) > 5 and max(held) > 100          # the hubs' spokes, pass after pass
+
+
+def test_compaction_renumbers_the_remembered_flipped_faces_and_forgets_removed_ones():
+    V, F = icosphere(2)
+    st = engine_state(V, F)
+    st.blk_face[:, 0:3] = [[0, 5, -1], [7, 3, 9], [1, 2, 6]]     # face 0's half-edges
+    st.blk_face[:, 6:9] = 5                                        # face 2's
+    st.alive[[1, 5]] = False                                       # faces 1 and 5 go
+    engine.compact(st)
+    assert st.blk_face[:, 0:3].tolist() == [[0, -1, -1], [5, 2, 7], [-1, 1, 4]]
+    assert (st.blk_face[:, 3:6] == -1).all()                       # face 2 is face 1 now
+    declared_lengths(st)
