@@ -51,6 +51,8 @@ from .quadrics import place_columns, quadric_at, rms_distance
 from .spatial import closest_on_triangles, triangle_rows
 
 _BIG = np.iinfo(np.int64).max
+#: a big star (see Tuning.hold_star) is first checked on about this many of its faces
+_SAMPLED = 16
 DEAD = -3  #: twin of a half-edge of a removed face (before compaction)
 _SQRT3x2 = 2.0 * np.sqrt(3.0)
 
@@ -534,6 +536,7 @@ def _check_rounds(st, pool, passes, haus, dihedral_cos, tun):
     active = np.arange(P, dtype=np.int64)
     faces = owned = ahead = None
     scratch = _scratch(n, P)
+    active = _drop_quick_refusals(st, pool, active, passes, tun)
     for _ in range(tun.max_rounds):
         active = active[~touched[pool.A[active]] & ~touched[pool.B[active]]]
         if active.size == 0:
@@ -567,6 +570,29 @@ def _check_rounds(st, pool, passes, haus, dihedral_cos, tun):
         return None, touched
     rows = tuple(np.concatenate(col) for col in zip(*acc_rows))
     return _Accepted(np.concatenate(acc_edges), rows, np.concatenate(acc_wit)), touched
+
+
+def _drop_quick_refusals(st, pool, active, passes, tun):
+    """The ``active`` pool edges but those with a big star (at least
+    ``Tuning.hold_star`` faces around the ends) that :func:`_quick_refusals`
+    refuses, remembered as :func:`_judge` remembers them, before any pick:
+    a fan's spoke picked would keep the whole fan waiting a round, and a
+    pass has few rounds."""
+    faces_at = np.bincount(st.F[st.alive].ravel(), minlength=st.V.shape[0])
+    big = np.flatnonzero(_take(faces_at, pool.A[active]) + _take(faces_at, pool.B[active]) >= tun.hold_star)
+    if big.size == 0:
+        return active
+    e = active[big]
+    A, B = pool.A[e], pool.B[e]
+    star, kf = _sampled_stars(st, A, B)
+    refused, flip = _flips_on(st, A, B, pool.XT[:, e], star, kf, tun)
+    if not refused.any():
+        return active
+    st.bent[pool.h[e[refused]]] = False
+    _remember_refused(st, pool.h[e[refused]], np.inf, passes, flip[refused])
+    keep = np.ones(active.size, dtype=bool)
+    keep[big[refused]] = False
+    return active[keep]
 
 
 def _judge(st, pool, sel, c, passes, tun):
@@ -788,8 +814,94 @@ class _Checked(NamedTuple):
 
 
 def _check(st, A, B, XT, interior, star, kf, tun, haus=True, dihedral_cos=None):
-    """:func:`_check_block` over blocks of collapses, on the worker threads.
-    Same results; the star rows come back grouped by block."""
+    """:func:`_check_block` over blocks of collapses, on the worker threads,
+    after :func:`_quick_refusals` (a big star refused on a sample of its
+    faces is not checked whole: its star rows are left out, its penalty is
+    0 and its witness A's, as :func:`_check_block` leaves a refused one's).
+    Otherwise the same results; the star rows come back grouped by block."""
+    refused, flip = _quick_refusals(st, A, B, XT, star, kf, tun)
+    if not refused.any():
+        return _check_blocks(st, A, B, XT, interior, star, kf, tun, haus, dihedral_cos)
+    rest = np.flatnonzero(~refused)
+    new = np.cumsum(~refused) - 1
+    r = np.flatnonzero(~_take(refused, kf))
+    c = _check_blocks(st, A[rest], B[rest], XT[:, rest], interior[rest], star[r], _take(new, kf[r]), tun, haus,
+                      dihedral_cos)
+    ok, pen, bent = np.zeros(A.size, dtype=bool), np.zeros(A.size), np.zeros(A.size, dtype=bool)
+    wit = _take(st.wit, A, axis=0)
+    ok[rest], pen[rest], wit[rest], bent[rest], flip[rest] = c.ok, c.pen, c.wit, c.bent, c.flip
+    star_c, kf_c, coll, cA, cB = c.rows
+    return _Checked(ok, pen, (star_c, _take(rest, kf_c), coll, cA, cB), wit, bent, flip)
+
+
+def _quick_refusals(st, A, B, XT, star, kf, tun):
+    """The collapses with at least ``Tuning.hold_star`` faces around their
+    ends (a fan's hub) that turn over one of about 16 of those faces, evenly
+    spread: refused without checking the hundreds of others (a hub's spokes
+    fold half the fan). Returns the (k,) bool refusals and their flipped
+    faces (k,3) (see :func:`_witnesses`; -1 elsewhere)."""
+    k = A.size
+    count = np.bincount(kf, minlength=k)
+    big = count >= tun.hold_star
+    refused, flip = np.zeros(k, dtype=bool), np.full((k, 3), -1, dtype=np.int64)
+    if not big.any():
+        return refused, flip
+    r = np.flatnonzero(_take(big, kf))
+    r = r[np.argsort(_take(kf, r), kind="stable")]
+    kr = _take(kf, r)
+    step = np.maximum(_take(count, kr) // _SAMPLED, 1)
+    first = np.searchsorted(kr, kr)
+    r = r[(np.arange(r.size) - first) % step == 0]
+    return _flips_on(st, A, B, XT, _take(star, r), _take(kf, r), tun)
+
+
+def _flips_on(st, A, B, XT, star, kf, tun):
+    """Which collapses turn over one of the faces ``star`` (rows: ``kf``
+    gives each one's collapse), and three of those faces (:func:`_witnesses`)."""
+    k = A.size
+    s = _star_of(st.F, A, B, star, kf)
+    g = _moved_faces(st, s, XT)
+    turned = np.flatnonzero(_turned_faces(st, s, g, A, B, tun))
+    refused = np.zeros(k, dtype=bool)
+    refused[s.mk[turned]] = True
+    return refused, _witnesses(s, turned, np.ones(k, dtype=bool))
+
+
+def _sampled_stars(st, A, B, per=_SAMPLED):
+    """About ``per`` of the live faces around each of ``A[k]`` and ``B[k]``,
+    evenly spread (every one up to ``per``), as star rows ``(star, kf)``."""
+    live = np.flatnonzero(st.alive)
+    v = _take(st.F, live, axis=0).ravel()
+    order = np.argsort(v, kind="stable")
+    vs, fs = _take(v, order), _take(np.repeat(live, 3), order)
+    ends = np.concatenate([A, B])
+    start = np.searchsorted(vs, ends, side="left")
+    count = np.searchsorted(vs, ends, side="right") - start
+    step = np.maximum(count // per, 1)
+    take = (count + step - 1) // step
+    g = np.repeat(np.arange(ends.size, dtype=np.int64), take)
+    j = np.arange(g.size, dtype=np.int64) - np.repeat(np.cumsum(take) - take, take)
+    star = _take(fs, _take(start, g) + j * _take(step, g))
+    return star, g % A.size
+
+
+def _witnesses(s, turned, hold):
+    """Three of the faces each collapse of the star rows ``s`` turns over
+    (``turned``: rows of ``s.mv``), at 1/6, 1/2 and 5/6 of them in ``s``'s
+    order, for the collapses ``hold`` (k,) bool; (k,3), -1 where none."""
+    flip = np.full((s.k, 3), -1, dtype=np.int64)
+    if turned.size:
+        turned = turned[np.argsort(s.mk[turned], kind="stable")]
+        cnt = np.bincount(s.mk[turned], minlength=s.k)
+        first = np.cumsum(cnt) - cnt
+        has = np.flatnonzero((cnt > 0) & hold)
+        for j, q in enumerate((1, 3, 5)):
+            flip[has, j] = s.star[s.mv[turned[first[has] + (cnt[has] * q) // 6]]]
+    return flip
+
+
+def _check_blocks(st, A, B, XT, interior, star, kf, tun, haus, dihedral_cos):
+    """:func:`_check_block` over blocks of collapses, on the worker threads."""
     spans = blocks(A.size, tun.block // 10)
     if len(spans) <= 1:
         return _check_block(st, A, B, XT, interior, star, kf, tun, haus, dihedral_cos)
@@ -1089,16 +1201,7 @@ def _check_block(st, A, B, XT, interior, star, kf, tun, haus=True, dihedral_cos=
     g = _moved_faces(st, s, XT)
     turned = np.flatnonzero(_turned_faces(st, s, g, A, B, tun))
     ok[s.mk[turned]] = False
-    flip = np.full((s.k, 3), -1, dtype=np.int64)
-    if turned.size:     # at 1/6, 1/2 and 5/6 of each collapse's flipped faces (ascending)
-        turned = turned[np.argsort(s.mk[turned], kind="stable")]
-        tk = s.mk[turned]
-        cnt = np.bincount(tk, minlength=s.k)
-        first = np.cumsum(cnt) - cnt
-        has = np.flatnonzero(cnt)
-        for j, q in enumerate((1, 3, 5)):
-            flip[has, j] = s.star[s.mv[turned[first[has] + (cnt[has] * q) // 6]]]
-    flip[np.bincount(s.kf, minlength=s.k) < tun.hold_star, :] = -1
+    flip = _witnesses(s, turned, np.bincount(s.kf, minlength=s.k) >= tun.hold_star)
     gmin_old, gmin_new = _min_compactness(s, g)
     ok &= ~((gmin_new < tun.gamma_hard) & (gmin_new < 0.5 * gmin_old))   # no new sliver
     bent = np.zeros(s.k, dtype=bool)

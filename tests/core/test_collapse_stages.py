@@ -369,3 +369,36 @@ def test_compaction_renumbers_the_remembered_flipped_faces_and_forgets_removed_o
     assert st.blk_face[:, 0:3].tolist() == [[0, -1, -1], [5, 2, 7], [-1, 1, 4]]
     assert (st.blk_face[:, 3:6] == -1).all()                       # face 2 is face 1 now
     declared_lengths(st)
+
+
+def test_sampled_stars_are_faces_around_the_ends_evenly_spread_and_all_of_a_small_one():
+    V, F = star_glyphs(count=1, spikes=50)              # hubs of 100 faces
+    st = engine_state(V, F)
+    hub, rim = 2 * 100, np.array([0, 1, 7])
+    A, B = np.full(3, hub), rim
+    star, kf = engine._sampled_stars(st, A, B, per=16)
+    for k in range(3):
+        mine = star[kf == k]
+        around = (st.F[mine] == A[k]).any(axis=1) | (st.F[mine] == B[k]).any(axis=1)
+        assert around.all()
+        of_hub = np.flatnonzero((st.F == hub).any(axis=1))
+        hub_rows = mine[(st.F[mine] == hub).any(axis=1)]
+        assert 16 <= np.unique(hub_rows).size <= 19 and np.ptp(hub_rows) > 0.8 * np.ptp(of_hub)   # (+ the rim's)
+        of_rim = np.flatnonzero((st.F == B[k]).any(axis=1))
+        assert set(of_rim) <= set(mine)                  # the rim vertex's few faces: every one
+
+
+def test_quick_refusals_are_refusals_of_the_whole_check():
+    # a fan's spokes refused on a sample of the fan are refused by the whole check
+    V, F = star_glyphs(count=1, spikes=100)
+    st = engine_state(V, F)
+    pool = pool_of(st)
+    active = np.arange(pool.key.size)
+    kept = engine._drop_quick_refusals(st, pool, active, 1, TUNING)
+    gone = np.setdiff1d(active, kept)
+    assert gone.size > 300                               # most of the 400 spokes
+    star, kf = engine._whole_stars(st.F, np.arange(st.F.shape[0]), pool.A[gone], pool.B[gone])
+    c = engine._check_blocks(st, pool.A[gone], pool.B[gone], pool.XT[:, gone], pool.interior[gone], star, kf,
+                             TUNING, True, None)
+    assert not c.ok.any()
+    assert np.isinf(st.c_blk[pool.h[gone]]).all() and (st.blk_face[:, pool.h[gone]] >= 0).all()

@@ -849,12 +849,13 @@ def test_star_glyphs_whose_cheapest_edges_are_folding_fan_spokes_take_few_passes
     # CAD text: every cap a fan of 400 needles from its centre, and every spoke
     # (cost 0: the cap is flat) folds the fan. They were checked again after each
     # collapse on the rim (the hub's one-ring changed): 341 passes to 120 faces,
-    # 1,446 for twelve glyphs to 500. Held while the faces they flip stay: 141.
+    # 1,446 for twelve glyphs to 500. Refused on a sample of the fan before the picks
+    # and held while the faces they flip stay: 99 (and 100).
     V, F = star_glyphs(count=3, spikes=200)
     for target in (1200, 120):
         res = simplify(V, F, target_faces=target)
         assert res.F.shape[0] == target and res.stopped_because == "target"
-        assert res.n_passes <= 150
+        assert res.n_passes <= 110
         assert_clean(res, V, F)
         t = topology_summary(res.F, res.V.shape[0])
         assert (t.components, t.euler, t.boundary_edges) == (3, 6, 0)
