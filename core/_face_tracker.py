@@ -34,6 +34,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from ._fan_index import FAN_FACES, FanIndex
 from ._groups import group_argmin, ragged_ranges
 from .spatial import KERNEL_BLOCK, TriangleIndex, closest_pairs, triangle_rows
 
@@ -125,6 +126,8 @@ class FaceTracker:
         area2 = np.maximum(s_ab * s_ac - s_abac * s_abac, 0.0)          # (2 area)^2
         edge2 = np.stack([s_ab + s_ac - 2.0 * s_abac, s_ac, s_ab])
         self._alt2 = area2 / np.maximum(edge2, 1e-300)           # squared altitudes (3,m)
+        self._fans = FanIndex.of(V, F, self._ring, self._first, self._deg) \
+            if (self._deg > FAN_FACES).any() else None
 
     def closest(self, Q, near=None):
         """Closest faces of the points ``Q`` (q,3): on the first call from the
@@ -197,12 +200,40 @@ class FaceTracker:
     def _around(self, QT, q, verts, counts):
         """Best face among those around ``verts``, ``counts[i]`` of them for
         query ``q[i]`` (in order): ``face, v, w, d2`` per query."""
-        idx, own = ragged_ranges(self._first[verts], self._deg[verts])
-        group = np.repeat(np.arange(q.size), counts)[own]
-        t = self._ring[idx]
+        per = np.repeat(np.arange(q.size), counts)
+        P = QT[:, q[per]]
+        h2 = np.zeros(verts.size)
+        if self._fans is not None:   # around a hub: the faces nearer than the best in each point's sector
+            t, own = self._faces_around(verts, P, h2)
+            h2 = np.full(verts.size, np.inf)
+            np.minimum.at(h2, own, self._pairs(QT, q[per[own]], t)[2])
+        t, own = self._faces_around(verts, P, h2)
+        group = per[own]
         v, w, d2 = self._pairs(QT, q[group], t)
         best = group_argmin(d2, np.bincount(group, minlength=q.size))
         return t[best], v[best], w[best], d2[best]
+
+    def _faces_around(self, vert, QT, h2):
+        """The faces around each vertex ``vert[i]`` and the ``i`` of each,
+        grouped by ``i`` in order: every face, but around a fan's hub only
+        those that may lie within ``sqrt(h2[i])`` of the point ``QT[:, i]``
+        (see :mod:`._fan_index`; ``h2`` 0: the faces whose sector holds the
+        point's angle, inf: every face)."""
+        if self._fans is None:
+            at, own = ragged_ranges(self._first[vert], self._deg[vert])
+            return self._ring[at], own
+        hub = self._fans.hub_of[vert]
+        plain, fan = np.flatnonzero(hub < 0), np.flatnonzero(hub >= 0)
+        at, own = ragged_ranges(self._first[vert[plain]], self._deg[vert[plain]])
+        faces, owner = [self._ring[at]], [plain[own]]
+        if fan.size:
+            starts, counts = self._fans.windows(hub[fan], QT[:, fan].T, h2[fan])
+            at, own = ragged_ranges(starts, counts)
+            faces.append(self._fans.faces[at])
+            owner.append(fan[own // 3])
+        faces, owner = np.concatenate(faces), np.concatenate(owner)
+        o = stable_argsort(owner)
+        return faces[o], owner[o]
 
     def _walk(self, QT, face, v, w, d2):
         """Walk every query to a closer face while its ball reaches one (see
@@ -256,9 +287,10 @@ class FaceTracker:
         for k, c in enumerate(corner):
             ik = np.flatnonzero(c)
             vert = self._FT[k].take(f[ik])
-            at, own = ragged_ranges(self._first[vert], self._deg[vert])
+            a = active[ik]
+            faces, own = self._faces_around(vert, QT[:, a], d2[a])
             i.append(ik[own])
-            t.append(self._ring[at])
+            t.append(faces)
         i, t = np.concatenate(i), np.concatenate(t)
         moved = np.zeros(active.size, dtype=bool)
         if i.size:

@@ -137,6 +137,32 @@ def cad_cylinder(n_around=1000, height=10.0, radius=1.0):
     return V, F.astype(np.int64)
 
 
+def fillet_cap(n_arc=1000, size=100.0, radius=5.0):
+    """A box's corner region as CAD exports a filleted edge: the end cap a
+    fan of ``n_arc + 2`` needles from one box corner to a quarter arc of
+    ``n_arc`` segments (and the cap's two long edges), the fillet one row of
+    ``size``-long strips, the box closed by two triangles a side. Closed."""
+    k = n_arc
+    a = np.linspace(0, np.pi / 2, k + 1)
+    arc = np.c_[size - radius + radius * np.cos(a), size - radius + radius * np.sin(a)]
+    V = np.vstack([np.c_[np.zeros(k + 1), arc], np.c_[np.full(k + 1, size), arc],
+                   [[0, 0, 0], [size, 0, 0], [size, size, 0], [0, size, 0], [0, 0, size], [size, 0, size]]])
+    c = 2 * (k + 1) + np.arange(6)
+    i = np.arange(k)
+    cap0 = np.r_[c[3], np.arange(0, k + 1), c[4]]
+    cap1 = np.r_[c[2], np.arange(k + 1, 2 * k + 2), c[5]]
+    F = np.vstack([np.c_[i, i + 1, i + k + 2], np.c_[i, i + k + 2, i + k + 1],
+                   [[c[0], c[1], c[2]], [c[0], c[2], c[3]], [c[0], c[1], c[5]], [c[0], c[5], c[4]],
+                    [c[3], c[2], k + 1], [c[3], k + 1, 0], [c[4], c[5], 2 * k + 1], [c[4], 2 * k + 1, k]],
+                   np.c_[np.full(cap0.size - 1, c[0]), cap0[:-1], cap0[1:]],
+                   np.c_[np.full(cap1.size - 1, c[1]), cap1[:-1], cap1[1:]]]).astype(np.int64)
+    P = V[F]
+    N = np.cross(P[:, 1] - P[:, 0], P[:, 2] - P[:, 0])
+    out = np.einsum("ij,ij->i", N, P.mean(axis=1) - size / 2) < 0
+    F[out] = F[out][:, ::-1]
+    return V, F
+
+
 def star_glyphs(count=3, spikes=200, depth=0.3):
     """``count`` extruded star-shaped glyphs side by side, as CAD exports
     text: each cap a fan of ``2 * spikes`` triangles from its centre (a hub

@@ -6,7 +6,7 @@ import numpy as np
 
 from core._face_tracker import FaceTracker, faces_across
 from core.spatial import TriangleIndex
-from tests.mesh_factory import icosphere, regular_grid, torus
+from tests.mesh_factory import cad_cylinder, fillet_cap, icosphere, regular_grid, torus
 
 
 def _nearest_vertex(V, Q):
@@ -120,3 +120,32 @@ def test_stable_argsort_is_numpys_stable_argsort():
     for x in (rng.integers(0, 50, 1000), rng.integers(0, 1 << 40, 1000),
               np.array([2 ** 62, 3, 2 ** 62, 0]), np.zeros(0, dtype=np.int64)):
         np.testing.assert_array_equal(stable_argsort(x), np.argsort(x, kind="stable"))
+
+
+def test_around_a_fans_hub_only_the_faces_near_each_point_are_tried_and_the_answers_are_the_same():
+    # a CAD cone and a fillet-like cap: hubs of 2,000 and 1,500 needles (and a
+    # few wide faces around the fillet's corner); points near the surface, each
+    # started at the hub, then moved a little: the same distances as trying every face
+    rng = np.random.default_rng(4)
+    for V, F in (cad_cylinder(2000), fillet_cap(1500)):
+        diag = np.linalg.norm(np.ptp(V, axis=0))
+        Q = V[F[rng.integers(0, F.shape[0], 3000)]].mean(axis=1) + rng.normal(0, 0.01 * diag, (3000, 3))
+        hub = np.argmax(np.bincount(F.ravel()))
+        near = np.full(Q.shape[0], hub)
+        fan = FaceTracker(F, V.shape[0], steps=8)
+        fan.place(V)
+        assert fan._fans is not None and fan._fans.start.size >= 2
+        every = FaceTracker(F, V.shape[0], steps=8)
+        every.place(V)
+        every._fans = None                               # every face around every vertex
+        for step in range(2):
+            got, ref = fan.closest(Q, near), every.closest(Q, near)
+            np.testing.assert_array_equal(np.linalg.norm(got.point - Q, axis=1),
+                                          np.linalg.norm(ref.point - Q, axis=1))
+            assert (got.face == ref.face).mean() > 0.99      # (ties may go to the other face)
+            Q = Q + rng.normal(0, 0.002 * diag, Q.shape)
+        # on the cylinder's cap (a fan all round) the windows hold few of the hub's faces
+        h = fan._fans.hub_of[near]
+        starts, counts = fan._fans.windows(h, Q, np.full(Q.shape[0], (0.01 * diag) ** 2))
+        share = counts.reshape(-1, 3).sum(axis=1).mean() / np.bincount(F.ravel())[hub]
+        assert share < (0.1 if F.shape[0] == 8000 else 1.0)
