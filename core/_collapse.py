@@ -23,6 +23,8 @@ One pass, as stages (each a function below)::
     later rounds may take collapses next to earlier ones (only merged ends
     wait): about 30% of the faces go per pass instead of about 12%;
     closer to it, a careful pass, rounds (_check_rounds):
+        _drop_quick_refusals  first, the pool edges around a fan's hub that fold
+                          a sample of its faces are refused (_quick_refusals)
         _pick_independent pool edges whose rank is the smallest over every face
                           around both endpoints -> the stars are disjoint
         _check            on the current mesh: _link_condition, _turned_faces,
@@ -51,8 +53,6 @@ from .quadrics import place_columns, quadric_at, rms_distance
 from .spatial import closest_on_triangles, triangle_rows
 
 _BIG = np.iinfo(np.int64).max
-#: a big star (see Tuning.hold_star) is first checked on about this many of its faces
-_SAMPLED = 16
 DEAD = -3  #: twin of a half-edge of a removed face (before compaction)
 _SQRT3x2 = 2.0 * np.sqrt(3.0)
 
@@ -584,7 +584,7 @@ def _drop_quick_refusals(st, pool, active, passes, tun):
         return active
     e = active[big]
     A, B = pool.A[e], pool.B[e]
-    star, kf = _sampled_stars(st, A, B)
+    star, kf = _sampled_stars(st, A, B, tun.hold_sample)
     refused, flip = _flips_on(st, A, B, pool.XT[:, e], star, kf, tun)
     if not refused.any():
         return active
@@ -836,8 +836,8 @@ def _check(st, A, B, XT, interior, star, kf, tun, haus=True, dihedral_cos=None):
 
 def _quick_refusals(st, A, B, XT, star, kf, tun):
     """The collapses with at least ``Tuning.hold_star`` faces around their
-    ends (a fan's hub) that turn over one of about 16 of those faces, evenly
-    spread: refused without checking the hundreds of others (a hub's spokes
+    ends (a fan's hub) that turn over one of about ``Tuning.hold_sample`` of
+    those faces, evenly spread: refused without checking the hundreds of others (a hub's spokes
     fold half the fan). Returns the (k,) bool refusals and their flipped
     faces (k,3) (see :func:`_witnesses`; -1 elsewhere)."""
     k = A.size
@@ -849,7 +849,7 @@ def _quick_refusals(st, A, B, XT, star, kf, tun):
     r = np.flatnonzero(_take(big, kf))
     r = r[np.argsort(_take(kf, r), kind="stable")]
     kr = _take(kf, r)
-    step = np.maximum(_take(count, kr) // _SAMPLED, 1)
+    step = np.maximum(_take(count, kr) // tun.hold_sample, 1)
     first = np.searchsorted(kr, kr)
     r = r[(np.arange(r.size) - first) % step == 0]
     return _flips_on(st, A, B, XT, _take(star, r), _take(kf, r), tun)
@@ -867,7 +867,7 @@ def _flips_on(st, A, B, XT, star, kf, tun):
     return refused, _witnesses(s, turned, np.ones(k, dtype=bool))
 
 
-def _sampled_stars(st, A, B, per=_SAMPLED):
+def _sampled_stars(st, A, B, per):
     """About ``per`` of the live faces around each of ``A[k]`` and ``B[k]``,
     evenly spread (every one up to ``per``), as star rows ``(star, kf)``."""
     live = np.flatnonzero(st.alive)

@@ -56,6 +56,9 @@ class Tuning:
     #: are unchanged, instead of being checked again after any change around it (12
     #: extruded star glyphs of 400-face fans, to 500 faces: 1,446 -> 175 passes)
     hold_star: int = 24
+    #: ... and such a collapse is first checked on about this many faces around each end
+    #: (evenly spread): one turned over refuses it (12 glyphs: 165 -> 100 passes)
+    hold_sample: int = 16
     face_cache_share: float = 0.75   #: a round re-packs the faces in play below this share
     bands: int = 8                   #: cost bands of the pool (then length bands, then random)
     length_bands: int = 16           #: length bands inside a cost band (shorter edges first)

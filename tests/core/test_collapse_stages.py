@@ -376,7 +376,7 @@ def test_sampled_stars_are_faces_around_the_ends_evenly_spread_and_all_of_a_smal
     st = engine_state(V, F)
     hub, rim = 2 * 100, np.array([0, 1, 7])
     A, B = np.full(3, hub), rim
-    star, kf = engine._sampled_stars(st, A, B, per=16)
+    star, kf = engine._sampled_stars(st, A, B, 16)
     for k in range(3):
         mine = star[kf == k]
         around = (st.F[mine] == A[k]).any(axis=1) | (st.F[mine] == B[k]).any(axis=1)
