@@ -67,14 +67,15 @@ _NEXT = np.array([1, 2, 0], dtype=np.int64)  # corner after c
 _PREV = np.array([2, 0, 1], dtype=np.int64)  # corner before c
 
 
-def _array(per, fill=None, values=None, reset=False):
+def _array(per, fill=None, values=None, reset=False, lazy=False):
     """Declare a :class:`State` array: indexed by ``per`` ("vertex", "face",
     "half_edge"; "vertex_t" / "half_edge_t" for coefficient-major (k, n)
     arrays), ``fill`` for new rows ("index": their own index, "unset": left
     uninitialised, only ever read after being written), ``values`` ("vertex", "face" or "half_edge")
     when its entries are indices that compaction renumbers, ``reset`` when
-    compaction starts it afresh (from ``fill``) instead of keeping its rows."""
-    return field(default=None, metadata=dict(per=per, fill=fill, values=values, reset=reset))
+    compaction starts it afresh (from ``fill``) instead of keeping its rows,
+    ``lazy`` when it stays None until first written (:func:`_rows_of`)."""
+    return field(default=None, metadata=dict(per=per, fill=fill, values=values, reset=reset, lazy=lazy))
 
 
 @dataclass(init=False, eq=False)
@@ -114,7 +115,7 @@ class State:
     c_blk: np.ndarray = _array("half_edge", -1.0)
     #: (3, 3m) faces the remembered rejection flips (-1: none): while one of them and the
     #: ends stay as they are, so does the refusal (see _still_flips)
-    blk_face: np.ndarray = _array("half_edge_t", -1, values="face")
+    blk_face: np.ndarray = _array("half_edge_t", np.int32(-1), values="face", lazy=True)
     c_cost: np.ndarray = _array("half_edge", 0.0)
     c_stale: np.ndarray = _array("half_edge", True)
     #: (3, 3m) cached collapse positions (read only where the cost is fresh, so new rows
@@ -148,7 +149,7 @@ class State:
         self.F, self.twin, self.feat = F, twin, feat
         self.forig = np.arange(m, dtype=np.int64) if forig is None else forig
         for name in _declared("half_edge", "half_edge_t"):
-            if getattr(self, name) is None:
+            if getattr(self, name) is None and not _meta(name)["lazy"]:
                 setattr(self, name, _fresh_rows(name, 3 * m))
         for name in _declared(reset=True):
             setattr(self, name, _fresh_rows(name, m if _per(name) == "face" else n))
@@ -177,6 +178,15 @@ def _declared(*per, reset=None):
     return [f.name for f in fields(State) if f.metadata
             and (not per or f.metadata["per"] in per)
             and (reset is None or f.metadata["reset"] == reset)]
+
+
+def _rows_of(st, name):
+    """The lazy State array ``name``, made from its declared fill on first use."""
+    if getattr(st, name) is None:
+        n, m = st.V.shape[0], st.F.shape[0]
+        size = {"vertex": n, "vertex_t": n, "face": m, "half_edge": 3 * m, "half_edge_t": 3 * m}[_per(name)]
+        setattr(st, name, _fresh_rows(name, size))
+    return getattr(st, name)
 
 
 def _fresh_rows(name, size):
@@ -291,8 +301,9 @@ def _candidate_edges(st):
     mem = np.flatnonzero(bv >= 0)           # rejections remembered until the neighbourhood changes
     blocked = np.zeros(rep.size, dtype=bool)
     since = _take(st.blk_pass, rep[mem])
-    blocked[mem] = (since > np.maximum(_take(st.vver, U[mem]), _take(st.vver, W[mem]))) \
-        | _still_flips(st, rep[mem], U[mem], W[mem], since)
+    blocked[mem] = since > np.maximum(_take(st.vver, U[mem]), _take(st.vver, W[mem]))
+    if st.blk_face is not None:
+        blocked[mem] |= _still_flips(st, rep[mem], U[mem], W[mem], since)
     cost = np.where(blocked, np.maximum(cost, bv), cost)
     return _Edges(rep, U, W, cost, stale, blocked, bv)
 
@@ -550,7 +561,7 @@ def _check_rounds(st, pool, passes, haus, dihedral_cos, tun):
                                                          stars=ahead is None)
         if ahead is None:
             c = _check(st, pool.A[sel], pool.B[sel], pool.XT[:, sel], pool.interior[sel], star, kf, tun, haus,
-                       dihedral_cos)
+                       dihedral_cos, quick=False)    # (_drop_quick_refusals sampled the big stars)
         else:
             c = ahead.results(sel)
         rows = c.rows
@@ -616,7 +627,8 @@ def _remember_refused(st, h, total, passes, flip):
     collapse's ends stay as they are (:func:`_still_flips`)."""
     st.c_blk[h] = total
     st.blk_pass[h] = passes
-    st.blk_face[:, h] = flip.T
+    if st.blk_face is not None or (flip >= 0).any():
+        _rows_of(st, "blk_face")[:, h] = flip.T
 
 
 def _bold_rounds(st, pool, passes, haus, dihedral_cos, tun, target):
@@ -813,14 +825,14 @@ class _Checked(NamedTuple):
                         _take(self.wit, i, axis=0), _take(self.bent, i), _take(self.flip, i, axis=0))
 
 
-def _check(st, A, B, XT, interior, star, kf, tun, haus=True, dihedral_cos=None):
+def _check(st, A, B, XT, interior, star, kf, tun, haus=True, dihedral_cos=None, quick=True):
     """:func:`_check_block` over blocks of collapses, on the worker threads,
-    after :func:`_quick_refusals` (a big star refused on a sample of its
+    with ``quick`` after :func:`_quick_refusals` (a big star refused on a sample of its
     faces is not checked whole: its star rows are left out, its penalty is
     0 and its witness A's, as :func:`_check_block` leaves a refused one's).
     Otherwise the same results; the star rows come back grouped by block."""
-    refused, flip = _quick_refusals(st, A, B, XT, star, kf, tun)
-    if not refused.any():
+    refused, flip = _quick_refusals(st, A, B, XT, star, kf, tun) if quick else (None, None)
+    if refused is None or not refused.any():
         return _check_blocks(st, A, B, XT, interior, star, kf, tun, haus, dihedral_cos)
     rest = np.flatnonzero(~refused)
     new = np.cumsum(~refused) - 1
@@ -890,7 +902,7 @@ def _witnesses(s, turned, hold):
     (``turned``: rows of ``s.mv``), at 1/6, 1/2 and 5/6 of them in ``s``'s
     order, for the collapses ``hold`` (k,) bool; (k,3), -1 where none."""
     flip = np.full((s.k, 3), -1, dtype=np.int64)
-    if turned.size:
+    if turned.size and hold.any():
         turned = turned[np.argsort(s.mk[turned], kind="stable")]
         cnt = np.bincount(s.mk[turned], minlength=s.k)
         first = np.cumsum(cnt) - cnt
@@ -1416,6 +1428,8 @@ def compact(st, threads_min_faces=0):
 
     def swap(name):  # each job replaces one array: the old one goes as soon as its job is done
         meta = _meta(name)
+        if getattr(st, name) is None:         # (a lazy one not made yet)
+            return
         idx, axis = rows[meta["per"]]
         a = _take(getattr(st, name), idx, axis=axis)
         setattr(st, name, a if meta["values"] is None else renumber[meta["values"]](a))
@@ -1431,7 +1445,7 @@ def compact(st, threads_min_faces=0):
 def _renumber_faces(a, keep_f, new_f):
     """Face ids ``a`` (-1: none) after compaction; a removed face's is -1."""
     f = np.maximum(a, 0)
-    return np.where((a >= 0) & _take(keep_f, f), _take(new_f, f), -1)
+    return np.where((a >= 0) & _take(keep_f, f), _take(new_f, f), -1).astype(a.dtype)
 
 
 def append_faces(st, faces, forig):
@@ -1443,7 +1457,7 @@ def append_faces(st, faces, forig):
     st.F = np.concatenate([st.F, faces])
     st.forig = np.concatenate([st.forig, forig])
     for name in _declared("face", "half_edge", "half_edge_t", reset=False):
-        if name in ("F", "forig"):
+        if name in ("F", "forig") or getattr(st, name) is None:
             continue
         axis = 1 if _per(name).endswith("_t") else 0
         size = 3 * k if _per(name).startswith("half_edge") else k

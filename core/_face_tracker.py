@@ -201,22 +201,21 @@ class FaceTracker:
         """Best face among those around ``verts``, ``counts[i]`` of them for
         query ``q[i]`` (in order): ``face, v, w, d2`` per query."""
         per = np.repeat(np.arange(q.size), counts)
-        P = QT[:, q[per]]
         h2 = np.zeros(verts.size)
         if self._fans is not None:   # around a hub: the faces nearer than the best in each point's sector
-            t, own = self._faces_around(verts, P, h2)
+            t, own = self._faces_around(verts, QT, q[per], h2)
             h2 = np.full(verts.size, np.inf)
             np.minimum.at(h2, own, self._pairs(QT, q[per[own]], t)[2])
-        t, own = self._faces_around(verts, P, h2)
+        t, own = self._faces_around(verts, QT, q[per], h2)
         group = per[own]
         v, w, d2 = self._pairs(QT, q[group], t)
         best = group_argmin(d2, np.bincount(group, minlength=q.size))
         return t[best], v[best], w[best], d2[best]
 
-    def _faces_around(self, vert, QT, h2):
+    def _faces_around(self, vert, QT, q, h2):
         """The faces around each vertex ``vert[i]`` and the ``i`` of each,
         grouped by ``i`` in order: every face, but around a fan's hub only
-        those that may lie within ``sqrt(h2[i])`` of the point ``QT[:, i]``
+        those that may lie within ``sqrt(h2[i])`` of the point ``QT[:, q[i]]``
         (see :mod:`._fan_index`; ``h2`` 0: the faces whose sector holds the
         point's angle, inf: every face)."""
         if self._fans is None:
@@ -227,7 +226,7 @@ class FaceTracker:
         at, own = ragged_ranges(self._first[vert[plain]], self._deg[vert[plain]])
         faces, owner = [self._ring[at]], [plain[own]]
         if fan.size:
-            starts, counts = self._fans.windows(hub[fan], QT[:, fan].T, h2[fan])
+            starts, counts = self._fans.windows(hub[fan], QT[:, q[fan]].T, h2[fan])
             at, own = ragged_ranges(starts, counts)
             faces.append(self._fans.faces[at])
             owner.append(fan[own // 3])
@@ -288,7 +287,7 @@ class FaceTracker:
             ik = np.flatnonzero(c)
             vert = self._FT[k].take(f[ik])
             a = active[ik]
-            faces, own = self._faces_around(vert, QT[:, a], d2[a])
+            faces, own = self._faces_around(vert, QT, a, d2[a] if self._fans is not None else None)
             i.append(ik[own])
             t.append(faces)
         i, t = np.concatenate(i), np.concatenate(t)
