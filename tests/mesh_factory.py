@@ -450,3 +450,23 @@ def with_fins(V, F, k=4, seed=4):
     tip = mid + (mid - V.mean(axis=0)) * 0.3
     n = V.shape[0]
     return np.concatenate([V, tip]), np.concatenate([F, np.stack([b, a, n + np.arange(k)], axis=1)])
+
+
+def random_winding(V, F, share=0.5, seed=7):
+    """Each face reversed with probability ``share`` (photogrammetry and some
+    scanner exports write each triangle's winding at random)."""
+    rng = np.random.default_rng(seed)
+    F = F.copy()
+    turn = rng.random(F.shape[0]) < share
+    F[turn] = F[turn][:, ::-1]
+    return V.copy(), F
+
+
+def cyclic_rows(F):
+    """``F`` with each row rotated to start at its smallest index, keeping
+    its cyclic order (two faces are the same oriented face when their rows
+    are equal here)."""
+    F = np.asarray(F)
+    first = np.argmin(F, axis=1)
+    cols = (first[:, None] + np.arange(3)[None]) % 3
+    return np.take_along_axis(F, cols, axis=1)
