@@ -333,6 +333,11 @@ def test_non_manifold_input_gives_a_manifold_cage():
 @pytest.mark.parametrize("V, F, match", [
     (np.array([[0, 0, 0], [1, 0, np.nan], [0, 1, 0]]), [[0, 1, 2]], "NaN or infinite"),
     (np.array([[0, 0, 0], [1, 0, np.inf], [0, 1, 0]]), [[0, 1, 2]], "NaN or infinite"),
+    # a scan's leftover points (unreferenced, NaN): the message says no face uses them
+    (np.array([[np.nan] * 3, [0, 0, 0], [1, 0, 0], [0, 1, 0]]), [[1, 2, 3]],
+     r"1 vertices have NaN or infinite coordinates, none of them used by a face \(.*\), e.g. vertex 0"),
+    (np.array([[0, 0, 0], [1, 0, np.inf], [0, 1, 0], [np.nan, 0, 0]]), [[0, 1, 2]],
+     r"2 vertices have NaN or infinite coordinates, 1 of them used by faces, e.g. vertex 1"),
     (np.eye(3), [[0, 1, 3]], "outside"),
     (np.eye(3), [[0, -1, 2]], "outside"),
     (np.eye(3), np.zeros((120, 4)), r"F must be \(m,3\) integers, got \(120, 4\) float64"),
