@@ -845,7 +845,8 @@ def _outward_sides(V, F, twin, comp, on_low, n_low, n_all):
     centre = np.stack([np.bincount(c, weights=centroids[:, k], minlength=size) for k in range(3)],
                       axis=1) / np.maximum(count, 1)[:, None]
     a, b, d = (V[F[faces, k]] - centre[c] for k in range(3))
-    cone = np.einsum("ij,ij->i", a, cross_rows(b, d))
+    unit = max(float(np.abs(x).max()) for x in (a, b, d)) or 1.0   # no overflow at 1e150
+    cone = np.einsum("ij,ij->i", a / unit, cross_rows(b / unit, d / unit))
     volume = np.bincount(c, weights=np.where(low, cone, -cone), minlength=size)
     unsigned = np.bincount(c, weights=np.abs(cone), minlength=size)
     open_ = np.bincount(c, weights=(twin.reshape(-1, 3)[faces] < 0).any(axis=1), minlength=size) > 0

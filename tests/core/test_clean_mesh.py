@@ -287,6 +287,16 @@ def test_random_winding_of_a_torus_and_a_sphere_with_pinholes_comes_back_outward
         assert core.enclosed_volume(r.V, r.F) > 0
 
 
+@pytest.mark.parametrize("scale, offset", [(1e150, 0.0), (1e-150, 0.0), (1.0, 1e9)])
+def test_random_winding_comes_back_outward_at_any_scale(scale, offset):
+    # the cones' volumes are taken in units of the component's size: at 1e150 they
+    # overflowed and the majority decided (inside-out for seeds 0 and 2)
+    V, F = icosphere(3)
+    for seed in range(3):
+        r = clean_mesh(*random_winding(V * scale + offset, F, 0.5, seed))
+        assert same_oriented_faces(r.clean_to_input[r.F], F)
+
+
 def test_orientation_without_a_tie_or_an_inside_keeps_the_majority():
     V, F = icosphere(3)
     inside_out = F[:, ::-1]
