@@ -202,7 +202,7 @@ def convert(task, opts):
         if res.cleaning:
             r["notes"].append(f"cleaning: {res.cleaning.summary()}")
         _check_target(r, res)
-        for note in (res.sliver_note, res.asymmetry_note):
+        for note in (res.sliver_note, res.asymmetry_note, res.pieces_note):
             if note:
                 r["warnings"].append(f"the cage: {note}")
         dist = run.step("measure", core.surface_distance, V, F, res.V, res.F,
