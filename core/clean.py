@@ -840,13 +840,15 @@ def _outward_sides(V, F, twin, comp, on_low, n_low, n_all):
     size = keep_low.size
     faces = np.flatnonzero(mixed[comp])
     c, low = comp[faces], on_low[faces]
-    centroids = V[F[faces]].mean(axis=1)
-    count = np.bincount(c, minlength=size)
-    centre = np.stack([np.bincount(c, weights=centroids[:, k], minlength=size) for k in range(3)],
-                      axis=1) / np.maximum(count, 1)[:, None]
-    a, b, d = (V[F[faces, k]] - centre[c] for k in range(3))
-    unit = max(float(np.abs(x).max()) for x in (a, b, d)) or 1.0   # no overflow at 1e150
-    cone = np.einsum("ij,ij->i", a / unit, cross_rows(b / unit, d / unit))
+    T = V[F[faces]]                                        # (k,3,3) corners
+    corners = 3 * np.maximum(np.bincount(c, minlength=size), 1)
+    S = T.sum(axis=1)
+    centre = np.stack([np.bincount(c, weights=S[:, j], minlength=size) for j in range(3)],
+                      axis=1)
+    T -= (centre[c] / corners[c][:, None])[:, None, :]
+    T /= max(float(T.max()), -float(T.min())) or 1.0      # no overflow at 1e150
+    cone = np.einsum("ij,ij->i", T[:, 0], cross_rows(T[:, 1], T[:, 2]))
+    del T
     volume = np.bincount(c, weights=np.where(low, cone, -cone), minlength=size)
     unsigned = np.bincount(c, weights=np.abs(cone), minlength=size)
     open_ = np.bincount(c, weights=(twin.reshape(-1, 3)[faces] < 0).any(axis=1), minlength=size) > 0
