@@ -78,7 +78,7 @@ STOP_REASONS = ("target", "max_error", "max_dihedral", "topology_floor", "no_val
 #: diagonal is named in the message (:attr:`SimplifyResult.asymmetry_note`). Scans are
 #: seldom centred on their mirror plane: the cow (symmetric in Z to 1.9%) and the
 #: bunny made symmetric in X came back 'ok' 11.9% and 35.8% off, their sides 16.6%
-#: and 12.7% apart (spot in X: 0.0%)
+#: and 36.9% apart (spot in X: 0.0%)
 ASYMMETRY_NOTE = 0.05
 #: a cage whose small pieces, collapsed to at most ``FLOOR_PIECE_FACES`` faces each (a
 #: closed piece's floor is a tetrahedron), hold more than this share of its faces while
@@ -135,8 +135,9 @@ class SimplifyResult:
         ``"relocate and output"``, and ``"total"``.
     asymmetry : float or None, with ``symmetry``: how far the cleaned input
         is from its own mirror image, as a share of its bounding-box
-        diagonal (the largest distance of its positive side from its mirrored
-        negative side); the cage lies between the two sides, so above
+        diagonal (the largest distance between its positive side and its
+        mirrored negative side, from the vertices of each to the other); the
+        cage lies between the two sides, so above
         :data:`ASYMMETRY_NOTE` the message says so (:attr:`asymmetry_note`).
     """
 

@@ -339,15 +339,16 @@ def _symmetrised(half, Vs, F, s, k, keep=None):
 def _negative_to_half(clean, half, k):
     """For each clean vertex not in the half, the half vertex nearest to its
     mirrored position (the corner of the closest half face with the largest
-    barycentric weight); -1 for clean vertices in the half."""
+    barycentric weight); -1 for clean vertices in the half. And the largest
+    distance of such a mirrored position from the half."""
     out = np.full(clean.V.shape[0], -1, dtype=np.int64)
     miss = np.flatnonzero(half.of_clean < 0)
     if miss.size == 0 or half.F.shape[0] == 0:
-        return out
+        return out, 0.0
     hit = TriangleIndex(half.V, half.F).closest(mirror(clean.V[miss], k))
     corner = np.argmax(hit.bary, axis=1)
     out[miss] = half.F[hit.face, corner]
-    return out
+    return out, float(hit.distance.max())
 
 
 def _mirror_face_sources(clean, s, V, F, k):
@@ -534,7 +535,8 @@ class _HalfInput(NamedTuple):
     weights: object         #: the half's vertex weights, or None
     locked: object          #: the half's locked mask (not on the seam), or None
     seam: np.ndarray        #: (n_half,) bool, half vertices on the mirror plane's seam
-    asymmetry: float        #: largest distance of the half from the mirrored other side
+    asymmetry: float        #: largest distance between the half and the mirrored other side
+                            #: (vertices of each to the other, both ways)
 
 
 def _half_set_up(clean, s, k, weights, lk):
@@ -544,14 +546,15 @@ def _half_set_up(clean, s, k, weights, lk):
     Vs = clean.V.copy()
     Vs[:, k] = np.where(s == 0.0, 0.0, Vs[:, k])
     half = _cut_half(Vs, clean.F, s, k)
-    neg_to_half = _negative_to_half(clean, half, k)
+    neg_to_half, beyond = _negative_to_half(clean, half, k)
     w_half, lk_half = _half_inputs(half, clean, weights, lk, neg_to_half)
     seam = np.zeros(half.V.shape[0], dtype=bool)
     seam[_seam_edges(half.F, half.V.shape[0], half.on_plane).ravel()] = True
     if lk_half is not None:
         lk_half &= ~seam
     W, asymmetry = _symmetrised(half, Vs, clean.F, s, k, keep=lk_half)
-    return _HalfInput(half._replace(V=W), neg_to_half, w_half, lk_half, seam, asymmetry)
+    return _HalfInput(half._replace(V=W), neg_to_half, w_half, lk_half, seam,
+                      max(asymmetry, beyond))
 
 
 def _simplify_half(run, clean, target, max_error):
