@@ -202,9 +202,9 @@ def convert(task, opts):
         if res.cleaning:
             r["notes"].append(f"cleaning: {res.cleaning.summary()}")
         _check_target(r, res)
-        slivers = res.sliver_note
-        if slivers:
-            r["warnings"].append(f"the cage: {slivers}")
+        for note in (res.sliver_note, res.asymmetry_note, res.pieces_note):
+            if note:
+                r["warnings"].append(f"the cage: {note}")
         dist = run.step("measure", core.surface_distance, V, F, res.V, res.F,
                         samples=MEASURE_SAMPLES)
         r["deviation_pct"] = 100.0 * dist.hausdorff / max(diag, 1e-300)

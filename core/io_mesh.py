@@ -94,11 +94,26 @@ def _vertices(fn, path, rows, lines):
     """(n,3) float64 from the coordinate strings of the ``v`` lines."""
     if not rows:
         return np.zeros((0, 3), dtype=np.float64)
-    V = _parsed(fn, path, rows, lines, np.float64, "is not a number")
+    return _parsed(fn, path, rows, lines, np.float64, "is not a number")
+
+
+def _check_finite(fn, path, V, lines, F):
+    """Raise when a ``v`` line (``lines``: their numbers) has a coordinate
+    that is not a finite number, naming the first one a face (``F``, 0-based)
+    uses, else the first, and saying how many there are and whether faces
+    use them (a scan's leftover points are used by none)."""
     bad = np.flatnonzero(~np.isfinite(V).all(axis=1))
-    if bad.size:
-        raise _line_error(fn, path, lines[bad[0]], "has a coordinate that is not a finite number")
-    return V
+    if bad.size == 0:
+        return
+    used = np.isin(bad, F)
+    k = bad[np.argmax(used)] if used.any() else bad[0]
+    some = f"one of {bad.size:,} such vertices, " if bad.size > 1 else ""
+    if not used.any():
+        how = (f" ({some}none used by a face: a scan's leftover points; delete the vertices "
+               f"no face uses)")
+    else:
+        how = f" ({some}{used.sum():,} used by faces)" if some else ""
+    raise _line_error(fn, path, lines[k], f"has a coordinate that is not a finite number{how}")
 
 
 def _read(path, fn, obj):
@@ -143,6 +158,7 @@ def _read(path, fn, obj):
             tri_lines.append(lineno)
             tri_base.append(base)
     if not tri_rows:
+        _check_finite(fn, path, V, v_lines, np.zeros((0, 3), dtype=np.int64))
         return MeshFile(V, np.zeros((0, 3), dtype=np.int64), 0, skipped)
     R = _parsed(fn, path, tri_rows, tri_lines, np.int64,    # the file's indices
                 "has an index that is not an integer", _missing_vertex(n))
@@ -162,6 +178,7 @@ def _read(path, fn, obj):
         problem = ("has vertex index 0 (indices are 1-based)" if (R[k] == 0).any() else
                    _missing_vertex(n))
         raise _line_error(fn, path, int(lines[k]), problem)
+    _check_finite(fn, path, V, v_lines, F)
     n_polygons = F.shape[0] - sum(len(idx) - 3 for _, idx, _ in poly)
     return MeshFile(V, F, n_polygons, skipped)
 

@@ -67,7 +67,7 @@ def check_mesh(V, F, *, where, allow_empty=True, copy=True):
     """
     V = _as_array(V, "V", "(n,3) floats", where)     # ragged lists first, V's then F's
     F = _as_array(F, "F", "(m,3) integers", where)
-    V = check_vertices(V, where=where, copy=copy)
+    V = check_vertices(V, where=where, copy=copy, faces=F)
     return V, check_faces(F, V.shape[0], where=where, allow_empty=allow_empty, copy=copy)
 
 
@@ -77,10 +77,11 @@ def _converted(x, dtype, copy):
     return np.array(x, dtype=dtype, order="C") if copy else np.asarray(x, dtype=dtype, order="C")
 
 
-def check_vertices(V, *, where, name="V", copy=True):
+def check_vertices(V, *, where, name="V", copy=True, faces=None):
     """Vertex positions ``V`` (n,3) as float64, checked as :func:`check_mesh`
     checks them (shape, numbers, finite); ``name`` is the argument named in
-    the message. Raises :class:`InvalidMeshError`."""
+    the message, which says how many of the non-finite vertices the
+    ``faces`` (when given) use. Raises :class:`InvalidMeshError`."""
     V_in = _as_array(V, name, "(n,3) floats", where)
     if V_in.size == 0 and V_in.ndim <= 1:
         V_in = V_in.reshape(0, 3)
@@ -91,10 +92,24 @@ def check_vertices(V, *, where, name="V", copy=True):
     if not np.isfinite(V_out).all():
         rows = np.flatnonzero(~np.isfinite(V_out).all(axis=1))
         raise InvalidMeshError(
-            f"{where}: {rows.size} vertices have NaN or infinite coordinates, "
-            f"e.g. vertex {rows[0]} = {V_out[rows[0]].tolist()}"
+            f"{where}: {rows.size} vertices have NaN or infinite coordinates"
+            f"{_used_by_faces(rows, faces)}, e.g. vertex {rows[0]} = {V_out[rows[0]].tolist()}"
         )
     return V_out
+
+
+def _used_by_faces(rows, faces):
+    """How many of the vertices ``rows`` the ``faces`` use, as the end of a
+    sentence (``", none of them used by a face (...)"``); "" when ``faces``
+    is not an (m,3) integer array (its own check names that)."""
+    F = faces if isinstance(faces, np.ndarray) else None
+    if F is None or F.ndim != 2 or F.shape[1] != 3 or not np.issubdtype(F.dtype, np.integer):
+        return ""
+    used = int(np.count_nonzero(np.isin(rows, F)))
+    if used == 0:
+        return (", none of them used by a face (a scan's leftover points: keep only the "
+                "vertices the faces use)")
+    return f", {used:,} of them used by faces"
 
 
 def check_faces(F, n_vertices, *, where, allow_empty=True, copy=True):

@@ -316,10 +316,11 @@ def _symmetrised(half, Vs, F, s, k, keep=None):
     (so a scan that is only nearly symmetric gets a cage between its two
     sides). Vertices whose faces would turn over stay where they were, as
     do those flagged in ``keep`` (locked); plane vertices stay exactly on
-    the plane. Returns (nh,3) float64."""
+    the plane. Returns the positions (nh,3) float64 and the largest distance
+    of a half vertex from the mirrored other side (the input's asymmetry)."""
     other = _cut_half(Vs, F, -s, k)
     if other.F.shape[0] == 0:
-        return half.V
+        return half.V, 0.0
     hit = TriangleIndex(mirror(other.V, k), other.F).closest(half.V)
     W = 0.5 * (half.V + hit.point)
     W[half.on_plane, k] = 0.0
@@ -332,21 +333,22 @@ def _symmetrised(half, Vs, F, s, k, keep=None):
             break
         back = np.unique(half.F[turned])
         W[back] = half.V[back]
-    return W
+    return W, float(hit.distance.max(initial=0.0))
 
 
 def _negative_to_half(clean, half, k):
     """For each clean vertex not in the half, the half vertex nearest to its
     mirrored position (the corner of the closest half face with the largest
-    barycentric weight); -1 for clean vertices in the half."""
+    barycentric weight); -1 for clean vertices in the half. And the largest
+    distance of such a mirrored position from the half."""
     out = np.full(clean.V.shape[0], -1, dtype=np.int64)
     miss = np.flatnonzero(half.of_clean < 0)
     if miss.size == 0 or half.F.shape[0] == 0:
-        return out
+        return out, 0.0
     hit = TriangleIndex(half.V, half.F).closest(mirror(clean.V[miss], k))
     corner = np.argmax(hit.bary, axis=1)
     out[miss] = half.F[hit.face, corner]
-    return out
+    return out, float(hit.distance.max())
 
 
 def _mirror_face_sources(clean, s, V, F, k):
@@ -502,7 +504,7 @@ def _symmetric(whole, options):
         max_error=r.max_error, stopped_because=r.stopped_because, feature_edges=fe,
         cleaning=clean.report, n_input_faces=int(whole.m_in), target=whole.target,
         hausdorff=hausdorff, n_boundary_loops=boundary_loops_count(cage.F, cage.V.shape[0]),
-        n_components=n_comp, n_passes=r.n_passes)
+        n_components=n_comp, n_passes=r.n_passes, asymmetry=hs.asymmetry / diag)
 
 
 def _check_crosses(clean, s, k, axis):
@@ -533,6 +535,8 @@ class _HalfInput(NamedTuple):
     weights: object         #: the half's vertex weights, or None
     locked: object          #: the half's locked mask (not on the seam), or None
     seam: np.ndarray        #: (n_half,) bool, half vertices on the mirror plane's seam
+    asymmetry: float        #: largest distance between the half and the mirrored other side
+                            #: (vertices of each to the other, both ways)
 
 
 def _half_set_up(clean, s, k, weights, lk):
@@ -542,14 +546,15 @@ def _half_set_up(clean, s, k, weights, lk):
     Vs = clean.V.copy()
     Vs[:, k] = np.where(s == 0.0, 0.0, Vs[:, k])
     half = _cut_half(Vs, clean.F, s, k)
-    neg_to_half = _negative_to_half(clean, half, k)
+    neg_to_half, beyond = _negative_to_half(clean, half, k)
     w_half, lk_half = _half_inputs(half, clean, weights, lk, neg_to_half)
     seam = np.zeros(half.V.shape[0], dtype=bool)
     seam[_seam_edges(half.F, half.V.shape[0], half.on_plane).ravel()] = True
     if lk_half is not None:
         lk_half &= ~seam
-    half = half._replace(V=_symmetrised(half, Vs, clean.F, s, k, keep=lk_half))
-    return _HalfInput(half, neg_to_half, w_half, lk_half, seam)
+    W, asymmetry = _symmetrised(half, Vs, clean.F, s, k, keep=lk_half)
+    return _HalfInput(half._replace(V=W), neg_to_half, w_half, lk_half, seam,
+                      max(asymmetry, beyond))
 
 
 def _simplify_half(run, clean, target, max_error):

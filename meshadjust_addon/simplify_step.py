@@ -371,9 +371,10 @@ def _summary(job):
             msg += f" (at {fit_levels(job.levels)} levels)"
     if job.fit_error:
         warnings.append(f"{job.fit_error}; the cage is kept unfitted")
-    slivers = getattr(res, "sliver_note", "")
-    if slivers:
-        warnings.append(slivers)
+    for note in (getattr(res, "sliver_note", ""), getattr(res, "asymmetry_note", ""),
+                 getattr(res, "pieces_note", "")):
+        if note:
+            warnings.append(note)
     return msg, dev, warnings
 
 

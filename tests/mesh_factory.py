@@ -476,3 +476,38 @@ def with_fins(V, F, k=4, seed=4):
     tip = mid + (mid - V.mean(axis=0)) * 0.3
     n = V.shape[0]
     return np.concatenate([V, tip]), np.concatenate([F, np.stack([b, a, n + np.arange(k)], axis=1)])
+
+
+def random_winding(V, F, share=0.5, seed=7):
+    """Each face reversed with probability ``share`` (photogrammetry and some
+    scanner exports write each triangle's winding at random)."""
+    rng = np.random.default_rng(seed)
+    F = F.copy()
+    turn = rng.random(F.shape[0]) < share
+    F[turn] = F[turn][:, ::-1]
+    return V.copy(), F
+
+
+def cyclic_rows(F):
+    """``F`` with each row rotated to start at its smallest index, keeping
+    its cyclic order (two faces are the same oriented face when their rows
+    are equal here)."""
+    F = np.asarray(F)
+    first = np.argmin(F, axis=1)
+    cols = (first[:, None] + np.arange(3)[None]) % 3
+    return np.take_along_axis(F, cols, axis=1)
+
+
+def with_pebbles(V, F, k=100, size=0.02, seed=8):
+    """The mesh beside ``k`` closed pebbles (80-face icospheres of radius ``size``
+    times the diagonal, squashed at random), on a ring around it: a scan of
+    an object on gravel. Their area is too large a share for debris."""
+    rng = np.random.default_rng(seed)
+    lo, hi = V.min(axis=0), V.max(axis=0)
+    d = float(np.linalg.norm(hi - lo))
+    P, Q = icosphere(1)
+    angle = np.linspace(0.0, 2.0 * np.pi, k, endpoint=False)
+    centre = 0.5 * (lo + hi) + 0.9 * d * np.stack([np.cos(angle), np.sin(angle), 0 * angle], axis=1)
+    pebbles = P[None] * size * d * rng.uniform(0.6, 1.0, (k, 1, 3)) + centre[:, None]
+    faces = Q[None] + V.shape[0] + P.shape[0] * np.arange(k)[:, None, None]
+    return np.vstack([V, pebbles.reshape(-1, 3)]), np.vstack([F, faces.reshape(-1, 3)])

@@ -19,8 +19,8 @@ from core.clean import (BUDGET_DEBRIS_SHARE, DEBRIS_MAX_FACE_SHARE, DEBRIS_MAX_F
                         WELD_DISTANCE, WIDER_WELDS, CleanReport, bulk_box, clean_mesh)
 from core.errors import InvalidArgumentError, InvalidMeshError
 from core.topology import manifold_report, topology_summary
-from tests.mesh_factory import (duplicated, icosphere, klein_bottle, load_shared, mobius_strip,
-                                pinched, regular_grid, shared_mesh_names, torus, unwelded,
+from tests.mesh_factory import (cyclic_rows, duplicated, icosphere, klein_bottle, load_shared,
+                                mobius_strip, pinched, random_winding, regular_grid, shared_mesh_names, torus, unwelded,
                                 with_debris, with_far_speck, with_fins, with_pinholes, with_sheets)
 
 
@@ -256,6 +256,60 @@ def test_inconsistent_orientation_is_fixed_by_the_majority():
     np.testing.assert_array_equal(np.sort(r.F, axis=1), np.sort(F, axis=1))
     assert core.enclosed_volume(r.V, r.F) > 0
     assert_manifold(r.V, r.F)
+
+
+def same_oriented_faces(F_a, F_b):
+    """Whether two face lists hold the same oriented faces (any order)."""
+    key = lambda F: np.sort(cyclic_rows(F).view([("a", F.dtype), ("b", F.dtype), ("c", F.dtype)]),
+                            axis=0)
+    return np.array_equal(key(np.ascontiguousarray(F_a)), key(np.ascontiguousarray(F_b)))
+
+
+@pytest.mark.parametrize("name", ["cow.obj", "spot.obj", "stanford-bunny.obj"])
+@pytest.mark.parametrize("share", [0.5, 0.6])
+@pytest.mark.parametrize("seed", [0, 2])
+def test_random_winding_comes_back_outward_not_by_a_coin_toss(name, share, seed):
+    # half or more of the faces reversed at random: the majority used to win, and the
+    # cow, spot and the bunny came back inside-out for seeds 0 and 2 (all six at 0.6)
+    V, F = load_shared(name)
+    r = clean_mesh(*random_winding(V, F, share, seed))
+    assert_manifold(r.V, r.F)
+    assert core.enclosed_volume(r.V, r.F) > 0
+    assert same_oriented_faces(r.clean_to_input[r.F], F)       # every face as the scan had it
+    assert r.report.n_flipped_faces == np.count_nonzero(~np.all(
+        cyclic_rows(random_winding(V, F, share, seed)[1]) == cyclic_rows(F), axis=1))
+
+
+def test_random_winding_of_a_torus_and_a_sphere_with_pinholes_comes_back_outward():
+    for V, F in (torus(48, 24), with_pinholes(*icosphere(4), share=0.01)):
+        r = clean_mesh(*random_winding(V, F, 0.55, seed=3))
+        assert same_oriented_faces(r.clean_to_input[r.F], F)
+        assert core.enclosed_volume(r.V, r.F) > 0
+
+
+@pytest.mark.parametrize("scale, offset", [(1e150, 0.0), (1e-150, 0.0), (1.0, 1e9)])
+def test_random_winding_comes_back_outward_at_any_scale(scale, offset):
+    # the cones' volumes are taken in units of the component's size: at 1e150 they
+    # overflowed and the majority decided (inside-out for seeds 0 and 2)
+    V, F = icosphere(3)
+    for seed in range(3):
+        r = clean_mesh(*random_winding(V * scale + offset, F, 0.5, seed))
+        assert same_oriented_faces(r.clean_to_input[r.F], F)
+
+
+def test_orientation_without_a_tie_or_an_inside_keeps_the_majority():
+    V, F = icosphere(3)
+    inside_out = F[:, ::-1]
+    r = clean_mesh(V, inside_out)                       # consistent: left as it came
+    assert r.report.n_flipped_faces == 0 and np.array_equal(r.F, inside_out)
+    bowl = inside_out[V[inside_out].mean(axis=1)[:, 2] < 0]      # an open bowl, normals in
+    Vb, Fb = random_winding(V, bowl, 0.2, seed=1)
+    r = clean_mesh(Vb, Fb)
+    assert same_oriented_faces(r.clean_to_input[r.F], bowl)     # the majority: still in
+    sheet = regular_grid(20, 20)                         # flat: no inside, a tie keeps the majority
+    r = clean_mesh(*random_winding(*sheet, 0.5, seed=4))
+    assert manifold_report(r.F, r.V.shape[0]).is_oriented_manifold
+    assert r.report.n_flipped_faces <= sheet[1].shape[0] // 2
 
 
 @pytest.mark.parametrize("scramble", [False, True])

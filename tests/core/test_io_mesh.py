@@ -78,6 +78,11 @@ def test_obj_slashes_negative_indices_and_extra_coordinates(tmp_path):
     ("v 0 0 0\nv 1 x 3\nv 0 1 0\nf 1 2 3\n", 2, r"'v 1 x 3' is not a number"),
     ("v 0 0 0\nv 1 0 0\nv nan 1 0\nf 1 2 3\n", 3, r"'v nan 1 0' has a coordinate that is not"),
     ("v 0 0 0\nv 1 0 inf\nv 0 1 0\nf 1 2 3\n", 2, r"'v 1 0 inf' .*not a finite number"),
+    # a scan's leftover point: the line says no face uses it; of several, a used one is named
+    ("v nan nan nan\nv 0 0 0\nv 1 0 0\nv 0 1 0\nf 2 3 4\n", 1,
+     r"'v nan nan nan' has a coordinate that is not a finite number \(none used by a face"),
+    ("v nan 0 0\nv 0 0 0\nv 1 0 0\nv 0 1 inf\nf 2 3 4\n", 4,
+     r"'v 0 1 inf' .*finite number \(one of 2 such vertices, 1 used by faces\)$"),
     ("v 0 0\n", 1, r"'v 0 0' needs 3 coordinates"),
     ("v 0 0 0\nv 1 0 0\nv 0 1 0\n# comment\nf 1 2 9\n", 5,
      r"'f 1 2 9' refers to a missing vertex \(the file has 3\)"),

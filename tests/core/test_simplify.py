@@ -11,10 +11,11 @@ from core.errors import InvalidArgumentError, InvalidMeshError
 from core.mesh import bbox_diagonal, face_normals
 from core.clean import clean_mesh
 from core.simplify import SimplifyResult, simplify
-from core.topology import manifold_report, topology_summary
+from core.topology import face_components, manifold_report, topology_summary
 from core.tuning import TUNING, Tuning
 from tests.mesh_factory import (boundary_edges, cad_cylinder, cube, double_torus, icosphere,
-                                load_shared, regular_grid, star_glyphs, tetrahedron, torus, unwelded)
+                                load_shared, regular_grid, star_glyphs, tetrahedron, torus, unwelded,
+                                with_pebbles)
 
 
 # ---------------------------------------------------------------- helpers
@@ -333,6 +334,11 @@ def test_non_manifold_input_gives_a_manifold_cage():
 @pytest.mark.parametrize("V, F, match", [
     (np.array([[0, 0, 0], [1, 0, np.nan], [0, 1, 0]]), [[0, 1, 2]], "NaN or infinite"),
     (np.array([[0, 0, 0], [1, 0, np.inf], [0, 1, 0]]), [[0, 1, 2]], "NaN or infinite"),
+    # a scan's leftover points (unreferenced, NaN): the message says no face uses them
+    (np.array([[np.nan] * 3, [0, 0, 0], [1, 0, 0], [0, 1, 0]]), [[1, 2, 3]],
+     r"1 vertices have NaN or infinite coordinates, none of them used by a face \(.*\), e.g. vertex 0"),
+    (np.array([[0, 0, 0], [1, 0, np.inf], [0, 1, 0], [np.nan, 0, 0]]), [[0, 1, 2]],
+     r"2 vertices have NaN or infinite coordinates, 1 of them used by faces, e.g. vertex 1"),
     (np.eye(3), [[0, 1, 3]], "outside"),
     (np.eye(3), [[0, -1, 2]], "outside"),
     (np.eye(3), np.zeros((120, 4)), r"F must be \(m,3\) integers, got \(120, 4\) float64"),
@@ -826,6 +832,29 @@ def _compactness_of(V, F):
     area = 0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=1)
     sumsq = ((b - a) ** 2).sum(1) + ((c - b) ** 2).sum(1) + ((a - c) ** 2).sum(1)
     return 4 * np.sqrt(3) * area / sumsq
+
+
+def test_pebbles_that_take_most_of_the_cage_are_named():
+    """A sphere beside 100 closed pebbles (too much area together to be
+    debris): at their floor (4 faces) they take most of the 500 faces and the
+    sphere, 'on target', gets fewer than half; the message says how many
+    pieces take how many faces. With 10 pebbles no note; nor when every piece
+    is at its floor (a target below 4 faces a piece: the topology floor's
+    message says so)."""
+    V0, F0 = icosphere(4)
+    res = simplify(*with_pebbles(V0, F0, 100), target_faces=500)
+    labels, n = face_components(res.F, res.V.shape[0])
+    size = np.bincount(labels, minlength=n)
+    small, faces = int((size <= 4).sum()), int((size[labels] <= 4).sum())
+    assert res.stopped_because == "target" and faces > 250 and small > 50
+    assert np.count_nonzero(res.face_map < F0.shape[0]) < 250        # the sphere's share
+    assert (f"{small:,} small pieces, each down to 4 faces or fewer, take {faces:,} of the "
+            f"cage's 500 faces and leave {500 - faces:,} to the {n - small:,} larger") in res.message
+    res = simplify(*with_pebbles(V0, F0, 10), target_faces=500)
+    assert res.pieces_note == "" and np.count_nonzero(res.face_map < F0.shape[0]) > 400
+    V, F = icosphere(1)
+    res = simplify(*with_pebbles(V, F, 100), target_faces=200)      # every piece a tetrahedron
+    assert res.stopped_because == "topology_floor" and res.pieces_note == ""
 
 
 def test_a_cage_of_slivers_says_so():
