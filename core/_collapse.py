@@ -138,7 +138,7 @@ class State:
         self.moved = np.zeros(n, dtype=bool)
         self.orig = np.arange(n, dtype=np.int64)
         self.vver = np.full(n, -1, dtype=np.int64)
-        self.vmov = np.full(n, -1, dtype=np.int64)
+        self.vmov = np.full(n, -1, dtype=np.int32)          # (a pass count)
         self.fresh = np.ones(n, dtype=bool)
         self.is_bnd = np.zeros(n, dtype=bool)
         hb = np.flatnonzero(twin == BOUNDARY)
