@@ -119,6 +119,9 @@ class Tuning:
     #: max_error raises the engine's bound in these steps (shares of it), measuring the
     #: cage after each with this many samples
     max_error_steps: tuple = (0.3, 0.5, 0.7, 0.85, 1.0)
+    #: ... and the gap between the last step within max_error and the first over it is
+    #: halved this many times
+    max_error_halvings: int = 3
     max_error_quick_samples: int = 20_000
     snap_bits: int = 32              #: coordinates snapped to 2^-snap_bits of the diagonal
     snap_share: float = 1e-12        #: (distance / edge length)^2 below which a position is an endpoint

@@ -9,6 +9,7 @@ from hypothesis import strategies as st
 
 from core.errors import InvalidArgumentError, InvalidMeshError
 from core.mesh import bbox_diagonal, face_normals
+from core.metrics import surface_distance
 from core.clean import clean_mesh
 from core.simplify import SimplifyResult, simplify
 from core.topology import face_components, manifold_report, topology_summary
@@ -891,3 +892,19 @@ def test_star_glyphs_whose_cheapest_edges_are_folding_fan_spokes_take_few_passes
     # the same with the hold off (hold_star above any star): the passes it saves
     slow = simplify(V, F, target_faces=120, tuning=replace(TUNING, hold_star=10**9))
     assert slow.F.shape[0] == 120 and slow.n_passes > 2 * res.n_passes
+
+
+def test_max_error_halves_the_gap_to_the_first_step_over_it():
+    # the cow at 2%: the first step (0.3 of the bound) is over it, half of that
+    # gives 936 faces, 0.74%, and it stopped there; halving the gap between the
+    # last step within the bound and the first over it gets closer to the bound
+    V, F = load_shared("cow.obj")[:2]
+    bound = 0.02 * bbox_diagonal(V)
+    plain = simplify(V, F, max_error=bound, tuning=replace(TUNING, max_error_halvings=0))
+    halved = simplify(V, F, max_error=bound)
+    for r in (plain, halved):
+        assert r.stopped_because == "max_error" and r.max_error <= bound
+        assert surface_distance(V, F, r.V, r.F).hausdorff <= bound
+        assert_clean(r)
+    assert halved.F.shape[0] < 0.8 * plain.F.shape[0]
+    assert halved.max_error > 1.05 * plain.max_error             # nearer the bound
