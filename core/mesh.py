@@ -376,8 +376,15 @@ def enclosed_volume(V, F):
 
     Raises :class:`InvalidMeshError` for a malformed mesh (:func:`check_mesh`)."""
     V, F = check_mesh(V, F, where="enclosed_volume", copy=False)
-    a, b, c = V[F[:, 0]], V[F[:, 1]], V[F[:, 2]]
-    return float(np.einsum("ij,ij->i", a, cross_rows(b, c)).sum() / 6.0)
+    if F.shape[0] == 0:
+        return 0.0
+    # coordinates over a power of two near their largest (exact: the same bits where
+    # nothing overflows; at 1e150 the products overflowed and inf - inf gave NaN)
+    scale = np.ldexp(1.0, int(np.frexp(float(np.abs(V[F]).max()))[1]))
+    a, b, c = (V[F[:, k]] / scale for k in range(3))
+    volume = np.einsum("ij,ij->i", a, cross_rows(b, c)).sum() / 6.0
+    with np.errstate(over="ignore"):
+        return float(volume * scale * scale * scale)
 
 
 def has_area(V, F):

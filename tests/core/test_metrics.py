@@ -204,3 +204,17 @@ def test_real_mesh_bunny_vs_perturbed_copy():
     assert d.hausdorff_pct == pytest.approx(100 * d.hausdorff / diag, rel=1e-12)
     # the unperturbed copy is at distance 0
     assert surface_distance(V, F, V, F, samples=20_000).hausdorff <= 1e-12 * diag
+
+
+def test_enclosed_volume_scales_as_the_cube_of_the_size_and_names_what_floats_cannot_hold():
+    # the coordinates are scaled by a power of two before the products: the same
+    # bits at ordinary sizes, and beyond the floats inf (it was NaN: inf - inf)
+    V, F = icosphere(3)
+    v = core.enclosed_volume(V, F)
+    assert v > 0 and core.enclosed_volume(V, F[:, ::-1]) == -v
+    for s in (2.0 ** 40, 2.0 ** -40, 3.0):
+        assert core.enclosed_volume(V * s, F) == pytest.approx(v * s ** 3, rel=1e-14)
+    assert core.enclosed_volume(V * 1e150, F) == np.inf
+    assert core.enclosed_volume(V * 1e150, F[:, ::-1]) == -np.inf
+    assert core.enclosed_volume(V * 1e-150, F) == 0.0
+    assert core.enclosed_volume(V, F[:0]) == 0.0
