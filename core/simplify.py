@@ -240,7 +240,8 @@ class SimplifyResult:
             return ""
         return (f"{n:,} of the cage's {self.F.shape[0]:,} faces are slivers, long and thin as "
                 f"the input's own triangles there (nothing lies between their ends for a cage "
-                f"vertex to sit on): subdivide or remesh the input for a cage without them")
+                f"vertex to sit on): remesh the input into even triangles (Blender's Remesh modifier, "
+                f"Voxel) for a cage without them; subdividing keeps their shape")
 
 
 def check_arguments(n, target_faces, ratio, max_error, feature_angle_deg, vertex_weights, locked,
