@@ -742,12 +742,8 @@ def _whole_stars(F, fidx, A, B):
     among them) around ``A[k]`` or ``B[k]``, as rows ``(star, kf)`` sorted by
     collapse, then face; stars may overlap."""
     k = A.size
-    v = _take(F, fidx, axis=0).ravel()
-    order = np.argsort(v, kind="stable")            # faces stay ascending within each vertex
-    vs, fs = _take(v, order), _take(np.repeat(fidx, 3), order)
-    a0, b0 = np.searchsorted(vs, A, side="left"), np.searchsorted(vs, B, side="left")
-    na = np.searchsorted(vs, A, side="right") - a0
-    nb = np.searchsorted(vs, B, side="right") - b0
+    fs, start, count = _faces_at(F, fidx, np.concatenate([A, B]))
+    a0, b0, na, nb = start[:k], start[k:], count[:k], count[k:]
     cnt = na + nb
     kf = np.repeat(np.arange(k, dtype=np.int64), cnt)
     j = np.arange(kf.size, dtype=np.int64) - np.repeat(np.cumsum(cnt) - cnt, cnt)
@@ -758,6 +754,17 @@ def _whole_stars(F, fidx, A, B):
     star, kf = _take(star, r), _take(kf, r)
     o = np.argsort(kf * np.int64(F.shape[0]) + star, kind="stable")
     return _take(star, o), _take(kf, o)
+
+
+def _faces_at(F, fidx, ends):
+    """The faces among ``fidx`` (ascending) around each vertex of ``ends``:
+    ``(fs, start, count)``, those of ``ends[i]`` being
+    ``fs[start[i]:start[i] + count[i]]``, ascending."""
+    v = _take(F, fidx, axis=0).ravel()
+    order = np.argsort(v, kind="stable")            # faces stay ascending within each vertex
+    vs, fs = _take(v, order), _take(np.repeat(fidx, 3), order)
+    start = np.searchsorted(vs, ends, side="left")
+    return fs, start, np.searchsorted(vs, ends, side="right") - start
 
 
 def _next_to_another(st, key, rows, acc, owned):
@@ -882,13 +889,8 @@ def _flips_on(st, A, B, XT, star, kf, tun):
 def _sampled_stars(st, A, B, per):
     """About ``per`` of the live faces around each of ``A[k]`` and ``B[k]``,
     evenly spread (every one up to ``per``), as star rows ``(star, kf)``."""
-    live = np.flatnonzero(st.alive)
-    v = _take(st.F, live, axis=0).ravel()
-    order = np.argsort(v, kind="stable")
-    vs, fs = _take(v, order), _take(np.repeat(live, 3), order)
     ends = np.concatenate([A, B])
-    start = np.searchsorted(vs, ends, side="left")
-    count = np.searchsorted(vs, ends, side="right") - start
+    fs, start, count = _faces_at(st.F, np.flatnonzero(st.alive), ends)
     step = np.maximum(count // per, 1)
     take = (count + step - 1) // step
     g = np.repeat(np.arange(ends.size, dtype=np.int64), take)

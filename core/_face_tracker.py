@@ -203,9 +203,11 @@ class FaceTracker:
         per = np.repeat(np.arange(q.size), counts)
         h2 = np.zeros(verts.size)
         if self._fans is not None:   # around a hub: the faces nearer than the best in each point's sector
-            t, own = self._faces_around(verts, QT, q[per], h2)
-            h2 = np.full(verts.size, np.inf)
-            np.minimum.at(h2, own, self._pairs(QT, q[per[own]], t)[2])
+            hub = np.flatnonzero(self._fans.hub_of[verts] >= 0)
+            t, own = self._faces_around(verts[hub], QT, q[per[hub]], h2[hub])
+            best = np.full(hub.size, np.inf)
+            np.minimum.at(best, own, self._pairs(QT, q[per[hub[own]]], t)[2])
+            h2[hub] = best
         t, own = self._faces_around(verts, QT, q[per], h2)
         group = per[own]
         v, w, d2 = self._pairs(QT, q[group], t)

@@ -19,6 +19,7 @@ from typing import NamedTuple
 import numpy as np
 
 from ._groups import ragged_ranges
+from .mesh import area_normals_rows, unit_rows
 
 #: hubs are vertices with more than this many faces around them
 FAN_FACES = 64
@@ -55,12 +56,12 @@ class FanIndex(NamedTuple):
         origin = V[hubs]
         u, v = _planes(V, F, f, owner, hubs.size)
         Fo = F[f]
-        c = np.argmax(Fo == hubs[owner][:, None], axis=1)            # the hub's corner
-        rest = np.stack([Fo[np.arange(f.size), (c + 1) % 3], Fo[np.arange(f.size), (c + 2) % 3]], axis=1)
+        corner = np.argmax(Fo == hubs[owner][:, None], axis=1)       # the hub's corner
+        rows = np.arange(f.size)
         ang = []
         steep = np.zeros(f.size, dtype=bool)
-        for c in range(2):
-            d = V[rest[:, c]] - origin[owner]
+        for k in (1, 2):                                              # the two other corners
+            d = V[Fo[rows, (corner + k) % 3]] - origin[owner]
             x, y = (d * u[owner]).sum(axis=1), (d * v[owner]).sum(axis=1)
             steep |= x * x + y * y <= (_STEEP * _STEEP) * (d * d).sum(axis=1)
             ang.append(np.arctan2(y, x))
@@ -115,11 +116,10 @@ def _planes(V, F, f, owner, h):
     """Unit axes ``u``, ``v`` (h,3) of a plane across each hub's normal (the
     sum of its faces' area normals ``f``, ``owner`` giving each one's hub;
     any plane where that sum vanishes)."""
-    P = V[F[f]]
     N = np.zeros((h, 3))
-    np.add.at(N, owner, np.cross(P[:, 1] - P[:, 0], P[:, 2] - P[:, 0]))
-    length = np.linalg.norm(N, axis=1)
-    N = np.where(length[:, None] > 0, N / np.where(length > 0, length, 1.0)[:, None], [0.0, 0.0, 1.0])
+    np.add.at(N, owner, area_normals_rows(V, F[f].T))
+    N = unit_rows(N)
+    N[~N.any(axis=1)] = [0.0, 0.0, 1.0]
     helper = np.where((np.abs(N[:, 0]) < 0.9)[:, None], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0])
     u = np.cross(N, helper)
     u /= np.linalg.norm(u, axis=1)[:, None]
