@@ -41,7 +41,7 @@ from typing import NamedTuple
 import numpy as np
 
 from ._groups import distinct, ragged_entries, ragged_ranges
-from ._parallel import blocks, run_blocks
+from ._parallel import WORKERS, blocks, run_blocks, run_each
 from .mesh import (NORMALS_BLOCK, area_normals_rows, area_normals_t, dot_columns, normal_dots,
                    squared_edges, unit_rows)
 from .topology import edge_map
@@ -66,6 +66,10 @@ FLAT_AT_REST = 1e-6
 
 #: faces per block of :func:`away_t`
 _AWAY_BLOCK = 1 << 16
+
+#: :func:`away_rows` and :meth:`FineFaceGroups.away` split their faces over the worker
+#: threads from this many on (below, the hand-offs cost more than they save)
+_AWAY_THREADS_MIN = 8192
 
 
 class FaceStars(NamedTuple):
@@ -158,9 +162,8 @@ class FineFaceGroups(NamedTuple):
         """The faces (distinct, ascending, int64) of ``entries`` (from
         :meth:`entries`) whose normal on ``X`` points away from rest (the
         values of :func:`away_rows`)."""
-        away = normal_dots(X, np.take(self.corners, entries, axis=1),
-                           np.take(self.rest, entries, axis=1)) < 0
-        return np.unique(self.faces[entries[away]]).astype(np.int64, copy=False)
+        away = _pointing_away(X, self.corners, self.rest, entries)
+        return np.unique(self.faces[away]).astype(np.int64, copy=False)
 
 
 class CageRings(NamedTuple):
@@ -269,7 +272,21 @@ def away_t(PT, FT, rest_normals):
 
 def away_rows(X, FT, faces, rest_normals):
     """:func:`away_t` over positions ``X`` (n,3), among ``faces`` (ascending)."""
-    return faces[normal_dots(X, np.take(FT, faces, axis=1), np.take(rest_normals, faces, axis=1)) < 0]
+    return _pointing_away(X, FT, rest_normals, faces)
+
+
+def _pointing_away(X, T, R, cols):
+    """The columns ``cols`` (ascending stays ascending) of the triangles
+    ``T`` (3,k) whose area normal on ``X`` (n,3) points away from ``R``
+    (3,k): :func:`~.mesh.normal_dots` below 0, in a part per worker thread
+    from ``_AWAY_THREADS_MIN`` columns on (the gathers are most of it: 48k
+    faces around 5 moved cage vertices' rows, 1.66 -> 1.28 ms on two)."""
+    def part(span):
+        c = cols[span[0]:span[1]]
+        return c[normal_dots(X, np.take(T, c, axis=1), np.take(R, c, axis=1)) < 0]
+    n = cols.shape[0]
+    return np.concatenate(run_each(part, blocks(n, -(-n // WORKERS)) or [(0, 0)],
+                                   threads=n >= _AWAY_THREADS_MIN))
 
 
 def turned_over(X, FT, away, rest_normals, rotate):

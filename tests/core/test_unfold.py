@@ -20,6 +20,7 @@ from core.binding import bind, deform
 from core.fit import fit_cage
 from core.mesh import bbox_diagonal, face_normals, turned_faces, vertex_normals
 from core.simplify import simplify
+from core import unfold
 from core.unfold import (FLAT_AT_REST, CageRings, FaceStars, FineFaceGroups, away_rows, away_t,
                          nearest_rotations, repair, rest_normals, ring_rotations, turned_over,
                          TURNED_DEG)
@@ -141,6 +142,24 @@ def test_nothing_to_repair_changes_nothing():
                  away)
     assert rep.rows.size == 0 and rep.raw.shape == (0, 3)
     assert np.array_equal(X, V + 0.01)
+
+
+def test_faces_pointing_away_are_the_same_found_in_parts_on_the_threads():
+    # from _AWAY_THREADS_MIN faces on the test runs in a part per worker: the same faces,
+    # in the same (ascending) order, as one test over all of them
+    V, F = regular_grid(120, 120)
+    X = V.copy()
+    X[:, 2] += 0.3 * np.sin(7 * V[:, 0]) * np.cos(5 * V[:, 1])
+    X[::7, 0] += 0.02               # some faces turned over
+    FT = np.ascontiguousarray(F.T)
+    rest = _rest_normals(V, F)
+    faces = np.arange(0, F.shape[0], 2)
+    assert faces.size >= unfold._AWAY_THREADS_MIN
+    expected = faces[np.einsum("ij,ji->i", face_normals(X, F[faces], normalize=False),
+                               rest[:, faces]) < 0]
+    assert 0 < expected.size < faces.size
+    assert np.array_equal(away_rows(X, FT, faces, rest), expected)
+    assert away_rows(X, FT, faces[:0], rest).size == 0
 
 
 def test_cage_rings_give_the_vertex_normals_at_a_few_vertices():
