@@ -70,8 +70,13 @@ __all__ = ["NearQuery", "cell_for_reach"]
 #: query was about 5% faster with 65,536 than with 32,768)
 _BLOCK = 65536
 
-#: rows (points, or (point, cell) pairs) per tile of one cell
-_TILE = 8
+#: rows (points, or (point, cell) pairs) per tile of one cell: each tile's bound is a
+#: small matrix product, and with 8 rows the products' per-matrix overhead was a third
+#: of the bind's query; 16 took binds of a 1M-vertex torus to a 10k-face cage from
+#: 1.33-1.40 s to 1.20-1.29 s (best / median of 4, alternating; 32: 1.19-1.23), of the
+#: bunny x16 and x4 to 2,000-face cages 0.97 -> 0.91 s and 1.17 -> 0.97 s (medians of
+#: 5), the plain bunny to 500 faces 0.27 -> 0.25 s (2026-12-04); the tiles were 95% full
+_TILE = 16
 
 #: (row, reference) pairs per set of tiles handled at once (float32 arrays of
 #: 1 MiB). Smaller sets stay in cache and win on one thread; on two, each set's
