@@ -57,6 +57,7 @@ from ._collapse import State, compactness, run
 from ._parallel import blocks, run_blocks, run_each
 from ._relax import close_smallest_hole, close_triangular_holes, drop_stuck_components
 from ._relocate import relocate, segment_triangles
+from ._touch_up import touch_up
 from .clean import MIN_COMPONENT_AREA, CleanReport, clean_mesh
 from .errors import InvalidArgumentError, InvalidMeshError, MeshAdjustError
 from .mesh import (area_normals_rows, bounding_box, check_mesh, check_vertex_mask,
@@ -517,6 +518,7 @@ def _cage_of(su, mesh, stopped, passes, opts, relocate=True):
     the caller's units, after the final relocation when ``relocate``."""
     tun = opts["tuning"]
     t0 = time.perf_counter()
+    F_out = mesh.F
     if (relocate and tun.relocate_iters > 0 and passes > 0
             and mesh.F.shape[0] <= min(tun.relocate_max_faces, tun.relocate_max_share * su.m0)):
         cos_max = opts["dihedral_cos"]
@@ -525,6 +527,9 @@ def _cage_of(su, mesh, stopped, passes, opts, relocate=True):
         _relocate_cage(mesh, su.Vn, su.creases, su.Eb_in, su.Fin, tun)
         if cos_max is not None and ((_bend_cosines(mesh) < cos_max) & (bend0 >= cos_max)).any():
             mesh.V, mesh.moved = V0, moved0      # it would bend faces beyond the bound: undone
+        elif (cos_max is None and su.Fin is not None and tun.touch_rounds > 0
+              and mesh.worst > tun.touch_min_error):
+            F_out = _touched_up(su, mesh, tun)
     # back to the caller's units; vertices never moved keep their exact input position
     Vout = mesh.V * su.scale + su.centre
     still = ~mesh.moved
@@ -537,16 +542,34 @@ def _cage_of(su, mesh, stopped, passes, opts, relocate=True):
     cur = mesh.cur_of_clean
     of_clean = np.empty(su.order.size, dtype=np.int64)
     of_clean[su.order] = np.where(cur >= 0, new_v[np.maximum(cur, 0)], -1)
-    hf = np.flatnonzero(mesh.feat)
-    tf = mesh.twin[hf]
-    hf = hf[(tf > hf) | (tf == BOUNDARY)]  # one half-edge per feature edge
-    a, b = (new_v[e] for e in half_edge_ends(mesh.F, hf))
+    a, b = (new_v[e] for e in _feature_edges(mesh).T)
     fe = np.stack([np.minimum(a, b), np.maximum(a, b)], axis=1)
     fe = fe[np.lexsort((fe[:, 1], fe[:, 0]))]
     forder_out = np.argsort(mesh.forig, kind="stable")
     seconds = {**su.seconds, **mesh.seconds, "relocate and output": time.perf_counter() - t0}
-    return _Cage(Vout[vorder], new_v[mesh.F[forder_out]], of_clean, mesh.forig[forder_out],
+    return _Cage(Vout[vorder], new_v[F_out[forder_out]], of_clean, mesh.forig[forder_out],
                  fe.astype(np.int64), float(mesh.worst * su.scale), stopped, passes, seconds)
+
+
+def _feature_edges(mesh):
+    """(k,2) the engine mesh's feature edges (its own vertex ids), each once."""
+    hf = np.flatnonzero(mesh.feat)
+    tf = mesh.twin[hf]
+    hf = hf[(tf > hf) | (tf == BOUNDARY)]  # one half-edge per feature edge
+    return np.stack(half_edge_ends(mesh.F, hf), axis=1)
+
+
+def _touched_up(su, mesh, tun):
+    """The relocated cage's farthest places from the input touched up
+    (:func:`~._touch_up.touch_up`; its locked vertices stay, its feature
+    edges are not flipped): ``mesh.V`` and ``mesh.moved`` updated, the new
+    faces returned (``mesh.F``, whose half-edge tables they would no longer
+    match, is left as it is)."""
+    V, F, moved = touch_up(mesh.V, mesh.F, su.Vn, su.Fin, mesh.locked, _feature_edges(mesh), tun,
+                           mesh.Nref if tun.ref_cos > -1.0 else None)
+    mesh.V = V
+    mesh.moved |= moved
+    return F
 
 
 def _collapse(su, clean, target, opts, progress):

@@ -106,6 +106,20 @@ class Tuning:
     #: its closest-point searches walk over the meshes from where the engine merged each
     #: input vertex (then from the last round's answers), at most this many steps a round
     relocate_walk_steps: int = 8
+    #: then the cage's farthest places from the input are touched up (:mod:`._touch_up`:
+    #: a vertex moved onto the input, an edge flipped, where that lowers the largest
+    #: distance around it), for inputs that get the backward pull: at most this many
+    #: rounds (0: off) ...
+    touch_rounds: int = 3
+    #: ... each trying this many of the cage vertices farthest from the input and the
+    #: faces nearest as many input vertices farthest from the cage
+    touch_candidates: int = 8
+    #: ... among those at least this share of the cage's largest distance (the others'
+    #: moves onto the input cost more in mean distance than they save in the largest)
+    touch_share: float = 0.9
+    #: ... and only when some collapse had an error above this (a share of the diagonal):
+    #: a cage whose every collapse was free (a flat grid, a cube) lies on the input
+    touch_min_error: float = 1e-9
     #: preserve_topology=False removes stuck components up to this size (share of the diagonal)
     relax_max_size: float = 0.25
     cap_apex_tries: int = 8          #: ... caps a hole from one of this many rim vertices
