@@ -118,8 +118,9 @@ class Tuning:
     #: moves onto the input cost more in mean distance than they save in the largest)
     touch_share: float = 0.9
     #: ... and only when some collapse had an error above this (a share of the diagonal):
-    #: a cage whose every collapse was free (a flat grid, a cube) lies on the input
-    touch_min_error: float = 1e-9
+    #: a cage whose every collapse was free (a flat grid, a cube: 4e-8 and 7e-9 of
+    #: rounding) lies on the input
+    touch_min_error: float = 1e-6
     #: preserve_topology=False removes stuck components up to this size (share of the diagonal)
     relax_max_size: float = 0.25
     cap_apex_tries: int = 8          #: ... caps a hole from one of this many rim vertices
