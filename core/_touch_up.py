@@ -49,7 +49,8 @@ from .near_query import NearQuery
 from .spatial import TriangleIndex, point_triangle_closest
 from .topology import edge_map
 
-__all__ = ["touch_up"]
+__all__ = ["Gaps", "measure_gaps", "touch_up"]
+
 
 class Gaps(NamedTuple):
     """The distances between a cage and the input, both ways, as sampled."""
@@ -247,8 +248,9 @@ def _acceptable(V, W, F, change, tun, N_keep):
     cos = (new @ reference if reference.ndim == 1 else np.einsum("ij,ij->i", new, reference))
     if not (cos > tun.relocate_min_cos * np.maximum(lo * ln, 1e-300)).all():
         return False
-    if N_keep is not None and not (np.einsum("ij,ij->i", new, N_keep[change.rows].sum(axis=1)) > 0).all():
-        return False
+    if N_keep is not None:
+        if not (np.einsum("ij,ij->i", new, N_keep[change.rows].sum(axis=1)) > 0).all():
+            return False
     g_old = _compactness(V, F[change.faces]).min()
     return bool((_compactness(W, change.rows) >= min(tun.gamma_hard, 0.5 * g_old)).all())
 
