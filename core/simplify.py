@@ -133,7 +133,8 @@ class SimplifyResult:
     seconds : dict, wall-clock seconds per stage: ``"clean"``, ``"set-up"``
         (order, quadrics), the engine's own (``"candidates"``, ``"recost"``,
         ``"pool"``, ``"pick and check"``, ``"apply"``, ``"compact"``),
-        ``"relocate and output"``, and ``"total"``.
+        ``"relocate and output"``, ``"touch-up"`` (when it ran: see
+        :mod:`._touch_up`), and ``"total"``.
     asymmetry : float or None, with ``symmetry``: how far the cleaned input
         is from its own mirror image, as a share of its bounding-box
         diagonal (the largest distance between its positive side and its
@@ -518,7 +519,7 @@ def _cage_of(su, mesh, stopped, passes, opts, relocate=True):
     the caller's units, after the final relocation when ``relocate``."""
     tun = opts["tuning"]
     t0 = time.perf_counter()
-    F_out = mesh.F
+    F_out, touched = mesh.F, None
     if (relocate and tun.relocate_iters > 0 and passes > 0
             and mesh.F.shape[0] <= min(tun.relocate_max_faces, tun.relocate_max_share * su.m0)):
         cos_max = opts["dihedral_cos"]
@@ -529,7 +530,9 @@ def _cage_of(su, mesh, stopped, passes, opts, relocate=True):
             mesh.V, mesh.moved = V0, moved0      # it would bend faces beyond the bound: undone
         elif (cos_max is None and su.Fin is not None and tun.touch_rounds > 0
               and mesh.worst > tun.touch_min_error):
+            t1 = time.perf_counter()
             F_out = _touched_up(su, mesh, tun)
+            touched = time.perf_counter() - t1
     # back to the caller's units; vertices never moved keep their exact input position
     Vout = mesh.V * su.scale + su.centre
     still = ~mesh.moved
@@ -546,7 +549,10 @@ def _cage_of(su, mesh, stopped, passes, opts, relocate=True):
     fe = np.stack([np.minimum(a, b), np.maximum(a, b)], axis=1)
     fe = fe[np.lexsort((fe[:, 1], fe[:, 0]))]
     forder_out = np.argsort(mesh.forig, kind="stable")
-    seconds = {**su.seconds, **mesh.seconds, "relocate and output": time.perf_counter() - t0}
+    seconds = {**su.seconds, **mesh.seconds,
+               "relocate and output": time.perf_counter() - t0 - (touched or 0.0)}
+    if touched is not None:
+        seconds["touch-up"] = touched
     return _Cage(Vout[vorder], new_v[F_out[forder_out]], of_clean, mesh.forig[forder_out],
                  fe.astype(np.int64), float(mesh.worst * su.scale), stopped, passes, seconds)
 

@@ -721,7 +721,7 @@ def test_seconds_per_stage_add_up_to_the_total():
     r = simplify(V, F, target_faces=300)
     s = r.seconds
     for stage in ("clean", "set-up", "candidates", "recost", "pool", "pick and check", "apply",
-                  "relocate and output", "total"):
+                  "relocate and output", "touch-up", "total"):
         assert s[stage] >= 0.0
     parts = sum(v for k, v in s.items() if k != "total")
     assert parts <= s["total"] and parts >= 0.5 * s["total"]
