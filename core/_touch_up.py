@@ -14,7 +14,9 @@ the worst few places (within ``Tuning.touch_share`` of the largest distance):
     flip    an edge of the cage face nearest an input point far from the
             cage (the other diagonal of the two faces)
 
-A change is kept when it lowers the largest distance of its *region*: the
+A change is kept when it lowers the largest distance of its *region* (by at
+least ``1 - Tuning.touch_gain``: smaller gains cost more mean distance than they
+are worth): the
 samples on the faces it changes (their distance to the input, exact) and the
 input vertices whose nearest cage face is one of them (their distance to the
 changed faces: a bound, they may now be nearer another face). Nothing else
@@ -30,11 +32,11 @@ from them.
 
 On the 23 quality cases (the shared meshes at 10%, 2% and 1,000 faces,
 against Blender's Decimate, 2026-12-04) it took the geometric mean of the
-Hausdorff distance from 0.778 to 0.748 and the worst case (the beetle at
+Hausdorff distance from 0.778 to 0.750 and the worst case (the beetle at
 1,000 faces, a cage vertex 0.41% of the diagonal off the input) from 1.29 to
-1.21, for a mean distance 0.718 -> 0.733 (a vertex on the input is not where
+1.21, for a mean distance 0.718 -> 0.731 (a vertex on the input is not where
 the squared distances want it); averaged over three jittered copies 0.778 ->
-0.757 and 0.718 -> 0.732. It costs an index of the input, so it runs where
+0.757 and 0.718 -> 0.730. It costs an index of the input, so it runs where
 the relocation's backward pull does (inputs up to
 ``Tuning.relocate_back_max_faces``): 20-100 ms on 5k-20k-face inputs.
 """
@@ -124,8 +126,8 @@ def touch_up(V, F, Vin, Fin, fixed, keep_edges, tun, N_keep=None):
     keep_edges : (e,2) int64
         Cage edges that must not be flipped besides the border (creases).
     tun : Tuning
-        ``touch_rounds``, ``touch_candidates``, ``touch_share``, ``relocate_min_cos``,
-        ``gamma_hard``.
+        ``touch_rounds``, ``touch_candidates``, ``touch_share``, ``touch_gain``,
+        ``relocate_min_cos``, ``gamma_hard``.
     N_keep : (n,3) float64 or None
         Per cage vertex, the summed normals of the input it stands for: a
         face whose normal ends more than 90 degrees from the sum of its
@@ -154,7 +156,7 @@ def touch_up(V, F, Vin, Fin, fixed, keep_edges, tun, N_keep=None):
             if not _acceptable(V, W, F, change, tun, N_keep):
                 continue
             after = _region_after(W, change, inputs, P, gaps)
-            if after.far < _region_was(change.faces, gaps):
+            if after.far < tun.touch_gain * _region_was(change.faces, gaps):
                 V, F = W, F.copy()       # (the generator reads the round's own V and F)
                 F[change.faces] = change.rows
                 after.record(gaps, change)
