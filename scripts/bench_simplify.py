@@ -9,7 +9,7 @@ Run with the bpy venv's Python (Blender as a module, NumPy 1.26)::
 
 For every case Decimate runs first; ``core.simplify`` then gets Decimate's
 output face count as ``target_faces`` so both end at the same size. Where
-the ``meshoptimizer`` Python binding installs (``pip install pymeshoptimizer``,
+the ``meshoptimizer`` Python binding installs (``.venv/bin/pip install meshoptimizer``,
 a benchmark-only dependency: C++, one thread, float32), its ``simplify`` runs
 in the same process as a second reference (its output is not cleaned: it can
 leave unreferenced vertices and does not promise a manifold). Errors
