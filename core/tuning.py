@@ -111,15 +111,16 @@ class Tuning:
     #: distance around it), for inputs that get the backward pull: at most this many
     #: rounds (0: off) ...
     touch_rounds: int = 3
-    #: ... each trying this many of the cage vertices farthest from the input and the
-    #: faces nearest as many input vertices farthest from the cage
+    #: ... each trying this many of the cage vertices farthest from the input, of the
+    #: cage faces farthest from it and of the faces nearest the input vertices farthest
+    #: from the cage
     touch_candidates: int = 8
     #: ... among those at least this share of the cage's largest distance (the others'
     #: moves onto the input cost more in mean distance than they save in the largest)
     touch_share: float = 0.9
     #: ... keeping a change only where the largest distance around it falls below this
-    #: share of what it was (the 23 quality cases: 1.0 gave mean / Hausdorff geomeans
-    #: 0.733 / 0.748, 0.98 0.731 / 0.750, 0.95 0.727 / 0.755)
+    #: share of what it was (the 23 quality cases, before the far faces' flips: 1.0 gave
+    #: mean / Hausdorff geomeans 0.733 / 0.748, 0.98 0.731 / 0.750, 0.95 0.727 / 0.755)
     touch_gain: float = 0.98
     #: ... and only when some collapse had an error above this (a share of the diagonal):
     #: a cage whose every collapse was free (a flat grid, a cube: 4e-8 and 7e-9 of
