@@ -1,7 +1,7 @@
 """The touch-up of a finished cage's farthest places (core._touch_up, run by simplify).
 
 Built inputs: a roof whose two-face cage cuts across the ridge gets the ridge
-diagonal (a flip) and lies on it, unless that edge is kept; a cage vertex
+diagonal (a flip) and lies on it; with that edge kept a corner rises instead; a cage vertex
 pushed off a sphere goes back onto it, unless it is fixed; the largest
 distance never grows, the topology never changes. Through simplify: the
 beetle at 1,000 faces (a cage vertex 0.41% of the diagonal off the input
@@ -53,11 +53,16 @@ def test_a_cage_across_a_ridge_gets_the_ridge_edge():
     assert manifold_report(F2, 4).is_oriented_manifold
 
 
-def test_a_kept_edge_is_not_flipped():
+def test_a_kept_edge_is_not_flipped_and_a_corner_moves_instead():
+    # the diagonal across the ridge kept: its midpoint stays far under the ridge unless a
+    # corner rises (corners on the input, a face cutting across it)
     Vin, Fin = _roof()
     V, F = _two_face_cage(Vin)
-    V2, F2, _ = touch_up(V, F, Vin, Fin, np.zeros(4, dtype=bool), np.array([[3, 1]]), TUNING)
+    before = _largest(V, F, Vin, Fin)
+    V2, F2, moved = touch_up(V, F, Vin, Fin, np.zeros(4, dtype=bool), np.array([[3, 1]]), TUNING)
     assert np.array_equal(F2, F)
+    assert moved.any() and _largest(V2, F2, Vin, Fin) < TUNING.touch_gain * before
+    assert np.array_equal(V2[~moved], V[~moved])
 
 
 def _pushed_sphere(k=5, push=0.15):
