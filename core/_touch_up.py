@@ -40,7 +40,7 @@ from them.
 
 On the 23 quality cases (the shared meshes at 10%, 2% and 1,000 faces,
 against Blender's Decimate, 2026-12-04) it took the geometric mean of the
-Hausdorff distance from 0.778 to 0.701 and the worst case (the beetle at
+Hausdorff distance from 0.778 to 0.703 and the worst case (the beetle at
 1,000 faces, a cage vertex 0.41% of the diagonal off the input) from 1.29 to
 1.21, for a mean distance 0.718 -> 0.734 (a vertex on the input is not where
 the squared distances want it); averaged over three jittered copies 0.778 ->
