@@ -55,20 +55,22 @@ from typing import NamedTuple
 import numpy as np
 
 from ._collapse import compactness
-from .mesh import area_normals_rows, squared_edges
+from ._face_tracker import faces_across
+from .mesh import cross_rows
 from .near_query import NearQuery
 from .spatial import TriangleIndex, point_triangle_closest
-from .topology import edge_map
+from .topology import edge_keys, edge_map
 
 __all__ = ["Gaps", "measure_gaps", "touch_up"]
 
-#: barycentric points measured on each face a change rewrites: the corners, the edge
-#: midpoints, the centroid and the quarter points (a face the change turns can move away
-#: from the input between the first seven: with them alone, moves were taken whose other
-#: points went farther, rocker-arm 2% 1.20 -> 1.27 of Decimate's Hausdorff distance)
-_SAMPLES = np.array([[4, 0, 0], [0, 4, 0], [0, 0, 4], [2, 2, 0], [0, 2, 2], [2, 0, 2],
-                     [4 / 3, 4 / 3, 4 / 3], [1, 3, 0], [3, 1, 0], [0, 1, 3], [0, 3, 1],
-                     [1, 0, 3], [3, 0, 1], [2, 1, 1], [1, 2, 1], [1, 1, 2]]) / 4.0
+#: barycentric points measured on each face a change rewrites besides its corners: the
+#: edge midpoints, the centroid and the quarter points (a face the change turns can move
+#: away from the input between the corners, midpoints and centroid: with them alone,
+#: moves were taken whose other points went farther, rocker-arm 2% 1.20 -> 1.27 of
+#: Decimate's Hausdorff distance)
+_SAMPLES = np.array([[2, 2, 0], [0, 2, 2], [2, 0, 2], [4 / 3, 4 / 3, 4 / 3],
+                     [1, 3, 0], [3, 1, 0], [0, 1, 3], [0, 3, 1], [1, 0, 3], [3, 0, 1],
+                     [2, 1, 1], [1, 2, 1], [1, 1, 2]]) / 4.0
 
 
 class Gaps(NamedTuple):
@@ -161,9 +163,12 @@ def touch_up(V, F, Vin, Fin, fixed, keep_edges, tun, N_keep=None):
     for _ in range(tun.touch_rounds):
         taken = np.zeros(F.shape[0], dtype=bool)
         changes = list(_candidates(V, F, gaps, fixed, keep, tun, inputs))
-        changes = [c for c, ok in zip(changes, _acceptable(V, F, changes, tun, N_keep)) if ok]
+        tris = [_points_after(V, c, c.rows) for c in changes]      # (r,3,3) each
+        ok = _acceptable(V, F, changes, tris, tun, N_keep)
+        changes = [c for c, good in zip(changes, ok) if good]
+        tris = [T for T, good in zip(tris, ok) if good]
         done = 0
-        for change, after in zip(changes, _regions_after(V, changes, inputs, P, gaps)):
+        for change, after in zip(changes, _regions_after(V, changes, tris, inputs, P, gaps)):
             # (evaluated all at once on the round's cage: a change whose faces no
             # earlier one took sees its region as it was, and the input vertices
             # there, which a change only ever takes into its own faces)
@@ -242,29 +247,23 @@ def _corner_pulls(V, F, faces, inputs):
 
 
 def _edge_keys(E, n):
-    """Sorted int64 keys ``low * n + high`` of the edges ``E`` (e,2)."""
-    E = np.sort(np.asarray(E, dtype=np.int64).reshape(-1, 2), axis=1)
-    return np.sort(E[:, 0] * n + E[:, 1])
+    """Sorted :func:`~.topology.edge_keys` of the edges ``E`` (e,2)."""
+    E = np.asarray(E, dtype=np.int64).reshape(-1, 2)
+    return np.sort(edge_keys(E[:, 0], E[:, 1], n))
 
 
 def _has(keys, a, b, n):
     """Whether the edge (a, b) is among the sorted ``keys`` (:func:`_edge_keys`)."""
-    key = min(a, b) * n + max(a, b)
+    key = edge_keys(a, b, n)
     i = int(np.searchsorted(keys, key))
     return i < keys.shape[0] and keys[i] == key
 
 
 def _across(F, n):
-    """(m,3) the face across the edge opposite each corner (-1 at a border),
-    and the cage's edge keys (:func:`_edge_keys`)."""
-    em = edge_map(F, n)
-    e = em.face_edge.ravel()
-    order = np.argsort(e, kind="stable")
-    pair = np.full(e.shape[0], -1, dtype=np.int64)
-    two = np.flatnonzero(np.diff(e[order]) == 0)
-    pair[order[two]] = order[two + 1] // 3
-    pair[order[two + 1]] = order[two] // 3
-    return pair.reshape(-1, 3), _edge_keys(em.E, n)
+    """(m,3) the face across the edge opposite each corner (-1 at a border,
+    :func:`~._face_tracker.faces_across`), and the cage's edge keys
+    (:func:`_edge_keys`)."""
+    return faces_across(F, n), np.unique(edge_keys(F.ravel(), F[:, [1, 2, 0]].ravel(), n))
 
 
 def _flipped(F, f, j, across, edges, keep, n):
@@ -280,8 +279,9 @@ def _flipped(F, f, j, across, edges, keep, n):
     return np.array([f, g]), np.array([[c, a, d], [c, d, b]])
 
 
-def _acceptable(V, F, changes, tun, N_keep):
-    """(k,) bool: whether each change rewrites no face turned by more than
+def _acceptable(V, F, changes, tris, tun, N_keep):
+    """(k,) bool: whether each change (``tris``: its new faces' corners,
+    (r,3,3) each) rewrites no face turned by more than
     ``acos(relocate_min_cos)`` from the face it replaces (a flip: from the
     pair's summed normal), none less compact than ``gamma_hard`` and than
     half the least compact of those it replaces, and (with ``N_keep``) none
@@ -293,9 +293,8 @@ def _acceptable(V, F, changes, tun, N_keep):
     first = np.concatenate([[0], np.cumsum([c.faces.size for c in changes])[:-1]])
     old_rows = F[np.concatenate([c.faces for c in changes])]
     rows = np.concatenate([c.rows for c in changes])
-    T = np.concatenate([_corners_after(V, c) for c in changes])
-    old = area_normals_rows(V, old_rows.T)
-    new = np.cross(T[:, 1] - T[:, 0], T[:, 2] - T[:, 0])
+    T_old, T = V[old_rows], np.concatenate(tris)
+    old, new = _normals(T_old), _normals(T)
     flip = np.array([c.vertex < 0 for c in changes])[owner]
     pair = np.add.reduceat(old, first, axis=0)[owner]               # a flip's two faces
     reference = np.where(flip[:, None], pair, old)
@@ -304,16 +303,23 @@ def _acceptable(V, F, changes, tun, N_keep):
         np.linalg.norm(reference, axis=1) * np.linalg.norm(new, axis=1), 1e-300)
     if N_keep is not None:
         ok &= np.einsum("ij,ij->i", new, N_keep[rows].sum(axis=1)) > 0
-    g_old = np.minimum.reduceat(_compactness(V, old_rows), first)[owner]
-    g_new = compactness(np.linalg.norm(new, axis=1), ((T - np.roll(T, -1, axis=1)) ** 2).sum(axis=(1, 2)))
-    ok &= g_new >= np.minimum(tun.gamma_hard, 0.5 * g_old)
+    g_old = np.minimum.reduceat(_compactness(T_old, old), first)[owner]
+    ok &= _compactness(T, new) >= np.minimum(tun.gamma_hard, 0.5 * g_old)
     return np.logical_and.reduceat(ok, first)
 
 
-def _compactness(V, F):
-    """:func:`~._collapse.compactness` of every face of ``F`` over ``V``."""
-    return compactness(np.linalg.norm(area_normals_rows(V, F.T), axis=1),
-                       squared_edges(V, F).sum(axis=1))
+def _normals(T):
+    """(k,3) the area normals of the triangles with corners ``T`` (k,3,3)
+    (those of :func:`~.mesh.area_normals_rows`, the same bits)."""
+    return cross_rows(T[:, 1] - T[:, 0], T[:, 2] - T[:, 0])
+
+
+def _compactness(T, N):
+    """:func:`~._collapse.compactness` of the triangles with corners ``T``
+    (k,3,3) and area normals ``N`` (k,3) (edge sums as
+    :func:`~.mesh.squared_edges` makes them)."""
+    E = np.roll(T, -1, axis=1) - T
+    return compactness(np.linalg.norm(N, axis=1), np.einsum("ijk,ijk->ij", E, E).sum(axis=1))
 
 
 def _region_was(faces, points, gaps):
@@ -326,7 +332,7 @@ def _region_was(faces, points, gaps):
 class _After(NamedTuple):
     """A region's distances after a change (:func:`_regions_after`)."""
 
-    face_far: np.ndarray   #: (r,) of its new faces
+    face_far: np.ndarray   #: (r,) of its new faces (their corners and ``_SAMPLES``)
     vertices: np.ndarray   #: (c,) its faces' corners ...
     near: object           #: ... their closest input points (ClosestPoints)
     points: np.ndarray     #: (p,) the input vertices whose nearest face was one of its old ones ...
@@ -336,23 +342,21 @@ class _After(NamedTuple):
     @property
     def far(self):
         """The region's largest distance either way."""
-        return max(float(self.face_far.max()), float(self.near.distance.max()),
-                   float(self.point_far.max(initial=0.0)))
+        return max(float(self.face_far.max()), float(self.point_far.max(initial=0.0)))
 
     def record(self, gaps, change):
         """Write these distances into ``gaps`` (in place) once ``change`` is made."""
-        gaps.face_far[change.faces] = np.maximum(self.face_far,
-                                                 self.near.distance[np.searchsorted(
-                                                     self.vertices, change.rows)].max(axis=1))
+        gaps.face_far[change.faces] = self.face_far
         gaps.vertex_far[self.vertices] = self.near.distance
         gaps.vertex_near[self.vertices] = self.near.point
         gaps.point_far[self.points] = self.point_far
         gaps.point_face[self.points] = self.point_face
 
 
-def _regions_after(V, changes, inputs, P, gaps):
+def _regions_after(V, changes, tris, inputs, P, gaps):
     """The :class:`_After` of each of the ``changes`` on the cage ``V`` (each
-    alone): its new faces' corners and ``_SAMPLES`` to the input, and the
+    alone; ``tris``: its new faces' corners, (r,3,3) each): its new faces'
+    corners and ``_SAMPLES`` to the input, and the
     input vertices whose nearest cage face was one of its old ones to the
     new faces (the nearest of them: a bound, they may be nearer another face
     now). One closest-point query and one pass of the point-triangle kernel
@@ -360,9 +364,8 @@ def _regions_after(V, changes, inputs, P, gaps):
     if not changes:
         return []
     corners = [np.unique(c.rows) for c in changes]
-    tris = [_corners_after(V, c) for c in changes]                     # (r,3,3) each
     samples = [np.einsum("sk,rkd->rsd", _SAMPLES, T).reshape(-1, 3) for T in tris]
-    ends = [c.positions(V)[k] for c, k in zip(changes, corners)]
+    ends = [_points_after(V, c, k) for c, k in zip(changes, corners)]
     hit = inputs.closest(np.concatenate(samples + ends))
     by_face = np.argsort(gaps.point_face, kind="stable")      # the input vertices of each face
     start = np.searchsorted(gaps.point_face[by_face], np.arange(gaps.face_far.shape[0] + 1))
@@ -374,8 +377,9 @@ def _regions_after(V, changes, inputs, P, gaps):
     out, at, pair = [], [0, sum(x.shape[0] for x in samples)], 0
     for c, k, x, m, Tc in zip(changes, corners, samples, mine, tris):
         r = Tc.shape[0]
-        face_far = hit.distance[at[0]:at[0] + x.shape[0]].reshape(r, -1).max(axis=1)
         near = type(hit)(*(a[at[1]:at[1] + k.size] for a in hit))
+        face_far = np.maximum(hit.distance[at[0]:at[0] + x.shape[0]].reshape(r, -1).max(axis=1),
+                              near.distance[np.searchsorted(k, c.rows)].max(axis=1))
         dm = d[pair:pair + m.size * r].reshape(-1, r)
         best = np.argmin(dm, axis=1)
         out.append(_After(face_far, k, near, m, dm[np.arange(m.size), best], c.faces[best]))
@@ -383,9 +387,9 @@ def _regions_after(V, changes, inputs, P, gaps):
     return out
 
 
-def _corners_after(V, change):
-    """(r,3,3) the corner positions of the faces a change rewrites, after it."""
-    T = V[change.rows]
+def _points_after(V, change, idx):
+    """The positions ``V[idx]`` (any shape of vertex ids) after ``change``."""
+    X = V[idx]
     if change.vertex >= 0:
-        T[change.rows == change.vertex] = change.to
-    return T
+        X[idx == change.vertex] = change.to
+    return X

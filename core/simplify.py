@@ -520,6 +520,7 @@ def _cage_of(su, mesh, stopped, passes, opts, relocate=True):
     tun = opts["tuning"]
     t0 = time.perf_counter()
     F_out, touched = mesh.F, None
+    features = _feature_edges(mesh)       # (the touch-up flips none: the same after it)
     if (relocate and tun.relocate_iters > 0 and passes > 0
             and mesh.F.shape[0] <= min(tun.relocate_max_faces, tun.relocate_max_share * su.m0)):
         cos_max = opts["dihedral_cos"]
@@ -531,7 +532,7 @@ def _cage_of(su, mesh, stopped, passes, opts, relocate=True):
         elif (cos_max is None and su.Fin is not None and tun.touch_rounds > 0
               and mesh.worst > tun.touch_min_error):
             t1 = time.perf_counter()
-            F_out = _touched_up(su, mesh, tun)
+            F_out = _touched_up(su, mesh, features, tun)
             touched = time.perf_counter() - t1
     # back to the caller's units; vertices never moved keep their exact input position
     Vout = mesh.V * su.scale + su.centre
@@ -545,7 +546,7 @@ def _cage_of(su, mesh, stopped, passes, opts, relocate=True):
     cur = mesh.cur_of_clean
     of_clean = np.empty(su.order.size, dtype=np.int64)
     of_clean[su.order] = np.where(cur >= 0, new_v[np.maximum(cur, 0)], -1)
-    a, b = (new_v[e] for e in _feature_edges(mesh).T)
+    a, b = (new_v[e] for e in features.T)
     fe = np.stack([np.minimum(a, b), np.maximum(a, b)], axis=1)
     fe = fe[np.lexsort((fe[:, 1], fe[:, 0]))]
     forder_out = np.argsort(mesh.forig, kind="stable")
@@ -565,13 +566,13 @@ def _feature_edges(mesh):
     return np.stack(half_edge_ends(mesh.F, hf), axis=1)
 
 
-def _touched_up(su, mesh, tun):
+def _touched_up(su, mesh, features, tun):
     """The relocated cage's farthest places from the input touched up
     (:func:`~._touch_up.touch_up`; its locked vertices stay, its feature
-    edges are not flipped): ``mesh.V`` and ``mesh.moved`` updated, the new
-    faces returned (``mesh.F``, whose half-edge tables they would no longer
-    match, is left as it is)."""
-    V, F, moved = touch_up(mesh.V, mesh.F, su.Vn, su.Fin, mesh.locked, _feature_edges(mesh), tun,
+    edges ``features`` are not flipped): ``mesh.V`` and ``mesh.moved``
+    updated, the new faces returned (``mesh.F``, whose half-edge tables they
+    would no longer match, is left as it is)."""
+    V, F, moved = touch_up(mesh.V, mesh.F, su.Vn, su.Fin, mesh.locked, features, tun,
                            mesh.Nref if tun.ref_cos > -1.0 else None)
     mesh.V = V
     mesh.moved |= moved
