@@ -168,11 +168,12 @@ def touch_up(V, F, Vin, Fin, fixed, keep_edges, tun, N_keep=None):
         changes = [c for c, good in zip(changes, ok) if good]
         tris = [T for T, good in zip(tris, ok) if good]
         done = 0
-        for change, after in zip(changes, _regions_after(V, changes, tris, inputs, P, gaps)):
+        for change, after in zip(changes, _regions_after(V, changes, tris, inputs, P, gaps,
+                                                         tun.touch_gain)):
             # (evaluated all at once on the round's cage: a change whose faces no
             # earlier one took sees its region as it was, and the input vertices
             # there, which a change only ever takes into its own faces)
-            if taken[change.faces].any() or \
+            if after is None or taken[change.faces].any() or \
                     after.far >= tun.touch_gain * _region_was(change.faces, after.points, gaps):
                 continue
             V = change.positions(V)
@@ -353,14 +354,16 @@ class _After(NamedTuple):
         gaps.point_face[self.points] = self.point_face
 
 
-def _regions_after(V, changes, tris, inputs, P, gaps):
+def _regions_after(V, changes, tris, inputs, P, gaps, gain):
     """The :class:`_After` of each of the ``changes`` on the cage ``V`` (each
     alone; ``tris``: its new faces' corners, (r,3,3) each): its new faces'
     corners and ``_SAMPLES`` to the input, and the
     input vertices whose nearest cage face was one of its old ones to the
     new faces (the nearest of them: a bound, they may be nearer another face
-    now). One closest-point query and one pass of the point-triangle kernel
-    for all of them."""
+    now). None for a change whose new faces alone are already at least
+    ``gain`` times its region's largest distance (it cannot be kept: its
+    input vertices are not measured). One closest-point query and one pass
+    of the point-triangle kernel for all of them."""
     if not changes:
         return []
     corners = [np.unique(c.rows) for c in changes]
@@ -369,21 +372,41 @@ def _regions_after(V, changes, tris, inputs, P, gaps):
     hit = inputs.closest(np.concatenate(samples + ends))
     by_face = np.argsort(gaps.point_face, kind="stable")      # the input vertices of each face
     start = np.searchsorted(gaps.point_face[by_face], np.arange(gaps.face_far.shape[0] + 1))
-    mine = [np.sort(np.concatenate([by_face[start[f]:start[f + 1]] for f in c.faces]))
-            for c in changes]
-    X = np.concatenate([np.repeat(P[m], T.shape[0], axis=0) for m, T in zip(mine, tris)])
-    T = np.concatenate([np.tile(T, (m.size, 1, 1)) for m, T in zip(mine, tris)]).reshape(-1, 3, 3)
-    d = point_triangle_closest(X, T[:, 0], T[:, 1], T[:, 2]).distance
-    out, at, pair = [], [0, sum(x.shape[0] for x in samples)], 0
-    for c, k, x, m, Tc in zip(changes, corners, samples, mine, tris):
+    found, at = [], [0, sum(x.shape[0] for x in samples)]
+    for c, k, x, Tc in zip(changes, corners, samples, tris):
         r = Tc.shape[0]
         near = type(hit)(*(a[at[1]:at[1] + k.size] for a in hit))
         face_far = np.maximum(hit.distance[at[0]:at[0] + x.shape[0]].reshape(r, -1).max(axis=1),
                               near.distance[np.searchsorted(k, c.rows)].max(axis=1))
+        m = np.sort(np.concatenate([by_face[start[f]:start[f + 1]] for f in c.faces]))
+        hopeless = float(face_far.max()) >= gain * _region_was(c.faces, m, gaps)
+        found.append(None if hopeless else (face_far, k, near, m, Tc))
+        at = [at[0] + x.shape[0], at[1] + k.size]
+    return _with_points(found, changes, P)
+
+
+def _with_points(found, changes, P):
+    """The :class:`_After` of each change from ``found`` (its new faces'
+    distances, corners, their closest input points, its input vertices and
+    its new faces' corners; None stays None): the input vertices' distances
+    to the new faces, one pass of the point-triangle kernel for all."""
+    live = [f for f in found if f is not None]
+    if not live:
+        return found
+    X = np.concatenate([np.repeat(P[m], T.shape[0], axis=0) for *_, m, T in live])
+    T = np.concatenate([np.tile(T, (m.size, 1, 1)) for *_, m, T in live]).reshape(-1, 3, 3)
+    d = point_triangle_closest(X, T[:, 0], T[:, 1], T[:, 2]).distance
+    out, pair = [], 0
+    for c, f in zip(changes, found):
+        if f is None:
+            out.append(None)
+            continue
+        face_far, k, near, m, Tc = f
+        r = Tc.shape[0]
         dm = d[pair:pair + m.size * r].reshape(-1, r)
         best = np.argmin(dm, axis=1)
         out.append(_After(face_far, k, near, m, dm[np.arange(m.size), best], c.faces[best]))
-        at, pair = [at[0] + x.shape[0], at[1] + k.size], pair + m.size * r
+        pair += m.size * r
     return out
 
 

@@ -521,7 +521,7 @@ def _cage_of(su, mesh, stopped, passes, opts, relocate=True):
     t0 = time.perf_counter()
     F_out, touched = mesh.F, None
     features = _feature_edges(mesh)       # (the touch-up flips none: the same after it)
-    if (relocate and tun.relocate_iters > 0 and passes > 0
+    if (relocate and tun.relocate_iters > 0 and passes > 0 and mesh.worst > tun.free_error
             and mesh.F.shape[0] <= min(tun.relocate_max_faces, tun.relocate_max_share * su.m0)):
         cos_max = opts["dihedral_cos"]
         V0, moved0 = mesh.V, mesh.moved.copy()
@@ -529,8 +529,7 @@ def _cage_of(su, mesh, stopped, passes, opts, relocate=True):
         _relocate_cage(mesh, su.Vn, su.creases, su.Eb_in, su.Fin, tun)
         if cos_max is not None and ((_bend_cosines(mesh) < cos_max) & (bend0 >= cos_max)).any():
             mesh.V, mesh.moved = V0, moved0      # it would bend faces beyond the bound: undone
-        elif (cos_max is None and su.Fin is not None and tun.touch_rounds > 0
-              and mesh.worst > tun.touch_min_error):
+        elif cos_max is None and su.Fin is not None and tun.touch_rounds > 0:
             t1 = time.perf_counter()
             F_out = _touched_up(su, mesh, features, tun)
             touched = time.perf_counter() - t1

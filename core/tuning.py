@@ -123,10 +123,11 @@ class Tuning:
     #: share of what it was (the 23 quality cases, before the far faces' flips: 1.0 gave
     #: mean / Hausdorff geomeans 0.733 / 0.748, 0.98 0.731 / 0.750, 0.95 0.727 / 0.755)
     touch_gain: float = 0.98
-    #: ... and only when some collapse had an error above this (a share of the diagonal):
-    #: a cage whose every collapse was free (a flat grid, a cube: 4e-8 and 7e-9 of
-    #: rounding) lies on the input
-    touch_min_error: float = 1e-6
+    #: a cage whose every collapse had an error of at most this (a share of the diagonal)
+    #: lies on the input (a flat grid, a cube: 4e-8 and 7e-9 of rounding): it is neither
+    #: relocated (its vertices moved by 0-2e-10 of the diagonal, for 30-40 ms at 2,000
+    #: faces) nor touched up
+    free_error: float = 1e-6
     #: preserve_topology=False removes stuck components up to this size (share of the diagonal)
     relax_max_size: float = 0.25
     cap_apex_tries: int = 8          #: ... caps a hole from one of this many rim vertices

@@ -690,6 +690,23 @@ def test_relocation_samples_the_input_not_the_collapsed_positions(monkeypatch):
     assert np.array_equal(seen["start"], seen["relocate"])
 
 
+def test_a_cage_whose_every_collapse_was_free_is_not_relocated():
+    # a flat grid and a cube simplify exactly (every collapse's error is rounding): their
+    # cage is the engine's, bit for bit, with or without the relocation; a curved
+    # surface's is moved by it
+    plain = replace(TUNING, relocate_iters=0)
+    for V, F, target in ((*regular_grid(40, 40), 200), (*cube(20), 200)):
+        r = simplify(V, F, target_faces=target)
+        assert r.max_error <= TUNING.free_error * bbox_diagonal(V)
+        assert "touch-up" not in r.seconds
+        unmoved = simplify(V, F, target_faces=target, tuning=plain)
+        assert np.array_equal(r.V, unmoved.V) and np.array_equal(r.F, unmoved.F)
+    V, F = torus(40, 20, bump=0.2)
+    r, unmoved = simplify(V, F, target_faces=200), simplify(V, F, target_faces=200, tuning=plain)
+    assert r.max_error > TUNING.free_error * bbox_diagonal(V)
+    assert r.F.shape == unmoved.F.shape and not np.array_equal(r.V, unmoved.V)
+
+
 def test_relaxed_topology_caps_holes_of_any_size_smallest_first():
     # a sphere with a wide hole (a rim of many edges) and a small one: kept, the
     # wide rim stays, and the small hole too until it stops the cage short of a

@@ -18,6 +18,7 @@ from core.simplify import simplify
 from core.spatial import TriangleIndex
 from core.topology import edge_map, manifold_report
 from core.tuning import TUNING
+from core import _touch_up as stages
 from core._touch_up import measure_gaps, touch_up
 from tests.mesh_factory import icosphere, load_shared, regular_grid
 
@@ -99,6 +100,37 @@ def test_the_largest_distance_never_grows_and_the_topology_stays():
     assert F2.shape == cage.F.shape
     assert manifold_report(F2, V2.shape[0]).is_oriented_manifold
     assert V2.shape[0] - edge_map(F2, V2.shape[0]).E.shape[0] + F2.shape[0] == 2
+
+
+def test_changes_that_cannot_be_kept_are_not_measured_further():
+    # a change whose new faces alone are already too far is left out of the input-vertex
+    # pass: every other change's distances are those of the full evaluation, bit for bit,
+    # and every one left out is one the full evaluation would refuse
+    rng = np.random.default_rng(5)
+    Vin, Fin = icosphere(4)
+    Vin = Vin * (1.0 + 0.03 * rng.standard_normal((Vin.shape[0], 1)))
+    cage = simplify(Vin, Fin, target_faces=150, tuning=dataclasses.replace(TUNING, touch_rounds=0))
+    V, F = cage.V, cage.F
+    inputs = TriangleIndex(Vin, Fin)
+    gaps = measure_gaps(V, F, inputs, Vin)
+    fixed = np.zeros(V.shape[0], dtype=bool)
+    keep = stages._edge_keys(np.zeros((0, 2), dtype=np.int64), V.shape[0])
+    changes = list(stages._candidates(V, F, gaps, fixed, keep, TUNING, inputs))
+    tris = [stages._points_after(V, c, c.rows) for c in changes]
+    gain = TUNING.touch_gain
+    quick = stages._regions_after(V, changes, tris, inputs, Vin, gaps, gain)
+    full = stages._regions_after(V, changes, tris, inputs, Vin, gaps, np.inf)
+    assert len(quick) == len(full) == len(changes) and all(a is not None for a in full)
+    left_out = [q is None for q in quick]
+    assert any(left_out) and not all(left_out)
+    for change, q, a in zip(changes, quick, full):
+        if q is None:
+            assert a.far >= gain * stages._region_was(change.faces, a.points, gaps)
+        else:
+            for x, y in zip(q, a):
+                if isinstance(x, np.ndarray):
+                    assert np.array_equal(x, y)
+            assert np.array_equal(q.near.distance, a.near.distance)
 
 
 def test_simplify_brings_the_beetle_closer():
