@@ -58,7 +58,7 @@ from ._collapse import compactness
 from ._face_tracker import faces_across
 from .mesh import cross_rows
 from .near_query import NearQuery
-from .spatial import TriangleIndex, point_triangle_closest
+from .spatial import point_triangle_closest
 from .topology import edge_keys, edge_map
 
 __all__ = ["Gaps", "measure_gaps", "touch_up"]
@@ -90,7 +90,8 @@ class Gaps(NamedTuple):
 
 def measure_gaps(V, F, inputs, P):
     """:class:`Gaps` of the cage ``(V, F)`` against the input (``inputs``, a
-    :class:`~.spatial.TriangleIndex` of it, and ``P``, its vertices)."""
+    :class:`~.near_query.NearQuery` or :class:`~.spatial.TriangleIndex` of
+    it, and ``P``, its vertices)."""
     near = inputs.closest(V)
     far = _face_far(V, F, inputs)
     hit = NearQuery(V, F).closest(P)
@@ -156,7 +157,7 @@ def touch_up(V, F, Vin, Fin, fixed, keep_edges, tun, N_keep=None):
     moved = np.zeros(V.shape[0], dtype=bool)
     if F.shape[0] < 2 or Fin.shape[0] == 0:
         return V, F, moved
-    inputs = TriangleIndex(Vin, Fin)
+    inputs = NearQuery(Vin, Fin)       # (its queries near the input: half the time of an index's)
     P = Vin[np.unique(Fin)]
     keep = _edge_keys(keep_edges, V.shape[0])
     gaps = measure_gaps(V, F, inputs, P)
