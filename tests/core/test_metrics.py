@@ -6,7 +6,9 @@ from hypothesis import given, settings, strategies as st
 
 import core
 from core.errors import InvalidArgumentError, InvalidMeshError
+from core import metrics
 from core.metrics import SurfaceDistance, sample_surface, surface_distance
+from core.near_query import NearQuery
 from core.spatial import TriangleIndex
 from tests.mesh_factory import cube, icosphere, load_shared, regular_grid, torus
 
@@ -189,6 +191,25 @@ def test_property_bounds_and_triangle_inequality(seed):
     assert 0 <= d.mean <= d.rms <= d.hausdorff + 1e-15
     moved = surface_distance(W, F, W + t, F, samples=500, seed=seed)
     assert moved.hausdorff <= np.linalg.norm(t) * (1 + 1e-12)
+
+
+def test_both_searches_give_the_same_distances_and_each_is_used_where_it_is_faster():
+    # a bumpy torus against a coarse copy: the near-surface search and the plain index
+    # give the same one-sided distances, bit for bit; the near search is taken where
+    # the queries are at least as many as the faces
+    rng = np.random.default_rng(2)
+    V, F = torus(60, 30, bump=0.1)
+    V = V + 0.002 * rng.standard_normal(V.shape)
+    Vc, Fc = torus(12, 6)
+    for (Vt, Ft), (Vq, Fq) in (((V, F), (Vc, Fc)), ((Vc, Fc), (V, F))):
+        samples = sample_surface(Vq, Fq, 20000, seed=1).points
+        near = metrics._one_side(NearQuery(Vt, Ft), samples, Vq)
+        plain = metrics._one_side(TriangleIndex(Vt, Ft), samples, Vq)
+        assert near == plain
+    few, many = np.zeros((10, 3)), np.zeros((F.shape[0], 3))
+    assert isinstance(metrics._index_for(V, F, few), TriangleIndex)
+    assert isinstance(metrics._index_for(V, F, many), NearQuery)
+    assert isinstance(metrics._index_for(V, F, many[:-10], few), NearQuery)
 
 
 def test_real_mesh_bunny_vs_perturbed_copy():
