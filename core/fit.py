@@ -40,6 +40,7 @@ from .mesh import (barycentric_gather, barycentric_scatter, bbox_diagonal, bound
                    cross_rows, face_areas, squared_edges, vertex_normals)
 from .metrics import sample_surface
 from .mirror import axis_index, mirror_partners, symmetrize
+from .near_query import search_for
 from .spatial import TriangleIndex
 from .subdivide import subdivision_operator
 from .topology import edge_map
@@ -245,7 +246,7 @@ def _match(pb, X):
     area = _vertex_areas(Vf, Ff, pb.op.n_fine)
     total = area.sum()
     area = area / total if total > 0 else np.full(pb.op.n_fine, 1.0 / pb.op.n_fine)
-    return _Matches(area, pb.dense_index.closest(Vf), TriangleIndex(Vf, Ff).closest(pb.P))
+    return _Matches(area, pb.dense_index.closest(Vf), search_for(Vf, Ff, pb.P.shape[0]).closest(pb.P))
 
 
 def _metric(mu, N, Y):

@@ -3,7 +3,7 @@
 Cignoni, Rocchini, Scopigno, *Metro: measuring error on simplified surfaces*
 (Computer Graphics Forum 17(2), 1998). Each surface is sampled (area-weighted,
 uniform on every triangle) and every sample, plus every vertex, is sent to the
-exact closest point on the other surface (see :func:`_index_for`)::
+exact closest point on the other surface (:func:`~.near_query.search_for`)::
 
     A --samples + vertices--> closest point on B  ->  d_AB (max, mean, rms)
     B --samples + vertices--> closest point on A  ->  d_BA (max, mean, rms)
@@ -26,8 +26,7 @@ from typing import NamedTuple
 import numpy as np
 
 from .mesh import bbox_diagonal, check_count, check_mesh, face_areas
-from .near_query import NearQuery
-from .spatial import TriangleIndex
+from .near_query import search_for
 from .pages import plain_pages
 
 __all__ = ["SurfaceSamples", "SurfaceDistance", "sample_surface", "surface_distance"]
@@ -143,19 +142,6 @@ def sample_surface(V, F, n_samples, *, seed=0):
     return _sample(V, F, n, np.random.default_rng(seed))
 
 
-def _index_for(V, F, *queries):
-    """The closest-point search over ``(V, F)`` for the point sets ``queries``
-    (the same exact answers either way): a :class:`~.near_query.NearQuery`
-    when they are at least as many as the faces (its searches near a surface
-    take about half the time: the bunny against a 1,000-face cage 1.1-1.2 ->
-    0.54-0.59 s), else a plain :class:`~.spatial.TriangleIndex` (a 1.1M-face
-    scan against its 10k-face cage, 205k queries on its side: its build is
-    most of the time, and a NearQuery's takes 190 MiB more)."""
-    if F.shape[0] <= sum(q.shape[0] for q in queries):
-        return NearQuery(V, F)
-    return TriangleIndex(V, F)
-
-
 def _one_side(index, P_samples, P_vertices):
     d_s = index.closest(P_samples).distance if P_samples.shape[0] else np.zeros(0)
     d_v = index.closest(P_vertices).distance
@@ -216,8 +202,10 @@ def surface_distance(V_a, F_a, V_b, F_b, *, samples=None, seed=0):
     diagonal = bbox_diagonal(used_a)
     s_a = _sample(V_a, F_a, n, np.random.default_rng(seed)).points
     s_b = _sample(V_b, F_b, n, np.random.default_rng(seed)).points
-    ab_max, ab_mean, ab_rms = _one_side(_index_for(V_b, F_b, s_a, used_a), s_a, used_a)
-    ba_max, ba_mean, ba_rms = _one_side(_index_for(V_a, F_a, s_b, used_b), s_b, used_b)
+    ab_max, ab_mean, ab_rms = _one_side(search_for(V_b, F_b, s_a.shape[0] + used_a.shape[0]),
+                                        s_a, used_a)
+    ba_max, ba_mean, ba_rms = _one_side(search_for(V_a, F_a, s_b.shape[0] + used_b.shape[0]),
+                                        s_b, used_b)
     return SurfaceDistance(
         hausdorff=max(ab_max, ba_max), mean=max(ab_mean, ba_mean), rms=max(ab_rms, ba_rms),
         a_to_b_max=ab_max, a_to_b_mean=ab_mean, b_to_a_max=ba_max, b_to_a_mean=ba_mean,

@@ -8,7 +8,7 @@ import core
 from core.errors import InvalidArgumentError, InvalidMeshError
 from core import metrics
 from core.metrics import SurfaceDistance, sample_surface, surface_distance
-from core.near_query import NearQuery
+from core.near_query import NearQuery, search_for
 from core.spatial import TriangleIndex
 from tests.mesh_factory import cube, icosphere, load_shared, regular_grid, torus
 
@@ -206,10 +206,10 @@ def test_both_searches_give_the_same_distances_and_each_is_used_where_it_is_fast
         near = metrics._one_side(NearQuery(Vt, Ft), samples, Vq)
         plain = metrics._one_side(TriangleIndex(Vt, Ft), samples, Vq)
         assert near == plain
-    few, many = np.zeros((10, 3)), np.zeros((F.shape[0], 3))
-    assert isinstance(metrics._index_for(V, F, few), TriangleIndex)
-    assert isinstance(metrics._index_for(V, F, many), NearQuery)
-    assert isinstance(metrics._index_for(V, F, many[:-10], few), NearQuery)
+    m = F.shape[0]
+    assert isinstance(search_for(V, F, 10), TriangleIndex)
+    assert isinstance(search_for(V, F, m - 1), TriangleIndex)
+    assert isinstance(search_for(V, F, m), NearQuery)
 
 
 def test_real_mesh_bunny_vs_perturbed_copy():
