@@ -246,7 +246,8 @@ def _match(pb, X):
     area = _vertex_areas(Vf, Ff, pb.op.n_fine)
     total = area.sum()
     area = area / total if total > 0 else np.full(pb.op.n_fine, 1.0 / pb.op.n_fine)
-    return _Matches(area, pb.dense_index.closest(Vf), search_for(Vf, Ff, pb.P.shape[0]).closest(pb.P))
+    hit = search_for(Vf, Ff, pb.P.shape[0]).closest(pb.P)
+    return _Matches(area, pb.dense_index.closest(Vf), hit)
 
 
 def _metric(mu, N, Y):
