@@ -1275,20 +1275,27 @@ class _Drag(NamedTuple):
 
 def _normals_at(idx, PT, vertices):
     """Unit normals (3, k) at the given fine vertices (each on at least one
-    face): the sum of the normals of the faces around each, a group per
-    vertex from the fine vertex -> faces index (each face's normal computed
-    once, as :func:`_vertex_normals_t` forms it, then gathered per vertex
-    and summed with ``np.add.reduceat``: in another order than there, so
-    equal to it to rounding), normalised as there."""
+    face), bit for bit :func:`_vertex_normals_t`'s there: every face around
+    them (from the fine vertex -> faces index, ascending) gets its normal
+    once, and each vertex sums those where it is corner 0, 1 and 2 with
+    ``bincount``, in face order, as there (the other corners go to a spare
+    slot), then normalised as there (57k vertices at five levels: 8.1-8.8
+    -> 7.9-8.4 ms, where a gather and ``np.add.reduceat`` per vertex gave
+    the same to rounding only)."""
     counts = idx["vertex_count"][vertices]
     around = idx["faces_by_vertex"][ragged_entries(idx["vertex_start"][vertices], counts)]
-    faces = _distinct(around, idx)
-    stamp = idx["stamp"]
-    T = np.take(idx["corners_t"], faces, axis=1)
+    T = np.take(idx["corners_t"], _distinct(around, idx), axis=1)
     fn = area_normals_t(PT, T)
-    stamp[faces] = np.arange(faces.shape[0])
-    starts = np.cumsum(counts) - counts
-    return _unit_columns(np.add.reduceat(np.take(fn, stamp[around], axis=1), starts, axis=1))
+    k = vertices.shape[0]
+    slot = idx["stamp"]
+    slot[T] = k                                # every corner to the spare slot ...
+    slot[vertices] = np.arange(k)              # ... but those asked for
+    at = [slot[T[c]] for c in range(3)]
+    out = np.empty((3, k + 1))
+    for d in range(3):
+        out[d] = np.bincount(at[0], fn[d], k + 1) + np.bincount(at[1], fn[d], k + 1) \
+            + np.bincount(at[2], fn[d], k + 1)
+    return _unit_columns(np.ascontiguousarray(out[:, :k]))
 
 
 class _Rows(NamedTuple):

@@ -250,6 +250,26 @@ def test_incremental_after_a_deform_of_another_cage(torus_case):
     assert np.abs(D - deform(b, V3)).max() <= _tol(Vd)
 
 
+def test_recomputed_normals_are_the_full_normals_bit_for_bit(torus_case):
+    # an incremental deform recomputes the fine normals its rows read from the faces
+    # around them, summed as the full deform sums them: on the same fine positions,
+    # the same bits (the positions themselves may differ from a full deform's by rounding)
+    from core import binding as binding_module
+    Vd, Vc, b = torus_case
+    rng = np.random.default_rng(7)
+    D = deform(b, Vc)
+    Ve = Vc.copy()
+    for _ in range(3):
+        ids = rng.choice(Vc.shape[0], 5, replace=False)
+        Ve[ids] += 0.03 * rng.standard_normal((5, 3))
+        deform(b, Ve, moved=ids, out=D)
+        g = b._cache["geometry"]
+        full = binding_module._vertex_normals_t(g.levels[-1], b.operator.F_fine)
+        fresh = ~g.stale
+        assert fresh.sum() > 0.9 * fresh.size
+        assert np.array_equal(g.normals[:, fresh], full[:, fresh])
+
+
 @pytest.mark.parametrize("scheme", ["butterfly", "loop"])
 def test_chain_on_a_fine_mesh_denser_than_the_dense_one(scheme):
     """Most fine faces have no dense vertex bound to them: the normals no row
