@@ -45,9 +45,10 @@ Hausdorff distance from 0.778 to 0.703 and the worst case (the beetle at
 1.21, for a mean distance 0.718 -> 0.734 (a vertex on the input is not where
 the squared distances want it); averaged over three jittered copies 0.778 ->
 0.715 and 0.718 -> 0.738, their worst cases 1.37 / 1.35 / 1.29 -> 1.26 / 1.25
-/ 1.21. It costs an index of the input, so it runs where
-the relocation's backward pull does (inputs up to
-``Tuning.relocate_back_max_faces``): 20-100 ms on 5k-20k-face inputs.
+/ 1.21. It costs a search structure of the input (a
+:class:`~.near_query.NearQuery`), so it runs where the relocation's backward
+pull does (inputs up to ``Tuning.relocate_back_max_faces``): 20-70 ms on
+5k-20k-face inputs.
 """
 
 from typing import NamedTuple
@@ -118,14 +119,6 @@ class _Region(NamedTuple):
     vertex: int         #: the vertex it moves (-1: none, an edge flip)
     to: np.ndarray      #: (3,) where it moves it
 
-    def positions(self, V):
-        """The positions ``V`` with the change's move made (``V`` itself for a flip)."""
-        if self.vertex < 0:
-            return V
-        W = V.copy()
-        W[self.vertex] = self.to
-        return W
-
 
 def touch_up(V, F, Vin, Fin, fixed, keep_edges, tun, N_keep=None):
     """Lower the cage's largest distance to the input at its worst places.
@@ -177,12 +170,11 @@ def touch_up(V, F, Vin, Fin, fixed, keep_edges, tun, N_keep=None):
             if after is None or taken[change.faces].any() or \
                     after.far >= tun.touch_gain * _region_was(change.faces, after.points, gaps):
                 continue
-            V = change.positions(V)
-            F = F.copy()
-            F[change.faces] = change.rows
-            after.record(gaps, change)
+            F[change.faces] = change.rows      # (V, F: this call's own copies)
             if change.vertex >= 0:
+                V[change.vertex] = change.to
                 moved[change.vertex] = True
+            after.record(gaps, change)
             taken[change.faces] = True
             done += 1
         if done == 0:

@@ -1295,7 +1295,7 @@ def _normals_at(idx, PT, vertices):
     for d in range(3):
         out[d] = np.bincount(at[0], fn[d], k + 1) + np.bincount(at[1], fn[d], k + 1) \
             + np.bincount(at[2], fn[d], k + 1)
-    return _unit_columns(np.ascontiguousarray(out[:, :k]))
+    return _unit_columns(out[:, :k])         # (a view: the spare slot left off)
 
 
 class _Rows(NamedTuple):

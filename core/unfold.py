@@ -162,7 +162,7 @@ class FineFaceGroups(NamedTuple):
         """The faces (distinct, ascending, int64) of ``entries`` (from
         :meth:`entries`) whose normal on ``X`` points away from rest (the
         values of :func:`away_rows`)."""
-        away = _pointing_away(X, self.corners, self.rest, entries)
+        away = away_rows(X, self.corners, entries, self.rest)
         return np.unique(self.faces[away]).astype(np.int64, copy=False)
 
 
@@ -271,20 +271,16 @@ def away_t(PT, FT, rest_normals):
 
 
 def away_rows(X, FT, faces, rest_normals):
-    """:func:`away_t` over positions ``X`` (n,3), among ``faces`` (ascending)."""
-    return _pointing_away(X, FT, rest_normals, faces)
-
-
-def _pointing_away(X, T, R, cols):
-    """The columns ``cols`` (ascending stays ascending) of the triangles
-    ``T`` (3,k) whose area normal on ``X`` (n,3) points away from ``R``
-    (3,k): :func:`~.mesh.normal_dots` below 0, in a part per worker thread
-    from ``_AWAY_THREADS_MIN`` columns on (the gathers are most of it: 48k
-    faces around 5 moved cage vertices' rows, 1.66 -> 1.28 ms on two)."""
+    """:func:`away_t` over positions ``X`` (n,3), among the columns ``faces``
+    of the triangles ``FT`` (3,k) and their ``rest_normals`` (3,k) (in their
+    order: ascending stays ascending): :func:`~.mesh.normal_dots` below 0,
+    in a part per worker thread from ``_AWAY_THREADS_MIN`` columns on (the
+    gathers are most of it: 48k faces around 5 moved cage vertices' rows,
+    1.66 -> 1.28 ms on two)."""
     def part(span):
-        c = cols[span[0]:span[1]]
-        return c[normal_dots(X, np.take(T, c, axis=1), np.take(R, c, axis=1)) < 0]
-    n = cols.shape[0]
+        c = faces[span[0]:span[1]]
+        return c[normal_dots(X, np.take(FT, c, axis=1), np.take(rest_normals, c, axis=1)) < 0]
+    n = faces.shape[0]
     return np.concatenate(run_each(part, blocks(n, -(-n // WORKERS)) or [(0, 0)],
                                    threads=n >= _AWAY_THREADS_MIN))
 
