@@ -78,7 +78,7 @@ def test_weld_distance_is_relative_to_the_diagonal_and_zero_welds_exact_duplicat
     assert clean_mesh(E, FE, weld_distance=0.0).report.n_welded_vertices == FE.size - V.shape[0]
 
 
-@pytest.mark.parametrize("jitter, used", [(1e-6, 1e-5), (1e-5, 1e-4)])
+@pytest.mark.parametrize("jitter, used", [(1e-6, 1e-5), (1e-5, 1e-4), (3e-5, 1e-4)])
 def test_the_automatic_weld_widens_for_a_soup_whose_copies_drifted_apart(jitter, used):
     V, F = icosphere(3)
     S, FS = unwelded(V, F, jitter, seed=1)
