@@ -61,7 +61,7 @@ import numpy as np
 
 from .detail_search import dense_points_near, exact_detail_index
 from .errors import CancelledError, InvalidArgumentError, InvalidMeshError, TopologyMismatchError
-from .mesh import area_normals_t, check_mesh, cross_columns, dot_columns
+from .mesh import area_normals_t, check_mesh, check_units, cross_columns, dot_columns
 from .near_query import NearQuery
 from .spatial import TriangleIndex
 from .subdivide import subdivision_operator
@@ -406,6 +406,8 @@ def bind(V_dense, F_dense, V_cage, F_cage, *, levels=2, scheme="butterfly", crea
     """
     V_dense, F_dense = check_mesh(V_dense, F_dense, where="bind")
     V_cage, F_cage = check_mesh(V_cage, F_cage, where="bind", allow_empty=False)
+    check_units(V_dense, where="bind", name="V_dense")
+    check_units(V_cage, where="bind", name="V_cage")
     creases = _normalise_creases(creases, "bind")
     if detail_search not in _DETAIL_SEARCHES:
         raise InvalidArgumentError(
@@ -517,7 +519,8 @@ def deform(binding, V_cage_edited, *, F_cage=None, moved=None, out=None):
         full deform of ``V_cage_edited`` to rounding (the same row-wise frame
         rebuild; its fine positions come from each level's stencil rows,
         summed in another order than the operator's apply plan: about 1e-16
-        of the diagonal).
+        of the diagonal near the origin, of the largest coordinate for a mesh
+        far from it: a few rounding steps of the coordinates).
 
     Notes
     -----
@@ -526,7 +529,9 @@ def deform(binding, V_cage_edited, *, F_cage=None, moved=None, out=None):
     face whose normal turned by more than 90 degrees from rest, and from
     its rest normal turned by the local rotation of the cage, is put back
     with its neighbourhood's rest shape (``Binding.repaired(D)`` lists the
-    rows). Nothing else changes: no edit and rigid motions stay exact.
+    rows). Nothing else changes: no edit and rigid motions stay exact (to
+    rounding: half a step of the largest coordinate, 1e-12 of the diagonal
+    up to about 1e3 diagonals from the origin, 3e-11 at 1e6).
 
     Every deform keeps the subdivided cage it computed in the binding's
     cache (each level's positions and the fine normals, about 57 bytes per
@@ -1101,6 +1106,7 @@ def _check_cage(binding, V_cage_edited, F_cage, where):
     Vc = np.asarray(Vc, dtype=np.float64)
     if not np.isfinite(Vc).all():
         raise InvalidMeshError(f"{where}: V_cage_edited has NaN or infinite coordinates")
+    check_units(Vc, where=where, name="V_cage_edited")
     return Vc
 
 

@@ -36,7 +36,7 @@ import numpy as np
 from .cg import conjugate_gradient
 from .clean import clean_mesh
 from .errors import InvalidArgumentError, InvalidMeshError
-from .mesh import (barycentric_gather, barycentric_scatter, bbox_diagonal, bounding_box, check_mesh,
+from .mesh import (barycentric_gather, barycentric_scatter, bbox_diagonal, bounding_box, check_mesh, check_units,
                    cross_rows, face_areas, squared_edges, vertex_normals)
 from .metrics import sample_surface
 from .mirror import axis_index, mirror_partners, symmetrize
@@ -185,6 +185,8 @@ def _set_up(V_dense, F_dense, V_cage, F_cage, *, levels, scheme, creases, smooth
     and index, and the cage's operator and Laplacian."""
     V_dense, F_dense = check_mesh(V_dense, F_dense, where="fit_cage", allow_empty=False)
     V_cage, F_cage = check_mesh(V_cage, F_cage, where="fit_cage", allow_empty=False)
+    check_units(V_dense, where="fit_cage", name="V_dense")
+    check_units(V_cage, where="fit_cage", name="V_cage")
     dense = clean_mesh(V_dense, F_dense)
     if dense.F.shape[0] == 0:
         raise InvalidMeshError(f"fit_cage: nothing of the dense mesh is left after cleaning "

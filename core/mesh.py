@@ -98,6 +98,37 @@ def check_vertices(V, *, where, name="V", copy=True, faces=None):
     return V_out
 
 
+#: the units :func:`check_units` accepts: coordinates up to ``UNITS[1]`` in absolute
+#: value, a size (bounding-box diagonal) from ``UNITS[0]``. ``fit_cage``, ``bind``,
+#: ``deform`` and ``surface_distance`` compute in the mesh's own units, and their
+#: searches near a surface bound squared distances in float32 (normal from 1.2e-38 to
+#: 3.4e38): from coordinates of 1e19 these overflowed (warnings; ``bind`` failed at
+#: 1e78 and its ``deform`` was 10% of the size off at 1e80) and below sizes of 1e-20
+#: they went subnormal (``fit_cage`` 10-100x slower). ``simplify`` scales the mesh to a
+#: unit size first and takes any units.
+UNITS = (1e-15, 1e15)
+
+
+def check_units(V, *, where, name):
+    """Raise :class:`InvalidMeshError` when the finite (n,3) positions ``V``
+    reach beyond ``UNITS[1]`` in absolute value or span less than
+    ``UNITS[0]`` (a single point spans 0 and passes: other checks name it);
+    ``name`` is the argument named in the message."""
+    lo, hi = bounding_box(V)
+    reach = float(np.maximum(np.abs(lo), np.abs(hi)).max())
+    size = diagonal_length(lo, hi)
+    if reach > UNITS[1]:
+        found = f"reaches {reach:.3g} in its coordinates"
+    elif 0.0 < size < UNITS[0]:
+        found = f"is {size:.3g} across"
+    else:
+        return
+    raise InvalidMeshError(
+        f"{where}: {name} {found}; {where} computes in the mesh's own units and takes "
+        f"coordinates up to {UNITS[1]:g} and sizes from {UNITS[0]:g}: scale the mesh into that "
+        f"range (e.g. to metres or millimetres) first (simplify takes any units)")
+
+
 def _used_by_faces(rows, faces):
     """How many of the vertices ``rows`` the ``faces`` use, as the end of a
     sentence (``", none of them used by a face (...)"``); "" when ``faces``

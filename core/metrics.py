@@ -25,7 +25,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from .mesh import bbox_diagonal, check_count, check_mesh, face_areas
+from .mesh import bbox_diagonal, check_count, check_mesh, check_units, face_areas
 from .near_query import search_for
 from .pages import plain_pages
 
@@ -193,6 +193,8 @@ def surface_distance(V_a, F_a, V_b, F_b, *, samples=None, seed=0):
     """
     V_a, F_a = check_mesh(V_a, F_a, where="surface_distance (mesh a)", allow_empty=False)
     V_b, F_b = check_mesh(V_b, F_b, where="surface_distance (mesh b)", allow_empty=False)
+    check_units(V_a, where="surface_distance", name="mesh a")
+    check_units(V_b, where="surface_distance", name="mesh b")
     if samples is None:
         n = int(np.clip(2 * max(F_a.shape[0], F_b.shape[0]), _MIN_SAMPLES, _MAX_SAMPLES))
     else:

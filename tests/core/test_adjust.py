@@ -6,6 +6,8 @@ identity, and the analytic bend of a bumpy plate (detail carried by the
 edit, compared with the plain subdivided cage).
 """
 
+import warnings
+
 import numpy as np
 import pytest
 from hypothesis import given, settings
@@ -606,3 +608,44 @@ def test_bind_hands_over_the_cache_binding_would_build(name, request):
     for key, value in rebuilt._cache.items():
         np.testing.assert_array_equal(b._cache[key], value)
         assert b._cache[key].flags.c_contiguous and b._cache[key].dtype == value.dtype
+
+
+def test_fit_bind_and_deform_take_units_within_their_range_and_name_those_beyond_it():
+    # fit, bind, deform and surface_distance compute in the mesh's own units (their
+    # searches bound squared distances in float32): at the ends of UNITS the whole
+    # pipeline holds, silently (no overflow or underflow warning) and with identity to
+    # 1e-12 of the size; beyond, a clear error naming the argument (bind failed at 1e78
+    # with a broadcasting error and deformed 10% of the size off at 1e80; fit_cage gave
+    # NaN at 1e100 and took 10-100x longer below sizes of 1e-20)
+    from core.fit import fit_cage
+    from core.mesh import UNITS, check_units
+    from core.metrics import surface_distance
+    from core.simplify import simplify
+    V0, F = torus(48, 24, bump=0.04)
+    V0 = V0 / bbox_diagonal(V0)
+    for scale in (0.5 * UNITS[1] / np.abs(V0).max(), 2 * UNITS[0]):
+        V = V0 * scale
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")
+            cage = simplify(V, F, target_faces=200)
+            fitted = fit_cage(V, F, cage.V, cage.F)
+            b = bind(V, F, fitted.V, cage.F)
+            D = deform(b, fitted.V)
+            assert np.abs(D - V).max() <= 1e-12 * bbox_diagonal(V)
+            d = surface_distance(V, F, D, F)
+            assert d.hausdorff <= 1e-12 * bbox_diagonal(V)
+    for scale, found in ((4 * UNITS[1], "reaches"), (0.25 * UNITS[0], "across")):
+        V = V0 * scale
+        cage = simplify(V, F, target_faces=200)            # (simplify takes any units)
+        assert np.isfinite(cage.V).all() and cage.stopped_because == "target"
+        for call, name in ((lambda: fit_cage(V, F, cage.V, cage.F), "V_dense"),
+                           (lambda: bind(V, F, cage.V, cage.F), "V_dense"),
+                           (lambda: surface_distance(V, F, cage.V, cage.F), "mesh a")):
+            with pytest.raises(InvalidMeshError, match=f"{name} .*{found}.*scale the mesh"):
+                call()
+        with pytest.raises(InvalidMeshError, match=f"V_cage .*{found}"):
+            check_units(cage.V, where="bind", name="V_cage")
+    cage = simplify(V0, F, target_faces=200)
+    b = bind(V0, F, cage.V, cage.F)
+    with pytest.raises(InvalidMeshError, match="deform: V_cage_edited reaches"):
+        deform(b, cage.V * 4 * UNITS[1] / np.abs(cage.V).max())
