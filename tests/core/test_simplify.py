@@ -575,6 +575,20 @@ def test_a_soup_is_welded_or_named_never_thrown_away_as_debris():
     assert f"the input is in {F.shape[0]:,} separate pieces: weld it first" in r.message
 
 
+def test_a_real_scan_as_a_soup_drifted_past_the_first_wider_weld_is_welded_by_the_next():
+    # homer's copies of each vertex drifted by 3e-5 of its size: the 1e-5 weld closes a
+    # few percent of its open edges (a pair welds only when every axis is within it),
+    # 1e-4 closes them all; the automatic weld stopped at the first and simplify gave
+    # the 12,000 one-face pieces back (topology floor)
+    V, F = load_shared("homer.obj")
+    S, FS = unwelded(V, F, 3e-5, seed=0)
+    r = simplify(S, FS, target_faces=500)
+    assert r.F.shape[0] == 500 and r.stopped_because == "target"
+    assert topology_summary(r.F, r.V.shape[0])[:3] == topology_summary(F, V.shape[0])[:3]
+    assert r.cleaning.n_welded_vertices == FS.size - V.shape[0]
+    assert "(within 0.0001 of the size: the input came in pieces)" in r.message
+
+
 def test_relaxed_topology_drops_a_component_that_cannot_shrink():
     V, F, n_big = _sphere_and_beads()
     kept = simplify(V, F, target_faces=12)
