@@ -26,6 +26,7 @@ import datetime
 import importlib.util
 import json
 import os
+import shutil
 import sys
 import time
 from collections import Counter
@@ -151,9 +152,10 @@ def collect_inputs(paths, out=None):
     for path in paths:
         if os.path.isdir(path):
             own = os.path.realpath(path) == out
-            found = sorted(os.path.join(path, f) for f in os.listdir(path)
-                           if os.path.splitext(f)[1].lower() in _convert.INPUT_EXTENSIONS
-                           and not (own and _is_output(f)))
+            found = _without_links_to_others(sorted(
+                os.path.join(path, f) for f in os.listdir(path)
+                if os.path.splitext(f)[1].lower() in _convert.INPUT_EXTENSIONS
+                and not (own and _is_output(f))))
         else:
             found = [path]
         for f in found:
@@ -162,6 +164,14 @@ def collect_inputs(paths, out=None):
                 seen.add(key)
                 files.append(f)
     return files
+
+
+def _without_links_to_others(found):
+    """The files ``found`` in a folder but the symbolic links to another of
+    them: the file is converted under its own name (a link sorted before it,
+    ``link_to_suzanne.obj``, took its row and its outputs' names)."""
+    real = {os.path.realpath(f) for f in found if not os.path.islink(f)}
+    return [f for f in found if not (os.path.islink(f) and os.path.realpath(f) in real)]
 
 
 def plan(files, opts, out):
@@ -361,10 +371,16 @@ def worker_command(entry, payload_json):
 
 def exit_now(status):
     """Leave without the interpreter's shutdown, which bpy as a module can
-    crash after everything is written."""
+    crash after everything is written; Blender's session folder
+    (``bpy.app.tempdir``, a ``blender_XXXXXX`` folder of the system's
+    temporary one), which that shutdown would remove, is removed here (each
+    run and each of its workers left one behind)."""
     sys.stdout.flush()
     sys.stderr.flush()
     if "bpy" in sys.modules:
+        session = sys.modules["bpy"].app.tempdir
+        if session and os.path.basename(os.path.normpath(session)).startswith("blender_"):
+            shutil.rmtree(session, ignore_errors=True)
         os._exit(status)
     sys.exit(status)
 

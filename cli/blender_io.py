@@ -360,15 +360,17 @@ def read_with_blender(path, log):
     return V, arrays.F, arrays.n_polygons, notes, warnings
 
 
-def write_with_blender(path, V, F, log):
+def write_with_blender(path, V, F, log, name):
     """Write a triangle mesh with Blender's exporter chosen by the extension
-    (``.ply``, ``.stl`` or ``.glb``)."""
+    (``.ply``, ``.stl`` or ``.glb``), its object and mesh named ``name``
+    (formats that store names, as glTF does, keep it: not the path's, which
+    may be a temporary one)."""
     # an empty scene, as for reading: the view layer of a scene whose objects an
     # earlier write removed can still list them (None, or a crash when touched:
     # a PLY input with --refine failed writing the refined mesh, or segfaulted)
     bpy = _empty_scene(log)
     fmt = os.path.splitext(path)[1].lower()
-    mesh = _mesh_io().new_mesh(os.path.splitext(os.path.basename(path))[0], V, F)
+    mesh = _mesh_io().new_mesh(name, V, F)
     obj = bpy.data.objects.new(mesh.name, mesh)
     bpy.context.scene.collection.objects.link(obj)
     obj.select_set(True)

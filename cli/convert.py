@@ -117,15 +117,18 @@ class _Run:
 
 
 def _write(path, V, F, log):
-    """Write through a temporary name in the same folder, then rename."""
+    """Write through a temporary name in the same folder, then rename. The
+    temporary name is short (``.part-<pid>.<ext>``: one write at a time per
+    process), so any name the folder takes does (a 240-character stem's
+    ``.<stem>.part-<pid>`` was too long for the file system)."""
     folder, base = os.path.split(path)
     stem, ext = os.path.splitext(base)
-    tmp = os.path.join(folder, f".{stem}.part-{os.getpid()}{ext}")
+    tmp = os.path.join(folder, f".part-{os.getpid()}{ext}")
     try:
         if ext.lower() in CORE_FORMATS:
             core.write_mesh(tmp, V, F)
         else:
-            blender_io.write_with_blender(tmp, V, F, log)
+            blender_io.write_with_blender(tmp, V, F, log, stem)
         os.replace(tmp, path)
     finally:
         if os.path.exists(tmp):

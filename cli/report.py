@@ -72,7 +72,9 @@ def summary_line(results, out):
 
 
 def write_json(path, data):
-    tmp = f"{path}.part-{os.getpid()}"
+    """Write ``data`` as JSON to ``path`` through a short temporary name in its
+    folder (any name the folder takes does), then rename."""
+    tmp = os.path.join(os.path.dirname(path), f".report.part-{os.getpid()}")
     with open(tmp, "w", encoding="utf-8") as fh:
         json.dump(data, fh, indent=1, allow_nan=False, default=str)
         fh.write("\n")

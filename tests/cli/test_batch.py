@@ -354,3 +354,32 @@ def test_a_cage_of_slivers_is_a_warning(tmp_path):
     assert rep["status"] == "warn" and rep["faces_out"] == 200
     assert any(w.startswith("the cage: ") and "faces are slivers" in w for w in rep["warnings"])
     assert run_batch(["cyl.obj", "--faces", "200", "--out", "out2", "--strict"], tmp_path).returncode == 1
+
+
+def test_outputs_are_named_by_their_files_and_the_run_leaves_nothing_outside_out(tmp_path):
+    # found by a fuzz of the batch tool: a GLB stored its temporary file's name (so two
+    # runs differed), a 240-character stem's temporary name was too long for the file
+    # system, every process left Blender's session folder in the temporary folder, and
+    # a link sorted before the file it points to took the file's row and outputs' names
+    V, F = octahedron()
+    long_stem = "n" * 240
+    core.write_obj(tmp_path / f"{long_stem}.obj", V, F)
+    core.write_obj(tmp_path / "zeta.obj", V, F)
+    os.symlink(tmp_path / "zeta.obj", tmp_path / "a_link_to_zeta.obj")
+    temp = tmp_path / "temp"
+    temp.mkdir()
+    outs = []
+    for k in (1, 2):
+        env = dict(os.environ, HOME=str(tmp_path), BLENDER_USER_RESOURCES=str(tmp_path),
+                   TMPDIR=str(temp), TEMP=str(temp), TMP=str(temp))
+        proc = subprocess.run([sys.executable, SCRIPT, ".", "--faces", "4", "--format", "glb",
+                               "--out", f"out{k}"], capture_output=True, text=True, env=env,
+                              timeout=300, cwd=str(tmp_path))
+        assert proc.returncode == 0, proc.stdout + proc.stderr
+        assert os.listdir(temp) == []                       # Blender's session folder removed
+        names = sorted(os.listdir(tmp_path / f"out{k}"))
+        assert names == sorted([f"{long_stem}_cage.glb", "zeta_cage.glb"])   # no link's row
+        outs.append({n: (tmp_path / f"out{k}" / n).read_bytes() for n in names})
+    assert outs[0] == outs[1]                               # the same bytes, run after run
+    assert b'"name":"zeta_cage"' in outs[0]["zeta_cage.glb"]
+    assert b".part" not in outs[0]["zeta_cage.glb"]
