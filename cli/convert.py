@@ -208,10 +208,9 @@ def convert(task, opts):
         for note in (res.sliver_note, res.asymmetry_note, res.pieces_note):
             if note:
                 r["warnings"].append(f"the cage: {note}")
-        dist = run.step("measure", core.surface_distance, V, F, res.V, res.F,
-                        samples=MEASURE_SAMPLES)
-        r["deviation_pct"] = 100.0 * dist.hausdorff / max(diag, 1e-300)
-        r["mean_deviation_pct"] = 100.0 * dist.mean / max(diag, 1e-300)
+        dist = run.step("measure", res.deviation, V, F, samples=MEASURE_SAMPLES)
+        r["deviation_pct"] = 100.0 * dist.hausdorff / max(dist.diagonal, 1e-300)
+        r["mean_deviation_pct"] = 100.0 * dist.mean / max(dist.diagonal, 1e-300)
         creases = res.feature_edges if len(res.feature_edges) else None
         V_cage, later = res.V, None
         if opts.fit:

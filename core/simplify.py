@@ -160,6 +160,25 @@ class SimplifyResult:
     seconds: dict = None
     asymmetry: float = None
 
+    def represented(self, F):
+        """(m_in,) bool per face of ``F`` (the faces given to ``simplify``):
+        whether the cage stands for it, every corner merged into a cage
+        vertex (not debris, an unreferenced piece or a component removed with
+        ``preserve_topology=False``)."""
+        return (self.vertex_map[np.asarray(F, dtype=np.int64)] >= 0).all(axis=1)
+
+    def deviation(self, V, F, *, samples=None):
+        """:func:`~.metrics.surface_distance` between the input ``V``, ``F``
+        given to ``simplify`` and the cage, over the faces the cage stands for
+        (:meth:`represented`); its ``diagonal`` is theirs. A speck dropped as
+        debris 1,000 diagonals away neither sets the deviation (it was 99.95%
+        of a diagonal that the speck made 1,000 times the mesh's) nor slows
+        the search (its grid cells grew with the box: 3.6 s for a 5k-face
+        sphere's 4-face cage, now a tenth of a second); the cleaning's
+        summary says what was dropped."""
+        F = np.asarray(F, dtype=np.int64)
+        return surface_distance(V, F[self.represented(F)], self.V, self.F, samples=samples)
+
     @property
     def message(self):
         """One sentence of what happened, e.g. ``"69,451 → 1,400 faces"`` or

@@ -178,7 +178,7 @@ def compute_simplify(job, *, progress=None):
         # simplification), before any fitting moves it
         if cancelled_at(0.72):
             return job
-        job.distance = core.surface_distance(job.V, job.F, res.V, res.F, samples=MEASURE_SAMPLES)
+        job.distance = res.deviation(job.V, job.F, samples=MEASURE_SAMPLES)
     creases = res.feature_edges if len(res.feature_edges) else None
     if p.fit and res.F.shape[0] >= 4:
         if cancelled_at(0.8) or not _fit_cage(job, res, creases, progress):
@@ -351,9 +351,9 @@ def _summary(job):
     dev = float("nan")
     msg = f"{job.F.shape[0]:,} -> {res.F.shape[0]:,} faces"
     if job.distance is not None:
-        dev = 100.0 * job.distance.hausdorff / max(_diag(job.V), 1e-300)
-        msg += (f", max deviation {dev:.2f}% of size (mean "
-                f"{100.0 * job.distance.mean / max(_diag(job.V), 1e-300):.3f}%)")
+        size = max(job.distance.diagonal, 1e-300)      # (of what the cage stands for)
+        dev = 100.0 * job.distance.hausdorff / size
+        msg += f", max deviation {dev:.2f}% of size (mean {100.0 * job.distance.mean / size:.3f}%)"
     if p.symmetry:
         msg += f", mirror-symmetric in {p.symmetry}"
     msg += f", {job.seconds:.1f} s"

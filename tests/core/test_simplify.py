@@ -16,7 +16,7 @@ from core.topology import face_components, manifold_report, topology_summary
 from core.tuning import TUNING, Tuning
 from tests.mesh_factory import (boundary_edges, cad_cylinder, cube, double_torus, icosphere,
                                 load_shared, regular_grid, star_glyphs, tetrahedron, torus, unwelded,
-                                with_pebbles)
+                                with_far_speck, with_pebbles)
 
 
 # ---------------------------------------------------------------- helpers
@@ -587,6 +587,23 @@ def test_a_real_scan_as_a_soup_drifted_past_the_first_wider_weld_is_welded_by_th
     assert topology_summary(r.F, r.V.shape[0])[:3] == topology_summary(F, V.shape[0])[:3]
     assert r.cleaning.n_welded_vertices == FS.size - V.shape[0]
     assert "(within 0.0001 of the size: the input came in pieces)" in r.message
+
+
+def test_the_deviation_is_measured_over_what_the_cage_stands_for():
+    # a speck 1,000 diagonals off is dropped as debris: the cage is the clean mesh's,
+    # and so is its deviation (measured against the whole input it was 99.95% of a
+    # diagonal the speck made 1,000 times the sphere's, and the search's grid cells
+    # grew with that box: 3.6 s for the 4-face cage)
+    V0, F0 = icosphere(4)
+    V, F = with_far_speck(V0, F0)
+    for target in (4, 200):
+        r, r0 = simplify(V, F, target_faces=target), simplify(V0, F0, target_faces=target)
+        assert np.array_equal(r.F, r0.F) and r.cleaning.n_debris_faces == 1
+        keep = r.represented(F)
+        assert keep.sum() == F0.shape[0] and not keep[F0.shape[0]:].any()
+        d, d0 = r.deviation(V, F), r0.deviation(V0, F0)
+        assert d == d0 and d.diagonal == bbox_diagonal(V0)
+        assert d0 == surface_distance(V0, F0, r0.V, r0.F)
 
 
 def test_relaxed_topology_drops_a_component_that_cannot_shrink():
