@@ -886,10 +886,14 @@ class TriangleIndex:
             order, Fo, ext, thin = order[keep], Fo[keep], ext[keep], thin[keep]
             self._order, m = order, order.shape[0]
             spans = blocks(m, _BUILD_BLOCK)
-        h, dims, natural = self._cell_size(V, Fo, spans, ext, thin, extent, cell_factor, min_cell)
+        h, dims, natural, boxed = self._cell_size(V, Fo, spans, ext, thin, extent, cell_factor,
+                                                  min_cell)
         self._h, self._dims = h, dims
-        # cells made wider on purpose (cell_factor, min_cell, the caps) hold more by design
-        self.crowded_cell = CROWDED_CELL * max(1.0, (h / natural) ** 2 if natural > 0 else 1.0)
+        # cells made wider on purpose (cell_factor, min_cell, the references' cap) hold more
+        # by design; cells made wider only to fit the box in _MAX_CELLS do not: a speck 1,000
+        # diagonals off the bunny put all of it in one cell, 69,451 faces that did not count
+        # as crowded, and a NearQuery's windows over it took 24 GB
+        self.crowded_cell = CROWDED_CELL * max(1.0, (h / boxed / natural) ** 2 if natural > 0 else 1.0)
         self._D, self._ball, self._prism = np.empty((16, m)), np.empty((4, m)), np.empty((16, m))
         small = np.int32 if m < 2**31 else np.int64        # (cells <= _MAX_CELLS < 2**31)
 
@@ -921,8 +925,10 @@ class TriangleIndex:
         largest box sides (of the triangles not ``thin``, when theirs is 25%
         smaller; at least ``min_cell``), grown by 1.25 until the
         grid has at most ``_MAX_CELLS`` cells and the triangles' boxes cover
-        at most ``_MAX_REFS_PER_FACE`` cells each on average; and the size
-        the default ``_CELL_FACTOR`` alone gives."""
+        at most ``_MAX_REFS_PER_FACE`` cells each on average; the size the
+        default ``_CELL_FACTOR`` alone gives; and the factor by which the
+        cells grew for the cap on cells alone (a box much larger than its
+        triangles: an outlier far off)."""
         m = ext.shape[0]
         mean = float(ext.mean())
         if thin.any() and not thin.all():
@@ -932,10 +938,12 @@ class TriangleIndex:
         span = float(extent.max())
         if not h > 0:
             h = span / 64 if span > 0 else 1.0
+        boxed = 1.0
         for _ in range(200):
             dims_f = np.floor(extent / h) + 1
             if float(np.prod(dims_f)) > _MAX_CELLS:
                 h *= 1.25
+                boxed *= 1.25
                 continue
             dims = dims_f.astype(np.int64)
 
@@ -953,7 +961,7 @@ class TriangleIndex:
                                                                  _MIN_REF_BUDGET):
                 break
             h *= 1.25
-        return h, dims, natural
+        return h, dims, natural, boxed
 
     # -- BVH ----------------------------------------------------------------------------------
     def _build_hierarchy(self):
