@@ -1,6 +1,7 @@
 """The batch CLI and the demo, end to end, in fresh Blender processes."""
 
 import os
+import re
 import subprocess
 import sys
 
@@ -172,5 +173,14 @@ def test_demo_writes_its_files(tmp_path):
     # Suzanne has open borders: a border collapse removes one face, so 599 is possible
     faces = int(report.split(" faces, ")[0].split("-> ")[-1].replace(",", ""))
     assert 599 <= faces <= 600
+    # the unedited cage gives the original back
+    error = float(re.search(r"max vertex error (\S+) of the diagonal", report).group(1))
+    assert error <= 1e-12
+    # Auto levels, as in the add-on: the refined mesh is the level closest to the source's faces
+    source = int(re.search(r"([\d,]+) triangles", report).group(1).replace(",", ""))
+    refined, level = re.search(r"refined: ([\d,]+) faces, butterfly x(\d)", report).groups()
+    level = int(level)
+    assert int(refined.replace(",", "")) == faces * 4 ** level
+    assert level == min(range(1, 6), key=lambda k: abs(faces * 4 ** k - source))
     with open(out / "demo.png", "rb") as fh:
         assert fh.read(8) == b"\x89PNG\r\n\x1a\n"
