@@ -123,7 +123,8 @@ _PLY_TYPES = {"char": "i1", "int8": "i1", "uchar": "u1", "uint8": "u1", "short":
 
 def _ply_header(path):
     """``(format, header length in bytes, [(element, count, [(type, name)])])``
-    of a PLY file (list properties have the type ``"list"``), or None."""
+    of a PLY file (a list property's type is ``("list", count type, item
+    type)``), or None."""
     with open(path, "rb") as fh:
         head = fh.read(1 << 16)
     end = head.find(b"end_header")
@@ -138,7 +139,8 @@ def _ply_header(path):
         elif parts[:1] == ["element"] and len(parts) == 3 and parts[2].isdigit():
             elements.append((parts[1], int(parts[2]), []))
         elif parts[:1] == ["property"] and elements and len(parts) >= 3:
-            elements[-1][2].append(("list" if parts[1] == "list" else parts[1], parts[-1]))
+            kind = tuple(parts[1:4]) if parts[1] == "list" and len(parts) == 5 else parts[1]
+            elements[-1][2].append((kind, parts[-1]))
     return fmt, length, elements
 
 
@@ -215,6 +217,129 @@ def header_face_count(path):
     except OSError:
         return None
     return None
+
+
+def ply_size_problem(path):
+    """Why a PLY file cannot hold what its header declares, in words that name
+    the file and the counts (a file cut short, or a count too large), or None.
+
+    Blender's importer reads such a file on: it takes the next element's
+    bytes for this one's and fails with "Invalid face size, must be between 1
+    and 255", or reads past the end and keeps what it could with a warning per
+    bad index. Checked here, before Blender: ASCII, a line per element;
+    binary, the bytes of each fixed-size element and of an element with one
+    list property (faces) whose records all have the first one's length (all
+    triangles, all quads), and for mixed records at least one index each and
+    a first record that is a face (a count of 1-255, indices of declared
+    vertices)."""
+    header = _ply_header(path)
+    if not header or not header[2]:
+        return None
+    fmt, length, elements = header
+    size = os.path.getsize(path)
+    name = os.path.basename(path)
+    declared = " and ".join(f"{n:,} {e}" for e, n, _ in elements)
+    if fmt == "ascii":
+        lines = _ascii_lines(path, length)
+        need = sum(n for _, n, _ in elements)
+        if lines < need:
+            return (f"{name}: its header declares {declared} elements, a line each ({need:,}), "
+                    f"but the file has {lines:,} lines after its header: cut short, or a wrong "
+                    f"count in the header")
+        return None
+    order = {"binary_little_endian": "<", "binary_big_endian": ">"}.get(fmt)
+    if order is None or any(not _known_ply_type(t) for _, _, props in elements for t, _ in props):
+        return None
+    pos = length
+    n_vertices = {e: n for e, n, _ in elements}.get("vertex", 2**63 - 1)
+    for element, count, props in elements:
+        layout = _ply_records(path, order, props, pos, count, size, n_vertices,
+                              element == "face")
+        if layout is None:
+            return None          # records of mixed lengths, no sign of a problem
+        got, end, bad_first = layout
+        if bad_first:
+            return (f"{name}: its header declares {declared} elements, but the first {element} "
+                    f"record (at byte {pos:,}) holds no valid {element}: the data before it is "
+                    f"not the size the header's counts give (a wrong count), or the file is "
+                    f"damaged")
+        if got is None or got < count:
+            where = (f"before its {count:,} {element} elements" if got is None else
+                     f"after {got:,} of the {count:,} {element} elements")
+            return (f"{name}: its header declares {declared} elements, but the file ends "
+                    f"({size:,} bytes) {where}: cut short, or a wrong count in the header")
+        pos = end
+    return None
+
+
+def _known_ply_type(t):
+    return t in _PLY_TYPES or (isinstance(t, tuple) and t[1] in _PLY_TYPES and t[2] in _PLY_TYPES)
+
+
+def _ascii_lines(path, start):
+    """Lines of a text file after its first ``start`` bytes (a last line
+    without a newline counted)."""
+    import numpy as np
+    data = np.memmap(path, dtype=np.uint8, mode="r") if os.path.getsize(path) else np.zeros(0, np.uint8)
+    body = data[start:]
+    return int(np.count_nonzero(body == 10)) + int(body.size > 0 and body[-1] != 10)
+
+
+def _ply_records(path, order, props, pos, count, size, n_vertices, face):
+    """``(whole records in the file or None when unknown, end byte, first
+    record invalid)`` of a binary PLY element of ``count`` records at byte
+    ``pos`` (see :func:`ply_size_problem`; ``n_vertices``: the vertices
+    declared, bounding a face's indices; ``face``: the element is the faces,
+    whose records hold at least 3 indices); None for records of mixed
+    lengths that the file may hold."""
+    import numpy as np
+    itemsize = {t: np.dtype(_PLY_TYPES[t]).itemsize for t in _PLY_TYPES}
+    lists = [k for k, (t, _) in enumerate(props) if isinstance(t, tuple)]
+    if not lists:
+        rec = sum(itemsize[t] for t, _ in props)
+        return (min(count, (size - pos) // rec) if rec else count), pos + count * rec, False
+    if count == 0:
+        return 0, pos, False
+    if len(lists) > 1:
+        return None
+    k = lists[0]
+    before = sum(itemsize[t] for t, _ in props[:k])
+    after = sum(itemsize[t] for t, _ in props[k + 1:])
+    _, ct, it = props[k][0]
+    at = pos + before + itemsize[ct]                    # the first record's indices
+    if at > size:
+        return 0, pos, False
+    data = np.memmap(path, dtype=np.uint8, mode="r")
+    c0 = int(np.frombuffer(data, dtype=order + _PLY_TYPES[ct], count=1, offset=at - itemsize[ct])[0])
+    first = np.frombuffer(data, dtype=order + _PLY_TYPES[it], offset=at,
+                          count=max(0, min(c0, (size - at) // itemsize[it])))
+    if not 1 <= c0 <= 255 or (first.size and (first.min() < 0 or first.max() >= n_vertices)):
+        return 0, pos, True
+    rec = before + itemsize[ct] + c0 * itemsize[it] + after
+    fits = min(count, (size - pos) // rec)
+    counts = np.frombuffer(data, offset=pos, count=fits, dtype=np.dtype(
+        {"names": ["c"], "formats": [order + _PLY_TYPES[ct]], "offsets": [before],
+         "itemsize": rec}))["c"]
+    # the least a record can be: a face has 3 corners, another list 1 item
+    least = before + itemsize[ct] + (3 if face else 1) * itemsize[it] + after
+    if (counts == c0).all():
+        if fits == count:
+            return fits, pos + count * rec, False
+        if pos + fits * rec + (count - fits) * least > size:   # short even if the rest were least
+            return fits, pos + count * rec, False
+        return None
+    return (None, pos, False) if pos + count * least > size else None
+
+
+def grouped_warnings(lines):
+    """Blender's warnings, one per kind: lines that differ only in their
+    numbers (``Invalid PLY vertex index in face 5856 loop 7``, ``... face
+    5857 loop 9``) as the first of them and how many more there were."""
+    kinds = {}
+    for line in lines:
+        kinds.setdefault(re.sub(r"\d+", "#", line), []).append(line)
+    return [f"{same[0][:200]}" + (f" (and {len(same) - 1:,} more like it)" if len(same) > 1 else "")
+            for same in kinds.values()]
 
 
 def count_nonfinite(path):
@@ -334,6 +459,10 @@ def read_with_blender(path, log):
         raise BlenderIOError(f"{os.path.basename(path)}: {bad:,} {what} with a coordinate that "
                              f"is not a finite number (NaN or infinity; Blender's importer would "
                              f"read them as 0)")
+    problem = ply_size_problem(path) if path.lower().endswith(".ply") and os.path.isfile(path) \
+        else None
+    if problem:
+        raise BlenderIOError(problem)
     _empty_scene(log)
     obj = import_mesh(path, log)
     arrays = _mesh_io().read_object(obj)
@@ -354,9 +483,9 @@ def read_with_blender(path, log):
     if expected is not None and arrays.n_polygons < expected:
         warnings.append(f"Blender's {BLENDER_IMPORT.get(os.path.splitext(path)[1].lower())} "
                         f"importer kept {arrays.n_polygons:,} of the file's {expected:,} faces")
-    for line in dict.fromkeys(_LOG_PREFIX.sub("", x).strip() for x in "".join(log).splitlines()
-                              if "WARNING" in x):
-        warnings.append(f"Blender: {line[:200]}")
+    for line in grouped_warnings(_LOG_PREFIX.sub("", x).strip()
+                                 for x in "".join(log).splitlines() if "WARNING" in x):
+        warnings.append(f"Blender: {line}")
     return V, arrays.F, arrays.n_polygons, notes, warnings
 
 

@@ -34,6 +34,26 @@ def write_binary_stl(path, V, F, *, count=None, extra=b""):
     path.write_bytes(b"binary".ljust(80) + struct.pack("<I", n) + rec.tobytes() + extra)
 
 
+def write_ply(path, V, F, *, ascii=False, counts=None, cut=0):
+    """A PLY file of ``V`` (float32) and ``F`` (uchar count, int indices; rows
+    of any length when ``F`` is a list), binary little-endian or ASCII; its
+    header declaring ``counts`` (vertices, faces; None: the true ones), its
+    last ``cut`` bytes dropped (a file cut short)."""
+    nv, nf = (len(V), len(F)) if counts is None else counts
+    head = (f"ply\nformat {'ascii' if ascii else 'binary_little_endian'} 1.0\n"
+            f"element vertex {nv}\nproperty float x\nproperty float y\nproperty float z\n"
+            f"element face {nf}\nproperty list uchar int vertex_indices\nend_header\n").encode()
+    if ascii:
+        body = "".join(f"{x} {y} {z}\n" for x, y, z in np.asarray(V, np.float32)) + \
+            "".join(f"{len(f)} {' '.join(map(str, f))}\n" for f in F)
+        body = body.encode()
+    else:
+        body = np.asarray(V, "<f4").tobytes() + b"".join(
+            bytes([len(f)]) + np.asarray(f, "<i4").tobytes() for f in F)
+    data = head + body
+    path.write_bytes(data[:len(data) - cut])
+
+
 def load_shared(name):
     """``(V, F)`` of a real mesh in ``../shared/meshes`` (skips when absent)."""
     from core.io_obj import read_obj

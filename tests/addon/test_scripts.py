@@ -58,7 +58,9 @@ def test_batch_parallel_jobs_and_ply_output(tmp_path):
     assert "2 converted, 0 failed" in proc.stdout
 
 
-def write_ascii_ply(path, V, F, *, faces_in_header=None, truncate=False):
+def write_ascii_ply(path, V, F, *, faces_in_header=None, truncate=False, garble=False):
+    """An ASCII PLY file; ``truncate``: its second half dropped; ``garble``: a
+    word in place of a face's vertex count (Blender's importer fails)."""
     lines = ["ply", "format ascii 1.0", f"element vertex {len(V)}", "property float x",
              "property float y", "property float z",
              f"element face {len(F) if faces_in_header is None else faces_in_header}",
@@ -67,6 +69,8 @@ def write_ascii_ply(path, V, F, *, faces_in_header=None, truncate=False):
     lines += [f"3 {a} {b} {c}" for a, b, c in F.tolist()]
     if truncate:
         lines = lines[:len(lines) // 2]
+    if garble:
+        lines[-5] = "three" + lines[-5][1:]
     path.write_text("\n".join(lines) + "\n")
 
 
@@ -90,6 +94,7 @@ def test_batch_quotes_blender_importer_errors_and_keeps_its_log_out_of_stdout(tm
     V, F = icosphere(3)
     write_ascii_ply(tmp_path / "good.ply", V, F)
     write_ascii_ply(tmp_path / "cut.ply", V, F, truncate=True)
+    write_ascii_ply(tmp_path / "garbled.ply", V, F, garble=True)
     bad_face = np.vstack([F, [[0, 1, len(V) + 5]]])          # Blender drops this face
     write_ascii_ply(tmp_path / "dropped.ply", V, bad_face)
     V_nan = V.copy()
@@ -98,17 +103,21 @@ def test_batch_quotes_blender_importer_errors_and_keeps_its_log_out_of_stdout(tm
     out, log = tmp_path / "out", tmp_path / "blender.log"
     proc = run_script(["scripts/meshadjust_batch.py", str(tmp_path / "good.ply"),
                        str(tmp_path / "cut.ply"), str(tmp_path / "dropped.ply"),
-                       str(tmp_path / "nan.ply"), "--faces", "100",
+                       str(tmp_path / "nan.ply"), str(tmp_path / "garbled.ply"), "--faces", "100",
                        "--out", str(out), "--log", str(log), "--report", str(tmp_path / "r.json")],
                       tmp_path)
     assert proc.returncode == 1, proc.stdout + proc.stderr
     lines = proc.stdout.splitlines()
-    assert len(lines) == 2 + 4 + 1, proc.stdout        # table, four rows, summary: nothing else
+    assert len(lines) == 2 + 5 + 1, proc.stdout        # table, five rows, summary: nothing else
     assert "| good.ply | 1,280 | 100 | 100 |" in proc.stdout
     cut = next(ln for ln in lines if ln.startswith("| cut.ply"))
-    assert ("FAILED: cut.ply: read failed: Blender's importer failed on cut.ply: "
-            "Error: PLY Importer: failed importing, unknown error (Blender's log: " in cut)
-    assert "PLY Importer: failed importing cut: " in cut     # the cause, from its log
+    assert ("FAILED: cut.ply: read failed: cut.ply: its header declares 642 vertex and 1,280 "
+            "face elements, a line each (1,922), but the file has 956 lines after its header: "
+            "cut short, or a wrong count in the header |") in cut          # before Blender
+    garbled = next(ln for ln in lines if ln.startswith("| garbled.ply"))
+    assert ("FAILED: garbled.ply: read failed: Blender's importer failed on garbled.ply: "
+            "Error: PLY Importer: failed importing, unknown error (Blender's log: " in garbled)
+    assert "PLY Importer: failed importing garbled: " in garbled    # the cause, from its log
     dropped = next(ln for ln in lines if ln.startswith("| dropped.ply"))
     assert "| warn: Blender's PLY importer kept 1,280 of the file's 1,281 faces" in dropped
     assert ("| FAILED: nan.ply: read failed: nan.ply: 2 vertices with a coordinate that is not a "
@@ -118,7 +127,7 @@ def test_batch_quotes_blender_importer_errors_and_keeps_its_log_out_of_stdout(tm
     assert sorted(os.listdir(out)) == ["dropped_cage.ply", "good_cage.ply"]
     import json
     files = json.loads((tmp_path / "r.json").read_text())["files"]
-    assert [f["status"] for f in files] == ["ok", "failed", "warn", "failed"]
+    assert [f["status"] for f in files] == ["ok", "failed", "warn", "failed", "failed"]
     assert all(f["log"] is None for f in files)           # it went to --log
 
 

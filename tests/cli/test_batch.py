@@ -12,8 +12,9 @@ import numpy as np
 import pytest
 
 import core
+from cli.blender_io import grouped_warnings, ply_size_problem
 from tests.mesh_factory import (cad_cylinder, icosphere, octahedron, shared_mesh_path, tetrahedron,
-                                write_binary_stl)
+                                write_binary_stl, write_ply)
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 SCRIPT = os.path.join(ROOT, "scripts", "meshadjust_batch.py")
@@ -144,6 +145,64 @@ def test_a_binary_stl_whose_count_disagrees_with_its_size_is_named_before_blende
             "(84 bytes of header and count, then 50 a triangle; its header says 4)") in cut
     assert "tiny.stl: 40 bytes, neither ASCII STL nor a binary STL file" in tiny
     assert "no mesh with faces" not in proc.stdout and "0 converted, 3 failed" in proc.stdout
+
+
+def test_a_ply_that_cannot_hold_what_its_header_declares_is_named_before_blender(tmp_path):
+    V, F = icosphere(2)                                  # 162 vertices, 320 triangles
+    write_ply(tmp_path / "cut.ply", V, F, cut=100)
+    write_ply(tmp_path / "faces.ply", V, F, counts=(162, 330))
+    write_ply(tmp_path / "vertices.ply", V, F, counts=(172, 320))
+    write_ply(tmp_path / "lines.ply", V, F, ascii=True, counts=(162, 321))
+    proc = run_batch(["cut.ply", "faces.ply", "vertices.ply", "lines.ply", "--faces", "40"],
+                     tmp_path)
+    assert proc.returncode == 1
+    cut, faces, vertices, lines = rows(proc.stdout)
+    # 13 bytes a triangle: 100 bytes short leaves 312 whole ones
+    assert ("cut.ply: its header declares 162 vertex and 320 face elements, but the file ends "
+            "(6,177 bytes) after 312 of the 320 face elements: cut short, or a wrong count in "
+            "the header |") in cut
+    assert "after 320 of the 330 face elements" in faces
+    # 10 vertices too many: the faces are read 120 bytes late, inside the first records
+    assert ("vertices.ply: its header declares 172 vertex and 320 face elements, but the first "
+            "face record (at byte 2,237) holds no valid face") in vertices
+    assert ("lines.ply: its header declares 162 vertex and 321 face elements, a line each (483), "
+            "but the file has 482 lines after its header") in lines
+    assert "Invalid face size" not in proc.stdout and "0 converted, 4 failed" in proc.stdout
+
+
+def test_ply_size_check_passes_whole_files_of_any_layout(tmp_path):
+    V, F = icosphere(1)
+    quads = [list(f) for f in F[:10]] + [[0, 1, 2, 3], [4, 5, 6, 7, 8]]   # mixed lengths
+    write_ply(tmp_path / "mixed.ply", V, quads)
+    write_ply(tmp_path / "ascii.ply", V, F, ascii=True)
+    write_ply(tmp_path / "tris.ply", V, F)
+    # big-endian, a vertex colour, a face flag before the list and a float after it
+    head = (b"ply\nformat binary_big_endian 1.0\nelement vertex 3\nproperty float x\n"
+            b"property float y\nproperty float z\nproperty uchar red\nelement face 1\n"
+            b"property uchar flags\nproperty list uchar uint vertex_indices\n"
+            b"property float quality\nend_header\n")
+    vert = np.zeros(3, dtype=[("p", ">f4", 3), ("r", "u1")])
+    face = np.zeros(1, dtype=[("fl", "u1"), ("n", "u1"), ("i", ">u4", 3), ("q", ">f4")])
+    face["n"], face["i"] = 3, [0, 1, 2]
+    (tmp_path / "be.ply").write_bytes(head + vert.tobytes() + face.tobytes())
+    for name in ("mixed.ply", "ascii.ply", "tris.ply", "be.ply"):
+        assert ply_size_problem(str(tmp_path / name)) is None, name
+    (tmp_path / "be_cut.ply").write_bytes(head + vert.tobytes() + face.tobytes()[:-1])
+    assert "after 0 of the 1 face elements" in ply_size_problem(str(tmp_path / "be_cut.ply"))
+    # mixed lengths: short only when 3 indices a face no longer fit (163 bytes of faces whole)
+    write_ply(tmp_path / "mixed_cut5.ply", V, quads, cut=5)
+    assert ply_size_problem(str(tmp_path / "mixed_cut5.ply")) is None     # Blender's to find
+    write_ply(tmp_path / "mixed_cut30.ply", V, quads, cut=30)
+    assert ("the file ends (813 bytes) after 10 of the 12 face elements"
+            in ply_size_problem(str(tmp_path / "mixed_cut30.ply")))
+
+
+def test_blender_warnings_are_grouped_by_kind():
+    lines = [f"WARNING Invalid PLY vertex index in face {f} loop {k}: {f * k}"
+             for f in range(100, 130) for k in range(4)] + ["WARNING something else"]
+    assert grouped_warnings(lines) == [
+        "WARNING Invalid PLY vertex index in face 100 loop 0: 0 (and 119 more like it)",
+        "WARNING something else"]
 
 
 def test_missed_target_and_unchanged_cage_warn_and_strict_fails(tmp_path):
