@@ -280,7 +280,8 @@ def test_chain_on_a_fine_mesh_denser_than_the_dense_one(scheme):
 
 
 def test_rows_rebuilt_in_many_blocks(torus_case, monkeypatch):
-    """Blocks of whole fine faces (tiny blocks here): same result as one block."""
+    """Blocks of whole fine faces (tiny blocks here), inline or on the worker
+    threads: same result as one block."""
     import core.binding as binding_module
     Vd, Vc, b = torus_case
     Ve = Vc.copy()
@@ -293,6 +294,11 @@ def test_rows_rebuilt_in_many_blocks(torus_case, monkeypatch):
     deform(b, Ve, moved=ids, out=many)
     assert np.array_equal(one, many)
     assert np.abs(many - deform(b, Ve)).max() <= _tol(Vd)
+    # the blocks on the worker threads (from _THREADED_ROWS rows): the same bits
+    monkeypatch.setattr(binding_module, "_THREADED_ROWS", 1)
+    threaded = deform(b, Vc)
+    deform(b, Ve, moved=ids, out=threaded)
+    assert np.array_equal(one, threaded)
 
 
 @pytest.mark.parametrize("span", [10, 1000, 10**6])
