@@ -59,17 +59,54 @@ def read_source(source):
     return arrays, staleness.source_fingerprint(source) or ""
 
 
+def transform_problem(obj):
+    """Why ``obj``'s world transform cannot carry MeshAdjust's objects, in
+    words that say what to do, or None: a zero scale (no inverse: the cage's
+    edit cannot be taken back to the source's space) or a shear (a rotated
+    child of a non-uniformly scaled parent: the cage and the results take
+    the source's transform as location, rotation and scale, which drop it)."""
+    M = np.array(obj.matrix_world)[:3, :3]
+    size = np.linalg.norm(M, axis=0)
+    if not np.isfinite(M).all() or not size.min() > 1e-9 * size.max() \
+            or not abs(np.linalg.det(M)) > 1e-9 * float(np.prod(size)):
+        return (f"'{obj.name}' has a zero scale on an axis (its transform has no inverse): give "
+                f"it a non-zero scale, or apply the scale (Object > Apply > Scale)")
+    if np.abs(M.T @ M / np.outer(size, size) - np.eye(3)).max() > 1e-6:
+        return (f"'{obj.name}' has a sheared transform (it is rotated under a parent scaled "
+                f"unevenly), which its cage and results cannot copy: apply the parent's scale "
+                f"(Object > Apply > Scale on '{obj.parent.name if obj.parent else obj.name}')")
+    return None
+
+
+def source_space(cage, source):
+    """The (4,4) matrix from the cage's local space to the source's (their
+    object transforms), both transforms checked (:func:`transform_problem`:
+    a :class:`core.MeshAdjustError` naming the object), and the cage's own
+    shape keys refused (its mesh is read, not what its keys show)."""
+    for obj in (source, cage):
+        why = transform_problem(obj)
+        if why:
+            raise core.MeshAdjustError(why)
+    keys = cage.data.shape_keys
+    if keys is not None and len(keys.key_blocks) > 1:
+        raise core.MeshAdjustError(
+            f"'{cage.name}' has shape keys: MeshAdjust reads the cage's mesh, not what its keys "
+            f"show, so an edit made through them would be lost; apply them to the mesh (Shape "
+            f"Keys > Apply All Shape Keys) or delete them")
+    return np.array(source.matrix_world.inverted() @ cage.matrix_world)
+
+
 def _cage_in_source_space(cage, source):
     """Cage positions in the source's local space (object transforms respected)."""
     if cage.mode == 'EDIT':
         cage.update_from_editmode()
     V = mesh_io.read_positions(cage.data)
-    M = np.array(source.matrix_world.inverted() @ cage.matrix_world)
+    M = source_space(cage, source)
     return V @ M[:3, :3].T + M[:3, 3]
 
 
 def _source_to_cage(cage, source, V):
-    M = np.array(cage.matrix_world.inverted() @ source.matrix_world)
+    M = np.linalg.inv(source_space(cage, source))
     return V @ M[:3, :3].T + M[:3, 3]
 
 
@@ -192,7 +229,7 @@ def compute_bind(job, *, progress=None):
 
 def commit_bind(cage, job):
     """Write a computed binding: the edited-original copy (created on first
-    use, re-made when the source's vertex count changed), deformed by the
+    use, re-made when the source's vertex count or faces changed), deformed by the
     edit; its binding attributes and fingerprints; the cage's rest shape;
     the other results that exist, updated. Returns the edited-original
     object (``job.notes`` gets what was re-made)."""
@@ -202,7 +239,7 @@ def commit_bind(cage, job):
         if cs.edited is not None:
             rb.keep(cs.edited.data)
         rb.keep(cage.data)
-        edited, note = results.edited_copy(source, cage, job.V.shape[0])
+        edited, note = results.edited_copy(source, cage, job.V.shape[0], job.F)
         job.note = note
         mesh_io.write_positions(edited.data, job.V_edited if job.V_edited is not None else job.V)
         store.save_binding(edited, job.binding)
@@ -364,28 +401,35 @@ def refine_object(cage, *, output='EDITED', levels=None, scheme=None):
     if scheme == 'BOUND':
         scheme = None
     parts, warnings = [], []
-    with all_or_nothing() as rb:
-        if (levels and levels != cs.levels) or (scheme is not None and scheme != cs.scheme):
-            job = prepare_cage_job(cage, levels=levels, scheme=scheme, keep_edit=True)
-            commit_bind(cage, compute_bind(job))
-            parts.append(f"re-bound from the rest shape ({job.old_scheme} x{job.old_levels} -> "
-                         f"{job.scheme} x{job.levels}), the edit kept")
+    # everything computed and checked first: a refusal changes nothing (a re-bind
+    # written and then refused would leave the binding and its data changed)
+    job = None
+    if (levels and levels != cs.levels) or (scheme is not None and scheme != cs.scheme):
+        job = compute_bind(prepare_cage_job(cage, levels=levels, scheme=scheme, keep_edit=True))
+        binding = job.binding
+        parts.append(f"re-bound from the rest shape ({job.old_scheme} x{job.old_levels} -> "
+                     f"{job.scheme} x{job.levels}), the edit kept")
+    else:
         binding = store.load_binding(edited, cage)
-        V_cage = _cage_in_source_space(cage, source)
-        turned = turned_cage_note(cage, binding, V_cage)
-        if turned:
-            warnings.append(turned)
-        if output == 'SHAPE_KEY':
-            why = results.shape_key_unavailable(source, binding.n_dense)
-            if why:
-                raise core.MeshAdjustError(f"Refine: {why}")
-        V_edited = None
-        if output in ('EDITED', 'BOTH', 'SHAPE_KEY'):
-            V_edited = core.deform(binding, V_cage)
-            repaired = binding.repaired(V_edited).size
-            if repaired:
-                parts.append(f"{repaired:,} dense vertices put back where the edit turned "
-                             f"faces over")
+    V_cage = _cage_in_source_space(cage, source)
+    turned = turned_cage_note(cage, binding, V_cage)
+    if turned:
+        warnings.append(turned)
+    if output == 'SHAPE_KEY':
+        why = results.shape_key_unavailable(source, binding.n_dense)
+        if why:
+            raise core.MeshAdjustError(f"Refine: {why}")
+    V_edited = None
+    if output in ('EDITED', 'BOTH', 'SHAPE_KEY'):
+        V_edited = core.deform(binding, V_cage)
+        repaired = binding.repaired(V_edited).size
+        if repaired:
+            parts.append(f"{repaired:,} dense vertices put back where the edit turned "
+                         f"faces over")
+    refined_mesh = core.refine(binding, V_cage) if output in ('REFINED', 'BOTH') else None
+    with all_or_nothing() as rb:
+        if job is not None:
+            commit_bind(cage, job)
         if output in ('EDITED', 'BOTH'):
             rb.keep(edited.data)
             mesh_io.write_positions(edited.data, V_edited)
@@ -395,8 +439,8 @@ def refine_object(cage, *, output='EDITED', levels=None, scheme=None):
             key = _write_key(source, cage, edited, binding, V_edited)
             parts.append(f"shape key '{key.name}' of '{source.name}' updated "
                          f"({binding.n_dense:,} vertices)")
-        if output in ('REFINED', 'BOTH'):
-            Vr, Fr = core.refine(binding, V_cage)
+        if refined_mesh is not None:
+            Vr, Fr = refined_mesh
             refined = results.write_refined(cage, source, Vr, Fr)
             parts.append(f"'{refined.name}' refined: {Fr.shape[0]:,} faces, {binding.scheme} x"
                          f"{binding.levels}" + _density_note(Fr.shape[0],

@@ -1,7 +1,7 @@
 """Live refine: keep a cage's results updated while it is edited.
 
-A ``depsgraph_update_post`` handler notices geometry updates of cages whose
-``live`` toggle is on and schedules one refine through ``bpy.app.timers``,
+A ``depsgraph_update_post`` handler notices geometry and transform updates
+of cages whose ``live`` toggle is on and schedules one refine through ``bpy.app.timers``,
 at most every ``live_interval`` seconds (add-on preferences), so the viewport
 stays responsive on dense meshes. The edited original is updated by
 :func:`.live_update.update_edited`: only the cage vertices that moved since
@@ -59,10 +59,13 @@ def refine_pending():
 
 @bpy.app.handlers.persistent   # stays registered when a .blend is loaded
 def on_depsgraph_update(scene, depsgraph):
-    """Schedule a throttled refine for every live cage whose geometry changed."""
+    """Schedule a throttled refine for every live cage whose geometry or
+    object transform changed (a cage moved as an object moves the results,
+    as Refine does)."""
     for update in depsgraph.updates:
         obj = update.id
-        if not isinstance(obj, bpy.types.Object) or not update.is_updated_geometry:
+        if not isinstance(obj, bpy.types.Object) or not (update.is_updated_geometry
+                                                         or update.is_updated_transform):
             continue
         obj = obj.original
         if obj.type != 'MESH' or obj.meshadjust.role != 'CAGE' or not obj.meshadjust.live:

@@ -30,7 +30,7 @@ import numpy as np
 
 from .. import core
 from . import store
-from .cage_steps import turned_cage_note
+from .cage_steps import source_space, turned_cage_note
 
 #: above this fraction of moved cage vertices a full deform is cheaper
 FULL_FRACTION = 0.25
@@ -77,7 +77,7 @@ def cage_in_source_space(cage, source):
     buf = np.empty(3 * n, dtype=np.float32)
     if n:
         mesh.vertices.foreach_get("co", buf)      # small mesh: the synced element array
-    M = np.array(source.matrix_world.inverted() @ cage.matrix_world)
+    M = source_space(cage, source)
     return buf.reshape(n, 3).astype(np.float64) @ M[:3, :3].T + M[:3, 3]
 
 

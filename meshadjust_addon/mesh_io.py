@@ -83,7 +83,9 @@ def read_object(obj, *, depsgraph=None, evaluated=None):
 
     ``evaluated=None`` (default) uses the evaluated mesh (modifiers and shape
     keys applied, what the user sees) only when the object has any, and says
-    so in the result; True / False force it.
+    so in the result; True / False force it. An object Blender does not
+    evaluate (disabled in the viewport) cannot give its evaluated mesh:
+    :class:`core.InvalidMeshError`.
     """
     if obj is None or obj.type != 'MESH':
         kind = "nothing" if obj is None else obj.type.lower()
@@ -92,6 +94,12 @@ def read_object(obj, *, depsgraph=None, evaluated=None):
     if use_eval:
         depsgraph = depsgraph or bpy.context.evaluated_depsgraph_get()
         ob_eval = obj.evaluated_get(depsgraph)
+        if not ob_eval.is_evaluated:
+            # (its base mesh would come back: the modifiers silently left out)
+            raise core.InvalidMeshError(
+                f"'{obj.name}' is disabled in the viewport (the object, or a collection it is "
+                f"in, is disabled or excluded), so Blender does not evaluate its modifiers and "
+                f"shape keys: enable it in the viewport first")
         mesh = ob_eval.to_mesh()
         try:
             V = read_positions(mesh)

@@ -66,6 +66,10 @@ class MeshAdjustObjectState(bpy.types.PropertyGroup):
     symmetry: EnumProperty(name="Symmetry", items=MIRROR_PLANES, default='NONE',
                            description="Mirror plane this cage was made symmetric about (Fit "
                                        "keeps it symmetric)")
+    key_name: StringProperty(name="Shape key", default="",
+                             description="The shape key this cage writes on its source (named "
+                                         "after the cage when first written; renaming the "
+                                         "cage keeps it)")
     live: BoolProperty(name="Live", default=False,
                        description="Update the results while the cage is edited")
     last_report: StringProperty(name="Last report", default="",

@@ -21,7 +21,7 @@ import numpy as np
 
 from .. import core
 from . import mesh_io
-from .staleness import own_key_names
+from .staleness import key_name, own_key_names
 
 
 def link_like(obj, like):
@@ -59,25 +59,27 @@ def _new_source_copy(source, name):
     return mesh
 
 
-def edited_copy(source, cage, n_vertices):
-    """The edited-original object of ``cage`` with ``n_vertices`` vertices:
-    the existing one, its mesh re-made from the source when the source's
-    vertex count changed, or a new copy (also when the artist deleted it). Returns ``(edited, note)``, the note
-    saying what was re-made (empty otherwise)."""
+def edited_copy(source, cage, n_vertices, F=None):
+    """The edited-original object of ``cage`` with ``n_vertices`` vertices
+    (and the triangles ``F`` of the mesh bound, when given): the existing
+    one, its mesh re-made from the source when the source's vertex count or
+    faces changed, or a new copy (also when the artist deleted it). Returns
+    ``(edited, note)``, the note saying what was re-made (empty otherwise)."""
     edited = cage.meshadjust.edited
     name = f"{source.name}_edited"
     if edited is not None and edited.name in bpy.data.objects and edited.users_collection:
         old = edited.data
-        if len(old.vertices) == n_vertices:
+        if len(old.vertices) == n_vertices and (
+                F is None or np.array_equal(mesh_io.read_triangles(old)[0], F)):
             return edited, ""
         mesh = _new_source_copy(source, old.name + ".new")
-        keep_name, n_old = old.name, len(old.vertices)
+        keep_name, n_old, m_old = old.name, len(old.vertices), len(old.polygons)
         edited.data = mesh
         if old.users == 0:
             bpy.data.meshes.remove(old)
             mesh.name = keep_name
         return edited, (f"'{edited.name}' re-made from '{source.name}' ({n_old:,} -> "
-                        f"{n_vertices:,} vertices)")
+                        f"{n_vertices:,} vertices, {m_old:,} -> {len(mesh.polygons):,} faces)")
     mesh = _new_source_copy(source, name)
     edited = bpy.data.objects.new(name, mesh)
     edited.matrix_world = source.matrix_world.copy()
@@ -124,21 +126,34 @@ def write_refined(cage, source, Vr, Fr):
 
 def shape_key_unavailable(source, n_dense):
     """Why the edit cannot be a shape key of ``source`` (None when it can)."""
+    if source.mode == 'EDIT':
+        return (f"'{source.name}' is in Edit Mode: a shape key written now would be lost when it "
+                f"leaves; leave Edit Mode on '{source.name}' first")
+    if not source.data.is_editable or source.library is not None:
+        return (f"'{source.name}' is linked from a library: a shape key on it would not be "
+                f"saved; make it local first (Object > Relations > Make Local)")
+    users = source.data.users - int(source.data.use_fake_user)
+    if users > 1:
+        return (f"'{source.name}' shares its mesh with {users - 1:,} other "
+                f"object(s): a shape key would change them too; make it single-user first "
+                f"(Object > Relations > Make Single User > Object & Data)")
     if len(source.data.vertices) != n_dense:
         return (f"'{source.name}' has {len(source.data.vertices):,} vertices in its mesh but "
-                f"{n_dense:,} were bound (its modifiers change the vertex count): the edit "
-                f"cannot be a shape key of it; use the edited original")
+                f"{n_dense:,} were bound (its modifiers change the vertex count, or vertices "
+                f"were added or removed since the bind): the edit cannot be a shape key of it; "
+                f"use the edited original, or re-bind")
     return None
 
 
 def shape_key_of(source, cage):
     """The shape key ``cage`` writes on ``source``, or None."""
     keys = source.data.shape_keys
-    return None if keys is None else keys.key_blocks.get(cage.name)
+    return None if keys is None else keys.key_blocks.get(key_name(cage))
 
 
 def write_shape_key(source, cage, V_edited, V_bound):
-    """Write the edit as the shape key named after ``cage`` on ``source``.
+    """Write the edit as the shape key of ``cage`` on ``source`` (named after
+    the cage when first written, :func:`~.staleness.key_name`).
 
     ``V_edited`` (n,3): the edited original's positions; ``V_bound`` (n,3):
     the positions that were bound (the source's evaluated mesh at bind time),
@@ -150,11 +165,12 @@ def write_shape_key(source, cage, V_edited, V_bound):
     if source.data.shape_keys is None:
         source.shape_key_add(name="Basis", from_mix=False)
     keys = source.data.shape_keys
-    key = keys.key_blocks.get(cage.name)
+    key = keys.key_blocks.get(key_name(cage))
     if key is None:
         key = source.shape_key_add(name=cage.name, from_mix=False)
         key.relative_key = keys.reference_key
         key.value = 1.0
+        cage.meshadjust.key_name = key.name       # (renaming the cage keeps its key)
     if V_bound is None:
         co = V_edited
     else:

@@ -72,8 +72,14 @@ def _rna_values(struct):
 
 def own_key_names(source):
     """Names of the shape keys MeshAdjust wrote on ``source`` (one per cage)."""
-    return {o.name for o in bpy.data.objects
+    return {key_name(o) for o in bpy.data.objects
             if o.type == 'MESH' and o.meshadjust.role == 'CAGE' and o.meshadjust.source == source}
+
+
+def key_name(cage):
+    """The name of the shape key ``cage`` writes on its source: the one it
+    first wrote (kept when the cage is renamed), else the cage's name."""
+    return cage.meshadjust.key_name or cage.name
 
 
 def source_fingerprint(source):

@@ -1,0 +1,198 @@
+"""Object states an artist's scene has and the first tests did not: transforms
+the cage cannot copy, sources in Edit Mode, disabled in the viewport, shared
+or with a changed face set, renamed cages, cages with shape keys, a cage
+moved as an object in live mode. Each is either handled or refused with a
+report that names the object and what to do, the scene left as it was."""
+
+import sys
+
+import bmesh
+import bpy
+import numpy as np
+import pytest
+
+from tests.addon.conftest import MODULE, make_object
+from tests.addon.test_nothing_lost import assert_unchanged, lift_top, pos, scene_snapshot
+from tests.addon.test_operators import bumpy_sphere, simplify
+
+
+def mod(name):
+    return sys.modules[MODULE + ".meshadjust_addon." + name]
+
+
+@pytest.fixture()
+def bound(scene):
+    V, F = bumpy_sphere(3)
+    dense = make_object("dense", V, F)
+    assert simplify(120, fit=False) == {'FINISHED'}
+    return dense, dense.meshadjust.cage
+
+
+def activate(obj):
+    for o in bpy.context.view_layer.objects:
+        o.select_set(False)
+    obj.select_set(True)
+    bpy.context.view_layer.objects.active = obj
+
+
+def test_a_zero_scale_is_refused_by_name_everywhere_and_stops_live(bound):
+    dense, cage = bound
+    dense.scale = (1.0, 1.0, 0.0)                         # flattened after the bind
+    bpy.context.view_layer.update()
+    activate(cage)
+    before = scene_snapshot()
+    for op in (lambda: bpy.ops.meshadjust.refine(output='EDITED'), bpy.ops.meshadjust.fit_cage,
+               bpy.ops.meshadjust.bind):
+        with pytest.raises(RuntimeError, match="'dense' has a zero scale on an axis"):
+            op()
+        assert_unchanged(before)
+    cage.meshadjust.live = True
+    live = mod("live")
+    live._pending.add(cage.name)
+    live.refine_pending()                                 # (no traceback out of the timer)
+    assert not cage.meshadjust.live
+    assert cage.meshadjust.last_report.startswith("live refine stopped: 'dense' has a zero scale")
+    # and Simplify refuses such a source before it starts
+    other = make_object("flat", *bumpy_sphere(2))
+    other.scale = (0.0, 1.0, 1.0)
+    activate(other)
+    with pytest.raises(RuntimeError, match="'flat' has a zero scale"):
+        simplify(50)
+
+
+def test_a_sheared_source_is_refused_with_what_to_do(scene):
+    parent = bpy.data.objects.new("parent", None)
+    scene.collection.objects.link(parent)
+    parent.scale = (1.0, 3.0, 1.0)
+    child = make_object("child", *bumpy_sphere(2))
+    child.parent = parent
+    child.rotation_euler = (0.0, 0.0, 0.6)                # rotated under an uneven scale
+    bpy.context.view_layer.update()
+    activate(child)
+    with pytest.raises(RuntimeError, match="'child' has a sheared transform .* Apply > Scale "
+                                           "on 'parent'"):
+        simplify(50)
+    # without the rotation there is no shear: the cage round-trips the source
+    child.rotation_euler = (0.0, 0.0, 0.0)
+    bpy.context.view_layer.update()
+    assert simplify(50, fit=False) == {'FINISHED'}
+    cage = child.meshadjust.cage
+    assert np.allclose(np.array(cage.matrix_world), np.array(child.matrix_world), atol=1e-6)
+    assert bpy.ops.meshadjust.refine(output='EDITED') == {'FINISHED'}
+    assert np.abs(pos(cage.meshadjust.edited) - pos(child)).max() <= 1e-5
+
+
+def test_a_refine_refused_after_its_rebind_would_be_computed_changes_nothing(bound):
+    dense, cage = bound
+    dense.modifiers.new("more", 'SUBSURF')               # the bound mesh is not the source's mesh
+    activate(cage)
+    assert bpy.ops.meshadjust.bind() == {'FINISHED'}
+    lift_top(cage)
+    detail = cage.meshadjust.edited.meshadjust.detail_mesh.name
+    before = scene_snapshot()
+    with pytest.raises(RuntimeError, match="cannot be a shape key"):
+        bpy.ops.meshadjust.refine(output='SHAPE_KEY', levels=1, scheme='butterfly')
+    assert_unchanged(before)
+    assert (cage.meshadjust.levels, cage.meshadjust.scheme) == (2, 'loop')
+    assert cage.meshadjust.edited.meshadjust.detail_mesh.name == detail
+    assert bpy.ops.meshadjust.refine(output='EDITED') == {'FINISHED'}
+
+
+def test_a_shape_key_on_a_source_in_edit_mode_is_refused(bound):
+    dense, cage = bound
+    lift_top(cage)
+    activate(dense)
+    bpy.ops.object.mode_set(mode='EDIT')
+    bpy.context.view_layer.objects.active = cage
+    cage.select_set(True)
+    before = scene_snapshot()
+    with pytest.raises(RuntimeError, match="'dense' is in Edit Mode: a shape key written now "
+                                           "would be lost"):
+        bpy.ops.meshadjust.refine(output='SHAPE_KEY')
+    assert dense.data.shape_keys is None
+    bpy.ops.object.mode_set(mode='OBJECT')
+    assert_unchanged(before)
+
+
+def test_a_renamed_cage_keeps_writing_its_own_shape_key(bound):
+    dense, cage = bound
+    lift_top(cage)
+    activate(cage)
+    assert bpy.ops.meshadjust.refine(output='SHAPE_KEY') == {'FINISHED'}
+    first = pos(dense).copy()
+    cage.name = "MyCage"
+    lift_top(cage, 0.1)
+    assert bpy.ops.meshadjust.refine(output='SHAPE_KEY') == {'FINISHED'}
+    keys = dense.data.shape_keys.key_blocks
+    assert [kb.name for kb in keys] == ["Basis", "dense_cage"]
+    # the key moved with the edit, and it is still MeshAdjust's own: no staleness
+    assert np.abs(np.array([kb.co[:] for kb in keys["dense_cage"].data]) - first).max() > 1e-3
+    assert "changed since it was bound" not in cage.meshadjust.last_report
+
+
+def test_a_shape_key_on_a_shared_mesh_is_refused(bound):
+    dense, cage = bound
+    twin = bpy.data.objects.new("twin", dense.data)           # a linked duplicate
+    bpy.context.scene.collection.objects.link(twin)
+    lift_top(cage)
+    activate(cage)
+    with pytest.raises(RuntimeError, match="'dense' shares its mesh with 1 other object"):
+        bpy.ops.meshadjust.refine(output='SHAPE_KEY')
+    assert dense.data.shape_keys is None
+
+
+def test_a_source_disabled_in_the_viewport_is_refused_not_read_without_its_modifiers(scene):
+    dense = make_object("dense", *bumpy_sphere(2))
+    dense.modifiers.new("more", 'SUBSURF')
+    dense.hide_viewport = True
+    activate(dense)
+    before = scene_snapshot()
+    with pytest.raises(RuntimeError, match="'dense' is disabled in the viewport"):
+        simplify(60)
+    assert_unchanged(before)
+    dense.hide_viewport = False
+    assert simplify(60, fit=False) == {'FINISHED'}
+    # the evaluated mesh was bound: one subdivision level, 320 triangles -> 960 quads
+    assert dense.meshadjust.cage.meshadjust.edited.meshadjust.dense_faces == 2 * 960
+
+
+def test_a_rebind_after_a_source_face_was_deleted_remakes_the_edited_original(bound):
+    dense, cage = bound
+    bm = bmesh.new()
+    bm.from_mesh(dense.data)
+    bm.faces.ensure_lookup_table()
+    bmesh.ops.delete(bm, geom=[bm.faces[0]], context='FACES_ONLY')
+    bm.to_mesh(dense.data)
+    bm.free()
+    activate(cage)
+    assert bpy.ops.meshadjust.bind() == {'FINISHED'}
+    edited = cage.meshadjust.edited
+    assert len(edited.data.polygons) == len(dense.data.polygons) == 1279
+    assert np.array_equal(mod("mesh_io").read_triangles(edited.data)[0],
+                          mod("mesh_io").read_triangles(dense.data)[0])
+
+
+def test_a_cage_with_shape_keys_is_refused(bound):
+    dense, cage = bound
+    cage.shape_key_add(name="Basis")
+    pose = cage.shape_key_add(name="Pose")
+    pose.value = 1.0
+    activate(cage)
+    before = scene_snapshot()
+    with pytest.raises(RuntimeError, match="'dense_cage' has shape keys"):
+        bpy.ops.meshadjust.refine(output='EDITED')
+    assert_unchanged(before)
+
+
+def test_live_follows_the_cage_moved_as_an_object(bound):
+    dense, cage = bound
+    live = mod("live")
+    activate(cage)
+    cage.meshadjust.live = True
+    live._pending.clear()
+    cage.location.x += 0.5
+    bpy.context.view_layer.update()                       # depsgraph_update_post
+    assert cage.name in live._pending
+    live.refine_pending()
+    edited = cage.meshadjust.edited
+    assert np.abs(pos(edited)[:, 0] - pos(dense)[:, 0] - 0.5).max() <= 1e-5
