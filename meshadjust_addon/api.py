@@ -30,13 +30,12 @@ from .. import core
 from . import mesh_io, results, store
 from .cage_steps import (MAX_AUTO_LEVELS, OUTPUT_NAMES, CageJob, auto_levels, bind_object,  # noqa: F401
                          commit_bind, commit_fit, compute_bind, compute_fit, fit_cage_object,
-                         prepare_cage_job, prepare_fit, read_source, refine_object,
-                         transform_problem)
+                         prepare_cage_job, prepare_fit, read_source, refine_object)
 from .report import Report, about, user_cause  # noqa: F401
 from .rollback import all_or_nothing
 from .simplify_step import (MEASURE_SAMPLES, TARGET_TOLERANCE, SimplifyJob,  # noqa: F401
                             SimplifyParams, commit_simplify, compute_simplify, prepare_simplify,
-                            simplify_object)
+                            simplify_object, source_problem)
 
 CREASE = store.CREASE
 

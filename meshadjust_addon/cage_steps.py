@@ -431,6 +431,9 @@ def refine_object(cage, *, output='EDITED', levels=None, scheme=None):
         if job is not None:
             commit_bind(cage, job)
         if output in ('EDITED', 'BOTH'):
+            if not edited.users_collection:         # deleted by the artist: shown again
+                results.link_like(edited, source)
+                parts.append(f"'{edited.name}' had been deleted: linked back")
             rb.keep(edited.data)
             mesh_io.write_positions(edited.data, V_edited)
             parts.append(f"'{edited.name}' deformed ({binding.n_dense:,} vertices)")

@@ -96,6 +96,9 @@ def update_edited(cage):
     source, edited = cs.source, cs.edited
     if source is None or edited is None:
         raise core.MeshAdjustError(f"'{cage.name}' is not a bound MeshAdjust cage")
+    if not edited.users_collection:
+        raise core.MeshAdjustError(f"'{edited.name}' was deleted: Refine (Edited original) "
+                                   f"links it back")
     binding = store.load_binding(edited, cage)
     V = cage_in_source_space(cage, source)
     t1 = time.perf_counter()

@@ -61,7 +61,7 @@ def simplify_unavailable(context):
         return f"'{obj.name}' is already a cage"
     if len(obj.data.polygons) == 0:
         return f"'{obj.name}' has no faces"
-    return api.transform_problem(obj)
+    return api.source_problem(obj)
 
 
 def cage_unavailable(context, need_binding=False):

@@ -14,7 +14,7 @@ import numpy as np
 
 from .. import core
 from . import cage_steps, mesh_io, results, settings, store
-from .cage_steps import CageJob, auto_levels, fit_levels, read_source
+from .cage_steps import CageJob, auto_levels, fit_levels, read_source, transform_problem
 from .report import Report, user_cause
 from .rollback import all_or_nothing
 
@@ -113,10 +113,24 @@ class SimplifyJob:
     cancelled: bool = False
 
 
+def source_problem(source):
+    """Why ``source`` (a mesh object) cannot be simplified into a cage, in
+    words that say what to do, or None: its transform
+    (:func:`~.cage_steps.transform_problem`), or linked from a library (the
+    link to its cage could not be saved)."""
+    if source.library is not None:
+        return (f"'{source.name}' is linked from a library: its link to a cage would not be "
+                f"saved; make it local first (Object > Relations > Make Local)")
+    return transform_problem(source)
+
+
 def prepare_simplify(source, params, *, depsgraph=None):
     """Read the source object into a :class:`SimplifyJob` (main thread)."""
     if source is None or source.type != 'MESH':
         raise core.InvalidMeshError("simplify: the active object is not a mesh")
+    why = source_problem(source)
+    if why:
+        raise core.MeshAdjustError(f"simplify: {why}")
     if depsgraph is None:
         arrays, fp = read_source(source)
     else:

@@ -196,3 +196,34 @@ def test_live_follows_the_cage_moved_as_an_object(bound):
     live.refine_pending()
     edited = cage.meshadjust.edited
     assert np.abs(pos(edited)[:, 0] - pos(dense)[:, 0] - 0.5).max() <= 1e-5
+
+
+def test_a_deleted_edited_original_is_linked_back_by_refine_and_stops_live(bound):
+    dense, cage = bound
+    edited = cage.meshadjust.edited
+    for col in list(edited.users_collection):
+        col.objects.unlink(edited)                          # deleted in the outliner
+    cage.meshadjust.live = True
+    live = mod("live")
+    live._pending.add(cage.name)
+    live.refine_pending()
+    assert not cage.meshadjust.live
+    assert "'dense_edited' was deleted" in cage.meshadjust.last_report
+    activate(cage)
+    assert bpy.ops.meshadjust.refine(output='EDITED') == {'FINISHED'}
+    assert edited.users_collection
+    assert "'dense_edited' had been deleted: linked back" in cage.meshadjust.last_report
+
+
+def test_simplify_refuses_a_source_linked_from_a_library(scene, tmp_path):
+    make_object("scan", *bumpy_sphere(2))
+    path = str(tmp_path / "library.blend")
+    bpy.data.libraries.write(path, {bpy.data.objects["scan"]})
+    bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)
+    with bpy.data.libraries.load(path, link=True) as (src, dst):
+        dst.objects = ["scan"]
+    linked = dst.objects[0]
+    bpy.context.scene.collection.objects.link(linked)
+    activate(linked)
+    with pytest.raises(RuntimeError, match="'scan' is linked from a library"):
+        simplify(50)
