@@ -46,12 +46,17 @@ def orphans():
         [m.name for m in bpy.data.meshes if m.name.endswith(".001")]
 
 
+def bound_sphere(level=4, faces=300):
+    """A bumpy sphere 'dense' simplified to a bound (unfitted) cage of ``faces``:
+    ``(dense, cage)``."""
+    dense = make_object("dense", *bumpy_sphere(level))
+    assert simplify(faces, fit=False) == {'FINISHED'}
+    return dense, dense.meshadjust.cage
+
+
 @pytest.fixture()
 def bound(scene):
-    V, F = bumpy_sphere(4)
-    dense = make_object("dense", V, F)
-    assert simplify(300, fit=False) == {'FINISHED'}
-    return dense, dense.meshadjust.cage
+    return bound_sphere()
 
 
 def lift_top(cage, dz=0.2):

@@ -4,28 +4,21 @@ or with a changed face set, renamed cages, cages with shape keys, a cage
 moved as an object in live mode. Each is either handled or refused with a
 report that names the object and what to do, the scene left as it was."""
 
-import sys
 
 import bmesh
 import bpy
 import numpy as np
 import pytest
 
-from tests.addon.conftest import MODULE, make_object
-from tests.addon.test_nothing_lost import assert_unchanged, lift_top, pos, scene_snapshot
+from tests.addon.conftest import make_object
+from tests.addon.test_nothing_lost import (assert_unchanged, bound_sphere, lift_top, mod, pos,
+                                           scene_snapshot)
 from tests.addon.test_operators import bumpy_sphere, simplify
-
-
-def mod(name):
-    return sys.modules[MODULE + ".meshadjust_addon." + name]
 
 
 @pytest.fixture()
 def bound(scene):
-    V, F = bumpy_sphere(3)
-    dense = make_object("dense", V, F)
-    assert simplify(120, fit=False) == {'FINISHED'}
-    return dense, dense.meshadjust.cage
+    return bound_sphere(3, 120)
 
 
 def activate(obj):
