@@ -494,14 +494,22 @@ def _symmetric(whole, options):
         seam_from[hit[hit >= 0]] = True
         return r, _mirror_cage(r.V, r.F, seam_from, k, LIFT * diag)
 
-    r, cage, hausdorff = _simplify_half(run, clean, whole.target, whole.max_error)
+    r, cage, hausdorff = _simplify_half(run, clean, whole.target, whole.max_error,
+                                        hs.half.F.shape[0])
     if cage is None:
         return _cancelled(clean, whole.n_in, whole.m_in, whole.target)
+    if cage.F.shape[0] == 0:
+        raise InvalidArgumentError(
+            f"{_WHERE}: symmetry {whole.axis!r}: the mesh's half on the positive side is all "
+            f"on the plane (lone triangles on the seam), so there is nothing to mirror")
+    stopped = r.stopped_because
+    if whole.target is not None and cage.F.shape[0] > whole.target and stopped == "target":
+        stopped = "topology_floor"         # (the fewest faces a mirrored cage of it has)
     vertex_map, face_from, fe = _whole_maps(clean, hs, r, cage, s, k, whole.n_in)
     _, n_comp = face_components(cage.F, cage.V.shape[0])
     return SimplifyResult(
         V=cage.V, F=cage.F, vertex_map=vertex_map, face_map=clean.face_to_input[face_from],
-        max_error=r.max_error, stopped_because=r.stopped_because, feature_edges=fe,
+        max_error=r.max_error, stopped_because=stopped, feature_edges=fe,
         cleaning=clean.report, n_input_faces=int(whole.m_in), target=whole.target,
         hausdorff=hausdorff, n_boundary_loops=boundary_loops_count(cage.F, cage.V.shape[0]),
         n_components=n_comp, n_passes=r.n_passes, asymmetry=hs.asymmetry / diag)
@@ -557,9 +565,10 @@ def _half_set_up(clean, s, k, weights, lk):
                       max(asymmetry, beyond))
 
 
-def _simplify_half(run, clean, target, max_error):
+def _simplify_half(run, clean, target, max_error, most):
     """Simplify the half (``run(half_target, bound)`` -> (result, mirrored
-    cage or None when cancelled)): half the target, asked again for fewer
+    cage or None when cancelled); ``most``: the half's faces): half the
+    target (raised while the mirrored cage would have no face), asked again for fewer
     while the mirrored cage is over it (the chords split before mirroring
     add faces); with ``max_error``, the engine's bound raised in
     ``MAX_ERROR_SHARES`` steps until the whole cage's Hausdorff distance is
@@ -569,7 +578,7 @@ def _simplify_half(run, clean, target, max_error):
         bound = None if share is None else share * float(max_error)
         half_target = None if target is None else target // 2
         for _ in range(TARGET_RETRIES + 1):
-            r, cage = run(half_target, bound)
+            r, cage, half_target = _mirrored_at_least_one_face(run, half_target, bound, most)
             if cage is None:
                 return r, None, None
             over = 0 if target is None else cage.F.shape[0] - target
@@ -582,6 +591,19 @@ def _simplify_half(run, clean, target, max_error):
         if hausdorff <= max_error:
             break
     return r, cage, hausdorff
+
+
+def _mirrored_at_least_one_face(run, half_target, bound, most):
+    """``run(half_target, bound)``, the half's target doubled while the
+    mirrored cage has no face (a half of one or two faces is all lone
+    triangles on the seam, which the mirroring drops: a 4-face target gave
+    an empty cage) and the half (``most`` faces) had more to keep. Returns
+    (result, mirrored cage, the half target used)."""
+    while True:
+        r, cage = run(half_target, bound)
+        if cage is None or cage.F.shape[0] or half_target is None or half_target >= most:
+            return r, cage, half_target
+        half_target = max(2 * half_target, 2)
 
 
 def _whole_maps(clean, hs, r, cage, s, k, n_in):

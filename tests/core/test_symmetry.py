@@ -94,6 +94,22 @@ def test_bumpy_sphere_cage_is_symmetric_manifold_with_the_same_euler(axis):
     assert r.n_components == 1 and r.n_boundary_loops == 0
 
 
+@pytest.mark.parametrize("target", [4, 5])
+@pytest.mark.parametrize("axis", ["X", "Y", "Z"])
+def test_a_target_below_the_smallest_symmetric_cage_stops_there_and_says_so(axis, target):
+    """Half of 4 or 5 faces is a half cage of one or two triangles on the
+    seam, which the mirroring drops: it gave an empty cage (and an
+    IndexError). Now the half keeps enough to mirror: the smallest
+    symmetric cage, a clean manifold, stopped at its floor."""
+    V, F = bumpy_sphere(3)
+    r = simplify(V, F, target_faces=target, symmetry=axis)
+    assert_symmetric(r.V, r.F, axis)
+    assert_clean(r, V, F)
+    assert euler_characteristic(r.F) == 2 and target < r.F.shape[0] <= 16
+    assert r.stopped_because == "topology_floor"
+    assert r.message.startswith(f"stopped at {r.F.shape[0]} faces of {target} asked")
+
+
 @pytest.mark.parametrize("axis", ["X", "Z"])
 def test_torus_keeps_genus_and_symmetry(axis):
     V, F = torus(48, 24, bump=0.02)
