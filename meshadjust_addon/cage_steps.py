@@ -96,6 +96,40 @@ def source_space(cage, source):
     return np.array(source.matrix_world.inverted() @ cage.matrix_world)
 
 
+def bound_source_matrix(cage):
+    """The source's (4,4) world matrix when ``cage`` was bound, or None (not
+    bound, or bound before it was recorded)."""
+    edited = cage.meshadjust.edited
+    M = np.array(edited.meshadjust.source_matrix).reshape(4, 4) if edited is not None else None
+    return M if M is not None and M.any() else None
+
+
+def _moved_since_bind(cage, source):
+    """The matrix taking the source's local space at bind time to its space
+    now, or None when its transform is the same (or was not recorded): the
+    source moved, or its transform was applied to its mesh."""
+    M0 = bound_source_matrix(cage)
+    if M0 is None:
+        return None
+    M = np.array(source.matrix_world)
+    if np.abs(M - M0).max() <= 1e-6 * max(1.0, float(np.abs(M0).max())):
+        return None
+    return np.linalg.inv(M) @ M0
+
+
+def check_source_in_place(cage, source):
+    """Raise :class:`core.MeshAdjustError` when the source's transform changed
+    since the bind (the binding, the cage's rest shape and the results are in
+    its space then: Refine took the change for an edit of the whole cage, and
+    the results jumped)."""
+    source_space(cage, source)              # (a transform with no inverse named first)
+    if _moved_since_bind(cage, source) is not None:
+        raise core.MeshAdjustError(
+            f"'{source.name}' was moved, rotated or scaled (or had its transform applied) since "
+            f"'{cage.name}' was bound, and the binding is in its old place: Bind (Keep edit) "
+            f"binds it where it is now and keeps the edit")
+
+
 def _cage_in_source_space(cage, source):
     """Cage positions in the source's local space (object transforms respected)."""
     if cage.mode == 'EDIT':
@@ -103,6 +137,12 @@ def _cage_in_source_space(cage, source):
     V = mesh_io.read_positions(cage.data)
     M = source_space(cage, source)
     return V @ M[:3, :3].T + M[:3, 3]
+
+
+def _matrix(M):
+    """A (4,4) array as Blender's ``mathutils.Matrix``."""
+    import mathutils
+    return mathutils.Matrix(M.tolist())
 
 
 def _source_to_cage(cage, source, V):
@@ -150,14 +190,18 @@ class CageJob:
 
 def _rest_of(cage, n):
     """The cage's saved rest shape (source space) when it has one for ``n``
-    vertices, else None."""
+    vertices, else None; in the source's space now when its transform
+    changed since the bind (:func:`_moved_since_bind`)."""
     if cage.data.attributes.get(store.REST) is None and not cage.data.is_editmode:
         return None
     try:
         V_rest = store.load_rest(cage)
     except core.MeshAdjustError:
         return None
-    return V_rest if V_rest.shape[0] == n else None
+    if V_rest.shape[0] != n:
+        return None
+    A = _moved_since_bind(cage, cage.meshadjust.source)
+    return V_rest if A is None else V_rest @ A[:3, :3].T + A[:3, 3]
 
 
 def _check_rest(cage, V_rest, V_now, F_cage):
@@ -184,6 +228,10 @@ def prepare_cage_job(cage, *, levels=None, scheme=None, from_rest=False, keep_ed
     source = cs.source
     if source is None:
         raise core.MeshAdjustError(f"'{cage.name}' is not a MeshAdjust cage (no source linked)")
+    if levels is not None:
+        levels = settings.checked("levels", levels, f"'{cage.name}'")
+    if scheme is not None and scheme != 'BOUND':
+        scheme = settings.checked("scheme", scheme, f"'{cage.name}'")
     V_now = _cage_in_source_space(cage, source)
     V_rest = _rest_of(cage, V_now.shape[0]) if (keep_edit or from_rest) else None
     F_cage, _, creases = store.cage_topology(cage)
@@ -239,8 +287,14 @@ def commit_bind(cage, job):
         if cs.edited is not None:
             rb.keep(cs.edited.data)
         rb.keep(cage.data)
+        A = _moved_since_bind(cage, source)            # (before the new matrix is recorded)
         edited, note = results.edited_copy(source, cage, job.V.shape[0], job.F)
         job.note = note
+        if A is not None:      # the results keep their place beside the source's new space
+            for obj in (edited, cs.refined):
+                if obj is not None:
+                    obj.matrix_world = obj.matrix_world @ _matrix(np.linalg.inv(A))
+        edited.meshadjust.source_matrix = np.array(source.matrix_world).ravel()
         mesh_io.write_positions(edited.data, job.V_edited if job.V_edited is not None else job.V)
         store.save_binding(edited, job.binding)
         store.save_rest(cage, job.V_cage)
@@ -410,15 +464,16 @@ def refine_object(cage, *, output='EDITED', levels=None, scheme=None):
         parts.append(f"re-bound from the rest shape ({job.old_scheme} x{job.old_levels} -> "
                      f"{job.scheme} x{job.levels}), the edit kept")
     else:
+        check_source_in_place(cage, source)
         binding = store.load_binding(edited, cage)
     V_cage = _cage_in_source_space(cage, source)
     turned = turned_cage_note(cage, binding, V_cage)
     if turned:
         warnings.append(turned)
-    if output == 'SHAPE_KEY':
-        why = results.shape_key_unavailable(source, binding.n_dense)
-        if why:
-            raise core.MeshAdjustError(f"Refine: {why}")
+    why = results.shape_key_unavailable(source, binding.n_dense) if output == 'SHAPE_KEY' else \
+        results.edited_problem(edited) if output in ('EDITED', 'BOTH') else None
+    if why:
+        raise core.MeshAdjustError(f"Refine: {why}")
     V_edited = None
     if output in ('EDITED', 'BOTH', 'SHAPE_KEY'):
         V_edited = core.deform(binding, V_cage)

@@ -29,8 +29,8 @@ from typing import NamedTuple
 import numpy as np
 
 from .. import core
-from . import store
-from .cage_steps import source_space, turned_cage_note
+from . import results, store
+from .cage_steps import check_source_in_place, source_space, turned_cage_note
 
 #: above this fraction of moved cage vertices a full deform is cheaper
 FULL_FRACTION = 0.25
@@ -99,6 +99,10 @@ def update_edited(cage):
     if not edited.users_collection:
         raise core.MeshAdjustError(f"'{edited.name}' was deleted: Refine (Edited original) "
                                    f"links it back")
+    why = results.edited_problem(edited)
+    if why:
+        raise core.MeshAdjustError(why)
+    check_source_in_place(cage, source)
     binding = store.load_binding(edited, cage)
     V = cage_in_source_space(cage, source)
     t1 = time.perf_counter()

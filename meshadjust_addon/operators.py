@@ -355,7 +355,8 @@ class _CageJobStep(_Background, _CageStep):
 
 def _edit_note(job):
     n = job.n_moved
-    return f"; the edit ({n:,} cage vertices moved) kept on top" if n else ""
+    return (f"; the edit ({n:,} cage {'vertex' if n == 1 else 'vertices'} moved) kept on top"
+            if n else "")
 
 
 class MESHADJUST_OT_fit_cage(FitProps, _CageJobStep, bpy.types.Operator):
@@ -391,7 +392,9 @@ class MESHADJUST_OT_fit_cage(FitProps, _CageJobStep, bpy.types.Operator):
             msg += f"; re-bound '{cage.meshadjust.edited.name}'"
         elif cage.meshadjust.edited is not None:
             msg += "; not re-bound: the fit counts as an edit of the bound rest shape"
-        return msg + _edit_note(self._job) + (f"; {self._job.note}" if self._job.note else "")
+        msg += _edit_note(self._job) + (f"; {self._job.note}" if self._job.note else "")
+        cage.meshadjust.last_report = msg          # (the panel's line: Refine's was stale)
+        return msg
 
 
 class MESHADJUST_OT_bind(BindProps, _CageJobStep, bpy.types.Operator):
@@ -417,7 +420,9 @@ class MESHADJUST_OT_bind(BindProps, _CageJobStep, bpy.types.Operator):
                f"'{cage.name}' ({job.scheme}, {job.levels} levels)")
         if job.old_levels and (job.old_levels, job.old_scheme) != (job.levels, job.scheme):
             msg += f", was {job.old_scheme} x{job.old_levels}"
-        return msg + _edit_note(job) + (f"; {job.note}" if job.note else "")
+        msg += _edit_note(job) + (f"; {job.note}" if job.note else "")
+        cage.meshadjust.last_report = msg          # (the panel's line: Refine's was stale)
+        return msg
 
 
 class MESHADJUST_OT_refine(RefineProps, _CageStep, bpy.types.Operator):

@@ -7,8 +7,8 @@ settings and the preferences are built from that table.
 """
 
 import bpy
-from bpy.props import (BoolProperty, EnumProperty, FloatProperty, IntProperty, IntVectorProperty,
-                       PointerProperty, StringProperty)
+from bpy.props import (BoolProperty, EnumProperty, FloatProperty, FloatVectorProperty, IntProperty,
+                       IntVectorProperty, PointerProperty, StringProperty)
 
 from . import settings as _settings
 from .settings import AXES, OUTPUTS, SCHEMES, TARGET_MODES  # noqa: F401  (re-exported)
@@ -57,6 +57,9 @@ class MeshAdjustObjectState(bpy.types.PropertyGroup):
     source_fingerprint: StringProperty(name="Source fingerprint", default="",
                                        description="Checksum of the source (mesh, shape keys, "
                                                    "modifiers) at bind time")
+    source_matrix: FloatVectorProperty(name="Source transform", size=16, default=(0.0,) * 16,
+                                       description="The source's world matrix at bind time "
+                                                   "(row by row; all 0: not recorded)")
     dense_faces: IntProperty(name="Source faces", default=0, min=0,
                              description="Triangles of the source at bind time")
     levels: IntProperty(name="Levels", default=2, min=0, max=6,

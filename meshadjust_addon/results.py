@@ -124,6 +124,17 @@ def write_refined(cage, source, Vr, Fr):
     return refined
 
 
+def edited_problem(edited):
+    """Why the edited original ``edited`` cannot take a deformed shape, or
+    None: shape keys of its own (its mesh is written, and Blender shows the
+    keys' mix over it: a Refine said "deformed" and nothing moved)."""
+    keys = edited.data.shape_keys
+    if keys is not None and len(keys.key_blocks):
+        return (f"'{edited.name}' has shape keys, which hide the mesh Refine writes: delete them "
+                f"(Shape Keys > Delete All Shape Keys), or add your keys to a copy of it")
+    return None
+
+
 def shape_key_unavailable(source, n_dense):
     """Why the edit cannot be a shape key of ``source`` (None when it can)."""
     if source.mode == 'EDIT':

@@ -117,10 +117,15 @@ def source_problem(source):
     """Why ``source`` (a mesh object) cannot be simplified into a cage, in
     words that say what to do, or None: its transform
     (:func:`~.cage_steps.transform_problem`), or linked from a library (the
-    link to its cage could not be saved)."""
+    link to its cage could not be saved), or a result another cage rewrites."""
     if source.library is not None:
         return (f"'{source.name}' is linked from a library: its link to a cage would not be "
                 f"saved; make it local first (Object > Relations > Make Local)")
+    cage = source.meshadjust.cage
+    if cage is not None and source in (cage.meshadjust.edited, cage.meshadjust.refined):
+        what = "edited original" if source == cage.meshadjust.edited else "refined mesh"
+        return (f"'{source.name}' is the {what} of '{cage.name}', which the cage rewrites: "
+                f"simplify a copy of it (Shift+D), or its source")
     return transform_problem(source)
 
 
@@ -131,6 +136,8 @@ def prepare_simplify(source, params, *, depsgraph=None):
     why = source_problem(source)
     if why:
         raise core.MeshAdjustError(f"simplify: {why}")
+    params = replace(params, levels=settings.checked("levels", params.levels, "simplify"),
+                     scheme=settings.checked("scheme", params.scheme, "simplify"))
     if depsgraph is None:
         arrays, fp = read_source(source)
     else:

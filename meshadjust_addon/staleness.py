@@ -186,10 +186,10 @@ def describe_change(before, after):
     if tuple(before) == tuple(after):
         return None
     parts = []
-    for k, noun in enumerate(("vertex", "edge", "face")):
+    for k, (noun, plural) in enumerate((("vertex", "vertices"), ("edge", "edges"),
+                                        ("face", "faces"))):
         d = after[k] - before[k]
         if d:
-            plural = noun + ("es" if noun == "vertex" else "s")
             parts.append(f"{abs(d):,} {noun if abs(d) == 1 else plural} "
                          f"{'added' if d > 0 else 'removed'}")
     if parts:

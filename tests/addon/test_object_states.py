@@ -5,12 +5,14 @@ moved as an object in live mode. Each is either handled or refused with a
 report that names the object and what to do, the scene left as it was."""
 
 
+import sys
+
 import bmesh
 import bpy
 import numpy as np
 import pytest
 
-from tests.addon.conftest import make_object
+from tests.addon.conftest import MODULE, make_object
 from tests.addon.test_nothing_lost import (assert_unchanged, bound_sphere, lift_top, mod, pos,
                                            scene_snapshot)
 from tests.addon.test_operators import bumpy_sphere, simplify
@@ -220,3 +222,69 @@ def test_simplify_refuses_a_source_linked_from_a_library(scene, tmp_path):
     activate(linked)
     with pytest.raises(RuntimeError, match="'scan' is linked from a library"):
         simplify(50)
+
+
+def world(obj):
+    M = np.array(obj.matrix_world)
+    return pos(obj) @ M[:3, :3].T + M[:3, 3]
+
+
+def test_a_source_transform_applied_after_the_bind_is_refused_then_rebound_in_place(scene):
+    dense = make_object("dense", *bumpy_sphere(3))
+    dense.scale = (2.0, 2.0, 2.0)
+    dense.location = (1.0, 0.0, 0.0)
+    bpy.context.view_layer.update()
+    assert simplify(120, fit=False) == {'FINISHED'}
+    cage = dense.meshadjust.cage
+    lift_top(cage)
+    activate(cage)
+    assert bpy.ops.meshadjust.refine(output='EDITED') == {'FINISHED'}
+    edited = cage.meshadjust.edited
+    shown = world(edited)
+    activate(dense)
+    bpy.ops.object.transform_apply(location=False, rotation=False, scale=True)
+    assert np.abs(world(dense) - world(edited)).max() > 0.1          # (the edit shows)
+    activate(cage)
+    before = scene_snapshot()
+    with pytest.raises(RuntimeError, match="'dense' was moved, rotated or scaled \\(or had its "
+                                           "transform applied\\) since 'dense_cage' was bound"):
+        bpy.ops.meshadjust.refine(output='EDITED')
+    assert_unchanged(before)
+    # Bind (keep edit) binds it where it is: the same edit, the result where it was
+    assert bpy.ops.meshadjust.bind() == {'FINISHED'}
+    assert "the edit (1 cage vertex moved) kept on top" in cage.meshadjust.last_report
+    assert bpy.ops.meshadjust.refine(output='EDITED') == {'FINISHED'}
+    assert np.abs(world(edited) - shown).max() <= 1e-4
+
+
+def test_an_edited_original_with_shape_keys_is_refused_and_a_result_cannot_be_simplified(bound):
+    dense, cage = bound
+    edited = cage.meshadjust.edited
+    edited.shape_key_add(name="Basis")
+    edited.shape_key_add(name="Variant").value = 1.0
+    lift_top(cage)
+    activate(cage)
+    before = scene_snapshot()
+    with pytest.raises(RuntimeError, match="'dense_edited' has shape keys, which hide the mesh"):
+        bpy.ops.meshadjust.refine(output='EDITED')
+    assert_unchanged(before)
+    activate(edited)
+    with pytest.raises(RuntimeError, match="'dense_edited' is the edited original of "
+                                           "'dense_cage', which the cage rewrites"):
+        simplify(40)
+
+
+def test_the_api_refuses_levels_and_schemes_the_ui_does_not_offer(bound):
+    dense, cage = bound
+    api, core = mod("api"), sys.modules[MODULE + ".core"]
+    before = scene_snapshot()
+    for kw, text in (({"levels": 9}, "levels must be an integer from 0 to 5, got 9"),
+                     ({"levels": 2.5}, "levels must be an integer from 0 to 5, got 2.5"),
+                     ({"levels": -1}, "levels must be an integer from 0 to 5, got -1"),
+                     ({"scheme": "catmull"}, "scheme must be one of 'loop', 'butterfly', "
+                                             "got 'catmull'")):
+        with pytest.raises(core.InvalidArgumentError, match=text):
+            api.refine_object(cage, **kw)
+        with pytest.raises(core.InvalidArgumentError, match=text):
+            api.simplify_object(dense, target_faces=60, **kw)
+    assert_unchanged(before)
