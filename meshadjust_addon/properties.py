@@ -69,6 +69,10 @@ class MeshAdjustObjectState(bpy.types.PropertyGroup):
     symmetry: EnumProperty(name="Symmetry", items=MIRROR_PLANES, default='NONE',
                            description="Mirror plane this cage was made symmetric about (Fit "
                                        "keeps it symmetric)")
+    own_keys: StringProperty(name="MeshAdjust's shape keys", default="",
+                             description="On a source: the shape keys its cages wrote, one name "
+                                         "a line (kept when a cage is deleted: never read as "
+                                         "the artist's own)")
     key_name: StringProperty(name="Shape key", default="",
                              description="The shape key this cage writes on its source (named "
                                          "after the cage when first written; renaming the "

@@ -182,6 +182,8 @@ def write_shape_key(source, cage, V_edited, V_bound):
         key.relative_key = keys.reference_key
         key.value = 1.0
         cage.meshadjust.key_name = key.name       # (renaming the cage keeps its key)
+        recorded = set(filter(None, source.meshadjust.own_keys.split("\n"))) | {key.name}
+        source.meshadjust.own_keys = "\n".join(sorted(recorded))
     if V_bound is None:
         co = V_edited
     else:

@@ -71,9 +71,12 @@ def _rna_values(struct):
 
 
 def own_key_names(source):
-    """Names of the shape keys MeshAdjust wrote on ``source`` (one per cage)."""
-    return {key_name(o) for o in bpy.data.objects
-            if o.type == 'MESH' and o.meshadjust.role == 'CAGE' and o.meshadjust.source == source}
+    """Names of the shape keys MeshAdjust wrote on ``source`` (one per cage,
+    and those of cages deleted since: recorded on the source when written,
+    so another cage's bind never reads them as the artist's, and bakes them)."""
+    names = {key_name(o) for o in bpy.data.objects
+             if o.type == 'MESH' and o.meshadjust.role == 'CAGE' and o.meshadjust.source == source}
+    return names | set(filter(None, source.meshadjust.own_keys.split("\n")))
 
 
 def key_name(cage):

@@ -288,3 +288,19 @@ def test_the_api_refuses_levels_and_schemes_the_ui_does_not_offer(bound):
         with pytest.raises(core.InvalidArgumentError, match=text):
             api.simplify_object(dense, target_faces=60, **kw)
     assert_unchanged(before)
+
+
+def test_the_key_of_a_deleted_cage_is_never_baked_into_another_cages_binding(bound):
+    dense, cage = bound
+    activate(dense)
+    assert simplify(60, fit=False) == {'FINISHED'}                 # a second cage
+    second = dense.meshadjust.cage
+    lift_top(second, 0.3)
+    activate(second)
+    assert bpy.ops.meshadjust.refine(output='SHAPE_KEY') == {'FINISHED'}
+    bpy.data.objects.remove(second)                                # the artist deletes it
+    assert mod("operators").binding_warnings(cage) == []           # (its key is not the artist's)
+    activate(cage)
+    assert bpy.ops.meshadjust.bind() == {'FINISHED'}
+    # the first cage has no edit: its edited original is the source's mesh, not its key's mix
+    assert np.abs(pos(cage.meshadjust.edited) - pos(dense)).max() <= 1e-6
