@@ -48,7 +48,7 @@ import numpy as np
 
 from ._clean import BOUNDARY, NON_MANIFOLD, edge_representatives, half_edge_ends, renumber_twins
 from ._parallel import blocks, run_blocks, run_each
-from .mesh import cross_columns, dot_columns
+from .mesh import cross_columns, dot_columns, stops
 from .quadrics import place_columns, quadric_at, rms_distance
 from .spatial import closest_on_triangles, triangle_rows
 
@@ -1263,7 +1263,7 @@ def _forget_refusals(st):
 def _progress(progress, m0, m, target):
     """Report the fraction done; False when the caller asks to stop."""
     frac = (m0 - m) / (m0 - target) if target is not None and m0 > target else (m0 - m) / max(m0, 1)
-    return progress(float(min(max(frac, 0.0), 1.0))) is not False
+    return not stops(progress(float(min(max(frac, 0.0), 1.0))))
 
 
 def _run(st, target, max_err_n, preserve_boundary, progress, m0, tun, dihedral_cos):

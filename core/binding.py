@@ -60,11 +60,12 @@ from typing import NamedTuple
 import numpy as np
 
 from .detail_search import dense_points_near, exact_detail_index
-from .errors import CancelledError, InvalidArgumentError, InvalidMeshError, TopologyMismatchError
-from .mesh import area_normals_t, check_mesh, check_units, cross_columns, dot_columns
+from .errors import CancelledError, InvalidArgumentError, TopologyMismatchError
+from .mesh import (area_normals_t, check_faces, check_mesh, check_units, check_vertices,
+                   cross_columns, dot_columns, stops)
 from .near_query import NearQuery
 from .spatial import TriangleIndex
-from .subdivide import subdivision_operator
+from .subdivide import check_subdivision_args, subdivision_operator
 from .unfold import (CageRings, FaceStars, FineFaceGroups, Repair, away_rows, away_t,
                      nearest_rotations, repair, rest_normals, ring_rotations, turned_over)
 from ._groups import distinct, ragged_entries, ragged_ranges
@@ -419,6 +420,7 @@ def bind(V_dense, F_dense, V_cage, F_cage, *, levels=2, scheme="butterfly", crea
             f"bind: detail_search must be one of {_DETAIL_SEARCHES}, got {detail_search!r}")
     if progress is not None and not callable(progress):
         raise InvalidArgumentError(f"bind: progress must be callable or None, got {type(progress)}")
+    check_subdivision_args(levels, scheme, "bind", F_cage.shape[0])
     op = subdivision_operator(F_cage, V_cage.shape[0], levels=levels, scheme=scheme,
                               creases=creases)
     Vf = op.apply(V_cage)
@@ -1099,24 +1101,20 @@ def _check_cage(binding, V_cage_edited, F_cage, where):
     """Check an edited cage against the binding; return it as float64."""
     if not isinstance(binding, Binding):
         raise InvalidArgumentError(f"{where}: expected a Binding, got {type(binding).__name__}")
-    Vc = np.asarray(V_cage_edited)
-    if Vc.ndim != 2 or Vc.shape[1] != 3:
-        raise InvalidMeshError(f"{where}: V_cage_edited must be (n,3) floats, got {Vc.shape} {Vc.dtype}")
+    # (n,3) real numbers, finite: strings, booleans and complex numbers were taken
+    Vc = check_vertices(V_cage_edited, where=where, name="V_cage_edited", copy=False)
     if Vc.shape[0] != binding.n_cage:
         raise TopologyMismatchError(
             f"{where}: the edited cage has {Vc.shape[0]} vertices but the binding was made for "
             f"{binding.n_cage} (fingerprint {binding.fingerprint}); rebind after changing the "
             f"cage's topology")
     if F_cage is not None:
-        Fc = np.asarray(F_cage)
+        Fc = check_faces(F_cage, binding.n_cage, where=where)
         if Fc.shape != binding.F_cage.shape or not np.array_equal(Fc, binding.F_cage):
             raise TopologyMismatchError(
                 f"{where}: the edited cage's faces {Fc.shape} differ from the bound cage's "
                 f"{binding.F_cage.shape} (fingerprint {binding.fingerprint}); rebind after "
                 f"changing the cage's topology")
-    Vc = np.asarray(Vc, dtype=np.float64)
-    if not np.isfinite(Vc).all():
-        raise InvalidMeshError(f"{where}: V_cage_edited has NaN or infinite coordinates")
     check_units(Vc, where=where, name="V_cage_edited")
     return Vc
 
@@ -1464,7 +1462,7 @@ def _reporter(progress, lo, hi):
         return None
 
     def report(fraction):
-        if progress(lo + (hi - lo) * fraction) is False:
+        if stops(progress(lo + (hi - lo) * fraction)):
             raise CancelledError("bind: cancelled")
     return report
 

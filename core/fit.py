@@ -36,17 +36,22 @@ import numpy as np
 from .cg import conjugate_gradient
 from .clean import clean_mesh
 from .errors import InvalidArgumentError, InvalidMeshError
-from .mesh import (barycentric_gather, barycentric_scatter, bbox_diagonal, bounding_box, check_mesh, check_units,
-                   cross_rows, face_areas, squared_edges, vertex_normals)
-from .metrics import sample_surface
+from .mesh import (barycentric_gather, barycentric_scatter, bbox_diagonal, bounding_box, check_mesh, check_number,
+                   check_seed, check_units,
+                   cross_rows, face_areas, squared_edges, stops, vertex_normals)
+from .metrics import MAX_SAMPLES, sample_surface
 from .mirror import axis_index, mirror_partners, symmetrize
 from .near_query import search_for
 from .spatial import TriangleIndex
-from .subdivide import subdivision_operator
+from .subdivide import check_subdivision_args, subdivision_operator
 from .topology import edge_map
 from .pages import plain_pages
 
 _LAPLACIANS = ("uniform", "cotangent")
+
+#: most fitting iterations (and a hundred times that, conjugate-gradient steps) taken:
+#: more is a mistake (iterations=10**12 ran on and on)
+MAX_ITERATIONS = 10_000
 
 #: the dense surface's index has cells at least this many mean fine edges wide: the
 #: fine vertices it answers lie a fraction of a fine edge from the dense surface, often
@@ -133,6 +138,8 @@ def fit_cage(V_dense, F_dense, V_cage, F_cage, *, levels=2, scheme="butterfly", 
     >>> r.mean_distance[-1] < r.mean_distance[0]                      # doctest: +SKIP
     True
     """
+    cg_rtol, cg_max_iterations = check_solver(cg_rtol, cg_max_iterations, progress)
+    check_subdivision_args(levels, scheme, "fit_cage")
     pb = _set_up(V_dense, F_dense, V_cage, F_cage, levels=levels, scheme=scheme, creases=creases,
                  smoothness=smoothness, point_to_point=point_to_point, laplacian=laplacian,
                  samples=samples, seed=seed, symmetry=symmetry, iterations=iterations)
@@ -147,7 +154,7 @@ def fit_cage(V_dense, F_dense, V_cage, F_cage, *, levels=2, scheme="butterfly", 
             break
         X, n_cg = _solve(pb, m, X, cg_rtol, cg_max_iterations)
         cg_its.append(n_cg)
-        if progress is not None and progress((it + 1) / (int(iterations) + 1)) is False:
+        if progress is not None and stops(progress((it + 1) / (int(iterations) + 1))):
             cancelled = True
             break
     f2d = np.array(f2d)
@@ -185,13 +192,15 @@ def _set_up(V_dense, F_dense, V_cage, F_cage, *, levels, scheme, creases, smooth
     and index, and the cage's operator and Laplacian."""
     V_dense, F_dense = check_mesh(V_dense, F_dense, where="fit_cage", allow_empty=False)
     V_cage, F_cage = check_mesh(V_cage, F_cage, where="fit_cage", allow_empty=False)
+    check_subdivision_args(levels, scheme, "fit_cage", F_cage.shape[0])
     check_units(V_dense, where="fit_cage", name="V_dense")
     check_units(V_cage, where="fit_cage", name="V_cage")
     dense = clean_mesh(V_dense, F_dense)
     if dense.F.shape[0] == 0:
         raise InvalidMeshError(f"fit_cage: nothing of the dense mesh is left after cleaning "
                                f"({dense.report.summary()})")
-    _check_weights(iterations, smoothness, point_to_point, laplacian)
+    iterations, smoothness, point_to_point = _check_weights(iterations, smoothness,
+                                                            point_to_point, laplacian)
     centre = 0.5 * np.add(*bounding_box(dense.V))
     sym = None
     if symmetry is not None:
@@ -205,9 +214,9 @@ def _set_up(V_dense, F_dense, V_cage, F_cage, *, levels, scheme, creases, smooth
                               creases=creases)
     if samples is None:
         samples = int(np.clip(2 * op.n_fine, 5000, 200000))
-    if int(samples) < 1:
-        raise InvalidArgumentError(f"fit_cage: samples must be >= 1, got {samples}")
-    sampled = sample_surface(V_dense, dense.F, int(samples), seed=seed)
+    samples = check_number(samples, where="fit_cage", name="samples", lo=1, hi=MAX_SAMPLES,
+                           integer=True)
+    sampled = sample_surface(V_dense, dense.F, samples, seed=check_seed(seed, where="fit_cage"))
     index = TriangleIndex(V_dense, dense.F,
                           min_cell=_DENSE_CELL_EDGES * _mean_edge(op.apply(V_cage), op.F_fine))
     N_dense = vertex_normals(V_dense, dense.F)
@@ -219,16 +228,28 @@ def _set_up(V_dense, F_dense, V_cage, F_cage, *, levels, scheme, creases, smooth
 
 
 def _check_weights(iterations, smoothness, point_to_point, laplacian):
-    """Raise :class:`~.errors.InvalidArgumentError` for an out-of-range setting."""
-    if int(iterations) != iterations or iterations < 0:
-        raise InvalidArgumentError(f"fit_cage: iterations must be an integer >= 0, got {iterations}")
-    if not smoothness >= 0:
-        raise InvalidArgumentError(f"fit_cage: smoothness must be >= 0, got {smoothness}")
-    if not point_to_point >= 0:
-        raise InvalidArgumentError(f"fit_cage: point_to_point must be >= 0, got {point_to_point}")
+    """The settings as numbers, checked (:class:`~.errors.InvalidArgumentError`
+    for a setting of the wrong kind or out of range: an infinite smoothness
+    returned the cage unfitted, a string one a TypeError deep inside)."""
     if laplacian not in _LAPLACIANS:
         raise InvalidArgumentError(
             f"fit_cage: laplacian must be one of {_LAPLACIANS}, got {laplacian!r}")
+    return (check_number(iterations, where="fit_cage", name="iterations", lo=0,
+                         hi=MAX_ITERATIONS, integer=True),
+            check_number(smoothness, where="fit_cage", name="smoothness", lo=0),
+            check_number(point_to_point, where="fit_cage", name="point_to_point", lo=0))
+
+
+def check_solver(cg_rtol, cg_max_iterations, progress):
+    """The conjugate-gradient settings, checked, and ``progress`` callable or
+    None (it was first called after a whole iteration)."""
+    if progress is not None and not callable(progress):
+        raise InvalidArgumentError(
+            f"fit_cage: progress must be callable or None, got {type(progress).__name__}")
+    return (check_number(cg_rtol, where="fit_cage", name="cg_rtol", lo=0, hi=1, open_lo=True,
+                         open_hi=True),
+            check_number(cg_max_iterations, where="fit_cage", name="cg_max_iterations", lo=1,
+                         hi=MAX_ITERATIONS * 100, integer=True))
 
 
 class _Matches(NamedTuple):

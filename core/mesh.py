@@ -109,6 +109,22 @@ def check_vertices(V, *, where, name="V", copy=True, faces=None):
 UNITS = (1e-15, 1e15)
 
 
+#: the reach of the exact closest-point searches (``TriangleIndex``): their kernel
+#: multiplies squared lengths, so coordinates whose fourth powers stay finite (at 1e100
+#: it overflowed, at 1e300 it failed with an IndexError)
+SEARCH_REACH = 1e60
+
+
+def check_reach(V, *, where, name):
+    """Raise :class:`InvalidMeshError` when the finite positions ``V`` reach
+    beyond :data:`SEARCH_REACH`."""
+    reach = float(np.abs(V).max()) if V.size else 0.0
+    if reach > SEARCH_REACH:
+        raise InvalidMeshError(
+            f"{where}: {name} reaches {reach:.3g} in its coordinates; its closest-point searches "
+            f"take coordinates up to {SEARCH_REACH:g}: scale the mesh first")
+
+
 def check_units(V, *, where, name):
     """Raise :class:`InvalidMeshError` when the finite (n,3) positions ``V``
     reach beyond ``UNITS[1]`` in absolute value or span less than
@@ -182,6 +198,60 @@ def check_count(value, *, where, name):
     return int(value)
 
 
+def check_number(value, *, where, name, lo=None, hi=None, open_lo=False, open_hi=False,
+                 integer=False):
+    """``value`` as a float (an int with ``integer``), or
+    :class:`InvalidArgumentError` naming ``name`` and the range it takes:
+    a real number (not a bool, a string, a list or a complex), finite, within
+    ``lo`` .. ``hi`` (each end open as asked, None: unbounded), an integer
+    with ``integer`` (3.0 is one, 2.5 is not)."""
+    kind = "an integer" if integer else "a number"
+    if lo is not None and hi is not None:
+        takes = f"{kind} in {'(' if open_lo else '['}{lo:g}, {hi:g}{')' if open_hi else ']'}"
+    elif lo is not None:
+        takes = f"{kind} {'>' if open_lo else '>='} {lo:g}"
+    elif hi is not None:
+        takes = f"{kind} {'<' if open_hi else '<='} {hi:g}"
+    else:
+        takes = f"a finite {kind[2:]}"
+    ok = isinstance(value, (int, float, np.integer, np.floating)) and \
+        not isinstance(value, (bool, np.bool_)) and np.isfinite(value)
+    if ok and integer:
+        ok = float(value) == int(value)
+    if ok and lo is not None:
+        ok = value > lo if open_lo else value >= lo
+    if ok and hi is not None:
+        ok = value < hi if open_hi else value <= hi
+    if not ok:
+        raise InvalidArgumentError(f"{where}: {name} must be {takes}, got {value!r}")
+    return int(value) if integer else float(value)
+
+
+def check_seed(seed, *, where):
+    """``seed`` for ``np.random.default_rng``: None, an integer >= 0 or a
+    ``np.random.Generator`` (which the call advances), else
+    :class:`InvalidArgumentError` (NumPy's own TypeError named none of it)."""
+    if seed is None or isinstance(seed, np.random.Generator):
+        return seed
+    return check_number(seed, where=where, name="seed", lo=0, integer=True)
+
+
+def check_flag(value, *, where, name):
+    """``value`` as a bool, or :class:`InvalidArgumentError` naming ``name``
+    when it is not True or False (NumPy's booleans too; 0, 1, "no" and None
+    are not flags)."""
+    if not isinstance(value, (bool, np.bool_)):
+        raise InvalidArgumentError(f"{where}: {name} must be True or False, got {value!r}")
+    return bool(value)
+
+
+def stops(answer):
+    """Whether a ``progress`` callback's ``answer`` asks to cancel: False,
+    NumPy's False too (``np.False_ is False`` is not true, so a callback
+    returning a comparison's result never cancelled)."""
+    return answer is False or (isinstance(answer, np.bool_) and not answer)
+
+
 def check_vertex_mask(mask, n, *, where, name):
     """A per-vertex flag array (n,) as booleans, or
     :class:`InvalidArgumentError` naming ``name`` and the length ``n`` it
@@ -224,9 +294,10 @@ def bbox_diagonal(V):
     """Length of the axis-aligned bounding-box diagonal of ``V`` (0 if empty).
 
     Every tolerance in ``core`` is expressed relative to this length, so that
-    results do not depend on the mesh's units.
+    results do not depend on the mesh's units. ``V`` is checked as
+    :func:`check_vertices` checks it (a NaN gave inf, an (n,2) array a number).
     """
-    return diagonal_length(*bounding_box(V))
+    return diagonal_length(*bounding_box(check_vertices(V, where="bbox_diagonal", copy=False)))
 
 
 def diagonal_length(lo, hi):

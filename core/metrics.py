@@ -25,12 +25,15 @@ from typing import NamedTuple
 
 import numpy as np
 
-from .mesh import bbox_diagonal, check_count, check_mesh, check_units, face_areas
+from .mesh import bbox_diagonal, check_mesh, check_number, check_seed, check_units, face_areas
 from .near_query import search_for
 from .pages import plain_pages
 
 __all__ = ["SurfaceSamples", "SurfaceDistance", "sample_surface", "surface_distance"]
 
+#: most samples drawn on a surface (1.2 GB of points and their faces; more was a MemoryError
+#: of 74.5 GiB, or minutes of work, for a mistyped count)
+MAX_SAMPLES = 50_000_000
 _MIN_SAMPLES = 10_000      # default samples per surface: 2 per face of the larger mesh,
 _MAX_SAMPLES = 200_000     # clipped to this range (a 1M-triangle comparison stays fast)
 
@@ -138,8 +141,9 @@ def sample_surface(V, F, n_samples, *, seed=0):
     ((4, 3), True)
     """
     V, F = check_mesh(V, F, where="sample_surface", allow_empty=False)
-    n = check_count(n_samples, where="sample_surface", name="n_samples")
-    return _sample(V, F, n, np.random.default_rng(seed))
+    n = check_number(n_samples, where="sample_surface", name="n_samples", lo=0, hi=MAX_SAMPLES,
+                     integer=True)
+    return _sample(V, F, n, np.random.default_rng(check_seed(seed, where="sample_surface")))
 
 
 def _one_side(index, P_samples, P_vertices):
@@ -198,10 +202,12 @@ def surface_distance(V_a, F_a, V_b, F_b, *, samples=None, seed=0):
     if samples is None:
         n = int(np.clip(2 * max(F_a.shape[0], F_b.shape[0]), _MIN_SAMPLES, _MAX_SAMPLES))
     else:
-        n = check_count(samples, where="surface_distance", name="samples")
+        n = check_number(samples, where="surface_distance", name="samples", lo=0, hi=MAX_SAMPLES,
+                         integer=True)
     used_a = V_a[np.unique(F_a)]
     used_b = V_b[np.unique(F_b)]
     diagonal = bbox_diagonal(used_a)
+    seed = check_seed(seed, where="surface_distance")
     s_a = _sample(V_a, F_a, n, np.random.default_rng(seed)).points
     s_b = _sample(V_b, F_b, n, np.random.default_rng(seed)).points
     ab_max, ab_mean, ab_rms = _one_side(search_for(V_b, F_b, s_a.shape[0] + used_a.shape[0]),

@@ -60,8 +60,9 @@ from ._relocate import relocate, segment_triangles
 from ._touch_up import touch_up
 from .clean import MIN_COMPONENT_AREA, CleanReport, clean_mesh
 from .errors import InvalidArgumentError, InvalidMeshError, MeshAdjustError
-from .mesh import (area_normals_rows, bounding_box, check_mesh, check_vertex_mask,
-                   diagonal_length, dot_columns, face_normals, has_area, squared_edges)
+from .mesh import (area_normals_rows, bounding_box, check_flag, check_mesh, check_number,
+                   check_vertex_mask, diagonal_length, dot_columns, face_normals, has_area,
+                   squared_edges)
 from .metrics import surface_distance
 from .topology import boundary_loops_count, collapsible_edges, face_components
 from .quadrics import accumulate_coefficients, vertex_face_quadrics, edge_constraint_quadrics
@@ -279,25 +280,17 @@ def check_arguments(n, target_faces, ratio, max_error, feature_angle_deg, vertex
                 f"{_WHERE}: target_faces must be an integer >= 0, got {target_faces!r}")
         if target_faces < 0:
             raise InvalidArgumentError(f"{_WHERE}: target_faces must be >= 0, got {target_faces}")
+    # (each a real number: '3', [1], 1j and True were TypeErrors deep inside, or taken)
     if ratio is not None:
-        r = float(ratio)
-        if not (0.0 < r <= 1.0):
-            raise InvalidArgumentError(f"{_WHERE}: ratio must be in (0, 1], got {ratio!r}")
+        check_number(ratio, where=_WHERE, name="ratio", lo=0, hi=1, open_lo=True)
     if max_error is not None:
-        e = float(max_error)
-        if not (e >= 0.0) or not np.isfinite(e):
-            raise InvalidArgumentError(
-                f"{_WHERE}: max_error must be a finite distance >= 0, got {max_error!r}")
+        check_number(max_error, where=_WHERE, name="max_error (a distance)", lo=0)
     if feature_angle_deg is not None:
-        a = float(feature_angle_deg)
-        if not (0.0 < a <= 180.0):
-            raise InvalidArgumentError(
-                f"{_WHERE}: feature_angle_deg must be in (0, 180] or None, got {feature_angle_deg!r}")
+        check_number(feature_angle_deg, where=_WHERE, name="feature_angle_deg (or None)", lo=0,
+                     hi=180, open_lo=True)
     if max_dihedral_deg is not None:
-        a = float(max_dihedral_deg)
-        if not (0.0 < a < 180.0):
-            raise InvalidArgumentError(
-                f"{_WHERE}: max_dihedral_deg must be in (0, 180) or None, got {max_dihedral_deg!r}")
+        check_number(max_dihedral_deg, where=_WHERE, name="max_dihedral_deg (or None)", lo=0,
+                     hi=180, open_lo=True, open_hi=True)
     w = None
     if vertex_weights is not None:
         w = np.asarray(vertex_weights)
@@ -314,6 +307,13 @@ def check_arguments(n, target_faces, ratio, max_error, feature_angle_deg, vertex
     if progress is not None and not callable(progress):
         raise InvalidArgumentError(f"{_WHERE}: progress must be callable or None, got {type(progress)}")
     return w, lk
+
+
+def check_flags(**flags):
+    """The on/off arguments of :func:`simplify` as bools, in the order given
+    (:class:`InvalidArgumentError` for anything but True or False: 'no', 0
+    and None were TypeErrors deep in the engine)."""
+    return tuple(check_flag(value, where=_WHERE, name=name) for name, value in flags.items())
 
 
 def _initial_quadrics(V, F, twin, preserve_boundary, feature_angle_deg, tun, scratch=None):
@@ -834,6 +834,9 @@ def simplify(V, F, *, target_faces=None, ratio=None, max_error=None, preserve_bo
     n_in = V.shape[0]
     weights, lk = check_arguments(n_in, target_faces, ratio, max_error, feature_angle_deg,
                                   vertex_weights, locked, progress, max_dihedral_deg)
+    preserve_boundary, preserve_topology, close_pinholes = check_flags(
+        preserve_boundary=preserve_boundary, preserve_topology=preserve_topology,
+        close_pinholes=close_pinholes)
     t0 = time.perf_counter()
     clean = cleaned_input(V, F, weld_distance, min_component_area,
                           debris_budget(target_faces, ratio, max_error, F.shape[0]), lk)

@@ -79,7 +79,7 @@ from typing import NamedTuple
 import numpy as np
 
 from .errors import InvalidArgumentError
-from .mesh import check_mesh, cross_rows, unit_rows
+from .mesh import check_mesh, check_number, check_reach, cross_rows, unit_rows
 from ._groups import group_argmin, ragged_ranges
 from ._parallel import blocks, run_each
 from .pages import plain_pages
@@ -856,14 +856,13 @@ class TriangleIndex:
     @plain_pages
     def __init__(self, V, F, *, cell_factor=_CELL_FACTOR, min_cell=None):
         V, F = check_mesh(V, F, where="TriangleIndex", allow_empty=False)
-        if not (isinstance(cell_factor, (int, float)) and cell_factor > 0):
-            raise InvalidArgumentError(
-                f"TriangleIndex: cell_factor must be a positive number, got {cell_factor!r}")
-        if min_cell is not None and not (isinstance(min_cell, (int, float))
-                                         and 0 < min_cell < np.inf):
-            raise InvalidArgumentError(
-                f"TriangleIndex: min_cell must be a positive finite number or None, "
-                f"got {min_cell!r}")
+        check_reach(V, where="TriangleIndex", name="V")
+        # (1e-300 never found a grid: an UnboundLocalError; a bool passed as a number)
+        cell_factor = check_number(cell_factor, where="TriangleIndex", name="cell_factor",
+                                   lo=_CELL_FACTOR / 1e3, hi=_CELL_FACTOR * 1e3)
+        if min_cell is not None:
+            min_cell = check_number(min_cell, where="TriangleIndex", name="min_cell (or None)",
+                                    lo=0, open_lo=True)
         self.V = V
         self.F = F
         self._lo, self._hi = _used_box(V, F)
@@ -933,9 +932,10 @@ class TriangleIndex:
         mean = float(ext.mean())
         if thin.any() and not thin.all():
             mean = min(mean, 1.25 * float(ext[~thin].mean()))
-        h = max(cell_factor * mean, min_cell or 0.0)
-        natural = _CELL_FACTOR * mean
         span = float(extent.max())
+        # (a min_cell a million times the mesh is one cell all the same: 1e300 overflowed below)
+        h = max(cell_factor * mean, min(min_cell or 0.0, 1e6 * span))
+        natural = _CELL_FACTOR * mean
         if not h > 0:
             h = span / 64 if span > 0 else 1.0
         boxed = 1.0

@@ -160,6 +160,9 @@ from .pages import plain_pages
 
 SCHEMES = ("butterfly", "loop")
 
+#: most faces a subdivision may make (2^28, 268M: about 20 GB of operator and positions)
+MAX_FINE_FACES = 2 ** 28
+
 __all__ = ["subdivide", "subdivision_operator", "SubdivisionOperator", "SubdivisionResult", "SCHEMES"]
 
 
@@ -363,11 +366,23 @@ def _merge_rows(S, n_in):
     return indptr, c, wsum
 
 
-def _check_args(levels, scheme, where):
+def check_subdivision_args(levels, scheme, where, n_faces=None):
+    """``levels`` as an int, checked with ``scheme`` for ``where`` (the public
+    function the caller called, so a message names what the user called):
+    :class:`InvalidArgumentError` for an unknown scheme, levels that are not
+    an integer >= 0, or levels that would make more than ``MAX_FINE_FACES``
+    faces of ``n_faces`` (``levels=40`` allocated for 20 s and ran out of
+    memory)."""
     if scheme not in SCHEMES:
         raise InvalidArgumentError(
             f"{where}: scheme must be one of {', '.join(map(repr, SCHEMES))}, got {scheme!r}")
-    return check_count(levels, where=where, name="levels")
+    levels = check_count(levels, where=where, name="levels")
+    if n_faces and levels > np.log(MAX_FINE_FACES / n_faces) / np.log(4.0):
+        made = f"{n_faces * 4.0 ** levels:.3g}" if levels < 500 else "more than 1e300"
+        raise InvalidArgumentError(
+            f"{where}: levels={levels} would make {made} faces of {n_faces:,} (each level "
+            f"multiplies them by 4); at most {MAX_FINE_FACES:,}")
+    return levels
 
 
 def _fingerprint(F, n, levels, scheme, creases):
@@ -442,9 +457,10 @@ def subdivision_operator(F, n_vertices, *, levels=1, scheme="butterfly", creases
     (15, (16, 3))
     """
     where = "subdivision_operator"
-    levels = _check_args(levels, scheme, where)
+    levels = check_subdivision_args(levels, scheme, where)
     n = check_count(n_vertices, where=where, name="n_vertices")
     F = check_faces(F, n, where=where)
+    check_subdivision_args(levels, scheme, where, F.shape[0])
     return _build(F, n, levels, scheme, creases, where)
 
 
@@ -481,7 +497,8 @@ def subdivide(V, F, *, levels=1, scheme="butterfly", creases=None):
     ((6, 3), (4, 3))
     """
     where = "subdivide"
-    levels = _check_args(levels, scheme, where)
+    levels = check_subdivision_args(levels, scheme, where)
     V, F = check_mesh(V, F, where=where)
+    check_subdivision_args(levels, scheme, where, F.shape[0])
     op = _build(F, V.shape[0], levels, scheme, creases, where)
     return SubdivisionResult(op.apply(V), op.F_fine)

@@ -42,11 +42,11 @@ import numpy as np
 
 from .clean import MIN_COMPONENT_AREA
 from .errors import InvalidArgumentError
-from .mesh import area_normals_rows, bbox_diagonal, check_mesh
+from .mesh import area_normals_rows, bbox_diagonal, check_mesh, check_reach
 from .metrics import surface_distance
 from .mirror import PARTNER_TOLERANCE, axis_index, mirror, mirror_partners  # noqa: F401 (example)
-from .simplify import (SimplifyResult, check_arguments, cleaned_input, debris_budget, simplify,
-                       target_count)
+from .simplify import (SimplifyResult, check_arguments, check_flags, cleaned_input, debris_budget,
+                       simplify, target_count)
 from .spatial import TriangleIndex
 from .topology import boundary_loops_count, edge_map, face_components
 from .pages import plain_pages
@@ -434,9 +434,13 @@ def simplify_symmetric(V, F, *, axis="X", target_faces=None, ratio=None, max_err
     k = axis_index(axis)
     axis = "XYZ"[k]
     V, F = check_mesh(V, F, where=_WHERE)
+    check_reach(V, where=f"{_WHERE} (symmetry)", name="V")
     n_in = V.shape[0]
     weights, lk = check_arguments(n_in, target_faces, ratio, max_error, feature_angle_deg,
                                   vertex_weights, locked, progress, max_dihedral_deg)
+    preserve_boundary, preserve_topology, close_pinholes = check_flags(
+        preserve_boundary=preserve_boundary, preserve_topology=preserve_topology,
+        close_pinholes=close_pinholes)
     clean = cleaned_input(V, F, weld_distance, min_component_area,
                           debris_budget(target_faces, ratio, max_error, F.shape[0]), lk)
     target = target_count(target_faces, ratio, clean.F.shape[0])

@@ -15,7 +15,11 @@ from typing import NamedTuple
 
 import numpy as np
 
+from .errors import InvalidArgumentError
 from .mesh import check_count, check_faces
+
+#: most vertices a mesh's topology is built for (its per-vertex arrays: 2^32)
+MAX_VERTICES = 2 ** 32
 
 
 class EdgeMap(NamedTuple):
@@ -66,6 +70,9 @@ def _checked(where, F, n_vertices):
     """``F`` (int64, not copied when it already is) and ``n_vertices`` checked
     for the public function ``where`` (:func:`~.mesh.check_faces`)."""
     n = check_count(n_vertices, where=where, name="n_vertices")
+    if n > MAX_VERTICES:   # (10**12 asked for 7 TiB; 10**30 overflowed the edge keys)
+        raise InvalidArgumentError(
+            f"{where}: n_vertices must be at most {MAX_VERTICES:,} (2^32), got {n_vertices!r}")
     return check_faces(F, n, where=where, copy=False), n
 
 

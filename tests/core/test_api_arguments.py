@@ -1,0 +1,122 @@
+"""Arguments of the public functions that a fuzz of the API found taken without a
+word, or failing deep inside with NumPy's own errors: each is now refused with
+the library's error, naming the function, the argument and what it takes."""
+
+import numpy as np
+import pytest
+
+import core
+from core import InvalidArgumentError, InvalidMeshError
+from core.mesh import stops
+from tests.mesh_factory import icosphere
+
+
+@pytest.fixture(scope="module")
+def sphere():
+    return icosphere(2)
+
+
+@pytest.fixture(scope="module")
+def cage(sphere):
+    V, F = sphere
+    r = core.simplify(V, F, target_faces=40)
+    return r.V, r.F
+
+
+@pytest.mark.parametrize("kwargs, match", [
+    (dict(iterations=float("nan")), r"fit_cage: iterations must be an integer in \[0, 10000\]"),
+    (dict(iterations=10**12), r"iterations must be an integer in \[0, 10000\], got 1000000000000"),
+    (dict(iterations=None), "iterations must be an integer"),
+    (dict(smoothness=float("inf")), r"smoothness must be a number >= 0, got inf"),
+    (dict(smoothness="3"), r"smoothness must be a number >= 0, got '3'"),
+    (dict(point_to_point=None), "point_to_point must be a number >= 0, got None"),
+    (dict(samples=float("nan")), "samples must be an integer"),
+    (dict(samples="3000"), "samples must be an integer"),
+    (dict(samples=10**12), "samples must be an integer"),
+    (dict(seed="3"), "seed must be an integer >= 0, got '3'"),
+    (dict(seed=-1), "seed must be an integer >= 0, got -1"),
+    (dict(cg_rtol=float("inf")), r"cg_rtol must be a number in \(0, 1\), got inf"),
+    (dict(cg_rtol=-1), r"fit_cage: cg_rtol must be a number in \(0, 1\)"),
+    (dict(cg_max_iterations=float("nan")), "cg_max_iterations must be an integer"),
+    (dict(progress=5), "fit_cage: progress must be callable or None, got int"),
+    (dict(levels=40), r"fit_cage: levels=40 would make .* faces of 40"),
+    (dict(scheme="catmull"), "fit_cage: scheme must be one of"),
+])
+def test_fit_cage_refuses_settings_of_the_wrong_kind_before_any_work(sphere, cage, kwargs, match):
+    V, F = sphere
+    with pytest.raises(InvalidArgumentError, match=match):
+        core.fit_cage(V, F, *cage, **kwargs)
+
+
+@pytest.mark.parametrize("call, match", [
+    (lambda V, F, C: core.subdivide(V, F, levels=40), r"subdivide: levels=40 would make"),
+    (lambda V, F, C: core.subdivision_operator(F, len(V), levels=10**12), "levels=1000000000000"),
+    (lambda V, F, C: core.bind(V, F, *C, levels=40), r"bind: levels=40 would make"),
+    (lambda V, F, C: core.bind(V, F, *C, scheme=None), "bind: scheme must be one of"),
+    (lambda V, F, C: core.sample_surface(V, F, 10**10), r"n_samples must be an integer in"),
+    (lambda V, F, C: core.sample_surface(V, F, 10, seed=2.5), "seed must be an integer"),
+    (lambda V, F, C: core.surface_distance(V, F, V, F, samples=10**12), "samples must be"),
+    (lambda V, F, C: core.surface_distance(V, F, V, F, seed=1j), "seed must be an integer"),
+    (lambda V, F, C: core.manifold_report(F, 10**12), r"n_vertices must be at most"),
+    (lambda V, F, C: core.edge_map(F, 10**30), r"n_vertices must be at most"),
+    (lambda V, F, C: core.TriangleIndex(V, F, cell_factor=1e-300), "cell_factor must be a number"),
+    (lambda V, F, C: core.TriangleIndex(V, F, cell_factor=True), "cell_factor must be a number"),
+    (lambda V, F, C: core.TriangleIndex(V, F, min_cell="1"), r"min_cell \(or None\) must be"),
+])
+def test_the_other_functions_refuse_them_too(sphere, cage, call, match):
+    V, F = sphere
+    with pytest.raises(InvalidArgumentError, match=match):
+        call(V, F, cage)
+
+
+def test_a_huge_min_cell_is_one_cell_and_the_answers_stay_exact(sphere):
+    V, F = sphere
+    P = np.random.default_rng(0).normal(size=(50, 3))
+    exact = core.TriangleIndex(V, F).closest(P).distance
+    assert np.allclose(core.TriangleIndex(V, F, min_cell=1e300).closest(P).distance, exact,
+                       rtol=0, atol=1e-12)
+
+
+@pytest.mark.parametrize("V_bad, match", [
+    (np.full((4, 3), np.nan), "bbox_diagonal: 4 vertices have NaN"),
+    (np.ones((4, 2)), r"bbox_diagonal: V must be \(n,3\) floats"),
+    (None, "bbox_diagonal: V must be"),
+])
+def test_bbox_diagonal_checks_its_vertices(V_bad, match):
+    with pytest.raises(InvalidMeshError, match=match):
+        core.bbox_diagonal(V_bad)
+
+
+def test_coordinates_beyond_the_searches_reach_are_named(sphere):
+    V, F = sphere
+    for scale in (1e20, 1e55):           # within reach: exact, no warning
+        with np.errstate(all="raise"):
+            assert core.closest_points(V * scale, F, V[:3] * scale).distance.max() == 0.0
+    with pytest.raises(InvalidMeshError, match="TriangleIndex: V reaches 1e.100 in its "
+                                               "coordinates; its closest-point searches take "
+                                               "coordinates up to 1e.60"):
+        core.closest_points(V * 1e100, F, V[:3])
+    with pytest.raises(InvalidMeshError, match=r"simplify \(symmetry\): V reaches 1e.300"):
+        core.simplify(V * 1e300, F, target_faces=20, symmetry="X")
+
+
+def test_an_edited_cage_of_the_wrong_kind_is_refused_by_deform(sphere, cage):
+    V, F = sphere
+    b = core.bind(V, F, *cage, levels=1)
+    Vc = cage[0]
+    for bad in (Vc.astype(complex), Vc.astype(str), Vc > 0):
+        with pytest.raises(InvalidMeshError, match=r"deform: V_cage_edited must be \(n,3\) floats"):
+            core.deform(b, bad)
+    with pytest.raises(InvalidMeshError, match=r"deform: F must be \(m,3\) integers"):
+        core.deform(b, Vc, F_cage=cage[1].astype(float) + 0.5)
+
+
+def test_numpys_false_from_a_progress_callback_cancels(sphere, cage):
+    V, F = sphere
+    assert stops(False) and stops(np.False_) and not stops(None) and not stops(np.True_)
+    r = core.simplify(V, F, target_faces=20, progress=lambda f: np.float64(f) < 0)
+    assert r.stopped_because == "cancelled"
+    fit = core.fit_cage(V, F, *cage, iterations=4, progress=lambda f: np.bool_(f < 0))
+    assert fit.cancelled
+    with pytest.raises(core.CancelledError):
+        core.bind(V, F, *cage, progress=lambda f: np.bool_(False))
