@@ -300,7 +300,8 @@ class Binding:
         (n_dense,) bool ndarray
         """
         op = self._operator
-        moved = op.support(np.atleast_1d(np.asarray(cage_vertex_ids, dtype=np.int64)))
+        # checked as influenced() checks them ([3.7] was vertex 3, "3" was taken)
+        moved = op.support(_check_moved(self, cage_vertex_ids, "Binding.affected"))
         touched = moved[op.F_fine].any(axis=1)
         normal_changed = np.zeros(op.n_fine, dtype=bool)
         normal_changed[op.F_fine[touched].ravel()] = True

@@ -31,6 +31,7 @@ from typing import NamedTuple
 import numpy as np
 
 from .errors import InvalidArgumentError, InvalidMeshError
+from .mesh import check_mesh
 from .pages import plain_pages
 
 #: the extensions :func:`read_mesh` and :func:`write_mesh` understand
@@ -267,14 +268,9 @@ def read_mesh(path):
 
 
 def _write(path, V, F, fn):
-    V = np.asarray(V, dtype=np.float64)
-    F = np.asarray(F)
-    if V.ndim != 2 or V.shape[1] != 3:
-        raise InvalidMeshError(f"{fn}: V must be (n,3), got {V.shape}")
-    if F.ndim != 2 or F.shape[1] != 3 or not np.issubdtype(F.dtype, np.integer):
-        raise InvalidMeshError(f"{fn}: F must be (m,3) integers, got {F.shape} {F.dtype}")
-    if F.size and (F.min() < 0 or F.max() >= V.shape[0]):
-        raise InvalidMeshError(f"{fn}: F indexes vertices outside 0..{V.shape[0] - 1}")
+    # checked as every function checks a mesh: NaN was written out (and then not read back),
+    # strings, booleans and complex numbers were taken
+    V, F = check_mesh(V, F, where=fn, copy=False)
     with open(path, "w", encoding="utf-8") as fh:
         fh.write(f"# written by MeshAdjust: {V.shape[0]} vertices, {F.shape[0]} triangles\n")
         # repr: the shortest text that reads back to the same float64

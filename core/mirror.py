@@ -12,7 +12,7 @@ The mirror plane passes through the origin, normal to an axis given as
 import numpy as np
 
 from .errors import InvalidArgumentError
-from .mesh import bbox_diagonal, check_vertex_indices, check_vertices
+from .mesh import bbox_diagonal, check_number, check_vertex_indices, check_vertices
 
 AXES = {"X": 0, "Y": 1, "Z": 2}
 #: a mirror partner is accepted this close (share of the diagonal; ``mirror_partners``)
@@ -70,7 +70,8 @@ def mirror_partners(V, axis, *, tolerance=PARTNER_TOLERANCE, where="mirror_partn
     """
     k = axis_index(axis, where, name="axis")
     axis = "XYZ"[k]
-    V = np.asarray(V, dtype=np.float64)
+    V = check_vertices(V, where=where, copy=False)      # ((n,2), None, NaN: IndexErrors before)
+    tolerance = check_number(tolerance, where=where, name="tolerance", lo=0, hi=1, open_lo=True)
     n = V.shape[0]
     if n == 0:
         return np.zeros(0, dtype=np.int64)

@@ -120,3 +120,27 @@ def test_numpys_false_from_a_progress_callback_cancels(sphere, cage):
     assert fit.cancelled
     with pytest.raises(core.CancelledError):
         core.bind(V, F, *cage, progress=lambda f: np.bool_(False))
+
+
+def test_writers_mirror_partners_and_affected_check_what_they_are_given(sphere, cage, tmp_path):
+    V, F = sphere
+    bad = V.copy()
+    bad[3, 1] = np.nan
+    with pytest.raises(InvalidMeshError, match=r"write_obj: 1 vertices have NaN or infinite "
+                                               r"coordinates, 1 of them used by faces"):
+        core.write_obj(tmp_path / "nan.obj", bad, F)          # (it was written, and not read back)
+    assert not (tmp_path / "nan.obj").exists()
+    with pytest.raises(InvalidMeshError, match=r"write_smf: V must be \(n,3\) floats"):
+        core.write_smf(tmp_path / "c.smf", V.astype(complex), F)
+    for bad_V in (V[:, :2], None, bad):
+        with pytest.raises(InvalidMeshError, match="mirror_partners: (V must be|1 vertices have NaN)"):
+            core.mirror_partners(bad_V, "X")
+    for tol in (-1, float("nan"), "3", None):
+        with pytest.raises(InvalidArgumentError, match=r"mirror_partners: tolerance must be a "
+                                                       r"number in \(0, 1\]"):
+            core.mirror_partners(V, "X", tolerance=tol)
+    b = core.bind(V, F, *cage, levels=1)
+    for ids, match in (([3.7], "moved must be integer cage vertex indices"),
+                       (["3"], "moved must be integer"), ([10**6], "out of range")):
+        with pytest.raises(InvalidArgumentError, match=f"Binding.affected: {match}"):
+            b.affected(ids)

@@ -116,7 +116,7 @@ def test_unsupported_extension_and_bad_arrays(tmp_path):
         core.write_mesh(tmp_path / "x.stl", V, F)
     with pytest.raises(InvalidMeshError, match=r"write_smf: F must be \(m,3\) integers"):
         core.write_smf(tmp_path / "x.smf", V, F.astype(float))
-    with pytest.raises(InvalidMeshError, match="write_smf: F indexes vertices outside 0..3"):
+    with pytest.raises(InvalidMeshError, match="write_smf: 3 faces index vertices outside \\[0, 4\\), e.g. face 1"):
         core.write_smf(tmp_path / "x.smf", V, F + 1)
 
 
