@@ -141,6 +141,6 @@ def test_writers_mirror_partners_and_affected_check_what_they_are_given(sphere, 
             core.mirror_partners(V, "X", tolerance=tol)
     b = core.bind(V, F, *cage, levels=1)
     for ids, match in (([3.7], "moved must be integer cage vertex indices"),
-                       (["3"], "moved must be integer"), ([10**6], "out of range")):
+                       (["3"], "moved must be integer"), ([10**6], "moved index 1000000 is out of range")):
         with pytest.raises(InvalidArgumentError, match=f"Binding.affected: {match}"):
             b.affected(ids)
