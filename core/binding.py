@@ -61,8 +61,8 @@ import numpy as np
 
 from .detail_search import dense_points_near, exact_detail_index
 from .errors import CancelledError, InvalidArgumentError, TopologyMismatchError
-from .mesh import (area_normals_t, check_faces, check_mesh, check_units, check_vertices,
-                   cross_columns, dot_columns, stops)
+from .mesh import (area_normals_t, check_faces, check_mesh, check_number, check_units,
+                   check_vertices, cross_columns, dot_columns, stops)
 from .near_query import NearQuery
 from .spatial import TriangleIndex
 from .subdivide import check_subdivision_args, subdivision_operator
@@ -274,11 +274,16 @@ class Binding:
                 f"Binding.from_arrays: fine_face, bary and offset must have one row per dense "
                 f"vertex, got {n}, {bary.shape[0]}, {offset.shape[0]}")
         creases = np.asarray(arrays["creases"]).astype(np.int64).reshape(-1, 2)
+        # the counts as integers ('x' and None were ValueErrors from int(); a 0-d array, as
+        # np.load gives them, is one)
+        n_cage, levels = (check_number(np.asarray(arrays[k]).item() if np.ndim(arrays[k]) == 0
+                                       else arrays[k], where="Binding.from_arrays", name=k,
+                                       lo=0, integer=True) for k in ("n_cage", "levels"))
         return cls(fine_face=fine_face, bary=np.ascontiguousarray(bary),
                    offset=np.ascontiguousarray(offset),
                    fine_detail=np.asarray(arrays["fine_detail"], dtype=np.float64).reshape(-1, 3),
                    F_cage=np.asarray(arrays["F_cage"]).astype(np.int64).reshape(-1, 3),
-                   n_cage=int(arrays["n_cage"]), levels=int(arrays["levels"]),
+                   n_cage=n_cage, levels=levels,
                    scheme=str(arrays["scheme"]), creases=creases if creases.shape[0] else None,
                    fingerprint=str(arrays["fingerprint"]),
                    F_dense=None if arrays.get("F_dense") is None

@@ -188,6 +188,15 @@ def symmetrize(V, partner, axis):
     k = axis_index(axis, where, name="axis")
     V = check_vertices(V, where=where, copy=False)
     partner = check_vertex_indices(partner, V.shape[0], where=where, name="partner")
+    # a pairing (each vertex its partner's partner): any other map gave positions that are
+    # not mirror images (np.roll of a pairing), or moved every vertex onto the plane
+    odd = np.flatnonzero(partner[partner] != np.arange(V.shape[0]))
+    if odd.size:
+        i = int(odd[0])
+        raise InvalidArgumentError(
+            f"{where}: partner must pair the vertices (each the partner of its partner), but "
+            f"{odd.size:,} are not, e.g. vertex {i} -> {int(partner[i])} -> "
+            f"{int(partner[partner[i]])}")
     out = 0.5 * (V + mirror(V[partner], k))
     # 0.5 (a + (-b)) and 0.5 (b + (-a)) are exact negatives; (a + b) / 2 and (b + a) / 2 equal
     out[partner == np.arange(V.shape[0]), k] = 0.0

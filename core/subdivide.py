@@ -203,7 +203,19 @@ class SubdivisionOperator:
     stencils: tuple = field(repr=False)
 
     def _as_2d(self, X, n, what):
-        X = np.asarray(X, dtype=np.float64)
+        """``X`` as (n, k) float64 values and whether it was (n,): real
+        numbers only (strings, booleans and complex numbers were taken, a
+        ragged list was NumPy's ValueError); not checked for NaN here, on the
+        hot path of every deform and fit (NaN in, NaN out)."""
+        try:
+            A = np.asarray(X)
+        except ValueError:
+            A = np.asarray(X, dtype=object)
+        if A.dtype.kind not in "fiu":
+            raise InvalidArgumentError(
+                f"SubdivisionOperator.{what}: expected ({n}, k) or ({n},) real numbers, got "
+                f"{A.shape} {A.dtype}")
+        X = np.asarray(A, dtype=np.float64)
         one_d = X.ndim == 1
         X2 = X[:, None] if one_d else X
         if X2.ndim != 2 or X2.shape[0] != n:
@@ -290,6 +302,10 @@ class SubdivisionOperator:
         (n_fine,) bool
         """
         ids = np.asarray(coarse_vertex_ids)
+        if ids.dtype.kind not in "biu":          # ([0.5] was vertex 0, None a TypeError)
+            raise InvalidArgumentError(
+                f"SubdivisionOperator.support: expected coarse vertex ids (integers) or a "
+                f"({self.n_coarse},) bool mask, got {ids.dtype}")
         if ids.dtype == bool:
             if ids.shape != (self.n_coarse,):
                 raise InvalidArgumentError(

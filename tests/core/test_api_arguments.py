@@ -144,3 +144,27 @@ def test_writers_mirror_partners_and_affected_check_what_they_are_given(sphere, 
                        (["3"], "moved must be integer"), ([10**6], "moved index 1000000 is out of range")):
         with pytest.raises(InvalidArgumentError, match=f"Binding.affected: {match}"):
             b.affected(ids)
+
+
+def test_operator_binding_arrays_and_symmetrize_refuse_what_they_cannot_mean(sphere, cage):
+    V, F = sphere
+    op = core.subdivision_operator(F, len(V), levels=1)
+    for bad in (V.astype(str), V.astype(complex), V > 0):
+        with pytest.raises(InvalidArgumentError, match=r"SubdivisionOperator.apply: expected "
+                                                       r"\(162, k\) or \(162,\) real numbers"):
+            op.apply(bad)
+    with pytest.raises(InvalidArgumentError, match="SubdivisionOperator.apply_transpose"):
+        op.apply_transpose([[1.0, 2.0], [3.0]])                  # ragged
+    for ids in ([0.5], None):
+        with pytest.raises(InvalidArgumentError, match="support: expected coarse vertex ids"):
+            op.support(ids)
+    arrays = core.bind(V, F, *cage, levels=1).to_arrays()
+    for key, value in (("n_cage", "x"), ("levels", None), ("levels", 2.5)):
+        with pytest.raises(InvalidArgumentError, match=f"Binding.from_arrays: {key} must be an "
+                                                       f"integer >= 0"):
+            core.Binding.from_arrays({**arrays, key: value})
+    assert core.Binding.from_arrays(arrays).n_cage == len(cage[0])
+    p = core.mirror_partners(V, "X")
+    assert np.array_equal(core.symmetrize(V, p, "X"), V)       # (the sphere is symmetric)
+    with pytest.raises(InvalidArgumentError, match="symmetrize: partner must pair the vertices"):
+        core.symmetrize(V, np.roll(p, 1), "X")
