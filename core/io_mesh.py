@@ -129,6 +129,9 @@ def _read(path, fn, obj):
             if not parts:
                 continue
             key = parts[0]
+            if key in ("v", "f") and "_" in line:      # (Python's int() and float() read 1_0 as 10)
+                raise _line_error(fn, path, lineno, "is not a number" if key == "v" else
+                                  "has an index that is not an integer")
             if key == "v":
                 if len(parts) < 4:
                     raise _line_error(fn, path, lineno, "needs 3 coordinates")
@@ -148,6 +151,10 @@ def _read(path, fn, obj):
                     poly.append((lineno, idx, len(v_rows)))
             elif not key.startswith("#"):
                 skipped[key] = skipped.get(key, 0) + 1
+    if not v_lines and not tri_lines and not poly and skipped:
+        raise InvalidMeshError(
+            f"{fn}: {path} has no 'v' or 'f' line ({sum(skipped.values()):,} other lines): not "
+            f"{'an OBJ' if obj else 'an SMF'} file, or an empty one")
     V = _vertices(fn, path, v_rows, v_lines)
     del v_rows
     n = V.shape[0]

@@ -174,6 +174,11 @@ def check_faces(F, n_vertices, *, where, allow_empty=True, copy=True):
         F_in = F_in.reshape(0, 3).astype(np.int64)
     if F_in.ndim != 2 or F_in.shape[1] != 3 or not np.issubdtype(F_in.dtype, np.integer):
         raise InvalidMeshError(f"{where}: F must be (m,3) integers, got {F_in.shape} {F_in.dtype}")
+    if F_in.dtype.kind == "u" and F_in.size and int(F_in.max()) > np.iinfo(np.int64).max:
+        # (as int64 it wrapped to a negative index, and the message showed -1)
+        f = int(np.flatnonzero((F_in > np.iinfo(np.int64).max).any(axis=1))[0])
+        raise InvalidMeshError(f"{where}: face {f} = {F_in[f].tolist()} indexes a vertex beyond "
+                               f"any mesh (more than 2^63)")
     F_out = _converted(F_in, np.int64, copy)
     if F_out.size:
         n = n_vertices

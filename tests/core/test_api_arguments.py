@@ -168,3 +168,18 @@ def test_operator_binding_arrays_and_symmetrize_refuse_what_they_cannot_mean(sph
     assert np.array_equal(core.symmetrize(V, p, "X"), V)       # (the sphere is symmetric)
     with pytest.raises(InvalidArgumentError, match="symmetrize: partner must pair the vertices"):
         core.symmetrize(V, np.roll(p, 1), "X")
+
+
+def test_readers_refuse_what_is_no_obj_and_faces_name_huge_indices(sphere, tmp_path):
+    V, F = sphere
+    (tmp_path / "u.obj").write_text("v 1_0 0 0\nv 0 1 0\nv 0 0 1\nf 1 2 3\n")
+    with pytest.raises(InvalidMeshError, match=r"u.obj line 1: 'v 1_0 0 0' is not a number"):
+        core.read_obj(tmp_path / "u.obj")                       # (it read 10.0)
+    (tmp_path / "b.obj").write_bytes(bytes(range(256)) * 40)
+    with pytest.raises(InvalidMeshError, match=r"has no 'v' or 'f' line .*not an OBJ file"):
+        core.read_obj(tmp_path / "b.obj")                       # (it read an empty mesh)
+    big = F.astype(np.uint64)
+    big[2, 2] = np.iinfo(np.uint64).max
+    with pytest.raises(InvalidMeshError, match=r"face 2 = \[.*, 18446744073709551615\] indexes "
+                                               r"a vertex beyond any mesh"):
+        core.euler_characteristic(big)                          # (it said -1)
