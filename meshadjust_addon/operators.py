@@ -90,7 +90,12 @@ def binding_warnings(cage):
     if edited is None or source is None:
         return []
     stale = staleness.source_change(source, edited.meshadjust.source_fingerprint)
-    return [stale] if stale else []
+    try:
+        api.check_source_in_place(cage, source)
+        moved = None
+    except USER_ERRORS as exc:             # (moved or applied: Refine refuses until Re-bind)
+        moved = str(exc)
+    return [w for w in (stale, moved) if w]
 
 
 def report_level(reports):

@@ -250,11 +250,13 @@ def test_a_source_transform_applied_after_the_bind_is_refused_then_rebound_in_pl
                                            "transform applied\\) since 'dense_cage' was bound"):
         bpy.ops.meshadjust.refine(output='EDITED')
     assert_unchanged(before)
+    assert any("'dense' was moved" in w for w in mod("operators").binding_warnings(cage))
     # Bind (keep edit) binds it where it is: the same edit, the result where it was
     assert bpy.ops.meshadjust.bind() == {'FINISHED'}
     assert "the edit (1 cage vertex moved) kept on top" in cage.meshadjust.last_report
     assert bpy.ops.meshadjust.refine(output='EDITED') == {'FINISHED'}
     assert np.abs(world(edited) - shown).max() <= 1e-4
+    assert not any("was moved" in w for w in mod("operators").binding_warnings(cage))
 
 
 def test_an_edited_original_with_shape_keys_is_refused_and_a_result_cannot_be_simplified(bound):
