@@ -429,35 +429,26 @@ def turned_cage_note(cage, binding, V_cage):
             f"move those vertices back a little")
 
 
-def refine_object(cage, *, output='EDITED', levels=None, scheme=None):
-    """Update the results of an edited cage; returns a :class:`Report`.
+@dataclass
+class _RefineJob:
+    """What a Refine computed and checked before it writes anything."""
 
-    ``output``: ``'EDITED'`` (the bound copy of the source, deformed; same
-    topology, UVs and attributes), ``'SHAPE_KEY'`` (the edit as a shape key
-    of the source named after the cage), ``'REFINED'`` (the subdivided cage
-    with the source's detail) or ``'BOTH'`` (edited and refined). Results
-    are created once and updated in place afterwards. Other ``levels`` /
-    ``scheme`` than the binding's re-bind from the rest shape, keeping the
-    edit (and the report says so). A source changed since the bind makes the
-    report a warning.
-    """
-    if output not in OUTPUT_NAMES:
-        raise core.InvalidArgumentError(f"refine: output must be one of {OUTPUT_NAMES}, "
-                                        f"got {output!r}")
-    t0 = time.perf_counter()
-    cs = cage.meshadjust
-    source = cs.source
-    if source is None:
-        raise core.MeshAdjustError(f"'{cage.name}' is not a MeshAdjust cage (no source linked)")
-    edited = cs.edited
-    if edited is None:
-        raise core.MeshAdjustError(f"'{cage.name}' is not bound yet: bind it first")
-    if scheme == 'BOUND':
-        scheme = None
-    parts, warnings = [], []
-    # everything computed and checked first: a refusal changes nothing (a re-bind
-    # written and then refused would leave the binding and its data changed)
-    job = None
+    binding: object              #: the binding used (a new one when ``rebind`` is set)
+    rebind: object               #: the :class:`CageJob` of a re-bind at other levels, or None
+    V_edited: object             #: the edited original's positions (None: not asked for)
+    refined: object              #: (V, F) of the refined mesh (None: not asked for)
+    parts: list                  #: the report's sentences so far
+    warnings: list
+
+
+def _refine_compute(cage, output, levels, scheme):
+    """The compute half of :func:`refine_object`: the binding (re-bound in
+    memory at other levels or scheme), the checks of the output, the deformed
+    and refined meshes. Everything is computed and checked here, so a
+    refusal changes nothing (a re-bind written and then refused had left the
+    binding and its data changed)."""
+    cs, source, edited = cage.meshadjust, cage.meshadjust.source, cage.meshadjust.edited
+    job, parts, warnings = None, [], []
     if (levels and levels != cs.levels) or (scheme is not None and scheme != cs.scheme):
         job = compute_bind(prepare_cage_job(cage, levels=levels, scheme=scheme, keep_edit=True))
         binding = job.binding
@@ -481,34 +472,70 @@ def refine_object(cage, *, output='EDITED', levels=None, scheme=None):
         if repaired:
             parts.append(f"{repaired:,} dense vertices put back where the edit turned "
                          f"faces over")
-    refined_mesh = core.refine(binding, V_cage) if output in ('REFINED', 'BOTH') else None
+    refined = core.refine(binding, V_cage) if output in ('REFINED', 'BOTH') else None
+    return _RefineJob(binding, job, V_edited, refined, parts, warnings)
+
+
+def _refine_commit(cage, output, rj):
+    """The Blender half of :func:`refine_object`: the re-bind, the edited
+    original, the shape key and the refined mesh written (all or nothing);
+    their sentences added to ``rj.parts``."""
+    source, edited, binding, parts = cage.meshadjust.source, cage.meshadjust.edited, rj.binding, \
+        rj.parts
     with all_or_nothing() as rb:
-        if job is not None:
-            commit_bind(cage, job)
+        if rj.rebind is not None:
+            commit_bind(cage, rj.rebind)
         if output in ('EDITED', 'BOTH'):
             if not edited.users_collection:         # deleted by the artist: shown again
                 results.link_like(edited, source)
                 parts.append(f"'{edited.name}' had been deleted: linked back")
             rb.keep(edited.data)
-            mesh_io.write_positions(edited.data, V_edited)
+            mesh_io.write_positions(edited.data, rj.V_edited)
             parts.append(f"'{edited.name}' deformed ({binding.n_dense:,} vertices)")
         if output == 'SHAPE_KEY':
             rb.keep(source.data)
-            key = _write_key(source, cage, edited, binding, V_edited)
+            key = _write_key(source, cage, edited, binding, rj.V_edited)
             parts.append(f"shape key '{key.name}' of '{source.name}' updated "
                          f"({binding.n_dense:,} vertices)")
-        if refined_mesh is not None:
-            Vr, Fr = refined_mesh
+        if rj.refined is not None:
+            Vr, Fr = rj.refined
             refined = results.write_refined(cage, source, Vr, Fr)
             parts.append(f"'{refined.name}' refined: {Fr.shape[0]:,} faces, {binding.scheme} x"
                          f"{binding.levels}" + _density_note(Fr.shape[0],
                                                              edited.meshadjust.dense_faces))
+
+
+def refine_object(cage, *, output='EDITED', levels=None, scheme=None):
+    """Update the results of an edited cage; returns a :class:`Report`.
+
+    ``output``: ``'EDITED'`` (the bound copy of the source, deformed; same
+    topology, UVs and attributes), ``'SHAPE_KEY'`` (the edit as a shape key
+    of the source named after the cage), ``'REFINED'`` (the subdivided cage
+    with the source's detail) or ``'BOTH'`` (edited and refined). Results
+    are created once and updated in place afterwards. Other ``levels`` /
+    ``scheme`` than the binding's re-bind from the rest shape, keeping the
+    edit (and the report says so). A source changed since the bind makes the
+    report a warning.
+    """
+    if output not in OUTPUT_NAMES:
+        raise core.InvalidArgumentError(f"refine: output must be one of {OUTPUT_NAMES}, "
+                                        f"got {output!r}")
+    t0 = time.perf_counter()
+    cs = cage.meshadjust
+    source, edited = cs.source, cs.edited
+    if source is None:
+        raise core.MeshAdjustError(f"'{cage.name}' is not a MeshAdjust cage (no source linked)")
+    if edited is None:
+        raise core.MeshAdjustError(f"'{cage.name}' is not bound yet: bind it first")
+    rj = _refine_compute(cage, output, levels, None if scheme == 'BOUND' else scheme)
+    _refine_commit(cage, output, rj)
+    warnings = rj.warnings
     stale = staleness.source_change(source, edited.meshadjust.source_fingerprint, fresh=True)
     if stale:
         warnings.append(f"{stale}: the result uses the mesh that was bound; re-bind to use the "
                         f"new one")
     dt = time.perf_counter() - t0
-    msg = "; ".join(parts) + f", {dt:.2f} s"
+    msg = "; ".join(rj.parts) + f", {dt:.2f} s"
     if warnings:
         msg += "; WARNING: " + "; ".join(warnings)
     cs.last_report = msg

@@ -130,7 +130,7 @@ def test_a_failed_step_leaves_every_object_and_mesh_as_it_was(bound, monkeypatch
     before = scene_snapshot()
     core = sys.modules[MODULE + ".core"]
     if step == "refine_deform":
-        monkeypatch.setattr(core, "refine", _boom)     # after the edited original was written
+        monkeypatch.setattr(core, "refine", _boom)     # (computed before any write since 2026-12-05)
     else:
         monkeypatch.setattr(core, "bind", _boom)
     with pytest.raises(RuntimeError, match="boom"):
