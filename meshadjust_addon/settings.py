@@ -27,7 +27,7 @@ from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty, St
 SCHEMES = [
     ('loop', "Loop", "Loop (1987): approximating and smooth, the default: over 54 measured "
                      "edits it folded no face where the edit left the cage unfolded "
-                     "(butterfly 2), and 304 in all (butterfly 697)"),
+                     "(butterfly 2), and 304 in all (butterfly 696)"),
     ('butterfly', "Butterfly", "Modified butterfly (Zorin et al. 1996): interpolating, the cage "
                                "vertices stay on the surface; tighter on bends, but an edit can "
                                "fold the surface"),

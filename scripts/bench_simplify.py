@@ -366,7 +366,7 @@ def main():
     ap.add_argument("--big", action="store_true", help="also the 4M-triangle synthetic mesh")
     ap.add_argument("--no-blender", action="store_true", help="ours only")
     ap.add_argument("--meshes", nargs="*", help="only these shared meshes (file names)")
-    ap.add_argument("--no-synthetic", action="store_true", help="skip the 1M mesh")
+    ap.add_argument("--no-synthetic", action="store_true", help="skip the synthetic 1M and 1.3M meshes")
     ap.add_argument("--no-messy", action="store_true", help="skip the messy section")
     ap.add_argument("--messy-only", action="store_true", help="only the messy section")
     ap.add_argument("--no-small", action="store_true", help="skip the small-mesh section")
