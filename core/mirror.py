@@ -88,8 +88,9 @@ def mirror_partners(V, axis, *, tolerance=PARTNER_TOLERANCE, where="mirror_partn
             f"{where}: the vertices are not mirror-symmetric about the {axis} plane: "
             f"{bad.size:,} have no partner within {tolerance:g} of the diagonal, e.g. vertex {i} "
             f"at {V[i].tolist()}")
-    if not np.array_equal(partner[partner], np.arange(n)):
-        i = int(np.flatnonzero(partner[partner] != np.arange(n))[0])
+    odd = _unpaired(partner)
+    if odd.size:
+        i = int(odd[0])
         raise InvalidArgumentError(
             f"{where}: the mirror pairing about the {axis} plane is ambiguous (two vertices at "
             f"one place?), e.g. vertex {i} and {int(partner[i])}")
@@ -153,6 +154,16 @@ def _nearest_partners(V, Mq, cell):
     return partner, best
 
 
+def _unpaired(partner):
+    """The vertices that are not the partner of their partner (ascending)."""
+    return np.flatnonzero(partner[partner] != np.arange(partner.shape[0]))
+
+
+def _chain(partner, i):
+    """Vertex ``i``, its partner and its partner's partner."""
+    return i, partner[i], partner[partner[i]]
+
+
 def symmetrize(V, partner, axis):
     """Exactly mirror-symmetric positions: each vertex averaged with its
     partner's mirrored position.
@@ -188,15 +199,12 @@ def symmetrize(V, partner, axis):
     k = axis_index(axis, where, name="axis")
     V = check_vertices(V, where=where, copy=False)
     partner = check_vertex_indices(partner, V.shape[0], where=where, name="partner")
-    # a pairing (each vertex its partner's partner): any other map gave positions that are
-    # not mirror images (np.roll of a pairing), or moved every vertex onto the plane
-    odd = np.flatnonzero(partner[partner] != np.arange(V.shape[0]))
+    # a pairing: any other map gave positions that are not mirror images (np.roll of one)
+    odd = _unpaired(partner)
     if odd.size:
-        i = int(odd[0])
-        raise InvalidArgumentError(
-            f"{where}: partner must pair the vertices (each the partner of its partner), but "
-            f"{odd.size:,} are not, e.g. vertex {i} -> {int(partner[i])} -> "
-            f"{int(partner[partner[i]])}")
+        raise InvalidArgumentError(f"{where}: partner must pair the vertices (each the partner of "
+                                   f"its partner), but {odd.size:,} are not, e.g. vertex "
+                                   f"{' -> '.join(str(int(v)) for v in _chain(partner, odd[0]))}")
     out = 0.5 * (V + mirror(V[partner], k))
     # 0.5 (a + (-b)) and 0.5 (b + (-a)) are exact negatives; (a + b) / 2 and (b + a) / 2 equal
     out[partner == np.arange(V.shape[0]), k] = 0.0
