@@ -96,7 +96,7 @@ def source_space(cage, source):
     return np.array(source.matrix_world.inverted() @ cage.matrix_world)
 
 
-def bound_source_matrix(cage):
+def _bound_source_matrix(cage):
     """The source's (4,4) world matrix when ``cage`` was bound, or None (not
     bound, or bound before it was recorded)."""
     edited = cage.meshadjust.edited
@@ -108,7 +108,7 @@ def _moved_since_bind(cage, source):
     """The matrix taking the source's local space at bind time to its space
     now, or None when its transform is the same (or was not recorded): the
     source moved, or its transform was applied to its mesh."""
-    M0 = bound_source_matrix(cage)
+    M0 = _bound_source_matrix(cage)
     if M0 is None:
         return None
     M = np.array(source.matrix_world)
@@ -130,8 +130,9 @@ def check_source_in_place(cage, source):
             f"binds it where it is now and keeps the edit")
 
 
-def _cage_in_source_space(cage, source):
-    """Cage positions in the source's local space (object transforms respected)."""
+def cage_in_source_space(cage, source):
+    """(n_cage,3) float64 cage positions in the source's local space (Edit
+    Mode synced first; object transforms respected, :func:`source_space`)."""
     if cage.mode == 'EDIT':
         cage.update_from_editmode()
     V = mesh_io.read_positions(cage.data)
@@ -232,7 +233,7 @@ def prepare_cage_job(cage, *, levels=None, scheme=None, from_rest=False, keep_ed
         levels = settings.checked("levels", levels, f"'{cage.name}'")
     if scheme is not None and scheme != 'BOUND':
         scheme = settings.checked("scheme", scheme, f"'{cage.name}'")
-    V_now = _cage_in_source_space(cage, source)
+    V_now = cage_in_source_space(cage, source)
     V_rest = _rest_of(cage, V_now.shape[0]) if (keep_edit or from_rest) else None
     F_cage, _, creases = store.cage_topology(cage)
     if V_rest is not None:
@@ -457,7 +458,7 @@ def _refine_compute(cage, output, levels, scheme):
     else:
         check_source_in_place(cage, source)
         binding = store.load_binding(edited, cage)
-    V_cage = _cage_in_source_space(cage, source)
+    V_cage = cage_in_source_space(cage, source)
     turned = turned_cage_note(cage, binding, V_cage)
     if turned:
         warnings.append(turned)

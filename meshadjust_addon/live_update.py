@@ -30,7 +30,7 @@ import numpy as np
 
 from .. import core
 from . import results, store
-from .cage_steps import check_source_in_place, source_space, turned_cage_note
+from .cage_steps import cage_in_source_space, check_source_in_place, turned_cage_note
 
 #: above this fraction of moved cage vertices a full deform is cheaper
 FULL_FRACTION = 0.25
@@ -65,20 +65,6 @@ class _State(NamedTuple):
     V_cage: np.ndarray   #: (n_cage,3) float64, source space, of the last update
     D: np.ndarray        #: (n_dense,3) float64, core.deform of V_cage
     buf: np.ndarray      #: (n_dense,3) float32, what was written to Blender
-
-
-def cage_in_source_space(cage, source):
-    """(n_cage,3) float64 cage positions in the source's local space (Edit
-    Mode synced first; object transforms respected)."""
-    if cage.mode == 'EDIT':
-        cage.update_from_editmode()
-    mesh = cage.data
-    n = len(mesh.vertices)
-    buf = np.empty(3 * n, dtype=np.float32)
-    if n:
-        mesh.vertices.foreach_get("co", buf)      # small mesh: the synced element array
-    M = source_space(cage, source)
-    return buf.reshape(n, 3).astype(np.float64) @ M[:3, :3].T + M[:3, 3]
 
 
 def update_edited(cage):

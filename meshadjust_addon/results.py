@@ -21,7 +21,7 @@ import numpy as np
 
 from .. import core
 from . import mesh_io
-from .staleness import key_name, own_key_names
+from .staleness import key_name, own_key_names, recorded_keys
 
 
 def link_like(obj, like):
@@ -182,8 +182,7 @@ def write_shape_key(source, cage, V_edited, V_bound):
         key.relative_key = keys.reference_key
         key.value = 1.0
         cage.meshadjust.key_name = key.name       # (renaming the cage keeps its key)
-        recorded = set(filter(None, source.meshadjust.own_keys.split("\n"))) | {key.name}
-        source.meshadjust.own_keys = "\n".join(sorted(recorded))
+        source.meshadjust.own_keys = "\n".join(sorted(recorded_keys(source) | {key.name}))
     if V_bound is None:
         co = V_edited
     else:

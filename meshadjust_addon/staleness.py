@@ -76,7 +76,13 @@ def own_key_names(source):
     so another cage's bind never reads them as the artist's, and bakes them)."""
     names = {key_name(o) for o in bpy.data.objects
              if o.type == 'MESH' and o.meshadjust.role == 'CAGE' and o.meshadjust.source == source}
-    return names | set(filter(None, source.meshadjust.own_keys.split("\n")))
+    return names | recorded_keys(source)
+
+
+def recorded_keys(source):
+    """The shape keys recorded on ``source`` as written by its cages (its
+    ``own_keys``, a name a line)."""
+    return set(filter(None, source.meshadjust.own_keys.split("\n")))
 
 
 def key_name(cage):
