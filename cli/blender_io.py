@@ -229,9 +229,9 @@ def ply_size_problem(path):
     bad index. Checked here, before Blender: ASCII, a line per element;
     binary, the bytes of each fixed-size element and of an element with one
     list property (faces) whose records all have the first one's length (all
-    triangles, all quads), and for mixed records at least one index each and
-    a first record that is a face (a count of 1-255, indices of declared
-    vertices)."""
+    triangles, all quads), and for mixed records at least 3 indices a face
+    (1 item a record of another list) and a first record that is a face (a
+    count of 1-255, indices of declared vertices)."""
     header = _ply_header(path)
     if not header or not header[2]:
         return None

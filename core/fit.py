@@ -36,9 +36,9 @@ import numpy as np
 from .cg import conjugate_gradient
 from .clean import clean_mesh
 from .errors import InvalidArgumentError, InvalidMeshError
-from .mesh import (barycentric_gather, barycentric_scatter, bbox_diagonal, bounding_box, check_mesh, check_number,
-                   check_seed, check_units,
-                   cross_rows, face_areas, squared_edges, stops, vertex_normals)
+from .mesh import (barycentric_gather, barycentric_scatter, bbox_diagonal, bounding_box, check_mesh,
+                   check_number, check_seed, check_units, cross_rows, face_areas, squared_edges,
+                   stops, vertex_normals)
 from .metrics import MAX_SAMPLES, sample_surface
 from .mirror import axis_index, mirror_partners, symmetrize
 from .near_query import search_for
@@ -138,7 +138,7 @@ def fit_cage(V_dense, F_dense, V_cage, F_cage, *, levels=2, scheme="butterfly", 
     >>> r.mean_distance[-1] < r.mean_distance[0]                      # doctest: +SKIP
     True
     """
-    cg_rtol, cg_max_iterations = check_solver(cg_rtol, cg_max_iterations, progress)
+    cg_rtol, cg_max_iterations = _check_solver(cg_rtol, cg_max_iterations, progress)
     check_subdivision_args(levels, scheme, "fit_cage")
     pb = _set_up(V_dense, F_dense, V_cage, F_cage, levels=levels, scheme=scheme, creases=creases,
                  smoothness=smoothness, point_to_point=point_to_point, laplacian=laplacian,
@@ -240,7 +240,7 @@ def _check_weights(iterations, smoothness, point_to_point, laplacian):
             check_number(point_to_point, where="fit_cage", name="point_to_point", lo=0))
 
 
-def check_solver(cg_rtol, cg_max_iterations, progress):
+def _check_solver(cg_rtol, cg_max_iterations, progress):
     """The conjugate-gradient settings, checked, and ``progress`` callable or
     None (it was first called after a whole iteration)."""
     if progress is not None and not callable(progress):

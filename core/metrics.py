@@ -34,8 +34,9 @@ __all__ = ["SurfaceSamples", "SurfaceDistance", "sample_surface", "surface_dista
 #: most samples drawn on a surface (1.2 GB of points and their faces; more was a MemoryError
 #: of 74.5 GiB, or minutes of work, for a mistyped count)
 MAX_SAMPLES = 50_000_000
-_MIN_SAMPLES = 10_000      # default samples per surface: 2 per face of the larger mesh,
-_MAX_SAMPLES = 200_000     # clipped to this range (a 1M-triangle comparison stays fast)
+#: default samples per surface: 2 per face of the larger mesh, clipped to this range (a
+#: 1M-triangle comparison stays fast)
+_DEFAULT_SAMPLES = (10_000, 200_000)
 
 
 class SurfaceSamples(NamedTuple):
@@ -200,7 +201,7 @@ def surface_distance(V_a, F_a, V_b, F_b, *, samples=None, seed=0):
     check_units(V_a, where="surface_distance", name="mesh a")
     check_units(V_b, where="surface_distance", name="mesh b")
     if samples is None:
-        n = int(np.clip(2 * max(F_a.shape[0], F_b.shape[0]), _MIN_SAMPLES, _MAX_SAMPLES))
+        n = int(np.clip(2 * max(F_a.shape[0], F_b.shape[0]), *_DEFAULT_SAMPLES))
     else:
         n = check_number(samples, where="surface_distance", name="samples", lo=0, hi=MAX_SAMPLES,
                          integer=True)
