@@ -33,7 +33,7 @@ from .cage_steps import (MAX_AUTO_LEVELS, OUTPUT_NAMES, CageJob, auto_levels, bi
                          compute_fit, fit_cage_object, prepare_cage_job, prepare_fit, read_source,
                          refine_object)
 from .report import Report, about, user_cause  # noqa: F401
-from .rollback import all_or_nothing
+from .rollback import all_or_nothing, retire
 from .simplify_step import (MEASURE_SAMPLES, TARGET_TOLERANCE, SimplifyJob,  # noqa: F401
                             SimplifyParams, commit_simplify, compute_simplify, prepare_simplify,
                             simplify_object, source_problem)
@@ -53,13 +53,13 @@ def subdivide_object(obj, *, levels=1, scheme="butterfly", in_place=False):
     Vf, Ff = core.subdivide(arrays.V, arrays.F, levels=levels, scheme=scheme,
                             creases=creases if creases.shape[0] else None)
     name = f"{obj.name}_{scheme}{levels}"
-    with all_or_nothing():
+    with all_or_nothing() as rb:
+        rb.keep_object(obj)
         mesh = mesh_io.new_mesh(name, Vf, Ff)
         if in_place:
             old = obj.data
             obj.data = mesh
-            if old.users == 0:
-                bpy.data.meshes.remove(old)
+            retire(old)
             out = obj
         else:
             out = bpy.data.objects.new(name, mesh)

@@ -21,6 +21,7 @@ import numpy as np
 
 from .. import core
 from . import mesh_io
+from .rollback import keep, retire
 from .staleness import key_name, own_key_names, recorded_keys
 
 
@@ -73,11 +74,9 @@ def edited_copy(source, cage, n_vertices, F=None):
                 F is None or np.array_equal(mesh_io.read_triangles(old)[0], F)):
             return edited, ""
         mesh = _new_source_copy(source, old.name + ".new")
-        keep_name, n_old, m_old = old.name, len(old.vertices), len(old.polygons)
+        n_old, m_old = len(old.vertices), len(old.polygons)
         edited.data = mesh
-        if old.users == 0:
-            bpy.data.meshes.remove(old)
-            mesh.name = keep_name
+        retire(old, mesh)
         return edited, (f"'{edited.name}' re-made from '{source.name}' ({n_old:,} -> "
                         f"{n_vertices:,} vertices, {m_old:,} -> {len(mesh.polygons):,} faces)")
     mesh = _new_source_copy(source, name)
@@ -102,6 +101,7 @@ def write_refined(cage, source, Vr, Fr):
         refined = None
     if refined is not None and len(refined.data.vertices) == Vr.shape[0] \
             and len(refined.data.polygons) == Fr.shape[0]:
+        keep(refined.data)
         mesh_io.write_positions(refined.data, Vr)
         return refined
     name = f"{source.name}_refined"
@@ -116,11 +116,8 @@ def write_refined(cage, source, Vr, Fr):
         cs.refined = refined
     else:
         old = refined.data
-        keep_name = old.name
         refined.data = mesh
-        if old.users == 0:
-            bpy.data.meshes.remove(old)
-            mesh.name = keep_name
+        retire(old, mesh)
     return refined
 
 
@@ -173,6 +170,7 @@ def write_shape_key(source, cage, V_edited, V_bound):
     why = shape_key_unavailable(source, V_edited.shape[0])
     if why:
         raise core.MeshAdjustError(f"Refine: {why}")
+    keep(source.data)
     if source.data.shape_keys is None:
         source.shape_key_add(name="Basis", from_mix=False)
     keys = source.data.shape_keys

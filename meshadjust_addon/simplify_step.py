@@ -309,7 +309,8 @@ def commit_simplify(source, job):
     more than 5%."""
     res = job.result
     p = job.params
-    with all_or_nothing():
+    with all_or_nothing() as rb:
+        rb.keep_object(source)
         cage = _new_cage(source, job)
         msg, dev, warnings = _summary(job)
         if job.binding is not None:

@@ -24,7 +24,7 @@ import bpy
 import numpy as np
 
 from .. import core
-from . import mesh_io, staleness
+from . import mesh_io, rollback, staleness
 
 FACE = "meshadjust_face"
 BARY = "meshadjust_bary"
@@ -36,6 +36,7 @@ _cache = {}
 
 
 def _set_point_attr(mesh, name, kind, values):
+    rollback.keep(mesh)
     attr = mesh.attributes.get(name)
     if attr is not None:
         mesh.attributes.remove(attr)
@@ -101,6 +102,7 @@ def save_rest(cage, V_rest):
     if not cage.data.is_editmode:
         _set_point_attr(cage.data, REST, 'FLOAT_VECTOR', V_rest)
         return
+    rollback.keep(cage.data)
     bm = bmesh.from_edit_mesh(cage.data)
     if len(bm.verts) != V_rest.shape[0]:
         raise core.TopologyMismatchError(
@@ -144,6 +146,7 @@ def save_binding(edited, binding):
     detail = state.detail_mesh
     name = f"{edited.name}.detail"
     if detail is not None and len(detail.vertices) == binding.fine_detail.shape[0]:
+        rollback.keep(detail)
         mesh_io.write_positions(detail, binding.fine_detail)     # in place: no new data-block
     else:
         old = detail
@@ -151,7 +154,7 @@ def save_binding(edited, binding):
         detail.use_fake_user = True
         state.detail_mesh = detail
         if old is not None:
-            bpy.data.meshes.remove(old)
+            rollback.retire(old, detail, name, ours=True)
     if detail.name != name and name not in bpy.data.meshes:
         detail.name = name
     state.fingerprint = binding.fingerprint
@@ -159,6 +162,7 @@ def save_binding(edited, binding):
     state.levels = binding.levels
     state.scheme = binding.scheme
     _cache[edited.session_uid] = binding
+    rollback.on_undo(lambda uid=edited.session_uid: _cache.pop(uid, None))
 
 
 def load_binding(edited, cage):

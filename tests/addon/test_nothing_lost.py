@@ -414,3 +414,139 @@ def test_esc_during_the_bind_itself_cancels_it(bound):
     job = api.compute_bind(api.prepare_cage_job(cage, levels=1), progress=stop_inside)
     assert job.cancelled and job.binding is None and any(0.0 < f < 0.9 for f in seen)
     assert_unchanged(before)
+
+
+def full_snapshot():
+    """Everything a step may write: per object its mesh, transform, visibility
+    and MeshAdjust state (pointers by name); per mesh its positions, shape
+    keys' shapes, attributes (every value) and fake user."""
+    objects = {}
+    for o in bpy.data.objects:
+        st = {}
+        for prop in o.meshadjust.bl_rna.properties:
+            if prop.identifier == "rna_type":
+                continue
+            v = getattr(o.meshadjust, prop.identifier)
+            st[prop.identifier] = (v.name if isinstance(v, bpy.types.ID) else
+                                   tuple(v) if getattr(prop, "is_array", False) else v)
+        objects[o.name] = (o.data.name, tuple(map(tuple, o.matrix_world)), o.hide_get(), st)
+    meshes = {}
+    for m in bpy.data.meshes:
+        keys = () if m.shape_keys is None else tuple(
+            (kb.name, kb.value, _values(kb.data, "co", 3)) for kb in m.shape_keys.key_blocks)
+        attrs = {a.name: (a.domain, a.data_type, _values(a.data, *{
+            'FLOAT_VECTOR': ("vector", 3), 'INT': ("value", 1), 'BOOLEAN': ("value", 1),
+            'FLOAT': ("value", 1)}.get(a.data_type, (None, 0)))) for a in m.attributes
+            if not a.name.startswith(".")}
+        meshes[m.name] = (pos_of(m), keys, attrs, m.use_fake_user)
+    return objects, meshes
+
+
+def _values(data, field, width):
+    if field is None:
+        return None
+    buf = np.empty(len(data) * width, dtype=np.float64)
+    data.foreach_get(field, buf)
+    return buf.tobytes()
+
+
+def pos_of(mesh):
+    return mod("mesh_io").read_positions(mesh).tobytes()
+
+
+def assert_all_unchanged(before):
+    after = full_snapshot()
+    assert set(after[0]) == set(before[0]), "objects added or removed"
+    assert set(after[1]) == set(before[1]), "meshes added or removed"
+    for name, record in before[0].items():
+        assert after[0][name] == record, f"object {name} changed"
+    for name, record in before[1].items():
+        for what, a, b in zip(("positions", "shape keys", "attributes", "fake user"),
+                              after[1][name], record):
+            assert a == b, f"mesh {name}: {what} changed"
+
+
+def _bug(*args, **kwargs):
+    raise RuntimeError("boom: a bug late in the commit")
+
+
+def test_a_refine_failing_after_its_rebind_was_written_puts_everything_back(bound, monkeypatch):
+    # The re-bind at one level writes the binding attributes, the states, a new
+    # detail mesh (the old one retired), the edited original; the refined mesh
+    # then fails. Everything comes back, the old detail mesh included, and the
+    # next Refine gives what the first did (no binding cached from the failed run:
+    # at one level it would refine to 1,200 faces, not 4,800).
+    dense, cage = bound
+    lift_top(cage)
+    assert bpy.ops.meshadjust.refine(output='BOTH') == {'FINISHED'}
+    edited = cage.meshadjust.edited
+    detail = edited.meshadjust.detail_mesh
+    before = full_snapshot()
+    monkeypatch.setattr(mod("results"), "write_refined", _bug)
+    with pytest.raises(RuntimeError, match="boom"):
+        bpy.ops.meshadjust.refine(output='BOTH', levels=1)
+    monkeypatch.undo()
+    assert_all_unchanged(before)
+    assert edited.meshadjust.detail_mesh == detail
+    V_edited, n_refined = pos(edited), len(cage.meshadjust.refined.data.polygons)
+    assert bpy.ops.meshadjust.refine(output='BOTH') == {'FINISHED'}
+    # (the binding now read back from its float32 attributes: 1e-7 of the size apart)
+    assert np.abs(pos(edited) - V_edited).max() < 1e-6
+    assert len(cage.meshadjust.refined.data.polygons) == n_refined
+
+
+def test_a_bind_failing_after_the_edited_original_was_remade_gives_back_its_mesh(
+        bound, monkeypatch):
+    dense, cage = bound
+    lift_top(cage)
+    assert bpy.ops.meshadjust.refine(output='BOTH') == {'FINISHED'}
+    edited = cage.meshadjust.edited
+    bm = bmesh.new()
+    bm.from_mesh(dense.data)
+    bm.faces.ensure_lookup_table()
+    bmesh.ops.delete(bm, geom=[bm.faces[0]], context='FACES_ONLY')
+    bm.to_mesh(dense.data)
+    bm.free()
+    old_mesh = edited.data
+    before = full_snapshot()
+    monkeypatch.setattr(mod("store"), "save_rest", _bug)     # after the re-made mesh and binding
+    bpy.context.view_layer.objects.active = cage
+    with pytest.raises(RuntimeError, match="boom"):
+        bpy.ops.meshadjust.bind()
+    monkeypatch.undo()
+    assert_all_unchanged(before)
+    assert edited.data == old_mesh
+    assert bpy.ops.meshadjust.bind() == {'FINISHED'}              # and then it works
+    assert len(edited.data.polygons) == len(dense.data.polygons) == 5119
+    assert orphans() == []
+
+
+def test_a_shape_key_refine_failing_late_puts_the_keys_shape_back(bound, monkeypatch):
+    dense, cage = bound
+    lift_top(cage)
+    assert bpy.ops.meshadjust.refine(output='SHAPE_KEY') == {'FINISHED'}
+    lift_top(cage, 0.1)
+    before = full_snapshot()
+    monkeypatch.setattr(mod("results"), "write_refined", _bug)   # a re-bind at one level writes
+    with pytest.raises(RuntimeError, match="boom"):               # the key, then the refined
+        bpy.ops.meshadjust.refine(output='BOTH', levels=1)        # mesh fails (none yet: made)
+    monkeypatch.undo()
+    assert_all_unchanged(before)
+
+
+def test_a_bind_from_edit_mode_failing_late_puts_the_rest_layer_back(bound, monkeypatch):
+    # In Edit Mode the rest shape is a layer of the cage's BMesh, written per vertex
+    dense, cage = bound
+    assert bpy.ops.meshadjust.refine(output='BOTH') == {'FINISHED'}
+    store = mod("store")
+    rest0 = store.load_rest(cage)
+    lift_in_edit_mode(cage)
+    monkeypatch.setattr(mod("results"), "write_refined", _bug)
+    with pytest.raises(RuntimeError, match="boom"):
+        bpy.ops.meshadjust.bind(levels=1, keep_edit=False)     # the lifted shape as the rest
+    monkeypatch.undo()
+    assert cage.mode == 'EDIT'
+    assert np.array_equal(store.load_rest(cage), rest0)
+    bpy.ops.object.mode_set(mode='OBJECT')
+    assert np.array_equal(store.load_rest(cage), rest0)
+    assert cage.meshadjust.levels == 2
