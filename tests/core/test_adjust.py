@@ -649,3 +649,20 @@ def test_fit_bind_and_deform_take_units_within_their_range_and_name_those_beyond
     b = bind(V0, F, cage.V, cage.F)
     with pytest.raises(InvalidMeshError, match="deform: V_cage_edited reaches"):
         deform(b, cage.V * 4 * UNITS[1] / np.abs(cage.V).max())
+
+
+def test_a_binding_owns_its_arrays_the_callers_can_change_after_the_bind(sphere_binding):
+    # (bind reads V_dense in place, without a copy: it keeps none of it)
+    Vd, Fd, Vc, Fc, _ = sphere_binding
+    Vd, Fd, Vc, Fc = Vd.copy(), Fd.copy(), Vc.copy(), Fc.copy()
+    b = bind(Vd, Fd, Vc, Fc, levels=1)
+    Ve = Vc * 1.1
+    D0 = deform(b, Ve)
+    for a in (Vd, Fd, Vc, Fc):
+        assert not any(np.shares_memory(a, x) for x in b.to_arrays().values()
+                       if isinstance(x, np.ndarray))
+    Vd += 5.0
+    Fd[:] = Fd[:, ::-1]
+    Vc += 1.0
+    Fc[:] = 0
+    assert np.array_equal(deform(b, Ve), D0)
