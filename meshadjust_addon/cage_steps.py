@@ -285,18 +285,23 @@ def commit_bind(cage, job):
     cs = cage.meshadjust
     source = cs.source
     with all_or_nothing() as rb:
+        notes = []
         if cs.edited is not None:
             rb.keep(cs.edited.data)
+            if cs.edited.users_collection:
+                results.aside_note(results.kept_aside(cs.edited), cs.edited, notes)
         rb.keep(cage.data)
         A = _moved_since_bind(cage, source)            # (before the new matrix is recorded)
         edited, note = results.edited_copy(source, cage, job.V.shape[0], job.F)
-        job.note = note
+        notes += [note] if note else []
+        job.note = "; ".join(notes)
         if A is not None:      # the results keep their place beside the source's new space
             for obj in (edited, cs.refined):
                 if obj is not None:
                     obj.matrix_world = obj.matrix_world @ _matrix(np.linalg.inv(A))
         edited.meshadjust.source_matrix = np.array(source.matrix_world).ravel()
-        mesh_io.write_positions(edited.data, job.V_edited if job.V_edited is not None else job.V)
+        results.record_written(edited, mesh_io.write_positions(
+            edited.data, job.V_edited if job.V_edited is not None else job.V))
         store.save_binding(edited, job.binding)
         store.save_rest(cage, job.V_cage)
         st = edited.meshadjust
@@ -311,9 +316,11 @@ def commit_bind(cage, job):
         cs.fingerprint = job.binding.fingerprint
         V_now = job.V_now if job.V_now is not None else job.V_cage
         if cs.refined is not None:
-            results.write_refined(cage, source, *core.refine(job.binding, V_now))
+            results.write_refined(cage, source, *core.refine(job.binding, V_now), notes=notes)
         if results.shape_key_of(source, cage) is not None:
-            _write_key(source, cage, edited, job.binding, job.V_edited, V_rest=job.V_cage)
+            _write_key(source, cage, edited, job.binding, job.V_edited, V_rest=job.V_cage,
+                       notes=notes)
+        job.note = "; ".join(notes)
         staleness.touched(cage)
         staleness.touched(source)
     return edited
@@ -388,7 +395,7 @@ def fit_cage_object(cage, *, levels=None, scheme=None, rebind=settings.default("
 _rest_dense = {}   #: edited session_uid -> (binding, dense positions of its rest shape)
 
 
-def _write_key(source, cage, edited, binding, V_edited, *, V_rest=None):
+def _write_key(source, cage, edited, binding, V_edited, *, V_rest=None, notes=None):
     """The shape-key output: relative to the mesh that was bound."""
     V_bound = None
     if not results.only_own_keys_and_no_modifiers(source):
@@ -399,7 +406,7 @@ def _write_key(source, cage, edited, binding, V_edited, *, V_rest=None):
             hit = (binding, core.deform(binding, V_rest))
             _rest_dense[edited.session_uid] = hit
         V_bound = hit[1]
-    return results.write_shape_key(source, cage, V_edited, V_bound)
+    return results.write_shape_key(source, cage, V_edited, V_bound, notes)
 
 
 def _density_note(n_refined, n_source):
@@ -490,17 +497,19 @@ def _refine_commit(cage, output, rj):
             if not edited.users_collection:         # deleted by the artist: shown again
                 results.link_like(edited, source)
                 parts.append(f"'{edited.name}' had been deleted: linked back")
+            else:
+                results.aside_note(results.kept_aside(edited), edited, parts)
             rb.keep(edited.data)
-            mesh_io.write_positions(edited.data, rj.V_edited)
+            results.record_written(edited, mesh_io.write_positions(edited.data, rj.V_edited))
             parts.append(f"'{edited.name}' deformed ({binding.n_dense:,} vertices)")
         if output == 'SHAPE_KEY':
             rb.keep(source.data)
-            key = _write_key(source, cage, edited, binding, rj.V_edited)
+            key = _write_key(source, cage, edited, binding, rj.V_edited, notes=parts)
             parts.append(f"shape key '{key.name}' of '{source.name}' updated "
                          f"({binding.n_dense:,} vertices)")
         if rj.refined is not None:
             Vr, Fr = rj.refined
-            refined = results.write_refined(cage, source, Vr, Fr)
+            refined = results.write_refined(cage, source, Vr, Fr, notes=parts)
             parts.append(f"'{refined.name}' refined: {Fr.shape[0]:,} faces, {binding.scheme} x"
                          f"{binding.levels}" + _density_note(Fr.shape[0],
                                                              edited.meshadjust.dense_faces))

@@ -51,12 +51,13 @@ class LiveTiming(NamedTuple):
     write: float       #: foreach_set of the position attribute and the update tag
     total: float
     warning: str = ""  #: the edit turns cage faces over (:func:`~.cage_steps.turned_cage_note`)
+    note: str = ""     #: what else happened (a changed version of the edited original kept aside)
 
     def summary(self):
         what = "full deform" if self.full else f"{self.moved} cage vertices moved"
         return (f"live: {what}, {self.rows:,} dense vertices updated in "
                 f"{1e3 * self.total:.1f} ms (deform {1e3 * self.deform:.1f}, "
-                f"write {1e3 * self.write:.1f})"
+                f"write {1e3 * self.write:.1f})" + (f"; {self.note}" if self.note else "")
                 + (f"; WARNING: {self.warning}" if self.warning else ""))
 
 
@@ -124,15 +125,26 @@ def update_edited(cage):
         rows = r.shape[0]
         state = state._replace(V_cage=V)
     t4 = time.perf_counter()
+    notes = []
     if moved is None or moved.size:
+        if moved is None and edited.meshadjust.written != results.LIVE:
+            # (the first write of this live session: a version changed since the
+            # last write is kept aside; later ones write over live mode's own)
+            aside = results.kept_aside(edited)
+            if aside is not None:
+                notes.append(f"'{edited.name}' had been changed since MeshAdjust wrote it: "
+                             f"that version is kept as '{aside.name}'")
         mesh.attributes["position"].data.foreach_set("vector", buf.reshape(-1))
         mesh.update_tag()
+        if edited.meshadjust.written != results.LIVE:
+            edited.meshadjust.written = results.LIVE
+        results.live_written[edited.session_uid] = buf     # (updated in place from now on)
     _states[key] = state
     t5 = time.perf_counter()
     timing = LiveTiming(moved=V.shape[0] if moved is None else int(moved.size), rows=int(rows),
                         full=moved is None, read_cage=t1 - t0, compare=t2 - t1,
                         deform=t3 - t2, convert=t4 - t3, write=t5 - t4, total=t5 - t0,
-                        warning=turned_cage_note(cage, binding, V))
+                        warning=turned_cage_note(cage, binding, V), note="; ".join(notes))
     cs.last_report = timing.summary()
     return timing
 

@@ -26,6 +26,25 @@ class MeshArrays(NamedTuple):
 
 def read_positions(mesh):
     """(n,3) float64 vertex positions of a ``bpy.types.Mesh``."""
+    return read_positions32(mesh).reshape(-1, 3).astype(np.float64)
+
+
+def write_positions(mesh, V):
+    """Overwrite the vertex positions of ``mesh`` (same vertex count); returns
+    the flat float32 buffer written."""
+    V = np.ascontiguousarray(V, dtype=np.float32).reshape(-1)
+    if V.size != 3 * len(mesh.vertices):
+        raise core.TopologyMismatchError(f"write_positions: {V.size // 3} positions for "
+                                         f"'{mesh.name}', which has {len(mesh.vertices)} vertices")
+    if V.size:
+        mesh.attributes["position"].data.foreach_set("vector", V)
+    mesh.update()
+    return V
+
+
+def read_positions32(mesh):
+    """The flat float32 vertex positions of ``mesh`` as Blender holds them
+    (what :func:`write_positions` wrote, bit for bit)."""
     n = len(mesh.vertices)
     buf = np.empty(n * 3, dtype=np.float32)
     if n and mesh.is_editmode:
@@ -34,18 +53,7 @@ def read_positions(mesh):
         mesh.vertices.foreach_get("co", buf)
     elif n:
         mesh.attributes["position"].data.foreach_get("vector", buf)
-    return buf.reshape(n, 3).astype(np.float64)
-
-
-def write_positions(mesh, V):
-    """Overwrite the vertex positions of ``mesh`` (same vertex count)."""
-    V = np.ascontiguousarray(V, dtype=np.float32).reshape(-1)
-    if V.size != 3 * len(mesh.vertices):
-        raise core.TopologyMismatchError(f"write_positions: {V.size // 3} positions for "
-                                         f"'{mesh.name}', which has {len(mesh.vertices)} vertices")
-    if V.size:
-        mesh.attributes["position"].data.foreach_set("vector", V)
-    mesh.update()
+    return buf
 
 
 def read_triangles(mesh):

@@ -77,6 +77,15 @@ class MeshAdjustObjectState(bpy.types.PropertyGroup):
                              description="The shape key this cage writes on its source (named "
                                          "after the cage when first written; renaming the "
                                          "cage keeps it)")
+    written: StringProperty(name="Written", default="",
+                            description="On a result: the vertex count and a checksum of the "
+                                        "positions MeshAdjust last wrote ('live': kept by live "
+                                        "mode), so a change made since (sculpting, an applied "
+                                        "transform) is kept aside, not overwritten")
+    key_written: StringProperty(name="Shape key written", default="",
+                                description="On a cage: a checksum of the shape key it last "
+                                            "wrote on its source (a key sculpted since is kept "
+                                            "aside, not overwritten)")
     live: BoolProperty(name="Live", default=False,
                        description="Update the results while the cage is edited")
     last_report: StringProperty(name="Last report", default="",

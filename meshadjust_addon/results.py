@@ -11,10 +11,14 @@
   original exactly when the source has no other keys and no modifiers.
 
 Every result is created once and updated in place afterwards; a mesh that
-is replaced is removed when nothing else uses it (no orphans).
+is replaced is removed when nothing else uses it (no orphans). A result
+changed since MeshAdjust wrote it (sculpted, its transform applied, a key
+edited by hand) is not overwritten: the changed version is kept aside
+first, as a copy (:func:`kept_aside`, :func:`key_kept_aside`).
 """
 
 import contextlib
+import zlib
 
 import bpy
 import numpy as np
@@ -23,6 +27,75 @@ from .. import core
 from . import mesh_io
 from .rollback import keep, retire
 from .staleness import key_name, own_key_names, recorded_keys
+
+
+#: ``written`` of a result live mode wrote last (its buffer is in :data:`live_written`)
+LIVE = "live"
+
+#: edited object session_uid -> the flat float32 buffer live mode last wrote there
+live_written = {}
+
+
+def _checksum(buf):
+    """``"n:crc"`` of a flat float32 position buffer."""
+    return f"{buf.size // 3}:{zlib.crc32(memoryview(np.ascontiguousarray(buf)).cast('B'))}"
+
+
+def record_written(obj, buf):
+    """Remember what MeshAdjust wrote on the result ``obj``: the flat float32
+    positions ``buf`` (as :func:`~.mesh_io.write_positions` returns them)."""
+    obj.meshadjust.written = _checksum(buf)
+    live_written.pop(obj.session_uid, None)
+
+
+def changed_since_written(obj):
+    """Whether the result ``obj``'s mesh is no longer what MeshAdjust last
+    wrote there (False when that is not known: nothing recorded, or live
+    mode's buffer gone with the session)."""
+    written = obj.meshadjust.written
+    if written == LIVE:
+        buf = live_written.get(obj.session_uid)
+        if buf is None:
+            return False
+        written = _checksum(buf)
+    if not written:
+        return False
+    return _checksum(mesh_io.read_positions32(obj.data)) != written
+
+
+def kept_aside(obj):
+    """When the result ``obj`` changed since MeshAdjust wrote it: a copy of
+    it as it is now, beside it, named ``<name>.hand``, with no MeshAdjust
+    state or binding data (the copy is the artist's; ``obj`` is then
+    overwritten). Returns the copy, or None when nothing changed."""
+    if not changed_since_written(obj):
+        return None
+    copy = obj.copy()
+    copy.data = obj.data.copy()
+    copy.name = f"{obj.name}.hand"
+    copy.data.name = copy.name
+    copy.property_unset("meshadjust")
+    attrs = copy.data.attributes
+    for name in [a.name for a in attrs if a.name.startswith("meshadjust_")]:
+        attrs.remove(attrs[name])         # (by name: a removal moves the others)
+    link_like(copy, obj)
+    return copy
+
+
+def key_kept_aside(source, cage, key):
+    """When the shape key ``key`` of ``cage`` on ``source`` changed since the
+    cage wrote it: a copy of it as it is now, ``<key>.hand`` (value 0, the
+    artist's own). Returns the copy, or None when nothing changed."""
+    written = cage.meshadjust.key_written
+    co = np.empty(3 * len(key.data), dtype=np.float32)
+    key.data.foreach_get("co", co)
+    if not written or _checksum(co) == written:
+        return None
+    copy = source.shape_key_add(name=f"{key.name}.hand", from_mix=False)
+    copy.data.foreach_set("co", co)
+    copy.relative_key = key.relative_key
+    copy.value = 0.0
+    return copy
 
 
 def link_like(obj, like):
@@ -93,16 +166,19 @@ def edited_copy(source, cage, n_vertices, F=None):
     return edited, ""
 
 
-def write_refined(cage, source, Vr, Fr):
-    """Create or update the refined-mesh object of ``cage``."""
+def write_refined(cage, source, Vr, Fr, notes=None):
+    """Create or update the refined-mesh object of ``cage`` (a version of
+    it changed since it was written kept aside first, said in ``notes``)."""
     cs = cage.meshadjust
     refined = cs.refined
     if refined is not None and not refined.users_collection:   # deleted by the artist
         refined = None
+    if refined is not None:
+        aside_note(kept_aside(refined), refined, notes)
     if refined is not None and len(refined.data.vertices) == Vr.shape[0] \
             and len(refined.data.polygons) == Fr.shape[0]:
         keep(refined.data)
-        mesh_io.write_positions(refined.data, Vr)
+        record_written(refined, mesh_io.write_positions(refined.data, Vr))
         return refined
     name = f"{source.name}_refined"
     mesh = mesh_io.new_mesh(name, Vr, Fr)
@@ -118,7 +194,16 @@ def write_refined(cage, source, Vr, Fr):
         old = refined.data
         refined.data = mesh
         retire(old, mesh)
+    record_written(refined, np.ascontiguousarray(Vr, dtype=np.float32).reshape(-1))
     return refined
+
+
+def aside_note(copy, obj, notes):
+    """Add to ``notes`` (a list, or None) the sentence saying that ``obj``'s
+    changed version was kept as ``copy`` (nothing when ``copy`` is None)."""
+    if copy is not None and notes is not None:
+        notes.append(f"'{obj.name}' had been changed since MeshAdjust wrote it: that version is "
+                     f"kept as '{copy.name}'")
 
 
 def edited_problem(edited):
@@ -159,7 +244,7 @@ def shape_key_of(source, cage):
     return None if keys is None else keys.key_blocks.get(key_name(cage))
 
 
-def write_shape_key(source, cage, V_edited, V_bound):
+def write_shape_key(source, cage, V_edited, V_bound, notes=None):
     """Write the edit as the shape key of ``cage`` on ``source`` (named after
     the cage when first written, :func:`~.staleness.key_name`).
 
@@ -175,6 +260,11 @@ def write_shape_key(source, cage, V_edited, V_bound):
         source.shape_key_add(name="Basis", from_mix=False)
     keys = source.data.shape_keys
     key = keys.key_blocks.get(key_name(cage))
+    if key is not None:
+        aside = key_kept_aside(source, cage, key)
+        if aside is not None and notes is not None:
+            notes.append(f"shape key '{key.name}' had been changed since MeshAdjust wrote it: "
+                         f"that version is kept as '{aside.name}' (value 0)")
     if key is None:
         key = source.shape_key_add(name=cage.name, from_mix=False)
         key.relative_key = keys.reference_key
@@ -187,7 +277,9 @@ def write_shape_key(source, cage, V_edited, V_bound):
         ref = np.empty(3 * len(source.data.vertices), np.float32)
         keys.reference_key.data.foreach_get("co", ref)
         co = ref.reshape(-1, 3).astype(np.float64) + (V_edited - V_bound)
-    key.data.foreach_set("co", np.ascontiguousarray(co, dtype=np.float32).ravel())
+    co = np.ascontiguousarray(co, dtype=np.float32).ravel()
+    key.data.foreach_set("co", co)
+    cage.meshadjust.key_written = _checksum(co)
     source.data.update()
     return key
 

@@ -147,8 +147,9 @@ def _restore_attributes(mesh, kept):
                     v[layer] = co
         bmesh.update_edit_mesh(mesh, loop_triangles=False, destructive=False)
         return
-    for attr in [a for a in mesh.attributes if a.name.startswith(PREFIX) and a.name not in kept]:
-        mesh.attributes.remove(attr)
+    attrs = mesh.attributes
+    for name in [a.name for a in attrs if a.name.startswith(PREFIX) and a.name not in kept]:
+        attrs.remove(attrs[name])         # (by name: a removal moves the others)
     for name, (domain, kind, values) in kept.items():
         attr = mesh.attributes.get(name)
         if attr is None or attr.domain != domain or attr.data_type != kind:

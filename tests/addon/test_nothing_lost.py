@@ -550,3 +550,115 @@ def test_a_bind_from_edit_mode_failing_late_puts_the_rest_layer_back(bound, monk
     bpy.ops.object.mode_set(mode='OBJECT')
     assert np.array_equal(store.load_rest(cage), rest0)
     assert cage.meshadjust.levels == 2
+
+
+def _sculpt(obj, dz=0.05):
+    """Change ``obj``'s mesh by hand (as a sculpt stroke would): lift a few vertices."""
+    V = pos(obj)
+    V[:20, 2] += dz
+    mod("mesh_io").write_positions(obj.data, V)
+    return V
+
+
+def _assert_artists_copy(copy, V):
+    assert copy is not None and np.array_equal(pos(copy), V.astype(np.float32))
+    assert copy.meshadjust.role == 'NONE' and copy.meshadjust.source is None
+    assert not [a.name for a in copy.data.attributes if a.name.startswith("meshadjust_")]
+    assert copy.users_collection
+
+
+@pytest.mark.parametrize("step", ["refine", "rebind", "fit"])
+def test_an_edited_original_changed_by_hand_is_kept_aside_not_overwritten(bound, step):
+    dense, cage = bound
+    lift_top(cage)
+    assert bpy.ops.meshadjust.refine(output='EDITED') == {'FINISHED'}
+    edited = cage.meshadjust.edited
+    V_hand = _sculpt(edited)
+    lift_top(cage, 0.1)
+    bpy.context.view_layer.objects.active = cage
+    if step == "refine":
+        assert bpy.ops.meshadjust.refine(output='EDITED') == {'FINISHED'}
+    elif step == "rebind":
+        assert bpy.ops.meshadjust.bind(levels=1) == {'FINISHED'}
+    else:
+        assert bpy.ops.meshadjust.fit_cage() == {'FINISHED'}
+    copy = bpy.data.objects.get(f"{edited.name}.hand")
+    _assert_artists_copy(copy, V_hand)
+    assert "kept as 'dense_edited.hand'" in cage.meshadjust.last_report
+    assert not np.array_equal(pos(edited), pos(copy))           # the edit was written
+    # written by MeshAdjust since: the next step keeps nothing more aside
+    n = len(bpy.data.objects)
+    assert bpy.ops.meshadjust.refine(output='EDITED') == {'FINISHED'}
+    assert len(bpy.data.objects) == n and "kept as" not in cage.meshadjust.last_report
+
+
+def test_an_applied_transform_and_a_sculpted_refined_mesh_are_kept_aside(bound):
+    dense, cage = bound
+    assert bpy.ops.meshadjust.refine(output='BOTH') == {'FINISHED'}
+    edited, refined = cage.meshadjust.edited, cage.meshadjust.refined
+    edited.location = (2.0, 0.0, 0.0)
+    bpy.context.view_layer.update()
+    for o in bpy.context.selected_objects:
+        o.select_set(False)
+    edited.select_set(True)
+    bpy.context.view_layer.objects.active = edited
+    bpy.ops.object.transform_apply(location=True, rotation=False, scale=False)
+    V_applied = pos(edited)
+    V_hand = _sculpt(refined)
+    bpy.context.view_layer.objects.active = cage
+    assert bpy.ops.meshadjust.refine(output='BOTH') == {'FINISHED'}
+    _assert_artists_copy(bpy.data.objects.get("dense_edited.hand"), V_applied)
+    _assert_artists_copy(bpy.data.objects.get("dense_refined.hand"), V_hand)
+
+
+def test_a_shape_key_changed_by_hand_is_kept_aside_as_a_key_at_value_0(bound):
+    dense, cage = bound
+    lift_top(cage)
+    assert bpy.ops.meshadjust.refine(output='SHAPE_KEY') == {'FINISHED'}
+    key = dense.data.shape_keys.key_blocks[cage.meshadjust.key_name]
+    co = np.empty(3 * len(key.data), dtype=np.float32)
+    key.data.foreach_get("co", co)
+    co[:30] += 0.05
+    key.data.foreach_set("co", co)
+    lift_top(cage, 0.1)
+    assert bpy.ops.meshadjust.refine(output='SHAPE_KEY') == {'FINISHED'}
+    hand = dense.data.shape_keys.key_blocks.get(f"{key.name}.hand")
+    assert hand is not None and hand.value == 0.0
+    got = np.empty_like(co)
+    hand.data.foreach_get("co", got)
+    assert np.array_equal(got, co)
+    assert "kept as" in cage.meshadjust.last_report
+    assert bpy.ops.meshadjust.refine(output='SHAPE_KEY') == {'FINISHED'}   # nothing more
+    assert len(dense.data.shape_keys.key_blocks) == 3
+
+
+def test_live_mode_keeps_a_changed_edited_original_aside_once_and_its_own_writes_are_not_changes(
+        bound):
+    dense, cage = bound
+    lu = mod("live_update")
+    lu.forget()
+    assert bpy.ops.meshadjust.refine(output='EDITED') == {'FINISHED'}
+    edited = cage.meshadjust.edited
+    V_hand = _sculpt(edited)
+    first = lu.update_edited(cage)
+    _assert_artists_copy(bpy.data.objects.get("dense_edited.hand"), V_hand)
+    assert "kept as 'dense_edited.hand'" in first.note
+    lift_top(cage, 0.1)
+    assert not lu.update_edited(cage).note
+    n = len(bpy.data.objects)
+    assert bpy.ops.meshadjust.refine(output='EDITED') == {'FINISHED'}      # live's own writes
+    assert len(bpy.data.objects) == n
+
+
+def test_a_first_bind_failing_late_leaves_the_cage_without_a_rest_shape(scene, monkeypatch):
+    # (the rest-shape attribute the failed run added to the cage is removed; the
+    # edited original it made is removed whole)
+    dense = make_object("dense", *bumpy_sphere(3))
+    assert simplify(200, bind=False, fit=False) == {'FINISHED'}
+    cage = dense.meshadjust.cage
+    before = full_snapshot()
+    monkeypatch.setattr(mod("store"), "save_rest", _bug)
+    bpy.context.view_layer.objects.active = cage
+    with pytest.raises(RuntimeError, match="boom"):
+        bpy.ops.meshadjust.bind()
+    assert_all_unchanged(before)
