@@ -240,91 +240,172 @@ def clean_mesh(V, F, *, weld_distance=None, min_component_area=MIN_COMPONENT_ARE
     ([[0, 1, 2], [1, 3, 2]], 'welded 2 vertices')
     """
     V, F = check_mesh(V, F, where=_WHERE)
+    face_budget, protected = _checked_options(weld_distance, min_component_area, face_budget,
+                                              protected, V.shape[0])
+    used = np.zeros(V.shape[0], dtype=bool)
+    used[F.ravel()] = True
+    box = bulk_box(V if used.all() else V[used])
+    w = _Work.of(V, F)
+    weld, area = _weld_stage(w, box, weld_distance, protected)
+    _drop_repeated_faces(w)
+    to_input, inner, turned = _manifold_stage(w)
+    if protected is not None:
+        protected = protected[to_input]
+    # areas of the faces as they came (welds move corners by at most weld_distance)
+    area, labels, turned = _debris_stage(w, area[w.faces], inner, float(min_component_area),
+                                         face_budget, protected, turned)
+    del inner
+    _copies_stage(w, labels, area, box, weld.distance, protected, turned)
+    V, F, input_to_clean, clean_to_input = _compact(w.V, w.F, to_input, weld.rep)
+    return CleanResult(V, F, input_to_clean, clean_to_input, w.faces, w.twin, w.area,
+                       CleanReport(**w.counts))
+
+
+def _checked_options(weld_distance, min_component_area, face_budget, protected, n):
+    """:func:`clean_mesh`'s options checked: ``(face_budget, protected)``
+    as it takes them (``n`` vertices)."""
     for name, value in (("weld_distance", WELD_DISTANCE if weld_distance is None else weld_distance),
                         ("min_component_area", min_component_area)):
         if not (isinstance(value, (int, float, np.number)) and np.isfinite(value) and value >= 0):
             raise InvalidArgumentError(
                 f"{_WHERE}: {name} must be a finite number >= 0, got {value!r}")
-    n_in = V.shape[0]
     if face_budget is not None:
         face_budget = check_count(face_budget, where=_WHERE, name="face_budget")
     if protected is not None:
-        protected = check_vertex_mask(protected, n_in, where=_WHERE, name="protected")
-    corners = np.bincount(F.ravel(), minlength=n_in)       # of the current F (None once it changes)
-    used = corners > 0
-    counts = {"n_unreferenced_vertices": int(n_in - np.count_nonzero(used))}
-    faces = np.arange(F.shape[0], dtype=np.int64)          # input face of each current face
-    bad = _degenerate(F)
-    n_degenerate = int(np.count_nonzero(bad))
-    if n_degenerate:
-        F, faces, corners = F[~bad], faces[~bad], None
-    box = bulk_box(V if used.all() else V[used])
+        protected = check_vertex_mask(protected, n, where=_WHERE, name="protected")
+    return face_budget, protected
+
+
+@dataclass
+class _Work:
+    """The mesh between :func:`clean_mesh`'s stages, and what they found.
+
+    ``faces`` maps each current face to its input face; ``corners`` counts
+    the corners of the input faces at each vertex while ``F`` is the input's
+    (None once a stage changes it); ``area`` is the area of each current face
+    as it came (set by :func:`_debris_stage`); ``counts`` are the report's."""
+
+    V: np.ndarray
+    F: np.ndarray
+    faces: np.ndarray
+    corners: object
+    counts: dict
+    twin: np.ndarray = None
+    area: np.ndarray = None
+
+    @classmethod
+    def of(cls, V, F):
+        """The input as the stages start from it: faces with a repeated
+        vertex index dropped (counted)."""
+        corners = np.bincount(F.ravel(), minlength=V.shape[0])
+        counts = {"n_unreferenced_vertices": int(V.shape[0] - np.count_nonzero(corners))}
+        faces = np.arange(F.shape[0], dtype=np.int64)
+        bad = _degenerate(F)
+        counts["n_degenerate_faces"] = int(np.count_nonzero(bad))
+        w = cls(V, F, faces, corners, counts)
+        if counts["n_degenerate_faces"]:
+            w.keep(~bad, twin=False)
+        return w
+
+    def keep(self, kept, twin=True):
+        """Keep the faces ``kept`` (a mask); their twin table made again
+        (``twin`` True), kept as it is (False: not made yet) or given."""
+        self.F, self.faces, self.corners = self.F[kept], self.faces[kept], None
+        if twin is True:
+            self.twin = twin_table(self.F, self.V.shape[0])
+        elif twin is not False:
+            self.twin = twin
+
+
+def _weld_stage(w, box, weld_distance, protected):
+    """Weld ``w`` (:func:`_welded`; with pieces stacked on others dropped
+    first when the weld leaves non-manifold edges, :func:`_stacked`, and the
+    weld made again). Returns the :class:`_Welded` and the area of every
+    input face as it came."""
+    n = w.V.shape[0]
     # the twin table and the faces' shape are independent: side by side
-    twin, shape = run_each(lambda job: job(), [lambda: twin_table(F, n_in), lambda: _shape(V, F, box)])
-    area = np.zeros(faces[-1] + 1 if faces.size else 0)
-    area[faces] = shape.area                               # per input face, as it came
-    weld = _welded(shape, F, twin, faces, weld_distance)
-    stacked, found = _stacked(shape, F, weld, protected)
-    counts.update(found)
+    twin, shape = run_each(lambda job: job(), [lambda: twin_table(w.F, n),
+                                                lambda: _shape(w.V, w.F, box)])
+    area = np.zeros(w.faces[-1] + 1 if w.faces.size else 0)
+    area[w.faces] = shape.area                             # per input face, as it came
+    weld = _welded(shape, w.F, twin, w.faces, weld_distance)
+    stacked, found = _stacked(shape, w.F, weld, protected)
+    w.counts.update(found)
     if stacked is not None:
-        kept = ~stacked
-        F, faces, corners, twin = F[kept], faces[kept], None, twin_table(F[kept], n_in)
-        shape = shape._replace(area=shape.area[kept], height=shape.height[kept])
-        weld = _welded(shape, F, twin, faces, weld_distance)
-    del shape
-    rep = weld.rep
-    counts["n_welded_vertices"] = int(np.count_nonzero(rep != np.arange(n_in)))
-    counts["weld_distance"] = weld.distance
-    counts["weld_widened"] = weld_distance is None and weld.distance > WELD_DISTANCE
-    if weld.F is not F:
-        F, faces, twin, corners = weld.F, weld.faces, weld.twin, None
-    counts["n_degenerate_faces"] = n_degenerate + weld.n_degenerate
-    keep, found = _unique_faces(F, twin, n_in)
-    counts.update(found)
+        w.keep(~stacked, twin=False)
+        twin = twin_table(w.F, n)
+        shape = shape._replace(area=shape.area[~stacked], height=shape.height[~stacked])
+        weld = _welded(shape, w.F, twin, w.faces, weld_distance)
+    w.counts["n_welded_vertices"] = int(np.count_nonzero(weld.rep != np.arange(n)))
+    w.counts["weld_distance"] = weld.distance
+    w.counts["weld_widened"] = weld_distance is None and weld.distance > WELD_DISTANCE
+    w.counts["n_degenerate_faces"] += weld.n_degenerate
+    if weld.F is not w.F:
+        w.F, w.faces, w.corners = weld.F, weld.faces, None
+    w.twin = weld.twin
+    return weld, area
+
+
+def _drop_repeated_faces(w):
+    """Of faces on the same three vertices keep one, or none (a
+    double-sided sheet): :func:`_unique_faces`."""
+    keep, found = _unique_faces(w.F, w.twin, w.V.shape[0])
+    w.counts.update(found)
     if not keep.all():
-        F, faces, corners = F[keep], faces[keep], None
-        twin = twin_table(F, n_in)
-    V, F, twin, to_input, found = _make_manifold(V, F, twin, corners)
-    counts.update(found)
-    inner = interior_edges(twin)
-    unoriented = F
-    F, twin, found = _orient(V, F, twin, inner)
-    # faces the orientation turned (a pillow's layer to drop is the turned one)
-    turned = (F != unoriented).any(axis=1) if found["n_flipped_faces"] else None
-    del unoriented
-    counts.update(found)
+        w.keep(keep)
+
+
+def _manifold_stage(w):
+    """Pair the faces around non-manifold edges and split multi-fan vertices
+    (:func:`_make_manifold`), orient each component (:func:`_orient`) and
+    split the vertices at the seams orienting leaves. Returns the input
+    vertex of each vertex, the interior-edge mask and, when the orientation
+    turned faces, which (a pillow's layer to drop is the turned one)."""
+    w.V, w.F, w.twin, to_input, found = _make_manifold(w.V, w.F, w.twin, w.corners)
+    w.counts.update(found)
+    inner = interior_edges(w.twin)
+    unoriented = w.F
+    w.F, w.twin, found = _orient(w.V, w.F, w.twin, inner)
+    turned = (w.F != unoriented).any(axis=1) if found["n_flipped_faces"] else None
+    w.counts.update(found)
     if found["n_seam_edges"]:
         # the seam's edges are open in twin: their ends get one vertex per side
-        V, F, to_input, _, _ = _split_fans(V, F, twin, to_input)
-        twin = twin_table(F, V.shape[0])
+        w.V, w.F, to_input, _, _ = _split_fans(w.V, w.F, w.twin, to_input)
+        w.twin = twin_table(w.F, w.V.shape[0])
     if found["n_flipped_faces"] or found["n_seam_edges"]:
-        inner = interior_edges(twin)
-    if protected is not None:
-        protected = protected[to_input]
-    # areas of the faces as they came (welds move corners by at most weld_distance)
-    area = area[faces]
-    keep, found, labels = _debris(area, F, inner, float(min_component_area), face_budget,
-                                  protected)
-    del inner
-    counts.update(found)
+        inner = interior_edges(w.twin)
+    return to_input, inner, turned
+
+
+def _debris_stage(w, area, inner, min_component_area, face_budget, protected, turned):
+    """Drop the debris components (:func:`_debris`; ``area``: the current
+    faces' areas as they came). Returns the kept faces' areas, component
+    labels and ``turned`` mask."""
+    keep, found, labels = _debris(area, w.F, inner, min_component_area, face_budget, protected)
+    w.counts.update(found)
     if not keep.all():
-        F, faces, twin, area = F[keep], faces[keep], _keep_twins(twin, keep), area[keep]
-        labels = labels[keep]
+        w.keep(keep, twin=_keep_twins(w.twin, keep))
+        area, labels = area[keep], labels[keep]
         turned = None if turned is None else turned[keep]
-    copies, found = _copies(V, F, twin, labels, area, box, weld.distance, protected,
-                            pillows=counts["n_welded_vertices"] > 0, turned=turned)
-    del labels
-    if copies is not None:
-        # (a pillow's layers share its rim edges: the twins are found again, not renumbered)
-        kept = ~copies
-        twin_kept = twin_table(F[kept], V.shape[0])
-        if not non_manifold_vertices(F[kept], V.shape[0], twin_kept).any():    # else: kept
-            F, faces, area, twin = F[kept], faces[kept], area[kept], twin_kept
-            for name, value in found.items():
-                counts[name] += value
-    V, F, input_to_clean, clean_to_input = _compact(V, F, to_input, rep)
-    return CleanResult(V, F, input_to_clean, clean_to_input, faces, twin, area,
-                       CleanReport(**counts))
+    w.area = area
+    return area, labels, turned
+
+
+def _copies_stage(w, labels, area, box, distance, protected, turned):
+    """Drop the coincident copies (:func:`_copies`), unless that would leave
+    a non-manifold vertex."""
+    copies, found = _copies(w.V, w.F, w.twin, labels, area, box, distance, protected,
+                            pillows=w.counts["n_welded_vertices"] > 0, turned=turned)
+    if copies is None:
+        return
+    # (a pillow's layers share its rim edges: the twins are found again, not renumbered)
+    kept = ~copies
+    twin_kept = twin_table(w.F[kept], w.V.shape[0])
+    if not non_manifold_vertices(w.F[kept], w.V.shape[0], twin_kept).any():    # else: kept
+        w.keep(kept, twin=twin_kept)
+        w.area = area[kept]
+        for name, value in found.items():
+            w.counts[name] += value
 
 
 #: a face is collapsed (its corners weld) only when no taller than the weld distance
