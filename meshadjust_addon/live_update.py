@@ -79,6 +79,39 @@ def update_edited(cage):
         The cage is not bound, or its topology changed since the bind.
     """
     t0 = time.perf_counter()
+    edited, binding, V = _live_inputs(cage)
+    t1 = time.perf_counter()
+    state, moved = _kept_state(edited, binding, V)
+    t2 = time.perf_counter()
+    if moved is None:
+        D = core.deform(binding, V)
+        binding.influenced([])      # builds the incremental indices now, not on the first edit
+        t3 = time.perf_counter()
+        state = _State(binding, V, D, D.astype(np.float32))
+        rows = binding.n_dense
+    else:
+        r = _deform_moved(binding, V, moved, state.D)
+        t3 = time.perf_counter()
+        state.buf[r] = np.take(state.D, r, axis=0)
+        rows = r.shape[0]
+        state = state._replace(V_cage=V)
+    t4 = time.perf_counter()
+    notes = []
+    if moved is None or moved.size:
+        _write(edited, state.buf, first=moved is None, notes=notes)
+    _states[edited.session_uid] = state
+    t5 = time.perf_counter()
+    timing = LiveTiming(moved=V.shape[0] if moved is None else int(moved.size), rows=int(rows),
+                        full=moved is None, read_cage=t1 - t0, compare=t2 - t1,
+                        deform=t3 - t2, convert=t4 - t3, write=t5 - t4, total=t5 - t0,
+                        warning=turned_cage_note(cage, binding, V), note="; ".join(notes))
+    cage.meshadjust.last_report = timing.summary()
+    return timing
+
+
+def _live_inputs(cage):
+    """The cage's edited original, its binding and the cage's positions in
+    the source's space, checked (raises :class:`core.MeshAdjustError`)."""
     cs = cage.meshadjust
     source, edited = cs.source, cs.edited
     if source is None or edited is None:
@@ -90,63 +123,46 @@ def update_edited(cage):
     if why:
         raise core.MeshAdjustError(why)
     check_source_in_place(cage, source)
-    binding = store.load_binding(edited, cage)
-    V = cage_in_source_space(cage, source)
-    t1 = time.perf_counter()
-    key = edited.session_uid
-    state = _states.get(key)
-    mesh = edited.data
-    if state is not None and (state.binding is not binding or state.V_cage.shape != V.shape
-                              or state.D.shape[0] != len(mesh.vertices)):
-        state = None
-    moved = None
-    if state is not None:
-        moved = np.flatnonzero((V != state.V_cage).any(axis=1))
-        if moved.size > FULL_FRACTION * V.shape[0]:
-            moved = None
-    t2 = time.perf_counter()
-    if moved is None:
-        D = core.deform(binding, V)
-        binding.influenced([])      # builds the incremental indices now, not on the first edit
-        t3 = time.perf_counter()
-        buf = D.astype(np.float32)
-        state = _State(binding, V, D, buf)
-        rows = binding.n_dense
-    else:
-        D, buf = state.D, state.buf
-        r = binding.influenced(moved, ordered=False)
-        before = binding.repaired(D)
-        core.deform(binding, V, moved=moved, out=D)
-        after = binding.repaired(D)
-        if before.size or after.size:       # rows the fold repair wrote, or unwrote
-            r = np.union1d(r, np.union1d(before, after))
-        t3 = time.perf_counter()
-        buf[r] = np.take(D, r, axis=0)
-        rows = r.shape[0]
-        state = state._replace(V_cage=V)
-    t4 = time.perf_counter()
-    notes = []
-    if moved is None or moved.size:
-        if moved is None and edited.meshadjust.written != results.LIVE:
-            # (the first write of this live session: a version changed since the
-            # last write is kept aside; later ones write over live mode's own)
-            aside = results.kept_aside(edited)
-            if aside is not None:
-                notes.append(f"'{edited.name}' had been changed since MeshAdjust wrote it: "
-                             f"that version is kept as '{aside.name}'")
-        mesh.attributes["position"].data.foreach_set("vector", buf.reshape(-1))
-        mesh.update_tag()
-        if edited.meshadjust.written != results.LIVE:
-            edited.meshadjust.written = results.LIVE
-        results.live_written[edited.session_uid] = buf     # (updated in place from now on)
-    _states[key] = state
-    t5 = time.perf_counter()
-    timing = LiveTiming(moved=V.shape[0] if moved is None else int(moved.size), rows=int(rows),
-                        full=moved is None, read_cage=t1 - t0, compare=t2 - t1,
-                        deform=t3 - t2, convert=t4 - t3, write=t5 - t4, total=t5 - t0,
-                        warning=turned_cage_note(cage, binding, V), note="; ".join(notes))
-    cs.last_report = timing.summary()
-    return timing
+    return edited, store.load_binding(edited, cage), cage_in_source_space(cage, source)
+
+
+def _kept_state(edited, binding, V):
+    """The state of the last update when it still applies, and the cage
+    vertices moved since (None: a full update, also when more than
+    ``FULL_FRACTION`` of them moved)."""
+    state = _states.get(edited.session_uid)
+    if state is None or state.binding is not binding or state.V_cage.shape != V.shape \
+            or state.D.shape[0] != len(edited.data.vertices):
+        return None, None
+    moved = np.flatnonzero((V != state.V_cage).any(axis=1))
+    return state, (None if moved.size > FULL_FRACTION * V.shape[0] else moved)
+
+
+def _deform_moved(binding, V, moved, D):
+    """The incremental deform of ``D`` (in place) for the cage vertices
+    ``moved``; returns the dense rows it changed (with those the fold repair
+    wrote, or unwrote)."""
+    r = binding.influenced(moved, ordered=False)
+    before = binding.repaired(D)
+    core.deform(binding, V, moved=moved, out=D)
+    after = binding.repaired(D)
+    if before.size or after.size:
+        r = np.union1d(r, np.union1d(before, after))
+    return r
+
+
+def _write(edited, buf, *, first, notes):
+    """Hand the positions ``buf`` to Blender (one ``foreach_set``). On the
+    ``first`` write of a live session, a version of the edited original
+    changed since MeshAdjust last wrote it is kept aside first (said in
+    ``notes``); live mode's own writes are then not changes."""
+    if first and edited.meshadjust.written != results.LIVE:
+        results.aside_note(results.kept_aside(edited), edited, notes)
+    edited.data.attributes["position"].data.foreach_set("vector", buf.reshape(-1))
+    edited.data.update_tag()
+    if edited.meshadjust.written != results.LIVE:
+        edited.meshadjust.written = results.LIVE
+    results.live_written[edited.session_uid] = buf     # (updated in place from now on)
 
 
 def forget(edited=None):
