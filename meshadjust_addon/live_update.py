@@ -16,8 +16,10 @@ float32 buffer handed to Blender. One update::
 Blender has no partial write of an attribute, so the last step writes the
 whole buffer (a few milliseconds for a million vertices); everything before
 it scales with the edit. Writing the whole buffer also means that whatever
-else changed the edited mesh (an undo, a full refine) is overwritten with
-the deform of the current cage. The state is rebuilt (one full deform) when
+else changed the edited mesh during a live session (an undo, a full refine)
+is overwritten with the deform of the current cage; a version changed by
+hand since MeshAdjust last wrote it is kept aside at the session's first
+write (:func:`~.results.kept_aside`). The state is rebuilt (one full deform) when
 the binding object changes (re-bind, other levels or scheme), when the
 edited mesh's vertex count changes, or when more than a quarter of the
 cage moved (e.g. the cage's transform changed).
