@@ -233,6 +233,9 @@ def prepare_cage_job(cage, *, levels=None, scheme=None, from_rest=False, keep_ed
         levels = settings.checked("levels", levels, f"'{cage.name}'")
     if scheme is not None and scheme != 'BOUND':
         scheme = settings.checked("scheme", scheme, f"'{cage.name}'")
+    why = results.edit_mode_problem(cs.edited, cs.refined)      # (a bind writes both)
+    if why:
+        raise core.MeshAdjustError(why)
     V_now = cage_in_source_space(cage, source)
     V_rest = _rest_of(cage, V_now.shape[0]) if (keep_edit or from_rest) else None
     F_cage, _, creases = store.cage_topology(cage)
@@ -471,6 +474,8 @@ def _refine_compute(cage, output, levels, scheme):
         warnings.append(turned)
     why = results.shape_key_unavailable(source, binding.n_dense) if output == 'SHAPE_KEY' else \
         results.edited_problem(edited) if output in ('EDITED', 'BOTH') else None
+    why = why or results.edit_mode_problem(edited if output in ('EDITED', 'BOTH') else None,
+                                           cs.refined if output in ('REFINED', 'BOTH') else None)
     if why:
         raise core.MeshAdjustError(f"Refine: {why}")
     V_edited = None

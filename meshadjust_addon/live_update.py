@@ -121,7 +121,7 @@ def _live_inputs(cage):
     if not edited.users_collection:
         raise core.MeshAdjustError(f"'{edited.name}' was deleted: Refine (Edited original) "
                                    f"links it back")
-    why = results.edited_problem(edited)
+    why = results.edited_problem(edited) or results.edit_mode_problem(edited)
     if why:
         raise core.MeshAdjustError(why)
     check_source_in_place(cage, source)

@@ -206,6 +206,18 @@ def aside_note(copy, obj, notes):
                      f"kept as '{copy.name}'")
 
 
+def edit_mode_problem(*objects):
+    """Why MeshAdjust cannot write the results ``objects`` (None ones
+    skipped), or None: one is in Edit Mode (its mesh is the BMesh's until
+    the mode is left, which would put the artist's edit back over the
+    write)."""
+    for obj in objects:
+        if obj is not None and obj.mode == 'EDIT':
+            return (f"'{obj.name}' is in Edit Mode, where MeshAdjust cannot write it: leave Edit "
+                    f"Mode on '{obj.name}' first")
+    return None
+
+
 def edited_problem(edited):
     """Why the edited original ``edited`` cannot take a deformed shape, or
     None: shape keys of its own (its mesh is written, and Blender shows the

@@ -662,3 +662,42 @@ def test_a_first_bind_failing_late_leaves_the_cage_without_a_rest_shape(scene, m
     with pytest.raises(RuntimeError, match="boom"):
         bpy.ops.meshadjust.bind()
     assert_all_unchanged(before)
+
+
+def _edit_mode_on(obj):
+    for o in bpy.context.view_layer.objects:
+        o.select_set(False)
+    obj.select_set(True)
+    bpy.context.view_layer.objects.active = obj
+    bpy.ops.object.mode_set(mode='EDIT')
+
+
+def test_results_in_edit_mode_are_refused_by_name_and_left_as_they_are(bound):
+    # (writing them raised a KeyError from Blender: the mesh of an object in Edit
+    # Mode is its BMesh's until the mode is left)
+    dense, cage = bound
+    lift_top(cage)
+    assert bpy.ops.meshadjust.refine(output='BOTH') == {'FINISHED'}
+    edited, refined = cage.meshadjust.edited, cage.meshadjust.refined
+    lift_top(cage, 0.1)
+    _edit_mode_on(edited)
+    before = full_snapshot()
+    bpy.context.view_layer.objects.active = cage
+    for op in (lambda: bpy.ops.meshadjust.refine(output='EDITED'),
+               lambda: bpy.ops.meshadjust.refine(output='BOTH'),
+               lambda: bpy.ops.meshadjust.bind(),
+               lambda: bpy.ops.meshadjust.fit_cage()):
+        with pytest.raises(RuntimeError, match="'dense_edited' is in Edit Mode.*leave Edit Mode"):
+            op()
+    with pytest.raises(sys.modules[MODULE + ".core"].MeshAdjustError, match="in Edit Mode"):
+        mod("live_update").update_edited(cage)
+    assert_all_unchanged(before)
+    assert bpy.ops.meshadjust.refine(output='REFINED') == {'FINISHED'}     # the other result
+    assert edited.mode == 'EDIT'
+    bpy.context.view_layer.objects.active = edited
+    bpy.ops.object.mode_set(mode='OBJECT')
+    _edit_mode_on(refined)
+    bpy.context.view_layer.objects.active = cage
+    with pytest.raises(RuntimeError, match="'dense_refined' is in Edit Mode"):
+        bpy.ops.meshadjust.refine(output='BOTH')
+    assert bpy.ops.meshadjust.refine(output='EDITED') == {'FINISHED'}
