@@ -21,11 +21,14 @@ the file's vertices. Writing is exact: floats are written with ``repr``, the
 shortest text that reads back to the same float64, so ``write`` then ``read``
 returns bit-identical arrays.
 
-Lines are classified in one pass; the numbers are converted in bulk, and only
-when that fails is the offending line searched for.
+A file is read in bulk: its lines classified and its numbers converted at
+once (a 1.1M-face OBJ in about half a second); only a file with something
+unusual or wrong is read again line by line, which names the line.
 """
 
 import os
+import re
+import warnings
 from typing import NamedTuple
 
 import numpy as np
@@ -118,7 +121,179 @@ def _check_finite(fn, path, V, lines, F):
 
 
 def _read(path, fn, obj):
-    """Parse an OBJ (``obj=True``) or SMF file into a :class:`MeshFile`."""
+    """Parse an OBJ (``obj=True``) or SMF file into a :class:`MeshFile`:
+    :func:`_read_bulk`, or line by line (:func:`_read_lines`) when that finds
+    anything it does not read the same way (the line reader then names the
+    line)."""
+    with open(path, "rb") as fh:
+        data = fh.read()
+    bulk = _read_bulk(data, obj)
+    return bulk if bulk is not None else _read_lines(path, fn, obj)
+
+
+#: bytes that separate the words of a line (str.split's ASCII whitespace)
+_SPACES = np.array([9, 10, 11, 12, 13, 28, 29, 30, 31, 32], dtype=np.uint8)
+#: per byte value, whether it separates words (a table: twice as fast as np.isin)
+_IS_SPACE = np.zeros(256, dtype=bool)
+_IS_SPACE[_SPACES] = True
+#: the longest keyword :func:`_read_bulk` counts (longer: read line by line)
+_KEY_BYTES = 16
+
+
+class _Lines(NamedTuple):
+    """The lines of a file's bytes: where each starts and ends (its newline
+    excluded) and whether each byte separates words."""
+
+    b: np.ndarray        #: (size,) uint8, the bytes
+    space: np.ndarray    #: (size,) bool
+    starts: np.ndarray   #: (k,) int64
+    ends: np.ndarray     #: (k,) int64
+
+    @classmethod
+    def of(cls, b):
+        nl = np.flatnonzero(b == 10)
+        starts = np.concatenate([[0], nl + 1])
+        ends = np.concatenate([nl, [b.size]])
+        if starts[-1] == b.size:                  # (after the last newline: no line)
+            starts, ends = starts[:-1], ends[:-1]
+        return cls(b, _IS_SPACE[b], starts, ends)
+
+    def words(self):
+        """(k,) the number of words on each line (each word's first byte
+        found, then its line: np.add.reduceat over the bytes is 5x slower)."""
+        first = ~self.space
+        first[1:] &= self.space[:-1]
+        line = np.searchsorted(self.ends, np.flatnonzero(first), side="right")
+        return np.bincount(line, minlength=self.starts.size)[:self.starts.size]
+
+    def second(self):
+        """(k,) the second byte of each line (a newline for a line of one byte)."""
+        at = np.minimum(self.starts + 1, self.b.size - 1)
+        return np.where(self.starts + 1 < self.ends, self.b[at], 10)
+
+
+def _body(lines, which):
+    """The bytes of the lines ``which`` (a mask), each without its first
+    byte (its keyword) and ending with a newline, and each line's word count."""
+    b = lines.b
+    take = np.repeat(which, lines.ends - lines.starts + 1)[:b.size]
+    take[lines.starts[which]] = False
+    body = b[take].tobytes()
+    if not body.endswith(b"\n"):
+        body += b"\n"
+    return body
+
+
+def _numbers(body, dtype):
+    """The numbers of ``body`` (whitespace separated) and the count on each
+    of its lines; None when a word is not a number of ``dtype``."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")              # (NumPy 1.x: a warning, 2.x: an error)
+        try:
+            values = np.fromstring(body, dtype=dtype, sep=" ")
+        except (ValueError, DeprecationWarning):
+            return None
+    lines = _Lines.of(np.frombuffer(body, dtype=np.uint8))
+    words = lines.words()
+    return (values, words) if values.size == words.sum() else None
+
+
+def _keywords(lines, other):
+    """``{keyword: lines}`` of the lines ``other`` (a mask); None when a
+    keyword is longer than ``_KEY_BYTES`` or not ASCII."""
+    s = lines.starts[other]
+    if s.size == 0:
+        return {}
+    at = s[:, None] + np.arange(_KEY_BYTES)
+    inside = at < lines.ends[other][:, None]
+    window = np.where(inside, lines.b[np.minimum(at, lines.b.size - 1)], 32)
+    ends_key = _IS_SPACE[window]
+    if not ends_key.any(axis=1).all():
+        return None
+    length = np.argmax(ends_key, axis=1)
+    window[np.arange(_KEY_BYTES) >= length[:, None]] = 0
+    if (window >= 0x80).any():
+        return None        # (text mode splits at Unicode spaces too: a no-break space)
+    keys, counts = np.unique(np.ascontiguousarray(window).view(f"S{_KEY_BYTES}").ravel(),
+                             return_counts=True)
+    return {k.decode("utf-8", errors="replace"): int(c) for k, c in zip(keys, counts)}
+
+
+def _read_bulk(data, obj):
+    """The :class:`MeshFile` of a file's bytes ``data`` read in bulk (every
+    line classified and every number converted at once, no loop over lines:
+    a 1.1M-face OBJ in well under a second instead of 4 s), or None when the
+    file has anything the line reader would read otherwise or refuse: a
+    line starting with a space, a ``v`` or ``f`` line with too few words or
+    a word that is not a number, an ``_``, a 0 or out-of-range index, a
+    coordinate that is not finite, a long keyword, no ``v`` or ``f`` line."""
+    if data.startswith(b"\xef\xbb\xbf"):
+        data = data[3:]
+    if data.count(b"\r") != data.count(b"\r\n") or b"\x00" in data:
+        return None        # (a lone CR ends a line in text mode; a NUL is a keyword's byte)
+    lines = _Lines.of(np.frombuffer(data, dtype=np.uint8))
+    if lines.starts.size == 0:
+        return None
+    empty = lines.starts == lines.ends
+    first = np.where(empty, 10, lines.b[np.minimum(lines.starts, lines.b.size - 1)])
+    keyword_ends = _IS_SPACE[lines.second()]
+    is_v = (first == ord("v")) & keyword_ends
+    is_f = (first == ord("f")) & keyword_ends
+    lead = _IS_SPACE[first] & ~empty
+    if lead.any() and (lines.words()[lead] > 0).any():
+        return None                                 # (a line starting with a space)
+    other = ~(is_v | is_f | empty | lead | (first == ord("#")))
+    skipped = _keywords(lines, other)
+    if skipped is None or not is_v.any():
+        return None
+    vb = _body(lines, is_v)
+    if b"_" in vb:
+        return None
+    got = _numbers(vb, np.float64)
+    if got is None or (got[1] < 3).any():
+        return None
+    values, words = got
+    V = values[(np.cumsum(words) - words)[:, None] + np.arange(3)]
+    if not np.isfinite(V).all():
+        return None
+    if not is_f.any():
+        return MeshFile(V, np.zeros((0, 3), dtype=np.int64), 0, skipped)
+    F = _faces(lines, is_v, is_f, obj, V.shape[0])
+    return None if F is None else MeshFile(V, F, int(np.count_nonzero(is_f)), skipped)
+
+
+def _faces(lines, is_v, is_f, obj, n):
+    """(m,3) int64 0-based triangles of the ``f`` lines (polygons
+    fan-triangulated, in the file's order; OBJ: ``v/vt/vn`` read as ``v``,
+    negative indices relative to the vertices before the line), or None
+    (see :func:`_read_bulk`)."""
+    fb = _body(lines, is_f)
+    if b"_" in fb or (not obj and b"/" in fb):
+        return None
+    if obj and b"/" in fb:
+        fb = re.sub(rb"/[^\s]*", b"", fb)
+    got = _numbers(fb, np.int64)
+    if got is None or (got[1] < 3).any():
+        return None
+    values, words = got
+    tris = words - 2
+    line = np.repeat(np.arange(words.size), tris)
+    j = np.arange(line.size) - np.repeat(np.cumsum(tris) - tris, tris)
+    start = (np.cumsum(words) - words)[line]
+    R = values[np.stack([start, start + j + 1, start + j + 2], axis=1)]
+    if obj:
+        base = (np.cumsum(is_v) - is_v)[is_f][line]
+        F = np.where(R > 0, R - 1, base[:, None] + R)
+    else:
+        F = R - 1
+    if (R == 0).any() or (F < 0).any() or (F >= n).any():
+        return None
+    return F
+
+
+def _read_lines(path, fn, obj):
+    """Parse an OBJ (``obj=True``) or SMF file line by line (naming the
+    first line it cannot read)."""
     v_rows, v_lines = [], []
     tri_rows, tri_lines, tri_base = [], [], []   # faces as index strings
     poly = []                                    # (lineno, index strings, vertex count)
@@ -280,9 +455,22 @@ def _write(path, V, F, fn):
     V, F = check_mesh(V, F, where=fn, copy=False)
     with open(path, "w", encoding="utf-8") as fh:
         fh.write(f"# written by MeshAdjust: {V.shape[0]} vertices, {F.shape[0]} triangles\n")
-        # repr: the shortest text that reads back to the same float64
-        fh.writelines(f"v {x!r} {y!r} {z!r}\n" for x, y, z in V.tolist())
-        fh.writelines(f"f {a} {b} {c}\n" for a, b, c in (F.astype(np.int64) + 1).tolist())
+        # %r: repr, the shortest text that reads back to the same float64; a block of
+        # rows formatted at once (one % over a repeated line: no loop over vertices)
+        _write_rows(fh, "v %r %r %r\n", V)
+        _write_rows(fh, "f %d %d %d\n", F.astype(np.int64) + 1)
+
+
+#: rows formatted at once by :func:`_write_rows`
+_WRITE_BLOCK = 1 << 16
+
+
+def _write_rows(fh, line, X):
+    """Write the rows of ``X`` (k,3), each as ``line % row``, a block of
+    ``_WRITE_BLOCK`` rows at a time."""
+    for s in range(0, X.shape[0], _WRITE_BLOCK):
+        block = X[s:s + _WRITE_BLOCK]
+        fh.write((line * block.shape[0]) % tuple(block.ravel().tolist()))
 
 
 def write_smf(path, V, F):
