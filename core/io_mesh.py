@@ -136,6 +136,8 @@ _SPACES = np.array([9, 10, 11, 12, 13, 28, 29, 30, 31, 32], dtype=np.uint8)
 #: per byte value, whether it separates words (a table: twice as fast as np.isin)
 _IS_SPACE = np.zeros(256, dtype=bool)
 _IS_SPACE[_SPACES] = True
+#: a byte outside ASCII (the line reader's text may split words there)
+_NOT_ASCII = re.compile(rb"[\x80-\xff]")
 #: the longest keyword :func:`_read_bulk` counts (longer: read line by line)
 _KEY_BYTES = 16
 
@@ -184,9 +186,10 @@ def _body(lines, which):
     return body
 
 
-def _numbers(body, dtype):
+def _numbers(body, dtype, n_lines):
     """The numbers of ``body`` (whitespace separated) and the count on each
-    of its lines; None when a word is not a number of ``dtype``."""
+    of its ``n_lines`` lines; None when a word is not a number of ``dtype``
+    (or a line lost its newline: a last line of just its keyword)."""
     with warnings.catch_warnings():
         warnings.simplefilter("error")              # (NumPy 1.x: a warning, 2.x: an error)
         try:
@@ -195,7 +198,7 @@ def _numbers(body, dtype):
             return None
     lines = _Lines.of(np.frombuffer(body, dtype=np.uint8))
     words = lines.words()
-    return (values, words) if values.size == words.sum() else None
+    return (values, words) if values.size == words.sum() and words.size == n_lines else None
 
 
 def _keywords(lines, other):
@@ -247,9 +250,9 @@ def _read_bulk(data, obj):
     if skipped is None or not is_v.any():
         return None
     vb = _body(lines, is_v)
-    if b"_" in vb:
-        return None
-    got = _numbers(vb, np.float64)
+    if b"_" in vb or _NOT_ASCII.search(vb):
+        return None        # (text mode splits words at Unicode spaces too)
+    got = _numbers(vb, np.float64, int(np.count_nonzero(is_v)))
     if got is None or (got[1] < 3).any():
         return None
     values, words = got
@@ -268,11 +271,12 @@ def _faces(lines, is_v, is_f, obj, n):
     negative indices relative to the vertices before the line), or None
     (see :func:`_read_bulk`)."""
     fb = _body(lines, is_f)
-    if b"_" in fb or (not obj and b"/" in fb):
-        return None
+    if b"_" in fb or (not obj and b"/" in fb) or _NOT_ASCII.search(fb) \
+            or re.search(rb"(?:^|\s)/", fb):
+        return None        # (a word starting with "/": no vertex index, the line reader says)
     if obj and b"/" in fb:
         fb = re.sub(rb"/[^\s]*", b"", fb)
-    got = _numbers(fb, np.int64)
+    got = _numbers(fb, np.int64, int(np.count_nonzero(is_f)))
     if got is None or (got[1] < 3).any():
         return None
     values, words = got

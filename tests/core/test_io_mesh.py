@@ -148,7 +148,10 @@ _LINES = ["  v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n", _BASE + "f 1 2\n", _BASE + "
           _BASE + "f 0 1 2\n", _BASE + "f 1 2 3.5\n", _BASE + "f 1_0 2 3\n",
           "v 0 0 nan\n" + _BASE + "f 1 2 3\n", "v 0 0 0 # c\nv 1 0 0\nv 0 1 0\nf 1 2 3\n",
           "v 0 0\r0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n", "v 0 0 0\nv 1\u00a00 0\nv 0 1 0\nf 1 2 3\n",
-          _BASE + "f 99999999999999999999 1 2\n", "", "# only\n", _BASE + "f 1 2 3\n\x00\n"]
+          _BASE + "f 99999999999999999999 1 2\n", "", "# only\n", _BASE + "f 1 2 3\n\x00\n",
+          # found by a differential fuzz of the two readers (2026-12-05): a word "/1", a
+          # no-break space inside a v/vt/vn word, a last line of just "v"
+          _BASE + "f 1/1 /1 2 3\n", _BASE + "f 1/\u00a01 2//2 3//3\n", _BASE + "f 1 2 3\nv"]
 
 
 @pytest.mark.parametrize("text", _BULK + _LINES)
