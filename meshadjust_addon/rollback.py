@@ -179,8 +179,9 @@ class Rollback:
 
     def keep(self, mesh):
         """Remember ``mesh``'s positions, shape keys' names and MeshAdjust
-        attributes before a write."""
-        if mesh is not None and mesh.name_full not in self.positions:
+        attributes before a write (nothing for a mesh made inside the block:
+        an undo removes it)."""
+        if mesh is not None and mesh in self.meshes and mesh.name_full not in self.positions:
             self.positions[mesh.name_full] = (mesh, _positions_of(mesh))
             self.keys[mesh.name_full] = (mesh, _key_shapes(mesh))
             self.attributes[mesh.name_full] = (mesh, _attributes_of(mesh))

@@ -470,6 +470,14 @@ def _bug(*args, **kwargs):
     raise RuntimeError("boom: a bug late in the commit")
 
 
+def _raises_the_bug(op):
+    """Run the operator ``op`` and check it fails with the bug itself (not
+    with an error of the rollback, which would show in the traceback)."""
+    with pytest.raises(RuntimeError, match="boom") as caught:
+        op()
+    assert "ReferenceError" not in str(caught.value) and "KeyError" not in str(caught.value)
+
+
 def test_a_refine_failing_after_its_rebind_was_written_puts_everything_back(bound, monkeypatch):
     # The re-bind at one level writes the binding attributes, the states, a new
     # detail mesh (the old one retired), the edited original; the refined mesh
@@ -483,8 +491,7 @@ def test_a_refine_failing_after_its_rebind_was_written_puts_everything_back(boun
     detail = edited.meshadjust.detail_mesh
     before = full_snapshot()
     monkeypatch.setattr(mod("results"), "write_refined", _bug)
-    with pytest.raises(RuntimeError, match="boom"):
-        bpy.ops.meshadjust.refine(output='BOTH', levels=1)
+    _raises_the_bug(lambda: bpy.ops.meshadjust.refine(output='BOTH', levels=1))
     monkeypatch.undo()
     assert_all_unchanged(before)
     assert edited.meshadjust.detail_mesh == detail
@@ -659,8 +666,7 @@ def test_a_first_bind_failing_late_leaves_the_cage_without_a_rest_shape(scene, m
     before = full_snapshot()
     monkeypatch.setattr(mod("store"), "save_rest", _bug)
     bpy.context.view_layer.objects.active = cage
-    with pytest.raises(RuntimeError, match="boom"):
-        bpy.ops.meshadjust.bind()
+    _raises_the_bug(lambda: bpy.ops.meshadjust.bind())
     assert_all_unchanged(before)
 
 
@@ -701,3 +707,28 @@ def test_results_in_edit_mode_are_refused_by_name_and_left_as_they_are(bound):
     with pytest.raises(RuntimeError, match="'dense_refined' is in Edit Mode"):
         bpy.ops.meshadjust.refine(output='BOTH')
     assert bpy.ops.meshadjust.refine(output='EDITED') == {'FINISHED'}
+
+
+@pytest.mark.parametrize("where", ["touched", "save_rest"])
+def test_a_simplify_with_bind_failing_late_is_undone_by_the_rollback_itself(
+        scene, monkeypatch, where):
+    # (the rollback read the edited original's mesh, made inside the block, after
+    # removing it: a ReferenceError replaced the bug, and what followed was not undone)
+    dense = make_object("dense", *bumpy_sphere(3))
+    before = full_snapshot()
+    monkeypatch.setattr(mod("staleness" if where == "touched" else "store"), where, _bug)
+    _raises_the_bug(lambda: simplify(150))
+    monkeypatch.undo()
+    assert_all_unchanged(before)
+
+
+def test_a_rebind_in_refine_failing_after_the_new_refined_mesh_is_undone(bound, monkeypatch):
+    dense, cage = bound
+    lift_top(cage)
+    assert bpy.ops.meshadjust.refine(output='BOTH') == {'FINISHED'}
+    lift_top(cage, 0.1)
+    before = full_snapshot()
+    monkeypatch.setattr(mod("cage_steps"), "_density_note", _bug)     # after write_refined
+    _raises_the_bug(lambda: bpy.ops.meshadjust.refine(output='BOTH', levels=1))
+    monkeypatch.undo()
+    assert_all_unchanged(before)
