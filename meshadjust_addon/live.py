@@ -53,6 +53,11 @@ def refine_pending():
         except core.MeshAdjustError as exc:
             cage.meshadjust.live = False
             cage.meshadjust.last_report = f"live refine stopped: {exc}"
+        except Exception as exc:           # a bug: live stops (not a traceback per edit)
+            cage.meshadjust.live = False
+            cage.meshadjust.last_report = (f"live refine stopped by an internal error "
+                                           f"({type(exc).__name__}: {exc}); please report it")
+            raise
         _last_run[name] = time.monotonic()
     return None
 

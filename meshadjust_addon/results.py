@@ -212,9 +212,13 @@ def edit_mode_problem(*objects):
     the mode is left, which would put the artist's edit back over the
     write)."""
     for obj in objects:
-        if obj is not None and obj.mode == 'EDIT':
-            return (f"'{obj.name}' is in Edit Mode, where MeshAdjust cannot write it: leave Edit "
-                    f"Mode on '{obj.name}' first")
+        if obj is not None and obj.data.is_editmode:
+            who = obj.name if obj.mode == 'EDIT' else next(
+                (o.name for o in bpy.data.objects if o.data == obj.data and o.mode == 'EDIT'),
+                obj.name)                              # (a linked duplicate of it)
+            return (f"'{who}' is in Edit Mode, where MeshAdjust cannot write "
+                    + ("it" if who == obj.name else f"'{obj.name}', whose mesh it shares")
+                    + f": leave Edit Mode on '{who}' first")
     return None
 
 

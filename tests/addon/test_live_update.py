@@ -145,3 +145,19 @@ def test_live_update_follows_the_fold_repair(scene):
         # the refine's report says when the repair acted
         assert ("dense vertices put back where the edit turned faces over"
                 in cage.meshadjust.last_report) == said
+
+
+def test_live_stops_on_an_internal_error_and_says_so_once(bound_cage, monkeypatch):
+    live = _mod("live")
+    cage = bound_cage
+    cage.meshadjust.live = True
+    live._pending.add(cage.name)
+
+    def bug(_cage):
+        raise ValueError("a bug")
+    monkeypatch.setattr(_mod("live_update"), "update_edited", bug)
+    with pytest.raises(ValueError, match="a bug"):     # (the console shows the traceback)
+        live.refine_pending()
+    assert not cage.meshadjust.live
+    assert cage.meshadjust.last_report == ("live refine stopped by an internal error "
+                                           "(ValueError: a bug); please report it")

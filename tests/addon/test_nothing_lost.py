@@ -732,3 +732,21 @@ def test_a_rebind_in_refine_failing_after_the_new_refined_mesh_is_undone(bound, 
     _raises_the_bug(lambda: bpy.ops.meshadjust.refine(output='BOTH', levels=1))
     monkeypatch.undo()
     assert_all_unchanged(before)
+
+
+def test_a_linked_duplicate_of_a_result_in_edit_mode_is_named(bound):
+    dense, cage = bound
+    assert bpy.ops.meshadjust.refine(output='BOTH') == {'FINISHED'}
+    edited = cage.meshadjust.edited
+    _edit_mode_on(edited)
+    bpy.ops.object.mode_set(mode='OBJECT')
+    bpy.ops.object.duplicate(linked=True)
+    twin = bpy.context.view_layer.objects.active
+    assert twin is not edited and twin.data == edited.data
+    bpy.ops.object.mode_set(mode='EDIT')
+    bpy.context.view_layer.objects.active = cage
+    with pytest.raises(RuntimeError, match=f"'{twin.name}' is in Edit Mode.*'dense_edited', "
+                                           "whose mesh it shares"):
+        bpy.ops.meshadjust.refine(output='EDITED')
+    with pytest.raises(sys.modules[MODULE + ".core"].MeshAdjustError, match="whose mesh it shares"):
+        mod("live_update").update_edited(cage)
