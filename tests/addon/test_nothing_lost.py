@@ -714,7 +714,7 @@ def test_a_simplify_with_bind_failing_late_is_undone_by_the_rollback_itself(
         scene, monkeypatch, where):
     # (the rollback read the edited original's mesh, made inside the block, after
     # removing it: a ReferenceError replaced the bug, and what followed was not undone)
-    dense = make_object("dense", *bumpy_sphere(3))
+    make_object("dense", *bumpy_sphere(3))
     before = full_snapshot()
     monkeypatch.setattr(mod("staleness" if where == "touched" else "store"), where, _bug)
     _raises_the_bug(lambda: simplify(150))
