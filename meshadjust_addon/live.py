@@ -17,7 +17,7 @@ import time
 import bpy
 
 from .. import core
-from . import api, live_update
+from . import api, live_update, results
 from .properties import preferences
 
 _pending = set()
@@ -83,14 +83,26 @@ def on_depsgraph_update(scene, depsgraph):
             bpy.app.timers.register(refine_pending, first_interval=wait)
 
 
+@bpy.app.handlers.persistent
+def on_save_pre(*_args):
+    """Before a save: what live mode wrote is recorded as checksums, so a
+    result sculpted after a reload is still found changed (the buffers are
+    gone then)."""
+    results.settle_live_written()
+
+
 def register():
     if on_depsgraph_update not in bpy.app.handlers.depsgraph_update_post:
         bpy.app.handlers.depsgraph_update_post.append(on_depsgraph_update)
+    if on_save_pre not in bpy.app.handlers.save_pre:
+        bpy.app.handlers.save_pre.append(on_save_pre)
 
 
 def unregister():
     if on_depsgraph_update in bpy.app.handlers.depsgraph_update_post:
         bpy.app.handlers.depsgraph_update_post.remove(on_depsgraph_update)
+    if on_save_pre in bpy.app.handlers.save_pre:
+        bpy.app.handlers.save_pre.remove(on_save_pre)
     if bpy.app.timers.is_registered(refine_pending):
         bpy.app.timers.unregister(refine_pending)
     _pending.clear()

@@ -18,8 +18,8 @@ whole buffer (a few milliseconds for a million vertices); everything before
 it scales with the edit. Writing the whole buffer also means that whatever
 else changed the edited mesh during a live session (an undo, a full refine)
 is overwritten with the deform of the current cage; a version changed by
-hand since MeshAdjust last wrote it is kept aside at the session's first
-write (:func:`~.results.kept_aside`). The state is rebuilt (one full deform) when
+hand since MeshAdjust last wrote it (also between two live writes) is kept
+aside first (:func:`~.results.kept_aside`). The state is rebuilt (one full deform) when
 the binding object changes (re-bind, other levels or scheme), when the
 edited mesh's vertex count changes, or when more than a quarter of the
 cage moved (e.g. the cage's transform changed).
@@ -84,6 +84,11 @@ def update_edited(cage):
     edited, binding, V = _live_inputs(cage)
     t1 = time.perf_counter()
     state, moved = _kept_state(edited, binding, V)
+    notes = []
+    if moved is None or moved.size:
+        # (before the buffer changes: a version sculpted since the last write, also
+        # between two live writes, is kept aside; 3-5 ms a million vertices)
+        results.aside_note(results.kept_aside(edited), edited, notes)
     t2 = time.perf_counter()
     if moved is None:
         D = core.deform(binding, V)
@@ -98,9 +103,8 @@ def update_edited(cage):
         rows = r.shape[0]
         state = state._replace(V_cage=V)
     t4 = time.perf_counter()
-    notes = []
     if moved is None or moved.size:
-        _write(edited, state.buf, first=moved is None, notes=notes)
+        _write(edited, state.buf)
     _states[edited.session_uid] = state
     t5 = time.perf_counter()
     timing = LiveTiming(moved=V.shape[0] if moved is None else int(moved.size), rows=int(rows),
@@ -153,18 +157,12 @@ def _deform_moved(binding, V, moved, D):
     return r
 
 
-def _write(edited, buf, *, first, notes):
-    """Hand the positions ``buf`` to Blender (one ``foreach_set``). On the
-    ``first`` write of a live session, a version of the edited original
-    changed since MeshAdjust last wrote it is kept aside first (said in
-    ``notes``); live mode's own writes are then not changes."""
-    if first and edited.meshadjust.written != results.LIVE:
-        results.aside_note(results.kept_aside(edited), edited, notes)
+def _write(edited, buf):
+    """Hand the positions ``buf`` to Blender (one ``foreach_set``) and
+    remember them as live mode's (:func:`~.results.record_live`)."""
     edited.data.attributes["position"].data.foreach_set("vector", buf.reshape(-1))
     edited.data.update_tag()
-    if edited.meshadjust.written != results.LIVE:
-        edited.meshadjust.written = results.LIVE
-    results.live_written[edited.session_uid] = buf     # (updated in place from now on)
+    results.record_live(edited, buf)
 
 
 def forget(edited=None):

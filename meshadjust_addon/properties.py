@@ -82,6 +82,10 @@ class MeshAdjustObjectState(bpy.types.PropertyGroup):
                                         "positions MeshAdjust last wrote ('live': kept by live "
                                         "mode), so a change made since (sculpting, an applied "
                                         "transform) is kept aside, not overwritten")
+    written_matrix: FloatVectorProperty(name="Written transform", size=16, default=(0.0,) * 16,
+                                        description="On a result: its world matrix when "
+                                                    "MeshAdjust last wrote it (row by row; all "
+                                                    "0: not recorded)")
     key_written: StringProperty(name="Shape key written", default="",
                                 description="On a cage: a checksum of the shape key it last "
                                             "wrote on its source (a key sculpted since is kept "

@@ -21,11 +21,12 @@ import contextlib
 import zlib
 
 import bpy
+import mathutils
 import numpy as np
 
 from .. import core
 from . import mesh_io
-from .rollback import keep, retire
+from .rollback import keep, on_undo, retire
 from .staleness import key_name, own_key_names, recorded_keys
 
 
@@ -43,24 +44,46 @@ def _checksum(buf):
 
 def record_written(obj, buf):
     """Remember what MeshAdjust wrote on the result ``obj``: the flat float32
-    positions ``buf`` (as :func:`~.mesh_io.write_positions` returns them)."""
+    positions ``buf`` (as :func:`~.mesh_io.write_positions` returns them),
+    and where the object was (the place it goes back to when a changed
+    version is kept aside, :func:`kept_aside`)."""
     obj.meshadjust.written = _checksum(buf)
-    live_written.pop(obj.session_uid, None)
+    obj.meshadjust.written_matrix = [v for row in obj.matrix_world for v in row]
+    uid = obj.session_uid
+    live = live_written.pop(uid, None)
+    if live is not None:               # (put back if the step is undone: still live's)
+        on_undo(lambda: live_written.__setitem__(uid, live))
+
+
+def record_live(obj, buf):
+    """Remember that live mode wrote the flat float32 positions ``buf`` on
+    ``obj`` (kept by reference: live mode updates it in place)."""
+    if obj.meshadjust.written != LIVE:
+        obj.meshadjust.written = LIVE
+        obj.meshadjust.written_matrix = [v for row in obj.matrix_world for v in row]
+    live_written[obj.session_uid] = buf
+
+
+def settle_live_written():
+    """Replace the ``live`` marks by the checksums of what live mode wrote
+    (before a save: the buffers do not outlive the session)."""
+    for obj in bpy.data.objects:
+        if obj.type == 'MESH' and obj.meshadjust.written == LIVE:
+            buf = live_written.get(obj.session_uid)
+            if buf is not None:
+                obj.meshadjust.written = _checksum(buf)
 
 
 def changed_since_written(obj):
     """Whether the result ``obj``'s mesh is no longer what MeshAdjust last
     wrote there (False when that is not known: nothing recorded, or live
-    mode's buffer gone with the session)."""
+    mode's buffer gone with the session unsaved)."""
     written = obj.meshadjust.written
+    now = mesh_io.read_positions32(obj.data)
     if written == LIVE:
         buf = live_written.get(obj.session_uid)
-        if buf is None:
-            return False
-        written = _checksum(buf)
-    if not written:
-        return False
-    return _checksum(mesh_io.read_positions32(obj.data)) != written
+        return buf is not None and not np.array_equal(now, buf.reshape(-1))
+    return bool(written) and _checksum(now) != written
 
 
 def kept_aside(obj):
@@ -71,6 +94,11 @@ def kept_aside(obj):
     if not changed_since_written(obj):
         return None
     copy = obj.copy()
+    placed = obj.meshadjust.written_matrix
+    if any(placed):                # (the result goes back where MeshAdjust last put it: an
+        obj.matrix_world = mathutils.Matrix([placed[0:4], placed[4:8], placed[8:12],
+                                             placed[12:16]])   # applied transform stays
+        #                                                        with the copy)
     copy.data = obj.data.copy()
     copy.name = f"{obj.name}.hand"
     copy.data.name = copy.name

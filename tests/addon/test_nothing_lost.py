@@ -750,3 +750,72 @@ def test_a_linked_duplicate_of_a_result_in_edit_mode_is_named(bound):
         bpy.ops.meshadjust.refine(output='EDITED')
     with pytest.raises(sys.modules[MODULE + ".core"].MeshAdjustError, match="whose mesh it shares"):
         mod("live_update").update_edited(cage)
+
+
+def test_live_keeps_a_version_sculpted_between_two_live_writes(bound):
+    dense, cage = bound
+    lu = mod("live_update")
+    lu.forget()
+    edited = cage.meshadjust.edited
+    lift_top(cage, 0.1)
+    lu.update_edited(cage)
+    V_hand = _sculpt(edited)
+    lift_top(cage, 0.05)
+    t = lu.update_edited(cage)                         # incremental
+    assert not t.full and "kept as 'dense_edited.hand'" in t.note
+    _assert_artists_copy(bpy.data.objects.get("dense_edited.hand"), V_hand)
+    lift_top(cage, 0.05)
+    assert not lu.update_edited(cage).note             # live's own write: no change
+
+
+def test_a_sculpt_after_a_live_session_saved_and_reloaded_is_kept(bound, tmp_path):
+    dense, cage = bound
+    lu = mod("live_update")
+    lu.forget()
+    lift_top(cage, 0.1)
+    lu.update_edited(cage)
+    path = str(tmp_path / "live.blend")
+    bpy.ops.wm.save_as_mainfile(filepath=path)
+    bpy.ops.wm.open_mainfile(filepath=path)
+    cage = bpy.data.objects["dense_cage"]
+    V_hand = _sculpt(cage.meshadjust.edited)
+    bpy.context.view_layer.objects.active = cage
+    assert bpy.ops.meshadjust.refine(output='EDITED') == {'FINISHED'}
+    _assert_artists_copy(bpy.data.objects.get("dense_edited.hand"), V_hand)
+
+
+def test_a_failed_refine_after_live_keeps_live_mode_s_record(bound, monkeypatch):
+    dense, cage = bound
+    lu = mod("live_update")
+    lu.forget()
+    edited = cage.meshadjust.edited
+    lift_top(cage, 0.1)
+    lu.update_edited(cage)
+    V_hand = _sculpt(edited)
+    monkeypatch.setattr(mod("results"), "write_refined", _bug)
+    _raises_the_bug(lambda: bpy.ops.meshadjust.refine(output='BOTH'))
+    monkeypatch.undo()
+    assert bpy.ops.meshadjust.refine(output='EDITED') == {'FINISHED'}
+    _assert_artists_copy(bpy.data.objects.get("dense_edited.hand"), V_hand)
+
+
+def test_a_scaled_source_s_edited_original_with_its_transform_applied_goes_back_in_place(scene):
+    V, F = bumpy_sphere(3)
+    dense = make_object("dense", V * 100.0, F)
+    dense.scale = (0.01, 0.01, 0.01)
+    dense.location = (3.0, 0.0, 0.0)
+    bpy.context.view_layer.update()
+    assert simplify(300, fit=False) == {'FINISHED'}
+    cage = dense.meshadjust.cage
+    edited = cage.meshadjust.edited
+    placed = edited.matrix_world.copy()
+    _edit_mode_on(edited)
+    bpy.ops.object.mode_set(mode='OBJECT')
+    bpy.ops.object.transform_apply(location=True, rotation=True, scale=True)
+    V_applied = pos(edited)
+    bpy.context.view_layer.objects.active = cage
+    assert bpy.ops.meshadjust.refine(output='EDITED') == {'FINISHED'}
+    _assert_artists_copy(bpy.data.objects.get("dense_edited.hand"), V_applied)
+    assert edited.matrix_world == placed                 # back on the source, not 100x
+    world = np.array(edited.matrix_world) @ np.c_[pos(edited), np.ones(len(pos(edited)))].T
+    assert np.abs(world[:3].T - (V * 1.0 + [3.0, 0.0, 0.0])).max() < 1e-4
