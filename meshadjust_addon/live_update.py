@@ -47,7 +47,7 @@ class LiveTiming(NamedTuple):
     rows: int          #: dense vertices recomputed
     full: bool         #: True when the whole dense mesh was recomputed
     read_cage: float   #: binding lookup, cage positions read and put in source space
-    compare: float     #: finding the moved cage vertices
+    compare: float     #: the moved cage vertices found; a hand change of the result looked for
     deform: float      #: core.deform (incremental or full)
     convert: float     #: float64 -> float32 of the recomputed rows
     write: float       #: foreach_set of the position attribute and the update tag
