@@ -123,6 +123,9 @@ def key_kept_aside(source, cage, key):
     copy.data.foreach_set("co", co)
     copy.relative_key = key.relative_key
     copy.value = 0.0
+    # (a version of MeshAdjust's own key: not the artist's source changing, so the
+    # binding is not stale, and a re-bind mutes it as it mutes the key itself)
+    source.meshadjust.own_keys = "\n".join(sorted(recorded_keys(source) | {copy.name}))
     return copy
 
 
