@@ -15,7 +15,7 @@ import threading
 import bpy
 
 from .. import core
-from . import api, settings, staleness
+from . import api, settings, staleness, store
 
 USER_ERRORS = (core.MeshAdjustError,)
 
@@ -89,7 +89,8 @@ def binding_warnings(cage):
     source = cage.meshadjust.source if cage is not None else None
     if edited is None or source is None:
         return []
-    stale = staleness.source_change(source, edited.meshadjust.source_fingerprint)
+    stale = staleness.source_change(source, edited.meshadjust.source_fingerprint) \
+        or store.binding_misfit(edited)
     try:
         api.check_source_in_place(cage, source)
         moved = None

@@ -60,6 +60,10 @@ class MeshAdjustObjectState(bpy.types.PropertyGroup):
     source_matrix: FloatVectorProperty(name="Source transform", size=16, default=(0.0,) * 16,
                                        description="The source's world matrix at bind time "
                                                    "(row by row; all 0: not recorded)")
+    dense_vertices: IntProperty(name="Bound vertices", default=0, min=0,
+                                description="Vertices of the edited original bound (0: not "
+                                            "recorded); another count means its mesh was "
+                                            "changed and its binding data no longer fits it")
     dense_faces: IntProperty(name="Source faces", default=0, min=0,
                              description="Triangles of the source at bind time")
     levels: IntProperty(name="Levels", default=2, min=0, max=6,

@@ -158,11 +158,22 @@ def save_binding(edited, binding):
     if detail.name != name and name not in bpy.data.meshes:
         detail.name = name
     state.fingerprint = binding.fingerprint
+    state.dense_vertices = binding.n_dense
     state.cage_counts = (binding.n_cage, binding.F_cage.shape[0])
     state.levels = binding.levels
     state.scheme = binding.scheme
     _cache[edited.session_uid] = binding
     rollback.on_undo(lambda uid=edited.session_uid: _cache.pop(uid, None))
+
+
+def binding_misfit(edited):
+    """Why the binding stored on the edited original ``edited`` no longer
+    fits its mesh (another vertex count than was bound), or None."""
+    n, bound = len(edited.data.vertices), edited.meshadjust.dense_vertices
+    if not bound or n == bound:
+        return None
+    return (f"'{edited.name}' has {n:,} vertices, {bound:,} were bound: its mesh was changed (a "
+            f"modifier applied, vertices added or removed) and its binding data no longer fits it")
 
 
 def load_binding(edited, cage):
@@ -176,6 +187,10 @@ def load_binding(edited, cage):
         The binding data is missing.
     """
     state = edited.meshadjust
+    misfit = binding_misfit(edited)
+    if misfit:
+        raise core.MeshAdjustError(f"{misfit}; Bind again to re-make it (your version is kept "
+                                   f"aside)")
     F_cage, n_cage, creases = cage_topology(cage)
     cached = _cache.get(edited.session_uid)
     if (cached is not None and cached.n_cage == n_cage and cached.F_cage.shape == F_cage.shape

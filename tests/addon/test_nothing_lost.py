@@ -821,3 +821,26 @@ def test_a_scaled_source_s_edited_original_with_its_transform_applied_goes_back_
     assert edited.matrix_world == placed                 # back on the source, not 100x
     world = np.array(edited.matrix_world) @ np.c_[pos(edited), np.ones(len(pos(edited)))].T
     assert np.abs(world[:3].T - (V * 1.0 + [3.0, 0.0, 0.0])).max() < 1e-4
+
+
+def test_an_edited_original_re_topologized_by_hand_is_refused_then_remade_by_bind(bound):
+    # (a Subdivision modifier applied on it had interpolated its binding attributes,
+    # and Refine wrote a spiky shape 2 units off on a unit sphere)
+    dense, cage = bound
+    edited = cage.meshadjust.edited
+    _edit_mode_on(edited)
+    bpy.ops.object.mode_set(mode='OBJECT')
+    edited.modifiers.new("Sub", 'SUBSURF').levels = 1
+    bpy.ops.object.modifier_apply(modifier="Sub")
+    V_hand = pos(edited)
+    bpy.context.view_layer.objects.active = cage
+    with pytest.raises(RuntimeError, match="'dense_edited' has 15,362 vertices, 2,562 were bound"):
+        bpy.ops.meshadjust.refine(output='EDITED')
+    with pytest.raises(sys.modules[MODULE + ".core"].MeshAdjustError, match="were bound"):
+        mod("live_update").update_edited(cage)
+    assert any("2,562 were bound" in text and rebind
+               for text, rebind in mod("panel").refine_messages(bpy.context))
+    assert bpy.ops.meshadjust.bind() == {'FINISHED'}
+    _assert_artists_copy(bpy.data.objects.get("dense_edited.hand"), V_hand)
+    assert len(edited.data.vertices) == len(dense.data.vertices) == 2562
+    assert bpy.ops.meshadjust.refine(output='EDITED') == {'FINISHED'}
