@@ -289,6 +289,10 @@ def commit_bind(cage, job):
     source = cs.source
     with all_or_nothing() as rb:
         notes = []
+        owner = results.copied_from(cage)
+        if owner is not None:          # a copy of another cage: results of its own from now on
+            cs.edited, cs.refined, cs.key_name = None, None, ""
+            notes.append(f"'{cage.name}' was a copy of '{owner.name}': given results of its own")
         if cs.edited is not None:
             rb.keep(cs.edited.data)
             if cs.edited.users_collection:
@@ -542,6 +546,9 @@ def refine_object(cage, *, output='EDITED', levels=None, scheme=None):
         raise core.MeshAdjustError(f"'{cage.name}' is not a MeshAdjust cage (no source linked)")
     if edited is None:
         raise core.MeshAdjustError(f"'{cage.name}' is not bound yet: bind it first")
+    why = results.copy_problem(cage)
+    if why:
+        raise core.MeshAdjustError(why)
     rj = _refine_compute(cage, output, levels, None if scheme == 'BOUND' else scheme)
     _refine_commit(cage, output, rj)
     warnings = rj.warnings

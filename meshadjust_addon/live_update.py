@@ -125,7 +125,8 @@ def _live_inputs(cage):
     if not edited.users_collection:
         raise core.MeshAdjustError(f"'{edited.name}' was deleted: Refine (Edited original) "
                                    f"links it back")
-    why = results.edited_problem(edited) or results.edit_mode_problem(edited)
+    why = results.copy_problem(cage) or results.edited_problem(edited) \
+        or results.edit_mode_problem(edited)
     if why:
         raise core.MeshAdjustError(why)
     check_source_in_place(cage, source)

@@ -15,7 +15,7 @@ import threading
 import bpy
 
 from .. import core
-from . import api, settings, staleness, store
+from . import api, results, settings, staleness, store
 
 USER_ERRORS = (core.MeshAdjustError,)
 
@@ -76,6 +76,9 @@ def cage_unavailable(context, need_binding=False):
         edited = cage.meshadjust.edited
         if edited is None:
             return f"'{cage.name}' is not bound: use Bind"
+        copied = results.copy_problem(cage)
+        if copied:
+            return copied
         what = staleness.cage_change(cage, edited)
         if what:
             return f"'{cage.name}' changed topology since it was bound ({what}): re-bind it"

@@ -237,6 +237,24 @@ def aside_note(copy, obj, notes):
                      f"kept as '{copy.name}'")
 
 
+def copied_from(cage):
+    """The cage ``cage`` is a copy of (duplicated with its MeshAdjust state,
+    so it points to that cage's results), or None."""
+    edited = cage.meshadjust.edited
+    owner = edited.meshadjust.cage if edited is not None else None
+    return owner if owner is not None and owner != cage else None
+
+
+def copy_problem(cage):
+    """Why ``cage`` cannot write results (it is a copy of another cage and
+    shares its results: they would be overwritten), or None."""
+    owner = copied_from(cage)
+    if owner is None:
+        return None
+    return (f"'{cage.name}' is a copy of '{owner.name}' and shares its results: Bind "
+            f"'{cage.name}' to give it results of its own")
+
+
 def edit_mode_problem(*objects):
     """Why MeshAdjust cannot write the results ``objects`` (None ones
     skipped), or None: one is in Edit Mode (its mesh is the BMesh's until

@@ -844,3 +844,35 @@ def test_an_edited_original_re_topologized_by_hand_is_refused_then_remade_by_bin
     _assert_artists_copy(bpy.data.objects.get("dense_edited.hand"), V_hand)
     assert len(edited.data.vertices) == len(dense.data.vertices) == 2562
     assert bpy.ops.meshadjust.refine(output='EDITED') == {'FINISHED'}
+
+
+def test_a_duplicated_cage_is_refused_until_bound_then_gets_results_of_its_own(bound):
+    # (Shift+D copies the MeshAdjust state: the copy's Refine overwrote the original
+    # cage's edited original and shape key)
+    dense, cage = bound
+    lift_top(cage)
+    assert bpy.ops.meshadjust.refine(output='EDITED') == {'FINISHED'}
+    edited = cage.meshadjust.edited
+    V_edited = pos(edited)
+    _edit_mode_on(cage)
+    bpy.ops.object.mode_set(mode='OBJECT')
+    bpy.ops.object.duplicate()
+    copy = bpy.context.view_layer.objects.active
+    assert copy is not cage and copy.meshadjust.edited == edited
+    lift_top(copy, 0.2)
+    with pytest.raises(RuntimeError, match=f"'{copy.name}' is a copy of 'dense_cage' and shares "
+                                           f"its results: Bind '{copy.name}'"):
+        bpy.ops.meshadjust.refine(output='EDITED')
+    assert mod("panel").panel_state(bpy.context)["refine"][1].startswith(f"'{copy.name}' is a copy")
+    with pytest.raises(sys.modules[MODULE + ".core"].MeshAdjustError, match="is a copy of"):
+        mod("live_update").update_edited(copy)
+    assert bpy.ops.meshadjust.bind() == {'FINISHED'}
+    assert "given results of its own" in copy.meshadjust.last_report
+    mine = copy.meshadjust.edited
+    assert mine is not None and mine != edited and mine.meshadjust.cage == copy
+    assert bpy.ops.meshadjust.refine(output='SHAPE_KEY') == {'FINISHED'}
+    assert copy.meshadjust.key_name == copy.name
+    assert np.array_equal(pos(edited), V_edited) and cage.meshadjust.edited == edited
+    bpy.context.view_layer.objects.active = cage
+    assert bpy.ops.meshadjust.refine(output='EDITED') == {'FINISHED'}
+    assert not bpy.data.objects.get("dense_edited.hand")
