@@ -504,8 +504,7 @@ def _refine_commit(cage, output, rj):
             commit_bind(cage, rj.rebind)
         if output in ('EDITED', 'BOTH'):
             if not edited.users_collection:         # deleted by the artist: shown again
-                results.link_like(edited, source)
-                parts.append(f"'{edited.name}' had been deleted: linked back")
+                parts.append(results.link_back(edited, source))
             else:
                 results.aside_note(results.kept_aside(edited), edited, parts)
             rb.keep(edited.data)

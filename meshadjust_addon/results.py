@@ -164,6 +164,15 @@ def _new_source_copy(source, name):
     return mesh
 
 
+def link_back(obj, like):
+    """Link the result ``obj``, which the artist deleted (no collection
+    left), back beside ``like`` (undone with the step, :func:`~.rollback.on_undo`);
+    returns the sentence for the report."""
+    link_like(obj, like)
+    on_undo(lambda: [col.objects.unlink(obj) for col in list(obj.users_collection)])
+    return f"'{obj.name}' had been deleted: linked back"
+
+
 def edited_copy(source, cage, n_vertices, F=None):
     """The edited-original object of ``cage`` with ``n_vertices`` vertices
     (and the triangles ``F`` of the mesh bound, when given): the existing
@@ -172,17 +181,21 @@ def edited_copy(source, cage, n_vertices, F=None):
     ``(edited, note)``, the note saying what was re-made (empty otherwise)."""
     edited = cage.meshadjust.edited
     name = f"{source.name}_edited"
+    linked = ""
+    if edited is not None and edited.name in bpy.data.objects and not edited.users_collection:
+        linked = link_back(edited, source)      # (deleted by the artist: as Refine does)
     if edited is not None and edited.name in bpy.data.objects and edited.users_collection:
         old = edited.data
         if len(old.vertices) == n_vertices and (
                 F is None or np.array_equal(mesh_io.read_triangles(old)[0], F)):
-            return edited, ""
+            return edited, linked
         mesh = _new_source_copy(source, old.name + ".new")
         n_old, m_old = len(old.vertices), len(old.polygons)
         edited.data = mesh
         retire(old, mesh)
-        return edited, (f"'{edited.name}' re-made from '{source.name}' ({n_old:,} -> "
-                        f"{n_vertices:,} vertices, {m_old:,} -> {len(mesh.polygons):,} faces)")
+        return edited, "; ".join(filter(None, [linked, (
+            f"'{edited.name}' re-made from '{source.name}' ({n_old:,} -> {n_vertices:,} "
+            f"vertices, {m_old:,} -> {len(mesh.polygons):,} faces)")]))
     mesh = _new_source_copy(source, name)
     edited = bpy.data.objects.new(name, mesh)
     edited.matrix_world = source.matrix_world.copy()

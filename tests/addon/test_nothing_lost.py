@@ -876,3 +876,22 @@ def test_a_duplicated_cage_is_refused_until_bound_then_gets_results_of_its_own(b
     bpy.context.view_layer.objects.active = cage
     assert bpy.ops.meshadjust.refine(output='EDITED') == {'FINISHED'}
     assert not bpy.data.objects.get("dense_edited.hand")
+
+
+def test_a_deleted_edited_original_is_linked_back_by_bind_too_and_a_failure_undoes_it(
+        bound, monkeypatch):
+    dense, cage = bound
+    assert bpy.ops.meshadjust.refine(output='BOTH') == {'FINISHED'}
+    edited = cage.meshadjust.edited
+    for col in list(edited.users_collection):       # deleted by the artist (the object's
+        col.objects.unlink(edited)                  # data stays, as Blender keeps it)
+    lift_top(cage, 0.05)
+    bpy.context.view_layer.objects.active = cage
+    monkeypatch.setattr(mod("results"), "write_refined", _bug)
+    _raises_the_bug(lambda: bpy.ops.meshadjust.refine(output='BOTH'))
+    monkeypatch.undo()
+    assert not edited.users_collection               # the link back undone with the step
+    n = len(bpy.data.objects)
+    assert bpy.ops.meshadjust.bind() == {'FINISHED'}
+    assert edited.users_collection and cage.meshadjust.edited == edited
+    assert len(bpy.data.objects) == n and "linked back" in cage.meshadjust.last_report
