@@ -242,6 +242,10 @@ def prepare_cage_job(cage, *, levels=None, scheme=None, from_rest=False, keep_ed
     if V_rest is not None:
         _check_rest(cage, V_rest, V_now, F_cage)
     src, fp = read_source(source)
+    if results.shape_key_of(source, cage) is not None:      # (a bind rewrites the key too)
+        why = results.shape_key_unavailable(source, src.V.shape[0])
+        if why:
+            raise core.MeshAdjustError(f"the shape key of '{cage.name}': {why}")
     if levels in (None, 0):
         levels = cs.levels or auto_levels(F_cage.shape[0], src.F.shape[0])
     if scheme in (None, 'BOUND'):

@@ -332,7 +332,7 @@ def write_shape_key(source, cage, V_edited, V_bound, notes=None):
     """
     why = shape_key_unavailable(source, V_edited.shape[0])
     if why:
-        raise core.MeshAdjustError(f"Refine: {why}")
+        raise core.MeshAdjustError(f"the shape key of '{cage.name}': {why}")
     keep(source.data)
     if source.data.shape_keys is None:
         source.shape_key_add(name="Basis", from_mix=False)

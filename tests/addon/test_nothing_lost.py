@@ -895,3 +895,18 @@ def test_a_deleted_edited_original_is_linked_back_by_bind_too_and_a_failure_undo
     assert bpy.ops.meshadjust.bind() == {'FINISHED'}
     assert edited.users_collection and cage.meshadjust.edited == edited
     assert len(bpy.data.objects) == n and "linked back" in cage.meshadjust.last_report
+
+
+def test_bind_and_fit_refuse_a_shape_key_they_cannot_write_before_any_work(bound):
+    # (they failed at commit, after the compute, with "Refine: ...")
+    dense, cage = bound
+    lift_top(cage)
+    assert bpy.ops.meshadjust.refine(output='SHAPE_KEY') == {'FINISHED'}
+    _edit_mode_on(dense)
+    before = full_snapshot()
+    bpy.context.view_layer.objects.active = cage
+    for op in (bpy.ops.meshadjust.bind, bpy.ops.meshadjust.fit_cage):
+        with pytest.raises(RuntimeError, match="the shape key of 'dense_cage': 'dense' is in "
+                                               "Edit Mode"):
+            op()
+    assert_all_unchanged(before)
