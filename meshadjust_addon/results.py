@@ -317,9 +317,27 @@ def shape_key_unavailable(source, n_dense):
 
 
 def shape_key_of(source, cage):
-    """The shape key ``cage`` writes on ``source``, or None."""
+    """The shape key ``cage`` writes on ``source``, or None: by its name, or,
+    when the artist renamed it, the key holding exactly what the cage last
+    wrote (:func:`_renamed_key`)."""
     keys = source.data.shape_keys
-    return None if keys is None else keys.key_blocks.get(key_name(cage))
+    if keys is None:
+        return None
+    return keys.key_blocks.get(key_name(cage)) or _renamed_key(keys, cage)
+
+
+def _renamed_key(keys, cage):
+    """The key of ``keys`` (the reference key aside) whose shape is the one
+    ``cage`` last wrote (``key_written``), or None."""
+    written = cage.meshadjust.key_written
+    if not written:
+        return None
+    for kb in keys.key_blocks[1:]:
+        co = np.empty(3 * len(kb.data), dtype=np.float32)
+        kb.data.foreach_get("co", co)
+        if _checksum(co) == written:
+            return kb
+    return None
 
 
 def write_shape_key(source, cage, V_edited, V_bound, notes=None):
@@ -337,7 +355,11 @@ def write_shape_key(source, cage, V_edited, V_bound, notes=None):
     if source.data.shape_keys is None:
         source.shape_key_add(name="Basis", from_mix=False)
     keys = source.data.shape_keys
-    key = keys.key_blocks.get(key_name(cage))
+    key = shape_key_of(source, cage)
+    if key is not None and key.name != key_name(cage):      # renamed by the artist: followed
+        own = recorded_keys(source) - {key_name(cage)}
+        cage.meshadjust.key_name = key.name
+        source.meshadjust.own_keys = "\n".join(sorted(own | {key.name}))
     if key is not None:
         aside = key_kept_aside(source, cage, key)
         if aside is not None and notes is not None:

@@ -910,3 +910,16 @@ def test_bind_and_fit_refuse_a_shape_key_they_cannot_write_before_any_work(bound
                                                "Edit Mode"):
             op()
     assert_all_unchanged(before)
+
+
+def test_a_shape_key_renamed_by_the_artist_is_followed_not_written_twice(bound):
+    dense, cage = bound
+    lift_top(cage)
+    assert bpy.ops.meshadjust.refine(output='SHAPE_KEY') == {'FINISHED'}
+    dense.data.shape_keys.key_blocks[cage.name].name = "smile"
+    lift_top(cage, 0.1)
+    assert bpy.ops.meshadjust.refine(output='SHAPE_KEY') == {'FINISHED'}
+    names = [kb.name for kb in dense.data.shape_keys.key_blocks]
+    assert names == ["Basis", "smile"] and cage.meshadjust.key_name == "smile"
+    assert "changed since" not in cage.meshadjust.last_report
+    assert "smile" in dense.meshadjust.own_keys.split("\n")
