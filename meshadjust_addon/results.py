@@ -371,17 +371,27 @@ def write_shape_key(source, cage, V_edited, V_bound, notes=None):
         key.value = 1.0
         cage.meshadjust.key_name = key.name       # (renaming the cage keeps its key)
         source.meshadjust.own_keys = "\n".join(sorted(recorded_keys(source) | {key.name}))
-    if V_bound is None:
-        co = V_edited
-    else:
-        ref = np.empty(3 * len(source.data.vertices), np.float32)
-        keys.reference_key.data.foreach_get("co", ref)
-        co = ref.reshape(-1, 3).astype(np.float64) + (V_edited - V_bound)
+    co = _key_shape(keys, key, V_edited, V_bound)
     co = np.ascontiguousarray(co, dtype=np.float32).ravel()
     key.data.foreach_set("co", co)
     cage.meshadjust.key_written = _checksum(co)
     source.data.update()
     return key
+
+
+def _key_shape(keys, key, V_edited, V_bound):
+    """The positions of ``key`` that show the edit ``V_edited - V_bound``
+    (``V_bound`` None: the reference key's positions) over the key it is
+    relative to (the reference key unless the artist chose another)."""
+    def shape(kb):
+        co = np.empty(3 * len(kb.data), np.float32)
+        kb.data.foreach_get("co", co)
+        return co.reshape(-1, 3).astype(np.float64)
+    relative = key.relative_key
+    if relative == keys.reference_key or relative == key:
+        return V_edited if V_bound is None else shape(relative) + (V_edited - V_bound)
+    bound = shape(keys.reference_key) if V_bound is None else V_bound
+    return shape(relative) + (V_edited - bound)
 
 
 def only_own_keys_and_no_modifiers(source):

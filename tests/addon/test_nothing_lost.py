@@ -923,3 +923,25 @@ def test_a_shape_key_renamed_by_the_artist_is_followed_not_written_twice(bound):
     assert names == ["Basis", "smile"] and cage.meshadjust.key_name == "smile"
     assert "changed since" not in cage.meshadjust.last_report
     assert "smile" in dense.meshadjust.own_keys.split("\n")
+
+
+def test_a_shape_key_made_relative_to_another_key_still_shows_the_edit(bound):
+    dense, cage = bound
+    lift_top(cage)
+    assert bpy.ops.meshadjust.refine(output='SHAPE_KEY') == {'FINISHED'}
+    keys = dense.data.shape_keys
+    mine = keys.key_blocks[cage.name]
+    shown = mod("mesh_io").read_positions(dense.evaluated_get(
+        bpy.context.evaluated_depsgraph_get()).to_mesh())
+    base = dense.shape_key_add(name="Base2", from_mix=False)      # an artist's key,
+    co = np.empty(3 * len(base.data), np.float32)                  # a lifted copy of Basis
+    base.data.foreach_get("co", co)
+    base.data.foreach_set("co", co + 0.25)
+    base.value = 0.0
+    mine.relative_key = base
+    assert bpy.ops.meshadjust.refine(output='SHAPE_KEY') == {'FINISHED'}
+    bpy.context.view_layer.update()
+    ev = dense.evaluated_get(bpy.context.evaluated_depsgraph_get())
+    now = mod("mesh_io").read_positions(ev.to_mesh())
+    ev.to_mesh_clear()
+    assert np.abs(now - shown).max() < 1e-5           # the same edit shown over the Basis
