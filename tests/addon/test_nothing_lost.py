@@ -59,6 +59,16 @@ def bound(scene):
     return bound_sphere()
 
 
+def delete_a_face(obj):
+    """Delete the first face of ``obj``'s mesh (as an artist would, through a BMesh)."""
+    bm = bmesh.new()
+    bm.from_mesh(obj.data)
+    bm.faces.ensure_lookup_table()
+    bmesh.ops.delete(bm, geom=[bm.faces[0]], context='FACES_ONLY')
+    bm.to_mesh(obj.data)
+    bm.free()
+
+
 def lift_top(cage, dz=0.2):
     V = pos(cage)
     top = int(np.argmax(V[:, 2]))
@@ -508,12 +518,7 @@ def test_a_bind_failing_after_the_edited_original_was_remade_gives_back_its_mesh
     lift_top(cage)
     assert bpy.ops.meshadjust.refine(output='BOTH') == {'FINISHED'}
     edited = cage.meshadjust.edited
-    bm = bmesh.new()
-    bm.from_mesh(dense.data)
-    bm.faces.ensure_lookup_table()
-    bmesh.ops.delete(bm, geom=[bm.faces[0]], context='FACES_ONLY')
-    bm.to_mesh(dense.data)
-    bm.free()
+    delete_a_face(dense)
     old_mesh = edited.data
     before = full_snapshot()
     monkeypatch.setattr(mod("store"), "save_rest", _bug)     # after the re-made mesh and binding
@@ -528,15 +533,19 @@ def test_a_bind_failing_after_the_edited_original_was_remade_gives_back_its_mesh
     assert orphans() == []
 
 
-def test_a_shape_key_refine_failing_late_puts_the_keys_shape_back(bound, monkeypatch):
+@pytest.mark.parametrize("first, module, name", [
+    # a re-bind at one level writes the key, then the refined mesh fails (none yet: made)
+    ('SHAPE_KEY', "results", "write_refined"),
+    # a re-bind at one level writes a new refined mesh, then the report fails
+    ('BOTH', "cage_steps", "_density_note")])
+def test_a_refine_re_binding_and_failing_late_is_undone(bound, monkeypatch, first, module, name):
     dense, cage = bound
     lift_top(cage)
-    assert bpy.ops.meshadjust.refine(output='SHAPE_KEY') == {'FINISHED'}
+    assert bpy.ops.meshadjust.refine(output=first) == {'FINISHED'}
     lift_top(cage, 0.1)
     before = full_snapshot()
-    monkeypatch.setattr(mod("results"), "write_refined", _bug)   # a re-bind at one level writes
-    with pytest.raises(RuntimeError, match="boom"):               # the key, then the refined
-        bpy.ops.meshadjust.refine(output='BOTH', levels=1)        # mesh fails (none yet: made)
+    monkeypatch.setattr(mod(module), name, _bug)
+    _raises_the_bug(lambda: bpy.ops.meshadjust.refine(output='BOTH', levels=1))
     monkeypatch.undo()
     assert_all_unchanged(before)
 
@@ -557,6 +566,15 @@ def test_a_bind_from_edit_mode_failing_late_puts_the_rest_layer_back(bound, monk
     bpy.ops.object.mode_set(mode='OBJECT')
     assert np.array_equal(store.load_rest(cage), rest0)
     assert cage.meshadjust.levels == 2
+
+
+def _live_session(cage):
+    """Live mode's module, with a first live write after the cage's top was lifted."""
+    lu = mod("live_update")
+    lu.forget()
+    lift_top(cage, 0.1)
+    lu.update_edited(cage)
+    return lu
 
 
 def _sculpt(obj, dz=0.05):
@@ -724,18 +742,6 @@ def test_a_simplify_with_bind_failing_late_is_undone_by_the_rollback_itself(
     assert_all_unchanged(before)
 
 
-def test_a_rebind_in_refine_failing_after_the_new_refined_mesh_is_undone(bound, monkeypatch):
-    dense, cage = bound
-    lift_top(cage)
-    assert bpy.ops.meshadjust.refine(output='BOTH') == {'FINISHED'}
-    lift_top(cage, 0.1)
-    before = full_snapshot()
-    monkeypatch.setattr(mod("cage_steps"), "_density_note", _bug)     # after write_refined
-    _raises_the_bug(lambda: bpy.ops.meshadjust.refine(output='BOTH', levels=1))
-    monkeypatch.undo()
-    assert_all_unchanged(before)
-
-
 def test_a_linked_duplicate_of_a_result_in_edit_mode_is_named(bound):
     dense, cage = bound
     assert bpy.ops.meshadjust.refine(output='BOTH') == {'FINISHED'}
@@ -756,11 +762,8 @@ def test_a_linked_duplicate_of_a_result_in_edit_mode_is_named(bound):
 
 def test_live_keeps_a_version_sculpted_between_two_live_writes(bound):
     dense, cage = bound
-    lu = mod("live_update")
-    lu.forget()
+    lu = _live_session(cage)
     edited = cage.meshadjust.edited
-    lift_top(cage, 0.1)
-    lu.update_edited(cage)
     V_hand = _sculpt(edited)
     lift_top(cage, 0.05)
     t = lu.update_edited(cage)                         # incremental
@@ -772,10 +775,7 @@ def test_live_keeps_a_version_sculpted_between_two_live_writes(bound):
 
 def test_a_sculpt_after_a_live_session_saved_and_reloaded_is_kept(bound, tmp_path):
     dense, cage = bound
-    lu = mod("live_update")
-    lu.forget()
-    lift_top(cage, 0.1)
-    lu.update_edited(cage)
+    _live_session(cage)
     path = str(tmp_path / "live.blend")
     bpy.ops.wm.save_as_mainfile(filepath=path)
     bpy.ops.wm.open_mainfile(filepath=path)
@@ -788,11 +788,8 @@ def test_a_sculpt_after_a_live_session_saved_and_reloaded_is_kept(bound, tmp_pat
 
 def test_a_failed_refine_after_live_keeps_live_mode_s_record(bound, monkeypatch):
     dense, cage = bound
-    lu = mod("live_update")
-    lu.forget()
+    _live_session(cage)
     edited = cage.meshadjust.edited
-    lift_top(cage, 0.1)
-    lu.update_edited(cage)
     V_hand = _sculpt(edited)
     monkeypatch.setattr(mod("results"), "write_refined", _bug)
     _raises_the_bug(lambda: bpy.ops.meshadjust.refine(output='BOTH'))

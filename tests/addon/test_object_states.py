@@ -7,14 +7,13 @@ report that names the object and what to do, the scene left as it was."""
 
 import sys
 
-import bmesh
 import bpy
 import numpy as np
 import pytest
 
 from tests.addon.conftest import MODULE, make_object
-from tests.addon.test_nothing_lost import (assert_unchanged, bound_sphere, lift_top, mod, pos,
-                                           scene_snapshot)
+from tests.addon.test_nothing_lost import (assert_unchanged, bound_sphere, delete_a_face,
+                                           lift_top, mod, pos, scene_snapshot)
 from tests.addon.test_operators import bumpy_sphere, simplify
 
 
@@ -153,12 +152,7 @@ def test_a_source_disabled_in_the_viewport_is_refused_not_read_without_its_modif
 
 def test_a_rebind_after_a_source_face_was_deleted_remakes_the_edited_original(bound):
     dense, cage = bound
-    bm = bmesh.new()
-    bm.from_mesh(dense.data)
-    bm.faces.ensure_lookup_table()
-    bmesh.ops.delete(bm, geom=[bm.faces[0]], context='FACES_ONLY')
-    bm.to_mesh(dense.data)
-    bm.free()
+    delete_a_face(dense)
     activate(cage)
     assert bpy.ops.meshadjust.bind() == {'FINISHED'}
     edited = cage.meshadjust.edited
