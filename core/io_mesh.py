@@ -298,10 +298,33 @@ def _faces(lines, is_v, is_f, obj, n):
 def _read_lines(path, fn, obj):
     """Parse an OBJ (``obj=True``) or SMF file line by line (naming the
     first line it cannot read)."""
-    v_rows, v_lines = [], []
-    tri_rows, tri_lines, tri_base = [], [], []   # faces as index strings
-    poly = []                                    # (lineno, index strings, vertex count)
-    skipped = {}
+    lines = _split_lines(path, fn, obj)
+    if not lines.v_lines and not lines.tri_lines and not lines.poly and lines.skipped:
+        raise InvalidMeshError(
+            f"{fn}: {path} has no 'v' or 'f' line ({sum(lines.skipped.values()):,} other "
+            f"lines): not {'an OBJ' if obj else 'an SMF'} file, or an empty one")
+    V = _vertices(fn, path, lines.v_rows, lines.v_lines)
+    F = _line_faces(fn, path, lines, V.shape[0], obj)
+    _check_finite(fn, path, V, lines.v_lines, F)
+    return MeshFile(V, F, len(lines.tri_lines) + len(lines.poly), lines.skipped)
+
+
+class _SplitLines(NamedTuple):
+    """A file's lines as :func:`_split_lines` sorts them (strings, not yet numbers)."""
+
+    v_rows: list       #: per ``v`` line, its 3 coordinate strings
+    v_lines: list      #: their line numbers
+    tri_rows: list     #: per triangle line, its 3 index strings (``v/vt/vn`` cut to ``v``)
+    tri_lines: list    #: their line numbers
+    tri_base: list     #: the vertices read before each
+    poly: list         #: per polygon line: (line number, index strings, vertices before)
+    skipped: dict      #: other keyword -> lines
+
+
+def _split_lines(path, fn, obj):
+    """The :class:`_SplitLines` of the file (raises at a ``v`` or ``f`` line
+    with too few words or an ``_``)."""
+    out = _SplitLines([], [], [], [], [], [], {})
     with open(path, "r", encoding="utf-8-sig", errors="replace") as fh:
         for lineno, line in enumerate(fh, 1):
             parts = line.split()
@@ -314,60 +337,51 @@ def _read_lines(path, fn, obj):
             if key == "v":
                 if len(parts) < 4:
                     raise _line_error(fn, path, lineno, "needs 3 coordinates")
-                v_rows.append(parts[1:4])
-                v_lines.append(lineno)
+                out.v_rows.append(parts[1:4])
+                out.v_lines.append(lineno)
             elif key == "f":
-                idx = parts[1:]
-                if obj:
-                    idx = [t.partition("/")[0] for t in idx]
+                idx = [t.partition("/")[0] for t in parts[1:]] if obj else parts[1:]
                 if len(idx) < 3:
                     raise _line_error(fn, path, lineno, "needs at least 3 vertices")
                 if len(idx) == 3:
-                    tri_rows.append(idx)
-                    tri_lines.append(lineno)
-                    tri_base.append(len(v_rows))
+                    out.tri_rows.append(idx)
+                    out.tri_lines.append(lineno)
+                    out.tri_base.append(len(out.v_rows))
                 else:
-                    poly.append((lineno, idx, len(v_rows)))
+                    out.poly.append((lineno, idx, len(out.v_rows)))
             elif not key.startswith("#"):
-                skipped[key] = skipped.get(key, 0) + 1
-    if not v_lines and not tri_lines and not poly and skipped:
-        raise InvalidMeshError(
-            f"{fn}: {path} has no 'v' or 'f' line ({sum(skipped.values()):,} other lines): not "
-            f"{'an OBJ' if obj else 'an SMF'} file, or an empty one")
-    V = _vertices(fn, path, v_rows, v_lines)
-    del v_rows
-    n = V.shape[0]
-    # polygons: fan-triangulated after the triangles, then sorted back by
-    # line so the faces keep the file's order
-    for lineno, idx, base in poly:
+                out.skipped[key] = out.skipped.get(key, 0) + 1
+    return out
+
+
+def _line_faces(fn, path, lines, n, obj):
+    """(m,3) int64 0-based triangles of the :class:`_SplitLines` ``lines``
+    over ``n`` vertices: polygons fan-triangulated after the triangles, then
+    sorted back by line so the faces keep the file's order; OBJ's negative
+    indices resolved. Raises at the first line with a bad index."""
+    rows, at, base = list(lines.tri_rows), list(lines.tri_lines), list(lines.tri_base)
+    for lineno, idx, before in lines.poly:
         for k in range(1, len(idx) - 1):
-            tri_rows.append([idx[0], idx[k], idx[k + 1]])
-            tri_lines.append(lineno)
-            tri_base.append(base)
-    if not tri_rows:
-        _check_finite(fn, path, V, v_lines, np.zeros((0, 3), dtype=np.int64))
-        return MeshFile(V, np.zeros((0, 3), dtype=np.int64), 0, skipped)
-    R = _parsed(fn, path, tri_rows, tri_lines, np.int64,    # the file's indices
+            rows.append([idx[0], idx[k], idx[k + 1]])
+            at.append(lineno)
+            base.append(before)
+    if not rows:
+        return np.zeros((0, 3), dtype=np.int64)
+    R = _parsed(fn, path, rows, at, np.int64,    # the file's indices
                 "has an index that is not an integer", _missing_vertex(n))
-    del tri_rows
-    lines = np.array(tri_lines, dtype=np.int64)
-    base = np.array(tri_base, dtype=np.int64)
-    if poly:
-        order = np.argsort(lines, kind="stable")
-        R, lines, base = R[order], lines[order], base[order]
-    if obj:   # negative: relative to the vertices read before the line
-        F = np.where(R > 0, R - 1, base[:, None] + R)
-    else:
-        F = R - 1
+    at, base = np.array(at, dtype=np.int64), np.array(base, dtype=np.int64)
+    if lines.poly:
+        order = np.argsort(at, kind="stable")
+        R, at, base = R[order], at[order], base[order]
+    # OBJ's negative indices: relative to the vertices read before the line
+    F = np.where(R > 0, R - 1, base[:, None] + R) if obj else R - 1
     bad = np.flatnonzero((R == 0).any(axis=1) | (F < 0).any(axis=1) | (F >= n).any(axis=1))
     if bad.size:
         k = bad[0]
         problem = ("has vertex index 0 (indices are 1-based)" if (R[k] == 0).any() else
                    _missing_vertex(n))
-        raise _line_error(fn, path, int(lines[k]), problem)
-    _check_finite(fn, path, V, v_lines, F)
-    n_polygons = F.shape[0] - sum(len(idx) - 3 for _, idx, _ in poly)
-    return MeshFile(V, F, n_polygons, skipped)
+        raise _line_error(fn, path, int(at[k]), problem)
+    return F
 
 
 def read_smf(path):
