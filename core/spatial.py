@@ -1364,6 +1364,45 @@ class TriangleIndex:
             self._scan(PT, *self._cell_pairs(qi[sel][own[keep]], g[keep]), best, probe=False)
         return qi[far]
 
+    def _scan_all(self, PT, far, best):
+        """A handful of far queries ``far``: every triangle through the
+        lower-bound filter (it costs less than building the hierarchy)."""
+        m = self.n_faces
+        per = max(1, _PAIR_CHUNK // m)
+        for s in range(0, far.size, per):
+            qs = far[s:s + per]
+            self._scan(PT, np.repeat(qs, m), np.tile(np.arange(m), qs.size), best, edges=False)
+
+    def _node_bounds(self, p, child, level):
+        """Squared distance bounds from the points ``p`` (3, k) to the BVH
+        nodes ``child`` (k,) of ``level``: the nearest a triangle in the node
+        can be (the larger of its box's and its cylinder's bounds) and the
+        farthest every triangle in it is within (the smaller of the two,
+        widened by the pruning slack)."""
+        box = np.take(self._bvh[level], child, axis=1)
+        near2 = np.zeros(p.shape[1])
+        far2 = np.zeros(p.shape[1])
+        for k in range(3):
+            a = box[k] - p[k]                    # lo - p
+            b = p[k] - box[k + 3]                # p - hi
+            near = np.maximum(np.maximum(a, b), 0.0)
+            near2 += near * near
+            fa = np.maximum(np.abs(a), np.abs(b))
+            far2 += fa * fa
+        S = np.take(self._slab[level], child, axis=1)      # the node's cylinder
+        dx, dy, dz = p[0] - S[0], p[1] - S[1], p[2] - S[2]
+        dc2 = dx * dx + dy * dy + dz * dz
+        hh = np.abs(dx * S[3] + dy * S[4] + dz * S[5])
+        lat = np.sqrt(np.maximum(dc2 - hh * hh, 0.0))
+        el = np.maximum(lat - S[6], 0.0)
+        eh = np.maximum(hh - S[7], 0.0)
+        near2 = np.maximum(near2, el * el + eh * eh - 1e-14 * dc2)
+        fl = lat + S[6]
+        fh = hh + S[7]
+        far2 = np.minimum(far2, fl * fl + fh * fh + 1e-14 * dc2)
+        far2 *= 1 + 4 * PRUNE_SLACK
+        return near2, far2
+
     def _bvh_query(self, PT, far, best):
         """Exact search of the queries ``far`` through the BVH.
 
@@ -1373,15 +1412,9 @@ class TriangleIndex:
         lies within that distance). Children whose nearest-point distance exceeds ``ub``
         are pruned, so the frontier stays near the surface patch closest to the query.
         """
-        m = self.n_faces
-        if not self._bvh_ready and far.size * m <= _BRUTE_PAIRS and far.size <= _BRUTE_QUERIES:
-            # a handful of far queries: every triangle through the lower-bound filter costs
-            # less than building the hierarchy
-            per = max(1, _PAIR_CHUNK // m)
-            for s in range(0, far.size, per):
-                qs = far[s:s + per]
-                self._scan(PT, np.repeat(qs, m), np.tile(np.arange(m), qs.size), best,
-                           edges=False)
+        if not self._bvh_ready and far.size * self.n_faces <= _BRUTE_PAIRS \
+                and far.size <= _BRUTE_QUERIES:
+            self._scan_all(PT, far, best)
             return
         if not self._bvh_ready:
             self._build_hierarchy()
@@ -1406,30 +1439,7 @@ class TriangleIndex:
                 child = ((node[:, None] << step) + np.arange(1 << step)).ravel()
                 q = np.repeat(q, 1 << step)
                 level += step - 1
-                box = np.take(self._bvh[level + 1], child, axis=1)
-                p = np.take(PT, q, axis=1)
-                near2 = np.zeros(q.size)
-                far2 = np.zeros(q.size)
-                for k in range(3):
-                    a = box[k] - p[k]                    # lo - p
-                    b = p[k] - box[k + 3]                # p - hi
-                    near = np.maximum(np.maximum(a, b), 0.0)
-                    near2 += near * near
-                    fa = np.maximum(np.abs(a), np.abs(b))
-                    far2 += fa * fa
-                # the node's cylinder: lower and upper bounds (max / min with the box's)
-                S = np.take(self._slab[level + 1], child, axis=1)
-                dx, dy, dz = p[0] - S[0], p[1] - S[1], p[2] - S[2]
-                dc2 = dx * dx + dy * dy + dz * dz
-                hh = np.abs(dx * S[3] + dy * S[4] + dz * S[5])
-                lat = np.sqrt(np.maximum(dc2 - hh * hh, 0.0))
-                el = np.maximum(lat - S[6], 0.0)
-                eh = np.maximum(hh - S[7], 0.0)
-                near2 = np.maximum(near2, el * el + eh * eh - 1e-14 * dc2)
-                fl = lat + S[6]
-                fh = hh + S[7]
-                far2 = np.minimum(far2, fl * fl + fh * fh + 1e-14 * dc2)
-                far2 *= 1 + 4 * PRUNE_SLACK
+                near2, far2 = self._node_bounds(np.take(PT, q, axis=1), child, level + 1)
                 counts = _run_lengths(q)
                 starts = np.cumsum(counts) - counts
                 uq = q[starts]
