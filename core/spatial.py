@@ -893,12 +893,22 @@ class TriangleIndex:
         # diagonals off the bunny put all of it in one cell, 69,451 faces that did not count
         # as crowded, and a NearQuery's windows over it took 24 GB
         self.crowded_cell = CROWDED_CELL * max(1.0, (h / boxed / natural) ** 2 if natural > 0 else 1.0)
+        self._build_tables(V, Fo, spans, ext, h, dims)
+        self._bvh = None                          # built on first need (far queries)
+        self._bvh_ready = False                   # ... with its cylinder bounds
+        self._normal = np.ascontiguousarray(self._D[12:15])      # the disk bound's rows
+        self.n_faces = m
+
+    def _build_tables(self, V, Fo, spans, ext, h, dims):
+        """The kernel rows (``_D``), the two lower-bound tables (``_ball``,
+        ``_prism``: :func:`_bounding_rows`) and the grid's cell -> triangles
+        table (:func:`_plane_cells`) of the triangles ``Fo`` (internal
+        order), a block of ``spans`` at a time on the worker threads."""
+        m = Fo.shape[0]
         self._D, self._ball, self._prism = np.empty((16, m)), np.empty((4, m)), np.empty((16, m))
         small = np.int32 if m < 2**31 else np.int64        # (cells <= _MAX_CELLS < 2**31)
 
         def build_block(span):
-            """The kernel rows, the two lower-bound tables (_bounding_rows) and
-            the grid references (:func:`_plane_cells`) of the triangles of ``span``."""
             s = slice(*span)
             A, B, C = _corners(V, Fo[s])
             self._D[:, s] = triangle_rows(A, B, C)
@@ -913,10 +923,6 @@ class TriangleIndex:
         self._cell_tri = tri[np.argsort(cell, kind="stable")]
         self._cell_start = np.zeros(int(np.prod(dims)) + 1, dtype=np.int64)
         np.cumsum(np.bincount(cell, minlength=int(np.prod(dims))), out=self._cell_start[1:])
-        self._bvh = None                          # built on first need (far queries)
-        self._bvh_ready = False                   # ... with its cylinder bounds
-        self._normal = np.ascontiguousarray(self._D[12:15])      # the disk bound's rows
-        self.n_faces = m
 
     # -- grid ---------------------------------------------------------------------------------
     def _cell_size(self, V, Fo, spans, ext, thin, extent, cell_factor, min_cell):
