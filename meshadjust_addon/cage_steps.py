@@ -241,6 +241,7 @@ def prepare_cage_job(cage, *, levels=None, scheme=None, from_rest=False, keep_ed
     F_cage, _, creases = store.cage_topology(cage)
     if V_rest is not None:
         _check_rest(cage, V_rest, V_now, F_cage)
+    results.follow_renamed_keys(source)      # (a renamed key is muted for the read, as its name was)
     src, fp = read_source(source)
     if results.shape_key_of(source, cage) is not None:      # (a bind rewrites the key too)
         why = results.shape_key_unavailable(source, src.V.shape[0])
@@ -295,12 +296,14 @@ def commit_bind(cage, job):
         notes = []
         owner = results.copied_from(cage)
         if owner is not None:          # a copy of another cage: results of its own from now on
-            cs.edited, cs.refined, cs.key_name = None, None, ""
+            cs.edited, cs.refined, cs.key_name, cs.key_written = None, None, "", ""
             notes.append(f"'{cage.name}' was a copy of '{owner.name}': given results of its own")
         if cs.edited is not None:
             rb.keep(cs.edited.data)
             if cs.edited.users_collection:
                 results.aside_note(results.kept_aside(cs.edited), cs.edited, notes)
+        if cs.refined is not None and cs.refined.users_collection:   # (before a move below)
+            results.aside_note(results.kept_aside(cs.refined), cs.refined, notes)
         rb.keep(cage.data)
         A = _moved_since_bind(cage, source)            # (before the new matrix is recorded)
         edited, note = results.edited_copy(source, cage, job.V.shape[0], job.F)
@@ -468,6 +471,9 @@ def _refine_compute(cage, output, levels, scheme):
     binding and its data changed)."""
     cs, source, edited = cage.meshadjust, cage.meshadjust.source, cage.meshadjust.edited
     job, parts, warnings = None, [], []
+    why = results.edit_mode_problem(edited)    # (its binding is read from its mesh)
+    if why:
+        raise core.MeshAdjustError(f"Refine: {why}")
     if (levels and levels != cs.levels) or (scheme is not None and scheme != cs.scheme):
         job = compute_bind(prepare_cage_job(cage, levels=levels, scheme=scheme, keep_edit=True))
         binding = job.binding
@@ -506,6 +512,7 @@ def _refine_commit(cage, output, rj):
     with all_or_nothing() as rb:
         if rj.rebind is not None:
             commit_bind(cage, rj.rebind)
+            parts.extend([rj.rebind.note] if rj.rebind.note else [])
         if output in ('EDITED', 'BOTH'):
             if not edited.users_collection:         # deleted by the artist: shown again
                 parts.append(results.link_back(edited, source))

@@ -94,6 +94,10 @@ def kept_aside(obj):
     if not changed_since_written(obj):
         return None
     copy = obj.copy()
+    obj.meshadjust.written = ""    # (kept: a second look in the same step finds nothing more)
+    uid, live = obj.session_uid, live_written.pop(obj.session_uid, None)
+    if live is not None:
+        on_undo(lambda: live_written.__setitem__(uid, live))
     placed = obj.meshadjust.written_matrix
     if any(placed):                # (the result goes back where MeshAdjust last put it: an
         obj.matrix_world = mathutils.Matrix([placed[0:4], placed[4:8], placed[8:12],
@@ -215,9 +219,13 @@ def write_refined(cage, source, Vr, Fr, notes=None):
     it changed since it was written kept aside first, said in ``notes``)."""
     cs = cage.meshadjust
     refined = cs.refined
-    if refined is not None and not refined.users_collection:   # deleted by the artist
+    if refined is not None and refined.name not in bpy.data.objects:
         refined = None
-    if refined is not None:
+    if refined is not None and not refined.users_collection:   # deleted by the artist
+        note = link_back(refined, source)
+        if notes is not None:
+            notes.append(note)
+    elif refined is not None:
         aside_note(kept_aside(refined), refined, notes)
     if refined is not None and len(refined.data.vertices) == Vr.shape[0] \
             and len(refined.data.polygons) == Fr.shape[0]:
@@ -274,6 +282,10 @@ def edit_mode_problem(*objects):
     the mode is left, which would put the artist's edit back over the
     write)."""
     for obj in objects:
+        if obj is not None and obj.mode == 'SCULPT' and obj.use_dynamic_topology_sculpting:
+            return (f"'{obj.name}' is in Sculpt Mode with Dynamic Topology, where MeshAdjust "
+                    f"cannot write it (leaving the mode would put the sculpt back over the "
+                    f"write): leave Sculpt Mode on '{obj.name}' first")
         if obj is not None and obj.data.is_editmode:
             who = obj.name if obj.mode == 'EDIT' else next(
                 (o.name for o in bpy.data.objects if o.data == obj.data and o.mode == 'EDIT'),
@@ -323,21 +335,57 @@ def shape_key_of(source, cage):
     keys = source.data.shape_keys
     if keys is None:
         return None
-    return keys.key_blocks.get(key_name(cage)) or _renamed_key(keys, cage)
+    others = _other_cages_keys(source, cage)
+    key = keys.key_blocks.get(key_name(cage))
+    if key is not None and not (not cage.meshadjust.key_name and key.name in others):
+        return key         # (a cage that never wrote a key does not take another cage's)
+    return _renamed_key(keys, cage, others)
 
 
-def _renamed_key(keys, cage):
-    """The key of ``keys`` (the reference key aside) whose shape is the one
-    ``cage`` last wrote (``key_written``), or None."""
+def _other_cages_keys(source, cage):
+    """The names of the keys the other cages of ``source`` write."""
+    return {o.meshadjust.key_name for o in bpy.data.objects
+            if o != cage and o.type == 'MESH' and o.meshadjust.role == 'CAGE'
+            and o.meshadjust.source == source and o.meshadjust.key_name}
+
+
+def _renamed_key(keys, cage, others):
+    """The one key of ``keys`` (the reference key and the keys of the other
+    cages, ``others``, aside) whose shape is the one ``cage`` last wrote
+    (``key_written``), or None (also when several are)."""
     written = cage.meshadjust.key_written
     if not written:
         return None
+    found = []
     for kb in keys.key_blocks[1:]:
+        if kb.name in others or kb == keys.reference_key:
+            continue
         co = np.empty(3 * len(kb.data), dtype=np.float32)
         kb.data.foreach_get("co", co)
         if _checksum(co) == written:
-            return kb
-    return None
+            found.append(kb)
+    return found[0] if len(found) == 1 else None
+
+
+def follow_renamed_keys(source):
+    """:func:`follow_renamed_key` for every cage of ``source`` (before its
+    evaluated mesh is read for a bind: a renamed key of any cage is muted)."""
+    if source.data.shape_keys is None:
+        return
+    for obj in bpy.data.objects:
+        if obj.type == 'MESH' and obj.meshadjust.role == 'CAGE' and obj.meshadjust.source == source:
+            follow_renamed_key(source, obj)
+
+
+def follow_renamed_key(source, cage):
+    """When the artist renamed the key ``cage`` writes on ``source``: record
+    its new name on the cage and among the source's own keys (so a bind
+    mutes it and the fingerprint leaves it out, as the key itself)."""
+    key = shape_key_of(source, cage)
+    if key is not None and key.name != key_name(cage):
+        own = recorded_keys(source) - {key_name(cage)}
+        cage.meshadjust.key_name = key.name
+        source.meshadjust.own_keys = "\n".join(sorted(own | {key.name}))
 
 
 def write_shape_key(source, cage, V_edited, V_bound, notes=None):
@@ -355,11 +403,8 @@ def write_shape_key(source, cage, V_edited, V_bound, notes=None):
     if source.data.shape_keys is None:
         source.shape_key_add(name="Basis", from_mix=False)
     keys = source.data.shape_keys
+    follow_renamed_key(source, cage)
     key = shape_key_of(source, cage)
-    if key is not None and key.name != key_name(cage):      # renamed by the artist: followed
-        own = recorded_keys(source) - {key_name(cage)}
-        cage.meshadjust.key_name = key.name
-        source.meshadjust.own_keys = "\n".join(sorted(own | {key.name}))
     if key is not None:
         aside = key_kept_aside(source, cage, key)
         if aside is not None and notes is not None:
