@@ -272,10 +272,10 @@ def _faces(lines, is_v, is_f, obj, n):
     (see :func:`_read_bulk`)."""
     fb = _body(lines, is_f)
     if b"_" in fb or (not obj and b"/" in fb) or _NOT_ASCII.search(fb) \
-            or re.search(rb"(?:^|\s)/", fb):
+            or re.search(rb"(?:^|[\t-\r\x1c-\x1f ])/", fb):
         return None        # (a word starting with "/": no vertex index, the line reader says)
     if obj and b"/" in fb:
-        fb = re.sub(rb"/[^\s]*", b"", fb)
+        fb = re.sub(rb"/[^\t-\r\x1c-\x1f ]*", b"", fb)       # (to the next of _SPACES)
     got = _numbers(fb, np.int64, int(np.count_nonzero(is_f)))
     if got is None or (got[1] < 3).any():
         return None

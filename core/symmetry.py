@@ -48,7 +48,7 @@ from .mirror import PARTNER_TOLERANCE, axis_index, mirror, mirror_partners  # no
 from .simplify import (SimplifyResult, check_arguments, check_flags, cleaned_input, debris_budget,
                        simplify, target_count)
 from .spatial import TriangleIndex
-from .topology import boundary_loops_count, edge_map, face_components
+from .topology import boundary_loops_count, edge_keys, edge_map, face_components
 from .pages import plain_pages
 from .pinholes import cap_pinholes
 
@@ -631,6 +631,12 @@ def _whole_maps(clean, hs, r, cage, s, k, n_in):
     fe = fe[(fe >= 0).all(axis=1)]
     fe = np.concatenate([fe, cage.copy_of[fe]])
     fe = np.unique(np.sort(fe, axis=1), axis=0).astype(np.int64).reshape(-1, 2)
+    # only pairs that are edges of the mirrored cage (the mirror's weld at the seam can
+    # join the ends of a half's feature edge that is no edge of the whole: 2 of 58 pairs
+    # on a fuzzed mesh, which the fit then refused as creases)
+    n = cage.V.shape[0]
+    E = edge_map(cage.F, n)[0]
+    fe = fe[np.isin(edge_keys(fe[:, 0], fe[:, 1], n), edge_keys(E[:, 0], E[:, 1], n))]
     return vertex_map, face_from, fe
 
 

@@ -151,7 +151,9 @@ _LINES = ["  v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n", _BASE + "f 1 2\n", _BASE + "
           _BASE + "f 99999999999999999999 1 2\n", "", "# only\n", _BASE + "f 1 2 3\n\x00\n",
           # found by a differential fuzz of the two readers (2026-12-05): a word "/1", a
           # no-break space inside a v/vt/vn word, a last line of just "v"
-          _BASE + "f 1/1 /1 2 3\n", _BASE + "f 1/\u00a01 2//2 3//3\n", _BASE + "f 1 2 3\nv"]
+          _BASE + "f 1/1 /1 2 3\n", _BASE + "f 1/\u00a01 2//2 3//3\n", _BASE + "f 1 2 3\nv",
+          # (a CLI fuzz: control bytes 0x1c-0x1f separate words in text mode)
+          _BASE + "f 1/1\x1c2/2 3/3 4/4\n", _BASE + "f 1 2 3/1\x1f-4\n"]
 
 
 @pytest.mark.parametrize("text", _BULK + _LINES)

@@ -348,3 +348,20 @@ def test_fit_with_symmetry_needs_a_symmetric_cage():
     V, F = bumpy_sphere(3)
     with pytest.raises(InvalidArgumentError, match="fit_cage: the vertices are not mirror-symmetric"):
         fit_cage(V, F, V + [0.1, 0.0, 0.0], F, levels=1, iterations=1, symmetry="X")
+
+
+def test_a_symmetric_cage_s_feature_edges_are_its_edges_and_the_fit_takes_them():
+    # (a fuzzed mesh of the batch CLI, 2026-12-05: the mirror's weld at the seam joined the
+    # ends of two of the half's feature edges that are no edges of the whole cage, and
+    # fit_cage refused them as creases)
+    import os
+    from core import fit_cage, read_obj
+    from core.topology import edge_map
+    V, F = read_obj(os.path.join(os.path.dirname(__file__), "data", "symmetry_seam_creases.obj"))
+    r = simplify(V, F, target_faces=200, symmetry='X')
+    E = edge_map(r.F, r.V.shape[0]).E
+    edges = set(map(tuple, np.sort(E, axis=1).tolist()))
+    assert len(r.feature_edges) > 40
+    assert all(tuple(e) in edges for e in r.feature_edges.tolist())
+    fit = fit_cage(V, F, r.V, r.F, levels=2, creases=r.feature_edges)
+    assert np.isfinite(fit.V).all()
