@@ -28,6 +28,14 @@ def kco(kb):
     return co.reshape(-1, 3)
 
 
+def _refined():
+    """A bound sphere and its cage, its top lifted, refined to both outputs."""
+    dense, cage = bound_sphere()
+    lift_top(cage)
+    assert refine(cage, 'BOTH') == {'FINISHED'}
+    return dense, cage
+
+
 def dup(obj):
     activate(obj)
     bpy.ops.object.duplicate(linked=False)          # Shift+D
@@ -51,6 +59,7 @@ def test_binding_a_duplicated_cage_leaves_the_first_cage_s_shape_key_alone(scene
     assert copy.meshadjust.key_name != "dense_cage"
     assert np.array_equal(kco(dense.data.shape_keys.key_blocks["dense_cage"]), K0)
 
+
 def test_a_new_cage_beside_a_renamed_one_writes_a_key_of_its_own(scene):
     dense, cage = bound_sphere()
     lift_top(cage, 0.2)
@@ -64,6 +73,7 @@ def test_a_new_cage_beside_a_renamed_one_writes_a_key_of_its_own(scene):
     V = pos(cage2); V[np.argmin(V[:, 2]), 2] -= 0.3; mod("mesh_io").write_positions(cage2.data, V)
     assert refine(cage2, 'SHAPE_KEY') == {'FINISHED'}
     assert np.array_equal(kco(dense.data.shape_keys.key_blocks["dense_cage"]), K_first)
+
 
 @pytest.mark.parametrize("step", ["bind", "fit", "refine_levels"])
 def test_a_renamed_key_is_muted_for_a_rebind_not_baked_in(scene, step):
@@ -82,6 +92,7 @@ def test_a_renamed_key_is_muted_for_a_rebind_not_baked_in(scene, step):
     assert "changed since" not in cage.meshadjust.last_report
     assert got == pytest.approx(want, abs=0.03), f"edit shown {got:.3f}, want {want:.3f}"
 
+
 def test_another_cage_s_renamed_key_is_not_baked_into_a_rebind(scene):
     dense, cageA = bound_sphere()
     V0 = pos(dense).copy()
@@ -96,11 +107,10 @@ def test_another_cage_s_renamed_key_is_not_baked_into_a_rebind(scene):
     assert bpy.ops.meshadjust.bind(levels=1) == {'FINISHED'}      # A is unedited
     assert np.abs(pos(cageA.meshadjust.edited) - V0).max() < 1e-3
 
+
 @pytest.mark.parametrize("output", ["EDITED", "REFINED"])
 def test_an_edited_original_in_edit_mode_after_a_reload_is_refused_cleanly(scene, tmp_path, output):
-    dense, cage = bound_sphere()
-    lift_top(cage)
-    assert refine(cage, 'BOTH') == {'FINISHED'}
+    dense, cage = _refined()
     p = str(tmp_path / "f.blend")
     bpy.ops.wm.save_as_mainfile(filepath=p); bpy.ops.wm.open_mainfile(filepath=p)
     cage = bpy.data.objects["dense_cage"]
@@ -110,23 +120,21 @@ def test_an_edited_original_in_edit_mode_after_a_reload_is_refused_cleanly(scene
         bpy.ops.meshadjust.refine(output=output)      # (a raw TypeError with a cold cache)
     assert "Traceback" not in str(caught.value)
 
+
 def test_a_sculpted_refined_mesh_follows_a_moved_source_on_bind(scene):
-    dense, cage = bound_sphere()
-    lift_top(cage)
-    assert refine(cage, 'BOTH') == {'FINISHED'}
+    dense, cage = _refined()
     refined = cage.meshadjust.refined
     _sculpt(refined)
     dense.location = (5, 0, 0)
     bpy.context.view_layer.update()
     activate(cage)
     assert bpy.ops.meshadjust.bind() == {'FINISHED'}
-    assert tuple(refined.matrix_world.translation) == pytest.approx((5, 0, 0))   # is (0,0,0)
+    assert tuple(refined.matrix_world.translation) == pytest.approx((5, 0, 0))   # (stayed at 0)
+
 
 @pytest.mark.parametrize("step", ["refine", "bind"])
 def test_a_deleted_refined_mesh_is_linked_back(scene, step):
-    dense, cage = bound_sphere()
-    lift_top(cage)
-    assert refine(cage, 'BOTH') == {'FINISHED'}
+    dense, cage = _refined()
     refined = cage.meshadjust.refined
     unlink(refined)
     activate(cage)
@@ -134,15 +142,14 @@ def test_a_deleted_refined_mesh_is_linked_back(scene, step):
     assert cage.meshadjust.refined == refined and refined.users_collection
     assert "dense_refined.001" not in bpy.data.objects
 
+
 def test_a_refine_re_binding_reports_the_copies_it_kept(scene):
-    dense, cage = bound_sphere()
-    lift_top(cage)
-    assert refine(cage, 'BOTH') == {'FINISHED'}
+    dense, cage = _refined()
     _sculpt(cage.meshadjust.edited)
     lift_top(cage, 0.1)
     assert refine(cage, 'REFINED', levels=1) == {'FINISHED'}
-    assert "dense_edited.hand" in bpy.data.objects               # made...
-    assert "kept as" in cage.meshadjust.last_report              # ...but not reported
+    assert "dense_edited.hand" in bpy.data.objects
+    assert "kept as" in cage.meshadjust.last_report              # (made, and had not been said)
 
 
 def test_a_result_in_sculpt_mode_with_dynamic_topology_is_refused(scene):
