@@ -100,8 +100,7 @@ def _bound_source_matrix(cage):
     """The source's (4,4) world matrix when ``cage`` was bound, or None (not
     bound, or bound before it was recorded)."""
     edited = cage.meshadjust.edited
-    M = np.array(edited.meshadjust.source_matrix).reshape(4, 4) if edited is not None else None
-    return M if M is not None and M.any() else None
+    return results.recorded_matrix(edited.meshadjust.source_matrix) if edited is not None else None
 
 
 def _moved_since_bind(cage, source):
@@ -138,12 +137,6 @@ def cage_in_source_space(cage, source):
     V = mesh_io.read_positions(cage.data)
     M = source_space(cage, source)
     return V @ M[:3, :3].T + M[:3, 3]
-
-
-def _matrix(M):
-    """A (4,4) array as Blender's ``mathutils.Matrix``."""
-    import mathutils
-    return mathutils.Matrix(M.tolist())
 
 
 def _source_to_cage(cage, source, V):
@@ -308,12 +301,11 @@ def commit_bind(cage, job):
         A = _moved_since_bind(cage, source)            # (before the new matrix is recorded)
         edited, note = results.edited_copy(source, cage, job.V.shape[0], job.F)
         notes += [note] if note else []
-        job.note = "; ".join(notes)
         if A is not None:      # the results keep their place beside the source's new space
             for obj in (edited, cs.refined):
                 if obj is not None:
-                    obj.matrix_world = obj.matrix_world @ _matrix(np.linalg.inv(A))
-        edited.meshadjust.source_matrix = np.array(source.matrix_world).ravel()
+                    obj.matrix_world = obj.matrix_world @ results.blender_matrix(np.linalg.inv(A))
+        edited.meshadjust.source_matrix = results.matrix_values(source.matrix_world)
         results.record_written(edited, mesh_io.write_positions(
             edited.data, job.V_edited if job.V_edited is not None else job.V))
         store.save_binding(edited, job.binding)
@@ -488,8 +480,7 @@ def _refine_compute(cage, output, levels, scheme):
         warnings.append(turned)
     why = results.shape_key_unavailable(source, binding.n_dense) if output == 'SHAPE_KEY' else \
         results.edited_problem(edited) if output in ('EDITED', 'BOTH') else None
-    why = why or results.edit_mode_problem(edited if output in ('EDITED', 'BOTH') else None,
-                                           cs.refined if output in ('REFINED', 'BOTH') else None)
+    why = why or results.edit_mode_problem(cs.refined if output in ('REFINED', 'BOTH') else None)
     if why:
         raise core.MeshAdjustError(f"Refine: {why}")
     V_edited = None

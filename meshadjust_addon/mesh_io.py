@@ -56,6 +56,13 @@ def read_positions32(mesh):
     return buf
 
 
+def read_key(kb):
+    """The flat float32 positions of the shape key ``kb`` (as written, bit for bit)."""
+    co = np.empty(3 * len(kb.data), dtype=np.float32)
+    kb.data.foreach_get("co", co)
+    return co
+
+
 def read_triangles(mesh):
     """(m,3) int64 triangles of ``mesh`` and whether polygons had to be split.
 

@@ -26,8 +26,8 @@ import numpy as np
 
 from .. import core
 from . import mesh_io
-from .rollback import keep, on_undo, retire
-from .staleness import key_name, own_key_names, recorded_keys
+from .rollback import keep, on_undo, remove_attributes, retire
+from .staleness import cages_of, key_name, own_key_names, record_keys, recorded_keys
 
 
 #: ``written`` of a result live mode wrote last (its buffer is in :data:`live_written`)
@@ -48,11 +48,34 @@ def record_written(obj, buf):
     and where the object was (the place it goes back to when a changed
     version is kept aside, :func:`kept_aside`)."""
     obj.meshadjust.written = _checksum(buf)
-    obj.meshadjust.written_matrix = [v for row in obj.matrix_world for v in row]
+    obj.meshadjust.written_matrix = matrix_values(obj.matrix_world)
+    _forget_live(obj)
+
+
+def _forget_live(obj):
+    """Drop live mode's buffer of ``obj`` (put back if the step is undone)."""
     uid = obj.session_uid
     live = live_written.pop(uid, None)
-    if live is not None:               # (put back if the step is undone: still live's)
+    if live is not None:
         on_undo(lambda: live_written.__setitem__(uid, live))
+
+
+def matrix_values(matrix):
+    """The 16 values, row by row, of a Blender 4x4 matrix (as the
+    ``source_matrix`` and ``written_matrix`` properties hold them)."""
+    return [v for row in matrix for v in row]
+
+
+def recorded_matrix(values):
+    """The (4,4) array of 16 recorded values, or None when they are all 0
+    (not recorded)."""
+    M = np.array(values, dtype=np.float64).reshape(4, 4)
+    return M if M.any() else None
+
+
+def blender_matrix(M):
+    """A (4,4) array as Blender's ``mathutils.Matrix``."""
+    return mathutils.Matrix(M.tolist())
 
 
 def record_live(obj, buf):
@@ -60,7 +83,7 @@ def record_live(obj, buf):
     ``obj`` (kept by reference: live mode updates it in place)."""
     if obj.meshadjust.written != LIVE:
         obj.meshadjust.written = LIVE
-        obj.meshadjust.written_matrix = [v for row in obj.matrix_world for v in row]
+        obj.meshadjust.written_matrix = matrix_values(obj.matrix_world)
     live_written[obj.session_uid] = buf
 
 
@@ -95,21 +118,15 @@ def kept_aside(obj):
         return None
     copy = obj.copy()
     obj.meshadjust.written = ""    # (kept: a second look in the same step finds nothing more)
-    uid, live = obj.session_uid, live_written.pop(obj.session_uid, None)
-    if live is not None:
-        on_undo(lambda: live_written.__setitem__(uid, live))
-    placed = obj.meshadjust.written_matrix
-    if any(placed):                # (the result goes back where MeshAdjust last put it: an
-        obj.matrix_world = mathutils.Matrix([placed[0:4], placed[4:8], placed[8:12],
-                                             placed[12:16]])   # applied transform stays
-        #                                                        with the copy)
+    _forget_live(obj)
+    placed = recorded_matrix(obj.meshadjust.written_matrix)
+    if placed is not None:         # (the result goes back where MeshAdjust last put it: an
+        obj.matrix_world = blender_matrix(placed)       # applied transform stays with the copy)
     copy.data = obj.data.copy()
     copy.name = f"{obj.name}.hand"
     copy.data.name = copy.name
     copy.property_unset("meshadjust")
-    attrs = copy.data.attributes
-    for name in [a.name for a in attrs if a.name.startswith("meshadjust_")]:
-        attrs.remove(attrs[name])         # (by name: a removal moves the others)
+    remove_attributes(copy.data)
     link_like(copy, obj)
     return copy
 
@@ -119,8 +136,7 @@ def key_kept_aside(source, cage, key):
     cage wrote it: a copy of it as it is now, ``<key>.hand`` (value 0, the
     artist's own). Returns the copy, or None when nothing changed."""
     written = cage.meshadjust.key_written
-    co = np.empty(3 * len(key.data), dtype=np.float32)
-    key.data.foreach_get("co", co)
+    co = mesh_io.read_key(key)
     if not written or _checksum(co) == written:
         return None
     copy = source.shape_key_add(name=f"{key.name}.hand", from_mix=False)
@@ -129,7 +145,7 @@ def key_kept_aside(source, cage, key):
     copy.value = 0.0
     # (a version of MeshAdjust's own key: not the artist's source changing, so the
     # binding is not stale, and a re-bind mutes it as it mutes the key itself)
-    source.meshadjust.own_keys = "\n".join(sorted(recorded_keys(source) | {copy.name}))
+    record_keys(source, recorded_keys(source) | {copy.name})
     return copy
 
 
@@ -278,9 +294,9 @@ def copy_problem(cage):
 
 def edit_mode_problem(*objects):
     """Why MeshAdjust cannot write the results ``objects`` (None ones
-    skipped), or None: one is in Edit Mode (its mesh is the BMesh's until
-    the mode is left, which would put the artist's edit back over the
-    write)."""
+    skipped), or None: one is in Edit Mode, its own or a linked duplicate's,
+    or in Sculpt Mode with Dynamic Topology (its mesh is a BMesh's until the
+    mode is left, which would put the artist's edit back over the write)."""
     for obj in objects:
         if obj is not None and obj.mode == 'SCULPT' and obj.use_dynamic_topology_sculpting:
             return (f"'{obj.name}' is in Sculpt Mode with Dynamic Topology, where MeshAdjust "
@@ -344,9 +360,7 @@ def shape_key_of(source, cage):
 
 def _other_cages_keys(source, cage):
     """The names of the keys the other cages of ``source`` write."""
-    return {o.meshadjust.key_name for o in bpy.data.objects
-            if o != cage and o.type == 'MESH' and o.meshadjust.role == 'CAGE'
-            and o.meshadjust.source == source and o.meshadjust.key_name}
+    return {o.meshadjust.key_name for o in cages_of(source) if o != cage and o.meshadjust.key_name}
 
 
 def _renamed_key(keys, cage, others):
@@ -360,9 +374,7 @@ def _renamed_key(keys, cage, others):
     for kb in keys.key_blocks[1:]:
         if kb.name in others or kb == keys.reference_key:
             continue
-        co = np.empty(3 * len(kb.data), dtype=np.float32)
-        kb.data.foreach_get("co", co)
-        if _checksum(co) == written:
+        if _checksum(mesh_io.read_key(kb)) == written:
             found.append(kb)
     return found[0] if len(found) == 1 else None
 
@@ -372,9 +384,8 @@ def follow_renamed_keys(source):
     evaluated mesh is read for a bind: a renamed key of any cage is muted)."""
     if source.data.shape_keys is None:
         return
-    for obj in bpy.data.objects:
-        if obj.type == 'MESH' and obj.meshadjust.role == 'CAGE' and obj.meshadjust.source == source:
-            follow_renamed_key(source, obj)
+    for cage in cages_of(source):
+        follow_renamed_key(source, cage)
 
 
 def follow_renamed_key(source, cage):
@@ -385,7 +396,7 @@ def follow_renamed_key(source, cage):
     if key is not None and key.name != key_name(cage):
         own = recorded_keys(source) - {key_name(cage)}
         cage.meshadjust.key_name = key.name
-        source.meshadjust.own_keys = "\n".join(sorted(own | {key.name}))
+        record_keys(source, own | {key.name})
 
 
 def write_shape_key(source, cage, V_edited, V_bound, notes=None):
@@ -415,7 +426,7 @@ def write_shape_key(source, cage, V_edited, V_bound, notes=None):
         key.relative_key = keys.reference_key
         key.value = 1.0
         cage.meshadjust.key_name = key.name       # (renaming the cage keeps its key)
-        source.meshadjust.own_keys = "\n".join(sorted(recorded_keys(source) | {key.name}))
+        record_keys(source, recorded_keys(source) | {key.name})
     co = _key_shape(keys, key, V_edited, V_bound)
     co = np.ascontiguousarray(co, dtype=np.float32).ravel()
     key.data.foreach_set("co", co)
@@ -429,9 +440,7 @@ def _key_shape(keys, key, V_edited, V_bound):
     (``V_bound`` None: the reference key's positions) over the key it is
     relative to (the reference key unless the artist chose another)."""
     def shape(kb):
-        co = np.empty(3 * len(kb.data), np.float32)
-        kb.data.foreach_get("co", co)
-        return co.reshape(-1, 3).astype(np.float64)
+        return mesh_io.read_key(kb).reshape(-1, 3).astype(np.float64)
     relative = key.relative_key
     if relative == keys.reference_key or relative == key:
         return V_edited if V_bound is None else shape(relative) + (V_edited - V_bound)

@@ -82,8 +82,7 @@ def _key_shapes(mesh):
         return None
     out = {}
     for kb in sk.key_blocks:
-        out[kb.name] = np.empty(3 * len(kb.data), dtype=np.float32)
-        kb.data.foreach_get("co", out[kb.name])
+        out[kb.name] = mesh_io.read_key(kb)
     return out
 
 
@@ -119,17 +118,26 @@ def _attributes_of(mesh):
                 for name in layers.keys() if name.startswith(PREFIX)}
     out = {}
     for attr in mesh.attributes:
-        if not attr.name.startswith(PREFIX):
+        if not attr.name.startswith(PREFIX) or attr.data_type not in _FIELDS:
             continue
-        field = {'FLOAT_VECTOR': "vector", 'INT': "value", 'BOOLEAN': "value",
-                 'FLOAT': "value"}.get(attr.data_type)
-        if field is None:
-            continue
-        dtype = {'INT': np.int32, 'BOOLEAN': bool}.get(attr.data_type, np.float32)
-        buf = np.empty(len(attr.data) * (3 if field == "vector" else 1), dtype=dtype)
+        field, width, dtype = _FIELDS[attr.data_type]
+        buf = np.empty(len(attr.data) * width, dtype=dtype)
         attr.data.foreach_get(field, buf)
         out[attr.name] = (attr.domain, attr.data_type, buf)
     return out
+
+
+#: per attribute data type a rollback keeps: the field, its values per element, their dtype
+_FIELDS = {'FLOAT_VECTOR': ("vector", 3, np.float32), 'FLOAT': ("value", 1, np.float32),
+           'INT': ("value", 1, np.int32), 'BOOLEAN': ("value", 1, bool)}
+
+
+def remove_attributes(mesh, keep=()):
+    """Remove the MeshAdjust attributes (``PREFIX``) of ``mesh`` but those
+    named in ``keep`` (by name: a removal moves the others)."""
+    attrs = mesh.attributes
+    for name in [a.name for a in attrs if a.name.startswith(PREFIX) and a.name not in keep]:
+        attrs.remove(attrs[name])
 
 
 def _restore_attributes(mesh, kept):
@@ -147,17 +155,15 @@ def _restore_attributes(mesh, kept):
                     v[layer] = co
         bmesh.update_edit_mesh(mesh, loop_triangles=False, destructive=False)
         return
-    attrs = mesh.attributes
-    for name in [a.name for a in attrs if a.name.startswith(PREFIX) and a.name not in kept]:
-        attrs.remove(attrs[name])         # (by name: a removal moves the others)
+    remove_attributes(mesh, keep=kept)
     for name, (domain, kind, values) in kept.items():
         attr = mesh.attributes.get(name)
         if attr is None or attr.domain != domain or attr.data_type != kind:
             if attr is not None:
                 mesh.attributes.remove(attr)
             attr = mesh.attributes.new(name, kind, domain)
-        field = "vector" if kind == 'FLOAT_VECTOR' else "value"
-        if len(attr.data) * (3 if field == "vector" else 1) == values.size:
+        field, width, _ = _FIELDS[kind]
+        if len(attr.data) * width == values.size:
             attr.data.foreach_set(field, values)
 
 

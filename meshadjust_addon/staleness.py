@@ -27,6 +27,8 @@ import bmesh
 import bpy
 import numpy as np
 
+from . import mesh_io
+
 _generation = {}      #: object session_uid -> geometry updates seen
 _memo = {}            #: (what, session_uid) -> (generation, value)
 
@@ -74,15 +76,25 @@ def own_key_names(source):
     """Names of the shape keys MeshAdjust wrote on ``source`` (one per cage,
     and those of cages deleted since: recorded on the source when written,
     so another cage's bind never reads them as the artist's, and bakes them)."""
-    names = {key_name(o) for o in bpy.data.objects
-             if o.type == 'MESH' and o.meshadjust.role == 'CAGE' and o.meshadjust.source == source}
-    return names | recorded_keys(source)
+    return {key_name(o) for o in cages_of(source)} | recorded_keys(source)
+
+
+def cages_of(source):
+    """The MeshAdjust cages of ``source``."""
+    return [o for o in bpy.data.objects
+            if o.type == 'MESH' and o.meshadjust.role == 'CAGE' and o.meshadjust.source == source]
 
 
 def recorded_keys(source):
     """The shape keys recorded on ``source`` as written by its cages (its
     ``own_keys``, a name a line)."""
     return set(filter(None, source.meshadjust.own_keys.split("\n")))
+
+
+def record_keys(source, names):
+    """Record the shape keys ``names`` (a set) as the ones MeshAdjust wrote on
+    ``source`` (its ``own_keys``, read by :func:`recorded_keys`)."""
+    source.meshadjust.own_keys = "\n".join(sorted(names))
 
 
 def key_name(cage):
@@ -113,9 +125,7 @@ def source_fingerprint(source):
         for kb in keys.key_blocks:
             if kb.name in own or kb == keys.reference_key:
                 continue
-            co = np.empty(3 * len(kb.data), np.float32)
-            kb.data.foreach_get("co", co)
-            c_keys = _crc(co, start=zlib.crc32(f"{kb.name}|{kb.value}|{kb.mute}|"
+            c_keys = _crc(mesh_io.read_key(kb), start=zlib.crc32(f"{kb.name}|{kb.value}|{kb.mute}|"
                                                f"{kb.relative_key.name}".encode(), c_keys))
     c_mods = 0
     for mod in source.modifiers:
