@@ -98,6 +98,18 @@ def check_vertices(V, *, where, name="V", copy=True, faces=None):
     return V_out
 
 
+def check_finite_rows(X, *, where, what):
+    """Raise :class:`InvalidArgumentError` when a row of ``X`` (k,d) holds NaN
+    or an infinite value, saying how many rows of ``what`` (e.g. "query
+    points") do and giving the first, with its values."""
+    bad = ~np.isfinite(X).all(axis=1)
+    if bad.any():
+        k = int(np.flatnonzero(bad)[0])
+        raise InvalidArgumentError(
+            f"{where}: {int(bad.sum())} {what} have NaN or infinite values, "
+            f"e.g. row {k} = {X[k].tolist()}")
+
+
 #: the units :func:`check_units` accepts: coordinates up to ``UNITS[1]`` in absolute
 #: value, a size (bounding-box diagonal) from ``UNITS[0]``. ``fit_cage``, ``bind``,
 #: ``deform`` and ``surface_distance`` compute in the mesh's own units, and their
@@ -408,16 +420,48 @@ def unit_rows(X):
     return np.divide(X, length[:, None], out=np.zeros_like(X), where=length[:, None] > 0)
 
 
+#: coordinates whose largest is within 2**-SAFE_EXPONENT .. 2**SAFE_EXPONENT
+#: multiply (twice, in area normals) without overflow or underflow
+SAFE_EXPONENT = 250
+
+
+def power_of_two_scale(V, F):
+    """A power of two to divide the coordinates of the faces ``F`` by before
+    multiplying them: the one just above their largest, or 1.0 when they are
+    safe as they are (:data:`SAFE_EXPONENT`; none; all zero). Dividing by it
+    is exact, so the products of the scaled coordinates neither overflow (at
+    1e200 area normals did, and ``inf - inf`` gave NaN) nor underflow (at
+    1e-200 they were zero), and give the same bits where neither happened."""
+    if F.size == 0:
+        return 1.0
+    largest = float(np.abs(V).max(axis=1)[F].max())
+    exponent = int(np.frexp(largest)[1])
+    if largest == 0 or abs(exponent) < SAFE_EXPONENT:
+        return 1.0
+    return float(np.ldexp(1.0, exponent))
+
+
+def scaled_area_normals(V, F):
+    """The area normals (m,3) of ``F`` over ``V / s`` and ``s``
+    (:func:`power_of_two_scale`): the true normals are ``s * s`` times them."""
+    s = power_of_two_scale(V, F)
+    return area_normals_rows(V / s if s != 1.0 else V, F.T), s
+
+
 def face_normals(V, F, *, normalize=True):
     """Per-face normals, (m,3) float64; unnormalised normals have length
-    twice the face area. Degenerate faces get a zero normal.
+    twice the face area (infinite where that is beyond the floats).
+    Degenerate faces get a zero normal; unit normals are found at any scale.
 
     Raises :class:`InvalidMeshError` for a malformed mesh (:func:`check_mesh`).
     Inside ``core``, on checked arrays, :func:`area_normals_rows` of ``F.T``
     is the same without the check."""
     V, F = check_mesh(V, F, where="face_normals", copy=False)
-    N = area_normals_rows(V, F.T)
-    return unit_rows(N) if normalize else N
+    N, s = scaled_area_normals(V, F)
+    if normalize:
+        return unit_rows(N)
+    with np.errstate(over="ignore"):
+        return N * s * s if s != 1.0 else N     # twice: 0 * (s * s) was NaN at inf
 
 
 def turned_faces(V_rest, V_new, F):
@@ -454,22 +498,26 @@ def squared_edges(V, F):
 
 
 def face_areas(V, F):
-    """Per-face areas, (m,) float64.
+    """Per-face areas, (m,) float64 (infinite where beyond the floats, never
+    NaN).
 
     Raises :class:`InvalidMeshError` for a malformed mesh (:func:`check_mesh`)."""
     V, F = check_mesh(V, F, where="face_areas", copy=False)
-    return 0.5 * np.linalg.norm(area_normals_rows(V, F.T), axis=1)
+    N, s = scaled_area_normals(V, F)
+    with np.errstate(over="ignore"):
+        return 0.5 * np.linalg.norm(N, axis=1) * s * s
 
 
 def vertex_normals(V, F):
     """Area-weighted, normalised per-vertex normals, (n,3) float64.
 
-    Vertices in no face (or only degenerate faces) get a zero normal.
+    Vertices in no face (or only degenerate faces) get a zero normal; found
+    at any scale (:func:`power_of_two_scale`).
     Raises :class:`InvalidMeshError` for a malformed mesh (:func:`check_mesh`).
     """
     V, F = check_mesh(V, F, where="vertex_normals", copy=False)
     n = V.shape[0]
-    N = area_normals_rows(V, F.T)
+    N, _ = scaled_area_normals(V, F)
     out = np.empty((n, 3))
     for k in range(3):
         out[:, k] = (np.bincount(F[:, 0], N[:, k], n) + np.bincount(F[:, 1], N[:, k], n)
@@ -485,9 +533,7 @@ def enclosed_volume(V, F):
     V, F = check_mesh(V, F, where="enclosed_volume", copy=False)
     if F.shape[0] == 0:
         return 0.0
-    # coordinates over a power of two near their largest (exact: the same bits where
-    # nothing overflows; at 1e150 the products overflowed and inf - inf gave NaN)
-    scale = np.ldexp(1.0, int(np.frexp(float(np.abs(V[F]).max()))[1]))
+    scale = power_of_two_scale(V, F)          # at 1e150 the products overflowed
     a, b, c = (V[F[:, k]] / scale for k in range(3))
     volume = np.einsum("ij,ij->i", a, cross_rows(b, c)).sum() / 6.0
     with np.errstate(over="ignore"):

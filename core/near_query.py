@@ -60,6 +60,7 @@ import numpy as np
 from numpy.lib.stride_tricks import sliding_window_view
 
 from .errors import InvalidArgumentError
+from .mesh import check_finite_rows
 from .spatial import PRUNE_SLACK, TriangleIndex, closest_pairs, closest_result
 from .pages import plain_pages
 
@@ -262,12 +263,7 @@ def _check_points(P):
     if P.ndim != 2 or P.shape[1] != 3:
         raise InvalidArgumentError(
             f"NearQuery.closest: P must be (q,3) floats, got {P.shape} {P.dtype}")
-    bad = ~np.isfinite(P).all(axis=1)
-    if bad.any():
-        k = int(np.flatnonzero(bad)[0])
-        raise InvalidArgumentError(
-            f"NearQuery.closest: {int(bad.sum())} query points have NaN or infinite "
-            f"coordinates, e.g. point {k} = {P[k].tolist()}")
+    check_finite_rows(P, where="NearQuery.closest", what="query points")
     return P
 
 

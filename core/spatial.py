@@ -79,7 +79,8 @@ from typing import NamedTuple
 import numpy as np
 
 from .errors import InvalidArgumentError
-from .mesh import check_mesh, check_number, check_reach, cross_rows, unit_rows
+from .mesh import (check_finite_rows, check_mesh, check_number, check_reach, cross_rows,
+                   unit_rows)
 from ._groups import group_argmin, ragged_ranges
 from ._parallel import blocks, run_each
 from .pages import plain_pages
@@ -376,10 +377,7 @@ def point_triangle_closest(P, A, B, C):
         if X.ndim != 2 or X.shape[1] != 3:
             raise InvalidArgumentError(
                 f"point_triangle_closest: {name} must be (k,3) floats, got {X.shape}")
-        if not np.isfinite(X).all():
-            raise InvalidArgumentError(
-                f"point_triangle_closest: {name} has NaN or infinite coordinates, "
-                f"e.g. row {int(np.flatnonzero(~np.isfinite(X).all(axis=1))[0])}")
+        check_finite_rows(X, where="point_triangle_closest", what=f"rows of {name}")
         arrs.append(X)
     P, A, B, C = arrs
     if not (P.shape[0] == A.shape[0] == B.shape[0] == C.shape[0]):
@@ -1106,12 +1104,7 @@ class TriangleIndex:
         if P.ndim != 2 or P.shape[1] != 3:
             raise InvalidArgumentError(
                 f"TriangleIndex.closest: P must be (q,3) floats, got {P.shape} {P.dtype}")
-        bad = ~np.isfinite(P).all(axis=1)
-        if bad.any():
-            k = int(np.flatnonzero(bad)[0])
-            raise InvalidArgumentError(
-                f"TriangleIndex.closest: {int(bad.sum())} query points have NaN or infinite "
-                f"coordinates, e.g. point {k} = {P[k].tolist()}")
+        check_finite_rows(P, where="TriangleIndex.closest", what="query points")
         nq = P.shape[0]
         best = _Best(nq)
         if nq:

@@ -155,7 +155,7 @@ import numpy as np
 from . import _refine as _rf
 from . import _stencils as _st
 from .errors import InvalidArgumentError
-from .mesh import check_count, check_faces, check_mesh
+from .mesh import check_count, check_faces, check_finite_rows, check_mesh
 from .pages import plain_pages
 
 SCHEMES = ("butterfly", "loop")
@@ -205,8 +205,9 @@ class SubdivisionOperator:
     def _as_2d(self, X, n, what):
         """``X`` as (n, k) float64 values and whether it was (n,): real
         numbers only (strings, booleans and complex numbers were taken, a
-        ragged list was NumPy's ValueError); not checked for NaN here, on the
-        hot path of every deform and fit (NaN in, NaN out)."""
+        ragged list was NumPy's ValueError). NaN is refused by :meth:`apply`
+        (coarse values: few) but not by :meth:`apply_transpose`, on the hot
+        path of every fit (fine values: NaN in, NaN out)."""
         try:
             A = np.asarray(X)
         except ValueError:
@@ -233,8 +234,12 @@ class SubdivisionOperator:
         Returns
         -------
         (n_fine, k) or (n_fine,) float64, a new array.
+
+        Raises :class:`InvalidArgumentError` for values of the wrong shape or
+        kind, or NaN / infinite values (naming the first coarse vertex).
         """
         X, one_d = self._as_2d(Vc, self.n_coarse, "apply")
+        check_finite_rows(X, where="SubdivisionOperator.apply", what="coarse vertices")
         Xt = np.ascontiguousarray(X.T)          # column-major: each gather reads one column
         if not self.stencils:
             return Xt[0].copy() if one_d else np.ascontiguousarray(Xt.T)

@@ -239,3 +239,32 @@ def test_enclosed_volume_scales_as_the_cube_of_the_size_and_names_what_floats_ca
     assert core.enclosed_volume(V * 1e150, F[:, ::-1]) == -np.inf
     assert core.enclosed_volume(V * 1e-150, F) == 0.0
     assert core.enclosed_volume(V, F[:0]) == 0.0
+
+
+@pytest.mark.parametrize("s", [1e200, 1e-200, 2.0 ** 600, 2.0 ** -600])
+def test_normals_and_areas_are_found_at_any_scale(s):
+    # normals do not depend on the size: at 1e200 the cross products overflowed (inf - inf
+    # gave NaN normals and NaN areas), at 1e-200 they underflowed (zero normals)
+    V, F = icosphere(2)
+    V = V + [0.3, -0.2, 0.1]                            # no coordinate a power of two
+    for fn in (core.vertex_normals, core.face_normals):
+        N, Ns = fn(V, F), fn(V * s, F)
+        np.testing.assert_allclose(Ns, N, rtol=0, atol=1e-15)
+        np.testing.assert_allclose(np.linalg.norm(Ns, axis=1), 1.0, rtol=0, atol=1e-15)
+    A, As = core.face_areas(V, F), core.face_areas(V * s, F)
+    if s > 1e150:                                         # beyond the floats: inf, never NaN
+        assert np.isposinf(As).all()
+        assert np.isposinf(core.face_normals(V * s, F, normalize=False)).any()
+    else:
+        np.testing.assert_allclose(As, A * s * s, rtol=1e-14)
+    # a power of two leaves the same bits at ordinary sizes
+    assert (core.face_areas(V * 2.0 ** 30, F) == A * 2.0 ** 60).all()
+    assert (core.vertex_normals(V * 2.0 ** 30, F) == core.vertex_normals(V, F)).all()
+
+
+def test_scale_of_meshes_without_faces_or_extent():
+    V = np.zeros((3, 3))
+    F = np.array([[0, 1, 2]])
+    assert core.face_areas(V, F).tolist() == [0.0]
+    assert core.vertex_normals(V, F).tolist() == [[0.0] * 3] * 3
+    assert core.face_areas(V, F[:0]).shape == (0,)

@@ -178,7 +178,7 @@ def test_kernel_bad_input():
         point_triangle_closest(np.zeros((3, 3)), z, z, z)
     bad = z.copy()
     bad[1, 2] = np.nan
-    with pytest.raises(InvalidArgumentError, match="B has NaN"):
+    with pytest.raises(InvalidArgumentError, match=r"1 rows of B have NaN or infinite values, e.g. row 1 = \[0.0, 0.0, nan\]"):
         point_triangle_closest(z, z, bad, z)
 
 

@@ -616,6 +616,14 @@ def test_bad_arguments_raise():
     op = subdivision_operator(F, 6)
     with pytest.raises(InvalidArgumentError, match="apply"):
         op.apply(np.zeros((5, 3)))
+    # NaN coarse values are named (they gave NaN fine positions, silently)
+    bad = V.copy()
+    bad[[2, 4], 1] = [np.nan, np.inf]
+    with pytest.raises(InvalidArgumentError, match=r"apply: 2 coarse vertices have NaN or infinite "
+                                                   r"values, e.g. row 2 = \[.*nan"):
+        op.apply(bad)
+    with pytest.raises(InvalidArgumentError, match="1 coarse vertices"):
+        op.apply(np.where(np.arange(6) == 5, np.nan, 0.0))
 
 
 def test_isolated_vertices_components_levels_zero_and_empty():
