@@ -14,6 +14,8 @@ changed and re-raises:
   their vertex positions, shape keys (those added removed, the others'
   shapes put back) and MeshAdjust attributes (the
   binding's, the rest shape, the crease flags: ``meshadjust_*``);
+* every object's and mesh's name, as it was when the block began (a step
+  renames the data it writes: the detail mesh after its edited original);
 * the caches of what the block wrote are dropped (:func:`on_undo`);
 * meshes the block retired (:func:`retire`: an object's old mesh, the old
   detail data) are only removed when it succeeds, so a failure can give
@@ -167,6 +169,24 @@ def _restore_attributes(mesh, kept):
             attr.data.foreach_set(field, values)
 
 
+def _names():
+    """``{ID: name}`` of every object and mesh."""
+    return {id_: id_.name for coll in (bpy.data.objects, bpy.data.meshes) for id_ in coll}
+
+
+def _restore_names(names):
+    """Give the objects and meshes of ``names`` (:func:`_names`, those still
+    there) their names back: the renamed ones first to a temporary name, so
+    two that swapped names do not collide (Blender would add '.001')."""
+    changed = [(id_, name) for id_, name in names.items()
+               if id_.name_full in bpy.data.objects or id_.name_full in bpy.data.meshes
+               if id_.name != name]
+    for i, (id_, _) in enumerate(changed):
+        id_.name = f".meshadjust_undo_{i}"
+    for id_, name in changed:
+        id_.name = name
+
+
 class Rollback:
     """What existed when the block began, and what to put back."""
 
@@ -177,6 +197,7 @@ class Rollback:
         self.records = {obj: _object_record(obj) for obj in self.objects
                         if obj.meshadjust.role != 'NONE'}
         self.meshes = set(bpy.data.meshes)
+        self.names = _names()
         self.positions = {}
         self.keys = {}
         self.attributes = {}
@@ -187,10 +208,11 @@ class Rollback:
         """Remember ``mesh``'s positions, shape keys' names and MeshAdjust
         attributes before a write (nothing for a mesh made inside the block:
         an undo removes it)."""
-        if mesh is not None and mesh in self.meshes and mesh.name_full not in self.positions:
-            self.positions[mesh.name_full] = (mesh, _positions_of(mesh))
-            self.keys[mesh.name_full] = (mesh, _key_shapes(mesh))
-            self.attributes[mesh.name_full] = (mesh, _attributes_of(mesh))
+        if mesh is not None and mesh in self.meshes and mesh not in self.positions:
+            # (by the mesh, not its name: a step may rename it between two keeps)
+            self.positions[mesh] = (mesh, _positions_of(mesh))
+            self.keys[mesh] = (mesh, _key_shapes(mesh))
+            self.attributes[mesh] = (mesh, _attributes_of(mesh))
 
     def keep_object(self, obj):
         """Remember ``obj``'s mesh, transform, visibility and state (those of
@@ -209,6 +231,7 @@ class Rollback:
                 _remove(mesh, *how)
 
     def undo(self):
+        """The block failed: put back what it changed (see the module's docstring)."""
         for fn in reversed(self.forget):
             fn()
         for obj, record in self.records.items():
@@ -218,22 +241,29 @@ class Rollback:
             bpy.data.objects.remove(obj)
         for mesh in [m for m in bpy.data.meshes if m not in self.meshes]:
             bpy.data.meshes.remove(mesh)
-        for mesh, names in self.keys.values():
-            sk = mesh.shape_keys
-            if sk is None:
-                continue
-            owners = [o for o in bpy.data.objects if o.data == mesh]
-            for kb in reversed([kb for kb in sk.key_blocks if names is None or kb.name not in names]):
-                if owners:
-                    owners[0].shape_key_remove(kb)
-            for kb in sk.key_blocks if names is not None else ():
-                co = names.get(kb.name)
-                if co is not None and len(kb.data) * 3 == co.size:
-                    kb.data.foreach_set("co", co)
+        _restore_names(self.names)
+        for mesh, shapes in self.keys.values():
+            _restore_keys(mesh, shapes)
         for mesh, V in self.positions.values():
             _put_positions(mesh, V)
         for mesh, kept in self.attributes.values():
             _restore_attributes(mesh, kept)
+
+
+def _restore_keys(mesh, shapes):
+    """Put the shape keys of ``mesh`` back to ``shapes`` (:func:`_key_shapes`):
+    those added since removed, the others' shapes rewritten."""
+    sk = mesh.shape_keys
+    if sk is None:
+        return
+    owners = [o for o in bpy.data.objects if o.data == mesh]
+    for kb in reversed([kb for kb in sk.key_blocks if shapes is None or kb.name not in shapes]):
+        if owners:
+            owners[0].shape_key_remove(kb)
+    for kb in sk.key_blocks if shapes is not None else ():
+        co = shapes.get(kb.name)
+        if co is not None and len(kb.data) * 3 == co.size:
+            kb.data.foreach_set("co", co)
 
 
 def keep(mesh):
