@@ -25,6 +25,7 @@ from dataclasses import dataclass
 
 from .. import core
 from . import blender_io
+from .file_check import InputFileError
 
 #: a cage with more than (1 + TARGET_SLACK) x its target faces is a warning
 TARGET_SLACK = 0.05
@@ -75,7 +76,7 @@ class StepFailed(Exception):
 def _cause(exc):
     """An exception as a user-facing cause: our own errors by their message,
     anything else with its type."""
-    if isinstance(exc, (core.MeshAdjustError, blender_io.BlenderIOError)):
+    if isinstance(exc, (core.MeshAdjustError, blender_io.BlenderIOError, InputFileError)):
         return str(exc)
     if isinstance(exc, OSError) and exc.strerror:
         return f"{exc.strerror}: {exc.filename}" if exc.filename else exc.strerror
@@ -128,7 +129,7 @@ def _write(path, V, F, log):
         if ext.lower() in CORE_FORMATS:
             core.write_mesh(tmp, V, F)
         else:
-            blender_io.write_with_blender(tmp, V, F, log, stem)
+            blender_io.write_with_blender(tmp, V, F, log, name=stem, shown=path)
         os.replace(tmp, path)
     finally:
         if os.path.exists(tmp):

@@ -12,7 +12,8 @@ import numpy as np
 import pytest
 
 import core
-from cli.blender_io import grouped_warnings, ply_size_problem
+from cli.blender_io import grouped_warnings
+from cli.ply_file import ply_size_problem
 from tests.mesh_factory import (cad_cylinder, icosphere, octahedron, shared_mesh_path, tetrahedron,
                                 write_binary_stl, write_ply)
 

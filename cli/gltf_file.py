@@ -1,0 +1,146 @@
+"""glTF files: checked before Blender's importer reads them, and their axes.
+
+Blender's glTF importer decodes every accessor with ``np.frombuffer`` and
+fails with a Python traceback ("ValueError: buffer is smaller than requested
+size") when a buffer holds fewer bytes than the file's JSON says.
+:func:`check` compares, before Blender, what each buffer holds (the ``.bin``
+file beside a ``.gltf``, a GLB's BIN chunk, a ``data:`` URI) with the
+``byteLength`` declared, and each buffer view and accessor with the bytes
+they reach:
+
+    GLB:  magic 'glTF' | version 2 | length | JSON chunk (length, 'JSON') | BIN chunk (length, 'BIN\\0')
+    accessor (count x type x component) -> bufferView (offset, length, stride) -> buffer (byteLength, uri)
+
+glTF is Y-up; Blender's importer turns it Z-up (``(x, y, z)`` of the file
+is ``(x, -z, y)`` in Blender). :data:`FROM_BLENDER` turns it back, so the
+batch works in the file's own coordinates (and exports glTF without the
+turn: ``export_yup=False``).
+"""
+
+import base64
+import json
+import os
+import struct
+import urllib.parse
+
+import numpy as np
+
+from .file_check import FileCheck, InputFileError
+
+#: a file's ``(x, y, z)`` from Blender's: ``V_file = V_blender @ FROM_BLENDER``
+FROM_BLENDER = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])
+_GLB_HEAD, _CHUNK_HEAD = 12, 8
+_JSON_CHUNK, _BIN_CHUNK = 0x4E4F534A, 0x004E4942
+_COMPONENT_BYTES = {5120: 1, 5121: 1, 5122: 2, 5123: 2, 5125: 4, 5126: 4}
+_TYPE_COMPONENTS = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4, "MAT2": 4, "MAT3": 9, "MAT4": 16}
+
+
+def _glb(path, name):
+    """``(JSON document, BIN chunk length or None)`` of a GLB file."""
+    with open(path, "rb") as fh:
+        data = fh.read()
+    if len(data) < _GLB_HEAD + _CHUNK_HEAD or data[:4] != b"glTF":
+        raise InputFileError(f"{name}: not a GLB file (no 'glTF' header)")
+    length = struct.unpack_from("<I", data, 8)[0]
+    if length != len(data):
+        raise InputFileError(f"{name}: its GLB header says {length:,} bytes, the file has "
+                             f"{len(data):,} (file truncated?)")
+    chunks, pos = {}, _GLB_HEAD
+    while pos + _CHUNK_HEAD <= len(data):
+        size, kind = struct.unpack_from("<II", data, pos)
+        if pos + _CHUNK_HEAD + size > len(data):
+            raise InputFileError(f"{name}: a GLB chunk of {size:,} bytes at byte {pos:,} runs "
+                                 f"past the end of the file ({len(data):,} bytes)")
+        chunks.setdefault(kind, data[pos + _CHUNK_HEAD:pos + _CHUNK_HEAD + size])
+        pos += _CHUNK_HEAD + size
+    if _JSON_CHUNK not in chunks:
+        raise InputFileError(f"{name}: a GLB file without its JSON chunk")
+    doc = _json(chunks[_JSON_CHUNK], name)
+    return doc, (len(chunks[_BIN_CHUNK]) if _BIN_CHUNK in chunks else None)
+
+
+def _json(text, name):
+    try:
+        doc = json.loads(text)
+    except (ValueError, UnicodeDecodeError) as exc:
+        raise InputFileError(f"{name}: its glTF JSON does not parse ({exc})") from None
+    if not isinstance(doc, dict):
+        raise InputFileError(f"{name}: its glTF JSON is not an object")
+    return doc
+
+
+def _held(buffer, i, path, name, bin_length):
+    """Bytes buffer ``i`` holds: its GLB BIN chunk, ``data:`` URI or file."""
+    uri = buffer.get("uri")
+    if uri is None:
+        if bin_length is None:
+            raise InputFileError(f"{name}: buffer {i} has no uri and the file no BIN chunk")
+        return bin_length, "the GLB's BIN chunk"
+    if uri.startswith("data:"):
+        try:
+            return len(base64.b64decode(uri.partition(",")[2], validate=False)), "its data: URI"
+        except ValueError:
+            raise InputFileError(f"{name}: buffer {i}'s data: URI is not base64") from None
+    file = os.path.join(os.path.dirname(path), urllib.parse.unquote(uri))
+    if not os.path.isfile(file):
+        raise InputFileError(f"{name}: buffer {i}'s file {uri} is missing (looked for {file})")
+    return os.path.getsize(file), uri
+
+
+def _number(obj, key, default=0):
+    v = obj.get(key, default) if isinstance(obj, dict) else None
+    return v if isinstance(v, int) and not isinstance(v, bool) and v >= 0 else None
+
+
+def _check_buffers(doc, path, name, bin_length):
+    """Each buffer holds its ``byteLength``; each view lies in its buffer."""
+    buffers = doc.get("buffers", [])
+    for i, b in enumerate(buffers):
+        held, where = _held(b, i, path, name, bin_length)
+        need = _number(b, "byteLength", None)
+        if need is not None and held < need:
+            raise InputFileError(f"{name}: buffer {i} ({where}) holds {held:,} bytes, the file "
+                                 f"says {need:,} (file truncated?)")
+    for j, v in enumerate(doc.get("bufferViews", [])):
+        k, off, length = _number(v, "buffer", None), _number(v, "byteOffset"), \
+            _number(v, "byteLength", None)
+        if None in (k, off, length) or k >= len(buffers):
+            raise InputFileError(f"{name}: bufferView {j} names no valid buffer, offset or length")
+        size = _number(buffers[k], "byteLength", None) or 0
+        if off + length > size:
+            raise InputFileError(f"{name}: bufferView {j} reaches byte {off + length:,} of buffer "
+                                 f"{k}, which holds {size:,}")
+
+
+def _check_accessors(doc, name):
+    """Each accessor's elements lie in its buffer view."""
+    views = doc.get("bufferViews", [])
+    for i, a in enumerate(doc.get("accessors", [])):
+        if not isinstance(a, dict) or "bufferView" not in a:
+            continue                              # all zeros, or sparse only: nothing to read
+        j, off, count = _number(a, "bufferView", None), _number(a, "byteOffset"), \
+            _number(a, "count", None)
+        width = _COMPONENT_BYTES.get(a.get("componentType"), 0) * \
+            _TYPE_COMPONENTS.get(a.get("type"), 0)
+        if None in (j, off, count) or j >= len(views) or not width:
+            raise InputFileError(f"{name}: accessor {i} names no valid bufferView, count or type")
+        stride = _number(views[j], "byteStride") or width
+        need = off + (stride * (count - 1) + width if count else 0)
+        if need > views[j]["byteLength"]:
+            raise InputFileError(f"{name}: accessor {i} reads {need:,} bytes of bufferView {j}, "
+                                 f"which holds {views[j]['byteLength']:,} (file truncated?)")
+
+
+def check(path):
+    """What a glTF or GLB file's own structure says (:class:`FileCheck`);
+    raises :class:`InputFileError` naming the file when a buffer holds less
+    than its JSON declares or a view or accessor reaches past it."""
+    name = os.path.basename(path)
+    if path.lower().endswith(".glb"):
+        doc, bin_length = _glb(path, name)
+    else:
+        with open(path, "rb") as fh:
+            doc, bin_length = _json(fh.read(), name), None
+    _check_buffers(doc, path, name, bin_length)
+    _check_accessors(doc, name)
+    return FileCheck()

@@ -1,0 +1,252 @@
+"""PLY files checked before Blender's importer reads them.
+
+Blender's PLY importer reads a file whose header's counts disagree with its
+data on: it takes the next element's bytes for this one's, reads past the
+end keeping what it could, or stops at the declared count and drops what
+follows, and it turns NaN coordinates into 0. :func:`check` finds those
+cases first and names the file and the counts:
+
+    ply / format ascii|binary_little_endian|binary_big_endian 1.0 /
+    element vertex N / property float x ... / element face M /
+    property list uchar int vertex_indices / end_header / N records / M records
+"""
+
+import os
+
+import numpy as np
+
+from .file_check import FileCheck, InputFileError
+
+PLY_TYPES = {"char": "i1", "int8": "i1", "uchar": "u1", "uint8": "u1", "short": "i2",
+              "int16": "i2", "ushort": "u2", "uint16": "u2", "int": "i4", "int32": "i4",
+              "uint": "u4", "uint32": "u4", "float": "f4", "float32": "f4", "double": "f8",
+              "float64": "f8"}
+#: bytes of a blank line (and, after a binary file's data, of padding with 0)
+_BLANK = (9, 10, 13, 32)
+
+
+def ply_header(path):
+    """``(format, header length in bytes, [(element, count, [(type, name)])])``
+    of a PLY file (a list property's type is ``("list", count type, item
+    type)``), or None."""
+    with open(path, "rb") as fh:
+        head = fh.read(1 << 16)
+    end = head.find(b"end_header")
+    if not head.startswith(b"ply") or end < 0:
+        return None
+    length = head.index(b"\n", end) + 1
+    fmt, elements = None, []
+    for line in head[:end].decode("ascii", "replace").splitlines():
+        parts = line.split()
+        if parts[:1] == ["format"] and len(parts) > 1:
+            fmt = parts[1]
+        elif parts[:1] == ["element"] and len(parts) == 3 and parts[2].isdigit():
+            elements.append((parts[1], int(parts[2]), []))
+        elif parts[:1] == ["property"] and elements and len(parts) >= 3:
+            kind = tuple(parts[1:4]) if parts[1] == "list" and len(parts) == 5 else parts[1]
+            elements[-1][2].append((kind, parts[-1]))
+    return fmt, length, elements
+
+
+def ply_size_problem(path):
+    """Why a PLY file does not hold what its header declares, in words that
+    name the file and the counts (a file cut short, a count too large or too
+    small), or None.
+
+    Blender's importer reads such a file on: it takes the next element's
+    bytes for this one's and fails with "Invalid face size, must be between 1
+    and 255", reads past the end and keeps what it could with a warning per
+    bad index, or stops at the declared counts and drops the rest silently.
+    Checked here, before Blender: ASCII, a line per element, the first and
+    last line of each holding the values its properties give, nothing but
+    blank lines after the last; binary, the bytes of each fixed-size element
+    and of an element with one list property (faces) whose records all have
+    the first one's length (all triangles, all quads), and for mixed records
+    at least 3 indices a face (1 item a record of another list) and a first
+    record that is a face (a count of 1-255, indices of declared vertices);
+    after the last element, nothing but padding (zero bytes, blanks)."""
+    header = ply_header(path)
+    if not header or not header[2]:
+        return None
+    fmt, length, elements = header
+    data = np.memmap(path, dtype=np.uint8, mode="r") if os.path.getsize(path) \
+        else np.zeros(0, np.uint8)
+    said = (f"{os.path.basename(path)}: its header declares "
+            f"{' and '.join(f'{n:,} {e}' for e, n, _ in elements)} elements")
+    if fmt == "ascii":
+        return _ascii_problem(data, length, elements, said)
+    order = {"binary_little_endian": "<", "binary_big_endian": ">"}.get(fmt)
+    if order is None or any(not _known_type(t) for _, _, props in elements for t, _ in props):
+        return None
+    return _binary_problem(path, data, order, length, elements, said)
+
+
+def _ascii_problem(data, length, elements, said):
+    """:func:`ply_size_problem` of an ASCII file (``said``: the message's
+    start, naming the file and the declared counts)."""
+    body = data[length:]
+    ends = np.flatnonzero(body == 10)
+    if body.size and body[-1] != 10:
+        ends = np.append(ends, body.size)              # a last line without its newline
+    need = sum(n for _, n, _ in elements)
+    if ends.size < need:
+        return (f"{said}, a line each ({need:,}), but the file has {ends.size:,} lines after "
+                f"its header: cut short, or a wrong count in the header")
+    starts = np.concatenate([[0], ends[:-1] + 1])
+    rest = body[starts[need]:] if ends.size > need else body[:0]
+    values = np.isin(rest, _BLANK, invert=True)
+    if values.any():
+        more = np.unique(np.cumsum(rest == 10)[values]).size     # lines holding a value
+        return (f"{said}, a line each ({need:,}), but {more:,} more lines with values follow "
+                f"them: the file holds more than its header declares (a wrong count; Blender's "
+                f"importer would drop them or misread them)")
+    header_lines = int(np.count_nonzero(data[:length] == 10))
+    first = 0
+    for element, count, props in elements:
+        for k in (first, first + count - 1) if count else ():
+            line = bytes(body[starts[k]:ends[k]]).split()
+            want = _ascii_values(line, props)
+            if want is not None and len(line) != want:
+                return (f"{said}, but the {element} record on line {header_lines + k + 1:,} "
+                        f"holds {len(line)} values, not the {want} its properties give: a "
+                        f"wrong count in the header, or a damaged file")
+        first += count
+    return None
+
+
+def _ascii_values(line, props):
+    """Values an ASCII record of ``props`` holds given its words ``line``
+    (a list property's count read from it), or None when unknown."""
+    lists = [k for k, (t, _) in enumerate(props) if isinstance(t, tuple)]
+    if not lists:
+        return len(props)
+    k = lists[0]
+    if len(lists) > 1 or len(line) <= k or not line[k].isdigit():
+        return None
+    return len(props) + int(line[k])
+
+
+def _binary_problem(path, data, order, length, elements, said):
+    """:func:`ply_size_problem` of a binary file."""
+    size = data.size
+    pos = length
+    n_vertices = {e: n for e, n, _ in elements}.get("vertex", 2**63 - 1)
+    for element, count, props in elements:
+        layout = _records(path, order, props, pos, count, size, n_vertices, element == "face")
+        if layout is None:
+            return None          # records of mixed lengths, no sign of a problem
+        got, end, bad_first = layout
+        if bad_first:
+            return (f"{said}, but the first {element} record (at byte {pos:,}) holds no valid "
+                    f"{element}: the data before it is not the size the header's counts give "
+                    f"(a wrong count), or the file is damaged")
+        if got is None or got < count:
+            where = (f"before its {count:,} {element} elements" if got is None else
+                     f"after {got:,} of the {count:,} {element} elements")
+            return (f"{said}, but the file ends ({size:,} bytes) {where}: cut short, or a wrong "
+                    f"count in the header")
+        pos = end
+    if np.isin(data[pos:], _BLANK + (0,), invert=True).any():
+        return (f"{said}, but {size - pos:,} bytes follow them (the file is {size:,} bytes, its "
+                f"elements end at byte {pos:,}): the file holds more than its header declares "
+                f"(a wrong count, or data appended; Blender's importer would drop them)")
+    return None
+
+
+def _known_type(t):
+    return t in PLY_TYPES or (isinstance(t, tuple) and t[1] in PLY_TYPES and t[2] in PLY_TYPES)
+
+
+def _records(path, order, props, pos, count, size, n_vertices, face):
+    """``(whole records in the file or None when unknown, end byte, first
+    record invalid)`` of a binary PLY element of ``count`` records at byte
+    ``pos`` (see :func:`ply_size_problem`; ``n_vertices``: the vertices
+    declared, bounding a face's indices; ``face``: the element is the faces,
+    whose records hold at least 3 indices); None for records of mixed
+    lengths that the file may hold."""
+    itemsize = {t: np.dtype(PLY_TYPES[t]).itemsize for t in PLY_TYPES}
+    lists = [k for k, (t, _) in enumerate(props) if isinstance(t, tuple)]
+    if not lists:
+        rec = sum(itemsize[t] for t, _ in props)
+        return (min(count, (size - pos) // rec) if rec else count), pos + count * rec, False
+    if count == 0:
+        return 0, pos, False
+    if len(lists) > 1:
+        return None
+    k = lists[0]
+    before = sum(itemsize[t] for t, _ in props[:k])
+    after = sum(itemsize[t] for t, _ in props[k + 1:])
+    _, ct, it = props[k][0]
+    at = pos + before + itemsize[ct]                    # the first record's indices
+    if at > size:
+        return 0, pos, False
+    data = np.memmap(path, dtype=np.uint8, mode="r")
+    c0 = int(np.frombuffer(data, dtype=order + PLY_TYPES[ct], count=1, offset=at - itemsize[ct])[0])
+    first = np.frombuffer(data, dtype=order + PLY_TYPES[it], offset=at,
+                          count=max(0, min(c0, (size - at) // itemsize[it])))
+    if not 1 <= c0 <= 255 or (first.size and (first.min() < 0 or first.max() >= n_vertices)):
+        return 0, pos, True
+    rec = before + itemsize[ct] + c0 * itemsize[it] + after
+    fits = min(count, (size - pos) // rec)
+    counts = np.frombuffer(data, offset=pos, count=fits, dtype=np.dtype(
+        {"names": ["c"], "formats": [order + PLY_TYPES[ct]], "offsets": [before],
+         "itemsize": rec}))["c"]
+    # the least a record can be: a face has 3 corners, another list 1 item
+    least = before + itemsize[ct] + (3 if face else 1) * itemsize[it] + after
+    if (counts == c0).all():
+        if fits == count:
+            return fits, pos + count * rec, False
+        if pos + fits * rec + (count - fits) * least > size:   # short even if the rest were least
+            return fits, pos + count * rec, False
+        return None
+    return (None, pos, False) if pos + count * least > size else None
+
+
+def count_nonfinite(path):
+    """Vertices with a coordinate that is NaN or infinite, read from the file
+    itself (Blender's importer turns those into 0); None when the layout is
+    not one read here (vertices not the first element, list properties on
+    them, a file cut short)."""
+    header = ply_header(path)
+    if not header or not header[2] or header[2][0][0] != "vertex":
+        return None
+    fmt, length, ((_, n, props), *_) = header
+    if any(t not in PLY_TYPES for t, _ in props) or not {"x", "y", "z"} <= {p for _, p in props}:
+        return None
+    if fmt == "ascii":
+        with open(path, "rb") as fh:
+            fh.seek(length)
+            text = fh.read()
+        try:
+            rows = b" ".join(text.split(b"\n", n)[:n])        # the vertex lines, one string
+            table = np.array(rows.split(), dtype=np.float64).reshape(n, len(props))
+        except ValueError:
+            return None
+        cols = [k for k, (_, name) in enumerate(props) if name in ("x", "y", "z")]
+        return int((~np.isfinite(table[:, cols]).all(axis=1)).sum())
+    order = {"binary_little_endian": "<", "binary_big_endian": ">"}.get(fmt)
+    if order is None:
+        return None
+    rec = np.dtype([(name, order + PLY_TYPES[t]) for t, name in props])
+    table = np.fromfile(path, dtype=rec, count=n, offset=length)
+    if table.shape[0] < n:
+        return None     # truncated: ply_size_problem says so
+    xyz = np.stack([table[c].astype(np.float64) for c in ("x", "y", "z")], axis=1)
+    return int((~np.isfinite(xyz).all(axis=1)).sum())
+
+
+def check(path):
+    """What a PLY file's own structure says (:class:`FileCheck`: the faces
+    its header declares); raises :class:`InputFileError` for a file Blender
+    would read wrong (:func:`count_nonfinite`, :func:`ply_size_problem`)."""
+    bad = count_nonfinite(path)
+    if bad:
+        raise InputFileError(f"{os.path.basename(path)}: {bad:,} "
+                             f"{'vertex' if bad == 1 else 'vertices'} with a coordinate that is "
+                             f"not a finite number (NaN or infinity; Blender's importer would "
+                             f"read them as 0)")
+    problem = ply_size_problem(path)
+    if problem:
+        raise InputFileError(problem)
+    header = ply_header(path)
+    return FileCheck({e: n for e, n, _ in header[2]}.get("face") if header else None)
