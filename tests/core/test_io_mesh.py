@@ -142,7 +142,9 @@ _BULK = [_BASE + "f 1 2 3\nf 2 4 3\n", (_BASE + "f 1 2 3\n").replace("\n", "\r\n
          _BASE + "f 1 2 3\nv 5 5 5\nf -1 -2 -3\n",
          _BASE + "vt 0 0\nvn 0 0 1\no thing\ng grp\ns off\nusemtl M\u00e4t\nf 1 2 3\n",
          "v 0 0 0 1 0 0\nv 1 0 0 0 1 0\nv 0 1 0 0 0 1\nf 1 2 3\n", "# c\n\n" + _BASE + "\n\n",
-         "v\t0\t0\t0  \nv +1 -0 .5\nv 1. 0e0 0\nf\t1 2  3 \n"]
+         "v\t0\t0\t0  \nv +1 -0 .5\nv 1. 0e0 0\nf\t1 2  3 \n",
+         # v/vt/vn words of every form, cut at their first "/" up to any separator
+         _BASE + "f 1/2/3\t2/x/y\x0b3// 4/\nf -1/1 2 -2//-7\f3/1/1/1\n"]
 #: files it leaves to the line reader (which reads them or names the line)
 _LINES = ["  v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n", _BASE + "f 1 2\n", _BASE + "f 1 2 5\n",
           _BASE + "f 0 1 2\n", _BASE + "f 1 2 3.5\n", _BASE + "f 1_0 2 3\n",
@@ -153,7 +155,9 @@ _LINES = ["  v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n", _BASE + "f 1 2\n", _BASE + "
           # no-break space inside a v/vt/vn word, a last line of just "v"
           _BASE + "f 1/1 /1 2 3\n", _BASE + "f 1/\u00a01 2//2 3//3\n", _BASE + "f 1 2 3\nv",
           # (a CLI fuzz: control bytes 0x1c-0x1f separate words in text mode)
-          _BASE + "f 1/1\x1c2/2 3/3 4/4\n", _BASE + "f 1 2 3/1\x1f-4\n"]
+          _BASE + "f 1/1\x1c2/2 3/3 4/4\n", _BASE + "f 1 2 3/1\x1f-4\n",
+          # a control byte that separates no words (the line reader keeps it in the word)
+          _BASE + "f 1/1\x01 2 3\n", _BASE + "f 1\x01/1 2 3\n"]
 
 
 @pytest.mark.parametrize("text", _BULK + _LINES)
