@@ -14,6 +14,11 @@ to where it ends. OBJ and SMF therefore never come here (the core's reader
 refuses them, naming the line); PLY, STL and glTF files are checked before
 Blender reads them (``ply_file``, ``stl_file``, ``gltf_file``), and the face
 count the file declares is compared with what was imported.
+
+Meshes come back in the file's own coordinates: a glTF node's transform is
+applied and Blender's turn of glTF's Y-up into its Z-up undone
+(``gltf_file.FROM_BLENDER``); glTF is written without that turn, so every
+output holds the numbers of its input's frame.
 """
 
 import contextlib
@@ -195,7 +200,8 @@ def _empty_scene(log):
 
 def read_with_blender(path, log):
     """``(V, F, n_polygons, notes, warnings)`` of a file read by Blender's
-    importer into an empty scene (a glTF node's transform applied). The file is checked first (:data:`FILE_CHECKS`:
+    importer into an empty scene, in the file's own coordinates (see the
+    module's docstring). The file is checked first (:data:`FILE_CHECKS`:
     raises ``file_check.InputFileError`` naming it, before Blender is
     loaded); ``notes`` and ``warnings`` hold the check's, faces the importer
     dropped and the warnings in its log."""
@@ -206,6 +212,8 @@ def read_with_blender(path, log):
     arrays = _mesh_io().read_object(obj)
     M = np.array([list(row) for row in obj.matrix_world])
     V = arrays.V @ M[:3, :3].T + M[:3, 3]              # a node's transform applied
+    if ext in (".gltf", ".glb"):
+        V = V @ gltf_file.FROM_BLENDER
     notes, warnings = list(found.notes), list(found.warnings)
     expected = found.expected_faces
     if expected is not None and arrays.n_polygons < expected:
@@ -219,7 +227,8 @@ def read_with_blender(path, log):
 
 def write_with_blender(path, V, F, log, *, name, shown):
     """Write a triangle mesh with Blender's exporter chosen by the extension
-    (``.ply``, ``.stl`` or ``.glb``), its object and mesh named ``name`` (formats that store names,
+    (``.ply``, ``.stl`` or ``.glb``, written as given: glTF without the turn
+    to Y-up), its object and mesh named ``name`` (formats that store names,
     as glTF does, keep it: not the path's, which may be a temporary one);
     an error names ``shown``, the path the user asked for."""
     # an empty scene, as for reading: the view layer of a scene whose objects an
@@ -238,7 +247,7 @@ def write_with_blender(path, V, F, log, *, name, shown):
                      ".stl": lambda: bpy.ops.wm.stl_export(filepath=path,
                                                             export_selected_objects=True)}
         gltf = lambda: bpy.ops.export_scene.gltf(filepath=path, use_selection=True,  # noqa: E731
-                                                 export_format='GLB')
+                                                 export_format='GLB', export_yup=False)
         trace = []
         with captured_output(log) as cap:
             failure = _failure_of(exporters.get(fmt, gltf), trace)
