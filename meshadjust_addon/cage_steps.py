@@ -237,7 +237,7 @@ def prepare_cage_job(cage, *, levels=None, scheme=None, from_rest=False, keep_ed
     results.follow_renamed_keys(source)      # (a renamed key is muted for the read, as its name was)
     src, fp = read_source(source)
     if results.shape_key_of(source, cage) is not None:      # (a bind rewrites the key too)
-        why = results.shape_key_unavailable(source, src.V.shape[0])
+        why = results.shape_key_unavailable(source, src.V.shape[0], cage)
         if why:
             raise core.MeshAdjustError(f"the shape key of '{cage.name}': {why}")
     if levels in (None, 0):
@@ -478,7 +478,7 @@ def _refine_compute(cage, output, levels, scheme):
     turned = turned_cage_note(cage, binding, V_cage)
     if turned:
         warnings.append(turned)
-    why = results.shape_key_unavailable(source, binding.n_dense) if output == 'SHAPE_KEY' else \
+    why = results.shape_key_unavailable(source, binding.n_dense, cage) if output == 'SHAPE_KEY' else \
         results.edited_problem(edited) if output in ('EDITED', 'BOTH') else None
     why = why or results.edit_mode_problem(cs.refined if output in ('REFINED', 'BOTH') else None)
     if why:

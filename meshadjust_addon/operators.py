@@ -15,7 +15,7 @@ import threading
 import bpy
 
 from .. import core
-from . import api, results, settings, staleness, store
+from . import api, basis, results, settings, staleness, store
 
 USER_ERRORS = (core.MeshAdjustError,)
 
@@ -501,6 +501,20 @@ class MESHADJUST_OT_edit_cage(_CageStep, bpy.types.Operator):
         return {'FINISHED'}
 
 
+class MESHADJUST_OT_restore_basis(_CageStep, bpy.types.Operator):
+    """Put back the source's Basis shape key from the mesh that was bound, after it was deleted and MeshAdjust's key became the source's reference key"""
+
+    bl_idname = "meshadjust.restore_basis"
+    bl_label = "Restore Basis"
+    bl_options = {'REGISTER', 'UNDO'}
+
+    _needs_binding = True
+
+    def execute(self, context):
+        return run_each(self, [cage_of(context.active_object)],
+                        lambda cage: api.Report(basis.restore_basis(cage)))
+
+
 class MESHADJUST_OT_apply_defaults(bpy.types.Operator):
     """Set this scene's MeshAdjust settings back to the add-on preferences' values (new scenes get them on their own)"""
 
@@ -518,4 +532,4 @@ class MESHADJUST_OT_apply_defaults(bpy.types.Operator):
 
 CLASSES = (MESHADJUST_OT_simplify, MESHADJUST_OT_fit_cage, MESHADJUST_OT_bind,
            MESHADJUST_OT_refine, MESHADJUST_OT_subdivide, MESHADJUST_OT_edit_cage,
-           MESHADJUST_OT_apply_defaults)
+           MESHADJUST_OT_restore_basis, MESHADJUST_OT_apply_defaults)

@@ -17,6 +17,7 @@ import bpy
 
 from . import settings
 from .operators import binding_warnings, cage_of, cage_unavailable, simplify_unavailable
+from .results import reference_key_problem
 
 
 def panel_state(context):
@@ -55,6 +56,14 @@ def refine_messages(context):
         if cage.meshadjust.last_report:
             out.append((cage.meshadjust.last_report[:160], False))
     return out
+
+
+def basis_lost(context):
+    """Why the active cage's shape key cannot be written because the source's
+    Basis was deleted (the Edit Cage panel then offers Restore Basis), or None."""
+    cage = cage_of(context.active_object)
+    source = cage.meshadjust.source if cage is not None else None
+    return reference_key_problem(source, cage) if source is not None else None
 
 
 class _Panel:
@@ -127,6 +136,10 @@ class MESHADJUST_PT_edit(_Panel, bpy.types.Panel):
         row.operator("meshadjust.bind", icon='LINKED')
         if reason:
             layout.label(text=reason, icon='INFO')
+        lost = basis_lost(context)
+        if lost:
+            layout.label(text=lost[:160], icon='ERROR')
+            layout.operator("meshadjust.restore_basis", icon='SHAPEKEY_DATA')
 
 
 class MESHADJUST_PT_refine(_Panel, bpy.types.Panel):

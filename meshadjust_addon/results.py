@@ -323,8 +323,13 @@ def edited_problem(edited):
     return None
 
 
-def shape_key_unavailable(source, n_dense):
-    """Why the edit cannot be a shape key of ``source`` (None when it can)."""
+def shape_key_unavailable(source, n_dense, cage=None):
+    """Why the edit cannot be a shape key of ``source`` (None when it can);
+    with ``cage``, also when its key became the reference key
+    (:func:`reference_key_problem`)."""
+    lost = reference_key_problem(source, cage) if cage is not None else None
+    if lost:
+        return lost
     if source.mode == 'EDIT':
         return (f"'{source.name}' is in Edit Mode: a shape key written now would be lost when it "
                 f"leaves; leave Edit Mode on '{source.name}' first")
@@ -356,6 +361,23 @@ def shape_key_of(source, cage):
     if key is not None and not (not cage.meshadjust.key_name and key.name in others):
         return key         # (a cage that never wrote a key does not take another cage's)
     return _renamed_key(keys, cage, others)
+
+
+def reference_key_problem(source, cage):
+    """Why ``cage`` cannot write its shape key on ``source``: the key is the
+    reference key (the artist deleted the Basis, and Blender made the first
+    remaining key the base shape that the mesh and the other keys follow:
+    writing it would change the source itself), or None."""
+    keys = source.data.shape_keys
+    key = shape_key_of(source, cage) if keys is not None else None
+    if key is None or key != keys.reference_key:
+        return None
+    return (f"'{key.name}' is now the reference key of '{source.name}' (its Basis "
+            f"was deleted, and Blender made the first remaining key, MeshAdjust's, the base shape "
+            f"of '{source.name}'): MeshAdjust does not write over it. Restore Basis (MeshAdjust > "
+            f"Edit Cage) puts the Basis back from the mesh that was bound, or Undo the deletion; "
+            f"to keep the edit as the shape of '{source.name}', rename the key and Bind with "
+            f"Keep edit off")
 
 
 def _other_cages_keys(source, cage):
@@ -407,7 +429,7 @@ def write_shape_key(source, cage, V_edited, V_bound, notes=None):
     the positions that were bound (the source's evaluated mesh at bind time),
     or None when they are the reference key's (no other keys, no modifiers).
     """
-    why = shape_key_unavailable(source, V_edited.shape[0])
+    why = shape_key_unavailable(source, V_edited.shape[0], cage)
     if why:
         raise core.MeshAdjustError(f"the shape key of '{cage.name}': {why}")
     keep(source.data)

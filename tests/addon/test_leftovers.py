@@ -3,10 +3,13 @@ shape key left as the reference key when the Basis was deleted, the data of
 a deleted edited original."""
 
 import bpy
+import numpy as np
 import pytest
 
+from tests.addon.conftest import make_object
 from tests.addon.test_nothing_lost import (_bug, _raises_the_bug, assert_all_unchanged,
-                                           bound_sphere, full_snapshot, mod)
+                                           bound_sphere, full_snapshot, lift_top, mod)
+from tests.addon.test_operators import bumpy_sphere, simplify
 
 
 @pytest.fixture()
@@ -58,3 +61,105 @@ def test_any_rename_in_a_failed_block_is_undone_even_swapped_names(bound):
             edited.data.name = "dense"
             _bug()
     assert renamed_since(before) == {}
+
+
+def _key_co(kb):
+    return mod("mesh_io").read_key(kb).reshape(-1, 3)
+
+
+def _basis_deleted(dense, cage):
+    """Write the cage's shape key (the top lifted), then delete the Basis as
+    an artist would: the cage's key becomes the reference key, and the mesh
+    takes its shape. Returns the Basis as it was (float32, (n,3))."""
+    lift_top(cage, 0.2)
+    assert bpy.ops.meshadjust.refine(output='SHAPE_KEY') == {'FINISHED'}
+    keys = dense.data.shape_keys
+    V0 = _key_co(keys.key_blocks["Basis"])
+    dense.shape_key_remove(keys.key_blocks["Basis"])
+    assert keys.reference_key.name == "dense_cage"
+    return V0
+
+
+def test_a_deleted_basis_is_named_not_written_over_and_restore_basis_puts_it_back(bound):
+    # (Refine had written the edit over the reference key, the source's own shape:
+    # the mesh out of step with it, the binding stale after every write; a re-bind
+    # bound the edit as the artist's mesh)
+    dense, cage = bound
+    V0 = _basis_deleted(dense, cage)
+    K = _key_co(dense.data.shape_keys.reference_key)
+    bpy.context.view_layer.objects.active = cage
+    before = full_snapshot()
+    lost = "'dense_cage' is now the reference key of 'dense' \\(its Basis was deleted.*Restore Basis"
+    for op in (lambda: bpy.ops.meshadjust.refine(output='SHAPE_KEY'), bpy.ops.meshadjust.bind,
+               bpy.ops.meshadjust.fit_cage):
+        with pytest.raises(RuntimeError, match=lost):
+            op()
+    assert_all_unchanged(before)
+    assert "Restore Basis" in mod("panel").basis_lost(bpy.context)
+    assert bpy.ops.meshadjust.restore_basis() == {'FINISHED'}
+    keys = dense.data.shape_keys
+    assert [kb.name for kb in keys.key_blocks] == ["Basis", "dense_cage"]
+    assert keys.reference_key.name == "Basis"
+    assert np.abs(_key_co(keys.reference_key) - V0).max() < 1e-6       # the mesh bound
+    assert np.abs(mod("mesh_io").read_positions(dense.data) - V0).max() < 1e-6
+    mine = keys.key_blocks["dense_cage"]
+    assert np.array_equal(_key_co(mine), K)                            # the edit, bit for bit
+    assert mine.value == 1.0 and mine.relative_key == keys.reference_key
+    assert mod("operators").binding_warnings(cage) == []              # the Basis is the one bound
+    assert mod("panel").basis_lost(bpy.context) is None
+    assert "Basis of 'dense' restored" in cage.meshadjust.last_report
+    lift_top(cage, 0.1)
+    assert bpy.ops.meshadjust.refine(output='SHAPE_KEY') == {'FINISHED'}
+    assert np.abs(_key_co(keys.reference_key) - V0).max() < 1e-6       # untouched since
+    assert "changed since" not in cage.meshadjust.last_report
+
+
+def test_restore_basis_failing_late_leaves_the_source_as_it_was(bound, monkeypatch):
+    dense, cage = bound
+    _basis_deleted(dense, cage)
+    bpy.context.view_layer.objects.active = cage
+    before = full_snapshot()
+    monkeypatch.setattr(mod("staleness"), "touched", _bug)
+    _raises_the_bug(bpy.ops.meshadjust.restore_basis)
+    monkeypatch.undo()
+    assert_all_unchanged(before)
+    assert dense.data.shape_keys.reference_key.name == "dense_cage"
+
+
+def test_a_deleted_basis_kept_as_the_source_s_shape_by_renaming_the_key(bound):
+    # (the other way out the message names: the edit becomes the artist's own shape)
+    dense, cage = bound
+    _basis_deleted(dense, cage)
+    keys = dense.data.shape_keys
+    keys.reference_key.name = "edited"
+    K = _key_co(keys.reference_key)
+    bpy.context.view_layer.objects.active = cage
+    assert bpy.ops.meshadjust.bind(keep_edit=False) == {'FINISHED'}
+    lift_top(cage, 0.1)
+    assert bpy.ops.meshadjust.refine(output='SHAPE_KEY') == {'FINISHED'}
+    assert [kb.name for kb in keys.key_blocks] == ["edited", "dense_cage"]
+    assert np.array_equal(_key_co(keys.reference_key), K)
+    lifted = _key_co(keys.key_blocks["dense_cage"])[:, 2] - K[:, 2]
+    assert 0.05 < lifted.max() < 0.15                      # the new lift only, not the old again
+    with pytest.raises(RuntimeError, match="not the reference key of its source: nothing to restore"):
+        bpy.ops.meshadjust.restore_basis()
+
+
+def test_restore_basis_refuses_a_basis_it_does_not_know(scene):
+    # bound over another key of the artist: the mesh bound was not the Basis
+    dense = make_object("dense", *bumpy_sphere(3))
+    dense.shape_key_add(name="Basis", from_mix=False)
+    dense.shape_key_add(name="pose", from_mix=False).value = 0.5
+    assert simplify(200, fit=False) == {'FINISHED'}
+    cage = dense.meshadjust.cage
+    keys = dense.data.shape_keys
+    lift_top(cage, 0.2)
+    assert bpy.ops.meshadjust.refine(output='SHAPE_KEY') == {'FINISHED'}
+    dense.shape_key_remove(keys.key_blocks["pose"])
+    dense.shape_key_remove(keys.key_blocks["Basis"])
+    assert keys.reference_key.name == "dense_cage"
+    bpy.context.view_layer.objects.active = cage
+    before = full_snapshot()
+    with pytest.raises(RuntimeError, match="other shape keys or modifiers when it was bound.*Undo"):
+        bpy.ops.meshadjust.restore_basis()
+    assert_all_unchanged(before)
