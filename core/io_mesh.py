@@ -12,7 +12,10 @@ the seed format of quadric simplification; OBJ is its common superset::
 
 Every other keyword (SMF ``c``, ``n``, ``r``, ``t``, ``bind``, ``begin``,
 ``end``, ``set``...; OBJ ``vt``, ``vn``, ``o``, ``g``, ``usemtl``, ``l``...)
-is counted and skipped: :func:`read_mesh` says how many of each.
+is counted and skipped: :func:`read_mesh` says how many of each. A line
+that starts with no keyword (an ASCII letter, then letters, digits or ``_``,
+16 at most: binary garbage, NUL bytes, a line cut short to ``1 2 3``) is
+skipped as unreadable: :func:`read_mesh` says how many and where the first is.
 
 Reading checks what a geometry core needs and names the line that breaks it
 (``read_smf: scan.smf line 12: 'v 1 x 3' is not a number``): a coordinate that
@@ -27,6 +30,8 @@ unusual or wrong is read again line by line, which names the line.
 """
 
 import os
+import re
+import string
 import warnings
 from typing import NamedTuple
 
@@ -49,12 +54,16 @@ class MeshFile(NamedTuple):
     F : (m,3) int64, triangles (polygons fan-triangulated), 0-based.
     n_polygons : int, faces in the file (before triangulation).
     skipped : dict str -> int, lines of each other keyword, skipped.
+    n_unreadable : int, lines starting with no keyword, skipped.
+    first_unreadable : int, the first of them (1-based line number; 0: none).
     """
 
     V: np.ndarray
     F: np.ndarray
     n_polygons: int
     skipped: dict
+    n_unreadable: int = 0
+    first_unreadable: int = 0
 
 
 def _line_text(path, lineno):
@@ -135,8 +144,25 @@ _SPACES = np.array([9, 10, 11, 12, 13, 28, 29, 30, 31, 32], dtype=np.uint8)
 #: per byte value, whether it separates words (a table: twice as fast as np.isin)
 _IS_SPACE = np.zeros(256, dtype=bool)
 _IS_SPACE[_SPACES] = True
-#: the longest keyword :func:`_read_bulk` counts (longer: read line by line)
+#: the longest keyword (a longer first word makes an unreadable line)
 _KEY_BYTES = 16
+#: a keyword, as the line reader checks a line's first word
+_KEYWORD = re.compile(rf"[A-Za-z][A-Za-z0-9_]{{0,{_KEY_BYTES - 1}}}")
+#: per byte value, whether it may start a keyword / continue one
+_KEY_FIRST = np.zeros(256, dtype=bool)
+_KEY_FIRST[list(string.ascii_letters.encode())] = True
+_KEY_NEXT = _KEY_FIRST.copy()
+_KEY_NEXT[list((string.digits + "_").encode())] = True
+#: lines whose first words :func:`_keywords` reads at once (its memory: ~300 bytes a line)
+_KEY_BLOCK = 1 << 16
+
+
+class _Skipped(NamedTuple):
+    """The lines of a file that are neither ``v``, ``f``, comments nor blank."""
+
+    keys: dict              #: keyword -> lines
+    n_unreadable: int       #: lines starting with no keyword
+    first_unreadable: int   #: the first of them (1-based; 0: none)
 
 
 class _Lines(NamedTuple):
@@ -199,24 +225,43 @@ def _numbers(body, dtype, n_lines):
 
 
 def _keywords(lines, other):
-    """``{keyword: lines}`` of the lines ``other`` (a mask); None when a
-    keyword is longer than ``_KEY_BYTES`` or not ASCII."""
-    s = lines.starts[other]
-    if s.size == 0:
-        return {}
-    at = s[:, None] + np.arange(_KEY_BYTES)
-    inside = at < lines.ends[other][:, None]
+    """The :class:`_Skipped` of the lines ``other`` (a mask), read a block of
+    ``_KEY_BLOCK`` lines at a time (a bounded memory); None when a first
+    word has a byte outside ASCII before it is known to be no keyword (the
+    line reader's text may split it there: a no-break space)."""
+    rows = np.flatnonzero(other)
+    words, bad = [], []
+    for s in range(0, rows.size, _KEY_BLOCK):
+        got = _key_block(lines, rows[s:s + _KEY_BLOCK])
+        if got is None:
+            return None
+        keys, counts = np.unique(got[0], return_counts=True)
+        words.append(dict(zip(keys.tolist(), counts.tolist())))
+        bad.append(got[1])
+    bad = np.concatenate(bad) if bad else rows
+    keys = {k.decode("ascii"): sum(w.get(k, 0) for w in words) for k in set().union(*words)}
+    return _Skipped(keys, bad.size, int(bad[0]) + 1 if bad.size else 0)
+
+
+def _key_block(lines, rows):
+    """``(keywords, unreadable)`` of the lines ``rows`` (indices): the
+    keywords of those starting with one (``S16``, one per line) and the
+    indices of the others; None (see :func:`_keywords`).
+
+    Each line's first ``_KEY_BYTES + 1`` bytes are read as a row (spaces
+    past its end): a keyword's bytes, then a separator."""
+    w = _KEY_BYTES + 1
+    at = lines.starts[rows][:, None] + np.arange(w)
+    inside = at < lines.ends[rows][:, None]
     window = np.where(inside, lines.b[np.minimum(at, lines.b.size - 1)], 32)
-    ends_key = _IS_SPACE[window]
-    if not ends_key.any(axis=1).all():
+    ok = np.concatenate([_KEY_FIRST[window[:, :1]], _KEY_NEXT[window[:, 1:]]], axis=1)
+    length = np.where(ok.all(axis=1), w, np.argmin(ok, axis=1))    # (w: no separator)
+    stop = window[np.arange(rows.size), np.minimum(length, w - 1)]
+    if ((stop >= 0x80) & (length < w)).any():
         return None
-    length = np.argmax(ends_key, axis=1)
-    window[np.arange(_KEY_BYTES) >= length[:, None]] = 0
-    if (window >= 0x80).any():
-        return None        # (text mode splits at Unicode spaces too: a no-break space)
-    keys, counts = np.unique(np.ascontiguousarray(window).view(f"S{_KEY_BYTES}").ravel(),
-                             return_counts=True)
-    return {k.decode("utf-8", errors="replace"): int(c) for k, c in zip(keys, counts)}
+    key = (length > 0) & (length < w) & _IS_SPACE[stop]
+    window[np.arange(w) >= length[:, None]] = 0
+    return np.ascontiguousarray(window[key, :_KEY_BYTES]).view(f"S{_KEY_BYTES}").ravel(), rows[~key]
 
 
 def _read_bulk(data, obj):
@@ -226,11 +271,11 @@ def _read_bulk(data, obj):
     file has anything the line reader would read otherwise or refuse: a
     line starting with a space, a ``v`` or ``f`` line with too few words or
     a word that is not a number, an ``_``, a 0 or out-of-range index, a
-    coordinate that is not finite, a long keyword, no ``v`` or ``f`` line."""
+    coordinate that is not finite, a NUL, no ``v`` or ``f`` line."""
     if data.startswith(b"\xef\xbb\xbf"):
         data = data[3:]
-    if data.count(b"\r") != data.count(b"\r\n") or b"\x00" in data:
-        return None        # (a lone CR ends a line in text mode; a NUL is a keyword's byte)
+    if data.count(b"\r") != data.count(b"\r\n"):
+        return None        # (a lone CR ends a line in text mode)
     lines = _Lines.of(np.frombuffer(data, dtype=np.uint8))
     if lines.starts.size == 0:
         return None
@@ -247,7 +292,7 @@ def _read_bulk(data, obj):
     if skipped is None or not is_v.any():
         return None
     vb = _body(lines, is_v)
-    if b"_" in vb or not vb.isascii():
+    if b"_" in vb or b"\x00" in vb or not vb.isascii():
         return None        # (text mode splits words at Unicode spaces too)
     got = _numbers(vb, np.float64, int(np.count_nonzero(is_v)))
     if got is None or (got[1] < 3).any():
@@ -257,9 +302,9 @@ def _read_bulk(data, obj):
     if not np.isfinite(V).all():
         return None
     if not is_f.any():
-        return MeshFile(V, np.zeros((0, 3), dtype=np.int64), 0, skipped)
+        return MeshFile(V, np.zeros((0, 3), dtype=np.int64), 0, *skipped)
     F = _faces(lines, is_v, is_f, obj, V.shape[0])
-    return None if F is None else MeshFile(V, F, int(np.count_nonzero(is_f)), skipped)
+    return None if F is None else MeshFile(V, F, int(np.count_nonzero(is_f)), *skipped)
 
 
 def _faces(lines, is_v, is_f, obj, n):
@@ -268,7 +313,7 @@ def _faces(lines, is_v, is_f, obj, n):
     negative indices relative to the vertices before the line), or None
     (see :func:`_read_bulk`)."""
     fb = _body(lines, is_f)
-    if b"_" in fb or (not obj and b"/" in fb) or not fb.isascii():
+    if b"_" in fb or b"\x00" in fb or (not obj and b"/" in fb) or not fb.isascii():
         return None        # (text mode splits words at Unicode spaces too)
     if obj and b"/" in fb:
         fb = _cut_slashes(fb)
@@ -322,14 +367,16 @@ def _read_lines(path, fn, obj):
     """Parse an OBJ (``obj=True``) or SMF file line by line (naming the
     first line it cannot read)."""
     lines = _split_lines(path, fn, obj)
-    if not lines.v_lines and not lines.tri_lines and not lines.poly and lines.skipped:
+    n_other = sum(lines.skipped.values()) + len(lines.unreadable)
+    if not lines.v_lines and not lines.tri_lines and not lines.poly and n_other:
         raise InvalidMeshError(
-            f"{fn}: {path} has no 'v' or 'f' line ({sum(lines.skipped.values()):,} other "
+            f"{fn}: {path} has no 'v' or 'f' line ({n_other:,} other "
             f"lines): not {'an OBJ' if obj else 'an SMF'} file, or an empty one")
     V = _vertices(fn, path, lines.v_rows, lines.v_lines)
     F = _line_faces(fn, path, lines, V.shape[0], obj)
     _check_finite(fn, path, V, lines.v_lines, F)
-    return MeshFile(V, F, len(lines.tri_lines) + len(lines.poly), lines.skipped)
+    return MeshFile(V, F, len(lines.tri_lines) + len(lines.poly), lines.skipped,
+                    len(lines.unreadable), lines.unreadable[0] if lines.unreadable else 0)
 
 
 class _SplitLines(NamedTuple):
@@ -342,12 +389,13 @@ class _SplitLines(NamedTuple):
     tri_base: list     #: the vertices read before each
     poly: list         #: per polygon line: (line number, index strings, vertices before)
     skipped: dict      #: other keyword -> lines
+    unreadable: list   #: the numbers of the lines starting with no keyword
 
 
 def _split_lines(path, fn, obj):
     """The :class:`_SplitLines` of the file (raises at a ``v`` or ``f`` line
     with too few words or an ``_``)."""
-    out = _SplitLines([], [], [], [], [], [], {})
+    out = _SplitLines([], [], [], [], [], [], {}, [])
     with open(path, "r", encoding="utf-8-sig", errors="replace") as fh:
         for lineno, line in enumerate(fh, 1):
             parts = line.split()
@@ -372,8 +420,10 @@ def _split_lines(path, fn, obj):
                     out.tri_base.append(len(out.v_rows))
                 else:
                     out.poly.append((lineno, idx, len(out.v_rows)))
-            elif not key.startswith("#"):
+            elif _KEYWORD.fullmatch(key):
                 out.skipped[key] = out.skipped.get(key, 0) + 1
+            elif not key.startswith("#"):
+                out.unreadable.append(lineno)
     return out
 
 

@@ -107,6 +107,30 @@ def test_bad_lines_are_named(tmp_path, text, lineno, problem):
         core.read_mesh(obj)
 
 
+@pytest.mark.parametrize("ext", [".obj", ".smf"])
+def test_lines_starting_with_no_keyword_are_counted_as_unreadable(tmp_path, ext):
+    """NUL bytes, binary garbage and lines cut short were counted as keywords
+    ('\\x00\\x00': 1, '1': 1 in the skipped report); they are counted apart,
+    with the first one's line number, by the bulk and the line reader alike."""
+    from core import io_mesh
+    text = (_BASE + "vt 0 0\n\x00\x00\x00\x00\n1 2 3\nf 1 2 3\n").encode() + (
+        b"\x01\xff\xfe garbage\nusemtl M\nv\x00 1 2 3\n%s 1\nshadow_obj x.obj\nK9_ 1\n" % (b"k" * 17))
+    path = tmp_path / f"junk{ext}"
+    path.write_bytes(text)
+    for m in (core.read_mesh(path), io_mesh._read_bulk(text, ext == ".obj"),
+              io_mesh._read_lines(str(path), "read_mesh", ext == ".obj")):
+        assert m.skipped == {"vt": 1, "usemtl": 1, "shadow_obj": 1, "K9_": 1}
+        assert (m.n_unreadable, m.first_unreadable) == (5, 6)
+        assert m.F.tolist() == [[0, 1, 2]] and m.V.shape == (4, 3)
+    clean = tmp_path / f"clean{ext}"
+    clean.write_text(_BASE + "f 1 2 3\n")
+    assert core.read_mesh(clean)[4:] == (0, 0)
+    only = tmp_path / f"only{ext}"
+    only.write_bytes(b"\x00\x00\nxyz\n")
+    with pytest.raises(InvalidMeshError, match=r"has no 'v' or 'f' line \(2 other lines\)"):
+        core.read_mesh(only)
+
+
 def test_unsupported_extension_and_bad_arrays(tmp_path):
     with pytest.raises(InvalidArgumentError, match=r"read_mesh: .*scan\.ply: unsupported "
                                                    r"extension '\.ply' \(use \.obj or \.smf\)"):
@@ -144,20 +168,26 @@ _BULK = [_BASE + "f 1 2 3\nf 2 4 3\n", (_BASE + "f 1 2 3\n").replace("\n", "\r\n
          "v 0 0 0 1 0 0\nv 1 0 0 0 1 0\nv 0 1 0 0 0 1\nf 1 2 3\n", "# c\n\n" + _BASE + "\n\n",
          "v\t0\t0\t0  \nv +1 -0 .5\nv 1. 0e0 0\nf\t1 2  3 \n",
          # v/vt/vn words of every form, cut at their first "/" up to any separator
-         _BASE + "f 1/2/3\t2/x/y\x0b3// 4/\nf -1/1 2 -2//-7\f3/1/1/1\n"]
+         _BASE + "f 1/2/3\t2/x/y\x0b3// 4/\nf -1/1 2 -2//-7\f3/1/1/1\n",
+         # lines starting with no keyword: skipped as unreadable
+         _BASE + "f 1 2 3\n\x00\n", _BASE + "1 2 3\nv\x00 1 2 3\n\x00\x00\x00\nf 1 2 3\n",
+         "v 0 0 0\n%s 1\n{ }\nv 1 0 0\nv 0 1 0\nf 1 2 3\n3ds max\n" % ("k" * 17),
+         "v 0 0 0\n-1 \u00e4\nv 1 0 0\nv 0 1 0\nf 1 2 3\n%s\n" % ("k" * 16)]
 #: files it leaves to the line reader (which reads them or names the line)
 _LINES = ["  v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n", _BASE + "f 1 2\n", _BASE + "f 1 2 5\n",
           _BASE + "f 0 1 2\n", _BASE + "f 1 2 3.5\n", _BASE + "f 1_0 2 3\n",
           "v 0 0 nan\n" + _BASE + "f 1 2 3\n", "v 0 0 0 # c\nv 1 0 0\nv 0 1 0\nf 1 2 3\n",
           "v 0 0\r0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n", "v 0 0 0\nv 1\u00a00 0\nv 0 1 0\nf 1 2 3\n",
-          _BASE + "f 99999999999999999999 1 2\n", "", "# only\n", _BASE + "f 1 2 3\n\x00\n",
+          _BASE + "f 99999999999999999999 1 2\n", "", "# only\n",
           # found by a differential fuzz of the two readers (2026-12-05): a word "/1", a
           # no-break space inside a v/vt/vn word, a last line of just "v"
           _BASE + "f 1/1 /1 2 3\n", _BASE + "f 1/\u00a01 2//2 3//3\n", _BASE + "f 1 2 3\nv",
           # (a CLI fuzz: control bytes 0x1c-0x1f separate words in text mode)
           _BASE + "f 1/1\x1c2/2 3/3 4/4\n", _BASE + "f 1 2 3/1\x1f-4\n",
           # a control byte that separates no words (the line reader keeps it in the word)
-          _BASE + "f 1/1\x01 2 3\n", _BASE + "f 1\x01/1 2 3\n"]
+          _BASE + "f 1/1\x01 2 3\n", _BASE + "f 1\x01/1 2 3\n",
+          # a first word with a byte outside ASCII where a keyword may end (a no-break space?)
+          _BASE + "x\u00e4 1\nf 1 2 3\n", _BASE + "%s\u00a0\nf 1 2 3\n" % ("k" * 16)]
 
 
 @pytest.mark.parametrize("text", _BULK + _LINES)
