@@ -11,8 +11,13 @@ module). For each input ``NAME.ext`` it writes ``NAME_cage.<fmt>`` and, with
 collide get their extension in the name (``scan.obj`` and ``scan.ply`` ->
 ``scan_obj_cage.obj``, ``scan_ply_cage.obj``), then a number.
 
-Before any compute the output folder, the report and the log are checked (a
-file where the folder should be is an immediate error, exit status 2). At the
+Before any compute the output folder, every output path, the report and the
+log are checked (a file where the folder should be, a name too long for the
+file system: an immediate error naming the path, exit status 2). Outputs
+appear under their final names only when every step of their file succeeded;
+a file that failed after the simplify keeps its cage as
+``incomplete/NAME_cage.<fmt>`` in the output folder (and ``--skip-existing``
+runs it again). At the
 end one table row per file (status ``ok``, ``warn`` with the reason,
 ``FAILED`` with the step and the cause, ``skipped``, ``cancelled``), a
 summary line, and with ``--report`` a JSON report of every file. Exit status:
@@ -34,7 +39,7 @@ from dataclasses import asdict
 
 from . import blender_io
 from . import convert as _convert
-from . import report, runners
+from . import outputs, report, runners
 
 PROG = "meshadjust-batch"
 #: how a worker process is started from an installed package
@@ -108,7 +113,9 @@ def _run_arguments(p):
     p.add_argument("--log", metavar="FILE", default=None,
                    help="write Blender's log here (default: into the report, never to stdout)")
     p.add_argument("--skip-existing", action="store_true",
-                   help="skip a file whose outputs all exist already (to resume a batch)")
+                   help="skip a file whose outputs all exist already (to resume a batch; "
+                        "outputs are written only when every step succeeded; a failed file "
+                        "keeps its cage in OUT/incomplete/ and runs again)")
     p.add_argument("--strict", action="store_true",
                    help="exit 1 when a file only warned (missed target, unchanged cage)")
 
@@ -220,6 +227,8 @@ def check_paths(args):
             problems.append(f"{opt} {path}: no folder {folder}")
         elif not os.access(folder, os.W_OK):
             problems.append(f"{opt} {path}: {folder} is not writable")
+        elif why := outputs.write_problem(path):
+            problems.append(f"{opt} {path}: cannot be written ({why})")
     if (args.format in blender_io.BLENDER_EXPORT and args.dask is None
             and "bpy" not in sys.modules and importlib.util.find_spec("bpy") is None):
         problems.append(f"--format {args.format} needs Blender (the bpy module); "
@@ -291,7 +300,7 @@ def main(argv=None, *, entry=None, prog=PROG):
 def _planned(args):
     """(options, tasks, problems) of the batch: ``problems`` the messages of
     why it cannot run (paths missing, no input, an output path that is a
-    folder), empty when it can."""
+    folder or cannot be written), empty when it can."""
     problems = check_paths(args)
     if problems:
         return None, None, problems
@@ -303,18 +312,36 @@ def _planned(args):
     blocked = [p for t in tasks for p in (t["cage"], t["refined"]) if p and os.path.isdir(p)]
     if blocked:
         return None, None, [f"{len(blocked)} output path(s) are folders, e.g. {blocked[0]}"]
-    return opts, tasks, []
+    return opts, tasks, _unwritable(tasks)
+
+
+def _unwritable(tasks):
+    """Messages for the output paths that cannot be written (a name too long
+    for the file system, ...), found by trying before any compute: each
+    names the input and the output path (at most 5, then how many more)."""
+    found = []
+    for t in tasks:
+        for path in (t["cage"], t["refined"]):
+            why = outputs.write_problem(path) if path else None
+            if why:
+                found.append(f"{t['name']}: cannot write its output {path} ({why})")
+                break
+    more = [f"... and {len(found) - 5:,} more inputs whose outputs cannot be written"]
+    return found[:5] + (more if len(found) > 5 else [])
 
 
 def _skipped(tasks, skip_existing):
     """(results, todo): the reports of the tasks skipped because their outputs
     exist (with ``skip_existing``; None for the others) and the indices of
-    the tasks to run."""
+    the tasks to run. Final names hold only whole results (``cli.outputs``);
+    a file whose last run failed (its cage in ``incomplete/``) runs again,
+    even beside the outputs of an earlier run."""
     results = [None] * len(tasks)
     todo = []
     for i, task in enumerate(tasks):
         outs = [p for p in (task["cage"], task["refined"]) if p]
-        if skip_existing and all(os.path.isfile(p) for p in outs):
+        if skip_existing and all(os.path.isfile(p) for p in outs) and \
+                not os.path.exists(outputs.incomplete_path(task["cage"])):
             results[i] = dict(runners.cancelled_report(task), status="skipped", outputs=outs)
         else:
             todo.append(i)

@@ -1,37 +1,41 @@
 """One file through the batch pipeline, timed step by step, reported honestly.
 
-    read -> simplify -> measure -> [fit] -> write cage -> [bind -> refine -> write refined]
+    read -> simplify -> [fit] -> measure -> [bind -> refine] -> write
 
 OBJ and SMF are read and written by the core (``core.read_mesh``: a bad
 coordinate is an error naming the line, not a zero); PLY, STL and glTF go
 through Blender (``cli.blender_io``). The geometry is the core's, as in the
-add-on's ``api.compute_simplify``: QEM, the deviation of QEM's cage measured
-with ``core.surface_distance``, then the fit, the binding and the refinement.
+add-on's ``api.compute_simplify``: QEM, the fit, the deviation of the cage
+as written (fitted or not) measured with ``core.surface_distance``, the
+binding and the refinement.
 
-Nothing computed is thrown away: when the fit, the binding or the refinement
-fails after the simplify succeeded, the (unfitted) cage is still written and
-the file is marked failed *in that step*, with the cause. A cage that missed
-its target by more than :data:`TARGET_SLACK` or came back unchanged is a
-warning with the reason (``stopped at 216 faces: 23 border loops kept``).
-
-Outputs are written to a temporary name beside the final one and renamed, so
-an interrupted run never leaves a half-written file under the final name (and
-``--skip-existing`` can trust what it finds).
+Outputs are written after every step (``cli.outputs``), under their final
+names only when all succeeded: a file there is always a whole result.
+Nothing computed is thrown away: when a step after the simplify fails (the
+fit, the binding or the refinement), the cage is kept as
+``incomplete/NAME_cage.<ext>`` in the output folder and the file is marked
+failed *in that step*, with the cause. A deviation that cannot be measured
+(coordinates beyond what the measure takes) is a warning saying so, the
+cage still written. A cage that missed its target by more than
+:data:`TARGET_SLACK` or came back unchanged is a warning with the reason
+(``stopped at 216 faces: 23 border loops kept``).
 """
 
 import os
 import time
 from dataclasses import dataclass
 
+import numpy as np
+
 from .. import core
 from . import blender_io
 from .file_check import InputFileError
+from .outputs import CORE_FORMATS, INCOMPLETE_FOLDER, incomplete_path, write_outputs
 
 #: a cage with more than (1 + TARGET_SLACK) x its target faces is a warning
 TARGET_SLACK = 0.05
 #: samples per surface for the deviation (as in the add-on's reports)
 MEASURE_SAMPLES = 60_000
-CORE_FORMATS = {".obj", ".smf"}
 INPUT_EXTENSIONS = CORE_FORMATS | set(blender_io.BLENDER_IMPORT)
 OUTPUT_FORMATS = ("obj", "smf", "ply", "stl", "glb")
 
@@ -94,8 +98,8 @@ class _Run:
                   "max_error_pct": None, "faces_out": None, "stopped_because": None,
                   "message": None, "deviation_pct": None, "mean_deviation_pct": None,
                   "cleaning": None, "fit": None, "refined_faces": None, "phases_s": {},
-                  "outputs": [], "warnings": [], "notes": [], "failed_step": None,
-                  "error": None}
+                  "outputs": [], "incomplete": [], "warnings": [], "notes": [],
+                  "failed_step": None, "error": None}
 
     def step(self, name, fn, *args, **kwargs):
         """Run one step, timed; a failure becomes :class:`StepFailed`."""
@@ -107,33 +111,26 @@ class _Run:
         finally:
             self.r["phases_s"][name] = round(time.perf_counter() - t, 4)
 
-    def fail(self, exc, *, after_cage=False):
+    def fail(self, exc):
         self.r["status"] = "failed"
         self.r["failed_step"] = exc.step
-        where = f"{exc.step} failed"
-        if after_cage:
-            where += (" (the cage was written without the fit)" if exc.step == "fit"
-                      else " (the cage was written)")
-        self.r["error"] = f"{self.task['name']}: {where}: {exc}"
+        self.r["error"] = f"{self.task['name']}: {exc.step} failed: {exc}"
 
-
-def _write(path, V, F, log):
-    """Write through a temporary name in the same folder, then rename. The
-    temporary name is short (``.part-<pid>.<ext>``: one write at a time per
-    process), so any name the folder takes does (a 240-character stem's
-    ``.<stem>.part-<pid>`` was too long for the file system)."""
-    folder, base = os.path.split(path)
-    stem, ext = os.path.splitext(base)
-    tmp = os.path.join(folder, f".part-{os.getpid()}{ext}")
-    try:
-        if ext.lower() in CORE_FORMATS:
-            core.write_mesh(tmp, V, F)
-        else:
-            blender_io.write_with_blender(tmp, V, F, log, name=stem, shown=path)
-        os.replace(tmp, path)
-    finally:
-        if os.path.exists(tmp):
-            os.remove(tmp)
+    def keep_incomplete(self, exc, cage):
+        """After ``exc`` (a :class:`StepFailed` after the simplify), write the
+        cage ``(V, F)`` as ``incomplete/NAME_cage.<ext>`` and fail the file,
+        saying so."""
+        path = incomplete_path(self.task["cage"])
+        what = {"fit": "the cage without the fit"}.get(exc.step, "the cage")
+        self.fail(exc)
+        try:
+            self.step("write", write_outputs, [(path, *cage)], self.log)
+        except StepFailed as failed:
+            self.r["warnings"].append(f"{what} could not be kept: {failed}")
+            return
+        self.r["incomplete"] = [path]
+        self.r["error"] = (f"{self.task['name']}: {exc.step} failed ({what} was kept as "
+                           f"{os.path.join(INCOMPLETE_FOLDER, os.path.basename(path))}): {exc}")
 
 
 def _read(path, log):
@@ -167,6 +164,101 @@ def _check_target(r, res):
                              f": {res.message}")
 
 
+def _read_input(run):
+    """``(V, F)`` of the task's input, its notes and warnings reported."""
+    r = run.r
+    V, F, n_poly, notes, warnings = run.step("read", _read, run.task["input"], run.log)
+    r["notes"] += notes
+    r["warnings"] += warnings
+    r["faces_in"], r["polygons_in"] = int(F.shape[0]), int(n_poly)
+    if n_poly != F.shape[0]:
+        r["notes"].append(f"triangulated {n_poly:,} polygons into {F.shape[0]:,} triangles")
+    if F.shape[0] == 0:
+        raise StepFailed("read", "no faces in the file")
+    return V, F
+
+
+def _simplified(run, V, F, opts):
+    """The simplify's result, reported (faces, why it stopped, cleaning, notes)."""
+    r = run.r
+    max_error = None
+    if opts.max_error_pct is not None:
+        r["max_error_pct"] = opts.max_error_pct
+        max_error = opts.max_error_pct / 100.0 * core.bbox_diagonal(V)
+    res = run.step("simplify", core.simplify, V, F, target_faces=opts.faces,
+                   ratio=opts.ratio, max_error=max_error,
+                   feature_angle_deg=opts.feature_angle_deg, symmetry=opts.symmetry,
+                   max_dihedral_deg=opts.max_dihedral_deg, weld_distance=opts.weld_distance,
+                   close_pinholes=opts.close_pinholes)
+    r["faces_out"] = int(res.F.shape[0])
+    r["target_faces"] = res.target
+    r["stopped_because"] = res.stopped_because
+    r["message"] = res.message
+    r["cleaning"] = res.cleaning.to_dict()
+    if res.cleaning:
+        r["notes"].append(f"cleaning: {res.cleaning.summary()}")
+    _check_target(r, res)
+    for note in (res.sliver_note, res.asymmetry_note, res.pieces_note):
+        if note:
+            r["warnings"].append(f"the cage: {note}")
+    return res
+
+
+def _fitted(run, V, F, res, opts, creases):
+    """The cage's positions: fitted with ``--fit`` (the fit reported)."""
+    if not opts.fit:
+        return res.V
+    fit = run.step("fit", core.fit_cage, V, F, res.V, res.F, levels=opts.levels,
+                   scheme=opts.scheme, creases=creases, symmetry=opts.symmetry)
+    d = fit.mean_distance
+    run.r["fit"] = {"mean_before_pct": 100 * d[0] / fit.diagonal,
+                    "mean_after_pct": 100 * d[-1] / fit.diagonal}
+    return fit.V
+
+
+def _measure(run, V, F, res, V_cage):
+    """The deviation of the cage as written (``V_cage``, ``res.F``) from the
+    input, over the faces the cage stands for; one that cannot be measured
+    (or comes out not finite) is a warning, the report's figures empty."""
+    F = np.asarray(F, dtype=np.int64)
+    try:
+        d = run.step("measure", core.surface_distance, V, F[res.represented(F)], V_cage, res.F,
+                     samples=MEASURE_SAMPLES)
+    except StepFailed as exc:
+        run.r["warnings"].append(f"the deviation could not be measured: {exc}")
+        return
+    with np.errstate(all="ignore"):
+        pct = 100.0 * np.array([d.hausdorff, d.mean]) / d.diagonal
+    if not (np.isfinite(pct).all() and d.diagonal > 0):
+        run.r["warnings"].append(f"the deviation could not be measured: it came out "
+                                 f"{d.hausdorff!r} on a diagonal of {d.diagonal!r}")
+        return
+    run.r["deviation_pct"], run.r["mean_deviation_pct"] = float(pct[0]), float(pct[1])
+
+
+def _results(run, V, F, res, opts):
+    """``(outputs, failure)``: the ``(path, V, F)`` to write, and the
+    :class:`StepFailed` of a step after the simplify or None."""
+    task, creases = run.task, (res.feature_edges if len(res.feature_edges) else None)
+    V_cage = res.V
+    try:
+        V_cage = _fitted(run, V, F, res, opts, creases)
+    except StepFailed as exc:
+        return [(task["cage"], V_cage, res.F)], exc
+    _measure(run, V, F, res, V_cage)
+    outputs = [(task["cage"], V_cage, res.F)]
+    if task.get("refined"):
+        try:
+            binding = run.step("bind", core.bind, V, F, V_cage, res.F, levels=opts.levels,
+                               scheme=opts.scheme, creases=creases)
+            Vr, Fr = run.step("refine", core.refine, binding, V_cage)
+        except StepFailed as exc:
+            return outputs, exc
+        run.r["refined_faces"] = int(Fr.shape[0])
+        outputs.append((task["refined"], Vr, Fr))
+    return outputs, None
+
+
 def convert(task, opts):
     """Convert one file; returns its report (a JSON-able dict).
 
@@ -178,66 +270,17 @@ def convert(task, opts):
     run = _Run(task)
     r = run.r
     t_start = time.perf_counter()
-    cage_written = False
     try:
-        V, F, n_poly, notes, warnings = run.step("read", _read, task["input"], run.log)
-        r["notes"] += notes
-        r["warnings"] += warnings
-        r["faces_in"], r["polygons_in"] = int(F.shape[0]), int(n_poly)
-        if n_poly != F.shape[0]:
-            r["notes"].append(f"triangulated {n_poly:,} polygons into {F.shape[0]:,} triangles")
-        if F.shape[0] == 0:
-            raise StepFailed("read", "no faces in the file")
-        diag = core.bbox_diagonal(V)
-        max_error = None
-        if opts.max_error_pct is not None:
-            r["max_error_pct"] = opts.max_error_pct
-            max_error = opts.max_error_pct / 100.0 * diag
-        res = run.step("simplify", core.simplify, V, F, target_faces=opts.faces,
-                       ratio=opts.ratio, max_error=max_error,
-                       feature_angle_deg=opts.feature_angle_deg, symmetry=opts.symmetry,
-                       max_dihedral_deg=opts.max_dihedral_deg, weld_distance=opts.weld_distance,
-                       close_pinholes=opts.close_pinholes)
-        r["faces_out"] = int(res.F.shape[0])
-        r["target_faces"] = res.target
-        r["stopped_because"] = res.stopped_because
-        r["message"] = res.message
-        r["cleaning"] = res.cleaning.to_dict()
-        if res.cleaning:
-            r["notes"].append(f"cleaning: {res.cleaning.summary()}")
-        _check_target(r, res)
-        for note in (res.sliver_note, res.asymmetry_note, res.pieces_note):
-            if note:
-                r["warnings"].append(f"the cage: {note}")
-        dist = run.step("measure", res.deviation, V, F, samples=MEASURE_SAMPLES)
-        r["deviation_pct"] = 100.0 * dist.hausdorff / max(dist.diagonal, 1e-300)
-        r["mean_deviation_pct"] = 100.0 * dist.mean / max(dist.diagonal, 1e-300)
-        creases = res.feature_edges if len(res.feature_edges) else None
-        V_cage, later = res.V, None
-        if opts.fit:
-            try:
-                fit = run.step("fit", core.fit_cage, V, F, res.V, res.F, levels=opts.levels,
-                               scheme=opts.scheme, creases=creases, symmetry=opts.symmetry)
-                V_cage = fit.V
-                d = fit.mean_distance
-                r["fit"] = {"mean_before_pct": 100 * d[0] / fit.diagonal,
-                            "mean_after_pct": 100 * d[-1] / fit.diagonal}
-            except StepFailed as exc:
-                later = exc
-        run.step("write cage", _write, task["cage"], V_cage, res.F, run.log)
-        r["outputs"].append(task["cage"])
-        cage_written = True
-        if later is not None:
-            raise later
-        if task.get("refined"):
-            binding = run.step("bind", core.bind, V, F, V_cage, res.F, levels=opts.levels,
-                               scheme=opts.scheme, creases=creases)
-            Vr, Fr = run.step("refine", core.refine, binding, V_cage)
-            r["refined_faces"] = int(Fr.shape[0])
-            run.step("write refined", _write, task["refined"], Vr, Fr, run.log)
-            r["outputs"].append(task["refined"])
+        V, F = _read_input(run)
+        res = _simplified(run, V, F, opts)
+        outputs, failure = _results(run, V, F, res, opts)
+        if failure is None:
+            run.step("write", write_outputs, outputs, run.log)
+            r["outputs"] = [path for path, _, _ in outputs]
+        else:
+            run.keep_incomplete(failure, outputs[0][1:])
     except StepFailed as exc:
-        run.fail(exc, after_cage=cage_written)
+        run.fail(exc)
     if r["status"] == "ok" and r["warnings"]:
         r["status"] = "warn"
     r["seconds"] = round(time.perf_counter() - t_start, 4)

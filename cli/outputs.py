@@ -1,0 +1,103 @@
+"""Where a file's outputs go: a complete result under its final names,
+anything less beside them under a name that says so.
+
+    all steps done  -> each output to .part-<pid>-<k>.<ext> in its folder -> all renamed
+    a step failed after the simplify -> the cage as incomplete/NAME_cage.<ext> in the
+                                        output folder, nothing under the final names
+
+A file under its final name (``NAME_cage.obj``, ``NAME_refined.obj``) is
+therefore always the whole result of a run whose every step succeeded (the
+report's status ``ok`` or ``warn``): ``--skip-existing`` and make-like
+pipelines can take its presence as done. The final names' rename comes last,
+after every compute, and a run that completes removes the incomplete file
+an earlier failed run left. An incomplete file keeps its final name's
+length, in a folder of its own: a name the output folder takes always fits
+(``NAME_cage.incomplete.obj`` would not, for a 240-character stem).
+
+:func:`write_problem` checks, before any compute, that a path can be
+written: the file system's limits on names (a 250-character stem) and the
+folder's permissions are only known by trying.
+"""
+
+import os
+
+from .. import core
+from . import blender_io
+
+CORE_FORMATS = {".obj", ".smf"}
+#: the folder, in the output folder, of the results a failed step left
+INCOMPLETE_FOLDER = "incomplete"
+
+
+def incomplete_path(path):
+    """Where the incomplete result of output ``path`` goes:
+    ``out/incomplete/NAME_cage.obj`` for ``out/NAME_cage.obj``."""
+    folder, base = os.path.split(path)
+    return os.path.join(folder, INCOMPLETE_FOLDER, base)
+
+
+def write_problem(path):
+    """Why ``path`` cannot be written (the system's words, e.g. ``File name
+    too long``), or None. A path that does not exist yet is created and
+    removed again: only the file system knows which names it takes."""
+    if os.path.isdir(path):
+        return "it is a folder"
+    if os.path.exists(path):
+        return None                      # replaced by a rename: the folder's permission counts
+    try:
+        fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o644)
+    except FileExistsError:              # made in between: the name is a valid one
+        return None
+    except OSError as exc:
+        return exc.strerror or str(exc)
+    os.close(fd)
+    os.remove(path)
+    return None
+
+
+def _write_one(tmp, path, V, F, log):
+    """Write ``V``, ``F`` to ``tmp`` in ``path``'s format; errors name ``path``."""
+    stem, ext = os.path.splitext(os.path.basename(path))
+    try:
+        if ext.lower() in CORE_FORMATS:
+            core.write_mesh(tmp, V, F)
+        else:
+            blender_io.write_with_blender(tmp, V, F, log, name=stem, shown=path)
+    except OSError as exc:
+        raise OSError(exc.errno, exc.strerror, path) from exc
+
+
+def write_outputs(outputs, log):
+    """Write ``outputs``, a list of ``(path, V, F)``, each to a short
+    temporary name in its folder (``.part-<pid>-<k>.<ext>``: any name the
+    folder takes does), then rename them all to their paths; a run that
+    completes this removes the incomplete files of an earlier one. An
+    ``OSError`` names the path asked for, never the temporary one."""
+    tmps = []
+    try:
+        for k, (path, V, F) in enumerate(outputs):
+            os.makedirs(os.path.dirname(path) or ".", exist_ok=True)
+            tmps.append(os.path.join(os.path.dirname(path),
+                                     f".part-{os.getpid()}-{k}{os.path.splitext(path)[1]}"))
+            _write_one(tmps[-1], path, V, F, log)
+        for tmp, (path, _, _) in zip(tmps, outputs):
+            try:
+                os.replace(tmp, path)
+            except OSError as exc:
+                raise OSError(exc.errno, exc.strerror, path) from exc
+    finally:
+        for tmp in tmps:
+            if os.path.exists(tmp):
+                os.remove(tmp)
+    for path, _, _ in outputs:
+        _remove_incomplete(incomplete_path(path))
+
+
+def _remove_incomplete(path):
+    """Remove an earlier run's incomplete result, and its folder once empty."""
+    if os.path.isfile(path):
+        os.remove(path)
+        try:
+            os.rmdir(os.path.dirname(path))
+        except OSError:               # other files in it
+            pass
