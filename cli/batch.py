@@ -92,7 +92,9 @@ def _cage_arguments(p):
                         "the file simplified again (the report counts them)")
     p.add_argument("--symmetry", choices=("X", "Y", "Z"), default=None,
                    help="make the cage mirror-symmetric about the plane through the origin "
-                        "normal to this axis, in the file's coordinates (the fit keeps it so)")
+                        "normal to this axis, in the file's coordinates (the fit keeps it so); "
+                        "an input whose two sides differ by more than "
+                        f"{100 * _convert.ASYMMETRY_NOTE:g}%% of its size fails")
 
 
 def _run_arguments(p):

@@ -1,6 +1,6 @@
 """One file through the batch pipeline, timed step by step, reported honestly.
 
-    read -> simplify -> [fit] -> measure -> [bind -> refine] -> write
+    read -> simplify -> [symmetry check] -> [fit] -> measure -> [bind -> refine] -> write
 
 OBJ and SMF are read and written by the core (``core.read_mesh``: a bad
 coordinate is an error naming the line, not a zero); PLY, STL and glTF go
@@ -12,9 +12,12 @@ binding and the refinement.
 Outputs are written after every step (``cli.outputs``), under their final
 names only when all succeeded: a file there is always a whole result.
 Nothing computed is thrown away: when a step after the simplify fails (the
-fit, the binding or the refinement), the cage is kept as
+symmetry check, the fit, the binding or the refinement), the cage is kept as
 ``incomplete/NAME_cage.<ext>`` in the output folder and the file is marked
-failed *in that step*, with the cause. A deviation that cannot be measured
+failed *in that step*, with the cause. With ``--symmetry`` an input whose
+two sides differ by more than the core's ``ASYMMETRY_NOTE`` of its diagonal
+gets no symmetric cage: the cage would lie between the sides and its
+refinement fold into near-zero faces. A deviation that cannot be measured
 (coordinates beyond what the measure takes) is a warning saying so, the
 cage still written. A cage that missed its target by more than
 :data:`TARGET_SLACK` or came back unchanged is a warning with the reason
@@ -28,6 +31,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .. import core
+from ..core.simplify import ASYMMETRY_NOTE
 from . import blender_io
 from .file_check import InputFileError
 from .outputs import CORE_FORMATS, INCOMPLETE_FOLDER, incomplete_path, write_outputs
@@ -121,7 +125,8 @@ class _Run:
         cage ``(V, F)`` as ``incomplete/NAME_cage.<ext>`` and fail the file,
         saying so."""
         path = incomplete_path(self.task["cage"])
-        what = {"fit": "the cage without the fit"}.get(exc.step, "the cage")
+        what = {"fit": "the cage without the fit", "symmetry": "the symmetric cage"}.get(
+            exc.step, "the cage")
         self.fail(exc)
         try:
             self.step("write", write_outputs, [(path, *cage)], self.log)
@@ -198,10 +203,24 @@ def _simplified(run, V, F, opts):
     if res.cleaning:
         r["notes"].append(f"cleaning: {res.cleaning.summary()}")
     _check_target(r, res)
-    for note in (res.sliver_note, res.asymmetry_note, res.pieces_note):
+    for note in (res.sliver_note, res.pieces_note):
         if note:
             r["warnings"].append(f"the cage: {note}")
     return res
+
+
+def _check_symmetry(res, opts):
+    """Refuse a symmetric cage of an input whose two sides differ by more
+    than ``ASYMMETRY_NOTE`` of its diagonal: the cage lies between them and
+    its refinement folds into near-zero faces (a sphere 6% off its plane:
+    faces 1e-17 of the median's area)."""
+    if res.asymmetry is not None and res.asymmetry > ASYMMETRY_NOTE:
+        raise core.InvalidArgumentError(
+            f"the input is not mirror-symmetric about the plane {opts.symmetry} = 0: its two "
+            f"sides differ by up to {100 * res.asymmetry:.1f}% of its size (a symmetric cage "
+            f"takes at most {100 * ASYMMETRY_NOTE:g}%; beyond, it lies between them and its "
+            f"refinement folds into near-zero faces): center it on its mirror plane, or leave "
+            f"out --symmetry")
 
 
 def _fitted(run, V, F, res, opts, creases):
@@ -242,6 +261,8 @@ def _results(run, V, F, res, opts):
     task, creases = run.task, (res.feature_edges if len(res.feature_edges) else None)
     V_cage = res.V
     try:
+        if opts.symmetry:
+            run.step("symmetry", _check_symmetry, res, opts)
         V_cage = _fitted(run, V, F, res, opts, creases)
     except StepFailed as exc:
         return [(task["cage"], V_cage, res.F)], exc

@@ -55,3 +55,9 @@ def test_symmetry_is_about_the_files_own_axis(tmp_path):
     p = mirror_partners(Vc, "Y", tolerance=1e-6)
     assert np.all(p >= 0) and np.allclose(Vc[p], Vc * [1, -1, 1], atol=1e-6)
     assert Vc[:, 2].min() > -1.6 and Vc[:, 2].max() > 4.4   # the file's z: -1.5 .. 4.5
+    # the file's Z is the axis it is off: refused there, naming that plane
+    proc = run_batch(["egg.glb", "--faces", "200", "--symmetry", "Z", "--format", "obj",
+                      "--out", "z", "--report", "z.json"], tmp_path)
+    f, = json.loads((tmp_path / "z.json").read_text())["files"]
+    assert proc.returncode == 1 and f["failed_step"] == "symmetry"
+    assert "not mirror-symmetric about the plane Z = 0" in f["error"]
