@@ -173,8 +173,9 @@ def import_mesh(path, log=None):
     with read as source, captured_output(log) as cap:
         failure = _failure_of(lambda: ops[ext](filepath=source), trace)
     log.extend(trace)
-    if failure is not None:
-        raise BlenderIOError(f"Blender's importer failed on {name}: {cap.explain(failure)}")
+    if failure is not None:                 # a traceback's own lines are no cause to quote
+        raise BlenderIOError(f"Blender's importer failed on {name}: "
+                             f"{failure if trace else cap.explain(failure)}")
     meshes = [o for o in bpy.data.objects if o not in before and o.type == 'MESH'
               and len(o.data.polygons)]
     if not meshes:
@@ -253,7 +254,8 @@ def write_with_blender(path, V, F, log, *, name, shown):
             failure = _failure_of(exporters.get(fmt, gltf), trace)
         log.extend(trace)
         if failure is not None:
-            raise BlenderIOError(f"Blender's exporter failed on {shown}: {cap.explain(failure)}")
+            raise BlenderIOError(f"Blender's exporter failed on {shown}: "
+                                 f"{failure if trace else cap.explain(failure)}")
     finally:
         bpy.data.objects.remove(obj)
         bpy.data.meshes.remove(mesh)

@@ -120,3 +120,19 @@ def test_a_gltf_buffer_shorter_than_its_json_says_is_named_not_a_traceback(tmp_p
     assert cut["error"] == (f"cut.glb: read failed: cut.glb: its GLB header says {full:,} bytes, "
                             f"the file has {full - 100:,} (file truncated?)")
     assert [p.name for p in (tmp_path / "out").iterdir()] == ["ball_gltf_cage.obj"]
+
+
+def test_a_python_error_in_blenders_gltf_importer_is_one_line_naming_the_file(tmp_path):
+    V, F = icosphere(1)
+    write_gltf(tmp_path / "ball.gltf", V, F)
+    doc = json.loads((tmp_path / "ball.gltf").read_text())
+    doc["meshes"][0]["primitives"][0]["indices"] = 99     # no such accessor: an IndexError
+    (tmp_path / "ball.gltf").write_text(json.dumps(doc))
+    proc = run_batch(["ball.gltf", "--faces", "20", "--out", "out", "--log", "log.txt"], tmp_path)
+    assert proc.returncode == 1
+    row, = rows(proc.stdout)
+    assert row.endswith(
+        "| FAILED: ball.gltf: read failed: Blender's importer failed on ball.gltf: a Python "
+        "error in Blender's add-on: IndexError: list index out of range (the traceback is in "
+        "the log) |")
+    assert "Traceback (most recent call last)" in (tmp_path / "log.txt").read_text()
