@@ -69,9 +69,19 @@ def _json(text, name):
     return doc
 
 
+def _entries(doc, key, name):
+    """The list of objects ``doc[key]`` (empty when absent)."""
+    items = doc.get(key, [])
+    if not isinstance(items, list) or not all(isinstance(x, dict) for x in items):
+        raise InputFileError(f"{name}: its glTF '{key}' is not a list of objects")
+    return items
+
+
 def _held(buffer, i, path, name, bin_length):
     """Bytes buffer ``i`` holds: its GLB BIN chunk, ``data:`` URI or file."""
     uri = buffer.get("uri")
+    if uri is not None and not isinstance(uri, str):
+        raise InputFileError(f"{name}: buffer {i}'s uri is not a string")
     if uri is None:
         if bin_length is None:
             raise InputFileError(f"{name}: buffer {i} has no uri and the file no BIN chunk")
@@ -94,14 +104,14 @@ def _number(obj, key, default=0):
 
 def _check_buffers(doc, path, name, bin_length):
     """Each buffer holds its ``byteLength``; each view lies in its buffer."""
-    buffers = doc.get("buffers", [])
+    buffers = _entries(doc, "buffers", name)
     for i, b in enumerate(buffers):
         held, where = _held(b, i, path, name, bin_length)
         need = _number(b, "byteLength", None)
         if need is not None and held < need:
             raise InputFileError(f"{name}: buffer {i} ({where}) holds {held:,} bytes, the file "
                                  f"says {need:,} (file truncated?)")
-    for j, v in enumerate(doc.get("bufferViews", [])):
+    for j, v in enumerate(_entries(doc, "bufferViews", name)):
         k, off, length = _number(v, "buffer", None), _number(v, "byteOffset"), \
             _number(v, "byteLength", None)
         if None in (k, off, length) or k >= len(buffers):
@@ -114,9 +124,9 @@ def _check_buffers(doc, path, name, bin_length):
 
 def _check_accessors(doc, name):
     """Each accessor's elements lie in its buffer view."""
-    views = doc.get("bufferViews", [])
-    for i, a in enumerate(doc.get("accessors", [])):
-        if not isinstance(a, dict) or "bufferView" not in a:
+    views = _entries(doc, "bufferViews", name)
+    for i, a in enumerate(_entries(doc, "accessors", name)):
+        if "bufferView" not in a:
             continue                              # all zeros, or sparse only: nothing to read
         j, off, count = _number(a, "bufferView", None), _number(a, "byteOffset"), \
             _number(a, "count", None)
@@ -128,7 +138,7 @@ def _check_accessors(doc, name):
         need = off + (stride * (count - 1) + width if count else 0)
         if need > views[j]["byteLength"]:
             raise InputFileError(f"{name}: accessor {i} reads {need:,} bytes of bufferView {j}, "
-                                 f"which holds {views[j]['byteLength']:,} (file truncated?)")
+                                 f"which holds {views[j]['byteLength']:,} (a wrong count or offset)")
 
 
 def check(path):
