@@ -8,8 +8,9 @@ file beside a ``.gltf``, a GLB's BIN chunk, a ``data:`` URI) with the
 ``byteLength`` declared, and each buffer view and accessor with the bytes
 they reach:
 
-    GLB:  magic 'glTF' | version 2 | length | JSON chunk (length, 'JSON') | BIN chunk (length, 'BIN\\0')
-    accessor (count x type x component) -> bufferView (offset, length, stride) -> buffer (byteLength, uri)
+    GLB:  'glTF' | version 2 | length | JSON chunk (length, 'JSON') | BIN chunk (length, 'BIN\\0')
+    accessor (count, type, component) -> bufferView (offset, length, stride)
+                                      -> buffer (byteLength, uri)
 
 glTF is Y-up; Blender's importer turns it Z-up (``(x, y, z)`` of the file
 is ``(x, -z, y)`` in Blender). :data:`FROM_BLENDER` turns it back, so the
@@ -138,7 +139,8 @@ def _check_accessors(doc, name):
         need = off + (stride * (count - 1) + width if count else 0)
         if need > views[j]["byteLength"]:
             raise InputFileError(f"{name}: accessor {i} reads {need:,} bytes of bufferView {j}, "
-                                 f"which holds {views[j]['byteLength']:,} (a wrong count or offset)")
+                                 f"which holds {views[j]['byteLength']:,} (a wrong count or "
+                                 f"offset)")
 
 
 def check(path):
