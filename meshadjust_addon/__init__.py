@@ -9,7 +9,7 @@ in ``settings``.
 
 import bpy
 
-from . import live, operators, panel, properties, staleness
+from . import leftovers, live, operators, panel, properties, staleness
 
 
 def _menu_subdivide(self, context):
@@ -22,11 +22,13 @@ def register():
         bpy.utils.register_class(cls)
     bpy.types.VIEW3D_MT_object.append(_menu_subdivide)
     staleness.register()
+    leftovers.register()
     live.register()
 
 
 def unregister():
     live.unregister()
+    leftovers.unregister()
     staleness.unregister()
     bpy.types.VIEW3D_MT_object.remove(_menu_subdivide)
     for cls in reversed(operators.CLASSES + panel.CLASSES):

@@ -19,7 +19,8 @@ changed and re-raises:
 * the caches of what the block wrote are dropped (:func:`on_undo`);
 * meshes the block retired (:func:`retire`: an object's old mesh, the old
   detail data) are only removed when it succeeds, so a failure can give
-  them back.
+  them back (with the detail data of edited originals deleted since,
+  :func:`.leftovers.remove_orphan_details`).
 
 A block opened inside another joins it: the outer block is the one
 transaction (a Fit that re-binds is undone whole, its bind included).
@@ -36,7 +37,7 @@ import bmesh
 import bpy
 import numpy as np
 
-from . import mesh_io
+from . import leftovers, mesh_io
 
 #: the attributes a step writes and a rollback restores (see :mod:`.store`)
 PREFIX = "meshadjust_"
@@ -221,14 +222,18 @@ class Rollback:
             self.records[obj] = _object_record(obj)
 
     def retire(self, mesh, successor=None, name=None, ours=False):
-        """Remove ``mesh`` once the block succeeds (see :func:`retire`)."""
-        self.retired.append((mesh, successor, name, ours))
+        """Remove ``mesh`` once the block succeeds (see :func:`retire`; a mesh
+        retired twice is removed once, as first said)."""
+        if all(mesh != m for m, *_ in self.retired):
+            self.retired.append((mesh, successor, name, ours))
 
     def finish(self):
-        """The block succeeded: remove the retired meshes."""
+        """The block succeeded: remove the retired meshes, and the detail data
+        of edited originals removed from the file since (:mod:`.leftovers`)."""
         for mesh, *how in self.retired:
             if mesh.name_full in bpy.data.meshes:
                 _remove(mesh, *how)
+        leftovers.remove_orphan_details()
 
     def undo(self):
         """The block failed: put back what it changed (see the module's docstring)."""

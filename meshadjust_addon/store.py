@@ -4,8 +4,8 @@
   hand): per dense vertex, point attributes ``meshadjust_face`` (INT, the fine
   face), ``meshadjust_bary`` and ``meshadjust_offset`` (FLOAT_VECTOR).
 * On a small data-only mesh ``<edited>.detail`` (fake user, pointed to from the
-  edited object's state): the per-fine-vertex detail as vertex positions, used
-  by the *refined mesh* output.
+  edited object's state, tagged for :mod:`.leftovers`): the per-fine-vertex
+  detail as vertex positions, used by the *refined mesh* output.
 * On the **cage**: its own topology, the crease edges as the boolean edge
   attribute ``meshadjust_crease``, and its rest shape at bind time (source
   space) as the point attribute ``meshadjust_rest``.
@@ -24,7 +24,7 @@ import bpy
 import numpy as np
 
 from .. import core
-from . import mesh_io, rollback, staleness
+from . import leftovers, mesh_io, rollback, staleness
 
 FACE = "meshadjust_face"
 BARY = "meshadjust_bary"
@@ -152,11 +152,11 @@ def save_binding(edited, binding):
         old = detail
         detail = mesh_io.new_mesh(name + ".new", binding.fine_detail, np.zeros((0, 3), np.int64))
         detail.use_fake_user = True
+        leftovers.tag_detail(detail)     # (removed once its edited original is gone)
         state.detail_mesh = detail
         if old is not None:
             rollback.retire(old, detail, name, ours=True)
-    if detail.name != name and name not in bpy.data.meshes:
-        detail.name = name
+    _take_name(detail, name)
     state.fingerprint = binding.fingerprint
     state.dense_vertices = binding.n_dense
     state.cage_counts = (binding.n_cage, binding.F_cage.shape[0])
@@ -164,6 +164,17 @@ def save_binding(edited, binding):
     state.scheme = binding.scheme
     _cache[edited.session_uid] = binding
     rollback.on_undo(lambda uid=edited.session_uid: _cache.pop(uid, None))
+
+
+def _take_name(detail, name):
+    """Name the detail mesh ``detail`` ``name``: now when it is free, when the
+    step succeeds when the detail data of a deleted edited original holds it
+    (removed then, :mod:`.leftovers`); else it keeps its name."""
+    taken = bpy.data.meshes.get(name)
+    if taken is None:
+        detail.name = name
+    elif taken != detail and taken in leftovers.orphan_details():
+        rollback.retire(taken, detail, name, ours=True)
 
 
 def binding_misfit(edited):

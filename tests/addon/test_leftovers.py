@@ -163,3 +163,61 @@ def test_restore_basis_refuses_a_basis_it_does_not_know(scene):
     with pytest.raises(RuntimeError, match="other shape keys or modifiers when it was bound.*Undo"):
         bpy.ops.meshadjust.restore_basis()
     assert_all_unchanged(before)
+
+
+def _details():
+    """The names of the detail meshes (``<edited>.detail``) in the file."""
+    return sorted(m.name for m in bpy.data.meshes if ".detail" in m.name)
+
+
+def test_the_detail_data_of_a_removed_edited_original_goes_with_the_next_step(bound, monkeypatch):
+    # (its fake user had kept it in the file for ever)
+    dense, cage = bound
+    bpy.data.objects.remove(cage.meshadjust.edited)
+    assert _details() == ["dense_edited.detail"]
+    bpy.context.view_layer.objects.active = cage
+    before = full_snapshot()
+    monkeypatch.setattr(mod("store"), "save_rest", _bug)
+    _raises_the_bug(bpy.ops.meshadjust.bind)               # a failed step removes nothing
+    monkeypatch.undo()
+    assert_all_unchanged(before)
+    assert bpy.ops.meshadjust.bind() == {'FINISHED'}
+    edited = cage.meshadjust.edited
+    assert _details() == ["dense_edited.detail"]            # the new one, under the old name
+    assert edited.meshadjust.detail_mesh.name == "dense_edited.detail"
+    assert [m.name for m in bpy.data.meshes if m.users == int(m.use_fake_user)] == \
+        ["dense_edited"]                                      # (Blender's own orphan: the
+    # removed object's mesh, no fake user, purged on save as for any deleted object)
+
+
+def test_a_detail_mesh_still_used_is_never_removed(bound):
+    dense, cage = bound
+    edited = cage.meshadjust.edited
+    detail = edited.meshadjust.detail_mesh
+    twin = edited.copy()                                    # points to the same detail data
+    bpy.context.scene.collection.objects.link(twin)
+    bpy.data.objects.remove(edited)
+    mod("leftovers").remove_orphan_details()
+    assert detail.name in bpy.data.meshes
+    shown = bpy.data.objects.new("shown", detail)           # the artist uses it as a mesh
+    bpy.data.objects.remove(twin)
+    mod("leftovers").remove_orphan_details()
+    assert detail.name in bpy.data.meshes and shown.data == detail
+    bpy.data.objects.remove(shown)
+    assert mod("leftovers").remove_orphan_details() == ["dense_edited.detail"]
+
+
+def test_a_leaked_detail_mesh_is_removed_when_the_file_is_loaded(bound, tmp_path):
+    dense, cage = bound
+    tag = mod("leftovers").TAG
+    del cage.meshadjust.edited.meshadjust.detail_mesh[tag]    # a file made before the tag:
+    path = str(tmp_path / "leak.blend")
+    bpy.ops.wm.save_as_mainfile(filepath=path)
+    bpy.ops.wm.open_mainfile(filepath=path)
+    edited = bpy.data.objects["dense_edited"]
+    assert edited.meshadjust.detail_mesh.get(tag)             # tagged when loaded
+    bpy.data.objects.remove(edited)
+    bpy.ops.wm.save_as_mainfile(filepath=path)
+    bpy.ops.wm.open_mainfile(filepath=path)
+    assert "dense_edited.detail" not in bpy.data.meshes
+    assert sorted(m.name for m in bpy.data.meshes) == ["dense", "dense_cage"]
