@@ -283,7 +283,9 @@ def _read_bulk(data, obj):
     file has anything the line reader would read otherwise or refuse: a
     line starting with a space, a ``v`` or ``f`` line with too few words or
     a word that is not a number, an ``_``, a 0 or out-of-range index, a
-    coordinate that is not finite, a NUL, no ``v`` or ``f`` line."""
+    coordinate that is not finite, a NUL in a ``v`` or ``f`` line, a byte
+    outside ASCII in a first word that may yet be a keyword, no ``v`` or
+    ``f`` line."""
     if data.startswith(b"\xef\xbb\xbf"):
         data = data[3:]
     if data.count(b"\r") != data.count(b"\r\n"):
