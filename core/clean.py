@@ -497,7 +497,7 @@ def _stacked(shape, F, weld, protected):
     drop = stacked_copies(shape.V, F, shape.area, weld.distance, protected)
     if drop is None:
         return None, found
-    found["n_copies"] = face_components(F[drop], shape.V.shape[0])[1]
+    found["n_copies"] = int(np.unique(face_components(F, shape.V.shape[0])[0][drop]).shape[0])
     found["n_copy_faces"] = int(np.count_nonzero(drop))
     return drop, found
 
