@@ -89,6 +89,10 @@ ASYMMETRY_NOTE = 0.05
 #: 'target' with 100 of its 500 faces on the bunny (4.1% off), beside 1,000 pebbles
 #: with 20 of 4,020 (44% off)
 FLOOR_PIECES_SHARE = 0.5
+#: a mesh whose faces have no area and whose coordinates keep fewer than this many
+#: significant digits of its shape (its distance from the origin over its size) is
+#: told that it is too far off: the faces' area may be lost in the rounding
+FEW_DIGITS = 6
 FLOOR_PIECE_FACES = 4
 
 
@@ -928,8 +932,24 @@ def cleaned_input(V, F, weld_distance, min_component_area, budget, locked):
     if clean.F.shape[0] and not has_area(clean.V, clean.F):
         raise InvalidMeshError(
             f"{_WHERE}: the {clean.F.shape[0]:,} faces left after cleaning have no area (their "
-            f"corners are collinear): no cage can be made")
+            f"corners are collinear{_far_off(clean.V)}): no cage can be made")
     return clean
+
+
+def _far_off(V):
+    """A hint for :func:`cleaned_input`'s error when the mesh lies so far
+    from the origin for its size that its coordinates hold fewer than
+    :data:`FEW_DIGITS` significant digits of its shape (a millimetre part
+    placed a thousand kilometres off): then the faces' area is lost in the
+    coordinates' rounding; empty otherwise."""
+    lo, hi = bounding_box(V)
+    size = diagonal_length(lo, hi)
+    far = float(np.abs(np.concatenate([lo, hi])).max())
+    if size > 0 and far / size < 10.0 ** (15 - FEW_DIGITS):
+        return ""
+    return (f", or lost in rounding: the mesh is {size:.3g} across and {far:.3g} from the origin, "
+            f"so its coordinates keep only {max(0, 15 - int(np.log10(far / size))) if size > 0 else 0} "
+            f"significant digits of its shape: move it to the origin first")
 
 
 def debris_budget(target_faces, ratio, max_error, m):

@@ -600,8 +600,21 @@ def test_a_collinear_soup_is_a_clear_error():
     rng = np.random.default_rng(0)
     P = np.zeros((3000, 3))
     P[:, 0] = rng.random(3000)
-    with pytest.raises(InvalidMeshError, match="have no area"):
+    with pytest.raises(InvalidMeshError, match=r"have no area \(their corners are collinear\): no"):
         core.simplify(P, np.arange(3000).reshape(-1, 3), target_faces=100)
+
+
+def test_a_tiny_mesh_far_off_is_told_to_move_to_the_origin():
+    """A sphere 2.5e-7 across placed 1e6 from the origin keeps 3 significant
+    digits of its shape in its coordinates: its faces' area is lost in the
+    rounding, and the error says so rather than only 'collinear'."""
+    V, F = icosphere(3)
+    with pytest.raises(InvalidMeshError, match=r"have no area \(their corners are collinear, or lost "
+                       r"in rounding: the mesh is 2.5e-07 across and 1e\+06 from the origin, so its "
+                       r"coordinates keep only 3 significant digits of its shape: move it to the origin"):
+        core.simplify(V * 2.5e-7 / core.bbox_diagonal(V) + 1e6, F, target_faces=100)
+    # moved to the origin, the same shape has a cage
+    assert core.simplify(V * 2.5e-7 / core.bbox_diagonal(V), F, target_faces=100).F.shape[0] == 100
 
 
 def test_the_bulk_of_a_mesh_is_never_debris_of_a_stray_huge_face():
