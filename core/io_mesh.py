@@ -9,16 +9,8 @@ the seed format of quadric simplification; OBJ is its common superset::
     f 1/1/1 2/2/2 3/3/3 4/4/4         OBJ: v/vt/vn, negative = relative
                                       (a polygon is fan-triangulated,
                                        v0 v1 v2, v0 v2 v3, ..., unless
-                                       the fan folds: then ear-clipped)
-
-A polygon's fan folds when one of its triangles faces against the polygon
-(a concave polygon seen from a vertex that does not see all of it)::
-
-    5-----4                 the fan from 0 folds (0 2 3 faces down);
-    |     |                 ear clipping in the polygon's best-fit plane
-    |  2--3                 (Newell's normal) cuts ears, convex corners
-    |  |                    whose triangle holds no other vertex, the
-    0--1                    best-shaped first: 0 1 2, 5 0 2, 2 3 4, 2 4 5
+                                       the fan folds: then ear-clipped,
+                                       see :mod:`.triangulate`)
 
 Every other keyword (SMF ``c``, ``n``, ``r``, ``t``, ``bind``, ``begin``,
 ``end``, ``set``...; OBJ ``vt``, ``vn``, ``o``, ``g``, ``usemtl``, ``l``...)
@@ -50,6 +42,7 @@ import numpy as np
 from .errors import InvalidArgumentError, InvalidMeshError
 from .mesh import check_mesh
 from .pages import plain_pages
+from .triangulate import triangulate_polygons
 
 #: the extensions :func:`read_mesh` and :func:`write_mesh` understand
 MESH_EXTENSIONS = (".obj", ".smf")
@@ -63,7 +56,7 @@ class MeshFile(NamedTuple):
     V : (n,3) float64, vertex positions.
     F : (m,3) int64, triangles, 0-based, in the file's order; a polygon of k
         vertices gives k-2 (a fan from its first vertex, ear-clipped where
-        the fan folds: see the module's docstring).
+        the fan folds: :func:`.triangulate.triangulate_polygons`).
     n_polygons : int, faces in the file (before triangulation).
     skipped : dict str -> int, lines of each other keyword, skipped.
     n_unreadable : int, lines starting with no keyword, skipped.
@@ -323,7 +316,7 @@ def _read_bulk(data, obj):
 
 def _faces(lines, is_v, is_f, obj, V):
     """(m,3) int64 0-based triangles of the ``f`` lines over the vertices
-    ``V`` (polygons triangulated by :func:`_triangulate`, in the file's
+    ``V`` (polygons triangulated by :func:`triangulate_polygons`, in the file's
     order; OBJ: ``v/vt/vn`` read as ``v``, negative indices relative to the
     vertices before the line), or None (see :func:`_read_bulk`)."""
     n = V.shape[0]
@@ -350,7 +343,7 @@ def _faces(lines, is_v, is_f, obj, V):
         F = R - 1
     if (R == 0).any() or (F < 0).any() or (F >= n).any():
         return None
-    return _triangulate(V, F, words)
+    return triangulate_polygons(V, F, words)
 
 
 def _cut_slashes(fb):
@@ -390,7 +383,7 @@ def _read_lines(path, fn, obj):
     V = _vertices(fn, path, lines.v_rows, lines.v_lines)
     F, sizes = _line_faces(fn, path, lines, V.shape[0], obj)
     _check_finite(fn, path, V, lines.v_lines, F)
-    F = _triangulate(V, F, sizes)
+    F = triangulate_polygons(V, F, sizes)
     return MeshFile(V, F, len(lines.tri_lines) + len(lines.poly), lines.skipped,
                     len(lines.unreadable), lines.unreadable[0] if lines.unreadable else 0)
 
@@ -472,121 +465,6 @@ def _line_faces(fn, path, lines, n, obj):
                    _missing_vertex(n))
         raise _line_error(fn, path, int(at[k]), problem)
     return F, np.unique(at, return_counts=True)[1] + 2
-
-
-#: polygons times corners times vertices :func:`_ear_scores` tests at once (its memory)
-_EAR_BLOCK = 1 << 20
-#: an area below this fraction of a polygon's squared size is flat (rounding: a rotated
-#: polygon's collinear vertices are a few 1e-16 off their line)
-_FLAT = 1e-10
-
-
-def _triangulate(V, F, sizes):
-    """``F`` (m,3), the fans of polygons of ``sizes`` vertices (per polygon,
-    in order: ``sizes - 2`` rows each, ``v0 vi vi+1``), with each polygon
-    whose fan folds (:func:`_folded_fans`) ear-clipped instead
-    (:func:`_ear_clip`; the polygons of one size at once, a block at a time)."""
-    first, k_of = _folded_fans(V, F, sizes)
-    if first.size == 0:
-        return F
-    F = F.copy()
-    for k in np.unique(k_of):
-        starts = first[k_of == k]
-        for s in range(0, starts.size, max(1, _EAR_BLOCK // (k * k))):
-            at = starts[s:s + max(1, _EAR_BLOCK // (k * k)), None] + np.arange(k - 2)
-            loops = np.concatenate([F[at[:, :1], 0], F[at[:, :1], 1], F[at, 2]], axis=1)
-            F[at] = np.take_along_axis(loops[:, None, :], _ear_clip(V[loops]), axis=2)
-    return F
-
-
-def _folded_fans(V, F, sizes):
-    """``(first, k)``: the first rows in ``F`` of the polygons (see
-    :func:`_triangulate`) whose fan folds, and their sizes. A fan folds when
-    one of its triangles faces against the polygon (Newell's normal: the sum
-    of the fan's triangle normals) by more than rounding; a fan that does not
-    covers its polygon once (its triangles' winding numbers add up to the
-    polygon's)."""
-    poly = np.flatnonzero(sizes > 3)
-    first = np.cumsum(sizes - 2) - (sizes - 2)              # each polygon's first row
-    count = sizes[poly] - 2
-    which = np.repeat(np.arange(poly.size), count)
-    rows = (first[poly] - (np.cumsum(count) - count))[which] + np.arange(which.size)
-    T = V[F[rows]]
-    n = np.cross(T[:, 1] - T[:, 0], T[:, 2] - T[:, 0])
-    N = np.stack([np.bincount(which, weights=n[:, c], minlength=poly.size) for c in range(3)], 1)
-    against = np.einsum("ij,ij->i", n, N[which]) < -_FLAT * np.einsum("ij,ij->i", N, N)[which]
-    folds = poly[np.bincount(which, weights=against, minlength=poly.size) > 0]
-    return first[folds], sizes[folds]
-
-
-def _ear_clip(X):
-    """(q,k-2,3) triangles (positions 0..k-1 in each polygon) of q polygons of
-    k vertices ``X`` (q,k,3), clipping one ear of each polygon at a time in
-    its best-fit plane: the best-shaped ear (a convex corner whose triangle
-    holds no other vertex); a polygon with none (self-intersecting) loses its
-    best-shaped convex corner, or any. Each clip re-scores the two neighbours
-    only (O(k^2) a polygon)."""
-    q, k = X.shape[:2]
-    P = _plane_coords(X)
-    tol = _FLAT * (P ** 2).sum(axis=2).max(axis=1)
-    loop = np.broadcast_to(np.arange(k), (q, k)).copy()
-    score = _ear_scores(P, tol, loop, loop)
-    r = np.arange(q)
-    out = []
-    for m in range(k, 3, -1):
-        j = np.argmax(score, axis=1)
-        out.append(np.stack([loop[r, j - 1], loop[r, j], loop[r, (j + 1) % m]], axis=1))
-        keep = np.arange(m) != j[:, None]
-        loop, score = loop[keep].reshape(q, m - 1), score[keep].reshape(q, m - 1)
-        at = np.stack([(j - 1) % (m - 1), j % (m - 1)], axis=1)
-        score[r[:, None], at] = _ear_scores(P, tol, loop, at)
-    return np.stack(out + [loop], axis=1)
-
-
-def _plane_coords(X):
-    """(q,k,2) coordinates of polygons ``X`` (q,k,3) in their best-fit planes
-    (Newell's normal N; axes u, w with u x w = N: a polygon winding
-    counter-clockwise about N has a positive area)."""
-    D = X - X[:, :1]
-    N = np.cross(D, np.roll(D, -1, axis=1)).sum(axis=1)
-    N /= np.maximum(np.linalg.norm(N, axis=1, keepdims=True), np.finfo(float).tiny)
-    u = np.cross(N, np.eye(3)[np.argmin(np.abs(N), axis=1)])
-    u /= np.maximum(np.linalg.norm(u, axis=1, keepdims=True), np.finfo(float).tiny)
-    w = np.cross(N, u)
-    return np.stack([np.einsum("qkc,qc->qk", D, u), np.einsum("qkc,qc->qk", D, w)], axis=2)
-
-
-def _orient(A, B, C):
-    """Twice the signed area of the 2D triangles ``A B C`` (..., 2) each."""
-    return ((B[..., 0] - A[..., 0]) * (C[..., 1] - A[..., 1])
-            - (B[..., 1] - A[..., 1]) * (C[..., 0] - A[..., 0]))
-
-
-def _ear_scores(P, tol, loop, at):
-    """(q,c) the score of clipping the corners at positions ``at`` (q,c) of
-    the polygons ``loop`` (q,m) (vertex positions in ``P``, (q,k,2); areas
-    within ``tol`` (q,) of 0 are flat): 2 plus the triangle's shape (in
-    [-1, 1], 1 equilateral, negative reflex) for an ear (a convex corner
-    whose closed triangle holds no other vertex), 1 plus it for another
-    convex corner, 0 plus it for a flat or reflex one."""
-    q, m = loop.shape
-    c = at.shape[1]
-    if q * c * m > _EAR_BLOCK and c > 1:                    # (a polygon of thousands of vertices)
-        step = max(1, _EAR_BLOCK // (q * m))
-        return np.concatenate([_ear_scores(P, tol, loop, at[:, s:s + step])
-                               for s in range(0, c, step)], axis=1)
-    r = np.arange(q)[:, None]
-    A, B, C = (P[r, loop[r, (at + d) % m]] for d in (-1, 0, 1))
-    area = _orient(A, B, C)
-    sq = sum(((X - Y) ** 2).sum(axis=-1) for X, Y in ((A, B), (B, C), (C, A)))
-    shape = np.where(sq > 0, 2 * np.sqrt(3) * area / np.where(sq > 0, sq, 1), 0)
-    Q = P[r, loop][:, None]                                  # (q,1,m,2)
-    A, B, C, t = A[:, :, None], B[:, :, None], C[:, :, None], -tol[:, None, None]
-    inside = (_orient(A, B, Q) >= t) & (_orient(B, C, Q) >= t) & (_orient(C, A, Q) >= t)
-    own = (np.arange(m) - at[:, :, None] + 1) % m < 3        # (the corner and its neighbours)
-    convex = area > tol[:, None]
-    ear = convex & ~(inside & ~own).any(axis=2)
-    return np.where(ear, 2, convex.astype(float)) + shape
 
 
 def read_smf(path):

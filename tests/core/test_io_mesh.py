@@ -7,6 +7,8 @@ from hypothesis import strategies as st
 
 import core
 from core import InvalidArgumentError, InvalidMeshError
+from core.triangulate import triangulate_polygons
+from tests.core.test_triangulate import CONCAVE, every_loop, fans, in_3d
 from tests.mesh_factory import icosphere, load_shared, tetrahedron
 
 
@@ -241,56 +243,17 @@ def _shared(name):
     return path if os.path.exists(path) else None
 
 
-def _fan(k):
-    """(k-2,3) the fan of a k-gon from its first vertex."""
-    return np.stack([np.zeros(k - 2, dtype=np.int64), np.arange(1, k - 1), np.arange(2, k)], axis=1)
-
-
-def _in_3d(P, seed=5):
-    """The 2D points ``P`` (k,2) rotated into 3D and moved away from the origin."""
-    Q = np.linalg.qr(np.random.default_rng(seed).normal(size=(3, 3)))[0]
-    return np.c_[P, np.zeros(len(P))] @ Q.T + [30.0, -20.0, 70.0]
-
-
-def _assert_tiles(X, T):
-    """The triangles ``T`` (k-2,3) of the planar polygon ``X`` (k,3) cover it
-    exactly once: each faces the polygon's way (Newell's normal), their areas
-    add up to the polygon's, and each polygon edge is a triangle edge once
-    (the others come in opposite pairs, the diagonals)."""
-    k = len(X)
-    n = np.cross(X[T[:, 1]] - X[T[:, 0]], X[T[:, 2]] - X[T[:, 0]])
-    D = X - X[0]
-    N = np.cross(D, np.roll(D, -1, axis=0)).sum(axis=0)
-    assert T.shape == (k - 2, 3) and (n @ N > 1e-6 * (N @ N)).all()
-    assert np.isclose(np.linalg.norm(n, axis=1).sum(), np.linalg.norm(N), rtol=1e-12)
-    edges = {(int(a), int(b)) for t in T for a, b in zip(t, np.roll(t, -1))}
-    assert len(edges) == 3 * (k - 2)                             # (no edge twice the same way)
-    assert all((i, (i + 1) % k) in edges for i in range(k))
-    assert all((b, a) in edges for a, b in edges if (b - a) % k not in (1, k - 1))
-
-
-_t = np.arange(10) * np.pi / 5
-_CONCAVE = {
-    "L": [(0, 0), (2, 0), (2, 1), (1, 1), (1, 2), (0, 2)],
-    "arrow": [(0, 0), (2, 1), (0, 2), (0.5, 1)],
-    "star": (np.c_[np.cos(_t), np.sin(_t)]
-             * np.where(np.arange(10) % 2, 0.4, 1.0)[:, None]).tolist(),
-    "comb": [(0, 0), (9, 0)] + [p for i in range(4, -1, -1) for p in
-                                [(2 * i + 2, 1), (2 * i + 1, 1), (2 * i + 1, 5), (2 * i, 5)]],
-}
-
-
-@pytest.mark.parametrize("name", sorted(_CONCAVE))
+@pytest.mark.parametrize("name", sorted(CONCAVE))
 @pytest.mark.parametrize("ext", [".obj", ".smf"])
 def test_concave_polygons_are_triangulated_without_folds(tmp_path, name, ext):
     """A concave polygon was fanned from its first vertex into overlapping,
-    flipped triangles; it is ear-clipped, from every first vertex and both
-    windings, in 3D, by the bulk and the line reader alike."""
+    flipped triangles; a file's polygons, from every first vertex and both
+    windings, give the triangles of ``triangulate_polygons`` (ear-clipped
+    where the fan folds: tested in test_triangulate.py), by the bulk and the
+    line reader alike."""
     from core import io_mesh
-    P = np.array(_CONCAVE[name], dtype=np.float64)
-    k = len(P)
-    X = _in_3d(P)
-    loops = [np.roll(np.arange(k)[::w], -s) for w in (1, -1) for s in range(k)]
+    X = in_3d(np.array(CONCAVE[name], dtype=np.float64))
+    loops = every_loop(len(X))
     text = "".join(f"v {x!r} {y!r} {z!r}\n" for x, y, z in X.tolist())
     text += "".join("f " + " ".join(str(i + 1) for i in loop) + "\n" for loop in loops)
     path = tmp_path / f"{name}{ext}"
@@ -298,59 +261,7 @@ def test_concave_polygons_are_triangulated_without_folds(tmp_path, name, ext):
     m = core.read_mesh(path)
     lines = io_mesh._read_lines(str(path), "read_mesh", ext == ".obj")
     assert io_mesh._read_bulk(path.read_bytes(), ext == ".obj") is not None
-    assert np.array_equal(m.F, lines.F) and m.n_polygons == 2 * k
-    folded = 0
-    for j, loop in enumerate(loops):
-        T = m.F[j * (k - 2):(j + 1) * (k - 2)]
-        local = np.argsort(loop)[T]                  # (positions in this loop)
-        _assert_tiles(X[loop], local)
-        folded += not np.array_equal(local, _fan(k))
-    assert folded > 0
-
-
-def test_a_fan_that_does_not_fold_is_kept():
-    """Convex polygons, and a concave one seen whole from its first vertex,
-    keep their fan (the triangles they had), also with collinear vertices
-    rotated into 3D (a few 1e-16 off their line)."""
-    from core import io_mesh
-    hexagon = np.c_[np.cos(np.arange(6)), np.sin(np.arange(6))]
-    shapes = [hexagon, np.array(_CONCAVE["L"], dtype=np.float64)[[3, 4, 5, 0, 1, 2]],
-              np.array([(0, 0), (1, 0), (2, 0), (3, 0), (3, 1), (0, 1)], dtype=np.float64),
-              np.array([(0, 0), (0, 0), (1, 0), (1, 1), (0, 1)], dtype=np.float64)]
-    for P in shapes:
-        k = len(P)
-        assert np.array_equal(io_mesh._triangulate(_in_3d(P), _fan(k), np.array([k])), _fan(k))
-
-
-def test_random_star_shaped_polygons_are_tiled():
-    """300 random star-shaped polygons of each size 4..16 (simple, mostly
-    concave), rotated into 3D, triangulated in one call."""
-    from core import io_mesh
-    rng = np.random.default_rng(11)
-    q = 300
-    for k in range(4, 17):
-        angle = (np.arange(k) + rng.uniform(0, 1, size=(q, k))) * 2 * np.pi / k   # (gaps < pi)
-        radius = rng.uniform(0.2, 1.0, size=(q, k))
-        P = np.stack([radius * np.cos(angle), radius * np.sin(angle)], axis=2)
-        X = np.concatenate([_in_3d(p, seed=j) for j, p in enumerate(P)])
-        F = (np.arange(q)[:, None, None] * k + _fan(k)).reshape(-1, 3)
-        T = io_mesh._triangulate(X, F, np.full(q, k)).reshape(q, k - 2, 3)
-        for j in range(q):
-            _assert_tiles(X[j * k:(j + 1) * k], T[j] - j * k)
-        assert (T != F.reshape(q, k - 2, 3)).any(axis=(1, 2)).sum() > 10     # (folded fans)
-
-
-@pytest.mark.parametrize("P", [
-    [(0, 0), (1, 1), (1, 0), (0, 1)],                                   # a bow tie
-    [(np.cos(a), np.sin(a)) for a in np.arange(5) * 4 * np.pi / 5],     # a pentagram
-    [(0, 0), (1, 0), (2, 0), (3, 0)],                                   # no area
-    [(0, 0), (2, 0), (2, 2), (1, 1), (1, 1), (0, 2)],                   # a repeated corner
-    [(0, 0), (2, 0), (1, 1), (2, 2), (0, 2), (1, 1)],                   # touching itself
-])
-def test_polygons_without_a_clean_triangulation_still_give_k_minus_2_triangles(P):
-    from core import io_mesh
-    P = np.array(P, dtype=np.float64)
-    k = len(P)
-    T = io_mesh._triangulate(_in_3d(P), _fan(k), np.array([k]))
-    assert T.shape == (k - 2, 3) and T.dtype == np.int64
-    assert set(T.ravel().tolist()) <= set(range(k)) and (np.diff(np.sort(T, axis=1)) > 0).all()
+    F, sizes = fans(loops)
+    T = triangulate_polygons(X, F, sizes)
+    assert np.array_equal(m.V, X) and m.n_polygons == len(loops)
+    assert np.array_equal(m.F, lines.F) and np.array_equal(m.F, T) and not np.array_equal(T, F)
