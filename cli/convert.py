@@ -145,13 +145,25 @@ def _read(path, log):
         raise FileNotFoundError(2, "no such file", path)
     if ext in CORE_FORMATS:
         m = core.read_mesh(path)
-        notes = [f"skipped {n:,} '{k}' line" + ("s" if n != 1 else "")
-                 for k, n in sorted(m.skipped.items())]
-        return m.V, m.F, m.n_polygons, notes, []
+        return m.V, m.F, m.n_polygons, _skipped_notes(m), []
     if ext not in blender_io.BLENDER_IMPORT:
         raise core.InvalidArgumentError(f"unsupported file type '{ext}' (use "
                                         f"{', '.join(sorted(INPUT_EXTENSIONS))})")
     return blender_io.read_with_blender(path, log)
+
+
+def _skipped_notes(m):
+    """The notes of the lines a :class:`core.MeshFile` skipped: per keyword
+    (``skipped 3 'vt' lines``), then those starting with no keyword (binary
+    junk, NUL bytes: ``skipped 5 unreadable lines (the first is line 6)``)."""
+    notes = [f"skipped {n:,} '{k}' line" + ("s" if n != 1 else "")
+             for k, n in sorted(m.skipped.items())]
+    if m.n_unreadable == 1:
+        notes.append(f"skipped 1 unreadable line (line {m.first_unreadable:,})")
+    elif m.n_unreadable:
+        notes.append(f"skipped {m.n_unreadable:,} unreadable lines "
+                     f"(the first is line {m.first_unreadable:,})")
+    return notes
 
 
 def _check_target(r, res):
