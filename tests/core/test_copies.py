@@ -257,3 +257,22 @@ def test_faces_wound_the_other_way_are_not_duplicates():
     protected = np.zeros(V2.shape[0], dtype=bool)
     protected[-1] = True
     assert stacked_copies((V2 - V2.min(axis=0)) / bbox_diagonal(V2), F2, area, 1e-6, protected) is None
+
+
+@pytest.mark.parametrize("jitter", [3e-6, 1e-5])
+@pytest.mark.parametrize("offset", [0.0, 1e-7])
+def test_a_drifted_soup_exported_twice_welds_into_one_piece(jitter, offset):
+    """A triangle soup whose corners drifted apart (beyond the first weld
+    distance), twice in place: the first weld joins each face to its copy
+    only, closed two-face pillows that hid every open edge, so the wider
+    welds were never tried and the icosphere stayed 1,280 one-face pieces."""
+    from tests.mesh_factory import duplicated, unwelded
+    V, F = icosphere(3)
+    r = clean_mesh(*duplicated(*unwelded(V, F, jitter=jitter), offset=offset))
+    alone = clean_mesh(*unwelded(V, F, jitter=jitter))
+    assert r.F.shape[0] == F.shape[0] and components(r) == 1
+    # the weld the soup alone takes (1e-5 and 1e-4 for these drifts), the copy's faces gone
+    assert r.report.weld_distance == alone.report.weld_distance > 1e-6
+    assert r.report.n_duplicate_faces == F.shape[0]
+    s = topology_summary(r.F, r.V.shape[0])
+    assert (s.euler, s.boundary_loops, s.non_manifold_edges) == (2, 0, 0)    # the sphere
