@@ -530,14 +530,9 @@ def _open_half_edges(w):
     removal opens again. Counted closed, they kept the wider welds from
     being tried (the icosphere so stayed 1,280 one-face pieces)."""
     t = w.twin
-    h = np.flatnonzero(t >= 0)
-    flat = w.F.ravel()
-    across = flat[h - h % 3 + _PREV_CORNER[h % 3]] == flat[t[h] - t[h] % 3 + _PREV_CORNER[t[h] % 3]]
-    return int(np.count_nonzero(t == BOUNDARY)) + int(np.count_nonzero(across))
-
-
-#: the corner before each corner of a face (the one across the edge that starts at it)
-_PREV_CORNER = np.array([2, 0, 1], dtype=np.int64)
+    across = w.F[:, [2, 0, 1]].ravel()        # the corner across each half-edge
+    meets_copy = (t >= 0) & (across == across.take(np.maximum(t, 0)))
+    return int(np.count_nonzero(t == BOUNDARY)) + int(np.count_nonzero(meets_copy))
 
 
 class _Shape(NamedTuple):
