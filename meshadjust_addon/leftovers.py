@@ -16,6 +16,8 @@ uses it as its mesh, no edited original points to it, nothing else holds it.
 
 import bpy
 
+from . import app_handlers
+
 #: the custom property that marks a mesh as MeshAdjust's detail data
 TAG = "meshadjust_detail"
 
@@ -58,13 +60,14 @@ def _on_load_post(*_args):
     remove_orphan_details()
 
 
+_HANDLERS = (("load_post", _on_load_post),)
+
+
 def register():
     """Sweep on every file load."""
-    if _on_load_post not in bpy.app.handlers.load_post:
-        bpy.app.handlers.load_post.append(_on_load_post)
+    app_handlers.add(_HANDLERS)
 
 
 def unregister():
     """Stop sweeping on load."""
-    if _on_load_post in bpy.app.handlers.load_post:
-        bpy.app.handlers.load_post.remove(_on_load_post)
+    app_handlers.remove(_HANDLERS)

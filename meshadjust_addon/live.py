@@ -17,7 +17,7 @@ import time
 import bpy
 
 from .. import core
-from . import api, live_update, results
+from . import api, app_handlers, live_update, results
 from .properties import preferences
 
 _pending = set()
@@ -91,18 +91,15 @@ def on_save_pre(*_args):
     results.settle_live_written()
 
 
+_HANDLERS = (("depsgraph_update_post", on_depsgraph_update), ("save_pre", on_save_pre))
+
+
 def register():
-    if on_depsgraph_update not in bpy.app.handlers.depsgraph_update_post:
-        bpy.app.handlers.depsgraph_update_post.append(on_depsgraph_update)
-    if on_save_pre not in bpy.app.handlers.save_pre:
-        bpy.app.handlers.save_pre.append(on_save_pre)
+    app_handlers.add(_HANDLERS)
 
 
 def unregister():
-    if on_depsgraph_update in bpy.app.handlers.depsgraph_update_post:
-        bpy.app.handlers.depsgraph_update_post.remove(on_depsgraph_update)
-    if on_save_pre in bpy.app.handlers.save_pre:
-        bpy.app.handlers.save_pre.remove(on_save_pre)
+    app_handlers.remove(_HANDLERS)
     if bpy.app.timers.is_registered(refine_pending):
         bpy.app.timers.unregister(refine_pending)
     _pending.clear()

@@ -10,7 +10,7 @@ import bpy
 from bpy.props import (BoolProperty, EnumProperty, FloatProperty, FloatVectorProperty, IntProperty,
                        IntVectorProperty, PointerProperty, StringProperty)
 
-from . import settings as _settings
+from . import app_handlers, settings as _settings
 from .settings import AXES, OUTPUTS, SCHEMES, TARGET_MODES  # noqa: F401  (re-exported)
 
 #: the plane a cage mirrors about, or none
@@ -178,8 +178,7 @@ def _on_depsgraph_update(scene, _depsgraph):
 
 
 CLASSES = (MeshAdjustObjectState, MeshAdjustSettings, MeshAdjustPreferences)
-_HANDLERS = ((bpy.app.handlers.load_post, _on_load_post),
-             (bpy.app.handlers.depsgraph_update_post, _on_depsgraph_update))
+_HANDLERS = (("load_post", _on_load_post), ("depsgraph_update_post", _on_depsgraph_update))
 
 
 def register():
@@ -187,9 +186,7 @@ def register():
         bpy.utils.register_class(cls)
     bpy.types.Object.meshadjust = PointerProperty(type=MeshAdjustObjectState)
     bpy.types.Scene.meshadjust = PointerProperty(type=MeshAdjustSettings)
-    for handlers, fn in _HANDLERS:
-        if fn not in handlers:
-            handlers.append(fn)
+    app_handlers.add(_HANDLERS)
     # register() runs with bpy.data restricted: seed the open scenes just after
     # (timers fire in a UI session; headless, load_post and the handler do it)
     if not bpy.app.timers.is_registered(_seed_soon):
@@ -199,9 +196,7 @@ def register():
 def unregister():
     if bpy.app.timers.is_registered(_seed_soon):
         bpy.app.timers.unregister(_seed_soon)
-    for handlers, fn in _HANDLERS:
-        if fn in handlers:
-            handlers.remove(fn)
+    app_handlers.remove(_HANDLERS)
     del bpy.types.Scene.meshadjust
     del bpy.types.Object.meshadjust
     for cls in reversed(CLASSES):

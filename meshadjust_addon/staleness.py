@@ -27,7 +27,7 @@ import bmesh
 import bpy
 import numpy as np
 
-from . import mesh_io
+from . import app_handlers, mesh_io
 
 _generation = {}      #: object session_uid -> geometry updates seen
 _memo = {}            #: (what, session_uid) -> (generation, value)
@@ -241,13 +241,14 @@ def touched(obj):
     _generation[obj.session_uid] = _generation.get(obj.session_uid, 0) + 1
 
 
+_HANDLERS = (("depsgraph_update_post", _on_depsgraph_update),)
+
+
 def register():
-    if _on_depsgraph_update not in bpy.app.handlers.depsgraph_update_post:
-        bpy.app.handlers.depsgraph_update_post.append(_on_depsgraph_update)
+    app_handlers.add(_HANDLERS)
 
 
 def unregister():
-    if _on_depsgraph_update in bpy.app.handlers.depsgraph_update_post:
-        bpy.app.handlers.depsgraph_update_post.remove(_on_depsgraph_update)
+    app_handlers.remove(_HANDLERS)
     _generation.clear()
     _memo.clear()
