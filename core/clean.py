@@ -32,11 +32,15 @@ edge- and vertex-manifold triangle mesh that :func:`~.simplify.simplify`,
            weld_distance) with vertices of another one, and, when the weld
            leaves non-manifold edges, pieces lying on another face for face
            before it (:mod:`core.copies`)
+    zip    T-junctions: border loops of zero width (a vertex on a
+           neighbour's edge, within weld_distance), each closed by splitting
+           the face across it (:func:`~.pinholes.zip_slits`)
     drop   unreferenced vertices
 
 Nothing is averaged or moved: every output vertex sits exactly on an input
 vertex (``clean_to_input``), and every output face is an input face
-(``face_to_input``), possibly flipped and with split vertices. A mesh that is
+(``face_to_input``), possibly flipped and with split vertices, or a part
+of one split at a T-junction. A mesh that is
 already clean comes back with the same vertices and faces in the same order.
 
 Welding looks at four grids of cell ``4 weld_distance``, each shifted by a
@@ -64,6 +68,7 @@ from .mesh import (bounding_box, check_count, check_mesh, check_vertex_mask, cro
 from .topology import connected_labels, edge_keys, face_components
 from .copies import coincident_copies, pillow_layers, stacked_copies
 from .pages import plain_pages
+from .pinholes import zip_slits
 
 _WHERE = "clean_mesh"
 
@@ -114,6 +119,7 @@ class CleanReport:
     n_unreferenced_vertices: int = 0  #: vertices no kept face uses
     n_pinholes: int = 0               #: holes too small for one cage face, capped (by simplify) ...
     n_pinhole_faces: int = 0          #: ... with this many faces
+    n_t_junctions: int = 0            #: zero-width holes along a face's edge, zipped
     #: the weld distance used (share of the diagonal): ``WELD_DISTANCE``, or wider
     #: when the automatic weld found the input in pieces (see :func:`clean_mesh`)
     weld_distance: float = WELD_DISTANCE
@@ -150,6 +156,7 @@ class CleanReport:
             f" ({self.n_debris_faces:,} faces)")
         add(self.n_copies, "dropped {} coincident copies", f" ({self.n_copy_faces:,} faces "
             "lying on other parts of the mesh)")
+        add(self.n_t_junctions, "zipped {} T-junctions")
         add(self.n_pinholes, "closed {} pinholes", f" ({self.n_pinhole_faces:,} faces)")
         add(self.n_degenerate_faces, "removed {} degenerate faces")
         add(self.n_duplicate_faces, "removed {} duplicate faces")
@@ -256,6 +263,7 @@ def clean_mesh(V, F, *, weld_distance=None, min_component_area=MIN_COMPONENT_ARE
                                          face_budget, protected, turned)
     del inner
     _copies_stage(w, labels, area, box, weld.distance, protected, turned)
+    _slits_stage(w, weld.distance * diagonal_length(*box))
     V, F, input_to_clean, clean_to_input = _compact(w.V, w.F, to_input, weld.rep)
     return CleanResult(V, F, input_to_clean, clean_to_input, w.faces, w.twin, w.area,
                        CleanReport(**w.counts))
@@ -406,6 +414,26 @@ def _copies_stage(w, labels, area, box, distance, protected, turned):
         w.area = area[kept]
         for name, value in found.items():
             w.counts[name] += value
+
+
+def _slits_stage(w, distance):
+    """Zip the T-junctions (:func:`~.pinholes.zip_slits`, vertices within
+    ``distance``, in mesh units, of a face's edge): the parts of a split face
+    map to its input face and keep its area. Up to ``SLIT_ROUNDS`` rounds: a
+    face with slits on two of its edges, or whose third vertex is on a slit,
+    is zipped in a later one."""
+    for _ in range(SLIT_ROUNDS):
+        slits = zip_slits(w.V, w.F, w.twin, distance)
+        if slits is None:
+            return
+        w.F, w.twin, w.corners = slits.F, slits.twin, None
+        w.faces = np.concatenate([w.faces, w.faces[slits.parent]])
+        w.area = np.concatenate([w.area, w.area[slits.parent]])
+        w.counts["n_t_junctions"] = w.counts.get("n_t_junctions", 0) + slits.n_slits
+
+
+#: rounds of :func:`_slits_stage` (each zips at most one slit per face)
+SLIT_ROUNDS = 4
 
 
 #: a face is collapsed (its corners weld) only when no taller than the weld distance

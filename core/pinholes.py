@@ -40,7 +40,7 @@ from .mesh import bounding_box, diagonal_length, face_areas
 from .topology import connected_labels, edge_keys, vertex_labels
 
 __all__ = ["PINHOLE_FACES", "PINHOLE_SURFACE", "MAX_PINHOLE_EDGES", "Pinholes", "cap_pinholes",
-           "close_pinholes", "face_floor"]
+           "close_pinholes", "face_floor", "Slits", "zip_slits"]
 
 #: a disk of a pinhole's perimeter has at most this many times the area of a mean cage face
 #: (a perimeter of about 2.3 mean cage edges)
@@ -154,6 +154,114 @@ def face_floor(V, F, twin):
     return int(floor[faces > 0].sum())
 
 
+class Slits(NamedTuple):
+    """The faces with the T-junctions' slits zipped (see :func:`zip_slits`)."""
+
+    F: np.ndarray          #: (m + k, 3) int64, each split face in place, its other parts after the faces
+    twin: np.ndarray       #: (3(m + k),) int64 their twin table
+    parent: np.ndarray     #: (k,) int64 for each part after the faces, the face it was split from
+    n_slits: int           #: slits zipped
+
+
+def zip_slits(V, F, twin, distance):
+    r"""Zip the T-junctions of the oriented vertex-manifold mesh ``(V, F)``
+    (twin table ``twin``): border loops of zero width, a chain of edges
+    ``a -> m_1 -> ... -> b`` along one edge ``b -> a`` of a face ``(b, a, x)``,
+    every vertex within ``distance`` (mesh units) of that edge and the chain
+    no longer than it by more than ``2 distance`` per vertex. A scan or a CAD
+    export split a face at a point of its edge and left the neighbour whole:
+    the surface is closed there, but the mesh has a hole that a cage keeping
+    its topology must keep (three vertices of its own), and no cap is needed
+    to close it. The face ``(b, a, x)`` becomes the fan ``(m_1, a, x), ...,
+    (b, m_k, x)`` (the first in its place, the others after the faces), so
+    no vertex moves and no area changes (the tests run unit-free: no overflow
+    at 1e200). A slit is left open when its face
+    already has one zipped, when ``x`` is on a border, or when an edge
+    ``x - m_i`` is already there (it would get three faces). Returns
+    :class:`Slits`, or None when there is none.
+
+    ::
+
+        a ----- m ----- b          a ----- m ----- b     the faces above the
+         \             /            \      |      /      chain a -> m -> b as
+          \           /      ->      \     |     /       they were; (b, a, x)
+           \         /                \    |    /        below becomes (m, a, x)
+                x                          x             and (b, m, x)
+    """
+    lo, hi = bounding_box(V)
+    size = diagonal_length(lo, hi) or 1.0
+    V = (V - lo) / size
+    loops = _border_loops(V, F, twin)
+    if loops is None:
+        return None
+    heads, longest = _slit_loops(V, loops, distance / size)
+    heads, x = _zippable(F, V.shape[0], twin, loops, heads, longest)
+    if heads.size == 0:
+        return None
+    rim, count = _rims(loops, heads)
+    # rim[:, 0] is the long edge b -> a (heads start there), the chain follows it
+    chain = rim[:, 1:]
+    live = chain >= 0
+    row = np.nonzero(live)[0]
+    p = chain[live]
+    w = loops.u[loops.succ[p]]
+    parts = np.stack([w, loops.u[p], x[row]], axis=1)          # (q, p, x) for chain edge p -> q
+    first = np.r_[True, row[1:] != row[:-1]]
+    face = loops.h[heads] // 3
+    F2 = F.copy()
+    F2[face] = parts[first]
+    F2 = np.concatenate([F2, parts[~first]])
+    return Slits(F2, twin_table(F2, V.shape[0]), face[row[~first]], int(heads.size))
+
+
+def _slit_loops(V, loops, distance):
+    """The loops of zero width (see :func:`zip_slits`), as their longest
+    border half-edge's position, and that position for every border half-edge's loop."""
+    u, w = loops.u, loops.u[loops.succ]
+    length = np.linalg.norm(V[w] - V[u], axis=1)
+    order = np.lexsort((length, loops.label))
+    lab = loops.label[order]
+    last = np.r_[lab[1:] != lab[:-1], True]
+    longest = np.zeros(loops.h.shape[0], dtype=np.int64)
+    longest[lab[last]] = order[last]
+    L = longest[loops.label]
+    A, B, P = V[w[L]], V[u[L]], V[u]
+    AB = B - A
+    t = np.clip(np.einsum("ij,ij->i", P - A, AB) / np.maximum(np.einsum("ij,ij->i", AB, AB), 1e-300),
+                0.0, 1.0)
+    far = np.linalg.norm(A + t[:, None] * AB - P, axis=1) > distance
+    wide = np.bincount(loops.label, weights=far, minlength=far.shape[0]) > 0
+    long_chain = loops.perimeter > 2.0 * length[longest] + 2.0 * distance * loops.count
+    pos = np.flatnonzero(loops.heads() & (loops.count >= 3) & (loops.count <= MAX_PINHOLE_EDGES)
+                         & ~wide & ~long_chain)
+    return longest[pos], L
+
+
+def _zippable(F, n, twin, loops, heads, longest):
+    """Of the slits whose long edges are ``heads`` (positions), those that
+    can be zipped (see :func:`zip_slits`), and the third vertex ``x`` of the
+    face of each long edge."""
+    h = loops.h[heads]
+    face, x = h // 3, F[h // 3, h % 3]
+    _, one = np.unique(face, return_index=True)
+    keep = np.zeros(heads.shape[0], dtype=bool)
+    keep[one] = True
+    border = np.zeros(n, dtype=bool)
+    border[loops.u] = True
+    keep &= ~border[x]
+    # an edge x - m already there: the chain vertices are the loop's but the long edge's ends
+    slot = np.full(loops.h.shape[0], -1, dtype=np.int64)
+    slot[heads] = np.arange(heads.shape[0])
+    mine = slot[longest[loops.label]]
+    inner = (mine >= 0) & (longest[loops.label] != np.arange(loops.h.shape[0])) \
+        & (loops.succ[longest[loops.label]] != np.arange(loops.h.shape[0]))
+    m, k = loops.u[inner], mine[inner]
+    a, b = half_edge_ends(F)
+    clash = np.isin(edge_keys(x[k], m, n), edge_keys(a, b, n))
+    keep &= np.bincount(k[clash], minlength=heads.shape[0]) == 0
+    return heads[keep], x[keep]
+
+
 def _border_loops(V, F, twin):
     """The :class:`_Loops` of the mesh (None without border half-edges). In a vertex-manifold mesh each rim vertex starts
     exactly one border half-edge, so the successor of ``u -> w`` is the one
@@ -192,10 +300,10 @@ def _on_large_surface(F, twin, face_area, loops, heads):
 
 
 def _rims(loops, heads):
-    """Rim positions (in ``loops.h``) of the loops ``heads`` in loop order
-    from the head, (k, longest) (-1 past each loop's end), and their counts;
+    """Rim positions (in ``loops.h``) of the loops of ``heads`` in loop order
+    from the head (any position of its loop), (k, longest) (-1 past each loop's end), and their counts;
     one step of all loops at a time (at most ``MAX_PINHOLE_EDGES`` steps)."""
-    count = loops.count[heads]
+    count = loops.count[loops.label[heads]]
     rim = np.full((heads.shape[0], int(count.max())), -1, dtype=np.int64)
     pos = heads.copy()
     for step in range(rim.shape[1]):
