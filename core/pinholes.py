@@ -188,6 +188,8 @@ def zip_slits(V, F, twin, distance):
            \         /                \    |    /        below becomes (m, a, x)
                 x                          x             and (b, m, x)
     """
+    if np.count_nonzero(twin == BOUNDARY) < 3:
+        return None                                # closed: nothing to scale
     lo, hi = bounding_box(V)
     size = diagonal_length(lo, hi) or 1.0
     V = (V - lo) / size
