@@ -176,7 +176,7 @@ def zip_slits(V, F, twin, distance):
     (b, m_k, x)`` (the first in its place, the others after the faces), so
     no vertex moves and no area changes (the tests run unit-free: no overflow
     at 1e200). A slit is left open when its face
-    already has one zipped, when ``x`` is on a border, or when an edge
+    already has one zipped, when ``x`` is on the chain of a slit, or when an edge
     ``x - m_i`` is already there (it would get three faces). Returns
     :class:`Slits`, or None when there is none.
 
@@ -248,16 +248,18 @@ def _zippable(F, n, twin, loops, heads, longest):
     _, one = np.unique(face, return_index=True)
     keep = np.zeros(heads.shape[0], dtype=bool)
     keep[one] = True
-    border = np.zeros(n, dtype=bool)
-    border[loops.u] = True
-    keep &= ~border[x]
-    # an edge x - m already there: the chain vertices are the loop's but the long edge's ends
+    # the chain vertices m: each loop's but its long edge's ends
     slot = np.full(loops.h.shape[0], -1, dtype=np.int64)
     slot[heads] = np.arange(heads.shape[0])
     mine = slot[longest[loops.label]]
     inner = (mine >= 0) & (longest[loops.label] != np.arange(loops.h.shape[0])) \
         & (loops.succ[longest[loops.label]] != np.arange(loops.h.shape[0]))
     m, k = loops.u[inner], mine[inner]
+    # x on a chain: its own (a degenerate face) or another's (two new edges could meet)
+    on_chain = np.zeros(n, dtype=bool)
+    on_chain[m] = True
+    keep &= ~on_chain[x]
+    # an edge x - m already there
     a, b = half_edge_ends(F)
     clash = np.isin(edge_keys(x[k], m, n), edge_keys(a, b, n))
     keep &= np.bincount(k[clash], minlength=heads.shape[0]) == 0

@@ -689,3 +689,25 @@ def test_only_zero_width_slits_are_zipped():
         r = clean_mesh(V2, F2)
         assert r.report.n_t_junctions == zipped
         assert topology_summary(r.F, r.V.shape[0]).boundary_loops == loops
+
+
+def test_t_junctions_on_two_faces_that_share_an_edge():
+    """Two faces ``f = (u, v, w)`` and ``g = (v, u, y)`` both split across,
+    ``f`` along ``v - w`` and ``g`` along ``u - y``: the third vertex of each
+    is an end of the other's slit (it was left open, found by fuzzing: fandisk
+    with T-junctions and slivers kept 20 such pairs)."""
+    V, F = icosphere(1)
+    owner = {(int(a), int(b)): f for f, row in enumerate(F) for a, b in zip(row, np.roll(row, -1))}
+    u, v, w = F[0]
+    g = owner[(v, u)]
+    y = next(c for c in F[g] if c not in (u, v))
+    across = np.array([owner[(w, v)], owner[(y, u)]])
+    # each face across, rotated so its split edge comes first (a -> b, as the helper takes it)
+    for f, (a, b) in zip(across, ((w, v), (y, u))):
+        F[f] = np.roll(F[f], -int(np.flatnonzero(F[f] == a)[0]))
+        assert F[f, 1] == b
+    V2, F2 = t_junctions(V, F, across)
+    r = clean_mesh(V2, F2)
+    assert_manifold(r.V, r.F)
+    assert r.report.n_t_junctions == 2
+    assert topology_summary(r.F, r.V.shape[0]).boundary_loops == 0
