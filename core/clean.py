@@ -419,9 +419,9 @@ def _copies_stage(w, labels, area, box, distance, protected, turned):
 def _slits_stage(w, distance):
     """Zip the T-junctions (:func:`~.pinholes.zip_slits`, vertices within
     ``distance``, in mesh units, of a face's edge): the parts of a split face
-    map to its input face and keep its area. Up to ``SLIT_ROUNDS`` rounds: a
-    face with slits on two of its edges, or whose third vertex is on a slit,
-    is zipped in a later one."""
+    map to its input face and keep its area. Up to ``SLIT_ROUNDS`` rounds
+    while slits are left: a face with slits on two of its edges, or whose
+    third vertex is on a slit, is zipped in a later one."""
     for _ in range(SLIT_ROUNDS):
         slits = zip_slits(w.V, w.F, w.twin, distance)
         if slits is None:
@@ -430,6 +430,8 @@ def _slits_stage(w, distance):
         w.faces = np.concatenate([w.faces, w.faces[slits.parent]])
         w.area = np.concatenate([w.area, w.area[slits.parent]])
         w.counts["n_t_junctions"] = w.counts.get("n_t_junctions", 0) + slits.n_slits
+        if slits.n_left == 0:
+            return
 
 
 #: rounds of :func:`_slits_stage` (each zips at most one slit per face)

@@ -161,6 +161,7 @@ class Slits(NamedTuple):
     twin: np.ndarray       #: (3(m + k),) int64 their twin table
     parent: np.ndarray     #: (k,) int64 for each part after the faces, the face it was split from
     n_slits: int           #: slits zipped
+    n_left: int            #: slits found but left open (see :func:`zip_slits`)
 
 
 def zip_slits(V, F, twin, distance):
@@ -196,8 +197,8 @@ def zip_slits(V, F, twin, distance):
     loops = _border_loops(V, F, twin)
     if loops is None:
         return None
-    heads, longest = _slit_loops(V, loops, distance / size)
-    heads, x = _zippable(F, V.shape[0], twin, loops, heads, longest)
+    found, longest = _slit_loops(V, loops, distance / size)
+    heads, x = _zippable(F, V.shape[0], loops, found, longest)
     if heads.size == 0:
         return None
     rim, count = _rims(loops, heads)
@@ -213,7 +214,8 @@ def zip_slits(V, F, twin, distance):
     F2 = F.copy()
     F2[face] = parts[first]
     F2 = np.concatenate([F2, parts[~first]])
-    return Slits(F2, twin_table(F2, V.shape[0]), face[row[~first]], int(heads.size))
+    return Slits(F2, twin_table(F2, V.shape[0]), face[row[~first]], int(heads.size),
+                 int(found.size - heads.size))
 
 
 def _slit_loops(V, loops, distance):
@@ -239,7 +241,7 @@ def _slit_loops(V, loops, distance):
     return longest[pos], L
 
 
-def _zippable(F, n, twin, loops, heads, longest):
+def _zippable(F, n, loops, heads, longest):
     """Of the slits whose long edges are ``heads`` (positions), those that
     can be zipped (see :func:`zip_slits`), and the third vertex ``x`` of the
     face of each long edge."""
@@ -260,8 +262,7 @@ def _zippable(F, n, twin, loops, heads, longest):
     on_chain[m] = True
     keep &= ~on_chain[x]
     # an edge x - m already there
-    a, b = half_edge_ends(F)
-    clash = np.isin(edge_keys(x[k], m, n), edge_keys(a, b, n))
+    clash = np.isin(edge_keys(x[k], m, n), _edges_among(F, n, np.concatenate([x, m])))
     keep &= np.bincount(k[clash], minlength=heads.shape[0]) == 0
     return heads[keep], x[keep]
 
