@@ -11,7 +11,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from core import simplify, topology_summary
+from core import bbox_diagonal, simplify, topology_summary
 from core._clean import BOUNDARY, NON_MANIFOLD, twin_table
 from core.clean import clean_mesh
 from core.pinholes import PINHOLE_FACES, PINHOLE_SURFACE, cap_pinholes, face_floor
@@ -320,3 +320,23 @@ def test_a_target_near_the_holes_floor_caps_them_in_one_run():
     # far above the floor the holes are kept (a cage that reaches its target keeps them)
     kept = simplify(V, F, target_faces=int(floor / 0.9))
     assert kept.cleaning.n_pinholes == 0 and kept.n_boundary_loops == 116
+
+
+def test_an_error_bound_stopped_at_the_holes_floor_says_the_holes_hold_it():
+    """With max_error holes are never capped: fandisk with 10% of its faces
+    missing (1,295 one-face holes) stopped at 6,481 faces, its floor 6,471,
+    said to be stopped by the error bound alone."""
+    V, F = load_shared("fandisk.obj")
+    Vh, Fh = with_pinholes(V, F, share=0.1)
+    r = simplify(Vh, Fh, max_error=0.02 * bbox_diagonal(V))
+    floor = face_floor(r.V, r.F, twin_table(r.F, r.V.shape[0]))
+    assert r.stopped_because == "max_error" and r.F.shape[0] <= 1.05 * floor
+    assert (f"where the error bound stopped it; its holes hold it there too: its topology floor "
+            f"is {floor:,} faces for its {r.n_boundary_loops:,} border loops (to go lower, close "
+            f"the input's holes first or ask for a face count") in r.message
+    assert r.n_boundary_loops == topology_summary(r.F, r.V.shape[0]).boundary_loops > 1000
+    # far above its floor (no holes: 4), the bound alone is named
+    W, G = icosphere(4)
+    plain = simplify(W, G, max_error=0.01 * bbox_diagonal(W))
+    assert plain.stopped_because == "max_error" and plain.floor_note == ""
+    assert plain.message.endswith("where the error bound stopped it")
