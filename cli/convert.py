@@ -251,10 +251,8 @@ def _measure(run, V, F, res, V_cage):
     """The deviation of the cage as written (``V_cage``, ``res.F``) from the
     input, over the faces the cage stands for; one that cannot be measured
     (or comes out not finite) is a warning, the report's figures empty."""
-    F = np.asarray(F, dtype=np.int64)
     try:
-        d = run.step("measure", core.surface_distance, V, F[res.represented(F)], V_cage, res.F,
-                     samples=MEASURE_SAMPLES)
+        d = run.step("measure", res.deviation, V, F, samples=MEASURE_SAMPLES, V_cage=V_cage)
     except StepFailed as exc:
         run.r["warnings"].append(f"the deviation could not be measured: {exc}")
         return

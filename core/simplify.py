@@ -90,11 +90,11 @@ ASYMMETRY_NOTE = 0.05
 #: 'target' with 100 of its 500 faces on the bunny (4.1% off), beside 1,000 pebbles
 #: with 20 of 4,020 (44% off)
 FLOOR_PIECES_SHARE = 0.5
-#: a mesh whose faces have no area and whose coordinates keep fewer than this many
-#: significant digits of its shape (its distance from the origin over its size) is
-#: told that it is too far off: the faces' area may be lost in the rounding
-FEW_DIGITS = 6
 FLOOR_PIECE_FACES = 4
+#: a mesh whose faces have no area and whose coordinates keep at most this many
+#: significant digits of its shape (15 less the decades of its distance from the origin
+#: over its size) is told that it is too far off: the faces' area may be lost in the rounding
+FEW_DIGITS = 6
 #: a cage stopped by max_error with at most this many times its topology floor's faces
 #: says that its holes hold it there (:attr:`SimplifyResult.floor_note`)
 FLOOR_NEAR = 1.05
@@ -176,7 +176,7 @@ class SimplifyResult:
         ``preserve_topology=False``)."""
         return (self.vertex_map[np.asarray(F, dtype=np.int64)] >= 0).all(axis=1)
 
-    def deviation(self, V, F, *, samples=None):
+    def deviation(self, V, F, *, samples=None, V_cage=None):
         """:func:`~.metrics.surface_distance` between the input ``V``, ``F``
         given to ``simplify`` and the cage, over the faces the cage stands for
         (:meth:`represented`); its ``diagonal`` is theirs. A speck dropped as
@@ -184,9 +184,11 @@ class SimplifyResult:
         of a diagonal that the speck made 1,000 times the mesh's) nor slows
         the search (its grid cells grew with the box: 3.6 s for a 5k-face
         sphere's 4-face cage, now 0.2 s); the cleaning's summary says what
-        was dropped."""
+        was dropped. ``V_cage``: other positions of the cage's vertices (a
+        fitted cage's; None: the cage's own)."""
         F = np.asarray(F, dtype=np.int64)
-        return surface_distance(V, F[self.represented(F)], self.V, self.F, samples=samples)
+        return surface_distance(V, F[self.represented(F)], self.V if V_cage is None else V_cage,
+                                self.F, samples=samples)
 
     @property
     def message(self):
@@ -959,18 +961,21 @@ def cleaned_input(V, F, weld_distance, min_component_area, budget, locked):
 
 def _far_off(V):
     """A hint for :func:`cleaned_input`'s error when the mesh lies so far
-    from the origin for its size that its coordinates hold fewer than
+    from the origin for its size that its coordinates hold at most
     :data:`FEW_DIGITS` significant digits of its shape (a millimetre part
     placed a thousand kilometres off): then the faces' area is lost in the
     coordinates' rounding; empty otherwise."""
     lo, hi = bounding_box(V)
     size = diagonal_length(lo, hi)
     far = float(np.abs(np.concatenate([lo, hi])).max())
-    if size > 0 and far / size < 10.0 ** (15 - FEW_DIGITS):
+    if size > 0 and far == 0:
+        return ""
+    digits = max(0, 15 - int(np.floor(np.log10(far / size)))) if size > 0 else 0
+    if digits > FEW_DIGITS:
         return ""
     return (f", or lost in rounding: the mesh is {size:.3g} across and {far:.3g} from the origin, "
-            f"so its coordinates keep only {max(0, 15 - int(np.log10(far / size))) if size > 0 else 0} "
-            f"significant digits of its shape: move it to the origin first")
+            f"so its coordinates keep only {digits} significant digits of its shape: move it to "
+            f"the origin first")
 
 
 def debris_budget(target_faces, ratio, max_error, m):
