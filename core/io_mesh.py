@@ -35,6 +35,7 @@ import os
 import re
 import string
 import warnings
+from collections import Counter
 from typing import NamedTuple
 
 import numpy as np
@@ -235,16 +236,16 @@ def _keywords(lines, other):
     word has a byte outside ASCII before it is known to be no keyword (the
     line reader's text may split it there: a no-break space)."""
     rows = np.flatnonzero(other)
-    words, bad = [], []
+    words, bad = Counter(), []
     for s in range(0, rows.size, _KEY_BLOCK):
         got = _key_block(lines, rows[s:s + _KEY_BLOCK])
         if got is None:
             return None
         keys, counts = np.unique(got[0], return_counts=True)
-        words.append(dict(zip(keys.tolist(), counts.tolist())))
+        words.update(dict(zip(keys.tolist(), counts.tolist())))
         bad.append(got[1])
     bad = np.concatenate(bad) if bad else rows
-    keys = {k.decode("ascii"): sum(w.get(k, 0) for w in words) for k in set().union(*words)}
+    keys = {k.decode("ascii"): n for k, n in sorted(words.items())}      # (in keyword order)
     return _Skipped(keys, bad.size, int(bad[0]) + 1 if bad.size else 0)
 
 
