@@ -34,8 +34,8 @@ PLAIN = "00000000"
 def bound_plainly(edited):
     """Whether the mesh bound to ``edited`` was its source's Basis: no other
     shape keys and no modifiers at bind time (its source fingerprint says so)."""
-    fields = edited.meshadjust.source_fingerprint.split(":")
-    return len(fields) == 5 and fields[3] == PLAIN and fields[4] == PLAIN
+    fields = staleness.fingerprint_fields(edited.meshadjust.source_fingerprint)
+    return fields is not None and fields.keys == PLAIN and fields.modifiers == PLAIN
 
 
 def basis_positions(cage):
@@ -78,11 +78,11 @@ def swap_in_basis(source, V):
 def _refresh_fingerprint(source, edited):
     """Record the source's fingerprint anew when only its base mesh differs
     from the one stored (the restored Basis is the mesh bound)."""
-    now, was = staleness.source_fingerprint(source), edited.meshadjust.source_fingerprint
-    if now and was:
-        a, b = now.split(":"), was.split(":")
-        if a[:2] + a[3:] == b[:2] + b[3:]:
-            edited.meshadjust.source_fingerprint = now
+    now = staleness.source_fingerprint(source)
+    a = staleness.fingerprint_fields(now) if now else None
+    b = staleness.fingerprint_fields(edited.meshadjust.source_fingerprint)
+    if a is not None and b is not None and a._replace(mesh="") == b._replace(mesh=""):
+        edited.meshadjust.source_fingerprint = now
 
 
 def restore_basis(cage):

@@ -199,9 +199,7 @@ class Rollback:
                         if obj.meshadjust.role != 'NONE'}
         self.meshes = set(bpy.data.meshes)
         self.names = _names()
-        self.positions = {}
-        self.keys = {}
-        self.attributes = {}
+        self.kept = {}          #: mesh -> (positions, shape keys, attributes) before a write
         self.retired = []
         self.forget = []
 
@@ -209,11 +207,9 @@ class Rollback:
         """Remember ``mesh``'s positions, shape keys' names and MeshAdjust
         attributes before a write (nothing for a mesh made inside the block:
         an undo removes it)."""
-        if mesh is not None and mesh in self.meshes and mesh not in self.positions:
+        if mesh is not None and mesh in self.meshes and mesh not in self.kept:
             # (by the mesh, not its name: a step may rename it between two keeps)
-            self.positions[mesh] = (mesh, _positions_of(mesh))
-            self.keys[mesh] = (mesh, _key_shapes(mesh))
-            self.attributes[mesh] = (mesh, _attributes_of(mesh))
+            self.kept[mesh] = (_positions_of(mesh), _key_shapes(mesh), _attributes_of(mesh))
 
     def keep_object(self, obj):
         """Remember ``obj``'s mesh, transform, visibility and state (those of
@@ -247,12 +243,12 @@ class Rollback:
         for mesh in [m for m in bpy.data.meshes if m not in self.meshes]:
             bpy.data.meshes.remove(mesh)
         _restore_names(self.names)
-        for mesh, shapes in self.keys.values():
+        for mesh, (_, shapes, _) in self.kept.items():
             _restore_keys(mesh, shapes)
-        for mesh, V in self.positions.values():
+        for mesh, (V, _, _) in self.kept.items():
             _put_positions(mesh, V)
-        for mesh, kept in self.attributes.values():
-            _restore_attributes(mesh, kept)
+        for mesh, (_, _, attributes) in self.kept.items():
+            _restore_attributes(mesh, attributes)
 
 
 def _restore_keys(mesh, shapes):

@@ -22,6 +22,7 @@ against that count, so the panel can ask on every redraw.
 """
 
 import zlib
+from typing import NamedTuple
 
 import bmesh
 import bpy
@@ -133,6 +134,23 @@ def source_fingerprint(source):
     return f"{n}:{m}:{c_mesh:08x}:{c_keys:08x}:{c_mods:08x}"
 
 
+class SourceFields(NamedTuple):
+    """The fields of a :func:`source_fingerprint` (strings, as written)."""
+
+    vertices: str     #: the mesh's vertex count
+    faces: str        #: its face count
+    mesh: str         #: the checksum of its base shape and corners
+    keys: str         #: of its other shape keys (not MeshAdjust's)
+    modifiers: str    #: of its modifiers
+
+
+def fingerprint_fields(fingerprint):
+    """The :class:`SourceFields` of a :func:`source_fingerprint` string, or
+    None when it has not their number of fields."""
+    parts = fingerprint.split(":")
+    return SourceFields(*parts) if len(parts) == len(SourceFields._fields) else None
+
+
 def source_change(source, stored, *, fresh=False):
     """What changed in ``source`` since its fingerprint was ``stored``: a
     sentence, or None when nothing did (or nothing was stored, or the source
@@ -142,19 +160,19 @@ def source_change(source, stored, *, fresh=False):
     now = source_fingerprint(source) if fresh else _memoised("source", source, source_fingerprint)
     if now is None or now == stored:
         return None
-    was, new = stored.split(":"), now.split(":")
-    if len(was) != len(new):
+    was, new = fingerprint_fields(stored), fingerprint_fields(now)
+    if was is None or new is None:
         return f"'{source.name}' may have changed since it was bound"
     what = []
     if was[:3] != new[:3]:
         if was[:2] != new[:2]:
-            what.append(f"its mesh was edited ({int(was[0]):,} -> {int(new[0]):,} vertices, "
-                        f"{int(was[1]):,} -> {int(new[1]):,} faces)")
+            what.append(f"its mesh was edited ({int(was.vertices):,} -> {int(new.vertices):,} "
+                        f"vertices, {int(was.faces):,} -> {int(new.faces):,} faces)")
         else:
             what.append("its mesh was edited (vertices moved)")
-    if was[3] != new[3]:
+    if was.keys != new.keys:
         what.append("its shape keys changed")
-    if was[4] != new[4]:
+    if was.modifiers != new.modifiers:
         what.append("its modifiers changed")
     return f"'{source.name}' changed since it was bound: " + ", ".join(what)
 
