@@ -13,7 +13,9 @@ a time::
     phase A      the edge-line bound (height above the plane, lateral distance
                  beyond the farthest-out edge line, ``spatial``'s docstring)
                  of every reference of the probe cell; the smallest is the
-                 probe, evaluated exactly -> u (an exact upper bound)
+                 probe, evaluated exactly -> u (an exact upper bound; where
+                 the probe lies far and far beyond its bound, past a long
+                 sliver's tip, u is the index's exact distance instead)
     phase B      the same bound on every other cell within u of the point
                  (box distance)
     exact        the kernel (float64) on the pairs whose bound is within u:
@@ -94,6 +96,12 @@ _MIN_BLOCK = 2048
 #: a point with more pairs than this left within its bound after its first one
 #: evaluates the one with the nearest centroid next (:func:`_crowded_next`)
 _CROWDED = 16
+
+#: a point whose probe lies farther than this many cells from it, and more than
+#: ``_LOOSE_PROBE`` times farther than the probe's bound said, takes its ball from
+#: the index's exact distance instead (:func:`_loose_probes`)
+_FAR_ANSWER = 0.3
+_LOOSE_PROBE = 2.0
 
 #: the float32 bound is loosened by this fraction of the grid's extent
 _F32_EPS = 2.0 ** -16
@@ -225,7 +233,8 @@ class NearQuery:
         crowded, order, _ = self.index.split_crowded(key)
         best = _Best.empty(q)
         far = [crowded]
-        far += [_block(T, P, order[s:s + _BLOCK], cell3, best) for s in range(0, order.size, _BLOCK)]
+        far += [_block(T, self.index, P, order[s:s + _BLOCK], cell3, best)
+                for s in range(0, order.size, _BLOCK)]
         far = np.concatenate(far)
         result = closest_result(T.tables, best.t, best.v, best.w, best.d2)
         if far.size:
@@ -361,23 +370,28 @@ class _Block(NamedTuple):
     probe: np.ndarray   #: (k,) padded id of the probe cell
 
 
-def _block(T, P, q, cell3, best):
+def _block(T, index, P, q, cell3, best):
     """Answer the points ``q`` (rows of ``P``) into ``best``; returns the rows
     left for ``TriangleIndex.closest``."""
     B, lost = _start_block(T, P, q, cell3)
     n = B.q.shape[0]
-    tiles, t0 = _probe(T, B)
+    tiles, t0, lb0 = _probe(T, B)
     v0, w0, d0 = _kernel(T, B.X, np.arange(n), t0)
     u2 = np.square(_bound32(T, d0))
+    reach = np.sqrt(d0)
+    loose = _loose_probes(T, d0, lb0)
+    if loose.any():                   # their ball from the index's exact distance
+        reach[loose] = index.closest(B.X[:, loose].T).distance
+        u2[loose] = np.square(_bound32(T, np.square(reach[loose])))
     owner_a, tri_a, lb_a = _within(tiles, np.arange(n), u2)
-    point_b, cell_b, far = _neighbour_cells(T, B, np.sqrt(d0))
+    point_b, cell_b, far = _neighbour_cells(T, B, reach)
     owner_b, tri_b, lb_b = _within(_tiles(T, B.A, point_b, cell_b, once=True), point_b, u2)
     if owner_a.size + owner_b.size > _CROWDED_BLOCK * n and n > _MIN_BLOCK:
         # hundreds of pairs a point: halves, whose arrays stay in cache (a point's
         # answer does not depend on its block)
         half = B.q.shape[0] // 2
-        return np.concatenate([lost, _block(T, P, B.q[:half], cell3, best),
-                               _block(T, P, B.q[half:], cell3, best)])
+        return np.concatenate([lost, _block(T, index, P, B.q[:half], cell3, best),
+                               _block(T, index, P, B.q[half:], cell3, best)])
     owner = np.concatenate([owner_a, owner_b])
     tri = np.concatenate([tri_a, tri_b])
     # a triangle is referenced in every cell it crosses, and windows overlap the
@@ -580,16 +594,38 @@ def _probe(T, B):
     n = B.q.shape[0]
     tiles = _tiles(T, B.A, np.arange(n), B.probe)
     best = [np.zeros((0, _TILE), dtype=np.int64)]
+    bound = [np.zeros((0, _TILE), dtype=np.int32)]
     for tile in tiles.sets:
         W = tile.lb.shape[2]
         low = (1 << max(1, (W - 1).bit_length())) - 1
         key = tile.lb.view(np.int32) & np.int32(~low)         # bounds are >= 0: bits sort as values
         key |= np.arange(W, dtype=np.int32)
-        col = np.minimum.reduce(key, axis=2) & low
-        best.append(np.take_along_axis(tile.tri, col, axis=1))
+        key = np.minimum.reduce(key, axis=2)
+        best.append(np.take_along_axis(tile.tri, key & low, axis=1))
+        bound.append(key & np.int32(~low))
     t0 = np.empty(n, dtype=np.int64)
-    t0[tiles.rows[tiles.valid]] = np.concatenate(best)[tiles.valid]
-    return tiles, t0
+    lb0 = np.empty(n, dtype=np.float32)
+    valid = tiles.valid
+    t0[tiles.rows[valid]] = np.concatenate(best)[valid]
+    lb0[tiles.rows[valid]] = np.concatenate(bound)[valid].view(np.float32)
+    return tiles, t0, lb0
+
+
+def _loose_probes(T, d0, lb0):
+    """The points whose probe (at squared distance ``d0``, bound ``lb0``,
+    its float32 bits truncated: never above the bound) lies more than
+    ``_FAR_ANSWER`` cells away and more than ``_LOOSE_PROBE`` times farther
+    than its bound said: past the sharp corner of a long sliver, whose edge
+    lines nearly meet, the bound stays near 0 far beyond the triangle, and
+    the smallest bound of the probe cell can be such a sliver far from a
+    point lying on another face. The ball that probe gives holds hundreds of
+    pairs a point (a cage with 20 model-long slivers of a pinched scan: 590
+    a point, 16x the time of the index's search of the same points), so
+    their ball comes from the index's exact distance instead (the pairs in
+    it still decide the answer: the lowest face index among equal ones)."""
+    loose = d0 > np.square(_FAR_ANSWER * T.h)
+    loose &= d0 > _LOOSE_PROBE ** 2 * lb0.astype(np.float64)
+    return loose
 
 
 def _within(tiles, who, u2):

@@ -97,26 +97,59 @@ def test_same_answer_for_any_block_size_order_and_thread(monkeypatch, name, V, F
         np.testing.assert_array_equal(np.concatenate([p[k] for p in parts]), ref[k])
 
 
-def test_model_long_slivers_answer_exactly_through_crowded_points_and_split_blocks(monkeypatch):
-    # a sphere crossed by needles (a pinched scan's cage): past a needle's tip the
-    # edge-line bound stays near 0, so points get many pairs; the crowded points try
-    # the nearest centroid next and crowded blocks are answered in halves -- the
-    # answer is still the brute-force minimum, bit for bit
-    rng = np.random.default_rng(4)
+def _needled_sphere(rng):
+    """A sphere crossed by 40 needles (a pinched scan's cage): past a needle's
+    tip the edge-line bound stays near 0, so a point's smallest bound can be
+    a needle far from it."""
     V, F = icosphere(3)
     a, b = rng.integers(0, V.shape[0], (2, 40))
     tip = V[a] + 1e-3 * rng.normal(size=(40, 3))
     Vn = np.vstack([V, tip])
     Fn = np.vstack([F, np.stack([a, b, V.shape[0] + np.arange(40)], axis=1)])
-    P = _near_points(Vn, F, rng, n=3000, spread=(0.0, 0.05))
-    calls = {"_block": 0, "_crowded_next": 0}
-    for name in calls:
+    return Vn, Fn, _near_points(Vn, F, rng, n=3000, spread=(0.0, 0.05))
+
+
+def _spy(monkeypatch, names):
+    """Count the calls of the module's functions ``names`` and the number of
+    (point, triangle) pairs the exact kernel evaluates."""
+    calls = dict.fromkeys(names, 0)
+    calls["pairs"] = 0
+    for name in names + ["_kernel"]:
         real = getattr(near_query, name)
 
         def spy(*args, _real=real, _name=name):
-            calls[_name] += 1
+            if _name == "_kernel":
+                calls["pairs"] += args[2].shape[0]
+            else:
+                calls[_name] += 1
             return _real(*args)
         monkeypatch.setattr(near_query, name, spy)
+    return calls
+
+
+def test_loose_probes_past_sliver_tips_take_the_index_bound(monkeypatch):
+    # points whose probe was a needle far from them get their ball from the index's
+    # exact distance: a few pairs a point (24 a point when the needle's distance was
+    # the ball), and still the brute-force minimum, bit for bit
+    Vn, Fn, P = _needled_sphere(np.random.default_rng(4))
+    loose = []
+    real = near_query._loose_probes
+    monkeypatch.setattr(near_query, "_loose_probes",
+                        lambda *a: loose.append(real(*a)) or loose[-1])
+    calls = _spy(monkeypatch, [])
+    _assert_exact(Vn, Fn, P, NearQuery(Vn, Fn).closest(P))
+    assert sum(int(m.sum()) for m in loose) > P.shape[0] // 2
+    assert calls["pairs"] < 10 * P.shape[0]
+
+
+def test_crowded_points_and_split_blocks_answer_exactly(monkeypatch):
+    # the crowded points try the nearest centroid next, and blocks with many pairs a
+    # point are answered in halves (made to happen here by lowering the thresholds)
+    Vn, Fn, P = _needled_sphere(np.random.default_rng(4))
+    monkeypatch.setattr(near_query, "_CROWDED_BLOCK", 1)
+    monkeypatch.setattr(near_query, "_MIN_BLOCK", 256)
+    monkeypatch.setattr(near_query, "_CROWDED", 2)
+    calls = _spy(monkeypatch, ["_block", "_crowded_next"])
     _assert_exact(Vn, Fn, P, NearQuery(Vn, Fn).closest(P))
     assert calls["_block"] > 1 and calls["_crowded_next"] >= 1
 
