@@ -48,7 +48,8 @@ from .mirror import PARTNER_TOLERANCE, axis_index, mirror, mirror_partners  # no
 from .simplify import (SimplifyResult, check_arguments, check_flags, cleaned_input, debris_budget,
                        simplify, target_count)
 from .spatial import TriangleIndex
-from .topology import boundary_loops_count, edge_keys, edge_map, face_components
+from .topology import (border_vertex_count, boundary_loops_count, edge_keys, edge_map,
+                       face_components)
 from .pages import plain_pages
 from .pinholes import cap_pinholes
 
@@ -516,7 +517,9 @@ def _symmetric(whole, options):
         max_error=r.max_error, stopped_because=stopped, feature_edges=fe,
         cleaning=clean.report, n_input_faces=int(whole.m_in), target=whole.target,
         hausdorff=hausdorff, n_boundary_loops=boundary_loops_count(cage.F, cage.V.shape[0]),
-        n_components=n_comp, n_passes=r.n_passes, asymmetry=hs.asymmetry / diag)
+        n_components=n_comp, n_passes=r.n_passes, asymmetry=hs.asymmetry / diag,
+        n_border_vertices=border_vertex_count(cage.F, cage.V.shape[0]),
+        preserve_boundary=r.preserve_boundary)
 
 
 def _check_crosses(clean, s, k, axis):

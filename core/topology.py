@@ -236,6 +236,12 @@ def boundary_loops_count(F, n_vertices, em=None):
     return int(np.unique(labels).shape[0])
 
 
+def border_vertex_count(F, n_vertices, em=None):
+    """Number of vertices on boundary edges (edges of one face)."""
+    em = _edge_map(np.asarray(F, dtype=np.int64), n_vertices) if em is None else em
+    return int(np.unique(em.E[em.edge_face_count == 1]).shape[0])
+
+
 class ManifoldReport(NamedTuple):
     """What is wrong with a triangle mesh's topology, as index arrays."""
 

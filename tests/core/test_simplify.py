@@ -974,3 +974,35 @@ def test_max_error_halves_the_gap_to_the_first_step_over_it():
         assert_clean(r)
     assert halved.F.shape[0] < 0.8 * plain.F.shape[0]
     assert halved.max_error > 1.05 * plain.max_error             # nearer the bound
+
+
+def _half(V, F, direction):
+    """The faces of (V, F) whose centroids lie below the median along ``direction``."""
+    along = V[F].mean(axis=1) @ np.asarray(direction, dtype=float)
+    return V, F[along < np.median(along)]
+
+
+@pytest.mark.parametrize("name", ["cube cut on a slant", "fandisk"])
+def test_a_cage_held_by_its_preserved_borders_says_so(name):
+    # an open piece whose border bends in 3-D keeps nearly every cage vertex on that
+    # border under preserve_boundary: the message says the borders hold it (not only
+    # "folds"), with the exact count; without preserve_boundary it reaches the target
+    if name == "fandisk":                 # (skipped when ../shared/meshes is absent)
+        V, F = _half(*load_shared("fandisk.obj"), [1.0, 0.0, 0.0])
+    else:
+        V, F = _half(*cube(10), [1.0, 0.7, 0.3])
+    held = simplify(V, F, target_faces=4)
+    assert held.stopped_because == "no_valid_collapse" and held.F.shape[0] > 4
+    border = np.unique(boundary_edges(held.F, held.V.shape[0]))
+    assert held.n_border_vertices == border.size > 0.75 * held.V.shape[0]
+    assert (f"its borders hold it there: {border.size:,} of its {held.V.shape[0]:,} vertices"
+            in held.message)
+    free = simplify(V, F, target_faces=4, preserve_boundary=False)
+    assert free.stopped_because == "target" and free.F.shape[0] <= 4
+    assert free.border_note == "" and "borders hold" not in free.message
+
+
+def test_a_cage_stopped_by_its_target_has_no_border_note():
+    r = simplify(*_half(*cube(10), [1.0, 0.0, 0.0]), target_faces=4)
+    assert r.stopped_because == "target" and r.border_note == ""
+    assert r.n_border_vertices == np.unique(boundary_edges(r.F, r.V.shape[0])).size
