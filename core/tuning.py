@@ -145,6 +145,10 @@ class Tuning:
     #: halved this many times
     max_error_halvings: int = 3
     max_error_quick_samples: int = 20_000
+    #: when every step within the bound by the quick measure is over it by the full one,
+    #: the engine runs afresh at half the smallest step's share, a quarter, ... this many
+    #: times, each cage fully measured, before the cleaned input itself is returned
+    max_error_retries: int = 4
     snap_bits: int = 32              #: coordinates snapped to 2^-snap_bits of the diagonal
     snap_share: float = 1e-12        #: (distance / edge length)^2 below which a position is an endpoint
     compact_share: float = 0.5       #: compact the arrays once live faces are fewer than this share

@@ -15,8 +15,8 @@ from core.simplify import SimplifyResult, simplify
 from core.topology import face_components, manifold_report, topology_summary
 from core.tuning import TUNING, Tuning
 from tests.mesh_factory import (boundary_edges, cad_cylinder, cube, double_torus, icosphere,
-                                load_shared, regular_grid, star_glyphs, tetrahedron, torus, unwelded,
-                                with_far_speck, with_pebbles)
+                                load_shared, pinched, regular_grid, star_glyphs, tetrahedron, torus,
+                                unwelded, with_far_speck, with_pebbles)
 
 
 # ---------------------------------------------------------------- helpers
@@ -1006,3 +1006,21 @@ def test_a_cage_stopped_by_its_target_has_no_border_note():
     r = simplify(*_half(*cube(10), [1.0, 0.0, 0.0]), target_faces=4)
     assert r.stopped_because == "target" and r.border_note == ""
     assert r.n_border_vertices == np.unique(boundary_edges(r.F, r.V.shape[0])).size
+
+
+def test_max_error_runs_afresh_lower_when_the_full_measure_refuses_every_quick_step():
+    # fandisk with 10 far-apart vertex pairs pinched (model-long slivers), each step's
+    # cage quickly measured on its vertices alone: every step the quick measure passed
+    # is over the bound by the full one, and the cleaned input itself came back as the
+    # "cage" (0 passes); the engine now runs afresh at lower shares, fully measured
+    V, F = pinched(*load_shared("fandisk.obj"), k=10, seed=10)
+    bound = 0.003 * bbox_diagonal(V)
+    clean = clean_mesh(V, F)
+    quick = Tuning(max_error_quick_samples=0)
+    before = simplify(V, F, max_error=bound, tuning=replace(quick, max_error_retries=0))
+    assert before.n_passes == 0 and before.F.shape[0] == clean.F.shape[0]
+    r = simplify(V, F, max_error=bound, tuning=quick)
+    assert r.stopped_because == "max_error" and 0 < r.n_passes
+    assert r.F.shape[0] < clean.F.shape[0] // 4
+    assert r.hausdorff == surface_distance(clean.V, clean.F, r.V, r.F).hausdorff <= bound
+    assert manifold_report(r.F, r.V.shape[0]).is_oriented_manifold
