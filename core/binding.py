@@ -66,6 +66,7 @@ from .mesh import (area_normals_t, check_faces, check_mesh, check_number, check_
 from .near_query import NearQuery
 from .spatial import TriangleIndex
 from .subdivide import check_subdivision_args, subdivision_operator
+from .topology import check_not_soup
 from .unfold import (CageRings, FaceStars, FineFaceGroups, Repair, away_rows, away_t,
                      nearest_rotations, repair, rest_normals, ring_rotations, turned_over)
 from ._groups import distinct, ragged_entries, ragged_ranges
@@ -422,6 +423,7 @@ def bind(V_dense, F_dense, V_cage, F_cage, *, levels=2, scheme="butterfly", crea
     if isinstance(F_in, np.ndarray) and np.may_share_memory(F_dense, F_in):
         F_dense = F_dense.copy()
     V_cage, F_cage = check_mesh(V_cage, F_cage, where="bind", allow_empty=False)
+    check_not_soup(F_cage, V_cage.shape[0], "bind")
     check_units(V_dense, where="bind", name="V_dense")
     check_units(V_cage, where="bind", name="V_cage")
     creases = _normalise_creases(creases, "bind")

@@ -44,7 +44,7 @@ from .mirror import axis_index, mirror_partners, symmetrize
 from .near_query import search_for
 from .spatial import TriangleIndex
 from .subdivide import check_subdivision_args, subdivision_operator
-from .topology import edge_map
+from .topology import check_not_soup, edge_map
 from .pages import plain_pages
 
 _LAPLACIANS = ("uniform", "cotangent")
@@ -193,6 +193,7 @@ def _set_up(V_dense, F_dense, V_cage, F_cage, *, levels, scheme, creases, smooth
     V_dense, F_dense = check_mesh(V_dense, F_dense, where="fit_cage", allow_empty=False)
     V_cage, F_cage = check_mesh(V_cage, F_cage, where="fit_cage", allow_empty=False)
     check_subdivision_args(levels, scheme, "fit_cage", F_cage.shape[0])
+    check_not_soup(F_cage, V_cage.shape[0], "fit_cage")
     check_units(V_dense, where="fit_cage", name="V_dense")
     check_units(V_cage, where="fit_cage", name="V_cage")
     dense = clean_mesh(V_dense, F_dense)

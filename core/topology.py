@@ -15,7 +15,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from .errors import InvalidArgumentError
+from .errors import InvalidArgumentError, InvalidMeshError
 from .mesh import check_count, check_faces
 
 #: most vertices a mesh's topology is built for (its per-vertex arrays: 2^32)
@@ -202,6 +202,31 @@ def face_components(F, n_vertices):
     Fu = at[F]
     roots = connected_labels(int(at[-1]) + 1, np.concatenate([Fu[:, :2], Fu[:, 1:]]))
     return numbered(roots[Fu[:, 0]])
+
+
+#: a cage with more separate pieces than this share of its faces, and at least
+#: ``SOUP_MIN_PIECES`` of them, is a triangle soup (:func:`check_not_soup`)
+SOUP_PIECES_SHARE = 0.5
+SOUP_MIN_PIECES = 32
+
+
+def check_not_soup(F_cage, n_vertices, where):
+    """Raise :class:`~.errors.InvalidMeshError` when the cage ``F_cage`` is a
+    triangle soup: more separate pieces than ``SOUP_PIECES_SHARE`` of its
+    faces (at least ``SOUP_MIN_PIECES``), as ``simplify`` returns for a
+    source whose faces no weld joins (its topology floor: every face its own
+    piece). Nothing can be fitted to or bound through such a cage, and the
+    closest-point searches over its heavily overlapping subdivision grow
+    with the square of its size (spot as a soup jittered by 30% of its
+    size: 162 s to fit a 5,856-face "cage")."""
+    _, pieces = face_components(F_cage, n_vertices)
+    m = np.asarray(F_cage).shape[0]
+    if pieces >= SOUP_MIN_PIECES and pieces > SOUP_PIECES_SHARE * m:
+        raise InvalidMeshError(
+            f"{where}: the cage is {pieces:,} separate pieces for its {m:,} faces, a triangle "
+            f"soup: its source was not welded, and a soup has no surface to subdivide; weld "
+            f"the source first (Merge by Distance in Blender, or simplify with a larger "
+            f"weld_distance) and make the cage again")
 
 
 def numbered(labels):

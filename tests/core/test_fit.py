@@ -222,3 +222,35 @@ def test_progress_reports_and_cancels():
     assert seen == [0.2, 0.4, 0.6, 0.8] and not r.cancelled
     r = fit_cage(V, F, Vc * 0.9, Fc, levels=1, iterations=4, progress=lambda f: f < 0.3)
     assert r.cancelled and r.cg_iterations.shape[0] == 2
+
+
+@pytest.mark.parametrize("step", ["fit_cage", "bind"])
+def test_a_triangle_soup_cage_is_refused_naming_its_pieces(step):
+    # spot as an unwelded soup jittered by 1% of its size: no weld joins it, so
+    # simplify stops at its topology floor with every face its own piece; fitting that
+    # "cage" took 10 s (162 s jittered by 30%) for nothing: refused, saying what to do
+    from core.binding import bind
+    from core.simplify import simplify
+    from tests.mesh_factory import unwelded
+    V, F = unwelded(*load_shared("spot.obj"), jitter=0.01)
+    r = simplify(V, F, target_faces=1000)
+    assert r.stopped_because == "topology_floor" and r.n_components == r.F.shape[0]
+    run = {"fit_cage": fit_cage, "bind": bind}[step]
+    with pytest.raises(InvalidMeshError, match=(
+            rf"{step}: the cage is {r.F.shape[0]:,} separate pieces for its "
+            rf"{r.F.shape[0]:,} faces, a triangle soup.*weld the source first")):
+        run(V, F, r.V, r.F, levels=1)
+
+
+def test_a_cage_of_many_small_closed_pieces_is_not_a_soup():
+    # 40 separate octahedra (a pebble field): 40 pieces for 320 faces is a cage
+    from core.binding import bind, deform
+    from tests.mesh_factory import octahedron
+    Vo, Fo = octahedron()
+    shift = np.repeat(3.0 * np.arange(40), 3).reshape(40, 3) * [1.0, 0.0, 0.0]
+    V = np.concatenate([Vo + s for s in shift])
+    F = np.concatenate([Fo + k * Vo.shape[0] for k in range(40)])
+    fitted = fit_cage(V, F, V, F, levels=1, iterations=1)
+    assert fitted.V.shape == V.shape and np.isfinite(fitted.V).all()
+    b = bind(V, F, V, F, levels=1)
+    np.testing.assert_allclose(deform(b, V), V, atol=1e-12 * bbox_diagonal(V))
