@@ -26,6 +26,20 @@ def test_simplify_report_says_what_the_cleaning_did(scene):
     assert len(cage.data.polygons) == 100
 
 
+def test_a_soup_no_weld_joins_is_kept_unfitted_with_a_warning_to_weld_it(scene):
+    # every corner moved by 1.5% of the size: no weld joins the faces, so the cage is the
+    # soup itself (its topology floor); fitting and binding it are refused with what to
+    # do (fitting such a soup took minutes), the cage is kept and the report warns
+    V, F = icosphere(3)
+    S = V[F].reshape(-1, 3) + 0.05 * np.random.default_rng(0).normal(size=(3 * len(F), 3))
+    soup = make_object("soup", S, np.arange(3 * len(F)).reshape(-1, 3))
+    cage, report = mod("api").simplify_object(soup, target_faces=100, fit=True, bind=True)
+    assert report.level == 'WARNING' and len(cage.data.polygons) == len(F)
+    assert f"the cage is {len(F):,} separate pieces" in report.message
+    assert "triangle soup" in report.message and "weld the source first" in report.message
+    assert "the cage is kept unfitted" in report.message
+
+
 def test_a_one_sided_scan_is_cut_open_said_so_and_refines_to_itself(scene):
     V, F = mobius_strip(240, 24, bump=0.01)
     obj = make_object("strip", V, F)
