@@ -215,7 +215,7 @@ def _simplified(run, V, F, opts):
     if res.cleaning:
         r["notes"].append(f"cleaning: {res.cleaning.summary()}")
     _check_target(r, res)
-    for note in (res.sliver_note, res.pieces_note):
+    for note in (res.soup_note, res.sliver_note, res.pieces_note):
         if note:
             r["warnings"].append(f"the cage: {note}")
     return res

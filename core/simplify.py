@@ -66,7 +66,7 @@ from .mesh import (area_normals_rows, bounding_box, check_flag, check_mesh, chec
                    squared_edges)
 from .metrics import surface_distance
 from .topology import (border_vertex_count, boundary_loops_count, collapsible_edges,
-                       face_components)
+                       face_components, is_soup)
 from .quadrics import accumulate_coefficients, vertex_face_quadrics, edge_constraint_quadrics
 from .pinholes import cap_pinholes, face_floor
 from .tuning import TUNING, Tuning
@@ -218,15 +218,24 @@ class SimplifyResult:
                                  f"or squash a face" + (f" ({kept})" if self.n_boundary_loops else ""),
             "cancelled": f"cancelled: the cleaned input returned unchanged ({m:,} faces)",
         }[self.stopped_because]
-        if self.stopped_because == "topology_floor" and self.n_components > 0.5 * m:
-            text += (f"; the input is in {self.n_components:,} separate pieces: weld it "
-                     f"first (Merge by Distance in Blender, or a larger weld_distance)")
-        for note in (self.floor_note, self.border_note, self.sliver_note, self.asymmetry_note,
-                     self.pieces_note):
+        for note in (self.soup_note, self.floor_note, self.border_note, self.sliver_note,
+                     self.asymmetry_note, self.pieces_note):
             if note:
                 text += f"; {note}"
         done = self.cleaning.summary()
         return f"{text}; {done}" if done else text
+
+    @property
+    def soup_note(self):
+        """A sentence when the cage is a triangle soup (:func:`~.topology.is_soup`:
+        the input's faces came apart and no weld joined them), and what to do
+        about it; "" otherwise. Whatever stopped it: without
+        ``preserve_topology`` the lone triangles are dropped down to the
+        target, which is then met by scattered triangles."""
+        if not is_soup(self.n_components, self.F.shape[0]):
+            return ""
+        return (f"the input is in {self.n_components:,} separate pieces: weld it first (Merge "
+                f"by Distance in Blender, or a larger weld_distance)")
 
     @property
     def floor_note(self):

@@ -210,10 +210,16 @@ SOUP_PIECES_SHARE = 0.5
 SOUP_MIN_PIECES = 32
 
 
+def is_soup(pieces, faces):
+    """Whether a mesh of ``faces`` faces in ``pieces`` separate pieces is a
+    triangle soup (more pieces than ``SOUP_PIECES_SHARE`` of its faces, at
+    least ``SOUP_MIN_PIECES``)."""
+    return pieces >= SOUP_MIN_PIECES and pieces > SOUP_PIECES_SHARE * faces
+
+
 def check_not_soup(F_cage, n_vertices, where):
     """Raise :class:`~.errors.InvalidMeshError` when the cage ``F_cage`` is a
-    triangle soup: more separate pieces than ``SOUP_PIECES_SHARE`` of its
-    faces (at least ``SOUP_MIN_PIECES``), as ``simplify`` returns for a
+    triangle soup (:func:`is_soup`), as ``simplify`` returns for a
     source whose faces no weld joins (its topology floor: every face its own
     piece). Nothing can be fitted to or bound through such a cage, and the
     closest-point searches over its heavily overlapping subdivision grow
@@ -221,7 +227,7 @@ def check_not_soup(F_cage, n_vertices, where):
     size: 162 s to fit a 5,856-face "cage")."""
     _, pieces = face_components(F_cage, n_vertices)
     m = np.asarray(F_cage).shape[0]
-    if pieces >= SOUP_MIN_PIECES and pieces > SOUP_PIECES_SHARE * m:
+    if is_soup(pieces, m):
         raise InvalidMeshError(
             f"{where}: the cage is {pieces:,} separate pieces for its {m:,} faces, a triangle "
             f"soup: its source was not welded, and a soup has no surface to subdivide; weld "

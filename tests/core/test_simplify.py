@@ -591,6 +591,12 @@ def test_a_soup_is_welded_or_named_never_thrown_away_as_debris():
     assert r.cleaning.n_debris_faces == 0 and r.F.shape[0] == F.shape[0]
     assert r.stopped_because == "topology_floor" and r.n_components == F.shape[0]
     assert f"the input is in {F.shape[0]:,} separate pieces: weld it first" in r.message
+    # without preserve_topology the lone triangles are dropped down to the target: the
+    # target is met by 100 scattered triangles, and the message still says to weld
+    r = simplify(S, FS, target_faces=100, preserve_topology=False)
+    assert r.stopped_because == "target" and r.F.shape[0] == r.n_components == 100
+    assert r.message.startswith(f"{F.shape[0]:,} → 100 faces; the input is in 100 separate "
+                                f"pieces: weld it first")
 
 
 def test_a_real_scan_as_a_soup_drifted_past_the_first_wider_weld_is_welded_by_the_next():
