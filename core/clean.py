@@ -560,7 +560,7 @@ def _open_half_edges(w):
     removal opens again. Counted closed, they kept the wider welds from
     being tried (the icosphere so stayed 1,280 one-face pieces)."""
     t = w.twin
-    across = w.F[:, [2, 0, 1]].ravel()        # the corner across each half-edge
+    across = w.F.ravel()                      # the corner across each half-edge (h = 3f + c)
     meets_copy = (t >= 0) & (across == across.take(np.maximum(t, 0)))
     return int(np.count_nonzero(t == BOUNDARY)) + int(np.count_nonzero(meets_copy))
 

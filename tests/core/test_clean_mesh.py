@@ -98,6 +98,24 @@ def test_the_automatic_weld_widens_for_a_soup_whose_copies_drifted_apart(jitter,
     assert asked.report.summary() == f"welded {FS.size - V.shape[0]:,} vertices (within {used:g} of the size)"
 
 
+@pytest.mark.parametrize("name", ["icosphere", "stanford-bunny"])
+@pytest.mark.parametrize("jitter, used", [(2e-6, 1e-5), (1e-5, 1e-4)])
+def test_a_drifted_soup_wound_at_random_widens_its_weld_too(name, jitter, used):
+    # half the faces wound the other way (photogrammetry, some scanner exports): the
+    # copy check read the corner across each half-edge off by one and took the faces
+    # wound against a neighbour for copies of it, so half the edges stayed "open" after
+    # any weld and none was widened (the bunny stayed 69,452 one-face pieces)
+    V, F = load_shared("stanford-bunny.obj") if name == "stanford-bunny" else icosphere(3)
+    S, FS = random_winding(*unwelded(V, F, jitter, seed=1), share=0.5, seed=3)
+    r = clean_mesh(S, FS)
+    assert r.report.weld_widened and r.report.weld_distance == used
+    assert r.F.shape == F.shape and r.report.n_welded_vertices == FS.size - np.unique(F).size
+    assert summary(r.F, r.V.shape[0]) == summary(F, V.shape[0])
+    assert_manifold(r.V, r.F)
+    flipped = r.report.n_flipped_faces
+    assert 0.4 * F.shape[0] < flipped < 0.6 * F.shape[0]   # one consistent orientation
+
+
 @pytest.mark.parametrize("far", [10.0, 1e3, 1e6])
 @pytest.mark.parametrize("jitter", [None, 1e-7], ids=["mesh", "jittered soup"])
 def test_a_stray_face_far_off_is_debris_and_leaves_the_weld_alone(far, jitter):
