@@ -423,7 +423,7 @@ def bind(V_dense, F_dense, V_cage, F_cage, *, levels=2, scheme="butterfly", crea
     if isinstance(F_in, np.ndarray) and np.may_share_memory(F_dense, F_in):
         F_dense = F_dense.copy()
     V_cage, F_cage = check_mesh(V_cage, F_cage, where="bind", allow_empty=False)
-    check_not_soup(F_cage, V_cage.shape[0], "bind")
+    check_not_soup(F_cage, V_cage.shape[0], F_dense, V_dense.shape[0], "bind")
     check_units(V_dense, where="bind", name="V_dense")
     check_units(V_cage, where="bind", name="V_cage")
     creases = _normalise_creases(creases, "bind")

@@ -193,13 +193,13 @@ def _set_up(V_dense, F_dense, V_cage, F_cage, *, levels, scheme, creases, smooth
     V_dense, F_dense = check_mesh(V_dense, F_dense, where="fit_cage", allow_empty=False)
     V_cage, F_cage = check_mesh(V_cage, F_cage, where="fit_cage", allow_empty=False)
     check_subdivision_args(levels, scheme, "fit_cage", F_cage.shape[0])
-    check_not_soup(F_cage, V_cage.shape[0], "fit_cage")
     check_units(V_dense, where="fit_cage", name="V_dense")
     check_units(V_cage, where="fit_cage", name="V_cage")
     dense = clean_mesh(V_dense, F_dense)
     if dense.F.shape[0] == 0:
         raise InvalidMeshError(f"fit_cage: nothing of the dense mesh is left after cleaning "
                                f"({dense.report.summary()})")
+    check_not_soup(F_cage, V_cage.shape[0], dense.F, dense.V.shape[0], "fit_cage")
     iterations, smoothness, point_to_point = _check_weights(iterations, smoothness,
                                                             point_to_point, laplacian)
     centre = 0.5 * np.add(*bounding_box(dense.V))

@@ -217,22 +217,27 @@ def is_soup(pieces, faces):
     return pieces >= SOUP_MIN_PIECES and pieces > SOUP_PIECES_SHARE * faces
 
 
-def check_not_soup(F_cage, n_vertices, where):
-    """Raise :class:`~.errors.InvalidMeshError` when the cage ``F_cage`` is a
-    triangle soup (:func:`is_soup`), as ``simplify`` returns for a
-    source whose faces no weld joins (its topology floor: every face its own
-    piece). Nothing can be fitted to or bound through such a cage, and the
-    closest-point searches over its heavily overlapping subdivision grow
-    with the square of its size (spot as a soup jittered by 30% of its
-    size: 162 s to fit a 5,856-face "cage")."""
-    _, pieces = face_components(F_cage, n_vertices)
+def check_not_soup(F_cage, n_cage, F_dense, n_dense, where):
+    """Raise :class:`~.errors.InvalidMeshError` when the cage ``F_cage`` and
+    the dense mesh ``F_dense`` it stands for are triangle soups
+    (:func:`is_soup`), as ``simplify`` returns for a source whose faces no
+    weld joins (its topology floor: every face its own piece). Nothing can
+    be fitted to or bound through such a cage, and the closest-point
+    searches over its heavily overlapping subdivision grow with the square
+    of its size (spot as a soup jittered by 30% of its size: 162 s to fit a
+    5,856-face "cage"). The dense mesh is counted only when the cage is one:
+    a cage in pieces at their floor can come from a source that is not (the
+    beetle beside a copy of itself)."""
+    _, pieces = face_components(F_cage, n_cage)
     m = np.asarray(F_cage).shape[0]
-    if is_soup(pieces, m):
-        raise InvalidMeshError(
-            f"{where}: the cage is {pieces:,} separate pieces for its {m:,} faces, a triangle "
-            f"soup: its source was not welded, and a soup has no surface to subdivide; weld "
-            f"the source first (Merge by Distance in Blender, or simplify with a larger "
-            f"weld_distance) and make the cage again")
+    if not is_soup(pieces, m) or not is_soup(face_components(F_dense, n_dense)[1],
+                                             np.asarray(F_dense).shape[0]):
+        return
+    raise InvalidMeshError(
+        f"{where}: the cage is {pieces:,} separate pieces for its {m:,} faces, a triangle "
+        f"soup: its source was not welded, and a soup has no surface to subdivide; weld "
+        f"the source first (Merge by Distance in Blender, or simplify with a larger "
+        f"weld_distance) and make the cage again")
 
 
 def numbered(labels):

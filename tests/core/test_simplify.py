@@ -595,8 +595,9 @@ def test_a_soup_is_welded_or_named_never_thrown_away_as_debris():
     # target is met by 100 scattered triangles, and the message still says to weld
     r = simplify(S, FS, target_faces=100, preserve_topology=False)
     assert r.stopped_because == "target" and r.F.shape[0] == r.n_components == 100
-    assert r.message.startswith(f"{F.shape[0]:,} → 100 faces; the input is in 100 separate "
-                                f"pieces: weld it first")
+    assert r.n_input_pieces == F.shape[0]
+    assert r.message.startswith(f"{F.shape[0]:,} → 100 faces; the input is in {F.shape[0]:,} "
+                                f"separate pieces: weld it first")
 
 
 def test_a_real_scan_as_a_soup_drifted_past_the_first_wider_weld_is_welded_by_the_next():
@@ -911,9 +912,10 @@ def test_pebbles_that_take_most_of_the_cage_are_named():
     """A sphere beside 100 closed pebbles (too much area together to be
     debris): at their floor (4 faces) they take most of the 500 faces and the
     sphere, 'on target', gets fewer than half; the message says how many
-    pieces take how many faces. With 10 pebbles no note; nor when every piece
-    is at its floor (a target below 4 faces a piece: the topology floor's
-    message says so)."""
+    pieces take how many faces. With 10 pebbles no note. When every piece is
+    at its floor (a target below 4 faces a piece: the topology floor) the
+    note says what to do to go lower; without preserve_topology the
+    pebbles go."""
     V0, F0 = icosphere(4)
     res = simplify(*with_pebbles(V0, F0, 100), target_faces=500)
     labels, n = face_components(res.F, res.V.shape[0])
@@ -927,7 +929,14 @@ def test_pebbles_that_take_most_of_the_cage_are_named():
     assert res.pieces_note == "" and np.count_nonzero(res.face_map < F0.shape[0]) > 400
     V, F = icosphere(1)
     res = simplify(*with_pebbles(V, F, 100), target_faces=200)      # every piece a tetrahedron
-    assert res.stopped_because == "topology_floor" and res.pieces_note == ""
+    assert res.stopped_because == "topology_floor" and res.n_components == 101
+    assert res.F.shape[0] == 4 * 101 and res.soup_note == ""
+    assert res.pieces_note == ("its 101 pieces are each down to 4 faces or fewer: delete the small "
+                               "ones from the scan (or raise min_component_area, or turn "
+                               "preserve_topology off) to go lower")
+    assert res.message.endswith(res.pieces_note)
+    res = simplify(*with_pebbles(V, F, 100), target_faces=200, preserve_topology=False)
+    assert res.F.shape[0] <= 200 and res.pieces_note == ""
 
 
 def test_a_cage_of_slivers_says_so():
