@@ -189,15 +189,16 @@ def zip_slits(V, F, twin, distance):
            \         /                \    |    /        below becomes (m, a, x)
                 x                          x             and (b, m, x)
     """
-    if np.count_nonzero(twin == BOUNDARY) < 3:
+    border = np.flatnonzero(twin == BOUNDARY)
+    if border.shape[0] < 3:
         return None                                # closed: nothing to scale
-    lo, hi = bounding_box(V)
-    size = diagonal_length(lo, hi) or 1.0
-    V = (V - lo) / size
+    V, size = _scaled_rim(V, np.concatenate(half_edge_ends(F, border)))
     loops = _border_loops(V, F, twin)
     if loops is None:
         return None
     found, longest = _slit_loops(V, loops, distance / size)
+    if found.size == 0:
+        return None
     heads, x = _zippable(F, V.shape[0], loops, found, longest)
     if heads.size == 0:
         return None
@@ -216,6 +217,20 @@ def zip_slits(V, F, twin, distance):
     F2 = np.concatenate([F2, parts[~first]])
     return Slits(F2, twin_table(F2, V.shape[0]), face[row[~first]], int(heads.size),
                  int(found.size - heads.size))
+
+
+def _scaled_rim(V, rim):
+    """``V`` with the rows ``rim`` (the border vertices, repeats allowed)
+    moved and scaled to the unit diagonal of their box, the other rows 0, and
+    that diagonal: the slit tests run unit-free (no overflow at 1e200) and
+    read the rim alone. The zeros are pages never written (a 4.4M-face
+    scan's whole mesh scaled took 50 ms a round, for five small holes)."""
+    P = V[rim]
+    lo, hi = P.min(axis=0), P.max(axis=0)
+    size = diagonal_length(lo, hi) or 1.0
+    out = np.zeros(V.shape)
+    out[rim] = (P - lo) / size
+    return out, size
 
 
 def _slit_loops(V, loops, distance):
@@ -358,6 +373,7 @@ def _edges_among(F, n, vertices):
     ends among ``vertices``."""
     mark = np.zeros(n, dtype=bool)
     mark[vertices] = True
-    a, b = half_edge_ends(F)
+    near = np.flatnonzero(np.count_nonzero(mark[F], axis=1) >= 2)     # (the faces with such an edge)
+    a, b = half_edge_ends(F[near])
     both = mark[a] & mark[b]
     return np.unique(edge_keys(a[both], b[both], n))
