@@ -293,13 +293,12 @@ class SimplifyResult:
     def pieces_note(self):
         """A sentence when small pieces at their floor (components of at most
         :data:`FLOOR_PIECE_FACES` faces) take more than :data:`FLOOR_PIECES_SHARE`
-        of the cage's faces and leave few to a larger piece, or (at the
-        topology floor) when every piece of at least :data:`FLOOR_MANY_PIECES`
-        is that small, and what to do about
-        it; "" otherwise, and for a soup (:attr:`soup_note` says it). The cow
-        beside 1,817 specks of 1% of its size (too much area together to be
-        debris) asked for 50 faces stopped at 7,272, "1,818 components kept",
-        and said no more."""
+        of the cage's faces and leave few to a larger piece, or when every
+        one of at least :data:`FLOOR_MANY_PIECES` pieces is that small at the
+        topology floor, and what to do about it; "" otherwise, and for a soup
+        (:attr:`soup_note` says it). The cow beside 1,817 specks of 1% of its
+        size (too much area together to be debris) asked for 50 faces stopped
+        at 7,272, "1,818 components kept", and said no more."""
         labels, n = face_components(self.F, self.V.shape[0])
         m = self.F.shape[0]
         if n < 2 or self.n_input_pieces is not None:
