@@ -290,6 +290,26 @@ def _results(run, V, F, res, opts):
     return outputs, None
 
 
+def _stl_joins(outputs):
+    """Warnings for the STL ``outputs`` (``(path, V, F)``) with vertices that
+    share a position with another (a bow-tie the cleaning split, a seam):
+    STL stores each triangle's corners and no connectivity, so any reader
+    joins them again, and a cage read back has the bow-tie the cleaning
+    took apart."""
+    warnings = []
+    for path, V, F in outputs:
+        if os.path.splitext(path)[1].lower() != ".stl":
+            continue
+        used = np.unique(F)
+        shared = used.shape[0] - np.unique(V[used], axis=0).shape[0]
+        if shared:
+            warnings.append(
+                f"{os.path.basename(path)}: {shared:,} of its vertices share a position with "
+                f"another (a bow-tie split apart); STL keeps no connectivity, so whatever reads "
+                f"it joins them again: write OBJ or PLY (--format obj) to keep them apart")
+    return warnings
+
+
 def convert(task, opts):
     """Convert one file; returns its report (a JSON-able dict).
 
@@ -305,6 +325,7 @@ def convert(task, opts):
         V, F = _read_input(run)
         res = _simplified(run, V, F, opts)
         outputs, failure = _results(run, V, F, res, opts)
+        r["warnings"] += _stl_joins(outputs)
         if failure is None:
             run.step("write", write_outputs, outputs, run.log)
             r["outputs"] = [path for path, _, _ in outputs]

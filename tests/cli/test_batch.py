@@ -454,3 +454,25 @@ def test_outputs_are_named_by_their_files_and_the_run_leaves_nothing_outside_out
     assert outs[0] == outs[1]                               # the same bytes, run after run
     assert b'"name":"zeta_cage"' in outs[0]["zeta_cage.glb"]
     assert b".part" not in outs[0]["zeta_cage.glb"]
+
+
+def test_an_stl_cage_whose_split_bow_tie_would_be_joined_again_warns(tmp_path):
+    """Two spheres touching at one vertex (a bow-tie): the cleaning splits it,
+    so the cage has two vertices at one position, which STL (no
+    connectivity) cannot keep apart: the STL output warns and says what to
+    write instead; OBJ keeps them and does not warn."""
+    V, F = icosphere(2)
+    G = F[:, ::-1] + V.shape[0]                   # the second: reflected through V[0]
+    G[G == V.shape[0]] = 0                        # and sharing vertex 0
+    core.write_obj(tmp_path / "pair.obj", np.vstack([V, 2.0 * V[0] - V]), np.vstack([F, G]))
+    # (near the input's 640 faces the split vertices stay where they are)
+    proc = run_batch(["pair.obj", "--faces", "600", "--format", "stl", "--report", "stl.json"],
+                     tmp_path)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    rep = json.loads((tmp_path / "stl.json").read_text())["files"][0]
+    assert rep["cleaning"]["n_split_vertices"] == 1 and rep["status"] == "warn"
+    assert any(w.startswith("pair_cage.stl: 1 of its vertices share a position with another")
+               and "--format obj" in w for w in rep["warnings"])
+    proc = run_batch(["pair.obj", "--faces", "600", "--out", "o", "--report", "obj.json"], tmp_path)
+    rep = json.loads((tmp_path / "obj.json").read_text())["files"][0]
+    assert not any("share a position" in w for w in rep["warnings"])
