@@ -26,10 +26,10 @@ from typing import NamedTuple
 import numpy as np
 
 from .mesh import bbox_diagonal, check_mesh, check_number, check_seed, check_units, face_areas
-from .near_query import search_for
+from .near_query import search_for, search_kind
 from .pages import plain_pages
 
-__all__ = ["SurfaceSamples", "SurfaceDistance", "sample_surface", "surface_distance"]
+__all__ = ["DistanceFrom", "SurfaceSamples", "SurfaceDistance", "sample_surface", "surface_distance"]
 
 #: most samples drawn on a surface (1.2 GB of points and their faces; more was a MemoryError
 #: of 74.5 GiB, or minutes of work, for a mistyped count)
@@ -196,26 +196,76 @@ def surface_distance(V_a, F_a, V_b, F_b, *, samples=None, seed=0):
     >>> round(d.hausdorff, 12), round(d.mean, 12)
     (1.0, 1.0)
     """
-    V_a, F_a = check_mesh(V_a, F_a, where="surface_distance (mesh a)", allow_empty=False)
-    V_b, F_b = check_mesh(V_b, F_b, where="surface_distance (mesh b)", allow_empty=False)
-    check_units(V_a, where="surface_distance", name="mesh a")
-    check_units(V_b, where="surface_distance", name="mesh b")
-    if samples is None:
-        n = int(np.clip(2 * max(F_a.shape[0], F_b.shape[0]), *_DEFAULT_SAMPLES))
-    else:
-        n = check_number(samples, where="surface_distance", name="samples", lo=0, hi=MAX_SAMPLES,
-                         integer=True)
-    used_a = V_a[np.unique(F_a)]
-    used_b = V_b[np.unique(F_b)]
-    diagonal = bbox_diagonal(used_a)
-    seed = check_seed(seed, where="surface_distance")
-    s_a = _sample(V_a, F_a, n, np.random.default_rng(seed)).points
-    s_b = _sample(V_b, F_b, n, np.random.default_rng(seed)).points
-    ab_max, ab_mean, ab_rms = _one_side(search_for(V_b, F_b, s_a.shape[0] + used_a.shape[0]),
-                                        s_a, used_a)
-    ba_max, ba_mean, ba_rms = _one_side(search_for(V_a, F_a, s_b.shape[0] + used_b.shape[0]),
-                                        s_b, used_b)
-    return SurfaceDistance(
-        hausdorff=max(ab_max, ba_max), mean=max(ab_mean, ba_mean), rms=max(ab_rms, ba_rms),
-        a_to_b_max=ab_max, a_to_b_mean=ab_mean, b_to_a_max=ba_max, b_to_a_mean=ba_mean,
-        diagonal=diagonal, a_to_b_rms=ab_rms, b_to_a_rms=ba_rms, n_samples=n)
+    return DistanceFrom(V_a, F_a).to(V_b, F_b, samples=samples, seed=seed)
+
+
+class DistanceFrom:
+    """:func:`surface_distance` from one mesh ``A`` to many: what depends on
+    ``A`` alone (its checks, used vertices and diagonal, its samples for each
+    count and seed, its closest-point search of each kind) is made once and
+    kept. ``simplify(max_error=...)`` measures each step's cage against the
+    cleaned input: the 1.1M-face bunny x16's index took 1.35 s of each of
+    its six measures at 0.5%. The results are :func:`surface_distance`'s, bit
+    for bit (it is ``DistanceFrom(V_a, F_a).to(V_b, F_b)``).
+
+    Parameters
+    ----------
+    V_a, F_a : the mesh measured from (the original; its diagonal scales the
+        percentages). Kept by reference as checked: not to be changed while
+        in use.
+
+    Raises
+    ------
+    InvalidMeshError
+        The mesh is malformed or has no faces.
+
+    Examples
+    --------
+    >>> a = DistanceFrom([[0, 0, 0], [1, 0, 0], [0, 1, 0]], [[0, 1, 2]])
+    >>> round(a.to([[0, 0, 1], [1, 0, 1], [0, 1, 1]], [[0, 1, 2]]).hausdorff, 12)
+    1.0
+    """
+
+    def __init__(self, V_a, F_a):
+        self.V, self.F = check_mesh(V_a, F_a, where="surface_distance (mesh a)", allow_empty=False)
+        check_units(self.V, where="surface_distance", name="mesh a")
+        self.used = self.V[np.unique(self.F)]
+        self.diagonal = bbox_diagonal(self.used)
+        self._samples = {}                  # (count, seed) -> points
+        self._searches = {}                 # kind -> search
+
+    def to(self, V_b, F_b, *, samples=None, seed=0):
+        """:func:`surface_distance` from ``A`` to the mesh ``V_b``, ``F_b``
+        (same parameters, same result)."""
+        V_b, F_b = check_mesh(V_b, F_b, where="surface_distance (mesh b)", allow_empty=False)
+        check_units(V_b, where="surface_distance", name="mesh b")
+        if samples is None:
+            n = int(np.clip(2 * max(self.F.shape[0], F_b.shape[0]), *_DEFAULT_SAMPLES))
+        else:
+            n = check_number(samples, where="surface_distance", name="samples", lo=0,
+                             hi=MAX_SAMPLES, integer=True)
+        used_b = V_b[np.unique(F_b)]
+        seed = check_seed(seed, where="surface_distance")
+        s_a = self._sampled(n, seed)
+        s_b = _sample(V_b, F_b, n, np.random.default_rng(seed)).points
+        ab_max, ab_mean, ab_rms = _one_side(search_for(V_b, F_b, s_a.shape[0] + self.used.shape[0]),
+                                            s_a, self.used)
+        ba_max, ba_mean, ba_rms = _one_side(self._search(s_b.shape[0] + used_b.shape[0]), s_b,
+                                            used_b)
+        return SurfaceDistance(
+            hausdorff=max(ab_max, ba_max), mean=max(ab_mean, ba_mean), rms=max(ab_rms, ba_rms),
+            a_to_b_max=ab_max, a_to_b_mean=ab_mean, b_to_a_max=ba_max, b_to_a_mean=ba_mean,
+            diagonal=self.diagonal, a_to_b_rms=ab_rms, b_to_a_rms=ba_rms, n_samples=n)
+
+    def _sampled(self, n, seed):
+        """``A``'s ``n`` samples drawn with ``seed`` (kept)."""
+        if (n, seed) not in self._samples:
+            self._samples[(n, seed)] = _sample(self.V, self.F, n, np.random.default_rng(seed)).points
+        return self._samples[(n, seed)]
+
+    def _search(self, n_queries):
+        """``A``'s closest-point search for ``n_queries`` points (kept per kind)."""
+        kind = search_kind(self.F.shape[0], n_queries)
+        if kind not in self._searches:
+            self._searches[kind] = kind(self.V, self.F)
+        return self._searches[kind]

@@ -66,7 +66,7 @@ from .mesh import check_finite_rows
 from .spatial import PRUNE_SLACK, TriangleIndex, closest_pairs, closest_result
 from .pages import plain_pages
 
-__all__ = ["NearQuery", "cell_for_reach", "search_for"]
+__all__ = ["NearQuery", "cell_for_reach", "search_for", "search_kind"]
 
 #: points per block (float32 temporaries of a few MiB; large blocks mean fewer NumPy
 #: calls, each a GIL hand-over when two threads query at once: the bind's 1M-point
@@ -246,16 +246,21 @@ class NearQuery:
 
 def search_for(V, F, n_queries):
     """The closest-point search over ``(V, F)`` for ``n_queries`` points near
-    it (the same exact distances either way): a :class:`NearQuery` when they
-    are at least as many as the faces (its searches take about half the time:
-    the bunny against a 1,000-face cage 1.1-1.2 -> 0.54-0.59 s in
-    ``surface_distance``), else a plain :class:`~.spatial.TriangleIndex` (a
-    1.1M-face scan against its 10k-face cage, 205k queries on its side: the
-    build is most of the time, and a NearQuery's takes 190 MiB more). Among
-    exactly equidistant faces the two may name different ones."""
-    if F.shape[0] <= n_queries:
-        return NearQuery(V, F)
-    return TriangleIndex(V, F)
+    it (the same exact distances either way), of the kind :func:`search_kind`
+    names. Among exactly equidistant faces the two kinds may name different
+    ones."""
+    return search_kind(F.shape[0], n_queries)(V, F)
+
+
+def search_kind(n_faces, n_queries):
+    """The closest-point search for ``n_queries`` points near a mesh of
+    ``n_faces`` faces: :class:`NearQuery` when they are at least as many as
+    the faces (its searches take about half the time: the bunny against a
+    1,000-face cage 1.1-1.2 -> 0.54-0.59 s in ``surface_distance``), else a
+    plain :class:`~.spatial.TriangleIndex` (a 1.1M-face scan against its
+    10k-face cage, 205k queries on its side: the build is most of the time,
+    and a NearQuery's takes 190 MiB more)."""
+    return NearQuery if n_faces <= n_queries else TriangleIndex
 
 
 def cell_for_reach(reach):

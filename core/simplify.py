@@ -64,7 +64,7 @@ from .errors import InvalidArgumentError, InvalidMeshError, MeshAdjustError
 from .mesh import (area_normals_rows, bounding_box, check_flag, check_mesh, check_number,
                    check_vertex_mask, diagonal_length, dot_columns, face_normals, has_area,
                    squared_edges)
-from .metrics import surface_distance
+from .metrics import DistanceFrom, surface_distance
 from .topology import (border_vertex_count, boundary_loops_count, collapsible_edges,
                        face_components, is_soup)
 from .quadrics import accumulate_coefficients, vertex_face_quadrics, edge_constraint_quadrics
@@ -753,8 +753,10 @@ def _within_max_error(su, clean, target, max_error, opts, progress):
     set-up of ``clean``. Returns the cage and its distance.
     """
 
+    source = DistanceFrom(clean.V, clean.F)         # (its index and samples made once)
+
     def measure(cage, samples=None):
-        return surface_distance(clean.V, clean.F, cage.V, cage.F, samples=samples).hausdorff
+        return source.to(cage.V, cage.F, samples=samples).hausdorff
 
     tun = opts["tuning"]
     steps = list(tun.max_error_steps)

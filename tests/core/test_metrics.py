@@ -7,7 +7,7 @@ from hypothesis import given, settings, strategies as st
 import core
 from core.errors import InvalidArgumentError, InvalidMeshError
 from core import metrics
-from core.metrics import SurfaceDistance, sample_surface, surface_distance
+from core.metrics import DistanceFrom, SurfaceDistance, sample_surface, surface_distance
 from core.near_query import NearQuery, search_for
 from core.spatial import TriangleIndex
 from tests.mesh_factory import cube, icosphere, load_shared, regular_grid, torus
@@ -210,6 +210,27 @@ def test_both_searches_give_the_same_distances_and_each_is_used_where_it_is_fast
     assert isinstance(search_for(V, F, 10), TriangleIndex)
     assert isinstance(search_for(V, F, m - 1), TriangleIndex)
     assert isinstance(search_for(V, F, m), NearQuery)
+
+
+def test_distance_from_one_mesh_to_many_is_surface_distance_and_builds_its_search_once():
+    # simplify(max_error=...) measures each step's cage against one input: DistanceFrom
+    # keeps the input's search (one of each kind) and samples, and every result is
+    # surface_distance's, bit for bit, whatever came before (sample counts, seeds, cages
+    # with fewer and more faces than it: both kinds of search)
+    V, F = torus(60, 30, bump=0.1)
+    source = DistanceFrom(V, F)
+    cages = [torus(k, k // 2) for k in (8, 12, 20, 90)]
+    asks = [dict(), dict(samples=0), dict(samples=3000, seed=4), dict()]
+    kept = None
+    for round_ in range(2):
+        for (Vc, Fc), ask in zip(cages, asks):
+            assert source.to(Vc, Fc, **ask) == surface_distance(V, F, Vc, Fc, **ask)
+        if kept is None:
+            kept = dict(source._searches)
+    assert set(kept) == {NearQuery, TriangleIndex}
+    assert all(source._searches[kind] is search for kind, search in kept.items())
+    with pytest.raises(InvalidMeshError, match="surface_distance \\(mesh b\\)"):
+        source.to(V, F[:, :2])
 
 
 def test_real_mesh_bunny_vs_perturbed_copy():
