@@ -371,11 +371,19 @@ def _kth_smallest(x, k, sample):
 # ---------------------------------------------------------------- the pool
 
 
-def _pool_size(ne, m, target, tun, bold=False, grow=1.0):
+def _pool_size(ne, m, target, tun, bold=False, grow=1.0, stalled=0):
     """How many of the ``ne`` candidate edges one pass (``bold``: see
     :func:`_bold_rounds`) may consider; ``grow`` widens the bound set by the
-    collapses still needed (see ``Tuning.slow_pass_share``)."""
-    P = int(np.ceil((tun.bold_pool_share if bold else tun.pool_share) * ne))
+    collapses still needed (see ``Tuning.slow_pass_share``), ``stalled`` (the
+    careful passes in a row that accepted nothing) doubles the share each
+    time past ``Tuning.stall_grace``: a messy homer stuck short of its
+    target refused a fifth of its 3,384 candidates a pass, 36 passes each
+    time it was stuck, 10,370 in all (17 s for 21k faces; now 2,712, 10 s).
+    Doubling from the first such pass changed the cow at 2% (Hausdorff
+    0.738 -> 0.754 of Decimate's)."""
+    share = (tun.bold_pool_share if bold else tun.pool_share) \
+        * 2.0 ** min(max(stalled - tun.stall_grace, 0), 8)
+    P = int(np.ceil(share * ne))
     if target is not None:
         goal = grow * tun.pool_goal_factor * (m - target) / 2.0    # (grow may reach inf)
         if goal < P:
@@ -1267,7 +1275,7 @@ def _progress(progress, m0, m, target):
 
 
 def _run(st, target, max_err_n, preserve_boundary, progress, m0, tun, dihedral_cos):
-    passes, grow, m_last, bold_on = 0, 1.0, None, True
+    passes, grow, m_last, bold_on, stalled = 0, 1.0, None, True, 0
     clock = _Clock(st.seconds)
     while passes < tun.max_passes:
         if st.m_live < tun.compact_share * st.F.shape[0]:
@@ -1290,7 +1298,7 @@ def _run(st, target, max_err_n, preserve_boundary, progress, m0, tun, dihedral_c
                 return "no_valid_collapse", passes
             continue
         bold = bold_on and target is not None and m > tun.bold_above * max(target, tun.bold_min_target)
-        P = _pool_size(ne, m, target, tun, bold, grow)
+        P = _pool_size(ne, m, target, tun, bold, grow, stalled)
         _recost_cheapest(st, e, P, max_err_n, preserve_boundary, tun)
         clock.lap("recost")
         cand = np.isfinite(e.cost)
@@ -1318,7 +1326,9 @@ def _run(st, target, max_err_n, preserve_boundary, progress, m0, tun, dihedral_c
         acc, touched = _check_rounds(st, pool, passes, haus, dihedral_cos, tun)
         clock.lap("pick and check")
         if acc is None:
+            stalled += 1
             continue
+        stalled = 0
         st.vver[touched] = passes
         _apply_accepted(st, pool, _trim_to_target(pool, acc, m, target), passes)
         clock.lap("apply")

@@ -15,6 +15,9 @@ class Tuning:
     feature_weight: float = 3.0      #: crease plane weight, times the edge length squared
     pool_share: float = 0.2          #: at most this share of the candidate edges per pass
     pool_goal_factor: float = 4.0    #: ... and at most this many times the collapses still needed
+    #: ... doubled for each careful pass in a row past this many that accepted nothing
+    #: (a stuck run refused a fifth of its candidates a pass: see ``_collapse._pool_size``)
+    stall_grace: int = 2
     #: a pass that removed less than this share of the faces still needed lets the next
     #: pass's goal bound grow by pool_growth (again after each such pass): near the
     #: target, where most of a small pool is refused, the tail takes a few passes, not dozens
