@@ -38,6 +38,7 @@ def test_a_soup_no_weld_joins_is_kept_unfitted_with_a_warning_to_weld_it(scene):
     assert f"the cage is {len(F):,} separate pieces" in report.message
     assert "triangle soup" in report.message and "weld the source first" in report.message
     assert "the cage is kept unfitted" in report.message
+    assert "max deviation" not in report.message       # (a soup's pieces are not measured)
 
 
 def test_a_one_sided_scan_is_cut_open_said_so_and_refines_to_itself(scene):

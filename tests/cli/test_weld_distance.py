@@ -25,6 +25,10 @@ def test_the_weld_is_automatic_or_as_asked(tmp_path):
     row = json.loads((tmp_path / "narrow.json").read_text())["files"][0]
     assert row["stopped_because"] == "topology_floor" and row["faces_out"] == F.shape[0]
     assert "separate pieces: weld it first" in row["message"]
+    # a soup's pieces are not measured against themselves (overlapping ones took 28 s)
+    assert row.get("deviation_pct") is None
+    assert f"the deviation is not measured: the cage is the input's {F.shape[0]:,} separate " \
+        f"pieces" in row["notes"]
     for bad in ("-1", "1", "2"):
         proc = run_batch(["soup.obj", "--faces", "200", "--weld-distance", bad], tmp_path)
         assert proc.returncode == 2 and "--weld-distance" in proc.stderr
