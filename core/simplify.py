@@ -66,7 +66,7 @@ from .mesh import (area_normals_rows, bounding_box, check_flag, check_mesh, chec
                    squared_edges)
 from .metrics import DistanceFrom, surface_distance
 from .topology import (border_vertex_count, boundary_loops_count, collapsible_edges,
-                       face_components, is_soup)
+                       face_components, soup_pieces)
 from .quadrics import accumulate_coefficients, vertex_face_quadrics, edge_constraint_quadrics
 from .pinholes import cap_pinholes, face_floor
 from .tuning import TUNING, Tuning
@@ -150,7 +150,8 @@ class SimplifyResult:
     n_border_vertices : int, the cage's vertices on its open borders.
     preserve_boundary : bool, as asked.
     n_input_pieces : int or None, the separate pieces of the cleaned input
-        when it and the cage are triangle soups (:func:`soup_pieces`), else None.
+        when it and the cage are triangle soups (:func:`~.topology.soup_pieces`),
+        else None.
     n_passes : int, batches applied.
     seconds : dict, wall-clock seconds per stage: ``"clean"``, ``"set-up"``
         (order, quadrics), the engine's own (``"candidates"``, ``"recost"``,
@@ -1073,20 +1074,6 @@ def target_count(target_faces, ratio, m0):
     return target
 
 
-def soup_pieces(F_cage, n_cage_pieces, clean):
-    """The separate pieces of the cleaned input ``clean`` (a ``CleanResult``)
-    when it and the cage (faces ``F_cage`` in ``n_cage_pieces`` pieces) are
-    triangle soups (:func:`~.topology.is_soup`), else None. The input is
-    counted only when the cage is one (its pieces cost 0.12 s at 1M faces):
-    a cage in pieces at their floor can come from an input that is not (the
-    beetle beside a copy of itself 1e-4 of its size off: 36 pieces for 44
-    faces, from 36 pieces of 2,291 faces, which no weld joins)."""
-    if not is_soup(n_cage_pieces, F_cage.shape[0]):
-        return None
-    _, pieces = face_components(clean.F, clean.V.shape[0])
-    return pieces if is_soup(pieces, clean.F.shape[0]) else None
-
-
 def _result(cage, clean, m_in, n_in, target, hausdorff, t0, preserve_boundary):
     """The :class:`SimplifyResult` of ``cage``, mapped back to the input."""
     kept = clean.input_to_clean >= 0
@@ -1100,4 +1087,5 @@ def _result(cage, clean, m_in, n_in, target, hausdorff, t0, preserve_boundary):
         n_boundary_loops=boundary_loops_count(cage.F, cage.V.shape[0]), n_components=n_comp,
         n_passes=cage.passes, seconds={**cage.seconds, "total": time.perf_counter() - t0},
         n_border_vertices=border_vertex_count(cage.F, cage.V.shape[0]),
-        preserve_boundary=preserve_boundary, n_input_pieces=soup_pieces(cage.F, n_comp, clean))
+        preserve_boundary=preserve_boundary,
+        n_input_pieces=soup_pieces(cage.F, cage.V.shape[0], clean.F, clean.V.shape[0], n_comp))

@@ -46,10 +46,10 @@ from .mesh import area_normals_rows, bbox_diagonal, check_mesh, check_reach
 from .metrics import surface_distance
 from .mirror import PARTNER_TOLERANCE, axis_index, mirror, mirror_partners  # noqa: F401 (example)
 from .simplify import (SimplifyResult, check_arguments, check_flags, cleaned_input, debris_budget,
-                       simplify, soup_pieces, target_count)
+                       simplify, target_count)
 from .spatial import TriangleIndex
 from .topology import (border_vertex_count, boundary_loops_count, edge_keys, edge_map,
-                       face_components)
+                       face_components, soup_pieces)
 from .pages import plain_pages
 from .pinholes import cap_pinholes
 
@@ -519,7 +519,8 @@ def _symmetric(whole, options):
         hausdorff=hausdorff, n_boundary_loops=boundary_loops_count(cage.F, cage.V.shape[0]),
         n_components=n_comp, n_passes=r.n_passes, asymmetry=hs.asymmetry / diag,
         n_border_vertices=border_vertex_count(cage.F, cage.V.shape[0]),
-        preserve_boundary=r.preserve_boundary, n_input_pieces=soup_pieces(cage.F, n_comp, clean))
+        preserve_boundary=r.preserve_boundary,
+        n_input_pieces=soup_pieces(cage.F, cage.V.shape[0], clean.F, clean.V.shape[0], n_comp))
 
 
 def _check_crosses(clean, s, k, axis):
