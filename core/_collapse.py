@@ -381,6 +381,8 @@ def _pool_size(ne, m, target, tun, bold=False, grow=1.0, stalled=0):
     time it was stuck, 10,370 in all (17 s for 21k faces; now 2,712, 10 s).
     Doubling from the first such pass changed the cow at 2% (Hausdorff
     0.738 -> 0.754 of Decimate's)."""
+    # (at most 2^8 times: the default shares reach every candidate after 3 doublings,
+    # and 2.0 ** stalled would overflow a long stall; P is cut to ne below)
     share = (tun.bold_pool_share if bold else tun.pool_share) \
         * 2.0 ** min(max(stalled - tun.stall_grace, 0), 8)
     P = int(np.ceil(share * ne))

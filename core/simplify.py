@@ -65,7 +65,7 @@ from .mesh import (area_normals_rows, bounding_box, check_flag, check_mesh, chec
                    check_vertex_mask, diagonal_length, dot_columns, face_normals, has_area,
                    squared_edges)
 from .metrics import DistanceFrom, surface_distance
-from .topology import (border_vertex_count, boundary_loops_count, collapsible_edges,
+from .topology import (border_vertex_count, boundary_loops_count, collapsible_edges, edge_map,
                        face_components, soup_pieces)
 from .quadrics import accumulate_coefficients, vertex_face_quadrics, edge_constraint_quadrics
 from .pinholes import cap_pinholes, face_floor
@@ -1080,12 +1080,13 @@ def _result(cage, clean, m_in, n_in, target, hausdorff, t0, preserve_boundary):
     vertex_map = np.full(n_in, -1, dtype=np.int64)
     vertex_map[kept] = cage.of_clean[clean.input_to_clean[kept]]
     _, n_comp = face_components(cage.F, cage.V.shape[0])
+    em = edge_map(cage.F, cage.V.shape[0])          # (for both border counts)
     return SimplifyResult(
         V=cage.V, F=cage.F, vertex_map=vertex_map, face_map=clean.face_to_input[cage.face_from],
         max_error=cage.worst, stopped_because=cage.stopped, feature_edges=cage.feature_edges,
         cleaning=clean.report, n_input_faces=int(m_in), target=target, hausdorff=hausdorff,
-        n_boundary_loops=boundary_loops_count(cage.F, cage.V.shape[0]), n_components=n_comp,
+        n_boundary_loops=boundary_loops_count(cage.F, cage.V.shape[0], em), n_components=n_comp,
         n_passes=cage.passes, seconds={**cage.seconds, "total": time.perf_counter() - t0},
-        n_border_vertices=border_vertex_count(cage.F, cage.V.shape[0]),
+        n_border_vertices=border_vertex_count(cage.F, cage.V.shape[0], em),
         preserve_boundary=preserve_boundary,
         n_input_pieces=soup_pieces(cage.F, cage.V.shape[0], clean.F, clean.V.shape[0], n_comp))

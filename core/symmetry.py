@@ -512,13 +512,14 @@ def _symmetric(whole, options):
         stopped = "topology_floor"         # (the fewest faces a mirrored cage of it has)
     vertex_map, face_from, fe = _whole_maps(clean, hs, r, cage, s, k, whole.n_in)
     _, n_comp = face_components(cage.F, cage.V.shape[0])
+    em = edge_map(cage.F, cage.V.shape[0])          # (for both border counts)
     return SimplifyResult(
         V=cage.V, F=cage.F, vertex_map=vertex_map, face_map=clean.face_to_input[face_from],
         max_error=r.max_error, stopped_because=stopped, feature_edges=fe,
         cleaning=clean.report, n_input_faces=int(whole.m_in), target=whole.target,
-        hausdorff=hausdorff, n_boundary_loops=boundary_loops_count(cage.F, cage.V.shape[0]),
+        hausdorff=hausdorff, n_boundary_loops=boundary_loops_count(cage.F, cage.V.shape[0], em),
         n_components=n_comp, n_passes=r.n_passes, asymmetry=hs.asymmetry / diag,
-        n_border_vertices=border_vertex_count(cage.F, cage.V.shape[0]),
+        n_border_vertices=border_vertex_count(cage.F, cage.V.shape[0], em),
         preserve_boundary=r.preserve_boundary,
         n_input_pieces=soup_pieces(cage.F, cage.V.shape[0], clean.F, clean.V.shape[0], n_comp))
 
