@@ -123,6 +123,12 @@ _FLAT_HEIGHT = 1e-9
 #: this share (of a unit vector, of the mesh's size); rounding may split one line's
 #: segments into two groups (fewer dropped), never puts two lines in one
 _LINE_ROUNDING = 1e-6
+#: triangles no taller over their longest edge than this share of its length also get a
+#: capsule bound (their distance to that edge less their height): needles and slivers,
+#: whose bounding sphere and disk are as wide as they are long, and whose thin ones have
+#: no plane to bound by (a fillet's end cap, a fan of 1,000 coplanar needles: each query
+#: near it evaluated every needle exactly)
+_CAPSULE_HEIGHT = 1.0 / 16
 _LEAF = 8                  # BVH leaf size (triangles)
 _BVH_STEP = 2              # BVH levels descended per traversal step (4 children per node)
 _SLAB_LEVELS = 3           # lowest BVH levels that also get cylinder bounds
@@ -659,6 +665,63 @@ def _bounding_rows(A, B, C, n):
     return np.ascontiguousarray(np.vstack([centre.T, r])), prism
 
 
+def _capsule_rows(A, B, C, S, ball, first):
+    """The capsule bound's rows of the needles among the triangles ``(A, B,
+    C)`` (numbered from ``first``; ``S`` their rows |ab|^2, |ac|^2, ab.ac of
+    :func:`triangle_rows`, ``ball`` their bounding spheres (4, k)): those no
+    taller over their longest edge than ``_CAPSULE_HEIGHT`` of its length.
+    Every point of a triangle lies within its height h of its longest edge,
+    so a point's distance to the triangle is at least its distance to that
+    edge less h. Returns (triangles (j,), rows (7, j): the edge's start
+    relative to the centroid, the edge, h with a rounding margin)."""
+    s_ab, s_ac, s_abac = S
+    longest = np.maximum(np.maximum(s_ab, s_ac), s_ab + s_ac - 2.0 * s_abac)
+    area2 = np.maximum(s_ab * s_ac - s_abac * s_abac, 0.0)          # |ab x ac|^2
+    rows = np.flatnonzero(area2 <= _CAPSULE_HEIGHT ** 2 * longest * longest)
+    edge = _LongestEdges.of(A[rows], B[rows], C[rows])
+    c, r = ball[:3, rows], ball[3, rows]
+    out = np.empty((7, rows.size))
+    out[0:3] = edge.start.T - c
+    out[3:6] = edge.edge.T
+    scale = np.abs(c).max(axis=0) + r
+    out[6] = np.sqrt(edge.height2) * (1 + 1e-9) + 1e-9 * r + 1e-12 * scale
+    return rows + first, out
+
+
+def _capsule_table(m, parts):
+    """The capsule bound's tables from the blocks' :func:`_capsule_rows`:
+    each triangle's column in the rows (-1 for none; None when no triangle
+    has one) and the rows (7, j)."""
+    rows = np.concatenate([p[0] for p in parts]) if parts else np.zeros(0, dtype=np.int64)
+    if rows.size == 0:
+        return None, np.zeros((7, 0))
+    at = np.full(m, -1, dtype=np.int32 if m < 2**31 else np.int64)
+    at[rows] = np.arange(rows.size)
+    return at, np.concatenate([p[1] for p in parts], axis=1)
+
+
+def _rod_rows(c, rel, size):
+    """Rods (capsules) holding the BVH nodes of a low level: per node, the
+    segment along the direction from its centre ``c`` (g,3) to its farthest
+    point (``rel`` (g,k,3): its triangles' corners less ``c``) that spans the
+    corners' projections, and the largest distance of a corner from it (with
+    rounding margins; ``size`` the corners' largest offset). (7, g): the
+    segment's start (3), the segment (3), the radius. A node of needles side
+    by side (a fan's) is a thin rod where its box and its cylinder around the
+    summed normal are as wide as the needles are long."""
+    g = rel.shape[0]
+    d2 = np.einsum("gkj,gkj->gk", rel, rel)
+    axis = unit_rows(rel[np.arange(g), np.argmax(d2, axis=1)])
+    along = np.einsum("gkj,gj->gk", rel, axis)
+    off = rel - along[:, :, None] * axis[:, None, :]      # (not d2 - along^2: it cancels)
+    radius = np.sqrt(np.einsum("gkj,gkj->gk", off, off).max(axis=1))
+    lo, hi = along.min(axis=1), along.max(axis=1)
+    scale = np.abs(c).max(axis=1) + size
+    radius = radius * (1 + 1e-9) + 1e-9 * size + 1e-12 * scale
+    return np.ascontiguousarray(np.vstack([(c + lo[:, None] * axis).T,
+                                           ((hi - lo)[:, None] * axis).T, radius]))
+
+
 def _cell_range(X, lo, h, dims):
     """Grid cell (k,3) int64 of the points ``X`` (k,3), clipped to the grid:
     ``clip(floor((X - lo) / h), 0, dims - 1)``, with one float temporary."""
@@ -913,10 +976,12 @@ class TriangleIndex:
             self._ball[:, s], self._prism[:, s] = _bounding_rows(A, B, C, self._D[12:15, s].T)
             c0, nr = _cell_ranges(A, B, C, self._lo, h, dims)
             sides = np.sqrt(self._D[9, s] * self._D[10, s])
-            return _plane_cells(A, B, C, sides, ext[s], c0, nr, self._lo, h, dims, span[0], small)
+            return _plane_cells(A, B, C, sides, ext[s], c0, nr, self._lo, h, dims, span[0], small) \
+                + _capsule_rows(A, B, C, self._D[9:12, s], self._ball[:, s], span[0])
         parts = run_each(build_block, spans, threads=m >= _THREADED_BUILD)
         cell = np.concatenate([p[0] for p in parts])
         tri = np.concatenate([p[1] for p in parts])
+        self._capsule_at, self._capsule = _capsule_table(m, [p[2:] for p in parts])
         del parts
         self._cell_tri = tri[np.argsort(cell, kind="stable")]
         self._cell_start = np.zeros(int(np.prod(dims)) + 1, dtype=np.int64)
@@ -1024,7 +1089,7 @@ class TriangleIndex:
             X = np.concatenate([X, np.repeat(X[-1:], pad, axis=0)])
             N = np.concatenate([N, np.zeros((pad, 3))])
         valid = np.arange(n_pad * _LEAF) < m
-        self._slab = {}
+        self._slab, self._rod = {}, {}
         low = min(_SLAB_LEVELS, self._depth + 1)
         for j in range(low):
             g = n_pad >> j
@@ -1040,6 +1105,7 @@ class TriangleIndex:
             t = np.abs(h).max(axis=1)
             size = np.abs(rel).max(axis=(1, 2))
             self._store_slab(self._depth - j, c, n, r, t, size, cnt, nsum)
+            self._rod[self._depth - j] = _rod_rows(c, rel, size)
         for level in range(self._depth - low, -1, -1):
             cc, nn, rr, tt, cnt, ns = self._slab_parts[level + 1]
             cnt2 = cnt[0::2] + cnt[1::2]
@@ -1232,7 +1298,29 @@ class TriangleIndex:
         lat *= lat
         hh += lat
         hh -= 1e-14 * dc2
-        return hh
+        return self._capsule_bound(X, t, dc2, hh)
+
+    def _capsule_bound(self, X, t, dc2, lb):
+        """``lb`` (squared-distance lower bounds of the points ``c_t + X`` to
+        the triangles ``t``) raised, in place, to the capsule bound where the
+        triangle has one (:func:`_capsule_rows`): the distance to its longest
+        edge less its height over it, less a rounding margin."""
+        if self._capsule_at is None:
+            return lb
+        k = np.take(self._capsule_at, t)
+        j = np.flatnonzero(k >= 0)
+        if j.size == 0:
+            return lb
+        C = np.take(self._capsule, k[j], axis=1)
+        X = np.take(X, j, axis=1)
+        _, d2 = _segment(X[0], X[1], X[2], C[0], C[1], C[2], C[3], C[4], C[5])
+        gap = np.sqrt(d2)
+        gap -= C[6]
+        gap -= 1e-12 * np.sqrt(dc2[j])
+        np.maximum(gap, 0.0, out=gap)
+        gap *= gap
+        lb[j] = np.maximum(lb[j], gap)
+        return lb
 
     def _prism_bound(self, X, t, dc2):
         """Squared-distance lower bound of the points ``c_t + X`` (X (3, k)) to the
@@ -1400,6 +1488,14 @@ class TriangleIndex:
         fh = hh + S[7]
         far2 = np.minimum(far2, fl * fl + fh * fh + 1e-14 * dc2)
         far2 *= 1 + 4 * PRUNE_SLACK
+        R = self._rod.get(level)
+        if R is not None:                                   # the lowest levels' rods
+            R = np.take(R, child, axis=1)
+            _, d2 = _segment(p[0], p[1], p[2], R[0], R[1], R[2], R[3], R[4], R[5])
+            gap = np.sqrt(d2)
+            gap -= R[6]
+            np.maximum(gap, 0.0, out=gap)
+            near2 = np.maximum(near2, gap * gap - 1e-14 * dc2)
         return near2, far2
 
     def _bvh_query(self, PT, far, best):
