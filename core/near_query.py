@@ -375,9 +375,11 @@ class _Block(NamedTuple):
     probe: np.ndarray   #: (k,) padded id of the probe cell
 
 
-def _block(T, index, P, q, cell3, best):
+def _block(T, index, P, q, cell3, best, known=None):
     """Answer the points ``q`` (rows of ``P``) into ``best``; returns the rows
-    left for ``TriangleIndex.closest``."""
+    left for ``TriangleIndex.closest``. ``known`` (len(P),), when given: the
+    index's exact distance of the loose probes among them (NaN elsewhere;
+    a crowded block's halves are told what the whole block asked for)."""
     B, lost = _start_block(T, P, q, cell3)
     n = B.q.shape[0]
     tiles, t0, lb0 = _probe(T, B)
@@ -386,7 +388,7 @@ def _block(T, index, P, q, cell3, best):
     reach = np.sqrt(d0)
     loose = _loose_probes(T, d0, lb0)
     if loose.any():                   # their ball from the index's exact distance
-        reach[loose] = index.closest(B.X[:, loose].T).distance
+        reach[loose] = _loose_reach(index, B, loose, known)
         u2[loose] = np.square(_bound32(T, np.square(reach[loose])))
     owner_a, tri_a, lb_a = _within(tiles, np.arange(n), u2)
     point_b, cell_b, far = _neighbour_cells(T, B, reach)
@@ -395,8 +397,12 @@ def _block(T, index, P, q, cell3, best):
         # hundreds of pairs a point: halves, whose arrays stay in cache (a point's
         # answer does not depend on its block)
         half = B.q.shape[0] // 2
-        return np.concatenate([lost, _block(T, index, P, B.q[:half], cell3, best),
-                               _block(T, index, P, B.q[half:], cell3, best)])
+        if loose.any():
+            if known is None:
+                known = np.full(P.shape[0], np.nan)
+            known[B.q[loose]] = reach[loose]
+        return np.concatenate([lost, _block(T, index, P, B.q[:half], cell3, best, known),
+                               _block(T, index, P, B.q[half:], cell3, best, known)])
     owner = np.concatenate([owner_a, owner_b])
     tri = np.concatenate([tri_a, tri_b])
     # a triangle is referenced in every cell it crosses, and windows overlap the
@@ -415,6 +421,18 @@ def _block(T, index, P, q, cell3, best):
     t, v, w, d2 = _fold(T, B.X, owner[rest], tri[rest], t, v, w, d2)
     best.t[B.q], best.v[B.q], best.w[B.q], best.d2[B.q] = t, v, w, d2
     return np.concatenate([lost, B.q[far]])
+
+
+def _loose_reach(index, B, loose, known):
+    """The index's exact distance of the block ``B``'s ``loose`` probes: from
+    ``known`` (see :func:`_block`) where it has one, else asked (a point's
+    probe, and so whether it is loose, does not depend on its block)."""
+    rows = B.q[loose]
+    reach = np.full(rows.shape[0], np.nan) if known is None else known[rows]
+    ask = np.isnan(reach)
+    if ask.any():
+        reach[ask] = index.closest(B.X[:, np.flatnonzero(loose)[ask]].T).distance
+    return reach
 
 
 def _crowded_next(T, X, owner, tri, lb, rest, current):

@@ -150,8 +150,19 @@ def test_crowded_points_and_split_blocks_answer_exactly(monkeypatch):
     monkeypatch.setattr(near_query, "_MIN_BLOCK", 256)
     monkeypatch.setattr(near_query, "_CROWDED", 2)
     calls = _spy(monkeypatch, ["_block", "_crowded_next"])
+    asked = []                          # the loose probes whose distance the index is asked for
+    real = near_query._loose_reach
+
+    def loose_reach(index, B, loose, known):
+        rows = B.q[loose]
+        asked.append(rows if known is None else rows[np.isnan(known[rows])])
+        return real(index, B, loose, known)
+    monkeypatch.setattr(near_query, "_loose_reach", loose_reach)
     _assert_exact(Vn, Fn, P, NearQuery(Vn, Fn).closest(P))
     assert calls["_block"] > 1 and calls["_crowded_next"] >= 1
+    # a loose probe's exact distance is asked for once, not again in each half of its block
+    rows = np.concatenate(asked)
+    assert rows.size > 0 and np.unique(rows).size == rows.size
 
 
 def test_agrees_with_the_index_up_to_exact_ties():
