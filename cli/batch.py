@@ -30,6 +30,7 @@ import argparse
 import datetime
 import importlib.util
 import json
+import math
 import os
 import shutil
 import sys
@@ -37,9 +38,17 @@ import time
 from collections import Counter
 from dataclasses import asdict
 
-from . import blender_io
-from . import convert as _convert
-from . import outputs, report, runners
+if __name__ == "__main__" and __package__ == "cli":
+    # `python -m cli.batch` in a checkout: the folder is then a top-level package, whose
+    # modules cannot import the core beside it as `..core` (an ImportError traceback); the
+    # checkout's script runs the tool as the package `meshadjust` instead, and exits
+    import runpy
+    runpy.run_path(os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))),
+                                "scripts", "meshadjust_batch.py"), run_name="__main__")
+
+from . import blender_io  # noqa: E402
+from . import convert as _convert  # noqa: E402
+from . import outputs, report, runners  # noqa: E402
 
 PROG = "meshadjust-batch"
 #: how a worker process is started from an installed package
@@ -128,8 +137,10 @@ def _check(p, args):
         p.error("--faces must be at least 4")
     if args.ratio is not None and not 0 < args.ratio <= 1:
         p.error("--ratio must be in (0, 1]")
-    if args.max_error is not None and args.max_error <= 0:
-        p.error("--max-error must be positive")
+    if args.max_error is not None and not 0 < args.max_error < math.inf:
+        p.error("--max-error must be a positive number")
+    if not 0 < args.feature_angle <= 180:
+        p.error("--feature-angle must be in (0, 180] degrees")
     if args.max_dihedral is not None and not 0 < args.max_dihedral < 180:
         p.error("--max-dihedral must be in (0, 180) degrees")
     if args.weld_distance is not None and not 0 <= args.weld_distance < 1:
@@ -280,7 +291,11 @@ def main(argv=None, *, entry=None, prog=PROG):
             print(f"{prog}: {msg}", file=sys.stderr)
         return 2
     results, todo = _skipped(tasks, args.skip_existing)
-    interrupted = _run(args, opts, entry, tasks, todo, results)
+    try:
+        interrupted = _run(args, opts, entry, tasks, todo, results)
+    except runners.SchedulerUnreachable as exc:
+        print(f"\n{prog}: --dask: {exc}", file=sys.stderr)
+        return 2
     if interrupted:
         sys.stderr.write("\n")
         print(f"{prog}: interrupted; the files not finished are cancelled", file=sys.stderr)

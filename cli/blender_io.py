@@ -16,7 +16,8 @@ Blender reads them (``ply_file``, ``stl_file``, ``gltf_file``), and the face
 count the file declares is compared with what was imported.
 
 Meshes come back in the file's own coordinates: a glTF node's transform is
-applied and Blender's turn of glTF's Y-up into its Z-up undone
+applied (the faces of a mirroring one reversed, as Blender draws them) and
+Blender's turn of glTF's Y-up into its Z-up undone
 (``gltf_file.FROM_BLENDER``); glTF is written without that turn, so every
 output holds the numbers of its input's frame.
 """
@@ -168,7 +169,7 @@ def import_mesh(path, log=None):
     if ext not in ops:
         raise BlenderIOError(f"{name}: unsupported file type '{ext}'")
     before = set(bpy.data.objects)
-    read = stl_file.with_count(path) if ext == ".stl" else contextlib.nullcontext(path)
+    read = stl_file.for_blender(path) if ext == ".stl" else contextlib.nullcontext(path)
     trace = []
     with read as source, captured_output(log) as cap:
         failure = _failure_of(lambda: ops[ext](filepath=source), trace)
@@ -176,10 +177,15 @@ def import_mesh(path, log=None):
     if failure is not None:                 # a traceback's own lines are no cause to quote
         raise BlenderIOError(f"Blender's importer failed on {name}: "
                              f"{failure if trace else cap.explain(failure)}")
-    meshes = [o for o in bpy.data.objects if o not in before and o.type == 'MESH'
-              and len(o.data.polygons)]
+    made = [o for o in bpy.data.objects if o not in before and o.type == 'MESH'
+            and len(o.data.polygons)]
+    shown = set(bpy.context.view_layer.objects)
+    meshes = [o for o in made if o in shown]      # (a glTF node in no scene is made, not shown)
     if not meshes:
-        raise BlenderIOError(f"{name}: no mesh with faces in the file")
+        outside = (f" ({len(made):,} outside the scene it shows: glTF nodes in no scene or in "
+                   f"another)" if made else "")
+        raise BlenderIOError(f"{name}: no mesh with faces in the file{outside}")
+    _unmirror_windings(meshes)
     for o in bpy.context.view_layer.objects:
         o.select_set(False)
     for o in meshes:
@@ -189,6 +195,21 @@ def import_mesh(path, log=None):
         with captured_output(log):
             bpy.ops.object.join()
     return bpy.context.view_layer.objects.active
+
+
+def _unmirror_windings(objects):
+    """Reverse the faces of the mesh objects whose world transform mirrors
+    (a negative determinant: a glTF node scaled by -1 on an axis), each on a
+    mesh of its own. Blender draws such an object's faces turned, but its
+    mesh and a join keep the file's winding, so the batch, which applies the
+    transform to the positions, wrote them inside out; glTF's own rule is
+    the same (a node whose determinant is negative winds its front faces
+    clockwise)."""
+    for o in objects:
+        if np.linalg.det(np.array([list(r) for r in o.matrix_world])[:3, :3]) < 0:
+            if o.data.users > 1:             # (instances of one glTF mesh share it)
+                o.data = o.data.copy()
+            o.data.flip_normals()
 
 
 def _empty_scene(log):

@@ -24,6 +24,7 @@ cage still written. A cage that missed its target by more than
 (``stopped at 216 faces: 23 border loops kept``).
 """
 
+import errno
 import os
 import time
 from dataclasses import dataclass
@@ -141,6 +142,8 @@ class _Run:
 def _read(path, log):
     """``(V, F, n_polygons, notes, warnings)`` of an input file."""
     ext = os.path.splitext(path)[1].lower()
+    if os.path.isdir(path):               # (a folder named scan.obj in a folder given)
+        raise IsADirectoryError(errno.EISDIR, "a folder, not a mesh file", path)
     if not os.path.isfile(path):
         raise FileNotFoundError(2, "no such file", path)
     if ext in CORE_FORMATS:

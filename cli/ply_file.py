@@ -62,8 +62,10 @@ def ply_size_problem(path):
     blank lines after the last; binary, the bytes of each fixed-size element
     and of an element with one list property (faces) whose records all have
     the first one's length (all triangles, all quads), and for mixed records
-    at least 3 indices a face (1 item a record of another list) and a first
-    record that is a face (a count of 1-255, indices of declared vertices);
+    at least 1 item a record (Blender's importer reads faces of 1-255
+    corners, skipping those of 1 or 2) and a first record that is a face (a
+    count of 1-255, indices of declared vertices) or a triangle strip
+    (indices of declared vertices or -1, which ends a strip);
     after the last element, nothing but padding (zero bytes, blanks)."""
     header = ply_header(path)
     if not header or not header[2]:
@@ -95,12 +97,18 @@ def _ascii_problem(data, length, elements, said):
     starts = np.concatenate([[0], ends[:-1] + 1])
     rest = body[starts[need]:] if ends.size > need else body[:0]
     values = np.isin(rest, _BLANK, invert=True)
+    header_lines = int(np.count_nonzero(data[:length] == 10))
+    blank = _blank_lines(body, starts[:need], ends[:need]) if values.any() else ()
+    if len(blank):
+        more = f" (and {len(blank) - 1:,} more)" if len(blank) > 1 else ""
+        return (f"{said}, a line each, but line {header_lines + blank[0] + 1:,} among them is "
+                f"blank{more}: Blender's importer would take it for a record and misread the "
+                f"rest; delete the blank lines")
     if values.any():
         more = np.unique(np.cumsum(rest == 10)[values]).size     # lines holding a value
         return (f"{said}, a line each ({need:,}), but {more:,} more lines with values follow "
                 f"them: the file holds more than its header declares (a wrong count; Blender's "
                 f"importer would drop them or misread them)")
-    header_lines = int(np.count_nonzero(data[:length] == 10))
     first = 0
     for element, count, props in elements:
         for k in (first, first + count - 1) if count else ():
@@ -112,6 +120,13 @@ def _ascii_problem(data, length, elements, said):
                         f"wrong count in the header, or a damaged file")
         first += count
     return None
+
+
+def _blank_lines(body, starts, ends):
+    """Indices of the lines (``starts``, ``ends``: byte ranges of ``body``)
+    that hold nothing but blanks."""
+    filled = np.concatenate([[0], np.cumsum(np.isin(body, _BLANK, invert=True))])
+    return np.flatnonzero(filled[ends] == filled[starts])
 
 
 def _ascii_values(line, props):
@@ -132,7 +147,7 @@ def _binary_problem(path, data, order, length, elements, said):
     pos = length
     n_vertices = {e: n for e, n, _ in elements}.get("vertex", 2**63 - 1)
     for element, count, props in elements:
-        layout = _records(path, order, props, pos, count, size, n_vertices, element == "face")
+        layout = _records(path, order, props, pos, count, size, n_vertices, element)
         if layout is None:
             return None          # records of mixed lengths, no sign of a problem
         got, end, bad_first = layout
@@ -157,13 +172,13 @@ def _known_type(t):
     return t in PLY_TYPES or (isinstance(t, tuple) and t[1] in PLY_TYPES and t[2] in PLY_TYPES)
 
 
-def _records(path, order, props, pos, count, size, n_vertices, face):
+def _records(path, order, props, pos, count, size, n_vertices, element):
     """``(whole records in the file or None when unknown, end byte, first
     record invalid)`` of a binary PLY element of ``count`` records at byte
     ``pos`` (see :func:`ply_size_problem`; ``n_vertices``: the vertices
-    declared, bounding a face's indices; ``face``: the element is the faces,
-    whose records hold at least 3 indices); None for records of mixed
-    lengths that the file may hold."""
+    declared, bounding a face's indices; ``element``: its name, whose first
+    record :func:`_valid_first` checks); None for records of mixed lengths
+    that the file may hold."""
     itemsize = {t: np.dtype(PLY_TYPES[t]).itemsize for t in PLY_TYPES}
     lists = [k for k, (t, _) in enumerate(props) if isinstance(t, tuple)]
     if not lists:
@@ -184,22 +199,53 @@ def _records(path, order, props, pos, count, size, n_vertices, face):
     c0 = int(np.frombuffer(data, dtype=order + PLY_TYPES[ct], count=1, offset=at - itemsize[ct])[0])
     first = np.frombuffer(data, dtype=order + PLY_TYPES[it], offset=at,
                           count=max(0, min(c0, (size - at) // itemsize[it])))
-    if not 1 <= c0 <= 255 or (first.size and (first.min() < 0 or first.max() >= n_vertices)):
+    if not _valid_first(element, c0, first, n_vertices):
         return 0, pos, True
     rec = before + itemsize[ct] + c0 * itemsize[it] + after
     fits = min(count, (size - pos) // rec)
     counts = np.frombuffer(data, offset=pos, count=fits, dtype=np.dtype(
         {"names": ["c"], "formats": [order + PLY_TYPES[ct]], "offsets": [before],
          "itemsize": rec}))["c"]
-    # the least a record can be: a face has 3 corners, another list 1 item
-    least = before + itemsize[ct] + (3 if face else 1) * itemsize[it] + after
+    # the least a record can be: 1 item (a face of 1 or 2 corners is read, and skipped)
+    least = before + itemsize[ct] + itemsize[it] + after
     if (counts == c0).all():
         if fits == count:
             return fits, pos + count * rec, False
-        if pos + fits * rec + (count - fits) * least > size:   # short even if the rest were least
+        # the next record's own length (its count read), the rest at least `least`
+        nxt = pos + fits * rec
+        need = _record_bytes(data, order, props[k][0], before, after, nxt) or least
+        if nxt + need + (count - fits - 1) * least > size:    # short even if the rest were least
             return fits, pos + count * rec, False
         return None
     return (None, pos, False) if pos + count * least > size else None
+
+
+def _record_bytes(data, order, kind, before, after, at):
+    """Bytes of the record at byte ``at`` with one list property of ``kind``
+    (``("list", count type, item type)``) after ``before`` bytes and before
+    ``after``, its count read from ``data`` (None when that count lies past
+    the end)."""
+    ct, it = np.dtype(order + PLY_TYPES[kind[1]]), np.dtype(PLY_TYPES[kind[2]])
+    if at + before + ct.itemsize > data.size:
+        return None
+    n = int(np.frombuffer(data, dtype=ct, count=1, offset=at + before)[0])
+    return before + ct.itemsize + max(n, 0) * it.itemsize + after
+
+
+def _valid_first(element, count, items, n_vertices):
+    """Whether the first record of a list ``element`` (its ``count`` and
+    ``items`` read) can be one: a face of 1-255 corners (Blender's importer
+    reads no more) on declared vertices, a triangle strip of declared
+    vertices and -1 (the end of a strip: a file's whole strip set is often
+    one record of thousands), anything for another element (its items'
+    meaning unknown)."""
+    if element == "face":
+        return 1 <= count <= 255 and not (items.size and (items.min() < 0 or
+                                                          items.max() >= n_vertices))
+    if element == "tristrips":
+        return count >= 1 and not (items.size and (items.min() < -1 or
+                                                   items.max() >= n_vertices))
+    return count >= 0
 
 
 def count_nonfinite(path):

@@ -157,6 +157,23 @@ def _dask_task(entry, payload_json, cancel_event):
     return w.report(task)
 
 
+class SchedulerUnreachable(Exception):
+    """The Dask scheduler ``--dask`` names cannot be reached (an unknown
+    scheme, nothing answering there); the message says which and why."""
+
+
+def _remote_client(Client, address):
+    """A Dask ``Client`` of the scheduler at ``address``; raises
+    :class:`SchedulerUnreachable` (the batch ended in distributed's
+    traceback: "ValueError: unknown address scheme", "OSError: Timed out
+    trying to connect")."""
+    try:
+        return Client(address, timeout="20s")
+    except (OSError, ValueError, TimeoutError) as exc:
+        raise SchedulerUnreachable(f"cannot reach the Dask scheduler {address}: "
+                                   f"{' '.join(str(exc).split())}") from None
+
+
 def run_dask(tasks, payload, entry, address, jobs, on_done):
     """Convert the files as tasks on a Dask cluster: ``address`` is a
     scheduler (``tcp://host:8786``) or ``"local"`` for a ``LocalCluster`` of
@@ -177,7 +194,7 @@ def run_dask(tasks, payload, entry, address, jobs, on_done):
                                dashboard_address=None)
         client = Client(cluster)
     else:
-        client = Client(address, timeout="20s")
+        client = _remote_client(Client, address)
     cancel_event = f"meshadjust-cancel-{uuid.uuid4().hex}"
     try:
         futures = [client.submit(task_fn, entry, payload(task), cancel_event, pure=False,

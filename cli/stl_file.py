@@ -11,6 +11,11 @@ finds those cases first and names the file:
 
 The ASCII scan counts keywords with ``bytes.count`` and reads the corners
 with one regular expression: no Python loop over lines.
+
+What Blender's importer would misread but the file means plainly is read
+through a temporary copy (:func:`for_blender`): a binary file whose count
+was left blank (0), or with bytes appended after its triangles, and an
+ASCII file written in capitals (``VERTEX``: Blender found no face in it).
 """
 
 import codecs
@@ -31,6 +36,8 @@ STL_HEAD, STL_TRIANGLE = 84, 50
 #: control bytes that never occur in a text file (tab, newlines and form feed do)
 _CONTROL = frozenset(range(32)) - {9, 10, 12, 13}
 _VERTEX = re.compile(rb"\bvertex[ \t]+(\S+)[ \t]+(\S+)[ \t]+(\S+)")
+#: the keywords that open and close a facet and a solid, as whole words
+_KEYWORDS = re.compile(rb"(?<!\S)(facet|endfacet|endsolid)(?!\S)")
 
 
 def is_ascii(head):
@@ -46,15 +53,17 @@ def is_ascii(head):
 
 
 def triangle_counts(path):
-    """``(in_header, by_size)`` triangle counts of a binary STL file, None for
+    """``(in_header, to_read)`` triangle counts of a binary STL file, None for
     an ASCII one (a size that is not ``84 + 50 * count``, and text).
 
     Blender's importer reads a file as binary only when its size is exactly
     ``84 + 50 * count`` and as ASCII otherwise, so a binary file with a wrong
     count came back as "no mesh with faces". Here a count of 0 with a size of
     whole triangles (an exporter that left the field blank) gives the
-    triangles the size holds (``in_header`` 0, ``by_size`` k: read a copy
-    with k written in, :func:`with_count`); any other disagreement raises
+    triangles the size holds (``in_header`` 0, ``to_read`` k), and a file
+    holding its header's triangles and then bytes that are no whole triangle
+    (data appended) gives the header's count (the bytes after them are left
+    out: :func:`for_blender`); any other disagreement raises
     :class:`InputFileError` naming the file, the header's count and the
     count its size implies."""
     with open(path, "rb") as fh:
@@ -70,6 +79,8 @@ def triangle_counts(path):
         raise InputFileError(f"{name}: {size:,} bytes, neither ASCII STL nor a binary STL file "
                              f"(at least {STL_HEAD} bytes of header and triangle count)")
     by_size, extra = divmod(size - STL_HEAD, STL_TRIANGLE)
+    if extra and count and size > STL_HEAD + STL_TRIANGLE * count:
+        return count, count                      # its triangles, then bytes that are none
     if extra:
         raise InputFileError(
             f"{name}: a binary STL file of {size:,} bytes, which is no whole number of triangles "
@@ -83,21 +94,43 @@ def triangle_counts(path):
     return count, by_size
 
 
+def _trailing_bytes(path, counts):
+    """Bytes of a binary STL file after the ``counts[1]`` triangles it is read as."""
+    return os.path.getsize(path) - STL_HEAD - STL_TRIANGLE * counts[1]
+
+
+def _upper_case_vertex(path):
+    """Whether an ASCII STL file writes its ``vertex`` keyword other than in
+    lower case (``VERTEX``: Blender's importer then finds no corner, and no face)."""
+    with open(path, "rb") as fh:
+        data = fh.read()
+    return data.count(b"vertex") != data.lower().count(b"vertex")
+
+
 @contextlib.contextmanager
-def with_count(path):
-    """``path``, or when its binary STL header's triangle count is blank
-    (:func:`triangle_counts`) a temporary copy of the same name with the
-    count its size implies written in (the file itself is never changed)."""
+def for_blender(path):
+    """``path``, or a temporary copy of the same name that Blender's importer
+    reads as the file means it (the file itself is never changed): a binary
+    file with its blank triangle count written in and the bytes after its
+    triangles left out (:func:`triangle_counts`); an ASCII file with its
+    ``vertex`` keyword in capitals (``VERTEX``, as some exporters write STL)
+    in lower case, all of it."""
     counts = triangle_counts(path)
-    if counts is None or counts[0] == counts[1]:
+    binary_fix = counts is not None and (counts[0] != counts[1] or _trailing_bytes(path, counts))
+    if not binary_fix and not (counts is None and _upper_case_vertex(path)):
         yield path
         return
     with tempfile.TemporaryDirectory(prefix="meshadjust-stl-") as folder:
         copy = os.path.join(folder, os.path.basename(path))
-        shutil.copyfile(path, copy)
-        with open(copy, "r+b") as fh:
-            fh.seek(80)
-            fh.write(struct.pack("<I", counts[1]))
+        if binary_fix:
+            shutil.copyfile(path, copy)
+            with open(copy, "r+b") as fh:
+                fh.seek(80)
+                fh.write(struct.pack("<I", counts[1]))
+                fh.truncate(STL_HEAD + STL_TRIANGLE * counts[1])
+        else:
+            with open(path, "rb") as src, open(copy, "wb") as dst:
+                dst.write(src.read().lower())
         yield copy
 
 
@@ -114,22 +147,34 @@ def _check_binary(path, counts):
     bad = int((~np.isfinite(v).all(axis=(1, 2))).sum())
     if bad:
         raise _nonfinite_error(path, bad)
-    notes = ()
+    notes, warnings = (), ()
     if counts[0] != counts[1]:
         notes = (f"the binary STL header's triangle count is 0 (left blank by its exporter?): "
                  f"read the {counts[1]:,} triangles its size holds",)
-    return FileCheck(counts[1], notes)
+    if trailing := _trailing_bytes(path, counts):
+        warnings = (f"{os.path.basename(path)}: {trailing:,} bytes follow the {counts[1]:,} "
+                    f"triangles its header declares, no whole triangle (data appended to the "
+                    f"file?): read those {counts[1]:,} triangles",)
+    return FileCheck(counts[1], notes, warnings)
 
 
-def _ascii_body(data):
-    """``(body, closed)`` of an ASCII STL file's bytes (lower case): what lies
-    between its ``solid`` line and its last ``endsolid`` line (their names
-    may hold any word), and whether that ``endsolid`` line ends the file."""
+def _ascii_keywords(data):
+    """``(facets opened, facets closed, closed)`` of an ASCII STL file's bytes
+    (lower case) after its first (``solid``) line: the ``facet`` and
+    ``endfacet`` keywords counted as whole words (a solid's name may hold
+    them inside a word: ``solid faceted_body`` in a file of several solids
+    was a facet never closed), and whether an ``endsolid`` follows the last
+    facet (what follows it, NUL padding or an exporter's junk, is no facet:
+    the file was not cut short)."""
     start = data.find(b"\n") + 1 if b"\n" in data else len(data)
-    tail = data.rstrip()
-    last = tail.rfind(b"\n") + 1
-    closed = last >= start and tail[last:].lstrip().startswith(b"endsolid")
-    return data[start:last if closed else len(data)], closed
+    ends = data.count(b"endfacet", start)
+    starts = data.count(b"facet", start) - ends
+    closed = data.rfind(b"endsolid") > max(data.rfind(b"endfacet"), start - 1)
+    if starts == ends and closed:
+        return starts, ends, closed          # (byte counts: 20x faster than the words)
+    words = _KEYWORDS.findall(data, start)
+    closed = bool(words) and words[-1] == b"endsolid"
+    return words.count(b"facet"), words.count(b"endfacet"), closed
 
 
 def _check_ascii(path):
@@ -138,9 +183,8 @@ def _check_ascii(path):
     ``endsolid`` a warning; a NaN or infinite corner an error."""
     with open(path, "rb") as fh:
         data = fh.read().lower()
-    body, closed = _ascii_body(data)
-    ends = body.count(b"endfacet")
-    starts = body.count(b"facet") - ends
+    starts, ends, closed = _ascii_keywords(data)
+    body = data[data.find(b"\n") + 1:] if b"\n" in data else b""
     name = os.path.basename(path)
     if starts > ends:
         raise InputFileError(f"{name}: ends inside facet {ends + 1:,} (file truncated?): an ASCII "

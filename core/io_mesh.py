@@ -12,6 +12,11 @@ the seed format of quadric simplification; OBJ is its common superset::
                                        the fan folds: then ear-clipped,
                                        see :mod:`.triangulate`)
 
+A line ending with a backslash continues on the next (``f 1 2 \\`` then
+``3 4``), and a ``#`` after the numbers of a ``v`` or ``f`` line starts a
+comment (``f 1 2 3 # a tri``), as the OBJ specification and Blender's
+importer have them.
+
 Every other keyword (SMF ``c``, ``n``, ``r``, ``t``, ``bind``, ``begin``,
 ``end``, ``set``...; OBJ ``vt``, ``vn``, ``o``, ``g``, ``usemtl``, ``l``...)
 is counted and skipped: :func:`read_mesh` says how many of each. A line
@@ -279,11 +284,14 @@ def _read_bulk(data, obj):
     a word that is not a number, an ``_``, a 0 or out-of-range index, a
     coordinate that is not finite, a NUL in a ``v`` or ``f`` line, a byte
     outside ASCII in a first word that may yet be a keyword, no ``v`` or
-    ``f`` line."""
+    ``f`` line, a line continued with a backslash, a comment after a ``v``
+    or ``f`` line's numbers."""
     if data.startswith(b"\xef\xbb\xbf"):
         data = data[3:]
     if data.count(b"\r") != data.count(b"\r\n"):
         return None        # (a lone CR ends a line in text mode)
+    if b"\\\n" in data or b"\\\r\n" in data:
+        return None        # (a line continued on the next: the line reader joins them)
     lines = _Lines.of(np.frombuffer(data, dtype=np.uint8))
     if lines.starts.size == 0:
         return None
@@ -300,7 +308,7 @@ def _read_bulk(data, obj):
     if skipped is None or not is_v.any():
         return None
     vb = _body(lines, is_v)
-    if b"_" in vb or b"\x00" in vb or not vb.isascii():
+    if b"_" in vb or b"\x00" in vb or b"#" in vb or not vb.isascii():
         return None        # (text mode splits words at Unicode spaces too)
     got = _numbers(vb, np.float64, int(np.count_nonzero(is_v)))
     if got is None or (got[1] < 3).any():
@@ -322,7 +330,7 @@ def _faces(lines, is_v, is_f, obj, V):
     vertices before the line), or None (see :func:`_read_bulk`)."""
     n = V.shape[0]
     fb = _body(lines, is_f)
-    if b"_" in fb or b"\x00" in fb or (not obj and b"/" in fb) or not fb.isascii():
+    if b"_" in fb or b"\x00" in fb or b"#" in fb or (not obj and b"/" in fb) or not fb.isascii():
         return None        # (text mode splits words at Unicode spaces too)
     if obj and b"/" in fb:
         fb = _cut_slashes(fb)
@@ -402,16 +410,37 @@ class _SplitLines(NamedTuple):
     unreadable: list   #: the numbers of the lines starting with no keyword
 
 
+def _joined_lines(fh):
+    """``(line number, text)`` of each line of the text file ``fh``, a line
+    ending with a backslash joined with the next (OBJ's line continuation,
+    as Blender's importer reads it: ``f 1 2 \\`` then ``3 4``); a joined line
+    has the number of its first line."""
+    held, first = "", 0
+    for lineno, line in enumerate(fh, 1):
+        text = line.rstrip("\r\n")
+        if text.endswith("\\"):
+            held, first = held + text[:-1] + " ", first or lineno
+            continue
+        yield (first or lineno), held + line
+        held, first = "", 0
+    if first:
+        yield first, held
+
+
 def _split_lines(path, fn, obj):
     """The :class:`_SplitLines` of the file (raises at a ``v`` or ``f`` line
-    with too few words or an ``_``)."""
+    with too few words or an ``_``). A ``#`` ends a ``v`` or ``f`` line (a
+    comment after the numbers: ``f 1 2 3 # a tri``)."""
     out = _SplitLines([], [], [], [], [], [], {}, [])
     with open(path, "r", encoding="utf-8-sig", errors="replace") as fh:
-        for lineno, line in enumerate(fh, 1):
+        for lineno, line in _joined_lines(fh):
             parts = line.split()
             if not parts:
                 continue
             key = parts[0]
+            if key in ("v", "f"):
+                line = line.partition("#")[0]
+                parts = line.split()
             if key in ("v", "f") and "_" in line:      # (Python's int() and float() read 1_0 as 10)
                 raise _line_error(fn, path, lineno, "is not a number" if key == "v" else
                                   "has an index that is not an integer")

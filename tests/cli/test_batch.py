@@ -134,7 +134,8 @@ def test_one_row_per_file_whatever_the_error_text(tmp_path):
 def test_a_binary_stl_whose_count_disagrees_with_its_size_is_named_before_blender(tmp_path):
     V, F = tetrahedron()
     write_binary_stl(tmp_path / "plus7.stl", V, F, count=11)
-    write_binary_stl(tmp_path / "cut.stl", V, F, extra=b"\0" * 17)
+    write_binary_stl(tmp_path / "cut.stl", V, F)
+    (tmp_path / "cut.stl").write_bytes((tmp_path / "cut.stl").read_bytes()[:-33])  # in triangle 4
     (tmp_path / "tiny.stl").write_bytes(b"\0" * 40)
     proc = run_batch(["plus7.stl", "cut.stl", "tiny.stl", "--faces", "4"], tmp_path)
     assert proc.returncode == 1
@@ -142,7 +143,7 @@ def test_a_binary_stl_whose_count_disagrees_with_its_size_is_named_before_blende
     assert ("FAILED: plus7.stl: read failed: plus7.stl: the header of this binary STL file says "
             "11 triangles, but its size (284 bytes) holds 4 (84 bytes of header and count, then "
             "50 a triangle): cut short, or a wrong count |") in plus7
-    assert ("cut.stl: a binary STL file of 301 bytes, which is no whole number of triangles "
+    assert ("cut.stl: a binary STL file of 251 bytes, which is no whole number of triangles "
             "(84 bytes of header and count, then 50 a triangle; its header says 4)") in cut
     assert "tiny.stl: 40 bytes, neither ASCII STL nor a binary STL file" in tiny
     assert "no mesh with faces" not in proc.stdout and "0 converted, 3 failed" in proc.stdout
