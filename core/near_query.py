@@ -409,6 +409,7 @@ def _block(T, index, P, q, cell3, best, known=None):
     # next cells: the probe and other pairs come again, evaluated once only
     again = np.flatnonzero(tri != t0[owner])
     owner, tri, lb = owner[again], tri[again], np.concatenate([lb_a, lb_b])[again]
+    _raise_for_needles(index, B.X, owner, tri, lb)
     # the pair with the smallest bound of each point first: usually the closest,
     # so the bound it gives leaves few of the others
     first = _lowest_per_point(owner, lb, n)
@@ -421,6 +422,20 @@ def _block(T, index, P, q, cell3, best, known=None):
     t, v, w, d2 = _fold(T, B.X, owner[rest], tri[rest], t, v, w, d2)
     best.t[B.q], best.v[B.q], best.w[B.q], best.d2[B.q] = t, v, w, d2
     return np.concatenate([lost, B.q[far]])
+
+
+def _raise_for_needles(index, X, owner, tri, lb):
+    """Raise the float32 bounds ``lb`` of the pairs (points ``owner`` of
+    ``X``, triangles ``tri``), in place, to the index's capsule bound where
+    the triangle is a needle (:meth:`~.spatial.TriangleIndex.capsule_bound`,
+    rounded down): a thin triangle has no plane and its edge lines are
+    zero rows here, so its tile bound is 0 wherever the point is; a CAD
+    cylinder's sides and its cage are all such needles."""
+    j = index.needle_pairs(tri)
+    if j.size:
+        cap = index.capsule_bound(np.take(X, owner[j], axis=1), tri[j]).astype(np.float32)
+        cap *= np.float32(1.0 - 2.0 ** -20)            # (rounded to float32: kept below)
+        lb[j] = np.maximum(lb[j], cap)
 
 
 def _loose_reach(index, B, loose, known):

@@ -1300,6 +1300,22 @@ class TriangleIndex:
         hh -= 1e-14 * dc2
         return self._capsule_bound(X, t, dc2, hh)
 
+    def needle_pairs(self, t):
+        """Positions (ascending) among the internal triangles ``t`` of those
+        with a capsule bound (needles and slivers: :func:`_capsule_rows`)."""
+        if self._capsule_at is None:
+            return np.zeros(0, dtype=np.int64)
+        return np.flatnonzero(np.take(self._capsule_at, t) >= 0)
+
+    def capsule_bound(self, P, t):
+        """Squared-distance lower bounds (k,) of the points ``P`` (3, k) to
+        the internal triangles ``t`` (k,), each one with a capsule bound
+        (:meth:`needle_pairs`): the distance to its longest edge less its
+        height, less a rounding margin."""
+        X = P - np.take(self._ball[:3], t, axis=1)
+        dc2 = np.einsum("ij,ij->j", X, X)
+        return self._capsule_bound(X, t, dc2, np.zeros(t.shape[0]))
+
     def _capsule_bound(self, X, t, dc2, lb):
         """``lb`` (squared-distance lower bounds of the points ``c_t + X`` to
         the triangles ``t``) raised, in place, to the capsule bound where the

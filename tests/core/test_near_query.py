@@ -9,6 +9,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings, strategies as st
 
 import core.near_query as near_query
+import core.spatial as spatial
 from core.errors import InvalidArgumentError, InvalidMeshError
 from core.near_query import NearQuery
 from core.spatial import closest_pairs, triangle_rows
@@ -163,6 +164,31 @@ def test_crowded_points_and_split_blocks_answer_exactly(monkeypatch):
     # a loose probe's exact distance is asked for once, not again in each half of its block
     rows = np.concatenate(asked)
     assert rows.size > 0 and np.unique(rows).size == rows.size
+
+
+def test_needles_are_pruned_by_their_capsules(monkeypatch):
+    """A CAD cylinder's sides (triangles 1,600 times longer than wide) and cap
+    fans are thin: no plane, so their float32 tile bound is 0 wherever the
+    point is. Their pairs' bounds are raised to the index's capsule bound
+    (the distance to the longest edge less the height) before any is
+    evaluated: 15,496 exact pairs here instead of 1,205,779 (every cell
+    answered by the tiles), and the same distances."""
+    monkeypatch.setattr(spatial, "CROWDED_CELL", 10**6)  # (every cell answered here, none by the index)
+    V, F = cad_cylinder(400)
+    rng = np.random.default_rng(13)
+    P = V[rng.integers(0, V.shape[0], 1500)] + 0.02 * rng.standard_normal((1500, 3))
+    P[:500, 2] = rng.uniform(0.0, 10.0, 500)          # beside the sides, anywhere along them
+    _, _, _, d2 = _brute(V, F, P)
+    counts = []
+    for raise_them in (True, False):
+        if not raise_them:
+            monkeypatch.setattr(near_query, "_raise_for_needles", lambda *a: None)
+        calls = _spy(monkeypatch, [])
+        r = NearQuery(V, F).closest(P)
+        # (the crowded cells' points are the index's: among equidistant faces, its pick)
+        np.testing.assert_array_equal(r.distance, np.sqrt(d2))
+        counts.append(calls["pairs"])
+    assert counts[0] < 0.1 * counts[1]
 
 
 def test_agrees_with_the_index_up_to_exact_ties():
