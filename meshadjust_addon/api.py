@@ -46,6 +46,11 @@ def subdivide_object(obj, *, levels=1, scheme="butterfly", in_place=False):
     marked sharp). Returns ``(object, Report)``: a new object beside ``obj``,
     or ``obj`` itself when ``in_place``."""
     t0 = time.perf_counter()
+    if in_place and mesh_io.has_deformers(obj):
+        raise core.MeshAdjustError(
+            f"'{obj.name}' has modifiers or shape keys: in place, what they show would become "
+            f"its mesh while they stay on it (a modifier applied twice, the keys lost); turn In "
+            f"place off for a new object of what it shows, or apply them first")
     arrays = mesh_io.read_object(obj)
     # sharp edges index the mesh data: they only apply when it was used as is
     creases = (np.zeros((0, 2), np.int64) if arrays.evaluated
@@ -56,6 +61,7 @@ def subdivide_object(obj, *, levels=1, scheme="butterfly", in_place=False):
     with all_or_nothing() as rb:
         rb.keep_object(obj)
         mesh = mesh_io.new_mesh(name, Vf, Ff)
+        _carry_materials(obj.data, mesh, levels, arrays.evaluated)
         if in_place:
             old = obj.data
             obj.data = mesh
@@ -74,3 +80,17 @@ def subdivide_object(obj, *, levels=1, scheme="butterfly", in_place=False):
     if arrays.evaluated:
         msg += "; used the evaluated mesh (modifiers and shape keys applied)"
     return out, Report(msg, arrays.F.shape[0], Ff.shape[0], seconds=dt)
+
+
+def _carry_materials(src, mesh, levels, evaluated):
+    """Give ``mesh``, the subdivision of the mesh ``src``, its materials: each
+    fine face the slot of its polygon (fine face ``g`` lies in coarse triangle
+    ``g // 4**levels``), or the first slot when an evaluated mesh was used."""
+    for mat in src.materials:
+        mesh.materials.append(mat)
+    if evaluated or len(src.materials) < 2 or not len(mesh.polygons):
+        return
+    index = np.empty(len(src.polygons), np.int32)
+    src.polygons.foreach_get("material_index", index)
+    coarse = np.arange(len(mesh.polygons)) // 4 ** int(levels)
+    mesh.polygons.foreach_set("material_index", index[mesh_io.triangle_polygons(src)][coarse])

@@ -237,7 +237,7 @@ def prepare_cage_job(cage, *, levels=None, scheme=None, from_rest=False, keep_ed
     results.follow_renamed_keys(source)      # (a renamed key is muted for the read, as its name was)
     src, fp = read_source(source)
     if results.shape_key_of(source, cage) is not None:      # (a bind rewrites the key too)
-        why = results.shape_key_unavailable(source, src.V.shape[0], cage)
+        why = results.shape_key_unavailable(source, src.V.shape[0], cage, binding=True)
         if why:
             raise core.MeshAdjustError(f"the shape key of '{cage.name}': {why}")
     if levels in (None, 0):
@@ -249,6 +249,32 @@ def prepare_cage_job(cage, *, levels=None, scheme=None, from_rest=False, keep_ed
                    levels, scheme, V_rest is not None, V_now=V_now, source_fingerprint=fp,
                    old_levels=cs.levels if bound else 0, old_scheme=cs.scheme if bound else "",
                    symmetry=None if cs.symmetry == 'NONE' else cs.symmetry)
+
+
+def check_current(cage, job):
+    """Raise :class:`core.MeshAdjustError` when what ``job`` was read from
+    changed before its commit (the artist worked on while Fit or Bind ran in
+    the background: a KeyError, or a binding of the old topology written
+    under the new one, before): the cage's source gone, a result it writes
+    in Edit Mode, the cage's topology, or the source's mesh or modifiers
+    changed (its other shape keys are left to the staleness check: which of
+    them are MeshAdjust's depends on the cages there are)."""
+    cs = cage.meshadjust
+    if cs.source is None:
+        raise core.MeshAdjustError(f"'{cage.name}' lost its source object: nothing was changed")
+    why = results.edit_mode_problem(cs.edited, cs.refined)
+    if why:
+        raise core.MeshAdjustError(why)
+    F_now = store.cage_topology(cage)[0]
+    was, now = (staleness.fingerprint_fields(fp or "") for fp in
+                (job.source_fingerprint, staleness.source_fingerprint(cs.source)))
+    if F_now.shape != job.F_cage.shape or not np.array_equal(F_now, job.F_cage):
+        what = f"'{cage.name}' changed topology"
+    elif was and now and was._replace(keys="") != now._replace(keys=""):
+        what = f"'{cs.source.name}' changed"
+    else:
+        return
+    raise core.MeshAdjustError(f"{what} while the step ran: nothing was changed; run it again")
 
 
 def compute_bind(job, *, progress=None):
@@ -283,6 +309,7 @@ def commit_bind(cage, job):
     edit; its binding attributes and fingerprints; the cage's rest shape;
     the other results that exist, updated. Returns the edited-original
     object (``job.notes`` gets what was re-made)."""
+    check_current(cage, job)
     cs = cage.meshadjust
     source = cs.source
     with all_or_nothing() as rb:
@@ -381,6 +408,7 @@ def commit_fit(cage, job):
     source = cage.meshadjust.source
     if cage.mode == 'EDIT':
         raise core.MeshAdjustError(f"leave Edit Mode on '{cage.name}' to fit it")
+    check_current(cage, job)
     with all_or_nothing() as rb:
         rb.keep(cage.data)
         mesh_io.write_positions(cage.data, _source_to_cage(cage, source, job.V_now))

@@ -87,6 +87,17 @@ def read_triangles(mesh):
     return buf.reshape(-1, 3).astype(np.int64), True
 
 
+def triangle_polygons(mesh):
+    """(m,) int64: the polygon of each triangle :func:`read_triangles` gives."""
+    n_polys = len(mesh.polygons)
+    if len(mesh.loops) == 3 * n_polys:
+        return np.arange(n_polys, dtype=np.int64)
+    mesh.calc_loop_triangles()
+    buf = np.empty(len(mesh.loop_triangles), dtype=np.int32)
+    mesh.loop_triangles.foreach_get("polygon_index", buf)
+    return buf.astype(np.int64)
+
+
 def has_deformers(obj):
     """True when the object's visible shape differs from its mesh data
     (modifiers or shape keys)."""

@@ -157,6 +157,7 @@ class _Background:
     _fraction = 0.0
 
     def start_background(self, context, label, compute):
+        self._scene_uid = context.scene.session_uid
         settings = context.scene.meshadjust
         settings.running = True
         settings.progress = 0.0
@@ -186,7 +187,11 @@ class _Background:
 
     def modal(self, context, event):
         wm = context.window_manager
-        settings = context.scene.meshadjust
+        # the bar of the scene the step started in (the artist may show another now: its
+        # bar stayed "running" for good before)
+        uid = getattr(self, "_scene_uid", None)
+        settings = next((s for s in bpy.data.scenes if s.session_uid == uid),
+                        context.scene).meshadjust
         if event.type == 'ESC':
             self._cancel = True
             settings.progress_text = "Cancelling..."
@@ -220,6 +225,28 @@ class _Background:
             give_back()
             self.report({'ERROR'}, str(exc))
             return {'CANCELLED'}
+
+
+def _select_only(context, obj):
+    """Select ``obj`` alone and make it active, when it is in the view layer
+    (not when its collection was excluded, or another scene shown, while the
+    step ran in the background: a traceback before)."""
+    if obj.name not in context.view_layer.objects:
+        return
+    for o in context.selected_objects:
+        o.select_set(False)
+    obj.select_set(True)
+    context.view_layer.objects.active = obj
+
+
+def object_by_uid(uid, name, label):
+    """The object whose ``session_uid`` is ``uid`` (renamed or not), for the
+    commit of a background step; :class:`core.MeshAdjustError` when the
+    artist deleted ``name`` while ``label`` ran (it had been a KeyError)."""
+    found = next((o for o in bpy.data.objects if o.session_uid == uid), None)
+    if found is None:
+        raise core.MeshAdjustError(f"'{name}' was deleted while {label} ran: nothing was changed")
+    return found
 
 
 class MESHADJUST_OT_simplify(_Background, SimplifyProps, bpy.types.Operator):
@@ -257,10 +284,7 @@ class MESHADJUST_OT_simplify(_Background, SimplifyProps, bpy.types.Operator):
 
         result = run_each(self, self._targets(context), step)
         if cages:
-            for obj in context.selected_objects:
-                obj.select_set(False)
-            cages[-1].select_set(True)
-            context.view_layer.objects.active = cages[-1]
+            _select_only(context, cages[-1])
         return result
 
     # --- interactive path: compute in a worker thread, Esc cancels
@@ -273,17 +297,14 @@ class MESHADJUST_OT_simplify(_Background, SimplifyProps, bpy.types.Operator):
         except USER_ERRORS as exc:
             self.report({'ERROR'}, f"{obj.name}: {exc}")
             return {'CANCELLED'}
-        self._job = job
+        self._job, self._source_uid = job, obj.session_uid
         return self.start_background(context, f"Simplifying {obj.name}",
                                      lambda progress: api.compute_simplify(job, progress=progress))
 
     def finish(self, context):
-        obj = bpy.data.objects.get(self._job.source_name)
+        obj = object_by_uid(self._source_uid, self._job.source_name, self.bl_label)
         cage, report = api.commit_simplify(obj, self._job)
-        for o in context.selected_objects:
-            o.select_set(False)
-        cage.select_set(True)
-        context.view_layer.objects.active = cage
+        _select_only(context, cage)
         self.report({report.level}, report.message)
         return {'FINISHED'}
 
@@ -334,6 +355,7 @@ class _CageJobStep(_Background, _CageStep):
 
         def step(cage):
             try:
+                self._cage_uid = cage.session_uid
                 self._job = self._compute(self._prepare(cage))
                 if self._job.cancelled:
                     raise core.MeshAdjustError(f"{self.bl_label} cancelled: nothing was changed")
@@ -349,8 +371,10 @@ class _CageJobStep(_Background, _CageStep):
         if bpy.app.background or len(cages) != 1:
             return self.execute(context)
         try:
+            self._cage_uid = cages[0].session_uid
             job = self._prepare(cages[0])
         except USER_ERRORS as exc:
+            (getattr(self, "give_back", None) or (lambda: None))()   # (Fit left Edit Mode)
             self.report({'ERROR'}, f"{cages[0].name}: {exc}")
             return {'CANCELLED'}
         self._job = job
@@ -360,6 +384,10 @@ class _CageJobStep(_Background, _CageStep):
     def finish(self, context):
         self.report({'INFO'}, self._commit())
         return {'FINISHED'}
+
+    def _cage(self):
+        """The cage the job was prepared for, also when renamed since."""
+        return object_by_uid(self._cage_uid, self._job.cage_name, self.bl_label)
 
 
 def _edit_note(job):
@@ -390,7 +418,7 @@ class MESHADJUST_OT_fit_cage(FitProps, _CageJobStep, bpy.types.Operator):
             _edit_mode(cage)
 
     def _commit(self):
-        cage = bpy.data.objects[self._job.cage_name]
+        cage = self._cage()
         _object_mode(cage)          # (the artist may have entered it while the fit ran)
         fit = api.commit_fit(cage, self._job)
         self.give_back()
@@ -422,7 +450,7 @@ class MESHADJUST_OT_bind(BindProps, _CageJobStep, bpy.types.Operator):
         return api.compute_bind(job, progress=progress)
 
     def _commit(self):
-        cage = bpy.data.objects[self._job.cage_name]
+        cage = self._cage()
         edited = api.commit_bind(cage, self._job)
         job = self._job
         msg = (f"bound '{edited.name}' ({len(edited.data.vertices):,} vertices) to "
@@ -488,12 +516,28 @@ class MESHADJUST_OT_edit_cage(_CageStep, bpy.types.Operator):
     bl_label = "Edit Cage"
     bl_options = {'REGISTER', 'UNDO'}
 
+    @classmethod
+    def poll(cls, context):
+        why = cage_unavailable(context)
+        cage = cage_of(context.active_object)
+        if why is None and cage.users_collection and cage.name not in context.view_layer.objects:
+            why = (f"'{cage.name}' is not in this view layer (its collection is excluded, or it "
+                   f"is in another scene): include it first")
+        if why:
+            cls.poll_message_set(why)
+        return why is None
+
     def execute(self, context):
         cage = cage_of(context.active_object)
         if context.active_object is not None and context.active_object.mode != 'OBJECT':
             bpy.ops.object.mode_set(mode='OBJECT')
+        if not cage.users_collection:   # deleted (MeshAdjust's links keep it): as results are
+            source = cage.meshadjust.source
+            self.report({'INFO'}, results.link_back(
+                cage, source if source.name in context.view_layer.objects else None))
         for o in context.selected_objects:
             o.select_set(False)
+        cage.hide_viewport = False      # (Blender cannot edit an object disabled in viewports)
         cage.hide_set(False)
         cage.select_set(True)
         context.view_layer.objects.active = cage

@@ -27,7 +27,8 @@ import numpy as np
 from .. import core
 from . import mesh_io
 from .rollback import keep, on_undo, remove_attributes, retire
-from .staleness import cages_of, key_name, own_key_names, record_keys, recorded_keys
+from .staleness import (cages_of, key_name, own_key_names, pinned_key, record_keys,
+                         recorded_keys)
 
 
 #: ``written`` of a result live mode wrote last (its buffer is in :data:`live_written`)
@@ -323,10 +324,11 @@ def edited_problem(edited):
     return None
 
 
-def shape_key_unavailable(source, n_dense, cage=None):
+def shape_key_unavailable(source, n_dense, cage=None, *, binding=False):
     """Why the edit cannot be a shape key of ``source`` (None when it can);
     with ``cage``, also when its key became the reference key
-    (:func:`reference_key_problem`)."""
+    (:func:`reference_key_problem`). ``binding``: asked by a bind of
+    ``n_dense`` vertices, which a re-bind cannot fix."""
     lost = reference_key_problem(source, cage) if cage is not None else None
     if lost:
         return lost
@@ -336,11 +338,20 @@ def shape_key_unavailable(source, n_dense, cage=None):
     if not source.data.is_editable or source.library is not None:
         return (f"'{source.name}' is linked from a library: a shape key on it would not be "
                 f"saved; make it local first (Object > Relations > Make Local)")
+    keys = source.data.shape_keys
+    if keys is not None and not keys.use_relative:
+        return (f"'{source.name}' has absolute shape keys (Relative off): there a key is a step "
+                f"of the sequence its evaluation time plays, not a shape at value 1, so the edit "
+                f"would not show; turn Relative on, or use the edited original")
     users = source.data.users - int(source.data.use_fake_user)
     if users > 1:
         return (f"'{source.name}' shares its mesh with {users - 1:,} other "
                 f"object(s): a shape key would change them too; make it single-user first "
                 f"(Object > Relations > Make Single User > Object & Data)")
+    if len(source.data.vertices) != n_dense and binding:
+        return (f"'{source.name}' has {len(source.data.vertices):,} vertices in its mesh but "
+                f"{n_dense:,} in what its modifiers show, which a bind binds: the edit cannot be "
+                f"a shape key of it; to bind, delete that shape key or those modifiers first")
     if len(source.data.vertices) != n_dense:
         return (f"'{source.name}' has {len(source.data.vertices):,} vertices in its mesh but "
                 f"{n_dense:,} were bound (its modifiers change the vertex count, or vertices "
@@ -358,7 +369,8 @@ def shape_key_of(source, cage):
         return None
     others = _other_cages_keys(source, cage)
     key = keys.key_blocks.get(key_name(cage))
-    if key is not None and not (not cage.meshadjust.key_name and key.name in others):
+    taken = others | recorded_keys(source)     # (also the key of a cage deleted since)
+    if key is not None and not (not cage.meshadjust.key_name and key.name in taken):
         return key         # (a cage that never wrote a key does not take another cage's)
     return _renamed_key(keys, cage, others)
 
@@ -477,6 +489,10 @@ def only_own_keys_and_no_modifiers(source):
     keys = source.data.shape_keys
     if keys is None:
         return True
+    if not keys.use_relative:        # (absolute keys: the evaluation time picks the shape)
+        return False
     own = own_key_names(source)
+    if pinned_key(source, own) is not None:     # (shown alone at full, whatever its value)
+        return False
     return all(kb.name in own or kb == keys.reference_key or kb.mute or kb.value == 0.0
                for kb in keys.key_blocks)

@@ -6,7 +6,8 @@ and compared with the objects as they are now:
 * the **source fingerprint**: vertex and face counts, a CRC-32 of the base
   mesh's positions (its reference key's when it has keys) and corners, one of
   every other shape key (but the ones MeshAdjust writes itself, named after a
-  cage) with its value, and one of
+  cage) with its value and vertex group (and of the evaluation time of
+  absolute keys, and of the key pinned to show alone), and one of
   every modifier with its settings, so a message can say which changed. It changes when the evaluated mesh the binding
   was made from can have changed: the mesh edited, a shape key's value or a
   modifier's level changed. (A modifier that follows another object, such as
@@ -98,6 +99,14 @@ def record_keys(source, names):
     source.meshadjust.own_keys = "\n".join(sorted(names))
 
 
+def pinned_key(source, own):
+    """The artist's shape key ``source`` shows alone, at full whatever its value
+    (Shape Key Lock, the pin), or None (no pin, or the key is one of ``own``,
+    MeshAdjust's)."""
+    key = source.active_shape_key if source.show_only_shape_key else None
+    return key if key is not None and key.name not in own else None
+
+
 def key_name(cage):
     """The name of the shape key ``cage`` writes on its source: the one it
     first wrote (kept when the cage is renamed), else the cage's name."""
@@ -123,11 +132,18 @@ def source_fingerprint(source):
     c_keys = 0
     if keys is not None:
         own = own_key_names(source)
+        if not keys.use_relative:     # (absolute keys: the time, not the values, picks the shape)
+            c_keys = zlib.crc32(f"absolute|{keys.eval_time}".encode())
+        pinned = pinned_key(source, own)
+        if pinned is not None:
+            c_keys = zlib.crc32(f"pinned|{pinned.name}".encode(), c_keys)
         for kb in keys.key_blocks:
             if kb.name in own or kb == keys.reference_key:
                 continue
+            # (a vertex group limits the key: only said when set, so older fingerprints hold)
+            group = f"|{kb.vertex_group}" if kb.vertex_group else ""
             c_keys = _crc(mesh_io.read_key(kb), start=zlib.crc32(f"{kb.name}|{kb.value}|{kb.mute}|"
-                                               f"{kb.relative_key.name}".encode(), c_keys))
+                                               f"{kb.relative_key.name}{group}".encode(), c_keys))
     c_mods = 0
     for mod in source.modifiers:
         c_mods = zlib.crc32(f"{mod.type}|{_rna_values(mod)}".encode(), c_mods)

@@ -1,0 +1,332 @@
+"""What a fuzz of the add-on with the objects and habits artists have found
+(2026-12-05): the artist working on while a step runs in the background,
+a cage deleted or disabled before Edit Cage, a cage deleted for good and
+made again, shape keys limited by a vertex group, pinned to show alone or
+absolute (Relative off), Subdivide in place on an object with modifiers or
+several materials.
+Each is handled or refused naming the object, the scene left as it was."""
+
+import threading
+from types import SimpleNamespace
+
+import bmesh
+import bpy
+import numpy as np
+import pytest
+
+from tests.addon.conftest import make_object
+from tests.addon.test_nothing_lost import (assert_all_unchanged, bound_sphere, full_snapshot,
+                                           lift_top, mod)
+from tests.addon.test_object_states import activate
+from tests.addon.test_operators import bumpy_sphere, simplify
+
+
+@pytest.fixture()
+def bound(scene):
+    return bound_sphere(3, 120)
+
+
+class _WM:
+    def event_timer_remove(self, timer):
+        pass
+
+    def progress_update(self, value):
+        pass
+
+    def progress_end(self):
+        pass
+
+
+def _background(op, obj, meddle, scene=None, **props):
+    """Run ``op``'s background path by hand (invoke and modal never run
+    headless): prepare on ``obj``, compute in a worker, ``meddle()`` as the
+    artist would meanwhile, then the modal step that commits, with ``scene``
+    shown then (None: the same). Returns ``(result, reports)``."""
+    ops = mod("operators")
+    cls = getattr(ops, f"MESHADJUST_OT_{op}")
+    reports = []
+    fake = SimpleNamespace(bl_label=cls.bl_label, _error=None, _cancel=False, _fraction=0.0,
+                           _timer=None, report=lambda level, msg: reports.append((level, msg)),
+                           **props)
+    for name in ("finish", "_prepare", "_compute", "_commit", "_cage", "give_back"):
+        if hasattr(cls, name):
+            setattr(fake, name, getattr(cls, name).__get__(fake))
+    api = mod("api")
+    if op == "simplify":
+        fake._source_uid = obj.session_uid
+        fake._job = api.prepare_simplify(obj, api.SimplifyParams(target_faces=60, levels=2))
+        work = lambda: api.compute_simplify(fake._job)    # noqa: E731
+    else:
+        fake._cage_uid = obj.session_uid
+        fake._job = fake._prepare(obj)
+        work = lambda: fake._compute(fake._job)           # noqa: E731
+    fake._thread = threading.Thread(target=work)
+    fake._thread.start()
+    fake._thread.join()
+    meddle()
+    fake._scene_uid = bpy.context.scene.session_uid
+    scene = scene or bpy.context.scene
+    layer = scene.view_layers[0]
+    context = SimpleNamespace(window_manager=_WM(), scene=scene, screen=None, view_layer=layer,
+                              selected_objects=[o for o in layer.objects if o.select_get()])
+    return ops._Background.modal(fake, context, SimpleNamespace(type='TIMER')), reports
+
+
+def _rotate_an_edge(cage):
+    bm = bmesh.new()
+    bm.from_mesh(cage.data)
+    bm.edges.ensure_lookup_table()
+    bmesh.ops.rotate_edges(bm, edges=[bm.edges[0]], use_ccw=False)
+    bm.to_mesh(cage.data)
+    bm.free()
+
+
+def test_what_the_artist_changes_while_a_step_runs_is_followed_or_refused_by_name(bound):
+    dense, cage = bound
+    lift_top(cage)
+    # renamed meanwhile: the commit follows the objects (a KeyError / AttributeError before)
+    result, reports = _background("bind", cage, lambda: setattr(cage, "name", "Renamed"),
+                                  levels=0, scheme='BOUND', keep_edit=True)
+    assert result == {'FINISHED'} and "to 'Renamed'" in reports[0][1]
+    other = make_object("other", *bumpy_sphere(2))
+    result, _ = _background("simplify", other, lambda: setattr(other, "name", "Other"))
+    assert result == {'FINISHED'} and bpy.data.objects["Other"].meshadjust.cage is not None
+    # deleted, a result in Edit Mode, the cage's topology or the source changed meanwhile:
+    # refused by name, nothing changed (tracebacks, or a binding of the old topology, before)
+    edited = cage.meshadjust.edited
+
+    def edit_mode(obj):
+        activate(obj)
+        bpy.ops.object.mode_set(mode='EDIT')
+
+    cases = [("fit_cage", lambda: edit_mode(edited), "'dense_edited' is in Edit Mode"),
+             ("bind", lambda: dense.data.vertices[0].co.__setitem__(2, 3.0),
+              "'dense' changed while the step ran"),
+             ("bind", lambda: _rotate_an_edge(cage), "'Renamed' changed topology while"),
+             ("fit_cage", lambda: bpy.data.objects.remove(cage),
+              "'Renamed' was deleted while Fit Cage ran")]
+    for op, meddle, message in cases:
+        before = []
+
+        def meddle_then_look():
+            meddle()
+            before.append(full_snapshot())     # the scene as the artist left it
+
+        props = dict(levels=0, scheme='BOUND', keep_edit=True) if op == "bind" else \
+            dict(rebind=True)
+        result, reports = _background(op, cage, meddle_then_look, **props)
+        assert result == {'CANCELLED'} and message in reports[0][1], reports
+        assert_all_unchanged(before[0])
+        if edited.mode == 'EDIT':
+            bpy.ops.object.mode_set(mode='OBJECT')
+    # a source deleted while Simplify ran
+    gone = make_object("gone", *bumpy_sphere(2))
+    objects = set(bpy.data.objects) - {gone}
+    result, reports = _background("simplify", gone, lambda: bpy.data.objects.remove(gone))
+    assert result == {'CANCELLED'} and reports == [
+        ({'ERROR'}, "'gone' was deleted while Simplify to Cage ran: nothing was changed")]
+    assert set(bpy.data.objects) == objects
+
+
+def test_a_simplify_ending_with_its_collection_excluded_and_another_scene_shown(scene):
+    part = bpy.data.collections.new("Part")
+    scene.collection.children.link(part)
+    obj = make_object("part", *bumpy_sphere(2))
+    scene.collection.objects.unlink(obj)
+    part.objects.link(obj)
+    scene.meshadjust.running = True                 # (as the step's start set it)
+    other = bpy.data.scenes.new("Other")
+
+    def exclude():
+        bpy.context.view_layer.layer_collection.children["Part"].exclude = True
+
+    result, reports = _background("simplify", obj, exclude, scene=other)
+    assert result == {'FINISHED'}, reports          # a traceback selecting the cage before
+    assert obj.meshadjust.cage.users_collection == (part,)
+    assert not scene.meshadjust.running             # its bar stayed on for good before
+
+
+def test_edit_cage_brings_back_a_deleted_or_disabled_cage_and_names_an_excluded_one(bound):
+    dense, cage = bound
+    edited = cage.meshadjust.edited
+    activate(cage)
+    bpy.ops.object.delete()          # MeshAdjust's links keep it, in no collection
+    assert cage.name in bpy.data.objects and not cage.users_collection
+    activate(edited)
+    assert bpy.ops.meshadjust.edit_cage() == {'FINISHED'}     # a traceback before
+    assert bpy.context.active_object == cage and cage.mode == 'EDIT'
+    assert cage.users_collection == dense.users_collection
+    bpy.ops.object.mode_set(mode='OBJECT')
+    cage.hide_viewport = True        # disabled in viewports: Blender cannot edit it
+    activate(edited)
+    assert bpy.ops.meshadjust.edit_cage() == {'FINISHED'}     # a traceback before
+    assert cage.mode == 'EDIT' and not cage.hide_viewport
+    bpy.ops.object.mode_set(mode='OBJECT')
+    hidden = bpy.data.collections.new("Hidden")
+    bpy.context.scene.collection.children.link(hidden)
+    for col in list(cage.users_collection):
+        col.objects.unlink(cage)
+    hidden.objects.link(cage)
+    bpy.context.view_layer.layer_collection.children["Hidden"].exclude = True
+    activate(edited)
+    with pytest.raises(RuntimeError, match="'dense_cage' is not in this view layer"):
+        bpy.ops.meshadjust.edit_cage()
+
+
+def test_a_new_cage_never_writes_over_the_shape_key_of_a_cage_deleted_for_good(bound):
+    dense, cage = bound
+    lift_top(cage)
+    activate(cage)
+    assert bpy.ops.meshadjust.refine(output='SHAPE_KEY') == {'FINISHED'}
+    kept = mod("mesh_io").read_key(dense.data.shape_keys.key_blocks["dense_cage"])
+    bpy.ops.object.delete(use_global=True)          # Delete Globally: its name is free
+    activate(dense)
+    assert simplify(60, fit=False) == {'FINISHED'}
+    new = dense.meshadjust.cage
+    assert new.name == "dense_cage"
+    lift_top(new, -0.2)
+    assert bpy.ops.meshadjust.refine(output='SHAPE_KEY') == {'FINISHED'}
+    keys = dense.data.shape_keys.key_blocks
+    assert [kb.name for kb in keys] == ["Basis", "dense_cage", "dense_cage.001"]
+    assert np.array_equal(mod("mesh_io").read_key(keys["dense_cage"]), kept)   # overwritten before
+    assert new.meshadjust.key_name == "dense_cage.001"
+
+
+def _keyed_sphere(name="keyed"):
+    """A sphere with a Basis and a key 'Squash' (z halved)."""
+    obj = make_object(name, *bumpy_sphere(3))
+    obj.shape_key_add(name="Basis")
+    key = obj.shape_key_add(name="Squash")
+    co = mod("mesh_io").read_key(key).reshape(-1, 3)
+    co[:, 2] *= 0.5
+    key.data.foreach_set("co", co.ravel())
+    return obj, key
+
+
+def test_a_key_limited_to_a_group_or_absolute_keys_changed_after_the_bind_are_stale(scene):
+    def warnings(cage):
+        bpy.context.view_layer.update()             # (the panel asks after Blender's update)
+        return mod("operators").binding_warnings(cage)
+
+    obj, key = _keyed_sphere()
+    key.value = 1.0
+    group = obj.vertex_groups.new(name="top")
+    group.add([v.index for v in obj.data.vertices if v.co.z > 0], 1.0, 'REPLACE')
+    activate(obj)
+    assert simplify(60, fit=False) == {'FINISHED'}
+    cage = obj.meshadjust.cage
+    assert warnings(cage) == []
+    key.vertex_group = "top"                        # the source now shows half of the key
+    assert warnings(cage) == ["'keyed' changed since it was bound: its shape keys changed"]
+    key.vertex_group = ""
+    assert warnings(cage) == []
+    obj.data.shape_keys.use_relative = False        # absolute keys: the time picks the shape
+    assert warnings(cage) == ["'keyed' changed since it was bound: its shape keys changed"]
+    activate(cage)
+    assert bpy.ops.meshadjust.bind() == {'FINISHED'}
+    assert warnings(cage) == []
+    obj.data.shape_keys.eval_time = 10.0            # now showing 'Squash'
+    assert warnings(cage) == ["'keyed' changed since it was bound: its shape keys changed"]
+
+
+def test_a_key_pinned_to_show_alone_is_read_as_shown_and_unpinning_it_is_stale(scene):
+    obj, key = _keyed_sphere()
+    key.value = 0.0
+    obj.active_shape_key_index = 1
+    obj.show_only_shape_key = True                  # the pin: 'Squash' shown alone, at full
+    activate(obj)
+    assert simplify(60, fit=False) == {'FINISHED'}
+    cage = obj.meshadjust.cage
+    z = mod("mesh_io").read_positions(cage.meshadjust.edited.data)[:, 2]
+    assert np.ptp(z) < 1.1              # what is shown was bound (the Basis, 2 high, before)
+    assert mod("operators").binding_warnings(cage) == []
+    obj.show_only_shape_key = False
+    bpy.context.view_layer.update()
+    assert mod("operators").binding_warnings(cage) == [
+        "'keyed' changed since it was bound: its shape keys changed"]
+
+
+def test_the_shape_key_output_is_refused_on_absolute_keys_and_they_are_read_as_shown(scene):
+    obj, key = _keyed_sphere()
+    key.value = 0.0                                 # (a value says nothing about absolute keys)
+    obj.data.shape_keys.use_relative = False
+    obj.data.shape_keys.eval_time = 10.0            # shows 'Squash'
+    activate(obj)
+    assert simplify(60, fit=False) == {'FINISHED'}
+    cage = obj.meshadjust.cage
+    z = mod("mesh_io").read_positions(cage.meshadjust.edited.data)[:, 2]
+    assert np.ptp(z) < 1.1              # what is shown was bound (the Basis, 2 high, before)
+    lift_top(cage)
+    before = full_snapshot()
+    with pytest.raises(RuntimeError, match="'keyed' has absolute shape keys \\(Relative off\\)"):
+        bpy.ops.meshadjust.refine(output='SHAPE_KEY')   # "updated" and nothing shown, before
+    assert_all_unchanged(before)
+    assert bpy.ops.meshadjust.refine(output='EDITED') == {'FINISHED'}
+
+
+def test_subdivide_in_place_refuses_modifiers_and_keys_and_keeps_the_materials(scene):
+    V, F = bumpy_sphere(2)
+    obj = make_object("mirrored", V + [2.0, 0.0, 0.0], F)
+    obj.modifiers.new("Mirror", 'MIRROR')
+    before = full_snapshot()
+    with pytest.raises(RuntimeError, match="'mirrored' has modifiers or shape keys: in place"):
+        bpy.ops.meshadjust.subdivide(levels=1, in_place=True)    # the mirror applied twice before
+    assert_all_unchanged(before)
+    assert bpy.ops.meshadjust.subdivide(levels=1, in_place=False) == {'FINISHED'}
+    bpy.ops.mesh.primitive_cylinder_add(vertices=8, end_fill_type='NGON')
+    cyl = bpy.context.active_object
+    mats = [bpy.data.materials.new(f"M{i}") for i in range(3)]
+    for mat in mats:
+        cyl.data.materials.append(mat)
+    index = np.arange(len(cyl.data.polygons), dtype=np.int32) % 3
+    cyl.data.polygons.foreach_set("material_index", index)
+    tri_poly = mod("mesh_io").triangle_polygons(cyl.data)
+    assert bpy.ops.meshadjust.subdivide(levels=2, scheme='loop', in_place=True) == {'FINISHED'}
+    assert list(cyl.data.materials) == mats                      # all lost before
+    fine = np.empty(len(cyl.data.polygons), np.int32)
+    cyl.data.polygons.foreach_get("material_index", fine)
+    assert np.array_equal(fine, np.repeat(index[tri_poly], 16))  # each face its polygon's
+
+
+class _Interactive:
+    """``bpy`` as the operators see it in a window (``app.background`` False)."""
+
+    def __init__(self, real):
+        self._real = real
+        self.app = SimpleNamespace(background=False)
+
+    def __getattr__(self, name):
+        return getattr(self._real, name)
+
+
+def test_a_fit_from_edit_mode_refused_before_it_starts_gives_edit_mode_back(bound, monkeypatch):
+    dense, cage = bound
+    dense.scale = (1.0, 1.0, 0.0)                         # refused by the fit's preparation
+    bpy.context.view_layer.update()
+    activate(cage)
+    bpy.ops.object.mode_set(mode='EDIT')
+    ops = mod("operators")
+    monkeypatch.setattr(ops, "bpy", _Interactive(bpy))    # invoke() runs only in a window
+    cls = ops.MESHADJUST_OT_fit_cage
+    reports = []
+    fake = SimpleNamespace(rebind=True, bl_label=cls.bl_label,
+                           report=lambda level, msg: reports.append((level, msg)))
+    for name in ("_prepare", "give_back"):
+        setattr(fake, name, getattr(cls, name).__get__(fake))
+    assert cls.invoke(fake, bpy.context, SimpleNamespace(type='LEFTMOUSE')) == {'CANCELLED'}
+    assert "'dense' has a zero scale" in reports[0][1]
+    assert cage.mode == 'EDIT'                            # left in Object Mode before
+
+
+def test_a_bind_refused_for_its_shape_key_says_how_to_bind_not_to_re_bind(bound):
+    dense, cage = bound
+    lift_top(cage)
+    activate(cage)
+    assert bpy.ops.meshadjust.refine(output='SHAPE_KEY') == {'FINISHED'}
+    dense.modifiers.new("more", 'SUBSURF')              # its evaluated mesh has more vertices
+    for op in (bpy.ops.meshadjust.bind, bpy.ops.meshadjust.fit_cage):
+        with pytest.raises(RuntimeError) as caught:
+            op()
+        text = str(caught.value)        # ("... or re-bind", from inside a refused bind, before)
+        assert "to bind, delete that shape key or those modifiers first" in text
+        assert "re-bind" not in text and "were bound" not in text
