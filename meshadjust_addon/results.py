@@ -361,17 +361,18 @@ def shape_key_unavailable(source, n_dense, cage=None, *, binding=False):
 
 
 def shape_key_of(source, cage):
-    """The shape key ``cage`` writes on ``source``, or None: by its name, or,
-    when the artist renamed it, the key holding exactly what the cage last
-    wrote (:func:`_renamed_key`)."""
+    """The shape key ``cage`` writes on ``source``, or None: by the name it
+    wrote it under, or, when the artist renamed it, the key holding exactly
+    what the cage last wrote (:func:`_renamed_key`). A cage that never wrote
+    a key has none: a key of its name is the artist's own, or a deleted
+    cage's (its first write makes a key of its own beside it)."""
     keys = source.data.shape_keys
-    if keys is None:
+    if keys is None or not cage.meshadjust.key_name:
         return None
     others = _other_cages_keys(source, cage)
     key = keys.key_blocks.get(key_name(cage))
-    taken = others | recorded_keys(source)     # (also the key of a cage deleted since)
-    if key is not None and not (not cage.meshadjust.key_name and key.name in taken):
-        return key         # (a cage that never wrote a key does not take another cage's)
+    if key is not None:
+        return key
     return _renamed_key(keys, cage, others)
 
 
@@ -459,6 +460,9 @@ def write_shape_key(source, cage, V_edited, V_bound, notes=None):
         key = source.shape_key_add(name=cage.name, from_mix=False)
         key.relative_key = keys.reference_key
         key.value = 1.0
+        if key.name != cage.name and notes is not None:
+            notes.append(f"a shape key '{cage.name}' MeshAdjust did not write is kept as it is: "
+                         f"the edit is the key '{key.name}'")
         cage.meshadjust.key_name = key.name       # (renaming the cage keeps its key)
         record_keys(source, recorded_keys(source) | {key.name})
     co = _key_shape(keys, key, V_edited, V_bound)

@@ -40,7 +40,9 @@ class SimplifyParams:
 
     The defaults are those of ``settings.SETTINGS`` (the panel's and the
     operator's). The target is whichever of ``target_faces``, ``ratio`` and
-    ``max_error_pct`` is given; with none, the default face count.
+    ``max_error_pct`` is given; with several, the run stops at whichever is
+    reached first (``core.simplify``: of two face counts, the larger); with
+    none, the default face count.
     ``levels=0`` picks the levels whose refined mesh comes closest to the
     source's face count (:func:`auto_levels`).
     """

@@ -192,6 +192,33 @@ def test_a_new_cage_never_writes_over_the_shape_key_of_a_cage_deleted_for_good(b
     assert new.meshadjust.key_name == "dense_cage.001"
 
 
+def test_the_artists_own_key_named_like_the_cage_is_never_written_over(scene):
+    """A key the artist made, named as the cage will be, before any cage: the
+    cage's first shape-key Refine makes a key of its own beside it and says
+    so (it took the artist's key over and rewrote it)."""
+    obj = make_object("dense", *bumpy_sphere(3))
+    obj.shape_key_add(name="Basis")
+    mine = obj.shape_key_add(name="dense_cage", from_mix=False)
+    co = mod("mesh_io").read_key(mine).reshape(-1, 3)
+    co[:, 0] *= 1.5
+    mine.data.foreach_set("co", co.ravel())
+    mine.value = 0.0
+    before = mod("mesh_io").read_key(mine)
+    activate(obj)
+    assert simplify(60, fit=False) == {'FINISHED'}
+    cage = obj.meshadjust.cage
+    assert cage.name == "dense_cage"
+    lift_top(cage)
+    activate(cage)
+    assert bpy.ops.meshadjust.refine(output='SHAPE_KEY') == {'FINISHED'}
+    keys = obj.data.shape_keys.key_blocks
+    assert [kb.name for kb in keys] == ["Basis", "dense_cage", "dense_cage.001"]
+    assert np.array_equal(mod("mesh_io").read_key(keys["dense_cage"]), before)
+    assert keys["dense_cage"].value == 0.0
+    assert cage.meshadjust.key_name == "dense_cage.001"
+    assert "did not write is kept" in cage.meshadjust.last_report
+
+
 def _keyed_sphere(name="keyed"):
     """A sphere with a Basis and a key 'Squash' (z halved)."""
     obj = make_object(name, *bumpy_sphere(3))
