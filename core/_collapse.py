@@ -1355,9 +1355,9 @@ def _collapse_reach(st, target, tun):
     9.6% of its size off."""
     if target is None or target <= 0 or tun.collapse_reach <= 0:
         return None
-    live = np.flatnonzero(st.alive)
-    P = st.V[st.F[live]]
-    area = 0.5 * float(np.linalg.norm(np.cross(P[:, 1] - P[:, 0], P[:, 2] - P[:, 0]), axis=1).sum())
+    # the input's area: each face's doubled area is in ``Aref`` at its three corners, and
+    # merges add them up (a run starts compact: every vertex live)
+    area = float(st.Aref.sum()) / 6.0
     return tun.collapse_reach * np.sqrt(4.0 * area / (np.sqrt(3.0) * target))
 
 
