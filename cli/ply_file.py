@@ -151,6 +151,10 @@ def _binary_problem(path, data, order, length, elements, said):
         if layout is None:
             return None          # records of mixed lengths, no sign of a problem
         got, end, bad_first = layout
+        if bad_first == "too many corners":
+            return (f"{os.path.basename(path)}: its first face (at byte {pos:,}) has more than "
+                    f"255 corners, and Blender's PLY importer reads faces of at most 255: "
+                    f"triangulate the file's polygons first (e.g. save it as OBJ)")
         if bad_first:
             return (f"{said}, but the first {element} record (at byte {pos:,}) holds no valid "
                     f"{element}: the data before it is not the size the header's counts give "
@@ -200,7 +204,9 @@ def _records(path, order, props, pos, count, size, n_vertices, element):
     first = np.frombuffer(data, dtype=order + PLY_TYPES[it], offset=at,
                           count=max(0, min(c0, (size - at) // itemsize[it])))
     if not _valid_first(element, c0, first, n_vertices):
-        return 0, pos, True
+        many = element == "face" and c0 > 255 and first.size == c0 \
+            and _valid_first(element, 3, first, n_vertices)
+        return 0, pos, "too many corners" if many else True
     rec = before + itemsize[ct] + c0 * itemsize[it] + after
     fits = min(count, (size - pos) // rec)
     counts = np.frombuffer(data, offset=pos, count=fits, dtype=np.dtype(

@@ -217,3 +217,22 @@ def test_an_ascii_ply_with_a_blank_line_among_its_records_says_so(tmp_path):
         "blank.ply: its header declares 42 vertex and 80 face elements, a line each, but line 52 "
         "among them is blank: Blender's importer would take it for a record and misread the "
         "rest; delete the blank lines")
+
+
+def test_a_binary_ply_whose_first_face_has_more_than_255_corners_says_so(tmp_path):
+    """Blender's PLY importer reads faces of at most 255 corners; a binary
+    file whose first face is a 300-gon (an int corner count) was refused as
+    'holds no valid face: ... a wrong count, or the file is damaged'."""
+    from cli.ply_file import ply_size_problem
+    t = np.linspace(0, 2 * np.pi, 300, endpoint=False)
+    V = np.vstack([np.stack([np.cos(t), np.sin(t), np.zeros(300)], axis=1), [[0.0, 0.0, 1.0]]])
+    faces = [np.arange(300)] + [np.array([300, i, (i + 1) % 300]) for i in range(300)]
+    head = (f"ply\nformat binary_little_endian 1.0\nelement vertex {len(V)}\nproperty float x\n"
+            f"property float y\nproperty float z\nelement face {len(faces)}\n"
+            "property list int int vertex_indices\nend_header\n").encode()
+    body = np.asarray(V, "<f4").tobytes() + b"".join(
+        np.int32(len(f)).tobytes() + np.asarray(f, "<i4").tobytes() for f in faces)
+    (tmp_path / "disk.ply").write_bytes(head + body)
+    why = ply_size_problem(str(tmp_path / "disk.ply"))
+    assert why.startswith("disk.ply: its first face (at byte ") and "more than 255 corners" in why
+    assert "wrong count" not in why
