@@ -427,13 +427,13 @@ def _block(T, index, P, q, cell3, best, known=None):
 def _raise_for_needles(index, X, owner, tri, lb):
     """Raise the float32 bounds ``lb`` of the pairs (points ``owner`` of
     ``X``, triangles ``tri``), in place, to the index's capsule bound where
-    the triangle is a needle (:meth:`~.spatial.TriangleIndex.capsule_bound`,
+    the triangle is a needle (:meth:`~.spatial.TriangleIndex.needle_bounds`,
     rounded down): a thin triangle has no plane and its edge lines are
     zero rows here, so its tile bound is 0 wherever the point is; a CAD
     cylinder's sides and its cage are all such needles."""
-    j = index.needle_pairs(tri)
+    j, cap = index.needle_bounds(X, owner, tri)
     if j.size:
-        cap = index.capsule_bound(np.take(X, owner[j], axis=1), tri[j]).astype(np.float32)
+        cap = cap.astype(np.float32)
         cap *= np.float32(1.0 - 2.0 ** -20)            # (rounded to float32: kept below)
         lb[j] = np.maximum(lb[j], cap)
 

@@ -688,6 +688,17 @@ def _capsule_rows(A, B, C, S, ball, first):
     return rows + first, out
 
 
+def _capsule_gap(X, C):
+    """How far beyond its capsule each point ``X`` (3, k) lies: its distance
+    to the segment of ``C`` (7, k) less the radius (negative inside), for
+    the rows :func:`_capsule_rows` and :func:`_rod_rows` make (the segment's
+    start and the segment, in the points' frame, and the radius)."""
+    _, d2 = _segment(X[0], X[1], X[2], C[0], C[1], C[2], C[3], C[4], C[5])
+    gap = np.sqrt(d2)
+    gap -= C[6]
+    return gap
+
+
 def _capsule_table(m, parts):
     """The capsule bound's tables from the blocks' :func:`_capsule_rows`:
     each triangle's column in the rows (-1 for none; None when no triangle
@@ -1300,43 +1311,41 @@ class TriangleIndex:
         hh -= 1e-14 * dc2
         return self._capsule_bound(X, t, dc2, hh)
 
-    def needle_pairs(self, t):
-        """Positions (ascending) among the internal triangles ``t`` of those
-        with a capsule bound (needles and slivers: :func:`_capsule_rows`)."""
+    def needle_bounds(self, P, owner, t):
+        """The pairs (points ``owner`` of ``P`` (3, n), internal triangles
+        ``t``) whose triangle has a capsule bound (needles and slivers:
+        :func:`_capsule_rows`): their positions (ascending) and their
+        squared-distance lower bounds, the distance to the triangle's
+        longest edge less its height, less a rounding margin."""
         if self._capsule_at is None:
-            return np.zeros(0, dtype=np.int64)
-        return np.flatnonzero(np.take(self._capsule_at, t) >= 0)
-
-    def capsule_bound(self, P, t):
-        """Squared-distance lower bounds (k,) of the points ``P`` (3, k) to
-        the internal triangles ``t`` (k,), each one with a capsule bound
-        (:meth:`needle_pairs`): the distance to its longest edge less its
-        height, less a rounding margin."""
-        X = P - np.take(self._ball[:3], t, axis=1)
-        dc2 = np.einsum("ij,ij->j", X, X)
-        return self._capsule_bound(X, t, dc2, np.zeros(t.shape[0]))
+            return np.zeros(0, dtype=np.int64), np.zeros(0)
+        k = np.take(self._capsule_at, t)
+        j = np.flatnonzero(k >= 0)
+        X = np.take(P, owner[j], axis=1) - np.take(self._ball[:3], t[j], axis=1)
+        return j, self._capsule_gap2(X, k[j], np.einsum("ij,ij->j", X, X))
 
     def _capsule_bound(self, X, t, dc2, lb):
         """``lb`` (squared-distance lower bounds of the points ``c_t + X`` to
         the triangles ``t``) raised, in place, to the capsule bound where the
-        triangle has one (:func:`_capsule_rows`): the distance to its longest
-        edge less its height over it, less a rounding margin."""
+        triangle has one (:meth:`needle_bounds`)."""
         if self._capsule_at is None:
             return lb
         k = np.take(self._capsule_at, t)
         j = np.flatnonzero(k >= 0)
-        if j.size == 0:
-            return lb
-        C = np.take(self._capsule, k[j], axis=1)
-        X = np.take(X, j, axis=1)
-        _, d2 = _segment(X[0], X[1], X[2], C[0], C[1], C[2], C[3], C[4], C[5])
-        gap = np.sqrt(d2)
-        gap -= C[6]
-        gap -= 1e-12 * np.sqrt(dc2[j])
+        if j.size:
+            lb[j] = np.maximum(lb[j], self._capsule_gap2(np.take(X, j, axis=1), k[j], dc2[j]))
+        return lb
+
+    def _capsule_gap2(self, X, k, dc2):
+        """The capsule bound of the points ``c + X`` (3, j) (offsets from the
+        centroids of the triangles with capsule rows ``k``, squared lengths
+        ``dc2``): the squared distance beyond each capsule, less 1e-12 of the
+        offset's length."""
+        gap = _capsule_gap(X, np.take(self._capsule, k, axis=1))
+        gap -= 1e-12 * np.sqrt(dc2)
         np.maximum(gap, 0.0, out=gap)
         gap *= gap
-        lb[j] = np.maximum(lb[j], gap)
-        return lb
+        return gap
 
     def _prism_bound(self, X, t, dc2):
         """Squared-distance lower bound of the points ``c_t + X`` (X (3, k)) to the
@@ -1506,10 +1515,7 @@ class TriangleIndex:
         far2 *= 1 + 4 * PRUNE_SLACK
         R = self._rod.get(level)
         if R is not None:                                   # the lowest levels' rods
-            R = np.take(R, child, axis=1)
-            _, d2 = _segment(p[0], p[1], p[2], R[0], R[1], R[2], R[3], R[4], R[5])
-            gap = np.sqrt(d2)
-            gap -= R[6]
+            gap = _capsule_gap(p, np.take(R, child, axis=1))
             np.maximum(gap, 0.0, out=gap)
             near2 = np.maximum(near2, gap * gap - 1e-14 * dc2)
         return near2, far2
