@@ -180,12 +180,18 @@ def _plane_coords(X):
     (Newell's normal N; axes u, w with u x w = N: a polygon winding
     counter-clockwise about N has a positive area)."""
     D = X - X[:, :1]
-    N = np.cross(D, np.roll(D, -1, axis=1)).sum(axis=1)
+    u, w = _plane_axes(np.cross(D, np.roll(D, -1, axis=1)).sum(axis=1))
+    return np.stack([np.einsum("qkc,qc->qk", D, u), np.einsum("qkc,qc->qk", D, w)], axis=2)
+
+
+def _plane_axes(N):
+    """Axes ``(u, w)`` (each (q,3)) of the planes with (Newell) normals ``N``
+    (q,3), ``u x w`` along ``N``: ``N`` normalised (in place), ``u`` across
+    its smallest component."""
     N /= np.maximum(np.linalg.norm(N, axis=1, keepdims=True), np.finfo(float).tiny)
     u = np.cross(N, np.eye(3)[np.argmin(np.abs(N), axis=1)])
     u /= np.maximum(np.linalg.norm(u, axis=1, keepdims=True), np.finfo(float).tiny)
-    w = np.cross(N, u)
-    return np.stack([np.einsum("qkc,qc->qk", D, u), np.einsum("qkc,qc->qk", D, w)], axis=2)
+    return u, np.cross(N, u)
 
 
 def _orient(A, B, C):
@@ -285,11 +291,8 @@ def _ragged_plane_coords(X, pid, start, nxt, p):
     flat-area tolerance (p,) of each polygon."""
     D = X - X[start[pid]]
     c = np.cross(D, D[nxt])
-    N = np.stack([np.bincount(pid, weights=c[:, i], minlength=p) for i in range(3)], axis=1)
-    N /= np.maximum(np.linalg.norm(N, axis=1, keepdims=True), np.finfo(float).tiny)
-    u = np.cross(N, np.eye(3)[np.argmin(np.abs(N), axis=1)])
-    u /= np.maximum(np.linalg.norm(u, axis=1, keepdims=True), np.finfo(float).tiny)
-    w = np.cross(N, u)
+    u, w = _plane_axes(np.stack([np.bincount(pid, weights=c[:, i], minlength=p)
+                                 for i in range(3)], axis=1))
     P = np.stack([np.einsum("nc,nc->n", D, u[pid]), np.einsum("nc,nc->n", D, w[pid])], axis=1)
     return P, _FLAT * np.maximum.reduceat((P ** 2).sum(axis=1), start)
 
