@@ -348,15 +348,15 @@ def shape_key_unavailable(source, n_dense, cage=None, *, binding=False):
         return (f"'{source.name}' shares its mesh with {users - 1:,} other "
                 f"object(s): a shape key would change them too; make it single-user first "
                 f"(Object > Relations > Make Single User > Object & Data)")
-    if len(source.data.vertices) != n_dense and binding:
-        return (f"'{source.name}' has {len(source.data.vertices):,} vertices in its mesh but "
-                f"{n_dense:,} in what its modifiers show, which a bind binds: the edit cannot be "
-                f"a shape key of it; to bind, delete that shape key or those modifiers first")
     if len(source.data.vertices) != n_dense:
-        return (f"'{source.name}' has {len(source.data.vertices):,} vertices in its mesh but "
-                f"{n_dense:,} were bound (its modifiers change the vertex count, or vertices "
-                f"were added or removed since the bind): the edit cannot be a shape key of it; "
-                f"use the edited original, or re-bind")
+        head = (f"'{source.name}' has {len(source.data.vertices):,} vertices in its mesh but "
+                f"{n_dense:,}")
+        if binding:
+            return (f"{head} in what its modifiers show, which a bind binds: the edit cannot be "
+                    f"a shape key of it; to bind, delete that shape key or those modifiers first")
+        return (f"{head} were bound (its modifiers change the vertex count, or vertices were "
+                f"added or removed since the bind): the edit cannot be a shape key of it; use "
+                f"the edited original, or re-bind")
     return None
 
 
@@ -369,11 +369,10 @@ def shape_key_of(source, cage):
     keys = source.data.shape_keys
     if keys is None or not cage.meshadjust.key_name:
         return None
-    others = _other_cages_keys(source, cage)
     key = keys.key_blocks.get(key_name(cage))
     if key is not None:
         return key
-    return _renamed_key(keys, cage, others)
+    return _renamed_key(keys, cage, _other_cages_keys(source, cage))
 
 
 def reference_key_problem(source, cage):
