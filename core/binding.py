@@ -1073,23 +1073,31 @@ def _frames_t(VfT, NfT, cornersT, baryT):
 def _frames_finish(point, e1, e2, normal, tmp):
     """The rest of :func:`_frames_t` from the point, the face's edges
     ``e1``, ``e2``, the blended normal (not yet normalised) and a scratch
-    (3, q) array; all are reused for the result."""
+    (3, q) array; all are reused for the result.
+
+    Degenerate is relative to the face's size (the longer of ``e1`` and
+    ``e2``), not to the edge itself: an edge between two corners at the same
+    point is rounding noise some 1e-17 long, whose direction a rotation of
+    the cage changes at random (a cage with a zero-area face, from a scan
+    whose bow-tie vertex was split, refined 0.2% of its size off the rotated
+    result where that noise was taken for a tangent)."""
     bad = _normalise_t(normal, 1.0)
+    e1_length = _length_t(e1)
+    size = np.maximum(e1_length, _length_t(e2))
     if bad.any():
         fn = cross_columns(e1[:, bad], e2[:, bad])
-        fbad = _normalise_t(fn, _length_t(e1[:, bad]) * _length_t(e2[:, bad]))
+        fbad = _normalise_t(fn, size[bad] * size[bad])
         fn[:, fbad] = np.array([[0.0], [0.0], [1.0]])
         normal[:, bad] = fn
-    e1_length = _length_t(e1)
     np.multiply(dot_columns(e1, normal), normal, out=tmp)
     tangent = e1
     tangent -= tmp                                 # e1 - (e1.n) n
-    bad = _normalise_t(tangent, e1_length)
+    bad = _normalise_t(tangent, size)
     if bad.any():
         nb = normal[:, bad]
         t2 = e2[:, bad]
         t2 -= dot_columns(t2, nb) * nb
-        bad2 = _normalise_t(t2, _length_t(e2[:, bad]))
+        bad2 = _normalise_t(t2, size[bad])
         if bad2.any():
             # any unit vector perpendicular to the normal
             nn = nb[:, bad2]
