@@ -50,7 +50,19 @@ def _diag(V):
 
 def read_source(source):
     """The source's mesh as the artist made it (MeshAdjust's own shape keys
-    muted): ``(MeshArrays, fingerprint)``."""
+    muted): ``(MeshArrays, fingerprint)``.
+
+    A source in Edit Mode is refused (:class:`core.MeshAdjustError`): its
+    mesh holds the shape from before the Edit Mode session, and no
+    fingerprint can be taken, so a bind of it went stale unnoticed."""
+    if source.data.is_editmode:
+        who = source.name if source.mode == 'EDIT' else next(
+            (o.name for o in bpy.data.objects if o.data == source.data and o.mode == 'EDIT'),
+            source.name)                               # (a linked duplicate of it)
+        shared = "" if who == source.name else f" (it shares its mesh with '{who}')"
+        raise core.MeshAdjustError(
+            f"'{source.name}' is in Edit Mode{shared}, where its mesh does not have the "
+            f"edits yet: leave Edit Mode on '{who}' first")
     # only MeshAdjust's keys (or keys at 0): the mesh itself, vertex groups usable
     plain = False if results.only_own_keys_and_no_modifiers(source) else None
     with results.own_keys_muted(source):

@@ -64,24 +64,21 @@ def _get_point_attr(mesh, name, kind):
 @contextlib.contextmanager
 def _readable_cage_mesh(cage):
     """The cage's mesh with its attributes readable: the mesh itself, or in
-    Edit Mode (where ``attributes`` lists the BMesh layers) its evaluated
-    copy, which has the same topology when the cage has no modifiers."""
+    Edit Mode (where ``attributes`` lists the BMesh layers) a temporary copy
+    of it synced from Edit Mode: the original object's ``to_mesh()``, which
+    leaves its modifiers out (the evaluated mesh had them: a Subdivision
+    Surface preview on the cage refused every step and live mode from Edit
+    Mode)."""
     if cage.mode == 'EDIT':
         cage.update_from_editmode()
     if not cage.data.is_editmode:
         yield cage.data
         return
-    depsgraph = bpy.context.evaluated_depsgraph_get()
-    ob_eval = cage.evaluated_get(depsgraph)
-    mesh = ob_eval.to_mesh()
+    mesh = cage.to_mesh()
     try:
-        if len(mesh.vertices) != len(cage.data.vertices) or \
-                len(mesh.edges) != len(cage.data.edges):
-            raise core.MeshAdjustError(f"'{cage.name}' has modifiers that change its topology: "
-                                       "leave Edit Mode to refine")
         yield mesh
     finally:
-        ob_eval.to_mesh_clear()
+        cage.to_mesh_clear()
 
 
 def cage_topology(cage):
