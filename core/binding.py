@@ -61,8 +61,8 @@ import numpy as np
 
 from .detail_search import dense_points_near, exact_detail_index
 from .errors import CancelledError, InvalidArgumentError, TopologyMismatchError
-from .mesh import (area_normals_t, check_faces, check_mesh, check_number, check_units,
-                   check_vertices, cross_columns, dot_columns, stops)
+from .mesh import (area_normals_t, bounding_box, check_faces, check_mesh, check_number,
+                   check_units, check_vertices, cross_columns, dot_columns, stops)
 from .near_query import NearQuery
 from .spatial import TriangleIndex
 from .subdivide import check_subdivision_args, subdivision_operator
@@ -435,18 +435,21 @@ def bind(V_dense, F_dense, V_cage, F_cage, *, levels=2, scheme="butterfly", crea
     check_subdivision_args(levels, scheme, "bind", F_cage.shape[0])
     op = subdivision_operator(F_cage, V_cage.shape[0], levels=levels, scheme=scheme,
                               creases=creases)
-    Vf = op.apply(V_cage)
+    # everything relative to the origin deform takes for this cage (_working_origin)
+    origin = _working_origin(V_cage)
+    shifted = bool(origin.any())
+    Vf = op.apply(V_cage - origin)
     VfT = np.ascontiguousarray(Vf.T)
     NfT = _vertex_normals_t(VfT, op.F_fine)
     detail = _detail_mode(detail_search, F_dense)
-    reach = _typical_distance(V_dense, V_cage, F_cage, scheme, creases) \
+    reach = _typical_distance(V_dense, V_cage, F_cage, scheme, creases, origin) \
         if levels > _REACH_LEVELS else None
     if detail == "exact":
         # the fine surface's index and the dense one do not depend on each other:
         # built side by side on the worker threads
         query, dense_index = run_each(lambda build: build(), [
             lambda: NearQuery(Vf, op.F_fine, reach=reach),
-            lambda: exact_detail_index(V_dense, F_dense)])
+            lambda: exact_detail_index(V_dense - origin if shifted else V_dense, F_dense)])
     else:
         query, dense_index = NearQuery(Vf, op.F_fine, reach=reach), None   # halves on the threads
     d_face, d_bary = _vertex_corners(op.F_fine, op.n_fine)
@@ -454,13 +457,14 @@ def bind(V_dense, F_dense, V_cage, F_cage, *, levels=2, scheme="butterfly", crea
     near = _NearSearch(vfr.point, _used_vertices(F_dense, V_dense.shape[0])) \
         if detail == "local" else None
     dense = _bind_dense(query, V_dense, VfT, NfT, op.F_fine, _reporter(progress, 0.05, 0.6),
-                        near)
+                        near, origin if shifted else None)
     fine_detail = np.zeros((op.n_fine, 3))
     if detail == "exact":
         q = _closest_on(dense_index, vfr.point, _reporter(progress, 0.65, 0.95), point=True)
         fine_detail = _to_frame(q - vfr.point, vfr)
     elif detail == "local":
-        q = dense_points_near(V_dense, F_dense, op.F_fine, dense.nearest, vfr.point, reach)
+        q = dense_points_near(V_dense - origin if shifted else V_dense, F_dense, op.F_fine,
+                              dense.nearest, vfr.point, reach)
         fine_detail = _to_frame(q - vfr.point, vfr)
     return Binding(fine_face=dense.face, bary=dense.bary_t.T, offset=dense.offset_t.T,
                    fine_detail=fine_detail, F_cage=F_cage, n_cage=int(V_cage.shape[0]),
@@ -470,17 +474,17 @@ def bind(V_dense, F_dense, V_cage, F_cage, *, levels=2, scheme="butterfly", crea
                    _cache=_binding_cache(dense, op.F_fine, d_face, d_bary, fine_detail))
 
 
-def _typical_distance(V_dense, V_cage, F_cage, scheme, creases):
+def _typical_distance(V_dense, V_cage, F_cage, scheme, creases, origin):
     """The median distance of ``_REACH_SAMPLES`` dense vertices (evenly by
     index) to the cage's subdivision surface ``_REACH_LEVELS`` levels down:
     about their distance to any finer level, at the cost of a small index
-    (None without dense vertices)."""
+    (None without dense vertices); positions taken relative to ``origin``."""
     if V_dense.shape[0] == 0:
         return None
     op = subdivision_operator(F_cage, V_cage.shape[0], levels=_REACH_LEVELS, scheme=scheme,
                               creases=creases)
     step = max(1, V_dense.shape[0] // _REACH_SAMPLES)
-    hit = TriangleIndex(op.apply(V_cage), op.F_fine).closest(V_dense[::step])
+    hit = TriangleIndex(op.apply(V_cage - origin), op.F_fine).closest(V_dense[::step] - origin)
     return float(np.median(hit.distance))
 
 
@@ -538,8 +542,9 @@ def deform(binding, V_cage_edited, *, F_cage=None, moved=None, out=None):
         full deform of ``V_cage_edited`` to rounding (the same row-wise frame
         rebuild; its fine positions come from each level's stencil rows,
         summed in another order than the operator's apply plan: about 1e-16
-        of the diagonal near the origin, of the largest coordinate for a mesh
-        far from it: a few rounding steps of the coordinates).
+        of the diagonal, computed relative to a working origin near the
+        cage; far from the origin, plus the output's own rounding: a
+        rounding step of the coordinates).
 
     Notes
     -----
@@ -549,8 +554,12 @@ def deform(binding, V_cage_edited, *, F_cage=None, moved=None, out=None):
     its rest normal turned by the local rotation of the cage, is put back
     with its neighbourhood's rest shape (``Binding.repaired(D)`` lists the
     rows). Nothing else changes: no edit and rigid motions stay exact (to
-    rounding: half a step of the largest coordinate, 1e-12 of the diagonal
-    up to about 1e3 diagonals from the origin, 3e-11 at 1e6).
+    rounding: the fine surface and its frames are computed relative to a
+    working origin near the cage (:func:`_working_origin`), so a scan or a
+    cage far from the origin is as exact as one near it, to a few rounding
+    steps of the largest coordinate: 1e-12 of the diagonal up to about 1e3
+    diagonals from the origin; the unedited cage gives the scan back to
+    half a step).
 
     Every deform keeps the subdivided cage it computed in the binding's
     cache (each level's positions and the fine normals, about 57 bytes per
@@ -592,21 +601,22 @@ def deform(binding, V_cage_edited, *, F_cage=None, moved=None, out=None):
         if ids.size:
             with _INCREMENTAL_LOCK:
                 hit = _influenced_dense(binding, ids)
-                P, N = _update_fine_geometry(binding, Vc, ids, hit)
+                P, N, origin = _update_fine_geometry(binding, Vc, ids, hit)
                 last = _repair_of(binding, out)
                 out[last.rows] = last.raw       # the rows as deformed, before out's repair
                 if hit.rows.size:
-                    _deform_rows(binding, P, N, hit, out)
+                    _deform_rows(binding, P, N, hit, out, origin)
                 _keep_repair(binding, out, _unfold(binding, out, Vc, hit, last))
         return out
     Vc = _check_cage(binding, V_cage_edited, F_cage, "deform")
-    X = _fine_levels(binding, Vc)
+    origin = _working_origin(Vc)
+    X = _fine_levels(binding, Vc, origin)
     Nf = _vertex_normals_t(X[-1], binding._operator.F_fine)
     c = binding._cache
-    DT = _positions_t(c["offset_t"], c["corners_t"], c["bary_t"], X[-1], Nf)
+    DT = _positions_t(c["offset_t"], c["corners_t"], c["bary_t"], X[-1], Nf, origin)
     # kept for the incremental deforms that follow (a new object: one in use
     # by an incremental deform is never changed under it)
-    c["geometry"] = _Geometry.of(Vc, X, Nf)
+    c["geometry"] = _Geometry.of(Vc, X, Nf, origin)
     c.pop("drag", None)                   # (the next incremental deform starts a new one)
     c.pop("last_moved", None)
     with _INCREMENTAL_LOCK:
@@ -629,9 +639,10 @@ def _repair_state(binding):
         return None
     c = binding._cache
     if "repair" not in c:
-        VrT = _fine_levels(binding, binding.V_cage_rest)[-1]
+        origin = _working_origin(binding.V_cage_rest)
+        VrT = _fine_levels(binding, binding.V_cage_rest, origin)[-1]
         NrT = _vertex_normals_t(VrT, binding._operator.F_fine)
-        rest = _positions_t(c["offset_t"], c["corners_t"], c["bary_t"], VrT, NrT)
+        rest = _positions_t(c["offset_t"], c["corners_t"], c["bary_t"], VrT, NrT, origin)
         FT = np.ascontiguousarray(binding.F_dense.T)
         c["repair"] = {"V_rest": np.ascontiguousarray(rest.T), "F_t": FT,
                        # float32: every test reads these same values (half the bytes)
@@ -814,9 +825,10 @@ class _Influenced(NamedTuple):
     normals: np.ndarray    #: (j,) int64 fine vertices whose normal changes (ascending)
 
 
-def _deform_rows(binding, P, N, hit, out):
+def _deform_rows(binding, P, N, hit, out, origin):
     """Rebuild the dense rows ``hit.rows`` of ``out`` on the fine positions
-    and normals ``P``, ``N`` (3, n_fine) (the incremental deform's row work).
+    and normals ``P``, ``N`` (3, n_fine), relative to ``origin`` (3,) (the
+    incremental deform's row work).
 
     The rows are grouped by fine face, so the face's corner, edges and
     corner normals are gathered once per face and repeated over its rows,
@@ -845,6 +857,7 @@ def _deform_rows(binding, P, N, hit, out):
         end, np.arange(size, int(end[-1]), size)) + 1, [Fh.shape[1]]]))
     at = 3 * hit.rows                 # row starts in the flat (C-contiguous) out
     flat = out.reshape(-1)
+    moved_origin = bool(origin.any())
 
     def block(span):
         f0, f1 = span
@@ -867,7 +880,7 @@ def _deform_rows(binding, P, N, hit, out):
         X = _compose_t(np.take(idx["offset_by_face"], hit.sorted_at[s:e], axis=1),
                        *_frames_finish(point, e1, e2, normal, tmp))
         for d in range(3):            # a coordinate at a time: no (r,3) copy to scatter
-            flat[at[s:e] + d] = X[d]
+            flat[at[s:e] + d] = X[d] + origin[d] if moved_origin else X[d]
     run_each(block, list(zip(cuts[:-1].tolist(), cuts[1:].tolist())), threads=threads)
 
 
@@ -993,9 +1006,10 @@ def refine(binding, V_cage_edited, *, F_cage=None):
     TopologyMismatchError, InvalidMeshError
         As :func:`deform`.
     """
-    Vf, Nf = _fine_geometry(binding, V_cage_edited, F_cage, "refine")
+    Vf, Nf, origin = _fine_geometry(binding, V_cage_edited, F_cage, "refine")
     c = binding._cache
-    VT = _positions_t(c["detail_offset_t"], c["detail_corners_t"], c["detail_bary_t"], Vf, Nf)
+    VT = _positions_t(c["detail_offset_t"], c["detail_corners_t"], c["detail_bary_t"], Vf, Nf,
+                      origin)
     return RefineResult(np.ascontiguousarray(VT.T), binding._operator.F_fine.copy())
 
 
@@ -1028,18 +1042,23 @@ def frames(Vf, Nf, corners, bary):
     return Frames(p.T.copy(), t.T.copy(), b.T.copy(), n.T.copy())
 
 
-def _positions_t(oT, cT, bT, VfT, NfT):
+def _positions_t(oT, cT, bT, VfT, NfT, origin=None):
     """The points (3, n) at the frame components ``oT`` of the fine surface
     points at corners ``cT``, barycentric coordinates ``bT`` (each (3, n)),
-    on fine positions and normals ``VfT``, ``NfT`` (3, n_fine):
+    on fine positions and normals ``VfT``, ``NfT`` (3, n_fine) relative to
+    ``origin`` (3,) (added to the result; None or zeros: none):
     :func:`_frames_t` and :func:`_compose_t` a block of ``_ROW_BLOCK``
     points at a time (the temporaries stay small and are reused), bit for
     bit the same as on the whole arrays."""
     n = oT.shape[1]
     out = np.empty((3, n))
 
+    shift = origin is not None and bool(origin.any())
+
     def block(s, e):
         out[:, s:e] = _compose_t(oT[:, s:e], *_frames_t(VfT, NfT, cT[:, s:e], bT[:, s:e]))
+        if shift:
+            out[:, s:e] += origin[:, None]
     run_blocks(block, blocks(n, _ROW_BLOCK))
     return out
 
@@ -1141,11 +1160,13 @@ def _check_cage(binding, V_cage_edited, F_cage, where):
 
 def _fine_geometry(binding, V_cage_edited, F_cage, where):
     """Check an edited cage against the binding; return fine positions and
-    normals, transposed (3, n_fine)."""
+    normals, transposed (3, n_fine), relative to the origin (3,) returned
+    third (:func:`_working_origin`)."""
     Vc = _check_cage(binding, V_cage_edited, F_cage, where)
+    origin = _working_origin(Vc)
     op = binding._operator
-    VfT = np.ascontiguousarray(op.apply(Vc).T)
-    return VfT, _vertex_normals_t(VfT, op.F_fine)
+    VfT = np.ascontiguousarray(op.apply(Vc - origin).T)
+    return VfT, _vertex_normals_t(VfT, op.F_fine), origin
 
 
 def _vertex_normals_t(PT, F):
@@ -1180,17 +1201,43 @@ class _Geometry(NamedTuple):
     levels: list         #: per level 0..L, positions transposed (3, n_l); 0 the cage
     normals: np.ndarray  #: (3, n_fine) fine vertex normals, valid where not ``stale``
     stale: np.ndarray    #: (n_fine,) bool: normal changed, not recomputed (no row reads it)
+    origin: np.ndarray   #: (3,) the levels' positions are relative to it (_working_origin)
 
     @classmethod
-    def of(cls, Vc, X, normals):
-        return cls(Vc.copy(), X, normals, np.zeros(normals.shape[1], dtype=bool))
+    def of(cls, Vc, X, normals, origin):
+        return cls(Vc.copy(), X, normals, np.zeros(normals.shape[1], dtype=bool), origin)
 
 
-def _fine_levels(binding, Vc):
+def _working_origin(Vc):
+    """The point (3,) float64 the fine surface and the frames are computed
+    relative to for the cage positions ``Vc`` (n,3): zero for a cage near the
+    origin (within twice its size: the results bit for bit as without one),
+    else the centre of its bounding box rounded to a multiple of the power
+    of two just above its size (so a small edit keeps the same origin).
+
+    Frames come from differences of fine positions: at 1e6 from the origin
+    each carried a rounding step of 1e6 (1.2e-10), which the offsets
+    multiplied by their length over a fine edge (a scan at 1e5-1e6, or a cage
+    moved a thousand sizes away, deformed 1e-10 to 1e-8 of its size off the
+    rigid result). Relative to this origin the frames are as exact as near
+    the origin, and the one rounding left is the output's own."""
+    if Vc.shape[0] == 0:
+        return np.zeros(3)
+    lo, hi = bounding_box(Vc)
+    mid = 0.5 * (lo + hi)
+    step = float(np.ldexp(1.0, int(np.frexp(max(float((hi - lo).max()), 1e-300))[1])))
+    if float(np.abs(mid).max()) <= 2.0 * step:
+        return np.zeros(3)
+    return np.round(mid / step) * step
+
+
+def _fine_levels(binding, Vc, origin=None):
     """Positions of every level, transposed (3, n_l), level 0 the cage (the
     apply of :meth:`~.subdivide.SubdivisionOperator.apply`, its
-    intermediates kept; the same values)."""
+    intermediates kept; the same values), relative to ``origin`` when given."""
     X = [np.ascontiguousarray(Vc.T)]
+    if origin is not None:
+        X[0] -= origin[:, None]
     for S in binding._operator.stencils:
         X.append(S.apply_t(X[-1]))
     return X
@@ -1198,7 +1245,8 @@ def _fine_levels(binding, Vc):
 
 def _update_fine_geometry(binding, Vc, ids, hit):
     """Fine positions and normals (3, n_fine) for the cage ``Vc``, from the
-    kept :class:`_Geometry` (callers hold ``_INCREMENTAL_LOCK``).
+    kept :class:`_Geometry` (callers hold ``_INCREMENTAL_LOCK``), and the
+    origin (3,) the positions are relative to (the kept geometry's).
 
     When the kept cage differs from ``Vc`` at most at ``ids``, only what
     they move is recomputed, in place: each level's changed vertices
@@ -1221,12 +1269,13 @@ def _update_fine_geometry(binding, Vc, ids, hit):
         other = (g.V_cage != Vc).any(axis=1)
         other[ids] = False
     if g is None or other.any():
-        X = _fine_levels(binding, Vc)
-        g = _Geometry.of(Vc, X, _vertex_normals_t(X[-1], binding._operator.F_fine))
+        origin = _working_origin(Vc)
+        X = _fine_levels(binding, Vc, origin)
+        g = _Geometry.of(Vc, X, _vertex_normals_t(X[-1], binding._operator.F_fine), origin)
         c["geometry"] = g
-        return g.levels[-1], g.normals
+        return g.levels[-1], g.normals, g.origin
     X = g.levels
-    X[0][:, ids] = Vc[ids].T
+    X[0][:, ids] = (Vc[ids] - g.origin).T
     g.V_cage[ids] = Vc[ids]
     key, drag = ids.tobytes(), c.get("drag")
     if drag is not None and drag.key == key and drag.geometry is g:
@@ -1246,7 +1295,7 @@ def _update_fine_geometry(binding, Vc, ids, hit):
     if redo.size:
         NfT[:, redo] = _normals_at(idx, VfT, redo)
         g.stale[redo] = False
-    return VfT, NfT
+    return VfT, NfT, g.origin
 
 
 def _restencil(op, X, hit):
@@ -1393,7 +1442,7 @@ def _used_vertices(F, n):
     return None if used.all() else used
 
 
-def _bind_dense(query, V_dense, VfT, NfT, F_fine, report=None, near=None):
+def _bind_dense(query, V_dense, VfT, NfT, F_fine, report=None, near=None, origin=None):
     """The :class:`_DenseBound` of the dense vertices: closest points on the
     fine surface (``query``, a :class:`~.near_query.NearQuery`), then the
     frame components of each vertex's offset from its point (the frames in
@@ -1403,26 +1452,29 @@ def _bind_dense(query, V_dense, VfT, NfT, F_fine, report=None, near=None):
     block is done, in order (returning False cancels the blocks not yet
     started). With ``near`` (a :class:`_NearSearch`), each block also
     offers its vertices as the nearest bound ones of its faces' corners
-    (:func:`_nearest_parts`), combined into ``nearest``."""
+    (:func:`_nearest_parts`), combined into ``nearest``. With ``origin``
+    (3,), the fine surface is relative to it: so are the dense vertices,
+    a block at a time (no copy of the whole dense mesh)."""
     n = V_dense.shape[0]
     out = _DenseBound(np.empty(n, dtype=np.int64), np.empty((3, n), dtype=np.int64),
                       np.empty((3, n)), np.empty((3, n)), None)
     parts = []
 
     def block(start, stop):
-        hit = query.closest(V_dense[start:stop])
+        P = V_dense[start:stop] if origin is None else V_dense[start:stop] - origin
+        hit = query.closest(P)
         out.face[start:stop] = hit.face
         corners = np.ascontiguousarray(F_fine[hit.face].T)
         bary = np.ascontiguousarray(hit.bary.T)
         out.corners_t[:, start:stop] = corners
         out.bary_t[:, start:stop] = bary
         p, t, bt, nrm = _frames_t(VfT, NfT, corners, bary)
-        d = np.ascontiguousarray(V_dense[start:stop].T)
+        d = np.ascontiguousarray(P.T)
         d -= p
         for k, axis in enumerate((t, bt, nrm)):
             out.offset_t[k, start:stop] = dot_columns(d, axis)
         if near is not None:
-            return _nearest_parts(near, V_dense[start:stop], start, corners, hit.face, n)
+            return _nearest_parts(near, P, start, corners, hit.face, n)
         return None
 
     def run(span):

@@ -14,11 +14,16 @@ from tests.mesh_factory import icosphere
 
 
 def _rotation(seed, angle_deg=None):
+    """A random rotation, or one by ``angle_deg`` about a random axis."""
     rng = np.random.default_rng(seed)
-    Q, _ = np.linalg.qr(rng.standard_normal((3, 3)))
-    if np.linalg.det(Q) < 0:
-        Q[:, 0] *= -1
-    return Q
+    if angle_deg is None:
+        Q, _ = np.linalg.qr(rng.standard_normal((3, 3)))
+        return Q * np.sign(np.linalg.det(Q))
+    a = rng.standard_normal(3)
+    a /= np.linalg.norm(a)
+    K = np.array([[0, -a[2], a[1]], [a[2], 0, -a[0]], [-a[1], a[0], 0]])
+    t = np.radians(angle_deg)
+    return np.eye(3) + np.sin(t) * K + (1 - np.cos(t)) * K @ K
 
 
 @pytest.mark.parametrize("seed", range(4))
@@ -37,3 +42,69 @@ def test_frames_of_a_face_with_two_corners_at_one_point_turn_with_a_rotation(see
     fr2 = frames(Vf @ Q.T + t, Nf @ Q.T, corners, bary)
     for a, b in zip(fr[1:], fr2[1:]):
         assert np.abs(b - a @ Q.T).max() < 1e-12
+
+
+def _bumpy_sphere(k=3, amp=0.03, seed=0):
+    V, F = icosphere(k)
+    rng = np.random.default_rng(seed)
+    return V * (1 + amp * rng.standard_normal((V.shape[0], 1))), F
+
+
+def _diagonal(V):
+    return float(np.linalg.norm(V.max(axis=0) - V.min(axis=0)))
+
+
+@pytest.mark.parametrize("scheme", ["butterfly", "loop"])
+@pytest.mark.parametrize("far", [1e5, 1e6])
+def test_a_scan_far_from_the_origin_comes_back_unedited_to_1e12_of_its_size(scheme, far):
+    # georeferenced scans sit 1e5-1e6 from the origin: the frames were built from
+    # differences of coordinates rounded at 1e-11..1e-10, and the unedited cage gave
+    # the scan back 4e-12 / 3e-11 of its size off
+    Vd, Fd = _bumpy_sphere()
+    Vc, Fc = icosphere(1)
+    o = np.array([far, -0.7 * far, 0.3 * far])
+    b = bind(Vd + o, Fd, 0.97 * Vc + o, Fc, levels=2, scheme=scheme)
+    assert np.abs(deform(b, 0.97 * Vc + o) - (Vd + o)).max() <= 1e-12 * _diagonal(Vd)
+
+
+def _ulps_off(A, B):
+    return float(np.abs(A - B).max() / np.spacing(np.abs(B).max()))
+
+
+@pytest.mark.parametrize("far", [0.0, 1e6])
+def test_rigid_motions_of_a_real_scan_far_from_the_origin_are_exact_to_its_coordinates(far):
+    # a scan at 1e6 (or a cage moved 1e3 of its size away): each frame's rounding at the
+    # coordinates' size, times the offsets over a fine edge, moved the beetle's rotated
+    # scan up to 150 rounding steps of its coordinates (2e-8 of its size) off the rotated
+    # original; relative to a working origin it is a few, as the rotation's own rounding
+    from tests.mesh_factory import load_shared
+    from core.simplify import simplify
+    V, F = load_shared("beetle.obj")
+    V = V + far
+    s = simplify(V, F, target_faces=120)
+    b = bind(V, F, s.V, s.F, levels=3, scheme="butterfly", creases=s.feature_edges)
+    D, R = deform(b, s.V), refine(b, s.V).V
+    for seed, angle in ((0, 90.0), (1, 180.0), (2, 135.0)):
+        Q = _rotation(seed, angle)
+        t = np.array([1.0, -2.0, 0.5]) * (1e3 * _diagonal(V) if far == 0 else 1.0)
+        Vc = s.V @ Q.T + t
+        assert _ulps_off(deform(b, Vc), D @ Q.T + t) <= 8
+
+
+def test_incremental_deform_of_a_real_scan_far_from_the_origin_equals_the_full_one():
+    # at 1e6 each level's rows, summed in another order, differed by rounding steps of
+    # 1e6, which the frames multiplied: 1.9e-8 of the beetle's size between the two
+    from tests.mesh_factory import load_shared
+    from core.simplify import simplify
+    V, F = load_shared("beetle.obj")
+    V = V + 1e6
+    s = simplify(V, F, target_faces=120)
+    b = bind(V, F, s.V, s.F, levels=3, scheme="butterfly", creases=s.feature_edges)
+    rng = np.random.default_rng(0)
+    Ve = s.V.copy()
+    D = deform(b, Ve)
+    for _ in range(5):
+        ids = rng.integers(0, Ve.shape[0], 3)
+        Ve[ids] += 0.02 * _diagonal(V) * rng.standard_normal((3, 3))
+        deform(b, Ve, moved=ids, out=D)
+        assert _ulps_off(D, deform(b, Ve)) <= 2
