@@ -21,13 +21,14 @@ The steps live in :mod:`.simplify_step` (simplify) and :mod:`.cage_steps`
 (bind, fit, refine); this module gathers them and adds ``subdivide_object``.
 """
 
+import contextlib
 import time
 
 import bpy
 import numpy as np
 
 from .. import core
-from . import mesh_io, results, store
+from . import carry, mesh_io, results, store
 from .cage_steps import (MAX_AUTO_LEVELS, OUTPUT_NAMES, CageJob, auto_levels, bind_object,  # noqa: F401
                          check_source_in_place, commit_bind, commit_fit, compute_bind,
                          compute_fit, fit_cage_object, prepare_cage_job, prepare_fit, read_source,
@@ -44,7 +45,9 @@ CREASE = store.CREASE
 def subdivide_object(obj, *, levels=1, scheme="butterfly", in_place=False):
     """Butterfly or Loop subdivision of any mesh object (creases: the edges
     marked sharp). Returns ``(object, Report)``: a new object beside ``obj``,
-    or ``obj`` itself when ``in_place``."""
+    or ``obj`` itself when ``in_place``. The result keeps the materials, UV
+    maps, colour and other attributes, vertex groups and loose edges of what
+    ``obj`` shows (:mod:`.carry`)."""
     t0 = time.perf_counter()
     if in_place and mesh_io.has_deformers(obj):
         raise core.MeshAdjustError(
@@ -55,13 +58,17 @@ def subdivide_object(obj, *, levels=1, scheme="butterfly", in_place=False):
     # sharp edges index the mesh data: they only apply when it was used as is
     creases = (np.zeros((0, 2), np.int64) if arrays.evaluated
                else mesh_io.get_edge_flags(obj.data, "sharp_edge"))
-    Vf, Ff = core.subdivide(arrays.V, arrays.F, levels=levels, scheme=scheme,
-                            creases=creases if creases.shape[0] else None)
+    op = core.subdivision_operator(arrays.F, arrays.V.shape[0], levels=levels, scheme=scheme,
+                                   creases=creases if creases.shape[0] else None)
+    Vf, Ff = op.apply(arrays.V), op.F_fine
     name = f"{obj.name}_{scheme}{levels}"
     with all_or_nothing() as rb:
         rb.keep_object(obj)
         mesh = mesh_io.new_mesh(name, Vf, Ff)
-        _carry_materials(obj.data, mesh, levels, arrays.evaluated)
+        with _shown_mesh(obj, arrays.evaluated) as src:
+            for mat in src.materials:
+                mesh.materials.append(mat)
+            groups, notes = carry.carry(src, obj, mesh, arrays.F, op)
         if in_place:
             old = obj.data
             obj.data = mesh
@@ -71,26 +78,29 @@ def subdivide_object(obj, *, levels=1, scheme="butterfly", in_place=False):
             out = bpy.data.objects.new(name, mesh)
             out.matrix_world = obj.matrix_world.copy()
             results.link_like(out, obj)
+        carry.put_groups(out, groups)
     dt = time.perf_counter() - t0
     msg = f"{arrays.F.shape[0]:,} -> {Ff.shape[0]:,} faces ({scheme}, {levels} level"
     msg += "s" if levels != 1 else ""
     msg += f"), {dt:.2f} s"
     if arrays.triangulated:
-        msg += f"; triangulated {arrays.n_polygons:,} polygons first"
+        msg += (f"; triangulated {arrays.n_split:,} of {arrays.n_polygons:,} polygons (quads "
+                f"and n-gons) first")
     if arrays.evaluated:
         msg += "; used the evaluated mesh (modifiers and shape keys applied)"
+    msg += "".join(f"; {note}" for note in notes)
     return out, Report(msg, arrays.F.shape[0], Ff.shape[0], seconds=dt)
 
 
-def _carry_materials(src, mesh, levels, evaluated):
-    """Give ``mesh``, the subdivision of the mesh ``src``, its materials: each
-    fine face the slot of its polygon (fine face ``g`` lies in coarse triangle
-    ``g // 4**levels``), or the first slot when an evaluated mesh was used."""
-    for mat in src.materials:
-        mesh.materials.append(mat)
-    if evaluated or len(src.materials) < 2 or not len(mesh.polygons):
+@contextlib.contextmanager
+def _shown_mesh(obj, evaluated):
+    """The mesh ``obj`` shows: its own, or (``evaluated``) its evaluated mesh,
+    the one :func:`~.mesh_io.read_object` read."""
+    if not evaluated:
+        yield obj.data
         return
-    index = np.empty(len(src.polygons), np.int32)
-    src.polygons.foreach_get("material_index", index)
-    coarse = np.arange(len(mesh.polygons)) // 4 ** int(levels)
-    mesh.polygons.foreach_set("material_index", index[mesh_io.triangle_polygons(src)][coarse])
+    ob_eval = obj.evaluated_get(bpy.context.evaluated_depsgraph_get())
+    try:
+        yield ob_eval.to_mesh()
+    finally:
+        ob_eval.to_mesh_clear()

@@ -22,6 +22,7 @@ class MeshArrays(NamedTuple):
     n_polygons: int        #: polygons in the Blender mesh (before triangulation)
     triangulated: bool     #: True when n-gons or quads were split for the core
     evaluated: bool        #: True when modifiers or shape keys were applied
+    n_split: int = 0       #: the polygons of more than 3 corners (those split for the core)
 
 
 def read_positions(mesh):
@@ -87,6 +88,14 @@ def read_triangles(mesh):
     return buf.reshape(-1, 3).astype(np.int64), True
 
 
+def split_polygons(mesh):
+    """How many polygons of ``mesh`` have more than three corners (the quads
+    and n-gons :func:`read_triangles` splits)."""
+    total = np.empty(len(mesh.polygons), dtype=np.int32)
+    mesh.polygons.foreach_get("loop_total", total)
+    return int(np.count_nonzero(total > 3))
+
+
 def triangle_polygons(mesh):
     """(m,) int64: the polygon of each triangle :func:`read_triangles` gives."""
     n_polys = len(mesh.polygons)
@@ -130,15 +139,15 @@ def read_object(obj, *, depsgraph=None, evaluated=None):
         try:
             V = read_positions(mesh)
             F, tri = read_triangles(mesh)
-            n_poly = len(mesh.polygons)
+            n_poly, n_split = len(mesh.polygons), (split_polygons(mesh) if tri else 0)
         finally:
             ob_eval.to_mesh_clear()
     else:
         mesh = obj.data
         V = read_positions(mesh)
         F, tri = read_triangles(mesh)
-        n_poly = len(mesh.polygons)
-    return MeshArrays(V, F, n_poly, tri, bool(use_eval))
+        n_poly, n_split = len(mesh.polygons), (split_polygons(mesh) if tri else 0)
+    return MeshArrays(V, F, n_poly, tri, bool(use_eval), n_split)
 
 
 def new_mesh(name, V, F):

@@ -152,7 +152,8 @@ def prepare_simplify(source, params, *, depsgraph=None):
     if arrays.evaluated:
         job.notes.append("used the evaluated mesh (modifiers and shape keys applied)")
     if arrays.triangulated:
-        job.notes.append(f"triangulated {arrays.n_polygons:,} polygons for the core")
+        job.notes.append(f"triangulated {arrays.n_split:,} of {arrays.n_polygons:,} polygons "
+                         f"(quads and n-gons) for the core")
     n = arrays.V.shape[0]
     for group, attr in ((params.weight_group, "weights"), (params.lock_group, "locked")):
         if not group:

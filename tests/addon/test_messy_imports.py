@@ -14,6 +14,7 @@ import pytest
 
 from tests.addon.conftest import MODULE
 
+MAT_SLOTS = 2
 
 
 def mod(name):
@@ -96,6 +97,15 @@ def test_a_source_left_in_edit_mode_is_refused_by_bind_and_fit_not_bound_stale(s
         "288 -> 288 faces)"]
 
 
+def test_the_simplify_report_counts_the_polygons_it_split_not_all_of_them(scene):
+    """A UV sphere of 96 quads and 32 triangles said "triangulated 128
+    polygons for the core": the triangles were counted as split."""
+    src = bumpy_uv_sphere(segments=16, rings=8)
+    assert simplify(60, fit=False, bind=False) == {'FINISHED'}
+    assert src.meshadjust.cage.meshadjust.last_report.endswith(
+        "; triangulated 96 of 128 polygons (quads and n-gons) for the core")
+
+
 # --------------------------------------------------------------------------- the cage
 @pytest.mark.parametrize("kind", ["SUBSURF", "MIRROR"])
 def test_a_cage_with_a_preview_modifier_refines_and_goes_live_from_edit_mode(scene, kind):
@@ -123,3 +133,151 @@ def test_a_cage_with_a_preview_modifier_refines_and_goes_live_from_edit_mode(sce
     assert np.array_equal(pos(cage.meshadjust.edited), in_edit[0])
     assert np.array_equal(pos(cage.meshadjust.refined), in_edit[1])
 
+
+# --------------------------------------------------------------------------- Subdivide
+def artist_data(obj):
+    """Give ``obj`` (a UV sphere) what an artist's mesh carries: a second UV
+    map, point and corner colours, a float and a string attribute, two vertex groups,
+    materials on two slots, custom normals, a seam, a hidden face, a loose
+    edge and a loose vertex."""
+    me = obj.data
+    rng = np.random.default_rng(0)
+    uv = np.empty(2 * len(me.loops), np.float32)
+    me.uv_layers[0].data.foreach_get("uv", uv)
+    me.uv_layers.new(name="Lightmap").data.foreach_set("uv", uv * 0.5 + 0.25)
+    me.uv_layers.active = me.uv_layers[1]
+    me.color_attributes.new("Cd_point", 'FLOAT_COLOR', 'POINT').data.foreach_set(
+        "color", rng.random(4 * len(me.vertices)).astype(np.float32))
+    me.color_attributes.new("Cd_corner", 'FLOAT_COLOR', 'CORNER').data.foreach_set(
+        "color", rng.random(4 * len(me.loops)).astype(np.float32))
+    me.color_attributes.active_color_name = "Cd_corner"
+    me.attributes.new("wetness", 'FLOAT', 'POINT').data.foreach_set(
+        "value", rng.random(len(me.vertices)).astype(np.float32))
+    me.attributes.new("label", 'STRING', 'POINT')
+    V = pos(obj)
+    obj.vertex_groups.new(name="top").add(np.flatnonzero(V[:, 2] > 0.3).tolist(), 0.75, 'REPLACE')
+    side = obj.vertex_groups.new(name="side")
+    for i in np.flatnonzero(V[:, 0] > 0.2).tolist():
+        side.add([i], float(rng.random()), 'REPLACE')
+    obj.vertex_groups.active_index = 0
+    for k in range(MAT_SLOTS):
+        me.materials.append(bpy.data.materials.new(f"mat{k}"))
+    me.polygons.foreach_set("material_index", np.arange(len(me.polygons), dtype=np.int32) % 2)
+    me.normals_split_custom_set_from_vertices([(0.0, 0.0, 1.0)] * len(me.vertices))
+    bm = bmesh.new()
+    bm.from_mesh(me)
+    bm.edges.ensure_lookup_table()
+    bm.faces.ensure_lookup_table()
+    for e in bm.faces[40].edges:
+        e.seam = True
+    bm.faces[7].hide_set(True)
+    a, b = bm.verts.new((3, 0, 0)), bm.verts.new((3, 1, 0))
+    bm.edges.new((a, b))
+    bm.verts.new((3, 2, 2))
+    bm.to_mesh(me)
+    bm.free()
+
+
+def corner_recursion(C, levels):
+    """(m*4**levels, 3, k) values at the corners of the fine faces of
+    triangles whose corners hold ``C`` (m, 3, k), split level by level by
+    the core's numbering (child 0 = (a, mc, mb), 1 = (mc, b, ma), 2 = (mb,
+    ma, c), 3 = (ma, mb, mc); ``m?`` the midpoint of the edge opposite ``?``)."""
+    for _ in range(levels):
+        a, b, c = C[:, 0], C[:, 1], C[:, 2]
+        ma, mb, mc = (b + c) / 2, (a + c) / 2, (a + b) / 2
+        kids = [(a, mc, mb), (mc, b, ma), (mb, ma, c), (ma, mb, mc)]
+        C = np.stack([np.stack(k, axis=1) for k in kids], axis=1).reshape(-1, 3, C.shape[-1])
+    return C
+
+
+def attribute(mesh, name, width, field="value"):
+    a = mesh.attributes[name]
+    buf = np.empty(len(a.data) * width, np.float32)
+    a.data.foreach_get(field, buf)
+    return buf.reshape(-1, width).astype(np.float64)
+
+
+def group_weights(obj, name):
+    k = obj.vertex_groups[name].index
+    w = np.full(len(obj.data.vertices), -1.0)
+    for v in obj.data.vertices:
+        for g in v.groups:
+            if g.group == k:
+                w[v.index] = g.weight
+    return w
+
+
+def test_subdivide_in_place_keeps_uv_maps_colours_groups_seams_and_hidden_faces(scene):
+    """Subdivide (in place, or not) built its mesh from positions and faces
+    alone: every UV map, colour attribute, vertex group, seam, hidden face and
+    loose edge of the artist's was lost without a word. Each fine corner now
+    takes the values where it lies in its coarse triangle (the same dyadic
+    midpoints, bit for bit), a seam stays a seam, a coarse vertex keeps its
+    values."""
+    obj = bumpy_uv_sphere(segments=16, rings=8)
+    artist_data(obj)
+    me = obj.data
+    me.calc_loop_triangles()
+    m = len(me.loop_triangles)
+    tri_loops = np.empty(3 * m, np.int32)
+    me.loop_triangles.foreach_get("loops", tri_loops)
+    tri_verts = np.empty(3 * m, np.int32)
+    me.loop_triangles.foreach_get("vertices", tri_verts)
+    tri_poly = np.empty(m, np.int32)
+    me.loop_triangles.foreach_get("polygon_index", tri_poly)
+    levels = 2
+    want = {}
+    for name, width, field, domain in (("UVMap", 2, "vector", tri_loops),
+                                       ("Lightmap", 2, "vector", tri_loops),
+                                       ("Cd_corner", 4, "color", tri_loops),
+                                       ("Cd_point", 4, "color", tri_verts),
+                                       ("wetness", 1, "value", tri_verts)):
+        values = attribute(me, name, width, field)[domain].reshape(m, 3, width)
+        want[name] = corner_recursion(values, levels).astype(np.float32)
+    groups = {}
+    for name in ("top", "side"):
+        w = group_weights(obj, name)
+        groups[name] = corner_recursion(np.maximum(w, 0)[tri_verts].reshape(m, 3, 1), levels)
+    index = np.empty(len(me.polygons), np.int32)
+    me.polygons.foreach_get("material_index", index)
+    hidden = np.array([p.hide for p in me.polygons])
+    seams = sum(e.use_seam for e in me.edges)
+    n_coarse = len(me.vertices)
+    coarse_wet = attribute(me, "wetness", 1)
+
+    out, report = mod("api").subdivide_object(obj, levels=levels, scheme="loop", in_place=True)
+    fine = obj.data
+    assert out is obj
+    assert fine is not me and len(fine.polygons) == 16 * m
+    Ff = np.array([p.vertices[:] for p in fine.polygons])
+    for name, width, field, point in (("UVMap", 2, "vector", False),
+                                      ("Lightmap", 2, "vector", False),
+                                      ("Cd_corner", 4, "color", False),
+                                      ("Cd_point", 4, "color", True),
+                                      ("wetness", 1, "value", True)):
+        got = attribute(fine, name, width, field)
+        got = got[Ff] if point else got.reshape(-1, 3, width)
+        assert np.array_equal(got, want[name].astype(np.float64)), name
+    assert np.array_equal(attribute(fine, "wetness", 1)[:n_coarse], coarse_wet)
+    assert fine.uv_layers.active.name == "Lightmap"
+    assert [u.active_render for u in fine.uv_layers] == [True, False]
+    assert fine.color_attributes.active_color_name == "Cd_corner"
+    assert [g.name for g in obj.vertex_groups] == ["top", "side"]
+    assert obj.vertex_groups.active_index == 0
+    for name, expected in groups.items():
+        w = group_weights(obj, name)[Ff]
+        inside = expected[..., 0] > 0
+        assert np.array_equal(w[inside], expected[..., 0][inside].astype(np.float32)), name
+    assert [m_.name for m_ in fine.materials] == ["mat0", "mat1"]
+    fine_index = np.empty(len(fine.polygons), np.int32)
+    fine.polygons.foreach_get("material_index", fine_index)
+    assert np.array_equal(fine_index, np.repeat(index[tri_poly], 16))
+    assert np.array_equal([p.hide for p in fine.polygons], np.repeat(hidden[tri_poly], 16))
+    assert sum(e.use_seam for e in fine.edges) == 4 * seams
+    assert sum(e.is_loose for e in fine.edges) == 1
+    assert len(fine.vertices) - len(np.unique(Ff)) == 3      # the loose edge's and the vertex
+    assert report.message.endswith(
+        "; triangulated 96 of 128 polygons (quads and n-gons) first; attribute 'label' not "
+        "carried (of a kind Subdivide cannot interpolate); its custom split normals are not "
+        "carried (the subdivided surface has normals of its own)")
