@@ -281,3 +281,26 @@ def test_subdivide_in_place_keeps_uv_maps_colours_groups_seams_and_hidden_faces(
         "; triangulated 96 of 128 polygons (quads and n-gons) first; attribute 'label' not "
         "carried (of a kind Subdivide cannot interpolate); its custom split normals are not "
         "carried (the subdivided surface has normals of its own)")
+
+
+def test_a_stray_loose_vertex_does_not_loosen_a_max_error_target(scene):
+    """A scan with one stray point 50 units off (a loose vertex, dropped by
+    the cleaning) asked for at most 0.5% of its size: the bound was taken of
+    the box holding the stray point, and the cage came back at 18 faces and
+    6.3% of the size the report measures."""
+    from tests.addon.conftest import make_object
+    from tests.addon.test_operators import bumpy_sphere
+    V, F = bumpy_sphere(4)
+    cages = []
+    for stray in (False, True):
+        bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)
+        obj = make_object("scan", np.vstack([V, [[50.0, 0.0, 0.0]]]) if stray else V, F)
+        assert bpy.ops.meshadjust.simplify(target_mode='ERROR', max_error_pct=0.5, fit=False,
+                                           bind=False) == {'FINISHED'}
+        cage = obj.meshadjust.cage
+        cages.append((pos(cage), mod("mesh_io").read_triangles(cage.data)[0],
+                      cage.meshadjust.last_report))
+    (V0, F0, report0), (V1, F1, report1) = cages
+    assert report1.split(" faces")[0] == report0.split(" faces")[0]      # "5,120 -> N"
+    assert np.array_equal(F1, F0) and np.array_equal(V1, V0)
+    assert "; cleaned the input: dropped 1 unreferenced vertices" in report1
