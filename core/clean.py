@@ -8,9 +8,10 @@ edge- and vertex-manifold triangle mesh that :func:`~.simplify.simplify`,
 :func:`~.binding.bind` accept, and says what it did::
 
     drop faces with a repeated vertex index
-    weld   vertices on open or non-manifold edges or on collapsed faces (no
-           taller than weld_distance, nor than FLAT_SHARE of the tallest
-           face) that coincide (exactly, or within
+    weld   vertices on open or non-manifold edges (or edges closed only by a
+           copy of their face: a soup made double-sided in place) or on
+           collapsed faces (no taller than weld_distance, nor than
+           FLAT_SHARE of the tallest face) that coincide (exactly, or within
            weld_distance of the mesh's size, :func:`bulk_box`: soups, seams,
            collapsed clusters), and the ends of edges that short
     drop   faces degenerate after welding; of faces on the same three
@@ -617,7 +618,8 @@ def _face_shape(cols, F, area, height):
 
 def _weld_map(shape, F, twin, weld_distance):
     """Representative of every vertex, (n,) int64: vertices on an open or
-    non-manifold edge (``twin < 0``) or on a collapsed face (no taller than
+    non-manifold edge (``twin < 0``, or closed only by a copy of its face:
+    :func:`_copy_closed`) or on a collapsed face (no taller than
     ``weld_distance`` over its longest edge, nor than ``FLAT_SHARE`` of the
     tallest face: a degenerate cluster, or an edge that short, since a face is
     no taller than its shortest edge) that coincide, exactly or within
@@ -628,6 +630,7 @@ def _weld_map(shape, F, twin, weld_distance):
     n = V.shape[0]
     rep = np.arange(n, dtype=np.int64)
     h = np.flatnonzero(twin < 0)
+    h = np.concatenate([h, _copy_closed(F, twin)])
     flat = np.flatnonzero(shape.height <= min(tol, FLAT_SHARE * shape.tallest))
     if h.size == 0 and flat.size == 0:
         return rep
@@ -637,6 +640,16 @@ def _weld_map(shape, F, twin, weld_distance):
         return rep
     rep[cand] = cand[connected_labels(cand.size, pairs)]
     return rep
+
+
+def _copy_closed(F, twin):
+    """Half-edges closed only by a copy of their face (the face across is on
+    the same three vertices: its corner across the edge is theirs). A soup
+    made double-sided in place (each triangle and its reverse on the same
+    three vertices) has no open edge, and its exact copies of each vertex
+    were never welded: the cage was its lone triangles."""
+    across = F.ravel()
+    return np.flatnonzero((twin >= 0) & (across == across.take(np.maximum(twin, 0))))
 
 
 def _orientation_sign(F):
