@@ -64,8 +64,8 @@ from ._clean import (BOUNDARY, NON_MANIFOLD, coincident_pairs, corner_fans, face
 from ._groups import ragged_entries
 from ._parallel import blocks, run_blocks, run_each
 from .errors import InvalidArgumentError
-from .mesh import (bounding_box, check_count, check_mesh, check_vertex_mask, cross_rows,
-                   diagonal_length, face_normals)
+from .mesh import (FLAT_FACE, bounding_box, check_count, check_mesh, check_vertex_mask,
+                   cross_rows, diagonal_length, face_normals)
 from .topology import connected_labels, edge_keys, face_components
 from .copies import coincident_copies, pillow_layers, stacked_copies
 from .pages import plain_pages
@@ -765,7 +765,8 @@ _MAX_RECUTS = 16
 def _pair_sheets(V, F, twin):
     """Twin table with every non-manifold edge resolved: its faces paired
     (consistent orientation first, then the flattest pair: largest dot
-    product of the unit normals), the unpaired ones left as borders.
+    product of the unit normals; faces with no area last), the unpaired ones
+    left as borders.
 
     Returns the new twin table and the number of non-manifold edges.
     """
@@ -790,6 +791,10 @@ def _pair_sheets(V, F, twin):
     hi, hj = hn[i], hn[j]
     N = face_normals(V, F[hn // 3])                # of the faces on non-manifold edges, by hn
     score = 2.0 * (U[hi] == W[hj]) + np.einsum("ij,ij->i", N[i], N[j])
+    # a face with no area (corners collinear: a fin folded flat onto the edge) pairs last,
+    # whatever its winding: it won over a real neighbour wound the other way, and stayed
+    flat = _flat_faces(V, F[hn // 3])
+    score[flat[i] | flat[j]] -= 8.0
     by = np.lexsort((-score, group[i]))
     i, j = i[by], j[by]
     matched = np.zeros(hn.size, dtype=bool)
@@ -804,6 +809,19 @@ def _pair_sheets(V, F, twin):
         twin[hn[b]] = hn[a]
     twin[hn[~matched]] = BOUNDARY
     return twin, int(start.size)
+
+
+def _flat_faces(V, F):
+    """(k,) bool per face of ``F`` (k,3): no area, its corners collinear up to
+    the rounding of their coordinates (twice its area at most ``FLAT_FACE``
+    times its longest edge times its largest coordinate magnitude, as
+    :func:`~.mesh.has_area` tells)."""
+    P = V[F]                                               # (k,3,3)
+    e1, e2 = P[:, 1] - P[:, 0], P[:, 2] - P[:, 0]
+    longest = np.sqrt(np.maximum(np.maximum((e1 * e1).sum(axis=1), (e2 * e2).sum(axis=1)),
+                                 ((e2 - e1) ** 2).sum(axis=1)))
+    size = np.abs(P).max(axis=(1, 2))
+    return np.linalg.norm(cross_rows(e1, e2), axis=1) <= FLAT_FACE * size * longest
 
 
 def _split_fans(V, F, twin, to_input, corners=None):

@@ -58,3 +58,23 @@ def test_a_double_sided_soup_sharing_its_corners_welds_into_one_side():
     assert_clean_cage(r.V, r.F)
     assert r.F.shape[0] == 200 and r.stopped_because == "target" and r.n_input_pieces is None
     assert (r.vertex_map >= 0).all()
+
+
+# ---------------------------------------------------------------- flat faces on non-manifold edges
+@pytest.mark.parametrize("seed", [0, 1, 3])
+def test_a_flat_fin_never_takes_a_real_faces_place_in_the_surface(seed):
+    """A face with no area on an edge of a randomly wound scan (three faces
+    on the edge): pairing preferred it, consistently wound with one real
+    neighbour, to the other real neighbour wound the other way, and the flat
+    face stayed in the surface (an icosphere came back with 1,282-1,286
+    faces, 2-6 of them flat, and a cage at or above them kept them)."""
+    V, F = random_winding(*icosphere(3), seed=seed)
+    Vz, Fz = flat_fins(V, F, 50, seed)
+    c = clean_mesh(Vz, Fz)
+    assert c.F.shape[0] == F.shape[0]
+    assert c.report.n_debris_components == 50 and c.report.n_debris_faces == 50
+    assert_clean_cage(c.V, c.F)
+    assert topology_summary(c.F, c.V.shape[0]).euler == 2
+    r = simplify(Vz, Fz, target_faces=2000)               # at or above: the cleaned input
+    assert r.F.shape[0] == F.shape[0]
+    assert_clean_cage(r.V, r.F)
