@@ -68,7 +68,8 @@ from .spatial import TriangleIndex
 from .subdivide import check_subdivision_args, subdivision_operator
 from .topology import check_not_soup
 from .unfold import (CageRings, FaceStars, FineFaceGroups, Repair, away_rows, away_t,
-                     nearest_rotations, repair, rest_normals, ring_rotations, turned_over)
+                     nearest_rotations, repair, rest_normals, ring_linear_maps, ring_rotations,
+                     turned_over)
 from ._groups import distinct, ragged_entries, ragged_ranges
 from ._parallel import WORKERS, blocks, each_in_order, run_blocks, run_each
 from .pages import plain_pages
@@ -727,30 +728,40 @@ def _keep_repair(binding, D, repaired):
 
 
 def _rotation(binding, Vc):
-    """``rotate(vertices, vectors)``: the vectors (j,3) turned by the rotation
-    of the cage where each dense vertex lies (over its fine face's coarse
-    face): the mean of its corners' :func:`~.unfold.ring_rotations` from the
-    rest cage to ``Vc``, made a rotation again. A rigid motion of the cage
-    turns them by exactly its rotation (to rounding). Each cage vertex's
-    rotation is computed once, when a coarse face it is a corner of is first
-    asked for, and each coarse face's once per call (every dense vertex over
-    it shares it)."""
+    """``(rotate, transform)``, each ``f(vertices, vectors)`` -> (j,3): the
+    vectors turned by the rotation of the cage where each dense vertex lies
+    (over its fine face's coarse face: the mean of its corners'
+    :func:`~.unfold.ring_rotations` from the rest cage to ``Vc``, made a
+    rotation again), or mapped by its local linear map (the mean of its
+    corners' :func:`~.unfold.ring_linear_maps`: also scaled and stretched as
+    the cage is there). A rigid motion of the cage turns them by exactly its
+    rotation (to rounding). Each cage vertex's rotation and map are computed
+    once, when a coarse face it is a corner of is first asked for."""
     rings = _repair_state(binding)["cage_rings"]
     ring_R = np.empty((binding.n_cage, 3, 3))
-    known = np.zeros(binding.n_cage, dtype=bool)
+    ring_A = np.empty((binding.n_cage, 3, 3))
+    known = np.zeros((2, binding.n_cage), dtype=bool)
     per_face = 4 ** binding.levels
 
-    def rotate(vertices, vectors):
+    def corners_of(vertices, kind, table, of):
         faces, at = np.unique(binding.fine_face[vertices] // per_face, return_inverse=True)
         corners = binding.F_cage[faces]
         new = np.unique(corners)
-        new = new[~known[new]]
+        new = new[~known[kind, new]]
         if new.size:
-            ring_R[new] = ring_rotations(binding.V_cage_rest, Vc, rings, new)
-            known[new] = True
+            table[new] = of(binding.V_cage_rest, Vc, rings, new)
+            known[kind, new] = True
+        return corners, at.ravel()
+
+    def rotate(vertices, vectors):
+        corners, at = corners_of(vertices, 0, ring_R, ring_rotations)
         R = nearest_rotations(ring_R[corners].sum(axis=1))
-        return np.einsum("kij,kj->ki", R[at.ravel()], vectors)
-    return rotate
+        return np.einsum("kij,kj->ki", R[at], vectors)
+
+    def transform(vertices, vectors):
+        corners, at = corners_of(vertices, 1, ring_A, ring_linear_maps)
+        return np.einsum("kij,kj->ki", ring_A[corners].mean(axis=1)[at], vectors)
+    return rotate, transform
 
 
 def _unfold(binding, D, Vc, hit=None, last=None, DT=None):
@@ -782,10 +793,11 @@ def _unfold(binding, D, Vc, hit=None, last=None, DT=None):
         if last.rows.size or last.away.size:
             around = np.union1d(_stars(binding, state).around(last.rows), last.away)
             away = np.union1d(away, away_rows(D, FT, around, rest))
-    rotate = _rotation(binding, Vc)
+    rotate, transform = _rotation(binding, Vc)
     folded = turned_over(D, FT, away, rest, rotate)
     return repair(D, state["V_rest"], binding.F_dense, FT,
-                  _stars(binding, state) if folded.size else None, folded, rest, rotate, away)
+                  _stars(binding, state) if folded.size else None, folded, rest, rotate, away,
+                  transform)
 
 
 def _check_out(binding, out):

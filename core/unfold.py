@@ -20,11 +20,14 @@ The repair, on the dense mesh itself:
              a half turn, is left alone, and one turned by 100 degrees where
              the cage turned by 20 is not)
     region   the vertices of the turned-over faces and their one-ring
-    relax    ``SWEEPS`` Jacobi sweeps of ``x_i = mean(x_j) + R_i d_i`` over
+    relax    ``SWEEPS`` Jacobi sweeps of ``x_i = mean(x_j) + A_i d_i`` over
              the region (neighbours ``j`` around the faces of ``i``; ``d_i``
-             the rest offset from that mean, turned by the cage's rotation
-             ``R_i``): the region takes its rest shape, moved with its
-             boundary
+             the rest offset from that mean, mapped by the cage's local
+             linear map ``A_i`` (:func:`ring_linear_maps`: its rotation, and
+             its scale and stretch, so a region of a cage scaled to half
+             takes its rest shape at half the size, not at full size between
+             halved neighbours, where it folded again): the region takes
+             its rest shape, moved with its boundary
     repeat   up to ``ROUNDS`` times, with the one-ring of any face still
              turned over added to the region
 
@@ -47,8 +50,8 @@ from .mesh import (NORMALS_BLOCK, area_normals_rows, area_normals_t, dot_columns
 from .topology import edge_map
 
 __all__ = ["CageRings", "FaceStars", "FineFaceGroups", "Neighbours", "Repair", "away_rows",
-           "away_t", "nearest_rotations", "repair", "rest_normals", "ring_rotations",
-           "turned_over"]
+           "away_t", "nearest_rotations", "repair", "rest_normals", "ring_linear_maps",
+           "ring_rotations", "turned_over"]
 
 #: Jacobi sweeps per round of the repair
 SWEEPS = 8
@@ -223,6 +226,38 @@ def ring_rotations(V0, V1, rings, vertices):
     return nearest_rotations(M)
 
 
+def ring_linear_maps(V0, V1, rings, vertices):
+    """Per cage vertex of ``vertices``: the linear map (k,3,3) that best takes
+    its one-ring's edges on ``V0`` to those on ``V1`` (least squares), its
+    area normal going to the new one stretched as the ring's edges are on
+    average (so a flat ring has one too); where that map is undefined (a
+    degenerate ring) or turns the ring inside out (a folded edit), the
+    ring's rotation (:func:`ring_rotations`) times that stretch. A rigid
+    motion gives its rotation (to rounding), a uniform scale by ``s`` that
+    scale."""
+    counts = rings.start[vertices + 1] - rings.start[vertices]
+    k, owner = ragged_ranges(rings.start[vertices], counts)
+    j = rings.other[k]
+    a, b = V0[j] - V0[vertices[owner]], V1[j] - V1[vertices[owner]]
+    q = vertices.shape[0]
+    BA, AA = np.zeros((q, 3, 3)), np.zeros((q, 3, 3))
+    np.add.at(BA, owner, b[:, :, None] * a[:, None, :])
+    np.add.at(AA, owner, a[:, :, None] * a[:, None, :])
+    n0, n1 = (rings.normals(V, vertices) for V in (V0, V1))
+    sa = np.bincount(owner, np.einsum("ij,ij->i", a, a), q)
+    sb = np.bincount(owner, np.einsum("ij,ij->i", b, b), q)
+    stretch = np.sqrt(np.divide(sb, sa, out=np.ones(q), where=sa > 0))
+    BA += (sa * stretch)[:, None, None] * n1[:, :, None] * n0[:, None, :]
+    AA += sa[:, None, None] * n0[:, :, None] * n0[:, None, :]
+    A = ring_rotations(V0, V1, rings, vertices) * stretch[:, None, None]
+    ok = np.linalg.det(AA) > 1e-9 * sa ** 3
+    if ok.any():
+        M = BA[ok] @ np.linalg.inv(AA[ok])
+        keep = np.linalg.det(M) > 0
+        A[np.flatnonzero(ok)[keep]] = M[keep]
+    return A
+
+
 class Repair(NamedTuple):
     """What a repair changed: the rows and their unrepaired ("raw")
     positions; and the faces found pointing away from their rest normal
@@ -335,18 +370,21 @@ class Neighbours(NamedTuple):
         return np.add.reduceat(X[self.other], self.start, axis=0) / self.count[:, None]
 
 
-def relax(X, V_rest, F, stars, region, rotate):
-    """``SWEEPS`` Jacobi sweeps of ``x_i = mean(x_j) + R_i d_i`` over
-    ``region`` of ``X`` (in place)."""
+def relax(X, V_rest, F, stars, region, transform):
+    """``SWEEPS`` Jacobi sweeps of ``x_i = mean(x_j) + A_i d_i`` over
+    ``region`` of ``X`` (in place); ``transform(vertices, vectors)`` maps the
+    rest offsets ``d_i`` by the cage's local map ``A_i``."""
     near = Neighbours.of(F, stars, region)
-    offset = rotate(region, V_rest[region] - near.means(V_rest))
+    offset = transform(region, V_rest[region] - near.means(V_rest))
     for _ in range(SWEEPS):
         X[region] = near.means(X) + offset
 
 
-def repair(X, V_rest, F, FT, stars, folded, rest_normals, rotate, away):
+def repair(X, V_rest, F, FT, stars, folded, rest_normals, rotate, away, transform=None):
     """Put the turned-over faces ``folded`` of ``X`` back (in place);
-    ``away`` the faces found pointing away from rest (kept in the result).
+    ``away`` the faces found pointing away from rest (kept in the result);
+    ``rotate`` turns rest normals for the test, ``transform`` (default
+    ``rotate``) maps the rest shape's offsets in the relaxation.
 
     Returns
     -------
@@ -363,7 +401,7 @@ def repair(X, V_rest, F, FT, stars, folded, rest_normals, rotate, away):
         rows.append(new)
         raw.append(X[new])
         region = grown
-        relax(X, V_rest, F, stars, region, rotate)
+        relax(X, V_rest, F, stars, region, rotate if transform is None else transform)
         left = away_rows(X, FT, stars.around(region), rest_normals)
         folded = turned_over(X, FT, left, rest_normals, rotate)
         if folded.shape[0] == 0:
