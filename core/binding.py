@@ -59,7 +59,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from .detail_search import dense_points_near, exact_detail_index
+from .detail_search import dense_points_near, detail_surface, exact_detail_index
 from .errors import CancelledError, InvalidArgumentError, TopologyMismatchError
 from .mesh import (area_normals_t, bounding_box, check_faces, check_mesh, check_number,
                    check_units, check_vertices, cross_columns, dot_columns, stops)
@@ -451,12 +451,21 @@ def bind(V_dense, F_dense, V_cage, F_cage, *, levels=2, scheme="butterfly", crea
         query, dense_index = run_each(lambda build: build(), [
             lambda: NearQuery(Vf, op.F_fine, reach=reach),
             lambda: exact_detail_index(V_dense - origin if shifted else V_dense, F_dense)])
+    elif detail == "local":
+        # the local search looks on the cleaned scan too (an unwelded scan's vertex had a
+        # fan of one triangle, a far speck was some fine vertex's nearest bound vertex)
+        query, surface = run_each(lambda build: build(), [
+            lambda: NearQuery(Vf, op.F_fine, reach=reach),
+            lambda: detail_surface(V_dense - origin if shifted else V_dense, F_dense)])
     else:
-        query, dense_index = NearQuery(Vf, op.F_fine, reach=reach), None   # halves on the threads
+        query = NearQuery(Vf, op.F_fine, reach=reach)      # halves on the threads
     d_face, d_bary = _vertex_corners(op.F_fine, op.n_fine)
     vfr = frames(Vf, NfT.T, op.F_fine[d_face], d_bary) if detail is not None else None
-    near = _NearSearch(vfr.point, _used_vertices(F_dense, V_dense.shape[0])) \
-        if detail == "local" else None
+    near = None
+    if detail == "local":
+        on = surface.to_surface
+        near = _NearSearch(vfr.point, _used_vertices(F_dense, V_dense.shape[0]) if on is None
+                           else (None if (on >= 0).all() else on >= 0))
     dense = _bind_dense(query, V_dense, VfT, NfT, op.F_fine, _reporter(progress, 0.05, 0.6),
                         near, origin if shifted else None)
     fine_detail = np.zeros((op.n_fine, 3))
@@ -464,8 +473,9 @@ def bind(V_dense, F_dense, V_cage, F_cage, *, levels=2, scheme="butterfly", crea
         q = _closest_on(dense_index, vfr.point, _reporter(progress, 0.65, 0.95), point=True)
         fine_detail = _to_frame(q - vfr.point, vfr)
     elif detail == "local":
-        q = dense_points_near(V_dense - origin if shifted else V_dense, F_dense, op.F_fine,
-                              dense.nearest, vfr.point, reach)
+        nearest = dense.nearest if surface.to_surface is None else \
+            np.where(dense.nearest >= 0, surface.to_surface[dense.nearest], -1)
+        q = dense_points_near(surface.V, surface.F, op.F_fine, nearest, vfr.point, reach)
         fine_detail = _to_frame(q - vfr.point, vfr)
     return Binding(fine_face=dense.face, bary=dense.bary_t.T, offset=dense.offset_t.T,
                    fine_detail=fine_detail, F_cage=F_cage, n_cage=int(V_cage.shape[0]),

@@ -27,7 +27,7 @@ from .spatial import TriangleIndex, point_triangle_closest, triangle_boxes
 from ._groups import group_argmin, ragged_ranges
 from ._parallel import blocks, run_blocks
 
-__all__ = ["exact_detail_index", "dense_points_near"]
+__all__ = ["DetailSurface", "detail_surface", "exact_detail_index", "dense_points_near"]
 
 #: fine vertices per block of the local detail search (``detail_search="local"``)
 _DETAIL_BLOCK = 8_192
@@ -40,13 +40,31 @@ _RING_BLOCK = 2_048
 _FACE_BLOCK = 65_536
 
 
+class DetailSurface(NamedTuple):
+    """The dense surface both detail searches look on (:func:`detail_surface`)."""
+
+    V: np.ndarray        #: (n_s,3) float64
+    F: np.ndarray        #: (m_s,3) int64
+    to_surface: object   #: (n,) int64 surface vertex of each dense vertex (-1: none), or
+                         #: None when the surface is the dense mesh itself
+
+
+def detail_surface(V_dense, F_dense):
+    """The dense surface as simplify saw it (cleaned: welded, so an unwelded
+    scan's vertex has its whole fan; no debris or far speck to pull a fine
+    vertex off the scan; no double-sided sheets), or the dense mesh itself
+    when cleaning leaves no face."""
+    surface = clean_mesh(V_dense, F_dense)
+    if surface.F.shape[0]:
+        return DetailSurface(surface.V, surface.F, surface.input_to_clean)
+    return DetailSurface(V_dense, F_dense, None)
+
+
 def exact_detail_index(V_dense, F_dense):
     """The :class:`~.spatial.TriangleIndex` the exact refine detail search
-    queries: over the dense surface as simplify saw it (cleaned: no debris to
-    pull a fine vertex off the scan, no double-sided sheets)."""
-    surface = clean_mesh(V_dense, F_dense)
-    Vs, Fs = (surface.V, surface.F) if surface.F.shape[0] else (V_dense, F_dense)
-    return TriangleIndex(Vs, Fs)
+    queries: over :func:`detail_surface`."""
+    surface = detail_surface(V_dense, F_dense)
+    return TriangleIndex(surface.V, surface.F)
 
 
 class _Fans(NamedTuple):

@@ -149,3 +149,21 @@ def test_a_cage_scaled_down_folds_no_face_of_the_scan(factor, levels):
     assert turned_faces(s.V, Ve, s.F).size == 0
     D = deform(b, Ve)
     assert turned_faces(V, D, F).size == 0
+
+
+@pytest.mark.parametrize("mess", ["unwelded", "far speck"])
+def test_the_local_detail_search_looks_on_the_cleaned_scan(mess):
+    # the local search (detail_search="auto" above 500k faces) looked on the scan as it
+    # came: an unwelded scan's vertex had a fan of one triangle (70% of the fine vertices
+    # refined off the scan's closest point), and a far speck bound near the cage was the
+    # nearest bound vertex of some fine vertices (refined 1.7e3 diagonals away)
+    from tests.mesh_factory import unwelded, with_far_speck
+    Vd, Fd = _bumpy_sphere()
+    Vd, Fd = unwelded(Vd, Fd) if mess == "unwelded" else with_far_speck(Vd, Fd)
+    Vc, Fc = icosphere(1)
+    Vc = 0.97 * Vc
+    exact = refine(bind(Vd, Fd, Vc, Fc, levels=3, detail_search="exact"), Vc).V
+    local = refine(bind(Vd, Fd, Vc, Fc, levels=3, detail_search="local"), Vc).V
+    off = np.linalg.norm(local - exact, axis=1)
+    assert off.max() < 0.05 * _diagonal(Vc)
+    assert np.count_nonzero(off > 1e-9) <= 0.01 * off.shape[0]
