@@ -63,7 +63,7 @@ from numpy.lib.stride_tricks import sliding_window_view
 
 from .errors import InvalidArgumentError
 from .mesh import check_finite_rows
-from .spatial import PRUNE_SLACK, TriangleIndex, closest_pairs, closest_result
+from .spatial import CROWDED_CELL, PRUNE_SLACK, TriangleIndex, closest_pairs, closest_result
 from .pages import plain_pages
 
 __all__ = ["NearQuery", "cell_for_reach", "search_for", "search_kind"]
@@ -92,6 +92,17 @@ _TILE_SLOTS = 1 << 18
 #: slivers gave 150 pairs a point, 10M pairs a block, 1.5 us each out of cache
 _CROWDED_BLOCK = 32
 _MIN_BLOCK = 2048
+
+#: points whose grid cell references more triangles than this (times the square of the
+#: cells' growth for a ``reach``) go to the index (its hierarchy), not through the tiles:
+#: a tile reads every reference of the 27 cells around a point, and where they are
+#: slivers, which pass the bounds, each is evaluated exactly. The index's own limit also
+#: grows with this module's wider cells (711 references). The 500-face cages of a CAD
+#: cylinder and a fillet (one cell of 500 slivers) answered 60k points in 5.4-6.0 and
+#: 7.2-9.4 s, now 1.1-1.3 and 0.5; the shared meshes, their 1,000-face cages and fine
+#: surfaces have at most 214 in a cell (fandisk's fine surface: 0.21 s at any limit from
+#: 256 up, 0.23 at 128)
+_INDEX_CELL = CROWDED_CELL
 
 #: a point with more pairs than this left within its bound after its first one
 #: evaluates the one with the nearest centroid next (:func:`_crowded_next`)
@@ -202,6 +213,7 @@ class NearQuery:
                 f"NearQuery: reach must be a finite number >= 0 or None, got {reach!r}")
         self.index = TriangleIndex(V, F, cell_factor=_CELL_FACTOR, min_cell=cell_for_reach(reach))
         self._t = _build_tables(self.index.tables)
+        self._index_cell = _INDEX_CELL * self.index.cell_growth ** 2
 
     def closest(self, P):
         """Closest point on the mesh of every query point.
@@ -228,9 +240,9 @@ class NearQuery:
         q = P.shape[0]
         cell3 = np.clip(np.floor((P - T.lo) / T.h), 0, T.dims - 1).astype(np.int64)
         key = cell3[:, 0] + T.dims[0] * (cell3[:, 1] + T.dims[1] * cell3[:, 2])
-        # points in a crowded cell go to the index (whose hierarchy answers them: a cage
-        # of long thin triangles, a CAD cylinder's, made cells of thousands)
-        crowded, order, _ = self.index.split_crowded(key)
+        # points in a crowded cell (see _INDEX_CELL) go to the index's
+        # hierarchy: a cage of long thin triangles, a CAD cylinder's, made cells of thousands
+        crowded, order, _ = self.index.split_crowded(key, limit=self._index_cell)
         best = _Best.empty(q)
         far = [crowded]
         far += [_block(T, self.index, P, order[s:s + _BLOCK], cell3, best)
@@ -238,7 +250,7 @@ class NearQuery:
         far = np.concatenate(far)
         result = closest_result(T.tables, best.t, best.v, best.w, best.d2)
         if far.size:
-            hit = self.index.closest(P[far])
+            hit = self.index.closest(P[far], crowded_cell=self._index_cell)
             for out, value in zip(result, hit):
                 out[far] = value
         return result

@@ -907,6 +907,9 @@ class TriangleIndex:
         Queries whose grid cell references more triangles than this go to
         the hierarchy (``CROWDED_CELL``, more where the cells were made
         wider than the default: their population grows with their area).
+    cell_growth : float
+        How many times wider than ``cell_factor`` mean extents ``min_cell``
+        made the cells (1: not at all).
     n_faces : int
         Triangles indexed: the faces of F, less repeated copies of one
         triangle's geometry where more than ``_MAX_SAME_CODE`` share a cell
@@ -965,6 +968,9 @@ class TriangleIndex:
         # diagonals off the bunny put all of it in one cell, 69,451 faces that did not count
         # as crowded, and a NearQuery's windows over it took 24 GB
         self.crowded_cell = CROWDED_CELL * max(1.0, (h / boxed / natural) ** 2 if natural > 0 else 1.0)
+        # (natural / _CELL_FACTOR is the mean extent the cell_factor multiplies)
+        own = cell_factor * natural / _CELL_FACTOR
+        self.cell_growth = max(1.0, min(h / boxed, min_cell or 0.0) / own) if own > 0 else 1.0
         self._build_tables(V, Fo, spans, ext, h, dims)
         self._bvh = None                          # built on first need (far queries)
         self._bvh_ready = False                   # ... with its cylinder bounds
@@ -1159,12 +1165,16 @@ class TriangleIndex:
 
     # -- queries -------------------------------------------------------------------------------
     @plain_pages
-    def closest(self, P):
+    def closest(self, P, *, crowded_cell=None):
         """Nearest point on the mesh for every query point.
 
         Parameters
         ----------
         P : (q, 3) array_like of float, finite.
+        crowded_cell : float or None, keyword-only
+            Points whose grid cell references more triangles than this go
+            to the hierarchy (None: :attr:`crowded_cell`; the answers are the
+            same, only the time changes).
 
         Returns
         -------
@@ -1189,7 +1199,7 @@ class TriangleIndex:
             h, dims, lo = self._h, self._dims, self._lo
             cc = np.clip(np.floor((P - lo) / h), 0, dims - 1).astype(np.int64)
             cid = cc[:, 0] + dims[0] * (cc[:, 1] + dims[1] * cc[:, 2])
-            crowded, order, cnt = self.split_crowded(cid)
+            crowded, order, cnt = self.split_crowded(cid, limit=crowded_cell)
             far = [crowded]
             if order.size:
                 csum = np.cumsum(cnt[order])
@@ -1205,15 +1215,15 @@ class TriangleIndex:
                 self._bvh_query(PT, far, best)
         return closest_result(self.tables, best.t, best.v, best.w, best.d2)
 
-    def split_crowded(self, cid):
+    def split_crowded(self, cid, limit=None):
         """For queries in the grid cells ``cid``: those whose cell is crowded
-        (more than ``crowded_cell`` references: long thin triangles, as on a CAD
-        cylinder's sides, cross many cells and crowd them all), which the
-        hierarchy answers; the others in cell order (stable: a mesh's own
-        order is coherent, and stable sorts it fast); and each one's cell's
-        reference count."""
+        (more than ``limit`` references, None: :attr:`crowded_cell`; long thin
+        triangles, as on a CAD cylinder's sides, cross many cells and crowd
+        them all), which the hierarchy answers; the others in cell order
+        (stable: a mesh's own order is coherent, and stable sorts it fast);
+        and each one's cell's reference count."""
         cnt = self._cell_start[cid + 1] - self._cell_start[cid]
-        crowded = cnt > self.crowded_cell
+        crowded = cnt > (self.crowded_cell if limit is None else limit)
         order = np.flatnonzero(~crowded)
         return np.flatnonzero(crowded), order[np.argsort(cid[order], kind="stable")], cnt
 

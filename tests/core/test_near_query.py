@@ -173,7 +173,7 @@ def test_needles_are_pruned_by_their_capsules(monkeypatch):
     (the distance to the longest edge less the height) before any is
     evaluated: 15,496 exact pairs here instead of 1,205,779 (every cell
     answered by the tiles), and the same distances."""
-    monkeypatch.setattr(spatial, "CROWDED_CELL", 10**6)  # (every cell answered here, none by the index)
+    monkeypatch.setattr(near_query, "_INDEX_CELL", 10**6)  # (every cell answered here, none by the index)
     V, F = cad_cylinder(400)
     rng = np.random.default_rng(13)
     P = V[rng.integers(0, V.shape[0], 1500)] + 0.02 * rng.standard_normal((1500, 3))
@@ -301,9 +301,9 @@ def _fallback_rows(query, P):
     rows = []
     original = query.index.closest
 
-    def spy(Q):
+    def spy(Q, **kw):
         rows.append(Q)
-        return original(Q)
+        return original(Q, **kw)
     query.index.closest = spy
     try:
         query.closest(P)
@@ -407,13 +407,37 @@ def test_points_in_crowded_cells_are_answered_by_the_index(monkeypatch):
     np.testing.assert_array_equal(own, d2)
 
 
+def test_a_cage_of_slivers_is_answered_by_the_index(monkeypatch):
+    """A CAD cylinder's coarse cage is itself 480 slivers and needles in
+    one grid cell: fewer references than the index's own limit (its cells
+    are narrower), but a tile would read all of them for every point and
+    evaluate most exactly (the 500-face cage of a 20k-face cylinder: 60k
+    points in 5.4-6.0 s, 1.1-1.3 s through the index). Its points go to the
+    index, none through the tiles, with the brute-force distances; a reach
+    that widens the cells raises the limit with their area."""
+    V, F = cad_cylinder(120)
+    P = _near_points(V, F, np.random.default_rng(4), n=400)
+    query = NearQuery(V, F)
+    per_cell = np.diff(query.index.tables.cell_start).max()
+    assert near_query._INDEX_CELL < per_cell <= query.index.crowded_cell
+    tiled = []
+    real = near_query._block
+    monkeypatch.setattr(near_query, "_block",
+                        lambda T, P_, q, *a: (tiled.append(q.size), real(T, P_, q, *a))[1])
+    r = query.closest(P)
+    assert sum(tiled) == 0
+    np.testing.assert_array_equal(r.distance, np.sqrt(_brute(V, F, P)[3]))
+    wide = NearQuery(V, F, reach=5.0)
+    growth = wide.index.cell_growth
+    assert growth > 1.0 and wide._index_cell == near_query._INDEX_CELL * growth ** 2
+
+
 def test_a_far_outlier_does_not_make_the_bulk_one_window():
     # one triangle 1,000 diagonals off: the grid's box is mostly empty, its cells grow
     # to fit _MAX_CELLS, and the whole sphere lands in a few cells. Those cells are
     # crowded (answered by the hierarchy), not windows of thousands of triangles: the
     # bunny with such a speck took 24 GB in surface_distance (killed), a 5k-face sphere
     # 1.8-3.6 s instead of 0.2. The answers stay exact
-    import core.spatial as spatial
     from tests.mesh_factory import with_far_speck
     V, F = with_far_speck(*icosphere(4))
     q = NearQuery(V, F)
