@@ -67,7 +67,7 @@ from .near_query import NearQuery
 from .spatial import TriangleIndex
 from .subdivide import check_subdivision_args, subdivision_operator
 from .topology import check_not_soup
-from .unfold import (CageRings, FaceStars, FineFaceGroups, Repair, away_rows, away_t,
+from .unfold import (CageRings, Copies, FaceStars, FineFaceGroups, Repair, away_rows, away_t,
                      nearest_rotations, repair, rest_normals, ring_linear_maps, ring_rotations,
                      turned_over)
 from ._groups import distinct, ragged_entries, ragged_ranges
@@ -805,9 +805,27 @@ def _unfold(binding, D, Vc, hit=None, last=None, DT=None):
             away = np.union1d(away, away_rows(D, FT, around, rest))
     rotate, transform = _rotation(binding, Vc)
     folded = turned_over(D, FT, away, rest, rotate)
-    return repair(D, state["V_rest"], binding.F_dense, FT,
-                  _stars(binding, state) if folded.size else None, folded, rest, rotate, away,
-                  transform)
+    if not folded.size:
+        return repair(D, state["V_rest"], binding.F_dense, FT, None, folded, rest, rotate, away)
+    welded = _welded(binding, state)
+    if welded is None:
+        return repair(D, state["V_rest"], binding.F_dense, FT, _stars(binding, state), folded,
+                      rest, rotate, away, transform)
+    return repair(D, state["V_rest"], welded[0], FT, welded[1], folded, rest, rotate, away,
+                  transform, welded[2])
+
+
+def _welded(binding, state):
+    """The dense faces on welded vertices, their faces around each vertex and
+    the :class:`~.unfold.Copies` (the repair relaxes a region on them), or
+    None when no two dense vertices sit at one rest point; found at the
+    first repair (a sort of the rest positions) and kept."""
+    if "welded" not in state:
+        copies = Copies.of(state["V_rest"])
+        state["welded"] = None if copies is None else (
+            copies.weld[binding.F_dense], FaceStars.of(copies.weld[binding.F_dense],
+                                                       binding.n_dense), copies)
+    return state["welded"]
 
 
 def _check_out(binding, out):

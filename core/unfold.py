@@ -49,7 +49,7 @@ from .mesh import (NORMALS_BLOCK, area_normals_rows, area_normals_t, dot_columns
                    squared_edges, unit_rows)
 from .topology import edge_map
 
-__all__ = ["CageRings", "FaceStars", "FineFaceGroups", "Neighbours", "Repair", "away_rows",
+__all__ = ["CageRings", "Copies", "FaceStars", "FineFaceGroups", "Neighbours", "Repair", "away_rows",
            "away_t", "nearest_rotations", "repair", "rest_normals", "ring_linear_maps",
            "ring_rotations", "turned_over"]
 
@@ -336,6 +336,46 @@ def turned_over(X, FT, away, rest_normals, rotate):
     return away[np.einsum("ij,ij->i", turned, n) < bound]
 
 
+class Copies(NamedTuple):
+    """Dense vertices at one point (an unwelded scan's), for :func:`repair`:
+    each vertex's representative (the first at its position) and, per
+    representative, its copies (CSR, itself included)."""
+
+    weld: np.ndarray    #: (n,) int64 the representative of each vertex
+    start: np.ndarray   #: (n+1,) int64 copies of vertex v: order[start[v]:start[v+1]]
+    order: np.ndarray   #: (n,) int64 vertices grouped by representative
+
+    @classmethod
+    def of(cls, V):
+        """The copies among the positions ``V`` (n,3) (bit-identical rows), or
+        None when every vertex has a point of its own."""
+        n = V.shape[0]
+        # first one sort of a hash of the bits (distinct hashes: distinct points; 0.07
+        # of the 0.39 s a lexsort takes for a million points)
+        bits = np.ascontiguousarray(V, dtype=np.float64).view(np.uint64)
+        h = np.sort(bits[:, 0] * np.uint64(0x9E3779B97F4A7C15) ^ bits[:, 1] * np.uint64(
+            0xC2B2AE3D27D4EB4F) ^ bits[:, 2] * np.uint64(0x165667B19E3779F9))
+        if n < 2 or (h[1:] != h[:-1]).all():
+            return None
+        order = np.lexsort((V[:, 2], V[:, 1], V[:, 0]))
+        S = V[order]
+        first = np.ones(n, dtype=bool)
+        first[1:] = (S[1:] != S[:-1]).any(axis=1)
+        if first.all():
+            return None
+        group = np.cumsum(first) - 1
+        weld = np.empty(n, dtype=np.int64)
+        weld[order] = np.minimum.reduceat(order, np.flatnonzero(first))[group]
+        start = np.zeros(n + 1, dtype=np.int64)
+        np.cumsum(np.bincount(weld, minlength=n), out=start[1:])
+        return cls(weld, start, np.argsort(weld, kind="stable"))
+
+    def of_vertices(self, reps):
+        """Every copy of the representatives ``reps`` (distinct), ascending."""
+        return np.sort(self.order[ragged_entries(self.start[reps],
+                                                 self.start[reps + 1] - self.start[reps])])
+
+
 def ring(stars, F, faces):
     """The vertices of ``faces`` and their one-ring (ascending)."""
     return np.unique(F[stars.around(np.unique(F[faces]))])
@@ -380,11 +420,17 @@ def relax(X, V_rest, F, stars, region, transform):
         X[region] = near.means(X) + offset
 
 
-def repair(X, V_rest, F, FT, stars, folded, rest_normals, rotate, away, transform=None):
+def repair(X, V_rest, F, FT, stars, folded, rest_normals, rotate, away, transform=None,
+           copies=None):
     """Put the turned-over faces ``folded`` of ``X`` back (in place);
     ``away`` the faces found pointing away from rest (kept in the result);
     ``rotate`` turns rest normals for the test, ``transform`` (default
-    ``rotate``) maps the rest shape's offsets in the relaxation.
+    ``rotate``) maps the rest shape's offsets in the relaxation. With
+    ``copies`` (:class:`Copies`), ``F`` and ``stars`` are the welded faces
+    (``FT`` the faces as they are), the region is relaxed on the welded
+    vertices and every copy follows its vertex (an unwelded scan, every
+    triangle on vertices of its own, was relaxed triangle by triangle and
+    opened cracks up to 45% of its size).
 
     Returns
     -------
@@ -398,10 +444,15 @@ def repair(X, V_rest, F, FT, stars, folded, rest_normals, rotate, away, transfor
     for _ in range(ROUNDS):
         grown = np.union1d(region, ring(stars, F, folded))
         new = np.setdiff1d(grown, region, assume_unique=True)
+        if copies is not None:
+            new = copies.of_vertices(new)
         rows.append(new)
         raw.append(X[new])
         region = grown
         relax(X, V_rest, F, stars, region, rotate if transform is None else transform)
+        if copies is not None:
+            every = copies.of_vertices(region)
+            X[every] = X[copies.weld[every]]
         left = away_rows(X, FT, stars.around(region), rest_normals)
         folded = turned_over(X, FT, left, rest_normals, rotate)
         if folded.shape[0] == 0:

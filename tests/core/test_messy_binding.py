@@ -167,3 +167,53 @@ def test_the_local_detail_search_looks_on_the_cleaned_scan(mess):
     off = np.linalg.norm(local - exact, axis=1)
     assert off.max() < 0.05 * _diagonal(Vc)
     assert np.count_nonzero(off > 1e-9) <= 0.01 * off.shape[0]
+
+
+def _unwelded_torus_case():
+    """A rough torus as an unwelded scan (every triangle on vertices of its own), its
+    200-face cage and a cage lift that makes the fold repair work: (Vd, Fd, key, cage,
+    b, ids, lift), ``key[i]`` the welded vertex unwelded vertex ``i`` sits on."""
+    from core.simplify import simplify
+    from core.mesh import vertex_normals
+    from tests.mesh_factory import torus, unwelded
+    V, F = torus(96, 48, bump=0.01)
+    V = V + 0.01 * np.random.default_rng(0).standard_normal(V.shape)
+    Vd, Fd = unwelded(V, F)
+    cage = simplify(Vd, Fd, target_faces=200)
+    b = bind(Vd, Fd, cage.V, cage.F, levels=2, scheme="butterfly")
+    ids = np.unique(cage.F[(cage.F == 50).any(axis=1)])
+    lift = 0.08 * _diagonal(V) * vertex_normals(cage.V, cage.F)[50]
+    return Vd, Fd, F.ravel(), cage, b, ids, lift
+
+
+def _crack(D, key):
+    """The largest distance between copies of one scan vertex."""
+    hi = np.full((key.max() + 1, 3), -np.inf)
+    lo = np.full((key.max() + 1, 3), np.inf)
+    np.maximum.at(hi, key, D)
+    np.minimum.at(lo, key, D)
+    return float(np.abs(hi - lo).max())
+
+
+def test_the_fold_repair_keeps_an_unwelded_scan_closed():
+    # every triangle of an STL scan has vertices of its own: the repair relaxed the
+    # triangles one by one (no neighbours across them) and opened cracks of 1-45% of the
+    # size; now it relaxes the welded scan and every copy follows its vertex
+    Vd, Fd, key, cage, b, ids, lift = _unwelded_torus_case()
+    Ve = cage.V.copy()
+    Ve[ids] += lift
+    D = deform(b, Ve)
+    assert b.repaired(D).size > 0
+    assert _crack(D, key) == 0.0
+    # and through incremental deforms, equal to the full ones
+    rng = np.random.default_rng(5)
+    cur = cage.V.copy()
+    D = deform(b, cur)
+    for _ in range(4):
+        some = rng.choice(ids, rng.integers(1, ids.size + 1), replace=False)
+        cur[some] = cage.V[some] + rng.uniform(0.5, 1.0) * lift
+        deform(b, cur, moved=some, out=D)
+        full = deform(b, cur)
+        assert np.abs(D - full).max() <= 1e-12 * _diagonal(Vd)
+        assert np.array_equal(b.repaired(D), b.repaired(full))
+        assert _crack(D, key) == 0.0
