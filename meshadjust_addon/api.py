@@ -32,7 +32,7 @@ from . import carry, mesh_io, results, store
 from .cage_steps import (MAX_AUTO_LEVELS, OUTPUT_NAMES, CageJob, auto_levels, bind_object,  # noqa: F401
                          check_source_in_place, commit_bind, commit_fit, compute_bind,
                          compute_fit, fit_cage_object, prepare_cage_job, prepare_fit, read_source,
-                         refine_object)
+                         refine_object, source_edit_problem)
 from .report import Report, about, user_cause  # noqa: F401
 from .rollback import all_or_nothing, retire
 from .simplify_step import (MEASURE_SAMPLES, TARGET_TOLERANCE, SimplifyJob,  # noqa: F401

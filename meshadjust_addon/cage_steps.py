@@ -48,21 +48,28 @@ def _diag(V):
     return core.bbox_diagonal(V)
 
 
+def source_edit_problem(source):
+    """Why ``source`` cannot be read now, or None: it is in Edit Mode (its own
+    or a linked duplicate's), where its mesh holds the shape from before the
+    Edit Mode session and no fingerprint can be taken (a bind of it went
+    stale unnoticed)."""
+    if not source.data.is_editmode:
+        return None
+    who = source.name if source.mode == 'EDIT' else next(
+        (o.name for o in bpy.data.objects if o.data == source.data and o.mode == 'EDIT'),
+        source.name)                                   # (a linked duplicate of it)
+    shared = "" if who == source.name else f" (it shares its mesh with '{who}')"
+    return (f"'{source.name}' is in Edit Mode{shared}, where its mesh does not have the edits "
+            f"yet: leave Edit Mode on '{who}' first")
+
+
 def read_source(source):
     """The source's mesh as the artist made it (MeshAdjust's own shape keys
-    muted): ``(MeshArrays, fingerprint)``.
-
-    A source in Edit Mode is refused (:class:`core.MeshAdjustError`): its
-    mesh holds the shape from before the Edit Mode session, and no
-    fingerprint can be taken, so a bind of it went stale unnoticed."""
-    if source.data.is_editmode:
-        who = source.name if source.mode == 'EDIT' else next(
-            (o.name for o in bpy.data.objects if o.data == source.data and o.mode == 'EDIT'),
-            source.name)                               # (a linked duplicate of it)
-        shared = "" if who == source.name else f" (it shares its mesh with '{who}')"
-        raise core.MeshAdjustError(
-            f"'{source.name}' is in Edit Mode{shared}, where its mesh does not have the "
-            f"edits yet: leave Edit Mode on '{who}' first")
+    muted): ``(MeshArrays, fingerprint)``. A source in Edit Mode is refused
+    (:func:`source_edit_problem`, :class:`core.MeshAdjustError`)."""
+    why = source_edit_problem(source)
+    if why:
+        raise core.MeshAdjustError(why)
     # only MeshAdjust's keys (or keys at 0): the mesh itself, vertex groups usable
     plain = False if results.only_own_keys_and_no_modifiers(source) else None
     with results.own_keys_muted(source):
@@ -184,6 +191,7 @@ class CageJob:
     old_scheme: str = ""
     note: str = ""               #: what the commit re-made, for the report
     symmetry: str = None         #: the cage's mirror axis ('X', 'Y', 'Z'), kept by a fit
+    faces_key: str = ""          #: ``mesh_io.polygon_key`` of the source's mesh read ("": unknown)
 
     @property
     def n_moved(self):
@@ -260,7 +268,8 @@ def prepare_cage_job(cage, *, levels=None, scheme=None, from_rest=False, keep_ed
     return CageJob(cage.name, src.V, src.F, V_now if V_rest is None else V_rest, F_cage, creases,
                    levels, scheme, V_rest is not None, V_now=V_now, source_fingerprint=fp,
                    old_levels=cs.levels if bound else 0, old_scheme=cs.scheme if bound else "",
-                   symmetry=None if cs.symmetry == 'NONE' else cs.symmetry)
+                   symmetry=None if cs.symmetry == 'NONE' else cs.symmetry,
+                   faces_key=src.faces_key)
 
 
 def check_current(cage, job):
@@ -338,7 +347,7 @@ def commit_bind(cage, job):
             results.aside_note(results.kept_aside(cs.refined), cs.refined, notes)
         rb.keep(cage.data)
         A = _moved_since_bind(cage, source)            # (before the new matrix is recorded)
-        edited, note = results.edited_copy(source, cage, job.V.shape[0], job.F)
+        edited, note = results.edited_copy(source, cage, job.V.shape[0], job.faces_key)
         notes += [note] if note else []
         if A is not None:      # the results keep their place beside the source's new space
             for obj in (edited, cs.refined):

@@ -31,7 +31,7 @@ from typing import NamedTuple
 import numpy as np
 
 from .. import core
-from . import results, store
+from . import mesh_io, results, store
 from .cage_steps import cage_in_source_space, check_source_in_place, turned_cage_note
 
 #: above this fraction of moved cage vertices a full deform is cheaper
@@ -162,6 +162,7 @@ def _write(edited, buf):
     """Hand the positions ``buf`` to Blender (one ``foreach_set``) and
     remember them as live mode's (:func:`~.results.record_live`)."""
     edited.data.attributes["position"].data.foreach_set("vector", buf.reshape(-1))
+    mesh_io.tag_positions_changed(edited.data)      # (its normals were left as they were)
     edited.data.update_tag()
     results.record_live(edited, buf)
 

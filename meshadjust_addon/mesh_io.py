@@ -6,6 +6,7 @@ million vertices in milliseconds); nothing here loops over elements in Python.
 The core works in float64 / int64, so dtypes are cast once, here.
 """
 
+import zlib
 from typing import NamedTuple
 
 import bpy
@@ -23,6 +24,7 @@ class MeshArrays(NamedTuple):
     triangulated: bool     #: True when n-gons or quads were split for the core
     evaluated: bool        #: True when modifiers or shape keys were applied
     n_split: int = 0       #: the polygons of more than 3 corners (those split for the core)
+    faces_key: str = ""    #: :func:`polygon_key` of the mesh read (its polygons, not its triangles)
 
 
 def read_positions(mesh):
@@ -39,8 +41,24 @@ def write_positions(mesh, V):
                                          f"'{mesh.name}', which has {len(mesh.vertices)} vertices")
     if V.size:
         mesh.attributes["position"].data.foreach_set("vector", V)
+        tag_positions_changed(mesh)
     mesh.update()
     return V
+
+
+def tag_positions_changed(mesh):
+    """Tell Blender that the positions of ``mesh`` changed, after a
+    ``foreach_set`` on its position attribute, which does not: Blender kept
+    its triangles of quads and n-gons (drawn, read by ``loop_triangles``:
+    a deformed quad stayed split along a diagonal that now folds it) and,
+    with ``update_tag()`` alone (live mode), its normals, so the edited
+    original was shaded with its old normals while the cage was edited.
+    Setting one vertex's position through its own property tags them all
+    (its update clears those caches); the value written is the one read,
+    bit for bit."""
+    if len(mesh.vertices):
+        v = mesh.vertices[0]
+        v.co = v.co
 
 
 def read_positions32(mesh):
@@ -86,6 +104,23 @@ def read_triangles(mesh):
     buf = np.empty(3 * len(mesh.loop_triangles), dtype=np.int32)
     mesh.loop_triangles.foreach_get("vertices", buf)
     return buf.reshape(-1, 3).astype(np.int64), True
+
+
+def polygon_key(mesh):
+    """A short string that changes when the polygons of ``mesh`` (their
+    corners' vertices, in order) change, and not when its vertices move:
+    Blender's triangles of a quad or an n-gon follow the positions (a
+    deformed quad can be split along its other diagonal)."""
+    corners = np.empty(len(mesh.loops), dtype=np.int32)
+    total = np.empty(len(mesh.polygons), dtype=np.int32)
+    if len(corners):
+        if mesh.is_editmode:   # see read_positions
+            mesh.loops.foreach_get("vertex_index", corners)
+        else:
+            mesh.attributes[".corner_vert"].data.foreach_get("value", corners)
+    mesh.polygons.foreach_get("loop_total", total)
+    crc = zlib.crc32(memoryview(total).cast("B"), zlib.crc32(memoryview(corners).cast("B")))
+    return f"{len(mesh.vertices)}:{len(total)}:{len(corners)}:{crc:08x}"
 
 
 def split_polygons(mesh):
@@ -140,6 +175,7 @@ def read_object(obj, *, depsgraph=None, evaluated=None):
             V = read_positions(mesh)
             F, tri = read_triangles(mesh)
             n_poly, n_split = len(mesh.polygons), (split_polygons(mesh) if tri else 0)
+            key = polygon_key(mesh)
         finally:
             ob_eval.to_mesh_clear()
     else:
@@ -147,7 +183,8 @@ def read_object(obj, *, depsgraph=None, evaluated=None):
         V = read_positions(mesh)
         F, tri = read_triangles(mesh)
         n_poly, n_split = len(mesh.polygons), (split_polygons(mesh) if tri else 0)
-    return MeshArrays(V, F, n_poly, tri, bool(use_eval), n_split)
+        key = polygon_key(mesh)
+    return MeshArrays(V, F, n_poly, tri, bool(use_eval), n_split, key)
 
 
 def new_mesh(name, V, F):

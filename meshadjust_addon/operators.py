@@ -64,14 +64,19 @@ def simplify_unavailable(context):
     return api.source_problem(obj)
 
 
-def cage_unavailable(context, need_binding=False):
-    """Why a cage step cannot run (None when it can)."""
+def cage_unavailable(context, need_binding=False, reads_source=False):
+    """Why a cage step cannot run (None when it can); ``reads_source``: the
+    step reads the source (Fit, Bind), which cannot be read in Edit Mode."""
     obj = context.active_object
     cage = cage_of(obj)
     if cage is None:
         return "Simplify a mesh first: the active object is not a cage"
     if cage.meshadjust.source is None:
         return f"'{cage.name}' lost its source object"
+    if reads_source:
+        why = api.source_edit_problem(cage.meshadjust.source)
+        if why:
+            return why
     if need_binding:
         edited = cage.meshadjust.edited
         if edited is None:
@@ -311,13 +316,17 @@ class MESHADJUST_OT_simplify(_Background, SimplifyProps, bpy.types.Operator):
 
 class _CageStep:
     """Mixin: the operator runs on the active object's cage; ``poll`` says
-    why not (``_needs_binding``: the cage must also have a valid binding)."""
+    why not (``_needs_binding``: the cage must also have a valid binding;
+    ``_reads_source``: the step reads the source, which must not be in Edit
+    Mode)."""
 
     _needs_binding = False
+    _reads_source = False
 
     @classmethod
     def poll(cls, context):
-        why = cage_unavailable(context, need_binding=cls._needs_binding)
+        why = cage_unavailable(context, need_binding=cls._needs_binding,
+                               reads_source=cls._reads_source)
         if why:
             cls.poll_message_set(why)
         return why is None
@@ -403,6 +412,8 @@ class MESHADJUST_OT_fit_cage(FitProps, _CageJobStep, bpy.types.Operator):
     bl_label = "Fit Cage"
     bl_options = {'REGISTER', 'UNDO'}
 
+    _reads_source = True
+
     def _prepare(self, cage):
         self._edit_cage = cage.name if cage.mode == 'EDIT' else ""   # given back afterwards
         _object_mode(cage)
@@ -440,6 +451,8 @@ class MESHADJUST_OT_bind(BindProps, _CageJobStep, bpy.types.Operator):
     bl_idname = "meshadjust.bind"
     bl_label = "Bind"
     bl_options = {'REGISTER', 'UNDO'}
+
+    _reads_source = True
 
     def _prepare(self, cage):
         """A bind job; levels 0 / scheme 'As bound' keep the cage's current ones."""

@@ -27,6 +27,7 @@ def panel_state(context):
     state["simplify"] = (why is None, why)
     why = cage_unavailable(context)
     state["edit"] = (why is None, why)
+    why = cage_unavailable(context, reads_source=True)
     state["fit"] = (why is None, why)
     state["bind"] = (why is None, why)
     why = cage_unavailable(context, need_binding=True)

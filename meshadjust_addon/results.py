@@ -194,12 +194,17 @@ def link_back(obj, like):
     return f"'{obj.name}' had been deleted: linked back"
 
 
-def edited_copy(source, cage, n_vertices, F=None):
+def edited_copy(source, cage, n_vertices, faces_key=None):
     """The edited-original object of ``cage`` with ``n_vertices`` vertices
-    (and the triangles ``F`` of the mesh bound, when given): the existing
-    one, its mesh re-made from the source when the source's vertex count or
-    faces changed, or a new copy (also when the artist deleted it). Returns
-    ``(edited, note)``, the note saying what was re-made (empty otherwise)."""
+    (and the polygons of the mesh bound, :func:`~.mesh_io.polygon_key`
+    ``faces_key``, when given): the existing one, its mesh re-made from the
+    source when the source's vertex count or polygons changed, or a new copy
+    (also when the artist deleted it). Returns ``(edited, note)``, the note
+    saying what was re-made (empty otherwise).
+
+    Polygons, not triangles: an edit that deforms a quad of the edited
+    original can make Blender split it along its other diagonal, and every
+    bind re-made it (the artist's paint on it lost) and said so."""
     edited = cage.meshadjust.edited
     name = f"{source.name}_edited"
     linked = ""
@@ -208,7 +213,7 @@ def edited_copy(source, cage, n_vertices, F=None):
     if edited is not None and edited.name in bpy.data.objects and edited.users_collection:
         old = edited.data
         if len(old.vertices) == n_vertices and (
-                F is None or np.array_equal(mesh_io.read_triangles(old)[0], F)):
+                not faces_key or mesh_io.polygon_key(old) == faces_key):
             return edited, linked
         mesh = _new_source_copy(source, old.name + ".new")
         n_old, m_old = len(old.vertices), len(old.polygons)

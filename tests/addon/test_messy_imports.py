@@ -87,6 +87,10 @@ def test_a_source_left_in_edit_mode_is_refused_by_bind_and_fit_not_bound_stale(s
                 op()
     assert edited.meshadjust.source_fingerprint == fingerprint
     assert np.array_equal(pos(edited), V_edited)
+    state = mod("panel").panel_state(bpy.context)          # (greyed out, the reason shown)
+    why = ("'scan' is in Edit Mode, where its mesh does not have the edits yet: leave Edit "
+           "Mode on 'scan' first")
+    assert state["bind"] == state["fit"] == (False, why) and state["refine"] == (True, None)
     # the API's simplify too (the panel's button is greyed out)
     with pytest.raises(mod("api").core.MeshAdjustError, match="'scan' is in Edit Mode"):
         mod("api").simplify_object(src, target_faces=50)
@@ -304,3 +308,100 @@ def test_a_stray_loose_vertex_does_not_loosen_a_max_error_target(scene):
     assert report1.split(" faces")[0] == report0.split(" faces")[0]      # "5,120 -> N"
     assert np.array_equal(F1, F0) and np.array_equal(V1, V0)
     assert "; cleaned the input: dropped 1 unreferenced vertices" in report1
+
+
+# --------------------------------------------------------------------------- results
+def evaluated_normals(obj):
+    bpy.context.view_layer.update()
+    mesh = obj.evaluated_get(bpy.context.evaluated_depsgraph_get()).data
+    n = np.empty(3 * len(mesh.vertices), np.float32)
+    mesh.vertex_normals.foreach_get("vector", n)
+    return n.reshape(-1, 3)
+
+
+def refreshed_normals(obj):
+    """The normals of ``obj`` after its positions are set again through the
+    vertices' own property (which tells Blender they changed)."""
+    V = np.empty(3 * len(obj.data.vertices), np.float32)
+    obj.data.vertices.foreach_get("co", V)
+    obj.data.vertices.foreach_set("co", V)
+    obj.data.update()
+    return evaluated_normals(obj)
+
+
+def test_live_mode_shades_the_edited_original_with_its_new_normals(scene):
+    """Live mode wrote the edited original's positions with update_tag()
+    alone: Blender kept its old normals, so while the cage was edited the
+    dense mesh moved but was shaded (and exported) as before the edit."""
+    src = bumpy_uv_sphere()
+    assert simplify(100) == {'FINISHED'}
+    cage = src.meshadjust.cage
+    edited = cage.meshadjust.edited
+    before = evaluated_normals(edited)
+    lift_in_edit_mode(cage, above=0.3, dz=0.4)
+    cage.meshadjust.live = True
+    live = mod("live")
+    live._pending.add(cage.name)
+    live.refine_pending()
+    assert cage.meshadjust.last_report.startswith("live: ")
+    shown = evaluated_normals(edited)
+    assert not np.allclose(shown, before, atol=1e-3)
+    assert np.array_equal(shown, refreshed_normals(edited))
+
+
+def concave_quad(obj):
+    """Move the fourth corner of a quad of ``obj`` across the quad's first
+    diagonal (as an artist's tweak can); returns the new positions."""
+    me = obj.data
+    p = next(p for p in me.polygons if len(p.vertices) == 4 and p.center.z > 0.3)
+    a, _, c, d = p.vertices
+    V = pos(obj)
+    V[d] += 2.0 * ((V[a] + V[c]) / 2 - V[d])
+    return V
+
+
+def test_positions_written_by_meshadjust_give_blender_s_triangles_of_them(scene):
+    """A foreach_set on the position attribute left Blender's triangles of
+    quads as they were: a quad MeshAdjust made concave was drawn (and read)
+    split along the diagonal that folds it."""
+    obj = bumpy_uv_sphere()
+    F_before = mod("mesh_io").read_triangles(obj.data)[0]
+    V = concave_quad(obj)
+    twin = obj.copy()
+    twin.data = obj.data.copy()
+    twin.data.vertices.foreach_set("co", V.astype(np.float32).ravel())
+    twin.data.update()
+    mod("mesh_io").write_positions(obj.data, V)
+    F = mod("mesh_io").read_triangles(obj.data)[0]
+    assert np.array_equal(F, mod("mesh_io").read_triangles(twin.data)[0])
+    assert (F != F_before).any()          # (precondition: quads around it split the other way)
+
+
+def test_a_bind_keeps_the_edited_original_when_only_a_quad_s_split_changed(scene):
+    """The edited original was re-made ('re-made from ... 266 -> 266
+    vertices, 288 -> 288 faces') whenever Blender split one of its quads
+    along the other diagonal than the source's (a deformed or tweaked quad):
+    its mesh was replaced by a new copy of the source, and what the artist
+    had painted on it was lost."""
+    src = bumpy_uv_sphere()
+    assert simplify(100, fit=False) == {'FINISHED'}
+    cage = src.meshadjust.cage
+    edited = cage.meshadjust.edited
+    paint = edited.data.color_attributes.new("paint", 'FLOAT_COLOR', 'POINT')
+    colours = np.random.default_rng(1).random(4 * len(edited.data.vertices)).astype(np.float32)
+    paint.data.foreach_set("color", colours)
+    mesh = edited.data
+    F_before = mod("mesh_io").read_triangles(src.data)[0]
+    V = concave_quad(src)
+    for i in range(len(src.data.vertices)):         # (the artist's tweak, through the UI)
+        src.data.vertices[i].co = V[i]
+    assert not np.array_equal(mod("mesh_io").read_triangles(src.data)[0], F_before)
+    activate(cage)
+    assert bpy.ops.meshadjust.bind() == {'FINISHED'}
+    assert "re-made" not in cage.meshadjust.last_report, cage.meshadjust.last_report
+    assert edited.data == mesh
+    got = np.empty_like(colours)
+    edited.data.color_attributes["paint"].data.foreach_get("color", got)
+    assert np.array_equal(got, colours)
+    assert edited.meshadjust.source_fingerprint == \
+        mod("staleness").source_fingerprint(src)
