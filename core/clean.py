@@ -16,7 +16,8 @@ edge- and vertex-manifold triangle mesh that :func:`~.simplify.simplify`,
            collapsed clusters), and the ends of edges that short
     drop   faces degenerate after welding; of faces on the same three
            vertices keep one, or none when both orientations are there
-           (a double-sided sheet) unless one side is what mends the surface
+           (a double-sided sheet) unless one side is what mends the surface;
+           of a quad triangulated both ways (inside the surface) keep one way
     pair   the faces around every non-manifold edge into manifold sheets
            (consistent orientation first, then the flattest pair); the faces
            left over see the edge as a border
@@ -67,7 +68,7 @@ from .errors import InvalidArgumentError
 from .mesh import (FLAT_FACE, bounding_box, check_count, check_mesh, check_vertex_mask,
                    cross_rows, diagonal_length, face_normals)
 from .topology import connected_labels, edge_keys, face_components
-from .copies import coincident_copies, pillow_layers, stacked_copies
+from .copies import coincident_copies, doubled_quads, pillow_layers, stacked_copies
 from .pages import plain_pages
 from .pinholes import zip_slits
 
@@ -104,6 +105,7 @@ class CleanReport:
     n_welded_vertices: int = 0        #: input vertices merged into another one
     n_degenerate_faces: int = 0       #: faces with a repeated vertex (also after welding)
     n_duplicate_faces: int = 0        #: faces on the same vertices as a kept one
+    n_doubled_quads: int = 0          #: quads triangulated both ways: one way dropped (2 faces each)
     n_double_sided_sheets: int = 0    #: face sets with both orientations, all removed ...
     n_double_sided_faces: int = 0     #: ... with this many faces
     n_non_manifold_edges: int = 0     #: edges with more than two faces, cut into sheets
@@ -161,6 +163,8 @@ class CleanReport:
         add(self.n_pinholes, "closed {} pinholes", f" ({self.n_pinhole_faces:,} faces)")
         add(self.n_degenerate_faces, "removed {} degenerate faces")
         add(self.n_duplicate_faces, "removed {} duplicate faces")
+        add(self.n_doubled_quads, "removed {} quads triangulated both ways",
+            f" ({2 * self.n_doubled_quads:,} faces)")
         add(self.n_detached_faces, "detached {} faces")
         add(self.n_flipped_faces, "flipped {} faces to a consistent orientation")
         add(self.n_non_orientable_components, "cut {} one-sided (non-orientable) components open",
@@ -357,11 +361,16 @@ def _weld_stage(w, box, weld_distance, protected):
 
 def _drop_repeated_faces(w):
     """Of faces on the same three vertices keep one, or none (a
-    double-sided sheet): :func:`_unique_faces`."""
+    double-sided sheet): :func:`_unique_faces`; of a quad triangulated both
+    ways keep one way (:func:`~.copies.doubled_quads`)."""
     keep, found = _unique_faces(w.F, w.twin, w.V.shape[0])
     w.counts.update(found)
     if not keep.all():
         w.keep(keep)
+    quads = doubled_quads(w.F, w.twin)
+    w.counts["n_doubled_quads"] = 0 if quads is None else int(np.count_nonzero(quads)) // 2
+    if quads is not None:
+        w.keep(~quads)
 
 
 def _manifold_stage(w):

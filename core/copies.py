@@ -39,12 +39,12 @@ pieces, a lid on a rim) keep vertices of their own and stay.
 
 import numpy as np
 
-from ._clean import BOUNDARY, coincident_pairs
+from ._clean import BOUNDARY, NON_MANIFOLD, coincident_pairs, half_edge_ends
 from ._groups import ragged_ranges
 from .mesh import face_areas
 from .topology import connected_labels, face_components, numbered, vertex_labels
 
-__all__ = ["coincident_copies", "pillow_layers", "stacked_copies"]
+__all__ = ["coincident_copies", "doubled_quads", "pillow_layers", "stacked_copies"]
 
 #: two components whose areas differ by less than this share have the same area (a copy
 #: moved by a weld distance rounds its area differently): the later one goes
@@ -145,6 +145,58 @@ def stacked_copies(V, F, area, distance, protected=None):
     if protected is not None:
         drop &= ~_has_protected(vc, lab, protected, k)
     return drop if drop.any() else None
+
+
+def doubled_quads(F, twin):
+    r"""(m,) bool mask of the faces to drop from quads triangulated both ways,
+    or None when there is none; ``twin`` is ``twin_table(F, n)``.
+
+    A quad ``p a q b`` exported with both diagonals has the faces ``(a, b,
+    p), (b, a, q)`` and ``(p, q, a), (q, p, b)``: a closed tetrahedron glued
+    into the surface, each of its four rim edges shared by three or more
+    faces. Pairing them edge by edge could take one triangulation on some rim
+    edges and the other on the rest; the chain of disagreeing pairs was cut,
+    both triangulations came loose, each dropped as a copy of the other, and
+    the quad was a hole (a torus with 20 such quads: 5 holes). Here, of the
+    two pairs of faces across an interior edge whose four other edges are all
+    non-manifold and that stand on the same four vertices, the pair without
+    the lower face index goes (the first one written stays, as of duplicates)::
+
+        p ------- a        p ------- a
+        |  \      |        |      /  |
+        |    \    |   +    |    /    |
+        |      \  |        |  /      |
+        b ------- q        b ------- q
+
+    (A tetrahedron on its own has no non-manifold edge; a quad with one of
+    its rim edges on a border of the mesh has that edge in two faces only,
+    and is left to the pairing.)
+    """
+    rims = (twin.reshape(-1, 3) == NON_MANIFOLD).sum(axis=1) == 2
+    if not rims.any():
+        return None
+    # interior edges (h < twin[h]) between two faces whose other two edges are non-manifold
+    h = np.flatnonzero((twin > np.arange(twin.size)) & np.repeat(rims, 3))
+    t = twin[h]
+    Fr = F.ravel()
+    keep = rims[t // 3] & (Fr[h] != Fr[t])          # (and two corners across: not a duplicate)
+    h, t = h[keep], t[keep]
+    if h.size < 2:
+        return None
+    U, W = half_edge_ends(F, h)
+    quads = np.sort(np.stack([U, W, Fr[h], Fr[t]], axis=1), axis=1)
+    _, group, count = np.unique(quads, axis=0, return_inverse=True, return_counts=True)
+    group = group.ravel()
+    two = np.flatnonzero(count[group] == 2)
+    if two.size == 0:
+        return None
+    low = np.minimum(h[two], t[two]) // 3
+    order = two[np.lexsort((low, group[two]))]      # each quad's two diagonals, lower face first
+    second = order[1::2]
+    drop = np.zeros(F.shape[0], dtype=bool)
+    drop[h[second] // 3] = True
+    drop[t[second] // 3] = True
+    return drop
 
 
 def _winding(corners):

@@ -38,6 +38,28 @@ def flat_fins(V, F, k, seed):
             np.vstack([F, np.stack([a, n + np.arange(k), b], axis=1)]))
 
 
+def both_diagonals(F, k, seed):
+    """``F`` with ``k`` of its quads (two faces across an interior edge, no
+    two quads sharing a face) triangulated the other way too: two more faces
+    across the other diagonal, wound the same way."""
+    from core.topology import edge_faces, edge_map
+    rng = np.random.default_rng(seed)
+    em = edge_map(F, int(F.max()) + 1)
+    faces, corners = edge_faces(em)
+    used, extra = set(), []
+    for e in rng.permutation(np.flatnonzero(em.edge_face_count == 2)):
+        (f0, f1), (c0, c1) = faces[e], corners[e]
+        if f0 in used or f1 in used:
+            continue
+        used |= {f0, f1}
+        a, b = F[f0, (c0 + 1) % 3], F[f0, (c0 + 2) % 3]
+        p, q = F[f0, c0], F[f1, c1]
+        extra += [[p, a, q], [q, b, p]]
+        if len(extra) == 2 * k:
+            break
+    return np.vstack([F, extra])
+
+
 # ---------------------------------------------------------------- double-sided soups
 def test_a_double_sided_soup_sharing_its_corners_welds_into_one_side():
     """A triangle soup made double-sided in place (each triangle and its
@@ -112,3 +134,40 @@ def test_the_beetles_deviation_is_within_its_max_error():
     assert r.stopped_because == "max_error"
     assert r.deviation(V, F).hausdorff <= 0.001 * d
 
+
+# ---------------------------------------------------------------- quads triangulated twice
+def test_a_quad_triangulated_both_ways_keeps_one_way_and_leaves_no_hole():
+    """A torus whose 20 quads are also triangulated across their other
+    diagonal (a closed tetrahedron glued into the surface, its rim edges in
+    three faces): the pairing took one triangulation on some rim edges and
+    the other on the rest, the disagreeing chain was cut, both came loose as
+    copies of each other and went: the cleaned torus had 5 holes (1,590
+    faces, 5 border loops) and so did its cage."""
+    V, F = torus(40, 20)
+    V = V * (1 + 0.05 * np.sin(9 * V[:, :1]))
+    F2 = both_diagonals(F, 20, 0)
+    c = clean_mesh(V, F2)
+    assert c.report.n_doubled_quads == 20 and "removed 20 quads triangulated both ways (40 faces)" \
+        in c.report.summary()
+    assert c.F.shape == F.shape and c.report.n_copies == 0
+    assert_clean_cage(c.V, c.F)
+    s = topology_summary(c.F, c.V.shape[0])
+    assert (s.euler, s.boundary_loops) == (0, 0)
+    # the first triangulation written stays: the cleaned torus is the torus
+    np.testing.assert_array_equal(c.face_to_input, np.arange(F.shape[0]))
+    d = core.bbox_diagonal(V)
+    r = simplify(V, F2, max_error=0.0005 * d)
+    assert r.n_boundary_loops == 0 and r.stopped_because == "max_error"
+    assert r.deviation(V, F2).hausdorff <= 0.0005 * d
+    assert r.represented(F2).sum() == F.shape[0]
+
+
+def test_a_lone_tetrahedron_and_an_open_cap_are_no_doubled_quads():
+    """Four faces on four vertices are a doubled quad only inside a surface:
+    a tetrahedron on its own, or three faces of one around a vertex, stay."""
+    from tests.mesh_factory import tetrahedron
+    V, F = tetrahedron()
+    c = clean_mesh(V, F)
+    assert c.F.shape[0] == 4 and not c.report
+    c = clean_mesh(V, F[:3])
+    assert c.F.shape[0] == 3 and not c.report
