@@ -36,14 +36,15 @@ import numpy as np
 from .cg import conjugate_gradient
 from .clean import clean_mesh
 from .errors import InvalidArgumentError, InvalidMeshError
-from .mesh import (barycentric_gather, barycentric_scatter, bbox_diagonal, bounding_box, check_mesh,
+from .mesh import (barycentric_gather, barycentric_scatter, bbox_diagonal, bounding_box,
                    check_number, check_seed, check_units, cross_rows, face_areas, squared_edges,
                    stops, vertex_normals)
 from .metrics import MAX_SAMPLES, sample_surface
 from .mirror import axis_index, mirror_partners, symmetrize
 from .near_query import search_for
 from .spatial import TriangleIndex
-from .subdivide import check_subdivision_args, subdivision_operator
+from .binding import check_named_mesh
+from .subdivide import cage_operator, check_subdivision_args
 from .topology import check_not_soup, edge_map
 from .pages import plain_pages
 
@@ -190,8 +191,10 @@ def _set_up(V_dense, F_dense, V_cage, F_cage, *, levels, scheme, creases, smooth
     moved to the dense bounding-box centre (the result then does not depend
     on where the mesh sits; the CG stopping rule is relative), its samples
     and index, and the cage's operator and Laplacian."""
-    V_dense, F_dense = check_mesh(V_dense, F_dense, where="fit_cage", allow_empty=False)
-    V_cage, F_cage = check_mesh(V_cage, F_cage, where="fit_cage", allow_empty=False)
+    V_dense, F_dense = check_named_mesh(V_dense, F_dense, where="fit_cage",
+                                        names=("V_dense", "F_dense"), allow_empty=False)
+    V_cage, F_cage = check_named_mesh(V_cage, F_cage, where="fit_cage", names=("V_cage", "F_cage"),
+                                      allow_empty=False)
     check_subdivision_args(levels, scheme, "fit_cage", F_cage.shape[0])
     check_units(V_dense, where="fit_cage", name="V_dense")
     check_units(V_cage, where="fit_cage", name="V_cage")
@@ -211,8 +214,8 @@ def _set_up(V_dense, F_dense, V_cage, F_cage, *, levels, scheme, creases, smooth
     V_dense, V_cage = dense.V - centre, V_cage - centre
     if creases is not None and np.asarray(creases).size == 0:
         creases = None                      # as bind does: same operator, same fingerprint
-    op = subdivision_operator(F_cage, V_cage.shape[0], levels=levels, scheme=scheme,
-                              creases=creases)
+    op = cage_operator(F_cage, V_cage.shape[0], where="fit_cage", levels=levels, scheme=scheme,
+                       creases=creases)
     if samples is None:
         samples = int(np.clip(2 * op.n_fine, 5000, 200000))
     samples = check_number(samples, where="fit_cage", name="samples", lo=1, hi=MAX_SAMPLES,

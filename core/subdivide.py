@@ -154,7 +154,7 @@ import numpy as np
 
 from . import _refine as _rf
 from . import _stencils as _st
-from .errors import InvalidArgumentError
+from .errors import InvalidArgumentError, InvalidMeshError
 from .mesh import check_count, check_faces, check_finite_rows, check_mesh
 from .pages import plain_pages
 
@@ -483,6 +483,22 @@ def subdivision_operator(F, n_vertices, *, levels=1, scheme="butterfly", creases
     F = check_faces(F, n, where=where)
     check_subdivision_args(levels, scheme, where, F.shape[0])
     return _build(F, n, levels, scheme, creases, where)
+
+
+def cage_operator(F_cage, n_cage, *, where, levels, scheme, creases):
+    """:func:`subdivision_operator` of a cage for the public function
+    ``where`` (``bind``, ``fit_cage``): its refusals (a non-manifold or
+    inconsistently oriented cage, a crease that is no edge) name ``where``
+    and ``F_cage``, not ``subdivision_operator``, which the caller never
+    called."""
+    try:
+        return subdivision_operator(F_cage, n_cage, levels=levels, scheme=scheme, creases=creases)
+    except (InvalidMeshError, InvalidArgumentError) as exc:
+        msg = str(exc)
+        head = "subdivision_operator: "
+        if not msg.startswith(head):
+            raise
+        raise type(exc)(f"{where}: the cage (F_cage): {msg[len(head):]}") from None
 
 
 @plain_pages

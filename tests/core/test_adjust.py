@@ -275,7 +275,7 @@ def test_bad_inputs_raise_named_errors(sphere_binding):
     bad[0, 0] = np.nan
     with pytest.raises(InvalidMeshError, match="NaN"):
         deform(b, bad)
-    with pytest.raises(InvalidMeshError, match="bind: F must be"):
+    with pytest.raises(InvalidMeshError, match="bind: F_dense must be"):
         bind(Vd, Fd[:, :2], Vc, Fc)
     with pytest.raises(InvalidMeshError, match="no faces"):
         bind(Vd, Fd, Vc, np.zeros((0, 3), np.int64))

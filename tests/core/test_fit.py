@@ -178,7 +178,7 @@ def test_fit_bad_arguments(sphere_case):
         fit_cage(Vd, Fd, Vc, Fc, iterations=-2)
     with pytest.raises(InvalidArgumentError, match="laplacian"):
         fit_cage(Vd, Fd, Vc, Fc, laplacian="harmonic")
-    with pytest.raises(InvalidMeshError, match="fit_cage: F must be"):
+    with pytest.raises(InvalidMeshError, match="fit_cage: F_dense must be"):
         fit_cage(Vd, Fd.astype(float), Vc, Fc)
 
 

@@ -217,3 +217,42 @@ def test_the_fold_repair_keeps_an_unwelded_scan_closed():
         assert np.abs(D - full).max() <= 1e-12 * _diagonal(Vd)
         assert np.array_equal(b.repaired(D), b.repaired(full))
         assert _crack(D, key) == 0.0
+
+
+@pytest.mark.parametrize("step", ["bind", "fit_cage"])
+def test_bad_meshes_are_refused_naming_the_argument(step):
+    # bind and fit_cage take two meshes: "V must be (n,3) floats", "the mesh has no
+    # faces" and "subdivision_operator: 3 non-manifold edges" named neither which mesh
+    # nor the function the user called
+    from core import InvalidArgumentError, InvalidMeshError, fit_cage
+    call = bind if step == "bind" else fit_cage
+    Vd, Fd = _bumpy_sphere(2)
+    Vc, Fc = icosphere(1)
+    cases = [
+        ((Vd[:, :2], Fd, Vc, Fc), InvalidMeshError, f"{step}: V_dense must be"),
+        ((Vd, Fd.astype(float), Vc, Fc), InvalidMeshError, f"{step}: F_dense must be"),
+        ((Vd, Fd, Vc.astype(complex), Fc), InvalidMeshError, f"{step}: V_cage must be"),
+        ((Vd, Fd, Vc, Fc[:0]), InvalidMeshError, f"{step}: F_cage has no faces"),
+        ((Vd, Fd + 1000, Vc, Fc), InvalidMeshError, f"{step}: 320 faces of F_dense index"),
+        ((Vd, Fd, np.where(np.arange(42)[:, None] == 3, np.nan, Vc), Fc), InvalidMeshError,
+         f"{step}: 1 vertices of V_cage have NaN"),
+        ((Vd, Fd, Vc, np.vstack([Fc, Fc[:1]])), InvalidMeshError,
+         rf"{step}: the cage \(F_cage\): 3 non-manifold edges"),
+        ((Vd, Fd, Vc, np.vstack([Fc[:1, ::-1], Fc[1:]])), InvalidMeshError,
+         rf"{step}: the cage \(F_cage\): faces are not consistently oriented"),
+    ]
+    for args, error, match in cases:
+        with pytest.raises(error, match=match):
+            call(*args, levels=1)
+    with pytest.raises(InvalidArgumentError, match=rf"{step}: the cage \(F_cage\): creases must"):
+        call(Vd, Fd, Vc, Fc, levels=1, creases=[[0, 41]])
+
+
+def test_an_unsigned_moved_index_beyond_int64_is_named_as_given():
+    Vd, Fd = _bumpy_sphere(2)
+    Vc, Fc = icosphere(1)
+    b = bind(Vd, Fd, Vc, Fc, levels=1)
+    D = deform(b, Vc)
+    from core import InvalidArgumentError
+    with pytest.raises(InvalidArgumentError, match="moved index 9223372036854775813 is out of"):
+        deform(b, Vc, moved=np.array([2**63 + 5], dtype=np.uint64), out=D)
