@@ -591,7 +591,7 @@ def deform(binding, V_cage_edited, *, F_cage=None, moved=None, out=None):
     with its neighbourhood's rest shape (``Binding.repaired(D)`` lists the
     rows). Nothing else changes: no edit and rigid motions stay exact (to
     rounding: the fine surface and its frames are computed relative to a
-    working origin near the cage (:func:`_working_origin`), so a scan or a
+    working origin near the cage (:func:`_deform_origin`), so a scan or a
     cage far from the origin is as exact as one near it, to a few rounding
     steps of the largest coordinate: 1e-12 of the diagonal up to about 1e3
     diagonals from the origin; the unedited cage gives the scan back to
@@ -645,7 +645,7 @@ def deform(binding, V_cage_edited, *, F_cage=None, moved=None, out=None):
                 _keep_repair(binding, out, _unfold(binding, out, Vc, hit, last))
         return out
     Vc = _check_cage(binding, V_cage_edited, F_cage, "deform")
-    origin = _working_origin(Vc)
+    origin = _deform_origin(binding, Vc)
     X = _fine_levels(binding, Vc, origin)
     Nf = _vertex_normals_t(X[-1], binding._operator.F_fine)
     c = binding._cache
@@ -675,7 +675,7 @@ def _repair_state(binding):
         return None
     c = binding._cache
     if "repair" not in c:
-        origin = _working_origin(binding.V_cage_rest)
+        origin = _deform_origin(binding, binding.V_cage_rest)
         VrT = _fine_levels(binding, binding.V_cage_rest, origin)[-1]
         NrT = _vertex_normals_t(VrT, binding._operator.F_fine)
         rest = _positions_t(c["offset_t"], c["corners_t"], c["bary_t"], VrT, NrT, origin)
@@ -1229,9 +1229,9 @@ def _check_cage(binding, V_cage_edited, F_cage, where):
 def _fine_geometry(binding, V_cage_edited, F_cage, where):
     """Check an edited cage against the binding; return fine positions and
     normals, transposed (3, n_fine), relative to the origin (3,) returned
-    third (:func:`_working_origin`)."""
+    third (:func:`_deform_origin`)."""
     Vc = _check_cage(binding, V_cage_edited, F_cage, where)
-    origin = _working_origin(Vc)
+    origin = _deform_origin(binding, Vc)
     op = binding._operator
     VfT = np.ascontiguousarray(op.apply(Vc - origin).T)
     return VfT, _vertex_normals_t(VfT, op.F_fine), origin
@@ -1281,7 +1281,7 @@ def _working_origin(Vc):
     relative to for the cage positions ``Vc`` (n,3): zero for a cage near the
     origin (within twice its size: the results bit for bit as without one),
     else the centre of its bounding box rounded to a multiple of the power
-    of two just above its size (so a small edit keeps the same origin).
+    of two just above its size.
 
     Frames come from differences of fine positions: at 1e6 from the origin
     each carried a rounding step of 1e6 (1.2e-10), which the offsets
@@ -1289,14 +1289,40 @@ def _working_origin(Vc):
     moved a thousand sizes away, deformed 1e-10 to 1e-8 of its size off the
     rigid result). Relative to this origin the frames are as exact as near
     the origin, and the one rounding left is the output's own."""
+    return _origin_and_step(Vc)[0]
+
+
+def _origin_and_step(Vc):
+    """:func:`_working_origin` and the power of two just above the cage's size."""
     if Vc.shape[0] == 0:
-        return np.zeros(3)
+        return np.zeros(3), 1.0
     lo, hi = bounding_box(Vc)
     mid = 0.5 * (lo + hi)
     step = float(np.ldexp(1.0, int(np.frexp(max(float((hi - lo).max()), 1e-300))[1])))
     if float(np.abs(mid).max()) <= 2.0 * step:
-        return np.zeros(3)
-    return np.round(mid / step) * step
+        return np.zeros(3), step
+    return np.round(mid / step) * step, step
+
+
+def _deform_origin(binding, Vc):
+    """The working origin of a deform or refine of the cage ``Vc``: the rest
+    cage's (the bind's: the unedited cage gives the scan back to half a
+    rounding step) while the edited cage's box centre stays within twice
+    the rest cage's size of it, so an edit of some vertices changes no
+    other row, not even by a rounding step (the origin of the edited cage
+    itself moved with its box, and rows of a scan far from the origin that
+    the edit does not reach changed in their last bit); else (the cage moved
+    far away) the edited cage's own."""
+    if binding.V_cage_rest is None:
+        return _working_origin(Vc)
+    c = binding._cache
+    if "rest_origin" not in c:
+        c["rest_origin"] = _origin_and_step(binding.V_cage_rest)
+    origin, step = c["rest_origin"]
+    lo, hi = bounding_box(Vc)
+    if float(np.abs(0.5 * (lo + hi) - origin).max()) <= 2.0 * step:
+        return origin
+    return _working_origin(Vc)
 
 
 def _fine_levels(binding, Vc, origin=None):
@@ -1337,7 +1363,7 @@ def _update_fine_geometry(binding, Vc, ids, hit):
         other = (g.V_cage != Vc).any(axis=1)
         other[ids] = False
     if g is None or other.any():
-        origin = _working_origin(Vc)
+        origin = _deform_origin(binding, Vc)
         X = _fine_levels(binding, Vc, origin)
         g = _Geometry.of(Vc, X, _vertex_normals_t(X[-1], binding._operator.F_fine), origin)
         c["geometry"] = g

@@ -256,3 +256,22 @@ def test_an_unsigned_moved_index_beyond_int64_is_named_as_given():
     from core import InvalidArgumentError
     with pytest.raises(InvalidArgumentError, match="moved index 9223372036854775813 is out of"):
         deform(b, Vc, moved=np.array([2**63 + 5], dtype=np.uint64), out=D)
+
+
+def test_an_edit_of_a_scan_far_from_the_origin_changes_no_row_it_does_not_reach():
+    # the working origin followed the edited cage's box: a vertex pulled past the box
+    # moved it, and every row of a scan 1e5-1e6 from the origin changed in its last bit,
+    # also those the edit does not reach (Binding.affected); it stays the rest cage's
+    Vd, Fd = _bumpy_sphere()
+    Vc, Fc = icosphere(1)
+    Vc = 0.97 * Vc
+    for far in (1e5 + 0.3, 1e6 + 0.7):
+        o = np.array([far, -far / 3, 0.0])
+        b = bind(Vd + o, Fd, Vc + o, Fc, levels=2)
+        D0 = deform(b, Vc + o)
+        for i in (0, 5, 17):
+            for amount in (0.05, 0.3, 1.0):
+                Ve = Vc + o
+                Ve[i] += amount * Vc[i] / np.linalg.norm(Vc[i])
+                away = ~b.affected([i])
+                assert np.array_equal(deform(b, Ve)[away], D0[away])
