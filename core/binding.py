@@ -390,9 +390,10 @@ def bind(V_dense, F_dense, V_cage, F_cage, *, levels=2, scheme="butterfly", crea
         Cage edges refined as sharp curves.
     detail_search : {"auto", "exact", "local"}
         How the refine detail (the dense surface point of each fine vertex)
-        is found: ``"exact"`` builds a :class:`~.spatial.TriangleIndex` over
-        the dense mesh (the closest point); ``"local"`` searches around the
-        dense vertices bound near each fine vertex, without an index (for
+        is found, both on the dense mesh cleaned (welded, without debris):
+        ``"exact"`` builds a :class:`~.spatial.TriangleIndex` over it (the
+        closest point); ``"local"`` searches around the dense vertices
+        bound near each fine vertex, without an index (for
         very large meshes: the closest point for about 99.5% of fine
         vertices, a farther point of the dense surface for the rest);
         ``"auto"`` is exact up to 500,000 dense faces.

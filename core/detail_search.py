@@ -2,10 +2,11 @@
 point of the dense surface near it (:func:`core.binding.bind`'s detail
 search).
 
-Two ways, chosen by ``bind(detail_search=...)``: an exact closest point on
-the cleaned dense surface (:func:`exact_detail_index`, an index of the whole
-scan; ``"auto"`` takes it up to 500,000 faces), or for larger scans a local
-search around the dense vertices the bind found near each fine vertex
+Two ways, chosen by ``bind(detail_search=...)``, both on the cleaned dense
+surface (:func:`detail_surface`: welded, without debris or double-sided
+sheets): an exact closest point (:func:`exact_detail_index`, an index of the
+whole scan; ``"auto"`` takes it up to 500,000 faces), or for larger scans a
+local search around the dense vertices the bind found near each fine vertex
 (:func:`dense_points_near`)::
 
     j has a bound dense vertex k nearest to it   closest point on k's fan; on k's
