@@ -61,7 +61,7 @@ from ._relocate import relocate, segment_triangles
 from ._touch_up import touch_up
 from .clean import MIN_COMPONENT_AREA, CleanReport, clean_mesh
 from .errors import InvalidArgumentError, InvalidMeshError, MeshAdjustError
-from .mesh import (area_normals_rows, bounding_box, check_flag, check_mesh, check_number,
+from .mesh import (UNITS, area_normals_rows, bounding_box, check_flag, check_mesh, check_number,
                    check_vertex_mask, diagonal_length, dot_columns, face_normals, has_area,
                    squared_edges)
 from .metrics import DistanceFrom, surface_distance
@@ -768,10 +768,11 @@ def _within_max_error(su, clean, target, max_error, opts, progress):
     set-up of ``clean``. Returns the cage and its distance.
     """
 
-    source = DistanceFrom(clean.V, clean.F)         # (its index and samples made once)
+    centre, scale = measuring_frame(clean.V)
+    source = DistanceFrom((clean.V - centre) / scale, clean.F)   # (its index and samples made once)
 
     def measure(cage, samples=None):
-        return source.to(cage.V, cage.F, samples=samples).hausdorff
+        return scale * source.to((cage.V - centre) / scale, cage.F, samples=samples).hausdorff
 
     tun = opts["tuning"]
     steps = list(tun.max_error_steps)
@@ -817,6 +818,23 @@ def _within_max_error(su, clean, target, max_error, opts, progress):
     return _unchanged(clean)._replace(stopped="max_error"), 0.0
 
 
+def measuring_frame(V):
+    """``(centre, scale)`` of the frame ``max_error`` is measured in, for
+    the positions ``V``: ``(V - centre) / scale`` goes to ``surface_distance``
+    and its distances are multiplied by ``scale``. The mesh's own units
+    (``(0, 1)``) when ``surface_distance`` takes them (:data:`~.mesh.UNITS`),
+    else centred on its bounding box and scaled to a unit diagonal: a part
+    1e-18 across or 1e15 from the origin was refused with
+    ``surface_distance``'s message ('... (simplify takes any units)') by a
+    simplify with ``max_error``."""
+    lo, hi = bounding_box(V)
+    reach = float(np.maximum(np.abs(lo), np.abs(hi)).max(initial=0.0))
+    size = diagonal_length(lo, hi)
+    if reach <= UNITS[1] and not 0.0 < size < UNITS[0]:
+        return np.zeros(3), 1.0
+    return 0.5 * (lo + hi), size or 1.0
+
+
 def _measured_cage(su, mesh, stopped, passes, opts, measure, max_error):
     """The cage of the engine state ``mesh`` (relocated, else not) and its
     distance, measured by ``measure``, if one is within ``max_error``; else
@@ -852,7 +870,9 @@ def simplify(V, F, *, target_faces=None, ratio=None, max_error=None, preserve_bo
     max_error : float >= 0, optional
         A guarantee, in the mesh's units: the cage's two-sided Hausdorff
         distance to the cleaned input, as :func:`core.surface_distance`
-        measures it (default samples and seed), is at most this. Collapses
+        measures it (default samples and seed; on the mesh scaled to a unit
+        size when it is outside the units that takes, :data:`~.mesh.UNITS`),
+        is at most this. Collapses
         whose error (the RMS distance of the new vertex to the planes of the
         input faces it stands for) exceeds the bound are refused, and when the
         measured distance would exceed it the last step of the bound is undone

@@ -47,7 +47,7 @@ from .mesh import area_normals_rows, bbox_diagonal, check_mesh, check_reach
 from .metrics import surface_distance
 from .mirror import PARTNER_TOLERANCE, axis_index, mirror, mirror_partners  # noqa: F401 (example)
 from .simplify import (SimplifyResult, check_arguments, check_flags, cleaned_input, debris_budget,
-                       represented_faces, simplify, target_count)
+                       measuring_frame, represented_faces, simplify, target_count)
 from .spatial import TriangleIndex
 from .topology import (border_vertex_count, boundary_loops_count, edge_keys, edge_map,
                        face_components, soup_pieces)
@@ -597,7 +597,9 @@ def _simplify_half(run, clean, target, max_error, most):
             half_target = max(0, half_target - (over + 1) // 2)
         if max_error is None:
             break
-        hausdorff = surface_distance(clean.V, clean.F, cage.V, cage.F).hausdorff
+        centre, scale = measuring_frame(clean.V)
+        hausdorff = scale * surface_distance((clean.V - centre) / scale, clean.F,
+                                             (cage.V - centre) / scale, cage.F).hausdorff
         if hausdorff <= max_error:
             break
     return r, cage, hausdorff

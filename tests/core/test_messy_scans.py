@@ -171,3 +171,22 @@ def test_a_lone_tetrahedron_and_an_open_cap_are_no_doubled_quads():
     assert c.F.shape[0] == 4 and not c.report
     c = clean_mesh(V, F[:3])
     assert c.F.shape[0] == 3 and not c.report
+
+
+# ---------------------------------------------------------------- units
+@pytest.mark.parametrize("symmetry", [None, "X"])
+@pytest.mark.parametrize("scale", [1e-18, 1e18])
+def test_max_error_takes_any_units_as_a_target_does(scale, symmetry):
+    """A mesh 1e-18 across (a part in light-years) or reaching 1e18: simplify
+    takes any units, but with max_error its measure was surface_distance's,
+    which refused them with its own message ('surface_distance: mesh a is
+    3.46e-18 across; ... (simplify takes any units)'). The same cage as at
+    unit scale, its distance in the mesh's units."""
+    V, F = icosphere(2)
+    unit = simplify(V, F, max_error=0.05, symmetry=symmetry)
+    r = simplify(V * scale, F, max_error=0.05 * scale, symmetry=symmetry)
+    assert r.stopped_because == unit.stopped_because == "max_error"
+    np.testing.assert_array_equal(r.F, unit.F)
+    np.testing.assert_allclose(r.V, unit.V * scale, rtol=1e-9, atol=0)
+    assert r.hausdorff == pytest.approx(unit.hausdorff * scale, rel=1e-6)
+    assert 0 < r.hausdorff <= 0.05 * scale and r.F.shape[0] < F.shape[0] / 2
