@@ -112,7 +112,40 @@ def source_space(cage, source):
             f"'{cage.name}' has shape keys: MeshAdjust reads the cage's mesh, not what its keys "
             f"show, so an edit made through them would be lost; apply them to the mesh (Shape "
             f"Keys > Apply All Shape Keys) or delete them")
+    moving = _moving_modifiers(cage)
+    if moving:
+        raise core.MeshAdjustError(
+            f"'{cage.name}' shows its vertices moved by its modifiers ({', '.join(moving)}): "
+            f"MeshAdjust reads the cage's mesh, not what its modifiers show, so an edit made "
+            f"through them would be lost; apply them to the mesh, or turn them off in the "
+            f"viewport (a Subdivision Surface or Mirror preview is fine)")
     return np.array(source.matrix_world.inverted() @ cage.matrix_world)
+
+
+def _moving_modifiers(cage):
+    """The names of the cage's viewport modifiers when what they show has the
+    cage's vertices elsewhere (a Displace, a Lattice: an edit made through
+    them was silently left out), else []. A modifier that adds vertices (a
+    Subdivision Surface or Mirror preview) shows more than the cage's
+    vertices: not one of these."""
+    shown = [m for m in cage.modifiers if m.show_viewport]
+    if not shown:
+        return []
+    if cage.mode == 'EDIT':
+        cage.update_from_editmode()
+    ob_eval = cage.evaluated_get(bpy.context.evaluated_depsgraph_get())
+    mesh = ob_eval.to_mesh()
+    try:
+        if len(mesh.vertices) != len(cage.data.vertices):
+            return []
+        V_shown = mesh_io.read_positions32(mesh)
+    finally:
+        ob_eval.to_mesh_clear()
+    V = mesh_io.read_positions32(cage.data)
+    tol = 1e-6 * max(core.bbox_diagonal(V.reshape(-1, 3).astype(np.float64)), 1e-300)
+    if np.abs(V_shown - V).max(initial=0.0) <= tol:
+        return []
+    return [m.name for m in shown]
 
 
 def _bound_source_matrix(cage):
@@ -606,6 +639,10 @@ def refine_object(cage, *, output='EDITED', levels=None, scheme=None):
     if stale:
         warnings.append(f"{stale}: the result uses the mesh that was bound; re-bind to use the "
                         f"new one")
+    data = staleness.source_data_change(source, edited, fresh=True) \
+        if output in ('EDITED', 'BOTH') and not stale else None
+    if data:
+        warnings.append(f"{data}: re-bind to bring them over")
     dt = time.perf_counter() - t0
     msg = "; ".join(rj.parts) + f", {dt:.2f} s"
     if warnings:

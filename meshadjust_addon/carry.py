@@ -29,16 +29,7 @@ import numpy as np
 
 from . import mesh_io
 
-#: attribute type -> (foreach field, values per element, dtype, interpolated)
-_TYPES = {
-    'FLOAT': ("value", 1, np.float32, True), 'FLOAT2': ("vector", 2, np.float32, True),
-    'FLOAT_VECTOR': ("vector", 3, np.float32, True),
-    'FLOAT_COLOR': ("color", 4, np.float32, True), 'BYTE_COLOR': ("color", 4, np.float32, True),
-    'INT': ("value", 1, np.int32, False), 'INT8': ("value", 1, np.int32, False),
-    'BOOLEAN': ("value", 1, bool, False), 'INT32_2D': ("value", 2, np.int32, False),
-    'QUATERNION': ("value", 4, np.float32, False), 'INT16_2D': ("value", 2, np.int32, False),
-    'FLOAT4X4': ("value", 16, np.float32, False),
-}
+_TYPES = mesh_io.ATTRIBUTE_FIELDS
 
 #: attributes the new mesh has of its own or that are not the artist's data
 _SKIP = {"position", "custom_normal"}
@@ -52,18 +43,6 @@ def _carried(attr):
     return ((name in _INTERNAL or not name.startswith((".", "meshadjust_")))
             and name not in _SKIP and attr.data_type in _TYPES
             and attr.domain in ('POINT', 'CORNER', 'FACE', 'EDGE'))
-
-
-def _read(attr, n):
-    field, width, dtype, _ = _TYPES[attr.data_type]
-    buf = np.empty(n * width, dtype=dtype)
-    attr.data.foreach_get(field, buf)
-    return buf.reshape(n, width)
-
-
-def _write(attr, values):
-    field, _, dtype, _ = _TYPES[attr.data_type]
-    attr.data.foreach_set(field, np.ascontiguousarray(values, dtype=dtype).ravel())
 
 
 def _mix(values, idx, weights, interpolate):
@@ -172,9 +151,7 @@ def carry(src, src_obj, dst, F, op):
     vidx = vW = None
     corner = edge = None
     for attr in [a for a in src.attributes if _carried(a)]:
-        n_src = {'POINT': len(src.vertices), 'CORNER': len(src.loops),
-                 'FACE': len(src.polygons), 'EDGE': len(src.edges)}[attr.domain]
-        values = _read(attr, n_src)
+        values = mesh_io.read_attribute(attr)
         interpolate = _TYPES[attr.data_type][3]
         if attr.domain == 'POINT':
             if vidx is None:
@@ -197,7 +174,7 @@ def carry(src, src_obj, dst, F, op):
             if new is not None:
                 dst.attributes.remove(new)
             new = dst.attributes.new(attr.name, attr.data_type, attr.domain)
-        _write(new, out)
+        mesh_io.write_attribute(new, out)
     _choices(src, dst)
     notes = []
     left = sorted(a.name for a in src.attributes if not a.name.startswith((".", "meshadjust_"))

@@ -148,6 +148,25 @@ def has_deformers(obj):
     return bool(obj.modifiers) or bool(obj.data.shape_keys)
 
 
+def disabled_in_viewport(obj, view_layer=None):
+    """Whether ``obj`` is disabled in the viewports of ``view_layer`` (the
+    context's): disabled itself, or in no collection that is enabled there
+    (every collection holding it excluded, or disabled in viewports itself or
+    through a parent collection). Hidden (the eye) is not disabled: Blender
+    still evaluates its modifiers."""
+    if obj.hide_viewport:
+        return True
+    view_layer = view_layer or bpy.context.view_layer
+
+    def enabled_in(lc, disabled):
+        disabled = disabled or lc.exclude or lc.collection.hide_viewport
+        if not disabled and lc.collection.objects.get(obj.name) == obj:
+            return True
+        return any(enabled_in(child, disabled) for child in lc.children)
+
+    return not enabled_in(view_layer.layer_collection, False)
+
+
 def read_object(obj, *, depsgraph=None, evaluated=None):
     """The object's mesh as :class:`MeshArrays` in its local space.
 
@@ -164,8 +183,9 @@ def read_object(obj, *, depsgraph=None, evaluated=None):
     if use_eval:
         depsgraph = depsgraph or bpy.context.evaluated_depsgraph_get()
         ob_eval = obj.evaluated_get(depsgraph)
-        if not ob_eval.is_evaluated:
-            # (its base mesh would come back: the modifiers silently left out)
+        if not ob_eval.is_evaluated or disabled_in_viewport(obj):
+            # (its base mesh would come back: the modifiers silently left out; an object a
+            # cage points to is in the depsgraph, evaluated without them)
             raise core.InvalidMeshError(
                 f"'{obj.name}' is disabled in the viewport (the object, or a collection it is "
                 f"in, is disabled or excluded), so Blender does not evaluate its modifiers and "
@@ -295,3 +315,50 @@ def vertex_group_weights(obj, group_name):
         bpy.data.objects.remove(tmp_obj)
         bpy.data.node_groups.remove(ng)
     return buf.astype(np.float64)
+
+
+#: attribute data type -> (foreach field, values per element, dtype, continuous: may be
+#: interpolated); the types a MeshAdjust step reads and writes in bulk (not STRING)
+ATTRIBUTE_FIELDS = {
+    'FLOAT': ("value", 1, np.float32, True), 'FLOAT2': ("vector", 2, np.float32, True),
+    'FLOAT_VECTOR': ("vector", 3, np.float32, True),
+    'FLOAT_COLOR': ("color", 4, np.float32, True), 'BYTE_COLOR': ("color", 4, np.float32, True),
+    'INT': ("value", 1, np.int32, False), 'INT8': ("value", 1, np.int32, False),
+    'BOOLEAN': ("value", 1, bool, False), 'INT32_2D': ("value", 2, np.int32, False),
+    'QUATERNION': ("value", 4, np.float32, False), 'INT16_2D': ("value", 2, np.int32, False),
+    'FLOAT4X4': ("value", 16, np.float32, False),
+}
+
+
+def read_attribute(attr):
+    """(len, width) values of a mesh attribute of a type in :data:`ATTRIBUTE_FIELDS`."""
+    field, width, dtype, _ = ATTRIBUTE_FIELDS[attr.data_type]
+    buf = np.empty(len(attr.data) * width, dtype=dtype)
+    attr.data.foreach_get(field, buf)
+    return buf.reshape(-1, width)
+
+
+def write_attribute(attr, values):
+    """Write ``values`` (len, width) into a mesh attribute (:func:`read_attribute`)."""
+    field, _, dtype, _ = ATTRIBUTE_FIELDS[attr.data_type]
+    attr.data.foreach_set(field, np.ascontiguousarray(values, dtype=dtype).ravel())
+
+
+#: Blender's attributes that are a view's state, not the artist's data
+_VIEW_STATE = (".select_", ".uv_select")
+
+
+def artist_data_key(mesh):
+    """A checksum of what ``mesh`` holds besides its positions and
+    MeshAdjust's own attributes: its other attributes (UV maps, colours,
+    material indices, custom normals, sharp edges, seams, hidden parts, its
+    faces) and its materials; selections and string attributes left out."""
+    c = zlib.crc32(";".join(m.name if m is not None else "" for m in mesh.materials).encode())
+    for attr in sorted(mesh.attributes, key=lambda a: a.name):
+        name = attr.name
+        if name == "position" or name.startswith(("meshadjust_",) + _VIEW_STATE) \
+                or attr.data_type not in ATTRIBUTE_FIELDS:
+            continue
+        c = zlib.crc32(f"{name}|{attr.domain}|{attr.data_type}".encode(), c)
+        c = zlib.crc32(memoryview(np.ascontiguousarray(read_attribute(attr))).cast("B"), c)
+    return f"{len(mesh.vertices)}:{c:08x}"

@@ -99,12 +99,13 @@ def binding_warnings(cage):
         return []
     stale = staleness.source_change(source, edited.meshadjust.source_fingerprint) \
         or store.binding_misfit(edited)
+    data = None if stale else staleness.source_data_change(source, edited)   # (said once)
     try:
         api.check_source_in_place(cage, source)
         moved = None
     except USER_ERRORS as exc:             # (moved or applied: Refine refuses until Re-bind)
         moved = str(exc)
-    return [w for w in (stale, moved) if w]
+    return [w for w in (stale, data, moved) if w]
 
 
 def report_level(reports):

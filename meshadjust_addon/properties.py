@@ -86,6 +86,12 @@ class MeshAdjustObjectState(bpy.types.PropertyGroup):
                                         "positions MeshAdjust last wrote ('live': kept by live "
                                         "mode), so a change made since (sculpting, an applied "
                                         "transform) is kept aside, not overwritten")
+    data_written: StringProperty(name="Data written", default="",
+                                 description="On an edited original: a checksum of its UV maps, "
+                                             "attributes and materials as MeshAdjust last made "
+                                             "them from the source (a bind brings a source's "
+                                             "changed ones over, and keeps a version changed by "
+                                             "hand aside)")
     written_matrix: FloatVectorProperty(name="Written transform", size=16, default=(0.0,) * 16,
                                         description="On a result: its world matrix when "
                                                     "MeshAdjust last wrote it (row by row; all "

@@ -110,12 +110,13 @@ def changed_since_written(obj):
     return bool(written) and _checksum(now) != written
 
 
-def kept_aside(obj):
-    """When the result ``obj`` changed since MeshAdjust wrote it: a copy of
-    it as it is now, beside it, named ``<name>.hand``, with no MeshAdjust
-    state or binding data (the copy is the artist's; ``obj`` is then
-    overwritten). Returns the copy, or None when nothing changed."""
-    if not changed_since_written(obj):
+def kept_aside(obj, *, changed=False):
+    """When the result ``obj`` changed since MeshAdjust wrote it (or
+    ``changed``: the caller found another change): a copy of it as it is
+    now, beside it, named ``<name>.hand``, with no MeshAdjust state or
+    binding data (the copy is the artist's; ``obj`` is then overwritten).
+    Returns the copy, or None when nothing changed."""
+    if not changed and not changed_since_written(obj):
         return None
     copy = obj.copy()
     obj.meshadjust.written = ""    # (kept: a second look in the same step finds nothing more)
@@ -198,9 +199,11 @@ def edited_copy(source, cage, n_vertices, faces_key=None):
     """The edited-original object of ``cage`` with ``n_vertices`` vertices
     (and the polygons of the mesh bound, :func:`~.mesh_io.polygon_key`
     ``faces_key``, when given): the existing one, its mesh re-made from the
-    source when the source's vertex count or polygons changed, or a new copy
-    (also when the artist deleted it). Returns ``(edited, note)``, the note
-    saying what was re-made (empty otherwise).
+    source when the source's vertex count, polygons, UV maps, attributes or
+    materials changed (:func:`~.mesh_io.artist_data_key`; a version whose
+    data was changed by hand kept aside first), or a new copy (also when the
+    artist deleted it). Returns ``(edited, note)``, the note saying what was
+    re-made or kept aside (empty otherwise).
 
     Polygons, not triangles: an edit that deforms a quad of the edited
     original can make Blender split it along its other diagonal, and every
@@ -212,16 +215,26 @@ def edited_copy(source, cage, n_vertices, faces_key=None):
         linked = link_back(edited, source)      # (deleted by the artist: as Refine does)
     if edited is not None and edited.name in bpy.data.objects and edited.users_collection:
         old = edited.data
-        if len(old.vertices) == n_vertices and (
-                not faces_key or mesh_io.polygon_key(old) == faces_key):
-            return edited, linked
+        same = len(old.vertices) == n_vertices and (
+            not faces_key or mesh_io.polygon_key(old) == faces_key)
         mesh = _new_source_copy(source, old.name + ".new")
-        n_old, m_old = len(old.vertices), len(old.polygons)
+        data = mesh_io.artist_data_key(mesh)
+        if same and mesh_io.artist_data_key(old) == data:
+            bpy.data.meshes.remove(mesh)
+            edited.meshadjust.data_written = data
+            return edited, linked
+        notes = [linked]
+        if same:
+            notes.append(_data_kept_aside(edited))
+            why = "its UV maps, attributes or materials changed"
+        else:
+            why = (f"{len(old.vertices):,} -> {n_vertices:,} vertices, {len(old.polygons):,} -> "
+                   f"{len(mesh.polygons):,} faces")
         edited.data = mesh
+        edited.meshadjust.data_written = data
         retire(old, mesh)
-        return edited, "; ".join(filter(None, [linked, (
-            f"'{edited.name}' re-made from '{source.name}' ({n_old:,} -> {n_vertices:,} "
-            f"vertices, {m_old:,} -> {len(mesh.polygons):,} faces)")]))
+        notes.append(f"'{edited.name}' re-made from '{source.name}' ({why})")
+        return edited, "; ".join(filter(None, notes))
     mesh = _new_source_copy(source, name)
     edited = bpy.data.objects.new(name, mesh)
     edited.matrix_world = source.matrix_world.copy()
@@ -232,8 +245,22 @@ def edited_copy(source, cage, n_vertices, faces_key=None):
     st.role = 'EDITED'
     st.source = source
     st.cage = cage
+    st.data_written = mesh_io.artist_data_key(mesh)
     cage.meshadjust.edited = edited
     return edited, ""
+
+
+def _data_kept_aside(edited):
+    """When the UV maps, attributes or materials of the edited original
+    ``edited`` were changed by hand since MeshAdjust made them (or that is
+    not known), a copy of it as it is, ``<name>.hand`` (as :func:`kept_aside`);
+    returns the sentence for the report, or ""."""
+    recorded = edited.meshadjust.data_written
+    if recorded and mesh_io.artist_data_key(edited.data) == recorded:
+        return ""
+    copy = kept_aside(edited, changed=True)
+    return (f"'{edited.name}' had its UV maps, attributes or materials changed since MeshAdjust "
+            f"made it: that version is kept as '{copy.name}'")
 
 
 def write_refined(cage, source, Vr, Fr, notes=None):

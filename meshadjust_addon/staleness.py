@@ -193,6 +193,38 @@ def source_change(source, stored, *, fresh=False):
     return f"'{source.name}' changed since it was bound: " + ", ".join(what)
 
 
+def source_data_key(source):
+    """:func:`~.mesh_io.artist_data_key` of what ``source`` shows (its
+    evaluated mesh when it has modifiers), or None when that cannot be read
+    (in Edit Mode, or disabled in the viewport with modifiers)."""
+    if source.data.is_editmode:
+        return None
+    if not source.modifiers:
+        return mesh_io.artist_data_key(source.data)
+    if mesh_io.disabled_in_viewport(source):      # (its modifiers are not evaluated)
+        return None
+    ob_eval = source.evaluated_get(bpy.context.evaluated_depsgraph_get())
+    try:
+        return mesh_io.artist_data_key(ob_eval.to_mesh())
+    finally:
+        ob_eval.to_mesh_clear()
+
+
+def source_data_change(source, edited, *, fresh=False):
+    """A sentence when the UV maps, attributes or materials of ``source``
+    changed since ``edited`` was made from it (its ``data_written``), or
+    None (also when that was not recorded). ``fresh`` recomputes instead of
+    using the memo."""
+    stored = edited.meshadjust.data_written
+    if not stored:
+        return None
+    now = source_data_key(source) if fresh else _memoised("data", source, source_data_key)
+    if now is None or now == stored:
+        return None
+    return (f"'{source.name}' changed since it was bound: its UV maps, attributes or materials "
+            f"changed (the edited original has the old ones)")
+
+
 # ------------------------------------------------------------------ cage
 def _half_edges_of_mesh(mesh):
     n_l = len(mesh.loops)

@@ -381,15 +381,11 @@ def test_a_bind_keeps_the_edited_original_when_only_a_quad_s_split_changed(scene
     """The edited original was re-made ('re-made from ... 266 -> 266
     vertices, 288 -> 288 faces') whenever Blender split one of its quads
     along the other diagonal than the source's (a deformed or tweaked quad):
-    its mesh was replaced by a new copy of the source, and what the artist
-    had painted on it was lost."""
+    its mesh was replaced by a new copy of the source."""
     src = bumpy_uv_sphere()
     assert simplify(100, fit=False) == {'FINISHED'}
     cage = src.meshadjust.cage
     edited = cage.meshadjust.edited
-    paint = edited.data.color_attributes.new("paint", 'FLOAT_COLOR', 'POINT')
-    colours = np.random.default_rng(1).random(4 * len(edited.data.vertices)).astype(np.float32)
-    paint.data.foreach_set("color", colours)
     mesh = edited.data
     F_before = mod("mesh_io").read_triangles(src.data)[0]
     V = concave_quad(src)
@@ -399,9 +395,137 @@ def test_a_bind_keeps_the_edited_original_when_only_a_quad_s_split_changed(scene
     activate(cage)
     assert bpy.ops.meshadjust.bind() == {'FINISHED'}
     assert "re-made" not in cage.meshadjust.last_report, cage.meshadjust.last_report
-    assert edited.data == mesh
-    got = np.empty_like(colours)
-    edited.data.color_attributes["paint"].data.foreach_get("color", got)
-    assert np.array_equal(got, colours)
+    assert edited.data == mesh and "scan_edited.hand" not in bpy.data.objects
     assert edited.meshadjust.source_fingerprint == \
         mod("staleness").source_fingerprint(src)
+
+
+def uv_of(mesh, name="UVMap"):
+    uv = np.empty(2 * len(mesh.loops), np.float32)
+    mesh.uv_layers[name].data.foreach_get("uv", uv)
+    return uv
+
+
+def test_a_bind_brings_the_source_s_new_uvs_and_materials_to_the_edited_original(scene):
+    """The artist re-unwraps the scan and gives it a new material after the
+    bind: nothing said so, and even a Bind kept the edited original's old UV
+    map and materials for good (the README: its "same UVs and attributes")."""
+    src = bumpy_uv_sphere()
+    assert simplify(100, fit=False) == {'FINISHED'}
+    cage = src.meshadjust.cage
+    edited = cage.meshadjust.edited
+    old_uv = uv_of(src.data)
+    src.data.uv_layers["UVMap"].data.foreach_set("uv", old_uv[::-1].copy())   # re-unwrapped
+    src.data.materials.append(bpy.data.materials.new("skin"))
+    src.data.polygons.foreach_set("material_index", np.zeros(len(src.data.polygons), np.int32))
+    src.data.update()
+    activate(cage)
+    why = ("'scan' changed since it was bound: its UV maps, attributes or materials changed "
+           "(the edited original has the old ones)")
+    assert mod("operators").binding_warnings(cage) == [why]
+    lift_in_edit_mode(cage)
+    bpy.ops.object.mode_set(mode='OBJECT')
+    assert bpy.ops.meshadjust.refine(output='EDITED') == {'FINISHED'}
+    assert cage.meshadjust.last_report.endswith(f"; WARNING: {why}: re-bind to bring them over")
+    assert np.array_equal(uv_of(edited.data), old_uv)
+    n_objects = len(bpy.data.objects)
+    assert bpy.ops.meshadjust.bind() == {'FINISHED'}
+    assert cage.meshadjust.last_report.endswith(
+        "; 'scan_edited' re-made from 'scan' (its UV maps, attributes or materials changed)")
+    assert np.array_equal(uv_of(edited.data), old_uv[::-1])
+    assert [m.name for m in edited.data.materials] == ["skin"]
+    assert len(bpy.data.objects) == n_objects and not orphans()        # (nothing kept aside)
+    assert mod("operators").binding_warnings(cage) == []
+    assert bpy.ops.meshadjust.refine(output='EDITED') == {'FINISHED'}
+    assert "WARNING" not in cage.meshadjust.last_report
+
+
+def orphans():
+    return [m.name for m in bpy.data.meshes if m.users == 0]
+
+
+def test_a_bind_keeps_aside_an_edited_original_painted_by_hand_before_remaking_it(scene):
+    """The edited original painted by hand, then the source re-unwrapped:
+    the Bind that brings the new UVs over keeps the painted version aside."""
+    src = bumpy_uv_sphere()
+    assert simplify(100, fit=False) == {'FINISHED'}
+    cage = src.meshadjust.cage
+    edited = cage.meshadjust.edited
+    paint = edited.data.color_attributes.new("paint", 'FLOAT_COLOR', 'CORNER')
+    colours = np.random.default_rng(2).random(4 * len(edited.data.loops)).astype(np.float32)
+    paint.data.foreach_set("color", colours)
+    src.data.uv_layers["UVMap"].data.foreach_set("uv", uv_of(src.data)[::-1].copy())
+    src.data.update()
+    activate(cage)
+    assert bpy.ops.meshadjust.bind() == {'FINISHED'}
+    assert ("'scan_edited' had its UV maps, attributes or materials changed since MeshAdjust "
+            "made it: that version is kept as 'scan_edited.hand'; 'scan_edited' re-made from "
+            "'scan' (its UV maps, attributes or materials changed)") in cage.meshadjust.last_report
+    hand = bpy.data.objects["scan_edited.hand"]
+    got = np.empty_like(colours)
+    hand.data.color_attributes["paint"].data.foreach_get("color", got)
+    assert np.array_equal(got, colours) and "paint" not in edited.data.color_attributes
+    assert hand.meshadjust.role == 'NONE'
+    assert np.array_equal(uv_of(edited.data), uv_of(src.data))
+
+
+def test_a_cage_deformed_by_a_modifier_is_refused_not_silently_refined_without_it(scene):
+    """A Displace (or Lattice) modifier on the cage moves what the artist sees:
+    Refine said "'scan_edited' deformed" and nothing moved, the edit made
+    through the modifier silently left out (as shape keys on the cage are
+    refused, so are these); a preview that adds vertices still works. (A
+    stack that also adds vertices is not looked into: what it shows has
+    other vertices than the cage's.)"""
+    src = bumpy_uv_sphere()
+    assert simplify(100, fit=False) == {'FINISHED'}
+    cage = src.meshadjust.cage
+    edited = cage.meshadjust.edited
+    displace = cage.modifiers.new("push", 'DISPLACE')
+    displace.strength = 0.3
+    cage.modifiers.new("tris", 'TRIANGULATE')          # (moves nothing)
+    activate(cage)
+    V = pos(edited)
+    for op in (lambda: bpy.ops.meshadjust.refine(output='EDITED'), bpy.ops.meshadjust.bind,
+               bpy.ops.meshadjust.fit_cage):
+        with pytest.raises(RuntimeError, match=r"'scan_cage' shows its vertices moved by its "
+                                               r"modifiers \(push, tris\): MeshAdjust reads "
+                                               r"the cage's mesh, not what its modifiers show"):
+            op()
+    assert np.array_equal(pos(edited), V)
+    displace.show_viewport = False
+    cage.modifiers.new("preview", 'SUBSURF')
+    assert bpy.ops.meshadjust.refine(output='EDITED') == {'FINISHED'}
+    assert np.abs(pos(edited) - V).max() < 1e-6             # (no edit: the source back)
+
+
+@pytest.mark.parametrize("how", ["object", "collection"])
+def test_a_hidden_source_disabled_in_the_viewport_is_refused_not_bound_without_its_modifiers(
+        scene, how):
+    """Simplify's "hide source" hid the scan, and the artist then disabled it
+    in the viewports (or its collection): Blender keeps an object a cage
+    points to in its depsgraph but without its modifiers, so a Bind bound
+    the bare mesh (266 vertices of the 1,106 a Subdivision Surface shows) and
+    re-made the edited original from it without a word."""
+    col = bpy.data.collections.new("scans")
+    scene.collection.children.link(col)
+    src = bumpy_uv_sphere()
+    col.objects.link(src)
+    scene.collection.objects.unlink(src)
+    src.modifiers.new("smooth", 'SUBSURF')
+    assert simplify(100, fit=False, hide_source=True) == {'FINISHED'}
+    cage = src.meshadjust.cage
+    edited = cage.meshadjust.edited
+    assert src.hide_get() and len(edited.data.vertices) == 1106
+    if how == "object":
+        src.hide_viewport = True
+    else:
+        col.hide_viewport = True
+    activate(cage)
+    for op in (bpy.ops.meshadjust.bind, bpy.ops.meshadjust.fit_cage):
+        with pytest.raises(RuntimeError, match="'scan' is disabled in the viewport"):
+            op()
+    assert len(edited.data.vertices) == 1106
+    assert mod("operators").binding_warnings(cage) == []
+    src.hide_viewport = col.hide_viewport = False
+    assert bpy.ops.meshadjust.bind() == {'FINISHED'}
+    assert len(edited.data.vertices) == 1106 and "re-made" not in cage.meshadjust.last_report
