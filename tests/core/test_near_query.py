@@ -381,6 +381,15 @@ def test_a_one_cell_grid_and_points_a_long_way_off():
     np.testing.assert_array_equal(r.face[near], face[near])
 
 
+def _closest_counting_tiled(monkeypatch, query, P):
+    """``query.closest(P)`` and how many of the points went through the tiles."""
+    tiled = []
+    real = near_query._block
+    monkeypatch.setattr(near_query, "_block",
+                        lambda T, P_, q, *a: (tiled.append(q.size), real(T, P_, q, *a))[1])
+    return query.closest(P), sum(tiled)
+
+
 def test_points_in_crowded_cells_are_answered_by_the_index(monkeypatch):
     """A CAD cylinder's long side triangles crowd every cell (thousands of
     references: a bind to a cage of such faces took 50 s and 8 GB for 24k
@@ -391,12 +400,8 @@ def test_points_in_crowded_cells_are_answered_by_the_index(monkeypatch):
     P = _near_points(V, F, np.random.default_rng(8), n=400)
     query = NearQuery(V, F)
     assert np.diff(query.index.tables.cell_start).max() > query.index.crowded_cell
-    tiled = []
-    real = near_query._block
-    monkeypatch.setattr(near_query, "_block",
-                        lambda T, P_, q, *a: (tiled.append(q.size), real(T, P_, q, *a))[1])
-    r = query.closest(P)
-    assert sum(tiled) == 0
+    r, tiled = _closest_counting_tiled(monkeypatch, query, P)
+    assert tiled == 0
     _, _, _, d2 = _brute(V, F, P)
     np.testing.assert_array_equal(r.distance, np.sqrt(d2))
     # each face given is a nearest one (an exact tie where it differs from the
@@ -420,12 +425,8 @@ def test_a_cage_of_slivers_is_answered_by_the_index(monkeypatch):
     query = NearQuery(V, F)
     per_cell = np.diff(query.index.tables.cell_start).max()
     assert near_query._INDEX_CELL < per_cell <= query.index.crowded_cell
-    tiled = []
-    real = near_query._block
-    monkeypatch.setattr(near_query, "_block",
-                        lambda T, P_, q, *a: (tiled.append(q.size), real(T, P_, q, *a))[1])
-    r = query.closest(P)
-    assert sum(tiled) == 0
+    r, tiled = _closest_counting_tiled(monkeypatch, query, P)
+    assert tiled == 0
     np.testing.assert_array_equal(r.distance, np.sqrt(_brute(V, F, P)[3]))
     wide = NearQuery(V, F, reach=5.0)
     growth = wide.index.cell_growth
