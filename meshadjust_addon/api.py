@@ -58,8 +58,11 @@ def subdivide_object(obj, *, levels=1, scheme="butterfly", in_place=False):
     # sharp edges index the mesh data: they only apply when it was used as is
     creases = (np.zeros((0, 2), np.int64) if arrays.evaluated
                else mesh_io.get_edge_flags(obj.data, "sharp_edge"))
-    op = core.subdivision_operator(arrays.F, arrays.V.shape[0], levels=levels, scheme=scheme,
-                                   creases=creases if creases.shape[0] else None)
+    try:
+        op = core.subdivision_operator(arrays.F, arrays.V.shape[0], levels=levels,
+                                       scheme=scheme, creases=creases if creases.shape[0] else None)
+    except core.MeshAdjustError as exc:   # (said as Subdivide said it before it kept the data)
+        raise type(exc)(str(exc).replace("subdivision_operator:", "subdivide:", 1)) from exc
     Vf, Ff = op.apply(arrays.V), op.F_fine
     name = f"{obj.name}_{scheme}{levels}"
     with all_or_nothing() as rb:

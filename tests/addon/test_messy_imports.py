@@ -529,3 +529,26 @@ def test_a_hidden_source_disabled_in_the_viewport_is_refused_not_bound_without_i
     src.hide_viewport = col.hide_viewport = False
     assert bpy.ops.meshadjust.bind() == {'FINISHED'}
     assert len(edited.data.vertices) == 1106 and "re-made" not in cage.meshadjust.last_report
+
+
+def test_subdivide_refusing_a_non_manifold_import_says_subdivide_and_changes_nothing(scene):
+    """A scan with a fin (an edge of three faces), subdivided in place: the
+    refusal names the step as the artist knows it, and the mesh, its UV
+    maps and its groups are left as they were."""
+    obj = bumpy_uv_sphere(segments=16, rings=8)
+    artist_data(obj)
+    bm = bmesh.new()
+    bm.from_mesh(obj.data)
+    bm.verts.ensure_lookup_table()
+    a = bm.verts[0]
+    b = a.link_edges[0].other_vert(a)
+    bm.faces.new([a, b, bm.verts.new((0.0, 0.0, 3.0))])
+    bm.to_mesh(obj.data)
+    bm.free()
+    mesh, uv, V = obj.data, uv_of(obj.data), pos(obj)
+    with pytest.raises(RuntimeError, match=r"scan: subdivide: 1 non-manifold edges \(used by "
+                                           r"more than two faces\)"):
+        bpy.ops.meshadjust.subdivide(levels=1, in_place=True)
+    assert obj.data == mesh and np.array_equal(uv_of(mesh), uv) and np.array_equal(pos(obj), V)
+    assert [g.name for g in obj.vertex_groups] == ["top", "side"]
+    assert sorted(m.name for m in bpy.data.meshes) == ["scan"]
