@@ -262,7 +262,10 @@ def clean_mesh(V, F, *, weld_distance=None, min_component_area=MIN_COMPONENT_ARE
     _drop_repeated_faces(w)
     to_input, inner, turned = _manifold_stage(w)
     if protected is not None:
-        protected = protected[to_input]
+        # a weld group is protected when any of its vertices is (to_input: the groups' reps)
+        grouped = np.zeros_like(protected)
+        grouped[weld.rep[protected]] = True
+        protected = grouped[to_input]
     # areas of the faces as they came (welds move corners by at most weld_distance)
     area, labels, turned = _debris_stage(w, area[w.faces], inner, float(min_component_area),
                                          face_budget, protected, turned)

@@ -983,13 +983,12 @@ def simplify(V, F, *, target_faces=None, ratio=None, max_error=None, preserve_bo
     stood_for = represented_faces(F, clean)
     del V, F                     # check_mesh's copies: the clean mesh is all that is needed now
     target = target_count(target_faces, ratio, clean.F.shape[0])
-    to_input = clean.clean_to_input
     opts = dict(tuning=TUNING if tuning is None else tuning, preserve_boundary=preserve_boundary,
                 preserve_topology=preserve_topology, feature_angle_deg=feature_angle_deg,
                 dihedral_cos=None if max_dihedral_deg is None
                 else float(np.cos(np.radians(max_dihedral_deg))),
-                weights=None if weights is None else weights[to_input],
-                locked=None if lk is None else lk[to_input])
+                weights=None if weights is None else per_clean_vertex(weights, clean),
+                locked=None if lk is None else per_clean_vertex(lk, clean))
     hausdorff = None
     if clean.F.shape[0] == 0:
         cage = _unchanged(clean)._replace(stopped="target")
@@ -1069,6 +1068,18 @@ def cleaned_input(V, F, weld_distance, min_component_area, budget, locked):
             f"{_WHERE}: the {clean.F.shape[0]:,} faces left after cleaning have no area (their "
             f"corners are collinear{_far_off(clean.V)}): no cage can be made")
     return clean
+
+
+def per_clean_vertex(values, clean):
+    """The per-input-vertex ``values`` (n_in,) (weights, or lock flags) as
+    one per vertex of the cleaned input ``clean``: the largest (for flags:
+    any) of the input vertices welded into it. Taken from the one it sits on
+    (``clean_to_input``, the first of its weld group), a lock on any other
+    copy of an unwelded (STL) input's vertex was lost, and the vertex moved."""
+    i = np.flatnonzero(clean.input_to_clean >= 0)
+    out = values.copy()
+    np.maximum.at(out, clean.clean_to_input[clean.input_to_clean[i]], values[i])
+    return out[clean.clean_to_input]
 
 
 def represented_faces(F, clean):

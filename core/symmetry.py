@@ -47,7 +47,8 @@ from .mesh import area_normals_rows, bbox_diagonal, check_mesh, check_reach
 from .metrics import surface_distance
 from .mirror import PARTNER_TOLERANCE, axis_index, mirror, mirror_partners  # noqa: F401 (example)
 from .simplify import (SimplifyResult, check_arguments, check_flags, cleaned_input, debris_budget,
-                       measuring_frame, represented_faces, simplify, target_count)
+                       measuring_frame, per_clean_vertex, represented_faces, simplify,
+                       target_count)
 from .spatial import TriangleIndex
 from .topology import (border_vertex_count, boundary_loops_count, edge_keys, edge_map,
                        face_components, soup_pieces)
@@ -302,11 +303,11 @@ def _half_inputs(half, clean, weights, locked, neg_to_half):
     src, t = half.vertex_from, half.t
     neg = np.flatnonzero(neg_to_half >= 0)
     if weights is not None:
-        wc = weights[clean.clean_to_input]
+        wc = per_clean_vertex(weights, clean)
         w = (1.0 - t) * wc[src[:, 0]] + t * wc[src[:, 1]]
         np.maximum.at(w, neg_to_half[neg], wc[neg])
     if locked is not None:
-        lc = locked[clean.clean_to_input]
+        lc = per_clean_vertex(locked, clean)
         lk = lc[src[:, 0]] & (src[:, 0] == src[:, 1])
         lk[neg_to_half[neg][lc[neg]]] = True
     return w, lk

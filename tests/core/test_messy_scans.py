@@ -190,3 +190,42 @@ def test_max_error_takes_any_units_as_a_target_does(scale, symmetry):
     np.testing.assert_allclose(r.V, unit.V * scale, rtol=1e-9, atol=0)
     assert r.hausdorff == pytest.approx(unit.hausdorff * scale, rel=1e-6)
     assert 0 < r.hausdorff <= 0.05 * scale and r.F.shape[0] < F.shape[0] / 2
+
+
+# ---------------------------------------------------------------- locks and weights on unwelded input
+@pytest.mark.parametrize("symmetry", [None, "X"])
+def test_a_lock_or_weight_on_any_copy_of_an_unwelded_vertex_holds(symmetry):
+    """An STL soup has each vertex once per face. A lock (or a weight) was
+    read from the copy the weld kept (the first), so a lock on any other
+    copy was lost and the vertex moved; now the weld group has the lock if
+    any copy has it, and the largest weight of its copies."""
+    V, F = icosphere(3)
+    S, FS = unwelded(V, F)
+    v = int(np.flatnonzero(V[:, 0] > 0.3)[0])
+    copies = np.flatnonzero((S == V[v]).all(axis=1))
+    assert copies.size >= 5
+    lk = np.zeros(len(S), dtype=bool)
+    lk[copies[-1]] = True
+    r = simplify(S, FS, target_faces=60, locked=lk, symmetry=symmetry)
+    assert_clean_cage(r.V, r.F)
+    np.testing.assert_array_equal(r.V[r.vertex_map[copies]], np.repeat(V[v][None], copies.size, 0))
+    one, every = np.ones(len(S)), np.ones(len(S))
+    one[copies[-1]] = every[copies] = 50.0
+    a = simplify(S, FS, target_faces=60, vertex_weights=one, symmetry=symmetry)
+    b = simplify(S, FS, target_faces=60, vertex_weights=every, symmetry=symmetry)
+    np.testing.assert_array_equal(a.F, b.F)
+    np.testing.assert_array_equal(a.V, b.V)
+
+
+def test_a_piece_with_a_lock_on_any_copy_of_a_vertex_is_never_debris():
+    """The same for the debris rule: a speck locked through the last copy of
+    one of its vertices was dropped as debris."""
+    from tests.mesh_factory import with_debris
+    S, FS = unwelded(*with_debris(*icosphere(3), k=1))
+    lk = np.zeros(len(S), dtype=bool)
+    lk[-1] = True                                          # the speck's last corner
+    r = simplify(S, FS, target_faces=100, locked=lk)
+    assert r.cleaning.n_debris_components == 0 and r.n_components == 2
+    assert r.vertex_map[-1] >= 0 and (r.V[r.vertex_map[-1]] == S[-1]).all()
+    c = clean_mesh(S, FS, protected=lk, face_budget=100)
+    assert c.report.n_debris_components == 0 and c.input_to_clean[-1] >= 0
