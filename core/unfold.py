@@ -232,29 +232,38 @@ def ring_linear_maps(V0, V1, rings, vertices):
     area normal going to the new one stretched as the ring's edges are on
     average (so a flat ring has one too); where that map is undefined (a
     degenerate ring) or turns the ring inside out (a folded edit), the
-    ring's rotation (:func:`ring_rotations`) times that stretch. A rigid
-    motion gives its rotation (to rounding), a uniform scale by ``s`` that
-    scale."""
+    ring's rotation (:func:`ring_rotations`, from the same sums) times that
+    stretch. A rigid motion gives its rotation (to rounding), a uniform
+    scale by ``s`` that scale."""
     counts = rings.start[vertices + 1] - rings.start[vertices]
     k, owner = ragged_ranges(rings.start[vertices], counts)
     j = rings.other[k]
     a, b = V0[j] - V0[vertices[owner]], V1[j] - V1[vertices[owner]]
     q = vertices.shape[0]
-    BA, AA = np.zeros((q, 3, 3)), np.zeros((q, 3, 3))
-    np.add.at(BA, owner, b[:, :, None] * a[:, None, :])
-    np.add.at(AA, owner, a[:, :, None] * a[:, None, :])
+    BA, AA = np.empty((q, 3, 3)), np.empty((q, 3, 3))
+    for r in range(3):                    # sums of outer products (bincount: no np.add.at)
+        for c in range(3):
+            BA[:, r, c] = np.bincount(owner, b[:, r] * a[:, c], q)
+            AA[:, r, c] = np.bincount(owner, a[:, r] * a[:, c], q)
     n0, n1 = (rings.normals(V, vertices) for V in (V0, V1))
-    sa = np.bincount(owner, np.einsum("ij,ij->i", a, a), q)
+    sa = AA[:, 0, 0] + AA[:, 1, 1] + AA[:, 2, 2]
     sb = np.bincount(owner, np.einsum("ij,ij->i", b, b), q)
     stretch = np.sqrt(np.divide(sb, sa, out=np.ones(q), where=sa > 0))
-    BA += (sa * stretch)[:, None, None] * n1[:, :, None] * n0[:, None, :]
+    normal_term = n1[:, :, None] * n0[:, None, :]
+    procrustes = BA + sa[:, None, None] * normal_term          # ring_rotations' matrix
+    BA += (sa * stretch)[:, None, None] * normal_term
     AA += sa[:, None, None] * n0[:, :, None] * n0[:, None, :]
-    A = ring_rotations(V0, V1, rings, vertices) * stretch[:, None, None]
-    ok = np.linalg.det(AA) > 1e-9 * sa ** 3
-    if ok.any():
+    A = np.empty((q, 3, 3))
+    good = np.zeros(q, dtype=bool)
+    ok = np.flatnonzero(np.linalg.det(AA) > 1e-9 * sa ** 3)
+    if ok.size:
         M = BA[ok] @ np.linalg.inv(AA[ok])
         keep = np.linalg.det(M) > 0
-        A[np.flatnonzero(ok)[keep]] = M[keep]
+        A[ok[keep]] = M[keep]
+        good[ok[keep]] = True
+    bad = np.flatnonzero(~good)
+    if bad.size:
+        A[bad] = nearest_rotations(procrustes[bad]) * stretch[bad, None, None]
     return A
 
 
