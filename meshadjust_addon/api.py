@@ -28,7 +28,7 @@ import bpy
 import numpy as np
 
 from .. import core
-from . import carry, mesh_io, results, store
+from . import carry, mesh_io, names, results, store
 from .cage_steps import (MAX_AUTO_LEVELS, OUTPUT_NAMES, CageJob, auto_levels, bind_object,  # noqa: F401
                          check_source_in_place, commit_bind, commit_fit, compute_bind,
                          compute_fit, fit_cage_object, prepare_cage_job, prepare_fit, read_source,
@@ -64,7 +64,7 @@ def subdivide_object(obj, *, levels=1, scheme="butterfly", in_place=False):
     except core.MeshAdjustError as exc:   # (said as Subdivide said it before it kept the data)
         raise type(exc)(str(exc).replace("subdivision_operator:", "subdivide:", 1)) from exc
     Vf, Ff = op.apply(arrays.V), op.F_fine
-    name = f"{obj.name}_{scheme}{levels}"
+    name = names.suffixed(obj.name, f"_{scheme}{levels}")
     with all_or_nothing() as rb:
         rb.keep_object(obj)
         mesh = mesh_io.new_mesh(name, Vf, Ff)

@@ -25,7 +25,7 @@ import mathutils
 import numpy as np
 
 from .. import core
-from . import mesh_io
+from . import mesh_io, names
 from .rollback import keep, on_undo, remove_attributes, retire
 from .staleness import (cages_of, key_name, own_key_names, pinned_key, record_keys,
                          recorded_keys)
@@ -125,7 +125,7 @@ def kept_aside(obj, *, changed=False):
     if placed is not None:         # (the result goes back where MeshAdjust last put it: an
         obj.matrix_world = blender_matrix(placed)       # applied transform stays with the copy)
     copy.data = obj.data.copy()
-    copy.name = f"{obj.name}.hand"
+    copy.name = names.suffixed(obj.name, ".hand")
     copy.data.name = copy.name
     copy.property_unset("meshadjust")
     remove_attributes(copy.data)
@@ -141,7 +141,8 @@ def key_kept_aside(source, cage, key):
     co = mesh_io.read_key(key)
     if not written or _checksum(co) == written:
         return None
-    copy = source.shape_key_add(name=f"{key.name}.hand", from_mix=False)
+    copy = source.shape_key_add(name=names.suffixed(key.name, ".hand", names.KEY_BYTES),
+                                from_mix=False)
     copy.data.foreach_set("co", co)
     copy.relative_key = key.relative_key
     copy.value = 0.0
@@ -209,7 +210,7 @@ def edited_copy(source, cage, n_vertices, faces_key=None):
     original can make Blender split it along its other diagonal, and every
     bind re-made it (the artist's paint on it lost) and said so."""
     edited = cage.meshadjust.edited
-    name = f"{source.name}_edited"
+    name = names.suffixed(source.name, "_edited")
     linked = ""
     if edited is not None and edited.name in bpy.data.objects and not edited.users_collection:
         linked = link_back(edited, source)      # (deleted by the artist: as Refine does)
@@ -281,7 +282,7 @@ def write_refined(cage, source, Vr, Fr, notes=None):
         keep(refined.data)
         record_written(refined, mesh_io.write_positions(refined.data, Vr))
         return refined
-    name = f"{source.name}_refined"
+    name = names.suffixed(source.name, "_refined")
     mesh = mesh_io.new_mesh(name, Vr, Fr)
     if refined is None:
         refined = bpy.data.objects.new(name, mesh)
@@ -488,11 +489,12 @@ def write_shape_key(source, cage, V_edited, V_bound, notes=None):
             notes.append(f"shape key '{key.name}' had been changed since MeshAdjust wrote it: "
                          f"that version is kept as '{aside.name}' (value 0)")
     if key is None:
-        key = source.shape_key_add(name=cage.name, from_mix=False)
+        wanted = names.key_name_for(cage.name)      # (as Blender keeps it: 63 bytes at most)
+        key = source.shape_key_add(name=wanted, from_mix=False)
         key.relative_key = keys.reference_key
         key.value = 1.0
-        if key.name != cage.name and notes is not None:
-            notes.append(f"a shape key '{cage.name}' MeshAdjust did not write is kept as it is: "
+        if key.name != wanted and notes is not None:
+            notes.append(f"a shape key '{wanted}' MeshAdjust did not write is kept as it is: "
                          f"the edit is the key '{key.name}'")
         cage.meshadjust.key_name = key.name       # (renaming the cage keeps its key)
         record_keys(source, recorded_keys(source) | {key.name})

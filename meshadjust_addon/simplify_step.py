@@ -13,7 +13,7 @@ import bpy
 import numpy as np
 
 from .. import core
-from . import cage_steps, mesh_io, results, settings, store
+from . import cage_steps, mesh_io, names, results, settings, store
 from .cage_steps import CageJob, auto_levels, fit_levels, read_source, transform_problem
 from .report import Report, user_cause
 from .rollback import all_or_nothing
@@ -350,7 +350,7 @@ def _new_cage(source, job):
     marked as creases and sharp), placed and linked like ``source``, its
     MeshAdjust settings (role, source, levels, scheme, symmetry)."""
     res, p = job.result, job.params
-    name = f"{source.name}_cage"
+    name = names.suffixed(source.name, "_cage")
     mesh = mesh_io.new_mesh(name, job.V_cage, res.F)
     if mesh_io.set_edge_flags(mesh, res.feature_edges, CREASE):
         sharp = (mesh.attributes.get("sharp_edge")

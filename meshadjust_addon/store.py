@@ -24,7 +24,7 @@ import bpy
 import numpy as np
 
 from .. import core
-from . import leftovers, mesh_io, rollback, staleness
+from . import leftovers, mesh_io, names, rollback, staleness
 
 FACE = "meshadjust_face"
 BARY = "meshadjust_bary"
@@ -141,7 +141,7 @@ def save_binding(edited, binding):
     _set_point_attr(mesh, OFFSET, 'FLOAT_VECTOR', binding.offset)
     state = edited.meshadjust
     detail = state.detail_mesh
-    name = f"{edited.name}.detail"
+    name = names.suffixed(edited.name, ".detail")
     if detail is not None and len(detail.vertices) == binding.fine_detail.shape[0]:
         rollback.keep(detail)
         mesh_io.write_positions(detail, binding.fine_detail)     # in place: no new data-block

@@ -552,3 +552,32 @@ def test_subdivide_refusing_a_non_manifold_import_says_subdivide_and_changes_not
     assert obj.data == mesh and np.array_equal(uv_of(mesh), uv) and np.array_equal(pos(obj), V)
     assert [g.name for g in obj.vertex_groups] == ["top", "side"]
     assert sorted(m.name for m in bpy.data.meshes) == ["scan"]
+
+
+def test_a_scan_with_a_long_name_gets_results_named_as_theirs_and_an_honest_key_report(scene):
+    """A scan named with 63 bytes (Blender 4.2's most; a Blender 5 object can
+    have 255): in 4.2 its cage was named like the scan itself ('_cage' cut
+    off) and its edited original '<scan>.001'; in 5 the cage's shape key lost
+    the end of its name (keys keep 63 bytes) and the first Refine said "a
+    shape key '..._cage' MeshAdjust did not write is kept as it is" of a key
+    that never existed."""
+    src = bumpy_uv_sphere(name="Büste_头像_" * 4 + "scan_05")
+    assert len(src.name.encode()) == 63
+    assert simplify(100, fit=False) == {'FINISHED'}
+    cage = src.meshadjust.cage
+    lift_in_edit_mode(cage)
+    bpy.ops.object.mode_set(mode='OBJECT')
+    assert bpy.ops.meshadjust.refine(output='BOTH') == {'FINISHED'}
+    edited, refined = cage.meshadjust.edited, cage.meshadjust.refined
+    for obj, suffix in ((cage, "_cage"), (edited, "_edited"), (refined, "_refined")):
+        assert obj.name.endswith(suffix) and obj.name.startswith("Büste_头像_"), obj.name
+        assert obj.name == obj.data.name or obj is cage
+    detail = edited.meshadjust.detail_mesh.name
+    assert detail.endswith(".detail") and detail.startswith("Büste_头像_")
+    assert bpy.ops.meshadjust.refine(output='SHAPE_KEY') == {'FINISHED'}
+    key = src.data.shape_keys.key_blocks[1]
+    assert key.name == cage.name.encode()[:63].decode("utf-8", "ignore") \
+        == cage.meshadjust.key_name
+    assert cage.meshadjust.last_report.startswith(f"shape key '{key.name}' of '{src.name}' "
+                                                  f"updated (266 vertices)")
+
