@@ -16,7 +16,9 @@ gives each fine vertex's barycentric coordinates in a coarse triangle):
 * **face** values (material index, smooth shading) are the coarse polygon's;
 * **edge** values (sharp edges, seams) go to the fine edges along the coarse
   edge, the other fine edges get none;
-* hidden parts stay hidden (the ``.hide_*`` flags, carried as the others).
+* hidden parts stay hidden (the ``.hide_*`` flags, carried as the others);
+* a cage's rest shape goes through the subdivision as its positions do, and
+  its crease flags as its sharp edges, so its edit is kept.
 
 Integer, boolean and other discrete values take the nearest coarse corner's
 value instead of an interpolation. Custom split normals are not carried (the
@@ -37,12 +39,34 @@ _SKIP = {"position", "custom_normal"}
 _INTERNAL = {".hide_vert", ".hide_edge", ".hide_poly", ".uv_seam"}
 
 
+#: a cage's rest shape (source space): subdivided as its positions are, so its edit is kept
+_REST = "meshadjust_rest"
+#: a cage's crease flags: carried as its sharp edges are
+_CREASE = "meshadjust_crease"
+
+
 def _carried(attr):
-    """Whether ``attr`` is an attribute of the artist's that this module carries."""
+    """Whether ``attr`` is an attribute of the artist's (or a cage's crease
+    flags) that this module carries by interpolation; MeshAdjust's others
+    (a binding's, per dense vertex) are left out."""
     name = attr.name
-    return ((name in _INTERNAL or not name.startswith((".", "meshadjust_")))
+    return ((name in _INTERNAL or name == _CREASE or not name.startswith((".", "meshadjust_")))
             and name not in _SKIP and attr.data_type in _TYPES
             and attr.domain in ('POINT', 'CORNER', 'FACE', 'EDGE'))
+
+
+def _carry_rest(src, dst, op):
+    """A cage's rest shape (point attribute ``meshadjust_rest``, in its
+    source's space) through the subdivision operator ``op``, as its positions
+    went: the edit (positions minus rest) stays an edit of the finer cage (a
+    cage subdivided in place lost it, and the Bind that followed made its
+    edited shape the rest: the edited original went back to the scan)."""
+    rest = src.attributes.get(_REST)
+    if rest is None or rest.domain != 'POINT' or rest.data_type != 'FLOAT_VECTOR' \
+            or len(rest.data) != op.n_coarse:
+        return
+    out = dst.attributes.new(_REST, 'FLOAT_VECTOR', 'POINT')
+    mesh_io.write_attribute(out, op.apply(mesh_io.read_attribute(rest).astype(np.float64)))
 
 
 def _mix(values, idx, weights, interpolate):
@@ -175,6 +199,7 @@ def carry(src, src_obj, dst, F, op):
                 dst.attributes.remove(new)
             new = dst.attributes.new(attr.name, attr.data_type, attr.domain)
         mesh_io.write_attribute(new, out)
+    _carry_rest(src, dst, op)
     _choices(src, dst)
     notes = []
     left = sorted(a.name for a in src.attributes if not a.name.startswith((".", "meshadjust_"))

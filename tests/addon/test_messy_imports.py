@@ -5,6 +5,7 @@ loose parts, hidden faces), modifiers on the cage, sources left in Edit Mode,
 and the artist's flows on them. Each test is a bug that a campaign of such
 scenes found (on 2026-12-05), and fails without its fix."""
 
+import re
 import sys
 
 import bmesh
@@ -581,3 +582,33 @@ def test_a_scan_with_a_long_name_gets_results_named_as_theirs_and_an_honest_key_
     assert cage.meshadjust.last_report.startswith(f"shape key '{key.name}' of '{src.name}' "
                                                   f"updated (266 vertices)")
 
+
+def test_an_edited_cage_subdivided_in_place_keeps_its_edit_through_the_re_bind(scene, core):
+    """Subdivide in place on an edited cage dropped its rest shape; the
+    re-bind the panel then asks for made the edited shape the rest, and the
+    edited original went back to the scan (its 0.3 lift gone, no word)."""
+    src = bumpy_uv_sphere()
+    assert simplify(100, fit=False) == {'FINISHED'}
+    cage = src.meshadjust.cage
+    edited = cage.meshadjust.edited
+    V = pos(cage)
+    V[V[:, 2] > 0.5, 2] += 0.3
+    mod("mesh_io").write_positions(cage.data, V)
+    activate(cage)
+    assert bpy.ops.meshadjust.refine(output='EDITED') == {'FINISHED'}
+    lifted = pos(edited)
+    rest = mod("store").load_rest(cage)
+    F, _, _ = mod("store").cage_topology(cage)
+    sharp = mod("mesh_io").get_edge_flags(cage.data, "sharp_edge")
+    expected = core.subdivide(rest, F, levels=1, scheme="loop",
+                              creases=sharp if sharp.shape[0] else None).V
+    assert bpy.ops.meshadjust.subdivide(levels=1, scheme='loop', in_place=True) == {'FINISHED'}
+    assert np.array_equal(mod("store").load_rest(cage),
+                          expected.astype(np.float32).astype(np.float64))
+    assert bpy.ops.meshadjust.bind() == {'FINISHED'}
+    assert re.search(r"; the edit \(\d+ cage vertices moved\) kept on top$",
+                     cage.meshadjust.last_report)
+    assert bpy.ops.meshadjust.refine(output='EDITED') == {'FINISHED'}
+    now = pos(edited)
+    assert np.abs(now - pos(src)).max() > 0.29            # the lift is still there
+    assert np.abs(now - lifted).max() < 0.02              # (a finer cage carries it a bit otherwise)
