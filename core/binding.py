@@ -1564,7 +1564,7 @@ def _bind_dense(query, V_dense, VfT, NfT, F_fine, report=None, near=None, origin
         out.corners_t[:, start:stop] = corners
         out.bary_t[:, start:stop] = bary
         p, t, bt, nrm = _frames_t(VfT, NfT, corners, bary)
-        d = np.ascontiguousarray(P.T)
+        d = np.array(P.T, order="C")      # a copy (one row: P.T was a view of V_dense)
         d -= p
         for k, axis in enumerate((t, bt, nrm)):
             out.offset_t[k, start:stop] = dot_columns(d, axis)

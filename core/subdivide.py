@@ -242,7 +242,8 @@ class SubdivisionOperator:
         check_finite_rows(X, where="SubdivisionOperator.apply", what="coarse vertices")
         Xt = np.ascontiguousarray(X.T)          # column-major: each gather reads one column
         if not self.stencils:
-            return Xt[0].copy() if one_d else np.ascontiguousarray(Xt.T)
+            # (a copy: for one column, or one vertex, both transposes were views of Vc)
+            return Xt[0].copy() if one_d else np.array(Xt.T, order="C")
         for S in self.stencils[:-1]:
             Xt = S.apply_t(Xt)
         # the last level writes straight into the (n_fine, k) result (no final transpose)
@@ -265,7 +266,7 @@ class SubdivisionOperator:
         Xt = np.ascontiguousarray(X.T)
         for S in reversed(self.stencils):
             Xt = S.apply_transpose_t(Xt)
-        return Xt[0].copy() if one_d else np.ascontiguousarray(Xt.T)
+        return Xt[0].copy() if one_d else np.array(Xt.T, order="C")
 
     def triplets(self):
         """The composed coarse-to-fine matrix as triplets.

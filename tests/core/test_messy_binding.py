@@ -275,3 +275,24 @@ def test_an_edit_of_a_scan_far_from_the_origin_changes_no_row_it_does_not_reach(
                 Ve[i] += amount * Vc[i] / np.linalg.norm(Vc[i])
                 away = ~b.affected([i])
                 assert np.array_equal(deform(b, Ve)[away], D0[away])
+
+
+def test_bind_of_a_single_dense_point_leaves_it_as_it_was():
+    # a block of one row: its transpose was a contiguous view of V_dense, and the
+    # offsets were computed in place in the caller's array
+    Vc, Fc = icosphere(1)
+    Vd = np.array([[0.1, 0.2, 0.3]])
+    b = bind(Vd, np.zeros((0, 3), np.int64), Vc, Fc, levels=1)
+    assert Vd.tolist() == [[0.1, 0.2, 0.3]]
+    assert np.abs(deform(b, Vc) - Vd).max() < 1e-15
+
+
+@pytest.mark.parametrize("shape", [(3, 1), (3, 3)])
+def test_the_operator_at_level_zero_returns_new_arrays(shape):
+    # for one column (or one vertex) both transposes were views: apply and its adjoint
+    # returned the caller's array itself, and writing the result wrote the input
+    from core.subdivide import subdivision_operator
+    op = subdivision_operator([[0, 1, 2]], 3, levels=0)
+    X = np.arange(float(np.prod(shape))).reshape(shape)
+    for Y in (op.apply(X), op.apply_transpose(X)):
+        assert np.array_equal(Y, X) and not np.shares_memory(X, Y)
