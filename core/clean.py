@@ -103,7 +103,7 @@ class CleanReport:
     """What :func:`clean_mesh` changed, as counts (all 0 for a clean mesh)."""
 
     n_welded_vertices: int = 0        #: input vertices merged into another one
-    n_degenerate_faces: int = 0       #: faces with a repeated vertex (also after welding)
+    n_degenerate_faces: int = 0       #: faces with a repeated vertex (also after welding), or flat on a border
     n_duplicate_faces: int = 0        #: faces on the same vertices as a kept one
     n_doubled_quads: int = 0          #: quads triangulated both ways: one way dropped (2 faces each)
     n_double_sided_sheets: int = 0    #: face sets with both orientations, all removed ...
@@ -261,6 +261,7 @@ def clean_mesh(V, F, *, weld_distance=None, min_component_area=MIN_COMPONENT_ARE
     weld, area = _weld_stage(w, box, weld_distance, protected)
     _drop_repeated_faces(w)
     to_input, inner, turned = _manifold_stage(w)
+    inner, turned = _drop_flat_ears(w, inner, turned)
     if protected is not None:
         # a weld group is protected when any of its vertices is (to_input: the groups' reps)
         grouped = np.zeros_like(protected)
@@ -396,6 +397,22 @@ def _manifold_stage(w):
     if found["n_flipped_faces"] or found["n_seam_edges"]:
         inner = interior_edges(w.twin)
     return to_input, inner, turned
+
+
+def _drop_flat_ears(w, inner, turned):
+    """Drop the faces with no area (:func:`_flat_faces`) and two open edges:
+    a flat ear on a border edge (three collinear border vertices, or a fin
+    folded flat onto an edge that had one face), which stayed in the surface
+    and in a cage at or above the cleaned face count. Counted as degenerate.
+    Returns the interior edges and the ``turned`` mask of the faces kept."""
+    ears = (w.twin.reshape(-1, 3) < 0).sum(axis=1) >= 2
+    cand = np.flatnonzero(ears)
+    ears[cand] = _flat_faces(w.V, w.F[cand])
+    if not ears.any() or ears.all():                # (all flat: simplify names that)
+        return inner, turned
+    w.counts["n_degenerate_faces"] += int(np.count_nonzero(ears))
+    w.keep(~ears)
+    return interior_edges(w.twin), None if turned is None else turned[~ears]
 
 
 def _debris_stage(w, area, inner, min_component_area, face_budget, protected, turned):
@@ -827,13 +844,15 @@ def _flat_faces(V, F):
     """(k,) bool per face of ``F`` (k,3): no area, its corners collinear up to
     the rounding of their coordinates (twice its area at most ``FLAT_FACE``
     times its longest edge times its largest coordinate magnitude, as
-    :func:`~.mesh.has_area` tells)."""
+    :func:`~.mesh.has_area` tells; each face scaled by that magnitude first,
+    so no product overflows at 1e200)."""
     P = V[F]                                               # (k,3,3)
+    size = np.abs(P).max(axis=(1, 2), initial=0.0)
+    P /= np.where(size > 0, size, 1.0)[:, None, None]
     e1, e2 = P[:, 1] - P[:, 0], P[:, 2] - P[:, 0]
     longest = np.sqrt(np.maximum(np.maximum((e1 * e1).sum(axis=1), (e2 * e2).sum(axis=1)),
                                  ((e2 - e1) ** 2).sum(axis=1)))
-    size = np.abs(P).max(axis=(1, 2))
-    return np.linalg.norm(cross_rows(e1, e2), axis=1) <= FLAT_FACE * size * longest
+    return np.linalg.norm(cross_rows(e1, e2), axis=1) <= FLAT_FACE * longest
 
 
 def _split_fans(V, F, twin, to_input, corners=None):

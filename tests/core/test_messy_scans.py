@@ -94,7 +94,7 @@ def test_a_flat_fin_never_takes_a_real_faces_place_in_the_surface(seed):
     Vz, Fz = flat_fins(V, F, 50, seed)
     c = clean_mesh(Vz, Fz)
     assert c.F.shape[0] == F.shape[0]
-    assert c.report.n_debris_components == 50 and c.report.n_debris_faces == 50
+    assert c.report.n_degenerate_faces == 50 and c.report.n_debris_faces == 0   # (flat, cut loose)
     assert_clean_cage(c.V, c.F)
     assert topology_summary(c.F, c.V.shape[0]).euler == 2
     r = simplify(Vz, Fz, target_faces=2000)               # at or above: the cleaned input
@@ -229,3 +229,28 @@ def test_a_piece_with_a_lock_on_any_copy_of_a_vertex_is_never_debris():
     assert r.vertex_map[-1] >= 0 and (r.V[r.vertex_map[-1]] == S[-1]).all()
     c = clean_mesh(S, FS, protected=lk, face_budget=100)
     assert c.report.n_debris_components == 0 and c.input_to_clean[-1] >= 0
+
+
+def test_a_flat_ear_on_a_border_edge_is_dropped_as_degenerate():
+    """A face with no area standing on a border edge (a fin folded flat onto
+    it, or three collinear border vertices) pairs with the edge's one face
+    and was kept in the surface, so a cage at or above the cleaned count had
+    a flat face (suzanne and the beetle wound at random with such fins)."""
+    from tests.mesh_factory import regular_grid
+    V, F = regular_grid(8, 8)
+    border = np.flatnonzero((V[:, 0] == V[:, 0].min()))
+    border = border[np.argsort(V[border, 1])]
+    a, b = border[:-1], border[1:]                         # the grid's left border edges
+    n, k = V.shape[0], a.size
+    mid = 0.5 * (V[a] + V[b])
+    Fz = np.vstack([F, np.stack([a, n + np.arange(k), b], axis=1)])
+    Fz[F.shape[0]::2] = Fz[F.shape[0]::2][:, ::-1]           # half of them wound the other way
+    c = clean_mesh(np.vstack([V, mid]), Fz)
+    assert c.F.shape == F.shape and c.report.n_degenerate_faces == k
+    assert c.V.shape[0] == V.shape[0] and c.report.n_unreferenced_vertices == 0
+    assert_clean_cage(c.V, c.F)
+    assert topology_summary(c.F, c.V.shape[0]).boundary_loops == 1
+    r = simplify(np.vstack([V, mid]), Fz, target_faces=1000)
+    assert r.F.shape == F.shape
+    assert_clean_cage(r.V, r.F)
+    assert (r.vertex_map[n:] == -1).all()
