@@ -184,6 +184,29 @@ def binding_misfit(edited):
             f"modifier applied, vertices added or removed) and its binding data no longer fits it")
 
 
+def _bound_triangles(edited):
+    """(m,3) int64: the triangles ``edited`` was bound with (its fold repair's).
+
+    Blender splits a quad or an n-gon as its positions say, and the edited
+    original's are deformed: read back from it (a binding rebuilt after a
+    reload), a deformed quad could be split along its other diagonal than
+    when it was bound, and the fold repair ran on other triangles than in
+    the session it was made in (results 2% of the size apart). The source's
+    own triangles are those that were bound while its polygons are the
+    edited original's and it is readable (else the edited original's)."""
+    own = mesh_io.read_triangles(edited.data)[0]
+    source = edited.meshadjust.source
+    if 3 * len(edited.data.polygons) == len(edited.data.loops) or source is None:
+        return own                                  # (triangles only: no choice was made)
+    from .cage_steps import read_source             # (cage_steps imports this module)
+    try:
+        arrays, _ = read_source(source)
+    except core.MeshAdjustError:
+        return own
+    same = arrays.faces_key == mesh_io.polygon_key(edited.data) and arrays.F.shape == own.shape
+    return arrays.F if same else own
+
+
 def load_binding(edited, cage):
     """The :class:`core.binding.Binding` stored on ``edited`` for ``cage``.
 
@@ -217,7 +240,7 @@ def load_binding(edited, cage):
         "creases": creases if creases is not None else np.zeros((0, 2), np.int64),
         "fingerprint": state.fingerprint,
         # for the fold repair: the edited copy has the source's faces, the cage its rest shape
-        "F_dense": mesh_io.read_triangles(edited.data)[0],
+        "F_dense": _bound_triangles(edited),
         "V_cage_rest": _rest_or_none(cage),
     }
     try:
