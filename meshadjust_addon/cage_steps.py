@@ -58,9 +58,11 @@ def source_edit_problem(source):
     who = source.name if source.mode == 'EDIT' else next(
         (o.name for o in bpy.data.objects if o.data == source.data and o.mode == 'EDIT'),
         source.name)                                   # (a linked duplicate of it)
-    shared = "" if who == source.name else f" (it shares its mesh with '{who}')"
-    return (f"'{source.name}' is in Edit Mode{shared}, where its mesh does not have the edits "
-            f"yet: leave Edit Mode on '{who}' first")
+    if who != source.name:
+        return (f"'{source.name}' shares its mesh with '{who}', which is in Edit Mode, where the "
+                f"mesh does not have the edits yet: leave Edit Mode on '{who}' first")
+    return (f"'{source.name}' is in Edit Mode, where its mesh does not have the edits yet: leave "
+            f"Edit Mode on '{who}' first")
 
 
 def read_source(source):

@@ -97,6 +97,16 @@ def test_a_source_left_in_edit_mode_is_refused_by_bind_and_fit_not_bound_stale(s
         mod("api").simplify_object(src, target_faces=50)
     activate(src)
     bpy.ops.object.mode_set(mode='OBJECT')
+    twin = src.copy()                                     # a linked duplicate, in Edit Mode
+    twin.name = "twin"
+    scene.collection.objects.link(twin)
+    activate(twin)
+    bpy.ops.object.mode_set(mode='EDIT')
+    assert mod("api").source_edit_problem(src) == (
+        "'scan' shares its mesh with 'twin', which is in Edit Mode, where the mesh does not "
+        "have the edits yet: leave Edit Mode on 'twin' first")
+    bpy.ops.object.mode_set(mode='OBJECT')
+    bpy.data.objects.remove(twin)
     assert mod("operators").binding_warnings(cage) == [
         "'scan' changed since it was bound: its mesh was edited (266 -> 267 vertices, "
         "288 -> 288 faces)"]
