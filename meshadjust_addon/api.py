@@ -81,6 +81,7 @@ def subdivide_object(obj, *, levels=1, scheme="butterfly", in_place=False):
             out = bpy.data.objects.new(name, mesh)
             out.matrix_world = obj.matrix_world.copy()
             results.link_like(out, obj)
+            _same_slots(obj, out)
         carry.put_groups(out, groups)
     dt = time.perf_counter() - t0
     msg = f"{arrays.F.shape[0]:,} -> {Ff.shape[0]:,} faces ({scheme}, {levels} level"
@@ -93,6 +94,16 @@ def subdivide_object(obj, *, levels=1, scheme="butterfly", in_place=False):
         msg += "; used the evaluated mesh (modifiers and shape keys applied)"
     msg += "".join(f"; {note}" for note in notes)
     return out, Report(msg, arrays.F.shape[0], Ff.shape[0], seconds=dt)
+
+
+def _same_slots(obj, out):
+    """The material slots of ``out`` linked as ``obj``'s, with their
+    materials: a material linked to the object (not its mesh) was left out
+    of a new object's slots, which showed the mesh's material instead."""
+    for slot, src in zip(out.material_slots, obj.material_slots):
+        if src.link == 'OBJECT':
+            slot.link = 'OBJECT'
+            slot.material = src.material
 
 
 @contextlib.contextmanager

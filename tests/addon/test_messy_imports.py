@@ -678,3 +678,18 @@ def test_a_binding_read_back_after_a_reload_refines_as_in_the_session_it_was_mad
     activate(cage)
     assert bpy.ops.meshadjust.refine(output='EDITED') == {'FINISHED'}
     assert np.abs(pos(edited) - in_session).max() < 1e-6
+
+
+def test_a_subdivided_copy_shows_the_materials_its_source_shows(scene):
+    """A material linked to the object (not the mesh), as imports and
+    artists often have it: the subdivided copy showed the mesh's material."""
+    obj = bumpy_uv_sphere(segments=16, rings=8)
+    for name in ("mesh_red", "mesh_blue"):
+        obj.data.materials.append(bpy.data.materials.new(name))
+    obj.material_slots[0].link = 'OBJECT'
+    obj.material_slots[0].material = bpy.data.materials.new("object_gold")
+    assert bpy.ops.meshadjust.subdivide(levels=1, in_place=False) == {'FINISHED'}
+    out = next(o for o in bpy.data.objects if o is not obj)
+    assert [(s.link, s.material.name) for s in out.material_slots] == \
+        [(s.link, s.material.name) for s in obj.material_slots] == \
+        [('OBJECT', "object_gold"), ('DATA', "mesh_blue")]
