@@ -26,7 +26,7 @@ The public API (one module per algorithm family):
 from .errors import (CancelledError, InvalidArgumentError, InvalidMeshError, MeshAdjustError,
                      TopologyMismatchError)
 from .mesh import (bbox_diagonal, check_mesh, enclosed_volume, face_areas, face_normals,
-                   turned_faces, vertex_normals)
+                   surface_diagonal, turned_faces, vertex_normals)
 from .topology import EdgeMap, edge_map, euler_characteristic, manifold_report, topology_summary
 from .io_mesh import MeshFile, read_mesh, read_obj, read_smf, write_mesh, write_obj, write_smf
 from .spatial import ClosestPoints, TriangleIndex, closest_points
@@ -42,7 +42,7 @@ from .binding import Binding, RefineResult, bind, deform, refine
 __all__ = [
     "MeshAdjustError", "InvalidMeshError", "InvalidArgumentError", "TopologyMismatchError",
     "CancelledError",
-    "check_mesh", "bbox_diagonal", "enclosed_volume", "face_areas", "face_normals",
+    "check_mesh", "bbox_diagonal", "surface_diagonal", "enclosed_volume", "face_areas", "face_normals",
     "vertex_normals", "turned_faces", "EdgeMap", "edge_map", "manifold_report", "topology_summary",
     "euler_characteristic", "read_obj", "write_obj", "read_smf", "write_smf", "read_mesh",
     "write_mesh", "MeshFile",

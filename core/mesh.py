@@ -317,6 +317,15 @@ def bbox_diagonal(V):
     return diagonal_length(*bounding_box(check_vertices(V, where="bbox_diagonal", copy=False)))
 
 
+def surface_diagonal(V, F):
+    """:func:`bbox_diagonal` of the vertices of ``V`` the faces ``F`` use:
+    the size a deviation or a max-error percentage is of (a scan's stray
+    loose vertex 50 sizes away does not make it 50 times larger)."""
+    F = np.asarray(F)
+    V = check_vertices(V, where="surface_diagonal", copy=False)
+    return bbox_diagonal(V[np.unique(F)]) if F.size else bbox_diagonal(V)
+
+
 def diagonal_length(lo, hi):
     """Length of the box diagonal from corner ``lo`` to ``hi`` (each (3,)),
     scaled so that coordinates near the float limits (1e200) do not overflow."""

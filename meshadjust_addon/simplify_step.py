@@ -228,7 +228,7 @@ def _simplify_cage(job, progress):
     if p.max_error_pct is not None:
         # the size of the surface (the report's "of size"): a stray loose vertex of a scan
         # 50 units away made the bound 25 times what was asked
-        max_error = p.max_error_pct / 100.0 * _diag(job.V[np.unique(job.F)])
+        max_error = p.max_error_pct / 100.0 * core.surface_diagonal(job.V, job.F)
     return core.simplify(job.V, job.F, target_faces=p.target_faces, ratio=p.ratio,
                          max_error=max_error, preserve_boundary=p.preserve_boundary,
                          preserve_topology=p.preserve_topology, close_pinholes=p.close_pinholes,
