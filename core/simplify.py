@@ -1089,6 +1089,26 @@ def cleaned_input(V, F, weld_distance, min_component_area, budget, locked):
     return clean
 
 
+def input_vertex_map(clean, of_clean):
+    """(n_in,) int64: the cage vertex of each input vertex of the cleaned
+    input ``clean``, given the cage vertex of each clean vertex ``of_clean``
+    (-1: none): that of its first copy (``input_to_clean``), or when that one
+    is gone, of another copy that a bow-tie split made (a piece removed with
+    ``preserve_topology=False`` took the first copy, and a vertex of the cage
+    was said to stand for no input vertex); -1 when none is left."""
+    out = np.full(clean.input_to_clean.shape[0], -1, dtype=np.int64)
+    kept = np.flatnonzero(clean.input_to_clean >= 0)
+    first = clean.input_to_clean[kept]
+    out[kept] = of_clean[first]
+    gone = np.flatnonzero(out[kept] < 0)
+    if gone.size:
+        alive = np.flatnonzero(of_clean >= 0)
+        other = np.full(clean.input_to_clean.shape[0], -1, dtype=np.int64)
+        other[clean.clean_to_input[alive]] = of_clean[alive]     # by the weld group's vertex
+        out[kept[gone]] = other[clean.clean_to_input[first[gone]]]
+    return out
+
+
 def per_clean_vertex(values, clean):
     """The per-input-vertex ``values`` (n_in,) (weights, or lock flags) as
     one per vertex of the cleaned input ``clean``: the largest (for flags:
@@ -1164,9 +1184,7 @@ def target_count(target_faces, ratio, m0):
 def _result(cage, clean, m_in, n_in, target, hausdorff, t0, preserve_boundary, stood_for):
     """The :class:`SimplifyResult` of ``cage``, mapped back to the input
     (``stood_for``: :func:`represented_faces` of the input)."""
-    kept = clean.input_to_clean >= 0
-    vertex_map = np.full(n_in, -1, dtype=np.int64)
-    vertex_map[kept] = cage.of_clean[clean.input_to_clean[kept]]
+    vertex_map = input_vertex_map(clean, cage.of_clean)
     _, n_comp = face_components(cage.F, cage.V.shape[0])
     em = edge_map(cage.F, cage.V.shape[0])          # (for both border counts)
     return SimplifyResult(

@@ -47,8 +47,8 @@ from .mesh import area_normals_rows, bbox_diagonal, check_mesh, check_reach
 from .metrics import surface_distance
 from .mirror import PARTNER_TOLERANCE, axis_index, mirror, mirror_partners  # noqa: F401 (example)
 from .simplify import (SimplifyResult, check_arguments, check_flags, cleaned_input, debris_budget,
-                       measuring_frame, per_clean_vertex, represented_faces, simplify,
-                       target_count)
+                       input_vertex_map, measuring_frame, per_clean_vertex, represented_faces,
+                       simplify, target_count)
 from .spatial import TriangleIndex
 from .topology import (border_vertex_count, boundary_loops_count, edge_keys, edge_map,
                        face_components, soup_pieces)
@@ -512,7 +512,7 @@ def _symmetric(whole, options):
     stopped = r.stopped_because
     if whole.target is not None and cage.F.shape[0] > whole.target and stopped == "target":
         stopped = "topology_floor"         # (the fewest faces a mirrored cage of it has)
-    vertex_map, face_from, fe = _whole_maps(clean, hs, r, cage, s, k, whole.n_in)
+    vertex_map, face_from, fe = _whole_maps(clean, hs, r, cage, s, k)
     _, n_comp = face_components(cage.F, cage.V.shape[0])
     em = edge_map(cage.F, cage.V.shape[0])          # (for both border counts)
     return SimplifyResult(
@@ -619,7 +619,7 @@ def _mirrored_at_least_one_face(run, half_target, bound, most):
         half_target = max(2 * half_target, 2)
 
 
-def _whole_maps(clean, hs, r, cage, s, k, n_in):
+def _whole_maps(clean, hs, r, cage, s, k):
     """The whole cage's vertex map (input vertex -> cage: the positive side
     directly, the negative side through its mirror), its faces' sources in
     the cleaned mesh, and its feature edges (the half's and their mirrors)."""
@@ -630,9 +630,7 @@ def _whole_maps(clean, hs, r, cage, s, k, n_in):
     neg = hs.neg_to_half >= 0
     via = at[r.vertex_map[hs.neg_to_half[neg]]]
     of_clean[neg] = np.where(via >= 0, cage.copy_of[np.maximum(via, 0)], -1)
-    kept = clean.input_to_clean >= 0
-    vertex_map = np.full(n_in, -1, dtype=np.int64)
-    vertex_map[kept] = of_clean[clean.input_to_clean[kept]]
+    vertex_map = input_vertex_map(clean, of_clean)
     mh = cage.n_half_faces
     face_from = np.concatenate([hs.half.face_from[r.face_map[cage.half_face_from]],
                                 _mirror_face_sources(clean, s, cage.V, cage.F[mh:], k)])

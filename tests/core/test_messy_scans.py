@@ -268,3 +268,25 @@ def test_with_max_error_the_seconds_per_stage_still_add_up_to_the_total():
     assert s["measure"] > 0.0 and s["steps"] >= 0.0
     parts = sum(v for k, v in s.items() if k != "total")
     assert 0.5 * s["total"] <= parts <= s["total"]
+
+
+# ---------------------------------------------------------------- vertex map through bow-ties
+def test_a_bow_tie_vertex_maps_to_the_copy_that_survives():
+    """A bow-tie vertex split by the cleaning mapped to its first copy only;
+    when preserve_topology=False removed that copy's piece (a lone triangle
+    touching a sphere), the input vertex mapped to -1 though the sphere's
+    copy of it stood in the cage, and cage faces mapped to input faces that
+    were 'not represented'."""
+    V, F = icosphere(2)
+    n = V.shape[0]
+    tri = np.array([[0.0, 0.0, 0.0], [0.1, 0.0, 0.0]]) + V[0] * 1.05
+    Vb = np.vstack([V, tri])
+    Fb = np.vstack([[[0, n, n + 1]], F])                  # the triangle first: it keeps vertex 0
+    # (with max_error no piece is debris of the target: the engine removes the triangle)
+    r = simplify(Vb, Fb, target_faces=4, max_error=10.0, preserve_topology=False)
+    assert r.F.shape[0] == 4 and r.n_components == 1 and r.cleaning.n_split_vertices == 1
+    assert_clean_cage(r.V, r.F)
+    assert r.vertex_map[0] >= 0 and (r.vertex_map[n:] == -1).all()
+    assert (r.vertex_map[:n] >= 0).all()
+    assert (r.vertex_map[Fb[r.face_map]] >= 0).all()
+    np.testing.assert_array_equal(np.unique(r.vertex_map[r.vertex_map >= 0]), np.arange(4))
