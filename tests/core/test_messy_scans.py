@@ -290,3 +290,27 @@ def test_a_bow_tie_vertex_maps_to_the_copy_that_survives():
     assert (r.vertex_map[:n] >= 0).all()
     assert (r.vertex_map[Fb[r.face_map]] >= 0).all()
     np.testing.assert_array_equal(np.unique(r.vertex_map[r.vertex_map >= 0]), np.arange(4))
+
+
+# ---------------------------------------------------------------- progress
+@pytest.mark.parametrize("case", ["max_error", "symmetric through pinholes"])
+def test_progress_never_goes_back(case):
+    """A max_error bound's steps start again from the last one kept, and a
+    symmetric run stopped short by pinholes runs again on the capped input:
+    the fractions went back (0.80 to 0.79, 0.99 to 0.31), and the add-on's
+    progress bar with them."""
+    from tests.mesh_factory import with_pinholes
+    if case == "max_error":
+        V, F = unwelded(*torus(40, 20))
+        V = V * (1 + 0.05 * np.sin(9 * V[:, :1]))
+        kwargs = dict(max_error=0.05)
+    else:
+        V, F = with_pinholes(*icosphere(4), share=0.02)
+        kwargs = dict(target_faces=100, symmetry="X")
+    seen = []
+    r = simplify(V, F, progress=lambda f: seen.append(f) or True, **kwargs)
+    assert r.stopped_because in ("max_error", "target") and len(seen) > 3
+    assert np.all(np.diff(seen) >= 0) and 0 <= seen[0] and seen[-1] <= 1
+    stop = []
+    r = simplify(V, F, progress=lambda f: stop.append(f) or len(stop) < 3, **kwargs)
+    assert r.stopped_because == "cancelled" and len(stop) == 3
