@@ -64,7 +64,7 @@ from ._clean import (BOUNDARY, NON_MANIFOLD, coincident_pairs, corner_fans, face
                      twin_table)
 from ._groups import ragged_entries
 from ._parallel import blocks, run_blocks, run_each
-from .errors import InvalidArgumentError
+from .errors import InvalidArgumentError, InvalidMeshError
 from .mesh import (FLAT_FACE, bounding_box, check_count, check_mesh, check_vertex_mask,
                    cross_rows, diagonal_length, face_normals)
 from .topology import connected_labels, edge_keys, face_components
@@ -256,6 +256,7 @@ def clean_mesh(V, F, *, weld_distance=None, min_component_area=MIN_COMPONENT_ARE
                                               protected, V.shape[0])
     used = np.zeros(V.shape[0], dtype=bool)
     used[F.ravel()] = True
+    check_span(V if used.all() else V[used], where=_WHERE)
     box = bulk_box(V if used.all() else V[used])
     w = _Work.of(V, F)
     weld, area = _weld_stage(w, box, weld_distance, protected)
@@ -276,6 +277,21 @@ def clean_mesh(V, F, *, weld_distance=None, min_component_area=MIN_COMPONENT_ARE
     V, F, input_to_clean, clean_to_input = _compact(w.V, w.F, to_input, weld.rep)
     return CleanResult(V, F, input_to_clean, clean_to_input, w.faces, w.twin, w.area,
                        CleanReport(**w.counts))
+
+
+def check_span(V, *, where):
+    """Raise :class:`InvalidMeshError` (named ``where``) when the positions
+    ``V`` (the ones the faces use) span more than the largest float along an axis: their
+    differences are infinite, and every face came out degenerate ('nothing
+    is left after cleaning ... (welded 158 vertices, removed 320 degenerate
+    faces)' for a sphere of radius 1e308)."""
+    lo, hi = bounding_box(V)
+    with np.errstate(over="ignore"):
+        span = hi - lo
+    if not np.isfinite(span).all():
+        raise InvalidMeshError(
+            f"{where}: the mesh spans from {lo.min():.3g} to {hi.max():.3g}, beyond what floats "
+            f"can subtract (about 1.8e308): scale it down first")
 
 
 def _checked_options(weld_distance, min_component_area, face_budget, protected, n):

@@ -59,7 +59,7 @@ from ._parallel import blocks, run_blocks, run_each
 from ._relax import close_smallest_hole, close_triangular_holes, drop_stuck_components
 from ._relocate import relocate, segment_triangles
 from ._touch_up import touch_up
-from .clean import MIN_COMPONENT_AREA, CleanReport, clean_mesh
+from .clean import MIN_COMPONENT_AREA, CleanReport, check_span, clean_mesh
 from .errors import InvalidArgumentError, InvalidMeshError, MeshAdjustError
 from .mesh import (UNITS, area_normals_rows, bounding_box, check_flag, check_mesh, check_number,
                    check_vertex_mask, diagonal_length, dot_columns, face_normals, has_area,
@@ -1097,6 +1097,9 @@ def _going_on(progress, done):
 def cleaned_input(V, F, weld_distance, min_component_area, budget, locked):
     """The cleaned input (:func:`core.clean.clean_mesh`), or a clear error
     when nothing with area is left of it."""
+    used = np.zeros(V.shape[0], dtype=bool)
+    used[F.ravel()] = True
+    check_span(V[used], where=_WHERE)
     clean = clean_mesh(V, F, weld_distance=weld_distance, min_component_area=min_component_area,
                        face_budget=budget or None, protected=locked)
     if clean.F.shape[0] == 0 and F.shape[0] > 0:

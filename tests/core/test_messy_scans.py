@@ -314,3 +314,19 @@ def test_progress_never_goes_back(case):
     stop = []
     r = simplify(V, F, progress=lambda f: stop.append(f) or len(stop) < 3, **kwargs)
     assert r.stopped_because == "cancelled" and len(stop) == 3
+
+
+def test_a_mesh_spanning_beyond_the_floats_is_named_as_such():
+    """A sphere of radius 1e308: its coordinates are finite but their
+    differences are not, and every face came out degenerate ('nothing is
+    left after cleaning the 320 faces (welded 158 vertices, removed 320
+    degenerate faces)'). An unreferenced far vertex does not count."""
+    from core.errors import InvalidMeshError
+    V, F = icosphere(2)
+    for call, where in ((lambda W: clean_mesh(W, F), "clean_mesh"),
+                        (lambda W: simplify(W, F, target_faces=10), "simplify")):
+        with pytest.raises(InvalidMeshError, match=f"^{where}: the mesh spans from -1e\\+308 to "
+                                                   f"1e\\+308, beyond what floats can subtract"):
+            call(V * 1e308)
+    r = simplify(np.vstack([V, [[-1.7e308, 0, 0], [1.7e308, 0, 0]]]), F, target_faces=10)
+    assert r.F.shape[0] == 10 and r.cleaning.n_unreferenced_vertices == 2
