@@ -173,10 +173,7 @@ def _check_target(r, res):
     """Warnings for an unchanged cage or a target missed by more than
     :data:`TARGET_SLACK`, with the simplify's own sentence as the reason."""
     out, target = r["faces_out"], r["target_faces"]
-    c = res.cleaning
-    cleaned = res.n_input_faces - (c.n_degenerate_faces + c.n_duplicate_faces
-                                   + c.n_double_sided_faces + c.n_debris_faces)
-    if out >= cleaned and res.stopped_because != "target":
+    if out >= res.n_clean_faces and res.stopped_because != "target":
         r["warnings"].append(f"the cage came back unchanged, no collapse possible "
                              f"({res.stopped_because.replace('_', ' ')}): {res.message}")
     elif target is not None and out > (1 + TARGET_SLACK) * target:

@@ -158,6 +158,9 @@ class SimplifyResult:
         cleaning dropped as debris, coincident copies or double-sided
         sheets. None: :meth:`represented` goes by the vertex map alone.
     n_passes : int, batches applied.
+    n_clean_faces : int, the faces the collapse started from (the cleaned
+        input, with its capped pinholes): a cage of that many faces is the
+        cleaned input unchanged.
     seconds : dict, wall-clock seconds per stage: ``"clean"``, ``"set-up"``
         (order, quadrics), the engine's own (``"candidates"``, ``"recost"``,
         ``"pool"``, ``"pick and check"``, ``"apply"``, ``"compact"``),
@@ -192,6 +195,7 @@ class SimplifyResult:
     preserve_boundary: bool = True
     n_input_pieces: int = None
     represented_faces: np.ndarray = None
+    n_clean_faces: int = 0
 
     def represented(self, F):
         """(m_in,) bool per face of ``F`` (the faces given to ``simplify``):
@@ -1220,4 +1224,4 @@ def _result(cage, clean, m_in, n_in, target, hausdorff, t0, preserve_boundary, s
         n_border_vertices=border_vertex_count(cage.F, cage.V.shape[0], em),
         preserve_boundary=preserve_boundary,
         n_input_pieces=soup_pieces(cage.F, cage.V.shape[0], clean.F, clean.V.shape[0], n_comp),
-        represented_faces=stood_for)
+        represented_faces=stood_for, n_clean_faces=int(clean.F.shape[0]))

@@ -523,7 +523,8 @@ def _symmetric(whole, options):
         n_components=n_comp, n_passes=r.n_passes, asymmetry=hs.asymmetry / diag,
         n_border_vertices=border_vertex_count(cage.F, cage.V.shape[0], em),
         preserve_boundary=r.preserve_boundary,
-        n_input_pieces=soup_pieces(cage.F, cage.V.shape[0], clean.F, clean.V.shape[0], n_comp))
+        n_input_pieces=soup_pieces(cage.F, cage.V.shape[0], clean.F, clean.V.shape[0], n_comp),
+        n_clean_faces=int(clean.F.shape[0]))
 
 
 def _check_crosses(clean, s, k, axis):
@@ -657,4 +658,5 @@ def _cancelled(clean, n_in, m_in, target):
         V=clean.V.copy(), F=clean.F.copy(), vertex_map=vertex_map, face_map=clean.face_to_input.copy(),
         max_error=0.0, stopped_because="cancelled", feature_edges=np.zeros((0, 2), np.int64),
         cleaning=clean.report, n_input_faces=int(m_in), target=target,
-        n_boundary_loops=boundary_loops_count(clean.F, clean.V.shape[0]), n_components=n_comp)
+        n_boundary_loops=boundary_loops_count(clean.F, clean.V.shape[0]), n_components=n_comp,
+        n_clean_faces=int(clean.F.shape[0]))

@@ -226,6 +226,22 @@ def test_missed_target_and_unchanged_cage_warn_and_strict_fails(tmp_path):
     assert proc.returncode == 1
 
 
+def test_an_unchanged_cage_of_a_mesh_exported_twice_is_said_unchanged(tmp_path):
+    # the batch guessed the cleaned face count from some of the cleaning's counts: ten
+    # tetrahedra exported twice in place (80 faces, the copies dropped: 40, the floor)
+    # came back unchanged, said only to miss its target; simplify now says how many
+    # faces the collapse started from (SimplifyResult.n_clean_faces)
+    from tests.mesh_factory import duplicated
+    core.write_obj(tmp_path / "twice.obj", *duplicated(*scattered(tetrahedron, 10)))
+    proc = run_batch(["twice.obj", "--faces", "20", "--out", "out", "--report", "r.json"],
+                     tmp_path)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    f, = json.loads((tmp_path / "r.json").read_text())["files"]
+    assert (f["faces_in"], f["faces_out"]) == (80, 40)
+    assert f["warnings"] == ["the cage came back unchanged, no collapse possible (topology "
+                             "floor): " + f["message"]]
+
+
 def test_skip_existing_resumes_a_batch(tmp_path):
     for k in range(2):
         core.write_obj(tmp_path / f"s{k}.obj", *bumpy_sphere(3))
