@@ -65,8 +65,8 @@ from ._clean import (BOUNDARY, NON_MANIFOLD, coincident_pairs, corner_fans, face
 from ._groups import ragged_entries
 from ._parallel import blocks, run_blocks, run_each
 from .errors import InvalidArgumentError, InvalidMeshError
-from .mesh import (FLAT_FACE, bounding_box, check_count, check_mesh, check_vertex_mask,
-                   cross_rows, diagonal_length, face_normals)
+from .mesh import (bounding_box, check_count, check_mesh, check_vertex_mask, cross_rows,
+                   diagonal_length, face_normals, flat_faces)
 from .topology import connected_labels, edge_keys, face_components
 from .copies import coincident_copies, doubled_quads, pillow_layers, stacked_copies
 from .pages import plain_pages
@@ -423,7 +423,7 @@ def _drop_flat_ears(w, inner, turned):
     Returns the interior edges and the ``turned`` mask of the faces kept."""
     ears = (w.twin.reshape(-1, 3) < 0).sum(axis=1) >= 2
     cand = np.flatnonzero(ears)
-    ears[cand] = _flat_faces(w.V, w.F[cand])
+    ears[cand] = flat_faces(w.V, w.F[cand])
     if not ears.any() or ears.all():                # (all flat: simplify names that)
         return inner, turned
     w.counts["n_degenerate_faces"] += int(np.count_nonzero(ears))
@@ -838,7 +838,7 @@ def _pair_sheets(V, F, twin):
     score = 2.0 * (U[hi] == W[hj]) + np.einsum("ij,ij->i", N[i], N[j])
     # a face with no area (corners collinear: a fin folded flat onto the edge) pairs last,
     # whatever its winding: it won over a real neighbour wound the other way, and stayed
-    flat = _flat_faces(V, F[hn // 3])
+    flat = flat_faces(V, F[hn // 3])
     score[flat[i] | flat[j]] -= 8.0
     by = np.lexsort((-score, group[i]))
     i, j = i[by], j[by]
@@ -854,21 +854,6 @@ def _pair_sheets(V, F, twin):
         twin[hn[b]] = hn[a]
     twin[hn[~matched]] = BOUNDARY
     return twin, int(start.size)
-
-
-def _flat_faces(V, F):
-    """(k,) bool per face of ``F`` (k,3): no area, its corners collinear up to
-    the rounding of their coordinates (twice its area at most ``FLAT_FACE``
-    times its longest edge times its largest coordinate magnitude, as
-    :func:`~.mesh.has_area` tells; each face scaled by that magnitude first,
-    so no product overflows at 1e200)."""
-    P = V[F]                                               # (k,3,3)
-    size = np.abs(P).max(axis=(1, 2), initial=0.0)
-    P /= np.where(size > 0, size, 1.0)[:, None, None]
-    e1, e2 = P[:, 1] - P[:, 0], P[:, 2] - P[:, 0]
-    longest = np.sqrt(np.maximum(np.maximum((e1 * e1).sum(axis=1), (e2 * e2).sum(axis=1)),
-                                 ((e2 - e1) ** 2).sum(axis=1)))
-    return np.linalg.norm(cross_rows(e1, e2), axis=1) <= FLAT_FACE * longest
 
 
 def _split_fans(V, F, twin, to_input, corners=None):

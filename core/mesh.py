@@ -576,6 +576,21 @@ def has_area(V, F):
     return False
 
 
+def flat_faces(V, F):
+    """(k,) bool per face of ``F`` (k,3): no area, its corners collinear up to
+    the rounding of their coordinates (twice its area at most ``FLAT_FACE``
+    times its longest edge times its largest coordinate magnitude, as
+    :func:`has_area` tells; each face scaled by that magnitude first, so no
+    product overflows at 1e200)."""
+    P = V[F]                                               # (k,3,3)
+    size = np.abs(P).max(axis=(1, 2), initial=0.0)
+    P /= np.where(size > 0, size, 1.0)[:, None, None]
+    e1, e2 = P[:, 1] - P[:, 0], P[:, 2] - P[:, 0]
+    longest = np.sqrt(np.maximum(np.maximum((e1 * e1).sum(axis=1), (e2 * e2).sum(axis=1)),
+                                 ((e2 - e1) ** 2).sum(axis=1)))
+    return np.linalg.norm(cross_rows(e1, e2), axis=1) <= FLAT_FACE * longest
+
+
 def barycentric_gather(X, corners, bary):
     """Points blended from the rows of ``X`` (n,d): ``sum_j bary[i, j] *
     X[corners[i, j]]``, (s,d). ``corners`` and ``bary`` are (s,3) (a

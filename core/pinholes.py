@@ -36,7 +36,7 @@ from typing import NamedTuple
 import numpy as np
 
 from ._clean import BOUNDARY, half_edge_ends, interior_edges, twin_table
-from .mesh import bounding_box, diagonal_length, face_areas
+from .mesh import bounding_box, diagonal_length, face_areas, flat_faces
 from .topology import connected_labels, edge_keys, vertex_labels
 
 __all__ = ["PINHOLE_FACES", "PINHOLE_SURFACE", "MAX_PINHOLE_EDGES", "Pinholes", "cap_pinholes",
@@ -121,7 +121,7 @@ def close_pinholes(V, F, twin, face_area, face_budget):
     if heads.size == 0:
         return None
     rim, count = _rims(loops, heads)
-    caps, beside = _fans(F, V.shape[0], rim, count, loops)
+    caps, beside = _fans(V, F, rim, count, loops)
     if caps.shape[0] == 0:
         return None
     F2 = np.concatenate([F, caps])
@@ -333,12 +333,14 @@ def _rims(loops, heads):
     return rim, count
 
 
-def _fans(F, n, rim, count, loops):
+def _fans(V, F, rim, count, loops):
     """The caps of the loops ``rim`` (positions, from :func:`_rims`): a fan
     from one rim vertex, triangles ``(r_a, r_{a+i+1}, r_{a+i})`` (the rim
-    edges' twins), the apex moved on where a diagonal is already an edge.
-    Returns the caps (c, 3) and, per cap, (the face beside its rim edge, its
-    loop's row)."""
+    edges' twins), the apex moved on where a diagonal is already an edge or
+    a triangle would have no area (a rim through two copies of a bow-tie
+    vertex, at one point: a cage kept two such faces). Returns the caps
+    (c, 3) and, per cap, (the face beside its rim edge, its loop's row)."""
+    n = V.shape[0]
     k = count[:, None]
     cols = np.arange(rim.shape[1])
     R = np.where(rim >= 0, loops.u[np.maximum(rim, 0)], -1)
@@ -355,13 +357,12 @@ def _fans(F, n, rim, count, loops):
         diag = (cols[None, 2:] <= kk - 2)                       # diagonals r_0 - r_j, 2 <= j <= k-2
         keys = edge_keys(r[:, :1], r[:, 2:], n)
         clash = (diag & np.isin(keys, existing)).any(axis=1)
-        ok = np.flatnonzero(~clash)
-        i = cols[1:-1]
-        tri = i[None, :] <= kk[ok] - 2                          # triangles 1 <= i <= k-2
-        row, col = np.nonzero(tri)
-        rr, pp = r[ok], p[ok]
-        caps.append(np.stack([rr[row, 0], rr[row, col + 2], rr[row, col + 1]], axis=1))
-        beside.append(np.stack([loops.h[pp[row, col + 1]] // 3, todo[ok][row]], axis=1))
+        row, col = np.nonzero(cols[None, 1:-1] <= kk - 2)       # triangles 1 <= i <= k-2
+        tri = np.stack([r[row, 0], r[row, col + 2], r[row, col + 1]], axis=1)
+        clash[row[flat_faces(V, tri)]] = True
+        fine = ~clash[row]
+        caps.append(tri[fine])
+        beside.append(np.stack([loops.h[p[row, col + 1]] // 3, todo[row]], axis=1)[fine])
         todo = todo[clash]
     if not caps:
         return np.zeros((0, 3), dtype=np.int64), np.zeros((0, 2), dtype=np.int64)
