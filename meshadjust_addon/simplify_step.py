@@ -158,14 +158,14 @@ def prepare_simplify(source, params, *, depsgraph=None):
     for group, attr in ((params.weight_group, "weights"), (params.lock_group, "locked")):
         if not group:
             continue
-        if arrays.evaluated:
-            raise core.InvalidArgumentError(
-                f"simplify: vertex groups cannot be used together with modifiers or shape keys "
-                f"on '{source.name}' (apply them first)")
+        # (modifiers and shape keys that only move the vertices, an Armature's, keep the
+        # groups' vertices: a rig need not be applied)
         w = mesh_io.vertex_group_weights(source, group)
         if w.shape[0] != n:
-            raise core.InvalidArgumentError(f"simplify: vertex group '{group}' does not match "
-                                            f"the mesh")
+            raise core.InvalidArgumentError(
+                f"simplify: vertex group '{group}' cannot be used with the modifiers on "
+                f"'{source.name}': they make {n:,} vertices of its {w.shape[0]:,} (apply them "
+                f"first, or turn those that add or remove vertices off)")
         setattr(job, attr, w if attr == "weights" else w > 0.5)
     if job.weights is not None:
         job.weights = 1.0 + 9.0 * job.weights     # weight 1 -> 10x as important

@@ -494,3 +494,29 @@ def test_cage_steps_handle_several_selected_cages(scene):
         assert np.allclose(dz, 0.1, atol=1e-4)
     assert bpy.ops.meshadjust.bind(levels=1) == {'FINISHED'}      # both re-bound, one level
     assert [c.meshadjust.levels for c in cages] == [1, 1]
+
+
+def test_vertex_groups_follow_a_rig_and_not_modifiers_that_add_vertices(scene):
+    # a lock group on a source with modifiers or shape keys was refused outright ("apply
+    # them first": a rig applied is a rig lost); modifiers that only move the vertices keep
+    # the group's vertices, so it is used; those that add vertices are named
+    V, F = bumpy_sphere(3)
+    obj = make_object("dense", V, F)
+    locked = np.flatnonzero(V[:, 2] > 0.8)
+    obj.vertex_groups.new(name="lock").add(locked.tolist(), 1.0, 'REPLACE')
+    lift = obj.modifiers.new("lift", 'DISPLACE')      # (no texture: every vertex up by 0.25)
+    lift.direction, lift.mid_level, lift.strength = 'Z', 0.0, 0.25
+    assert bpy.ops.meshadjust.simplify(target_mode='FACES', target_faces=400, lock_group="lock",
+                                       fit=False, bind=False) == {'FINISHED'}
+    cage = obj.meshadjust.cage
+    assert "evaluated mesh" in cage.meshadjust.last_report
+    Vc = mio().read_positions(cage.data)
+    Vl = (V[locked] + [0.0, 0.0, 0.25]).astype(np.float32).astype(np.float64)
+    d = np.linalg.norm(Vl[:, None, :] - Vc[None, :, :], axis=2).min(axis=1)
+    assert d.max() < 1e-6                  # every locked vertex a cage vertex, where it shows
+    obj.modifiers.new("sub", 'SUBSURF').levels = 1
+    names = set(bpy.data.objects.keys())
+    with pytest.raises(RuntimeError, match="make 3,842 vertices of its 642"):
+        bpy.ops.meshadjust.simplify(target_mode='FACES', target_faces=400, lock_group="lock",
+                                    fit=False, bind=False)
+    assert set(bpy.data.objects.keys()) == names
