@@ -214,16 +214,32 @@ def ring_rotations(V0, V1, rings, vertices):
     its one-ring's edges (and its area normal, so a flat or straight ring
     still has one) on ``V0`` to those on ``V1`` (least squares: Procrustes).
     Exact for a rigid motion."""
-    counts = rings.start[vertices + 1] - rings.start[vertices]
-    k, owner = ragged_ranges(rings.start[vertices], counts)
-    j = rings.other[k]
-    a, b = V0[j] - V0[vertices[owner]], V1[j] - V1[vertices[owner]]
-    M = np.zeros((vertices.shape[0], 3, 3))
-    np.add.at(M, owner, b[:, :, None] * a[:, None, :])
+    a, b, owner = _ring_edges(V0, V1, rings, vertices)
+    M = _outer_sums(b, a, owner, vertices.shape[0])
     n0, n1 = (rings.normals(V, vertices) for V in (V0, V1))
     scale = np.bincount(owner, np.einsum("ij,ij->i", a, a), vertices.shape[0])
     M += scale[:, None, None] * n1[:, :, None] * n0[:, None, :]
     return nearest_rotations(M)
+
+
+def _ring_edges(V0, V1, rings, vertices):
+    """The one-ring edges of the cage ``vertices`` on ``V0`` and on ``V1``
+    ((e,3) each, from the vertex) and the row of ``vertices`` each is of."""
+    counts = rings.start[vertices + 1] - rings.start[vertices]
+    k, owner = ragged_ranges(rings.start[vertices], counts)
+    j = rings.other[k]
+    return V0[j] - V0[vertices[owner]], V1[j] - V1[vertices[owner]], owner
+
+
+def _outer_sums(x, y, owner, q):
+    """(q,3,3) per row ``r < q`` the sum of the outer products ``x_e y_e^T``
+    of the rows ``e`` with ``owner[e] == r`` (a bincount per entry: in the
+    rows' order, as ``np.add.at`` adds, several times faster)."""
+    out = np.empty((q, 3, 3))
+    for r in range(3):
+        for c in range(3):
+            out[:, r, c] = np.bincount(owner, x[:, r] * y[:, c], q)
+    return out
 
 
 def ring_linear_maps(V0, V1, rings, vertices):
@@ -235,16 +251,9 @@ def ring_linear_maps(V0, V1, rings, vertices):
     ring's rotation (:func:`ring_rotations`, from the same sums) times that
     stretch. A rigid motion gives its rotation (to rounding), a uniform
     scale by ``s`` that scale."""
-    counts = rings.start[vertices + 1] - rings.start[vertices]
-    k, owner = ragged_ranges(rings.start[vertices], counts)
-    j = rings.other[k]
-    a, b = V0[j] - V0[vertices[owner]], V1[j] - V1[vertices[owner]]
+    a, b, owner = _ring_edges(V0, V1, rings, vertices)
     q = vertices.shape[0]
-    BA, AA = np.empty((q, 3, 3)), np.empty((q, 3, 3))
-    for r in range(3):                    # sums of outer products (bincount: no np.add.at)
-        for c in range(3):
-            BA[:, r, c] = np.bincount(owner, b[:, r] * a[:, c], q)
-            AA[:, r, c] = np.bincount(owner, a[:, r] * a[:, c], q)
+    BA, AA = _outer_sums(b, a, owner, q), _outer_sums(a, a, owner, q)
     n0, n1 = (rings.normals(V, vertices) for V in (V0, V1))
     sa = AA[:, 0, 0] + AA[:, 1, 1] + AA[:, 2, 2]
     sb = np.bincount(owner, np.einsum("ij,ij->i", b, b), q)
