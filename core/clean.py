@@ -256,8 +256,10 @@ def clean_mesh(V, F, *, weld_distance=None, min_component_area=MIN_COMPONENT_ARE
                                               protected, V.shape[0])
     used = np.zeros(V.shape[0], dtype=bool)
     used[F.ravel()] = True
-    check_span(V if used.all() else V[used], where=_WHERE)
-    box = bulk_box(V if used.all() else V[used])
+    on_faces = V if used.all() else V[used]
+    check_span(on_faces, where=_WHERE)
+    box = bulk_box(on_faces)
+    del on_faces
     w = _Work.of(V, F)
     weld, area = _weld_stage(w, box, weld_distance, protected)
     _drop_repeated_faces(w)
