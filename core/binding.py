@@ -61,8 +61,8 @@ import numpy as np
 
 from .detail_search import (DetailSurface, dense_points_near, detail_surface, exact_detail_index,
                             is_unwelded)
-from .errors import CancelledError, InvalidArgumentError, InvalidMeshError, TopologyMismatchError
-from .mesh import (area_normals_t, bounding_box, check_faces, check_number,
+from .errors import CancelledError, InvalidArgumentError, TopologyMismatchError
+from .mesh import (area_normals_t, bounding_box, check_faces, check_mesh, check_number,
                    check_units, check_vertices, cross_columns, dot_columns, stops)
 from .near_query import NearQuery
 from .spatial import TriangleIndex
@@ -422,12 +422,12 @@ def bind(V_dense, F_dense, V_cage, F_cage, *, levels=2, scheme="butterfly", crea
     """
     F_in = F_dense
     # V_dense is only read: not copied (24 MB at 1M vertices); the binding keeps its own F_dense
-    V_dense, F_dense = check_named_mesh(V_dense, F_dense, where="bind", names=("V_dense", "F_dense"),
-                                        copy=False)
+    V_dense, F_dense = check_mesh(V_dense, F_dense, where="bind", names=("V_dense", "F_dense"),
+                                  copy=False)
     if isinstance(F_in, np.ndarray) and np.may_share_memory(F_dense, F_in):
         F_dense = F_dense.copy()
-    V_cage, F_cage = check_named_mesh(V_cage, F_cage, where="bind", names=("V_cage", "F_cage"),
-                                      allow_empty=False)
+    V_cage, F_cage = check_mesh(V_cage, F_cage, where="bind", names=("V_cage", "F_cage"),
+                                allow_empty=False)
     check_not_soup(F_cage, V_cage.shape[0], F_dense, V_dense.shape[0], "bind")
     check_units(V_dense, where="bind", name="V_dense")
     check_units(V_cage, where="bind", name="V_cage")
@@ -492,29 +492,6 @@ def bind(V_dense, F_dense, V_cage, F_cage, *, levels=2, scheme="butterfly", crea
                    fingerprint=op.fingerprint, F_dense=F_dense, V_cage_rest=V_cage,
                    _operator=op,
                    _cache=_binding_cache(dense, op.F_fine, d_face, d_bary, fine_detail))
-
-
-def check_named_mesh(V, F, *, where, names, allow_empty=True, copy=True):
-    """:func:`~.mesh.check_mesh` for a function taking two meshes (``bind``,
-    ``fit_cage``): the messages name the arguments ``names`` (e.g.
-    ``("V_cage", "F_cage")``), not "V", "F" or "the mesh"."""
-    faces = F if isinstance(F, np.ndarray) else None
-    try:
-        V = check_vertices(V, where=where, name=names[0], copy=copy, faces=faces)
-    except InvalidMeshError as exc:
-        raise InvalidMeshError(str(exc).replace(" vertices have NaN", f" vertices of {names[0]} "
-                                                "have NaN", 1)) from None
-    try:
-        F = check_faces(F, V.shape[0], where=where, allow_empty=allow_empty, copy=copy)
-    except InvalidMeshError as exc:
-        msg = str(exc)
-        for old, new in ((f"{where}: F must", f"{where}: {names[1]} must"),
-                         ("the mesh has no faces", f"{names[1]} has no faces"),
-                         (" faces index vertices", f" faces of {names[1]} index vertices"),
-                         (f"{where}: face ", f"{where}: {names[1]}'s face ")):
-            msg = msg.replace(old, new, 1)
-        raise InvalidMeshError(msg) from None
-    return V, F
 
 
 def _typical_distance(V_dense, V_cage, F_cage, scheme, creases, origin):

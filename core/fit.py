@@ -37,13 +37,12 @@ from .cg import conjugate_gradient
 from .clean import clean_mesh
 from .errors import InvalidArgumentError, InvalidMeshError
 from .mesh import (barycentric_gather, barycentric_scatter, bbox_diagonal, bounding_box,
-                   check_number, check_seed, check_units, cross_rows, face_areas, squared_edges,
-                   stops, vertex_normals)
+                   check_mesh, check_number, check_seed, check_units, cross_rows, face_areas,
+                   squared_edges, stops, vertex_normals)
 from .metrics import MAX_SAMPLES, sample_surface
 from .mirror import axis_index, mirror_partners, symmetrize
 from .near_query import search_for
 from .spatial import TriangleIndex
-from .binding import check_named_mesh
 from .subdivide import cage_operator, check_subdivision_args
 from .topology import check_not_soup, edge_map
 from .pages import plain_pages
@@ -191,10 +190,10 @@ def _set_up(V_dense, F_dense, V_cage, F_cage, *, levels, scheme, creases, smooth
     moved to the dense bounding-box centre (the result then does not depend
     on where the mesh sits; the CG stopping rule is relative), its samples
     and index, and the cage's operator and Laplacian."""
-    V_dense, F_dense = check_named_mesh(V_dense, F_dense, where="fit_cage",
-                                        names=("V_dense", "F_dense"), allow_empty=False)
-    V_cage, F_cage = check_named_mesh(V_cage, F_cage, where="fit_cage", names=("V_cage", "F_cage"),
-                                      allow_empty=False)
+    V_dense, F_dense = check_mesh(V_dense, F_dense, where="fit_cage",
+                                  names=("V_dense", "F_dense"), allow_empty=False)
+    V_cage, F_cage = check_mesh(V_cage, F_cage, where="fit_cage", names=("V_cage", "F_cage"),
+                                allow_empty=False)
     check_subdivision_args(levels, scheme, "fit_cage", F_cage.shape[0])
     check_units(V_dense, where="fit_cage", name="V_dense")
     check_units(V_cage, where="fit_cage", name="V_cage")

@@ -32,7 +32,7 @@ def _as_array(x, name, shape, where, error=InvalidMeshError):
                     f"lengths ({exc})") from None
 
 
-def check_mesh(V, F, *, where, allow_empty=True, copy=True):
+def check_mesh(V, F, *, where, allow_empty=True, copy=True, names=("V", "F")):
     """Validate and copy a triangle mesh.
 
     Parameters
@@ -48,6 +48,9 @@ def check_mesh(V, F, *, where, allow_empty=True, copy=True):
     copy : bool
         If False, arrays that already are C-contiguous float64 / int64 come
         back as they are (for functions that only read them).
+    names : (str, str)
+        The arguments the messages name (``("V_cage", "F_cage")`` for a
+        function taking two meshes: "F_cage has no faces", not "the mesh").
 
     Returns
     -------
@@ -65,10 +68,11 @@ def check_mesh(V, F, *, where, allow_empty=True, copy=True):
     >>> V.dtype, F.dtype
     (dtype('float64'), dtype('int64'))
     """
-    V = _as_array(V, "V", "(n,3) floats", where)     # ragged lists first, V's then F's
-    F = _as_array(F, "F", "(m,3) integers", where)
-    V = check_vertices(V, where=where, copy=copy, faces=F)
-    return V, check_faces(F, V.shape[0], where=where, allow_empty=allow_empty, copy=copy)
+    V = _as_array(V, names[0], "(n,3) floats", where)     # ragged lists first, V's then F's
+    F = _as_array(F, names[1], "(m,3) integers", where)
+    V = check_vertices(V, where=where, name=names[0], copy=copy, faces=F)
+    return V, check_faces(F, V.shape[0], where=where, allow_empty=allow_empty, copy=copy,
+                          name=names[1])
 
 
 def _converted(x, dtype, copy):
@@ -91,8 +95,9 @@ def check_vertices(V, *, where, name="V", copy=True, faces=None):
     V_out = _converted(V_in, np.float64, copy)
     if not np.isfinite(V_out).all():
         rows = np.flatnonzero(~np.isfinite(V_out).all(axis=1))
+        of = "" if name == "V" else f" of {name}"
         raise InvalidMeshError(
-            f"{where}: {rows.size} vertices have NaN or infinite coordinates"
+            f"{where}: {rows.size} vertices{of} have NaN or infinite coordinates"
             f"{_used_by_faces(rows, faces)}, e.g. vertex {rows[0]} = {V_out[rows[0]].tolist()}"
         )
     return V_out
@@ -171,25 +176,28 @@ def _used_by_faces(rows, faces):
     return f", {used:,} of them used by faces"
 
 
-def check_faces(F, n_vertices, *, where, allow_empty=True, copy=True):
+def check_faces(F, n_vertices, *, where, allow_empty=True, copy=True, name="F"):
     """Triangles ``F`` (m,3) as int64, checked as :func:`check_mesh` checks
     them: integers, each in ``[0, n_vertices)`` (``n_vertices`` None: only
-    ``>= 0``). Raises :class:`InvalidMeshError` naming the first bad face.
+    ``>= 0``). Raises :class:`InvalidMeshError` naming the first bad face
+    (and ``name``, the argument, where it is not plain ``F``).
 
     Examples
     --------
     >>> check_faces([[0, 1, 2]], 3, where="demo").tolist()
     [[0, 1, 2]]
     """
-    F_in = _as_array(F, "F", "(m,3) integers", where)
+    F_in = _as_array(F, name, "(m,3) integers", where)
+    of, face = ("", "face") if name == "F" else (f" of {name}", f"{name}'s face")
     if F_in.size == 0 and F_in.ndim <= 1:
         F_in = F_in.reshape(0, 3).astype(np.int64)
     if F_in.ndim != 2 or F_in.shape[1] != 3 or not np.issubdtype(F_in.dtype, np.integer):
-        raise InvalidMeshError(f"{where}: F must be (m,3) integers, got {F_in.shape} {F_in.dtype}")
+        raise InvalidMeshError(f"{where}: {name} must be (m,3) integers, got {F_in.shape} "
+                               f"{F_in.dtype}")
     if F_in.dtype.kind == "u" and F_in.size and int(F_in.max()) > np.iinfo(np.int64).max:
         # (as int64 it wrapped to a negative index, and the message showed -1)
         f = int(np.flatnonzero((F_in > np.iinfo(np.int64).max).any(axis=1))[0])
-        raise InvalidMeshError(f"{where}: face {f} = {F_in[f].tolist()} indexes a vertex beyond "
+        raise InvalidMeshError(f"{where}: {face} {f} = {F_in[f].tolist()} indexes a vertex beyond "
                                f"any mesh (more than 2^63)")
     F_out = _converted(F_in, np.int64, copy)
     if F_out.size:
@@ -199,11 +207,11 @@ def check_faces(F, n_vertices, *, where, allow_empty=True, copy=True):
             f = int(np.flatnonzero(out.any(axis=1))[0])
             span = "have negative indices" if n is None else f"index vertices outside [0, {n})"
             raise InvalidMeshError(
-                f"{where}: {int(out.any(axis=1).sum())} faces {span}, "
+                f"{where}: {int(out.any(axis=1).sum())} faces{of} {span}, "
                 f"e.g. face {f} = {F_out[f].tolist()}"
             )
     elif not allow_empty:
-        raise InvalidMeshError(f"{where}: the mesh has no faces")
+        raise InvalidMeshError(f"{where}: {'the mesh' if name == 'F' else name} has no faces")
     return F_out
 
 
