@@ -57,12 +57,15 @@ import numpy as np
 
 from ._collapse import compactness
 from ._face_tracker import faces_across
-from .mesh import cross_rows
+from .mesh import cross_rows, flat_faces
 from .near_query import NearQuery
 from .spatial import point_triangle_closest
 from .topology import edge_keys, edge_map
 
-__all__ = ["Gaps", "measure_gaps", "touch_up"]
+__all__ = ["Gaps", "flip_flat_faces", "measure_gaps", "touch_up"]
+
+#: rounds of :func:`flip_flat_faces` (each flips flat faces with disjoint neighbours)
+_FLAT_ROUNDS = 8
 
 #: barycentric points measured on each face a change rewrites besides its corners: the
 #: edge midpoints, the centroid and the quarter points (a face the change turns can move
@@ -409,3 +412,87 @@ def _points_after(V, change, idx):
     if change.vertex >= 0:
         X[idx == change.vertex] = change.to
     return X
+
+
+def flip_flat_faces(V, F, creases):
+    """The cage ``(V, F)`` without its flat faces where an edge flip removes
+    them: a face with no area (:func:`~.mesh.flat_faces`) has one corner on
+    its longest edge, and flipping that edge with the face across it puts the
+    corner on that face's far corner: the two new faces tile the face across
+    (the surface does not change) and both have area. (A pinched scan's fan,
+    folded onto the grid around it, kept a flat input face in the cage: its
+    edges were creases, the fold's, and every collapse next to it was
+    refused.)
+
+    A flipped crease ``(a, b)`` of ``creases`` (k,2) becomes the two creases
+    through the corner on it (the same line). Not flipped: a border edge, an
+    edge whose new edge the cage already has, one whose new faces would have
+    no area or turn from the face across. Flips of one round touch disjoint
+    faces; ``_FLAT_ROUNDS`` rounds at most. Returns the faces and the creases
+    (``F`` and ``creases`` themselves when nothing was flipped; face ids stay)."""
+    out, creases = F, np.asarray(creases, dtype=np.int64).reshape(-1, 2)
+    for _ in range(_FLAT_ROUNDS):
+        flat = flat_faces(V, out)
+        if not flat.any():
+            break
+        flips = _flat_flips(V, out, np.flatnonzero(flat), flat)
+        if flips is None:
+            break
+        out = out.copy() if out is F else out
+        out[flips.faces] = flips.rows
+        creases = _creases_after(creases, flips, V.shape[0])
+    return out, creases
+
+
+class _Flips(NamedTuple):
+    """Edge flips of flat faces: the faces rewritten and their new rows, and
+    per flip the edge ``(a, b)`` flipped and the corner ``c`` on it."""
+
+    faces: np.ndarray   #: (2k,) the flat faces, then the faces across
+    rows: np.ndarray    #: (2k,3)
+    ab: np.ndarray      #: (k,2)
+    c: np.ndarray       #: (k,)
+
+
+def _flat_flips(V, F, faces, flat):
+    """One round of :func:`flip_flat_faces` over the flat ``faces`` (their
+    mask ``flat``): the :class:`_Flips` taken, or None."""
+    n = V.shape[0]
+    P = V[F[faces]]
+    opposite = np.stack([np.square(P[:, (j + 2) % 3] - P[:, (j + 1) % 3]).sum(axis=1)
+                         for j in range(3)], axis=1)
+    j = np.argmax(opposite, axis=1)
+    c, a, b = F[faces, j], F[faces, (j + 1) % 3], F[faces, (j + 2) % 3]
+    g = faces_across(F, n)[faces, j]
+    ok = g >= 0
+    g = np.where(ok, g, 0)
+    d = F[g].sum(axis=1) - a - b
+    ok &= ~flat[g] & (c != d)
+    ok &= ~np.isin(edge_keys(c, d, n), edge_keys(F.ravel(), F[:, [1, 2, 0]].ravel(), n))
+    new = np.stack([np.stack([c, a, d], axis=1), np.stack([c, d, b], axis=1)], axis=1)  # (k,2,3)
+    ok &= ~flat_faces(V, new.reshape(-1, 3)).reshape(-1, 2).any(axis=1)
+    Ng = cross_rows(V[F[g, 1]] - V[F[g, 0]], V[F[g, 2]] - V[F[g, 0]])
+    for t in range(2):
+        T = V[new[:, t]]
+        ok &= np.einsum("ij,ij->i", cross_rows(T[:, 1] - T[:, 0], T[:, 2] - T[:, 0]), Ng) > 0
+    # the flat faces are distinct and never across (those are not flat): one flip per
+    # face across a round
+    sel = np.flatnonzero(ok)[np.unique(g[ok], return_index=True)[1]]
+    if not sel.size:
+        return None
+    return _Flips(np.concatenate([faces[sel], g[sel]]), np.concatenate([new[sel, 0], new[sel, 1]]),
+                  np.stack([a[sel], b[sel]], axis=1), c[sel])
+
+
+def _creases_after(creases, flips, n):
+    """``creases`` (k,2) with each flipped one ``(a, b)`` replaced by
+    ``(a, c)`` and ``(c, b)`` (each crease once)."""
+    key = edge_keys(creases[:, 0], creases[:, 1], n)
+    hit = np.isin(edge_keys(flips.ab[:, 0], flips.ab[:, 1], n), key)
+    if not hit.any():
+        return creases
+    a, b, c = flips.ab[hit, 0], flips.ab[hit, 1], flips.c[hit]
+    gone = np.isin(key, edge_keys(a, b, n))
+    E = np.concatenate([creases[~gone], np.stack([a, c], axis=1), np.stack([c, b], axis=1)])
+    _, first = np.unique(edge_keys(E[:, 0], E[:, 1], n), return_index=True)
+    return E[np.sort(first)]

@@ -58,7 +58,7 @@ from ._collapse import State, compactness, run
 from ._parallel import blocks, run_blocks, run_each
 from ._relax import close_smallest_hole, close_triangular_holes, drop_stuck_components
 from ._relocate import relocate, segment_triangles
-from ._touch_up import touch_up
+from ._touch_up import flip_flat_faces, touch_up
 from .clean import MIN_COMPONENT_AREA, CleanReport, check_span, clean_mesh
 from .errors import InvalidArgumentError, InvalidMeshError, MeshAdjustError
 from .mesh import (UNITS, area_normals_rows, bounding_box, check_flag, check_mesh, check_number,
@@ -649,6 +649,7 @@ def _cage_of(su, mesh, stopped, passes, opts, relocate=True):
             t1 = time.perf_counter()
             F_out = _touched_up(su, mesh, features, tun)
             touched = time.perf_counter() - t1
+    F_out, features = flip_flat_faces(mesh.V, F_out, features)
     # back to the caller's units; vertices never moved keep their exact input position
     Vout = mesh.V * su.scale + su.centre
     still = ~mesh.moved

@@ -13,6 +13,7 @@ import dataclasses
 
 import numpy as np
 
+from core.mesh import face_areas, flat_faces
 from core.metrics import surface_distance
 from core.simplify import simplify
 from core.spatial import TriangleIndex
@@ -20,7 +21,7 @@ from core.topology import edge_map, manifold_report
 from core.tuning import TUNING
 from core import _touch_up as stages
 from core._touch_up import measure_gaps, touch_up
-from tests.mesh_factory import icosphere, load_shared, regular_grid
+from tests.mesh_factory import grid, icosphere, load_shared, pinched, regular_grid
 
 
 def _roof(n=20, h=0.3):
@@ -145,3 +146,52 @@ def test_simplify_brings_the_beetle_closer():
     assert touched.n_components == plain.n_components
     assert manifold_report(touched.F, touched.V.shape[0]).is_oriented_manifold
     assert np.array_equal(np.sort(touched.feature_edges, axis=0), np.sort(plain.feature_edges, axis=0))
+
+
+def test_a_flat_face_is_flipped_away_and_the_surface_stays():
+    # a fan around vertex 4, which lies on the edge 0-2 of face (0, 4, 2): flat
+    V = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0], [0.5, 0.5, 0], [2, 0.5, 0.3]],
+                 dtype=float)
+    F = np.array([[0, 1, 4], [1, 2, 4], [0, 4, 2], [2, 3, 0], [1, 5, 2]])
+    assert flat_faces(V, F).tolist() == [False, False, True, False, False]
+    creases = np.array([[0, 2], [1, 5]])
+    F2, creases2 = stages.flip_flat_faces(V, F, creases)
+    assert not flat_faces(V, F2).any()
+    assert F2.shape == F.shape and not np.shares_memory(F2, F)
+    assert F.tolist()[2] == [0, 4, 2]                                    # input untouched
+    # the flat face and the one across its longest edge (0-2) now tile that face
+    assert sorted(map(sorted, F2[[2, 3]].tolist())) == [[0, 3, 4], [2, 3, 4]]
+    assert np.isclose(face_areas(V, F2).sum(), face_areas(V, F).sum())
+    assert manifold_report(F2, V.shape[0]).is_manifold
+    em = edge_map(F2, V.shape[0])
+    assert em.E.shape[0] == edge_map(F, V.shape[0]).E.shape[0]          # a flip: same count
+    # the crease 0-2 is now the two creases through vertex 4, on the same line
+    assert sorted(map(tuple, np.sort(creases2, axis=1).tolist())) == [(0, 4), (1, 5), (2, 4)]
+    assert all(((em.E == np.sort(e)).all(axis=1)).any() for e in creases2)
+
+
+def test_a_flat_face_on_a_border_is_left_and_a_clean_cage_is_returned_as_it_is():
+    V = np.array([[0, 0, 0], [1, 0, 0], [2, 0, 0], [1, 1, 0]], dtype=float)
+    F = np.array([[0, 1, 3], [1, 2, 3], [0, 2, 1]])         # (0,2,1) flat, 0-2 on the border
+    creases = np.zeros((0, 2), dtype=np.int64)
+    F2, c2 = stages.flip_flat_faces(V, F, creases)
+    assert F2 is F and c2.shape == (0, 2)
+    Vs, Fs = icosphere(2)
+    F3, _ = stages.flip_flat_faces(Vs, Fs, creases)
+    assert F3 is Fs
+
+
+def test_a_pinched_grid_gives_cages_without_flat_faces():
+    # far-apart grid vertices merged into one index: the bow-tie split leaves a fan folded
+    # onto the grid, its edges creases, with one flat face that every collapse next to it
+    # kept; 18 of 96 such cages (60x60 grid, 1-12 pinches, 6 seeds, 4 targets) had one
+    V, F = grid(60, 60)
+    for k, seed, target in [(1, 4, 49), (3, 0, 1999), (6, 4, 999), (12, 4, 199)]:
+        Vp, Fp = pinched(V, F, k=k, seed=seed)
+        r = simplify(Vp, Fp, target_faces=target)
+        assert not flat_faces(r.V, r.F).any(), (k, seed, target)
+        assert manifold_report(r.F, r.V.shape[0]).is_manifold
+        assert r.F.shape[0] <= target and r.stopped_because == "target"
+        em = edge_map(r.F, r.V.shape[0])
+        keys = em.E[:, 0] * r.V.shape[0] + em.E[:, 1]
+        assert np.isin(r.feature_edges[:, 0] * r.V.shape[0] + r.feature_edges[:, 1], keys).all()
