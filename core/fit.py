@@ -64,10 +64,10 @@ class FitResult(NamedTuple):
     """Fitted cage and the distance record of :func:`fit_cage`."""
 
     V: np.ndarray               #: (n_cage,3) float64 fitted cage positions
-    mean_distance: np.ndarray   #: (iterations+1,) two-sided mean distance, before each step and at the end
-    fine_to_dense: np.ndarray   #: (iterations+1,) area-weighted mean distance fine surface -> dense
-    dense_to_fine: np.ndarray   #: (iterations+1,) mean distance dense samples -> fine surface
-    cg_iterations: np.ndarray   #: (iterations,) CG iterations of each solve
+    mean_distance: np.ndarray   #: (k+1,) two-sided mean distance, at the start and after each step kept
+    fine_to_dense: np.ndarray   #: (k+1,) area-weighted mean distance fine surface -> dense
+    dense_to_fine: np.ndarray   #: (k+1,) mean distance dense samples -> fine surface
+    cg_iterations: np.ndarray   #: (k,) CG iterations of each step kept
     diagonal: float             #: bounding-box diagonal of the dense mesh
     cancelled: bool = False     #: True when ``progress`` asked to stop (V is then the last iterate)
 
@@ -90,7 +90,12 @@ def fit_cage(V_dense, F_dense, V_cage, F_cage, *, levels=2, scheme="butterfly", 
     levels, scheme, creases
         Subdivision used to evaluate the cage (as in :func:`~.binding.bind`).
     iterations : int
-        Correspondence / solve alternations (>= 0; 0 returns the input).
+        Correspondence / solve alternations (>= 0; 0 returns the input). A
+        step that would increase the mean distance (its correspondences
+        slide, e.g. an open patch drifting off the scan) is undone and the
+        fit stops there, so ``k <= iterations`` steps are kept and the
+        distance record never rises: the cage returned is never farther
+        than the one given.
     smoothness : float
         Weight (>= 0, unit-free) of the Laplacian of the cage's displacement,
         relative to the mean-squared-distance data terms.
@@ -143,20 +148,22 @@ def fit_cage(V_dense, F_dense, V_cage, F_cage, *, levels=2, scheme="butterfly", 
     pb = _set_up(V_dense, F_dense, V_cage, F_cage, levels=levels, scheme=scheme, creases=creases,
                  smoothness=smoothness, point_to_point=point_to_point, laplacian=laplacian,
                  samples=samples, seed=seed, symmetry=symmetry, iterations=iterations)
-    X = pb.X0.copy()
-    f2d, d2f, cg_its = [], [], []
+    X, m = pb.X0.copy(), _match(pb, pb.X0)
+    f2d, d2f, cg_its = [m.fine_to_dense], [m.dense_to_fine], []
     cancelled = False
-    for it in range(int(iterations) + 1):
-        m = _match(pb, X)
-        f2d.append(float(np.dot(m.area, m.near.distance)))
-        d2f.append(float(np.mean(m.hit.distance)))
-        if it == int(iterations):
-            break
-        X, n_cg = _solve(pb, m, X, cg_rtol, cg_max_iterations)
-        cg_its.append(n_cg)
+    for it in range(int(iterations)):
+        X_new, n_cg = _solve(pb, m, X, cg_rtol, cg_max_iterations)
         if progress is not None and stops(progress((it + 1) / (int(iterations) + 1))):
-            cancelled = True
+            X, cancelled = X_new, True
+            cg_its.append(n_cg)
             break
+        m_new = _match(pb, X_new)
+        if not m_new.mean <= m.mean:   # a step away from the surface (or NaN): undone, and
+            break                      # the next would be the same (same correspondences)
+        X, m = X_new, m_new
+        f2d.append(m.fine_to_dense)
+        d2f.append(m.dense_to_fine)
+        cg_its.append(n_cg)
     f2d = np.array(f2d)
     d2f = np.array(d2f)
     return FitResult(X + pb.centre, 0.5 * (f2d + d2f), f2d, d2f, np.array(cg_its, dtype=np.int64),
@@ -256,11 +263,26 @@ def _check_solver(cg_rtol, cg_max_iterations, progress):
 
 
 class _Matches(NamedTuple):
-    """One iteration's correspondences (:func:`_match`)."""
+    """One iteration's correspondences (:func:`_match`) and its distances."""
 
     area: np.ndarray     #: (n_fine,) the fine vertices' area shares (sum 1)
     near: object         #: ClosestPoints of the fine vertices on the dense surface
     hit: object          #: ClosestPoints of the dense samples on the fine surface
+
+    @property
+    def fine_to_dense(self):
+        """Area-weighted mean distance of the fine vertices to the dense surface."""
+        return float(np.dot(self.area, self.near.distance))
+
+    @property
+    def dense_to_fine(self):
+        """Mean distance of the dense samples to the fine surface."""
+        return float(np.mean(self.hit.distance))
+
+    @property
+    def mean(self):
+        """The two-sided mean distance (``FitResult.mean_distance``)."""
+        return 0.5 * (self.fine_to_dense + self.dense_to_fine)
 
 
 def _match(pb, X):

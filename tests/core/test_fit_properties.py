@@ -1,0 +1,49 @@
+"""Property tests of core.fit.fit_cage on cages as artists leave them: open
+patches, a single triangle, creases, weights at the ends of their ranges."""
+
+import numpy as np
+import pytest
+
+from core.fit import fit_cage
+from core.subdivide import subdivide
+
+
+def _fan(k):
+    """An open planar fan of k triangles around the origin (radius 1)."""
+    ang = np.arange(k) * 2 * np.pi / k
+    V = np.vstack([[0.0, 0, 0], np.stack([np.cos(ang), np.sin(ang), np.zeros(k)], 1)])
+    F = np.array([[0, 1 + i, 1 + (i + 1) % k] for i in range(k)], dtype=np.int64)
+    return V, F
+
+
+def _noisy_patch(V, F, seed, noise=0.003, shift=0.2):
+    """A dense scan of the cage's Loop surface (noise: a share of its size)
+    and the cage moved off it (shift: a share of its size)."""
+    rng = np.random.default_rng(seed)
+    size = np.linalg.norm(V.max(0) - V.min(0))
+    DV, DF = subdivide(V, F, levels=3, scheme="loop")
+    DV = DV + noise * size * rng.standard_normal(DV.shape)
+    return DV, DF, V + shift * size * rng.standard_normal(V.shape)
+
+
+@pytest.mark.parametrize("k, seed, levels, smoothness, point_to_point", [
+    (1, 1, 0, 1.0, 0.0),        # a single triangle: 1 -> 7.4x the start's mean distance
+    (1, 5, 1, 0.05, 0.0),       # 1 -> 2.5x
+    (12, 0, 0, 1.0, 0.0),       # 1 -> 3.6x
+    (12, 4, 0, 100.0, 0.1),     # 1 -> 1.018x (default point_to_point)
+    (12, 2, 0, 100.0, 0.1),     # 1 -> 1.008x
+])
+def test_fit_never_ends_farther_than_it_started(k, seed, levels, smoothness, point_to_point):
+    """Each step of the fit is kept only if it does not increase the mean
+    distance (its own measure): the record never rises, and the cage it
+    returns is the one its last entry measured."""
+    V, F = _fan(k) if k > 1 else (np.array([[0.0, 0, 0], [1, 0, 0], [0, 1, 0]]), np.array([[0, 1, 2]]))
+    DV, DF, start = _noisy_patch(V, F, seed)
+    kw = dict(levels=levels, smoothness=smoothness, point_to_point=point_to_point)
+    r = fit_cage(DV, DF, start, F, iterations=7, **kw)
+    md = r.mean_distance
+    assert np.isfinite(r.V).all() and np.isfinite(md).all()
+    assert np.all(np.diff(md) <= 0), md / md[0]
+    assert r.cg_iterations.shape[0] == md.shape[0] - 1
+    again = fit_cage(DV, DF, r.V, F, iterations=0, **kw)
+    assert again.mean_distance[0] == pytest.approx(md[-1], rel=1e-12)
