@@ -16,6 +16,7 @@ import os
 import numpy as np
 
 from .file_check import FileCheck, InputFileError
+from .ply_ascii import record_problem
 
 PLY_TYPES = {"char": "i1", "int8": "i1", "uchar": "u1", "uint8": "u1", "short": "i2",
               "int16": "i2", "ushort": "u2", "uint16": "u2", "int": "i4", "int32": "i4",
@@ -57,9 +58,10 @@ def ply_size_problem(path):
     bytes for this one's and fails with "Invalid face size, must be between 1
     and 255", reads past the end and keeps what it could with a warning per
     bad index, or stops at the declared counts and drops the rest silently.
-    Checked here, before Blender: ASCII, a line per element, the first and
-    last line of each holding the values its properties give, nothing but
-    blank lines after the last; binary, the bytes of each fixed-size element
+    Checked here, before Blender: ASCII, a line per element, every one
+    holding the values its properties give (:mod:`.ply_ascii`: numbers, whole
+    ones for integer types, a list as long as its count), nothing but blank
+    lines after the last; binary, the bytes of each fixed-size element
     and of an element with one list property (faces) whose records all have
     the first one's length (all triangles, all quads), and for mixed records
     at least 1 item a record (Blender's importer reads faces of 1-255
@@ -111,13 +113,14 @@ def _ascii_problem(data, length, elements, said):
                 f"importer would drop them or misread them)")
     first = 0
     for element, count, props in elements:
-        for k in (first, first + count - 1) if count else ():
-            line = bytes(body[starts[k]:ends[k]]).split()
-            want = _ascii_values(line, props)
-            if want is not None and len(line) != want:
-                return (f"{said}, but the {element} record on line {header_lines + k + 1:,} "
-                        f"holds {len(line)} values, not the {want} its properties give: a "
-                        f"wrong count in the header, or a damaged file")
+        bad = record_problem(body, starts, ends, first, count, props) if count else None
+        if bad:
+            line = bytes(body[starts[bad[0]]:ends[bad[0]]]).decode("utf-8", "replace").strip()
+            line = line if len(line) <= 60 else line[:57] + "..."
+            why = ("a wrong count in the header, or a damaged file" if "values, not the" in
+                   bad[1] else "a damaged file, or one written by a tool that does not follow PLY")
+            return (f"{said}, but the {element} record on line {header_lines + bad[0] + 1:,} "
+                    f"('{line}') {bad[1]}: {why} (Blender's importer would misread it)")
         first += count
     return None
 
@@ -127,18 +130,6 @@ def _blank_lines(body, starts, ends):
     that hold nothing but blanks."""
     filled = np.concatenate([[0], np.cumsum(np.isin(body, _BLANK, invert=True))])
     return np.flatnonzero(filled[ends] == filled[starts])
-
-
-def _ascii_values(line, props):
-    """Values an ASCII record of ``props`` holds given its words ``line``
-    (a list property's count read from it), or None when unknown."""
-    lists = [k for k, (t, _) in enumerate(props) if isinstance(t, tuple)]
-    if not lists:
-        return len(props)
-    k = lists[0]
-    if len(lists) > 1 or len(line) <= k or not line[k].isdigit():
-        return None
-    return len(props) + int(line[k])
 
 
 def _binary_problem(path, data, order, length, elements, said):

@@ -76,9 +76,10 @@ def test_a_ply_holding_more_than_its_header_declares_is_named_before_blender(tmp
     assert ("lines.ply: its header declares 162 vertex and 300 face elements, a line each (462), "
             "but 20 more lines with values follow them: the file holds more than its header "
             "declares") in lines
-    # the header's 172nd vertex is the file's first face line, "3 ..." (4 values, not 3)
+    # the header's 163rd vertex is the file's first face line, "3 ..." (4 values, not 3)
     assert ("shifted.ply: its header declares 172 vertex and 310 face elements, but the vertex "
-            "record on line 181 holds 4 values, not the 3 its properties give") in shifted
+            "record on line 172 ('3 0 46 43') holds 4 values, not the 3 its properties give") \
+        in shifted
     assert padded.startswith("| padded.ply | 320 | 100 |") and padded.endswith("| ok |")
     assert [p.name for p in (tmp_path / "out").iterdir()] == ["padded_cage.obj"]
 

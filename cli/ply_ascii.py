@@ -1,0 +1,154 @@
+"""The records of an ASCII PLY file, every one checked before Blender reads them.
+
+Blender's PLY importer reads an ASCII record that holds a word which is no
+number (``0.5 abc 0.5``, a decimal comma ``0,5``) as 0, one with too few
+values from what follows, and drops a face with an index ``1.5`` with a
+bare count: the file came back "ok" with vertices moved to 0 (a comma file:
+every vertex on an axis). :func:`record_problem` finds the first such
+record, the numbers of a block of lines converted at once::
+
+    for each element, a block of lines at a time:
+        values = every word as a number          (a word that is none: that line)
+        words per line == the values its properties give (a list's count read)
+        whole numbers where a property is an integer type
+"""
+
+import warnings
+
+import numpy as np
+
+#: bytes that separate the words of a record (as NumPy's number parser skips them)
+_SPACE = np.zeros(256, dtype=bool)
+_SPACE[[9, 10, 11, 12, 13, 32]] = True
+#: property types that hold whole numbers
+INTEGER_TYPES = {"char", "int8", "uchar", "uint8", "short", "int16", "ushort", "uint16", "int",
+                 "int32", "uint", "uint32"}
+#: lines whose numbers are converted at once
+_BLOCK = 1 << 16
+
+
+def _numbers(text):
+    """The numbers of ``text`` (whitespace-separated words), or None when a
+    word is no number."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")              # (NumPy 1.x: a warning, 2.x: an error)
+        try:
+            return np.fromstring(text, dtype=np.float64, sep=" ")
+        except (ValueError, DeprecationWarning):
+            return None
+
+
+def _whole(x):
+    return bool(np.isfinite(x) and x == np.floor(x))
+
+
+def describe(words, props):
+    """What is wrong with one record (its ``words``, bytes) of an element of
+    ``props`` (``[(type, name)]``, a list's type ``("list", count type,
+    item type)``), in words, or None."""
+    values = []
+    for w in words:
+        got = _numbers(w)
+        if got is None or got.size != 1:
+            comma = " (a decimal comma? PLY's numbers take a point)" if b"," in w else ""
+            return f"holds '{w.decode('ascii', 'replace')}', which is not a number{comma}"
+        values.append(float(got[0]))
+    at, want = 0, 0
+    for t, name in props:
+        if isinstance(t, tuple):
+            if at < len(values) and not (_whole(values[at]) and values[at] >= 0):
+                return (f"holds '{words[at].decode()}' as the length of its {name} list, which "
+                        f"is no count")
+            n = int(values[at]) if at < len(values) else 0
+            items = values[at + 1:at + 1 + n]
+            bad = [k for k, v in enumerate(items) if not _whole(v)] if t[2] in INTEGER_TYPES \
+                else []
+            if bad:
+                return (f"holds '{words[at + 1 + bad[0]].decode()}' in its {name} list, whose "
+                        f"items are whole numbers ({t[2]})")
+            at, want = at + 1 + n, want + 1 + n
+        else:
+            if t in INTEGER_TYPES and at < len(values) and not _whole(values[at]):
+                return f"holds '{words[at].decode()}' for its {name}, a whole number ({t})"
+            at, want = at + 1, want + 1
+    if len(values) != want:
+        return f"holds {len(values)} values, not the {want} its properties give"
+    return None
+
+
+def record_problem(body, starts, ends, first, count, props):
+    """``(line, problem)`` of the first bad record of an element of
+    ``count`` records from line ``first`` of ``body`` (bytes; ``starts``,
+    ``ends``: each line's byte range; the line 0-based in ``body``) whose
+    properties are ``props``, or None (see the module's docstring)."""
+    for s in range(first, first + count, _BLOCK):
+        e = min(s + _BLOCK, first + count)
+        k = _first_bad_line(body, starts[s:e], ends[s:e], props)
+        if k is not None:
+            line = s + k
+            return line, describe(bytes(body[starts[line]:ends[line]]).split(), props)
+    return None
+
+
+def _first_bad_line(body, starts, ends, props):
+    """Index (in ``starts``) of the first line whose record :func:`describe`
+    finds wrong, or None."""
+    seg = np.asarray(body[starts[0]:ends[-1]])
+    rel_ends = ends - starts[0]
+    values = _numbers(seg.tobytes())
+    space = _SPACE[seg]
+    first = ~space
+    first[1:] &= space[:-1]
+    words = np.bincount(np.searchsorted(rel_ends, np.flatnonzero(first), side="right"),
+                        minlength=starts.size)[:starts.size]
+    if values is None or values.size != words.sum():
+        return _first_described(body, starts, ends, props)
+    offset = np.cumsum(words) - words
+    bad = _wrong_records(values, offset, words, props)
+    if bad is None:
+        return _first_described(body, starts, ends, props)
+    hits = np.flatnonzero(bad)
+    return int(hits[0]) if hits.size else None
+
+
+def _first_described(body, starts, ends, props):
+    """The first line :func:`describe` finds wrong (a line at a time)."""
+    for k in range(starts.size):
+        if describe(bytes(body[starts[k]:ends[k]]).split(), props):
+            return k
+    return None
+
+
+def _wrong_records(values, offset, words, props):
+    """Per record (its words ``values[offset:offset + words]``), whether its
+    value count or a whole-number property is wrong; None when a list's
+    count cannot be read (the line by line check then finds it)."""
+    at = offset.copy()
+    bad = np.zeros(words.size, dtype=bool)
+    integer = np.zeros(values.size + 1, dtype=np.int64)     # +1 / -1 where int items start / end
+    end = offset + words
+    for t, _ in props:
+        inside = at < end
+        if isinstance(t, tuple):
+            c = np.where(inside, values[np.minimum(at, values.size - 1)], 0.0)
+            if not np.isfinite(c).all():
+                return None
+            bad |= (c != np.floor(c)) | (c < 0)
+            n = np.where(bad, 0, c).astype(np.int64)
+            if t[2] in INTEGER_TYPES:
+                lo, hi = np.minimum(at + 1, end), np.minimum(at + 1 + n, end)
+                np.add.at(integer, lo, 1)
+                np.add.at(integer, hi, -1)
+            at = at + 1 + n
+        else:
+            if t in INTEGER_TYPES:
+                i = np.flatnonzero(inside)
+                integer[at[i]] += 1
+                integer[at[i] + 1] -= 1
+            at = at + 1
+    bad |= at != end
+    check = np.cumsum(integer[:-1]) > 0
+    wrong = check & ~(np.isfinite(values) & (values == np.floor(values)))
+    if wrong.any():
+        bad[np.searchsorted(offset, np.flatnonzero(wrong), side="right") - 1] = True
+    return bad

@@ -1,0 +1,61 @@
+"""PLY files as scanners and exporters write them, damaged in ways Blender's
+importer reads on silently or crashes on (found by a fuzz of the batch CLI
+on 2026-12-05, second campaign): each is named before Blender reads it, the
+other files of the batch still converted."""
+
+import json
+
+from tests.cli.test_batch import run_batch
+from tests.mesh_factory import icosphere, write_ply
+
+
+def _ascii_ply(path, V, F, *, replace=None):
+    """An ASCII PLY file of ``V``, ``F``; ``replace``: ``{record index: text}``
+    (vertices first, then faces) written instead of those records."""
+    write_ply(path, V, F, ascii=True)
+    head, body = path.read_bytes().split(b"end_header\n")
+    lines = body.split(b"\n")
+    for k, text in (replace or {}).items():
+        lines[k] = text
+    path.write_bytes(head + b"end_header\n" + b"\n".join(lines))
+
+
+def test_an_ascii_ply_record_that_is_not_what_its_properties_say_is_named(tmp_path):
+    """Only an element's first and last records were checked: a vertex line
+    in the middle with a word that is no number ('0.5 abc 0.5', read as 0),
+    two values or four, a decimal comma everywhere (every vertex on an axis:
+    'nothing is left after cleaning'), a face with an index of 1.5 or a count
+    of 4 with 3 indices (dropped: 'kept 319 of 320 faces') came back ok or
+    warned without naming the line."""
+    V, F = icosphere(2)                      # 162 vertices, 320 faces; 9 header lines
+    cases = {"word.ply": {50: b"0.5 abc 0.5"}, "short.ply": {50: b"0.5 0.5"},
+             "long.ply": {50: b"0.5 0.5 0.5 0.5"}, "index.ply": {200: b"3 0 1.5 2"},
+             "count.ply": {200: b"4 0 1 2"}}
+    for name, replace in cases.items():
+        _ascii_ply(tmp_path / name, V, F, replace=replace)
+    _ascii_ply(tmp_path / "whole.ply", V, F)
+    (tmp_path / "comma.ply").write_bytes((tmp_path / "whole.ply").read_bytes().replace(b".", b","))
+    names = [*cases, "comma.ply", "whole.ply"]
+    proc = run_batch([*names, "--faces", "100", "--format", "obj", "--out", "out",
+                      "--report", "r.json"], tmp_path)
+    assert proc.returncode == 1 and "Traceback" not in proc.stdout + proc.stderr
+    got = {f["name"]: f for f in json.loads((tmp_path / "r.json").read_text())["files"]}
+    said = "its header declares 162 vertex and 320 face elements, but the"
+    want = {"word.ply": "vertex record on line 60 ('0.5 abc 0.5') holds 'abc', which is not a "
+                        "number: a damaged file",
+            "short.ply": "vertex record on line 60 ('0.5 0.5') holds 2 values, not the 3 its "
+                         "properties give: a wrong count in the header, or a damaged file",
+            "long.ply": "vertex record on line 60 ('0.5 0.5 0.5 0.5') holds 4 values, not the 3",
+            "index.ply": "face record on line 210 ('3 0 1.5 2') holds '1.5' in its "
+                         "vertex_indices list, whose items are whole numbers (int)",
+            "count.ply": "face record on line 210 ('4 0 1 2') holds 4 values, not the 5 its "
+                         "properties give",
+            "comma.ply": "vertex record on line 10 ("}
+    for name, text in want.items():
+        r = got[name]
+        assert r["status"] == "failed" and r["failed_step"] == "read", (name, r)
+        assert r["error"].startswith(f"{name}: read failed: {name}: {said} {text}"), r["error"]
+    assert "which is not a number (a decimal comma? PLY's numbers take a point)" in \
+        got["comma.ply"]["error"]
+    assert got["whole.ply"]["status"] == "ok" and got["whole.ply"]["faces_in"] == 320
+    assert [p.name for p in (tmp_path / "out").iterdir()] == ["whole_cage.obj"]
