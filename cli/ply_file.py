@@ -12,6 +12,7 @@ cases first and names the file and the counts:
 """
 
 import os
+import struct
 
 import numpy as np
 
@@ -22,6 +23,9 @@ PLY_TYPES = {"char": "i1", "int8": "i1", "uchar": "u1", "uint8": "u1", "short": 
               "int16": "i2", "ushort": "u2", "uint16": "u2", "int": "i4", "int32": "i4",
               "uint": "u4", "uint32": "u4", "float": "f4", "float32": "f4", "double": "f8",
               "float64": "f8"}
+#: the struct module's code of each NumPy type a list's count may have
+_STRUCT_CODES = {"i1": "b", "u1": "B", "i2": "h", "u2": "H", "i4": "i", "u4": "I", "f4": "f",
+                 "f8": "d"}
 #: bytes of a blank line (and, after a binary file's data, of padding with 0)
 _BLANK = (9, 10, 13, 32)
 
@@ -61,12 +65,12 @@ def ply_size_problem(path):
     Checked here, before Blender: ASCII, a line per element, every one
     holding the values its properties give (:mod:`.ply_ascii`: numbers, whole
     ones for integer types, a list as long as its count), nothing but blank
-    lines after the last; binary, the bytes of each fixed-size element
-    and of an element with one list property (faces) whose records all have
-    the first one's length (all triangles, all quads), and for mixed records
-    at least 1 item a record (Blender's importer reads faces of 1-255
-    corners, skipping those of 1 or 2) and a first record that is a face (a
-    count of 1-255, indices of declared vertices) or a triangle strip
+    lines after the last; binary, the bytes of each fixed-size element and of
+    each element with lists, its records counted at once while they have the
+    first one's length (all triangles, all quads) and walked one by one from
+    the first of another length, each face 1-255 corners long (Blender's
+    importer reads no others, skipping those of 1 or 2), the first record a
+    face (a count of 1-255, indices of declared vertices) or a triangle strip
     (indices of declared vertices or -1, which ends a strip);
     after the last element, nothing but padding (zero bytes, blanks)."""
     header = ply_header(path)
@@ -138,10 +142,17 @@ def _binary_problem(path, data, order, length, elements, said):
     pos = length
     n_vertices = {e: n for e, n, _ in elements}.get("vertex", 2**63 - 1)
     for element, count, props in elements:
-        layout = _records(path, order, props, pos, count, size, n_vertices, element)
-        if layout is None:
-            return None          # records of mixed lengths, no sign of a problem
-        got, end, bad_first = layout
+        got, end, bad_first = _records(path, order, props, pos, count, size, n_vertices,
+                                       element)
+        if isinstance(bad_first, tuple):
+            k, at, n = bad_first
+            if element == "face" and n > 255:
+                return (f"{os.path.basename(path)}: its face {k + 1:,} (at byte {at:,}) has "
+                        f"{n:,} corners, and Blender's PLY importer reads faces of at most 255: "
+                        f"triangulate the file's polygons first (e.g. save it as OBJ), unless "
+                        f"the file is damaged there")
+            return (f"{said}, but {element} record {k + 1:,} (at byte {at:,}) holds a list of "
+                    f"{n:g} items: the file is damaged there, or a count in the header is wrong")
         if bad_first == "too many corners":
             return (f"{os.path.basename(path)}: its first face (at byte {pos:,}) has more than "
                     f"255 corners, and Blender's PLY importer reads faces of at most 255: "
@@ -150,11 +161,9 @@ def _binary_problem(path, data, order, length, elements, said):
             return (f"{said}, but the first {element} record (at byte {pos:,}) holds no valid "
                     f"{element}: the data before it is not the size the header's counts give "
                     f"(a wrong count), or the file is damaged")
-        if got is None or got < count:
-            where = (f"before its {count:,} {element} elements" if got is None else
-                     f"after {got:,} of the {count:,} {element} elements")
-            return (f"{said}, but the file ends ({size:,} bytes) {where}: cut short, or a wrong "
-                    f"count in the header")
+        if got < count:
+            return (f"{said}, but the file ends ({size:,} bytes) after {got:,} of the {count:,} "
+                    f"{element} elements: cut short, or a wrong count in the header")
         pos = end
     if np.isin(data[pos:], _BLANK + (0,), invert=True).any():
         return (f"{said}, but {size - pos:,} bytes follow them (the file is {size:,} bytes, its "
@@ -168,12 +177,18 @@ def _known_type(t):
 
 
 def _records(path, order, props, pos, count, size, n_vertices, element):
-    """``(whole records in the file or None when unknown, end byte, first
-    record invalid)`` of a binary PLY element of ``count`` records at byte
-    ``pos`` (see :func:`ply_size_problem`; ``n_vertices``: the vertices
-    declared, bounding a face's indices; ``element``: its name, whose first
-    record :func:`_valid_first` checks); None for records of mixed lengths
-    that the file may hold."""
+    """``(whole records in the file, end byte, what is wrong)`` of a binary
+    PLY element of ``count`` records at byte ``pos`` (see
+    :func:`ply_size_problem`; ``n_vertices``: the vertices declared,
+    bounding a face's indices; ``element``: its name, whose first record
+    :func:`_valid_first` checks). What is wrong: False, True (the first
+    record is none), ``"too many corners"`` (the first face has more than
+    255) or, from :func:`_walk`, ``(record, byte, items)`` of a later record
+    whose list no reader takes. Records of the first one's length are
+    counted at once; from the first of another length on they are walked
+    one by one (mixed lengths had been taken on trust: a file of quads and
+    triangles cut 5 bytes short, or with bytes after it, came back "ok",
+    its last face read from past the end)."""
     itemsize = {t: np.dtype(PLY_TYPES[t]).itemsize for t in PLY_TYPES}
     lists = [k for k, (t, _) in enumerate(props) if isinstance(t, tuple)]
     if not lists:
@@ -181,8 +196,9 @@ def _records(path, order, props, pos, count, size, n_vertices, element):
         return (min(count, (size - pos) // rec) if rec else count), pos + count * rec, False
     if count == 0:
         return 0, pos, False
+    data = np.memmap(path, dtype=np.uint8, mode="r")
     if len(lists) > 1:
-        return None
+        return _walk(data, order, props, pos, 0, count, element)
     k = lists[0]
     before = sum(itemsize[t] for t, _ in props[:k])
     after = sum(itemsize[t] for t, _ in props[k + 1:])
@@ -190,7 +206,6 @@ def _records(path, order, props, pos, count, size, n_vertices, element):
     at = pos + before + itemsize[ct]                    # the first record's indices
     if at > size:
         return 0, pos, False
-    data = np.memmap(path, dtype=np.uint8, mode="r")
     c0 = int(np.frombuffer(data, dtype=order + PLY_TYPES[ct], count=1, offset=at - itemsize[ct])[0])
     first = np.frombuffer(data, dtype=order + PLY_TYPES[it], offset=at,
                           count=max(0, min(c0, (size - at) // itemsize[it])))
@@ -203,30 +218,44 @@ def _records(path, order, props, pos, count, size, n_vertices, element):
     counts = np.frombuffer(data, offset=pos, count=fits, dtype=np.dtype(
         {"names": ["c"], "formats": [order + PLY_TYPES[ct]], "offsets": [before],
          "itemsize": rec}))["c"]
-    # the least a record can be: 1 item (a face of 1 or 2 corners is read, and skipped)
-    least = before + itemsize[ct] + itemsize[it] + after
-    if (counts == c0).all():
-        if fits == count:
-            return fits, pos + count * rec, False
-        # the next record's own length (its count read), the rest at least `least`
-        nxt = pos + fits * rec
-        need = _record_bytes(data, order, props[k][0], before, after, nxt) or least
-        if nxt + need + (count - fits - 1) * least > size:    # short even if the rest were least
-            return fits, pos + count * rec, False
-        return None
-    return (None, pos, False) if pos + count * least > size else None
+    same = counts == c0
+    run = fits if same.all() else int(np.argmin(same))   # records of the first one's length
+    if run == count:
+        return count, pos + count * rec, False
+    return _walk(data, order, props, pos + run * rec, run, count, element)
 
 
-def _record_bytes(data, order, kind, before, after, at):
-    """Bytes of the record at byte ``at`` with one list property of ``kind``
-    (``("list", count type, item type)``) after ``before`` bytes and before
-    ``after``, its count read from ``data`` (None when that count lies past
-    the end)."""
-    ct, it = np.dtype(order + PLY_TYPES[kind[1]]), np.dtype(PLY_TYPES[kind[2]])
-    if at + before + ct.itemsize > data.size:
-        return None
-    n = int(np.frombuffer(data, dtype=ct, count=1, offset=at + before)[0])
-    return before + ct.itemsize + max(n, 0) * it.itemsize + after
+def _walk(data, order, props, pos, done, count, element):
+    """:func:`_records` of the records ``done`` to ``count`` of an element,
+    the first at byte ``pos``, read one by one (each list's count read, its
+    items skipped): ``(whole records, end byte, what is wrong)``, what is
+    wrong ``(record, byte, items)`` of the first face whose corners Blender's
+    importer refuses (fewer than 1 or more than 255) or list whose count is
+    negative, else False."""
+    plan, fixed = [], 0          # (bytes before, count reader, item bytes, corners?) per list
+    for t, name in props:
+        if isinstance(t, tuple):
+            reader = struct.Struct(order + _STRUCT_CODES[PLY_TYPES[t[1]]])
+            corners = element == "face" and name in ("vertex_indices", "vertex_index")
+            plan.append((fixed, reader, np.dtype(PLY_TYPES[t[2]]).itemsize, corners))
+            fixed = 0
+        else:
+            fixed += np.dtype(PLY_TYPES[t]).itemsize
+    size, buf = data.size, memoryview(data)
+    for k in range(done, count):
+        start = pos
+        for skip, reader, item, corners in plan:
+            pos += skip
+            if pos + reader.size > size:
+                return k, size, False
+            n = reader.unpack_from(buf, pos)[0]
+            if n < 0 or n != int(n) or (corners and not 1 <= n <= 255):
+                return k, start, (k, start, n)
+            pos += reader.size + int(n) * item
+        pos += fixed
+        if pos > size:
+            return k, size, False
+    return count, pos, False
 
 
 def _valid_first(element, count, items, n_vertices):

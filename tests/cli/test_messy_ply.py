@@ -5,6 +5,9 @@ other files of the batch still converted."""
 
 import json
 
+import numpy as np
+
+from cli.ply_file import ply_size_problem
 from tests.cli.test_batch import run_batch
 from tests.mesh_factory import icosphere, write_ply
 
@@ -59,3 +62,41 @@ def test_an_ascii_ply_record_that_is_not_what_its_properties_say_is_named(tmp_pa
         got["comma.ply"]["error"]
     assert got["whole.ply"]["status"] == "ok" and got["whole.ply"]["faces_in"] == 320
     assert [p.name for p in (tmp_path / "out").iterdir()] == ["whole_cage.obj"]
+
+
+def test_a_binary_ply_of_mixed_faces_cut_short_or_with_bytes_after_them_is_named(tmp_path):
+    """Faces of mixed lengths (quads and triangles, as scanners write them)
+    were taken on trust: cut 5 bytes short, Blender read the last face from
+    past the end (two non-manifold edges, status ok); 8 bytes appended were
+    dropped silently, though the same bytes after faces of one length fail."""
+    V, F = icosphere(2)
+    faces = [list(f) for f in F[:-2]] + [[0, 1, 2, 3]]          # 318 triangles, 1 quad
+    write_ply(tmp_path / "whole.ply", V, faces)
+    data = (tmp_path / "whole.ply").read_bytes()
+    (tmp_path / "cut.ply").write_bytes(data[:-5])
+    (tmp_path / "tail.ply").write_bytes(data + b"\x07garbage")
+    # a face with a list and a second list of texture coordinates (MeshLab's texcoord)
+    head = (b"ply\nformat binary_little_endian 1.0\nelement vertex 4\nproperty float x\n"
+            b"property float y\nproperty float z\nelement face 2\nproperty list uchar int "
+            b"vertex_indices\nproperty list uchar float texcoord\nend_header\n")
+    quad = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], "<f4").tobytes()
+    tri = b"\x03" + np.array([0, 1, 2], "<i4").tobytes() + b"\x06" + bytes(24)
+    (tmp_path / "texcoord.ply").write_bytes(head + quad + tri + tri[:-4])
+    assert ply_size_problem(str(tmp_path / "whole.ply")) is None
+    assert ply_size_problem(str(tmp_path / "texcoord.ply")) == (
+        "texcoord.ply: its header declares 4 vertex and 2 face elements, but the file ends "
+        "(324 bytes) after 1 of the 2 face elements: cut short, or a wrong count in the header")
+    proc = run_batch(["cut.ply", "tail.ply", "whole.ply", "--faces", "100", "--format", "obj",
+                      "--out", "out", "--report", "r.json"], tmp_path)
+    cut, tail, whole = json.loads((tmp_path / "r.json").read_text())["files"]
+    said = "its header declares 162 vertex and 319 face elements, but the"
+    assert cut["status"] == "failed" and cut["error"] == (
+        f"cut.ply: read failed: cut.ply: {said} file ends (6,263 bytes) after 318 of the 319 face "
+        f"elements: cut short, or a wrong count in the header")
+    assert tail["status"] == "failed" and tail["error"] == (
+        "tail.ply: read failed: tail.ply: its header declares 162 vertex and 319 face elements, "
+        "but 8 bytes follow them (the file is 6,276 bytes, its elements end at byte 6,268): the "
+        "file holds more than its header declares (a wrong count, or data appended; Blender's "
+        "importer would drop them)")
+    assert whole["status"] == "ok" and whole["faces_in"] == 320 and whole["polygons_in"] == 319
+    assert proc.returncode == 1 and "Traceback" not in proc.stdout + proc.stderr
