@@ -55,13 +55,17 @@ def crease_edge_ids(creases, E, n, where):
     Raises InvalidArgumentError when a pair is not an edge."""
     if creases is None:
         return np.zeros(0, dtype=np.int64)
-    C = np.asarray(creases)
-    if C.size == 0:
+    shape = f"{where}: creases must be a (k,2) integer array of vertex pairs, got"
+    try:
+        C_in = np.asarray(creases)
+    except ValueError:      # (NumPy's "setting an array element with a sequence")
+        raise InvalidArgumentError(f"{shape} rows of different lengths") from None
+    if C_in.size == 0:
         return np.zeros(0, dtype=np.int64)
-    if C.ndim != 2 or C.shape[1] != 2 or not np.issubdtype(C.dtype, np.integer):
-        raise InvalidArgumentError(
-            f"{where}: creases must be a (k,2) integer array of vertex pairs, got {C.shape} {C.dtype}")
-    C = C.astype(np.int64)
+    if C_in.ndim != 2 or C_in.shape[1] != 2 or not np.issubdtype(C_in.dtype, np.integer):
+        raise InvalidArgumentError(f"{shape} {C_in.shape} {C_in.dtype}")
+    # (unsigned indices past 2^63 wrap to negative ones: refused below, shown as given)
+    C = C_in.astype(np.int64)
     lo, hi = np.minimum(C[:, 0], C[:, 1]), np.maximum(C[:, 0], C[:, 1])
     keys = edge_keys(lo, hi, n)
     ekeys = edge_keys(E[:, 0], E[:, 1], n)
@@ -72,7 +76,7 @@ def crease_edge_ids(creases, E, n, where):
     if not np.all(ok):
         i = int(np.flatnonzero(~ok)[0])
         raise InvalidArgumentError(
-            f"{where}: creases must be edges of F, e.g. pair {i} = {C[i].tolist()} is not an edge")
+            f"{where}: creases must be edges of F, e.g. pair {i} = {C_in[i].tolist()} is not an edge")
     return np.unique(pos)
 
 

@@ -218,8 +218,6 @@ def _set_up(V_dense, F_dense, V_cage, F_cage, *, levels, scheme, creases, smooth
         centre[k] = 0.0          # the mirror plane through the working origin: sym stays linear
         V_cage = sym(V_cage)
     V_dense, V_cage = dense.V - centre, V_cage - centre
-    if creases is not None and np.asarray(creases).size == 0:
-        creases = None                      # as bind does: same operator, same fingerprint
     op = cage_operator(F_cage, V_cage.shape[0], where="fit_cage", levels=levels, scheme=scheme,
                        creases=creases)
     if samples is None:

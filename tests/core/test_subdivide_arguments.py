@@ -1,0 +1,46 @@
+"""Arguments of subdivide / subdivision_operator / SubdivisionOperator as
+they arrive from an add-on, a script or a file: every bad one is refused by
+a core error that names it, never a NumPy error from inside."""
+
+import numpy as np
+import pytest
+
+from core.errors import InvalidArgumentError
+from core.fit import fit_cage
+from core.subdivide import subdivide, subdivision_operator
+from tests.mesh_factory import icosphere, octahedron
+
+
+@pytest.mark.parametrize("call", ["subdivide", "subdivision_operator", "fit_cage"])
+def test_ragged_creases_are_named(call):
+    """A crease list with a row of one vertex was NumPy's 'setting an array
+    element with a sequence' ValueError."""
+    V, F = octahedron()
+    ragged = [[0, 2], [2]]
+    with pytest.raises(InvalidArgumentError, match=rf"{call}: .*creases must be a \(k,2\) integer "
+                                                   r"array of vertex pairs, got rows of different lengths"):
+        if call == "subdivide":
+            subdivide(V, F, creases=ragged)
+        elif call == "subdivision_operator":
+            subdivision_operator(F, 6, creases=ragged)
+        else:
+            Vd, Fd = icosphere(2)
+            fit_cage(Vd, Fd, V, F, creases=ragged, iterations=1)
+
+
+def test_a_crease_index_beyond_int64_is_shown_as_given():
+    """An unsigned index past 2^63 was shown wrapped to a negative number
+    ('pair 0 = [0, -9223372036854775803] is not an edge')."""
+    V, F = octahedron()
+    C = np.array([[0, 2 ** 63 + 5]], dtype=np.uint64)
+    with pytest.raises(InvalidArgumentError, match=r"pair 0 = \[0, 9223372036854775813\] is not an edge"):
+        subdivide(V, F, creases=C)
+
+
+def test_empty_creases_of_any_kind_are_no_creases():
+    V, F = octahedron()
+    plain = subdivision_operator(F, 6, levels=2)
+    for empty in ([], (), np.zeros((0, 2), np.int32), np.zeros(0), [[]]):
+        op = subdivision_operator(F, 6, levels=2, creases=empty)
+        assert op.fingerprint == plain.fingerprint and op.creases.shape == (0, 2)
+
