@@ -308,6 +308,8 @@ class SubdivisionOperator:
         (n_fine,) bool
         """
         ids = np.asarray(coarse_vertex_ids)
+        if ids.size == 0 and ids.dtype != bool:     # ([] is float64 to NumPy)
+            ids = ids.astype(np.int64)
         if ids.dtype.kind not in "biu":          # ([0.5] was vertex 0, None a TypeError)
             raise InvalidArgumentError(
                 f"SubdivisionOperator.support: expected coarse vertex ids (integers) or a "

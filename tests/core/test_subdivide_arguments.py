@@ -44,3 +44,11 @@ def test_empty_creases_of_any_kind_are_no_creases():
         op = subdivision_operator(F, 6, levels=2, creases=empty)
         assert op.fingerprint == plain.fingerprint and op.creases.shape == (0, 2)
 
+
+def test_support_of_an_empty_selection_is_empty():
+    """support([]) was refused: an empty list is float64 to NumPy."""
+    V, F = octahedron()
+    op = subdivision_operator(F, 6, levels=2)
+    for empty in ([], np.zeros(0, np.int64), ()):
+        got = op.support(empty)
+        assert got.dtype == bool and got.shape == (op.n_fine,) and not got.any()
