@@ -30,27 +30,70 @@ _STRUCT_CODES = {"i1": "b", "u1": "B", "i2": "h", "u2": "H", "i4": "i", "u4": "I
 _BLANK = (9, 10, 13, 32)
 
 
+#: the most bytes read looking for a header's end (a scanner's thousands of comments fit)
+_HEADER_LIMIT = 1 << 24
+#: the largest element count Blender's importer reads (a C ``int``; beyond, it aborts)
+_COUNT_LIMIT = 2**31 - 1
+
+
+def _header_bytes(path):
+    """The first bytes of a PLY file, up to and including its ``end_header``
+    line (all of them when there is none within :data:`_HEADER_LIMIT`)."""
+    head = b""
+    with open(path, "rb") as fh:
+        while len(head) < _HEADER_LIMIT:
+            more = fh.read(1 << 16)
+            head += more
+            end = head.find(b"end_header")
+            if not more or (end >= 0 and head.find(b"\n", end) >= 0):
+                break
+    return head
+
+
 def ply_header(path):
     """``(format, header length in bytes, [(element, count, [(type, name)])])``
     of a PLY file (a list property's type is ``("list", count type, item
-    type)``), or None."""
-    with open(path, "rb") as fh:
-        head = fh.read(1 << 16)
+    type)``), or None when it has no PLY header.
+
+    Raises :class:`InputFileError` naming the line for a header Blender's
+    importer would crash on or misread: an element line without a count it
+    can read (``element vertex``: the importer aborted the process), a
+    property before any element (``ELEMENT vertex 3`` then ``property``: it
+    read freed memory, and crashed), a property of a type PLY has not."""
+    head = _header_bytes(path)
     end = head.find(b"end_header")
     if not head.startswith(b"ply") or end < 0:
         return None
-    length = head.index(b"\n", end) + 1
+    nl = head.find(b"\n", end)
+    length = nl + 1 if nl >= 0 else len(head)
     fmt, elements = None, []
-    for line in head[:end].decode("ascii", "replace").splitlines():
+    for k, line in enumerate(head[:end].decode("ascii", "replace").splitlines(), 1):
         parts = line.split()
         if parts[:1] == ["format"] and len(parts) > 1:
             fmt = parts[1]
-        elif parts[:1] == ["element"] and len(parts) == 3 and parts[2].isdigit():
+        elif parts[:1] == ["element"]:
+            if len(parts) != 3 or not parts[2].isdigit() or int(parts[2]) > _COUNT_LIMIT:
+                raise _header_error(path, k, line, "is not 'element NAME COUNT' with a count of "
+                                    f"0 to {_COUNT_LIMIT:,}")
             elements.append((parts[1], int(parts[2]), []))
-        elif parts[:1] == ["property"] and elements and len(parts) >= 3:
-            kind = tuple(parts[1:4]) if parts[1] == "list" and len(parts) == 5 else parts[1]
+        elif parts[:1] == ["property"]:
+            if not elements:
+                raise _header_error(path, k, line, "comes before any 'element' line (Blender's "
+                                    "importer would crash on it)")
+            kind = tuple(parts[1:4]) if parts[1:2] == ["list"] and len(parts) == 5 else \
+                parts[1] if len(parts) == 3 else None
+            if kind is None or not _known_type(kind):
+                raise _header_error(path, k, line, "is not 'property TYPE NAME' or 'property "
+                                    "list COUNT_TYPE ITEM_TYPE NAME' with PLY's types ("
+                                    f"{', '.join(sorted(set(PLY_TYPES)))})")
             elements[-1][2].append((kind, parts[-1]))
     return fmt, length, elements
+
+
+def _header_error(path, lineno, line, problem):
+    line = line.strip()
+    line = line if len(line) <= 60 else line[:57] + "..."
+    return InputFileError(f"{os.path.basename(path)}: header line {lineno}, '{line}', {problem}")
 
 
 def ply_size_problem(path):
@@ -283,7 +326,9 @@ def count_nonfinite(path):
     if not header or not header[2] or header[2][0][0] != "vertex":
         return None
     fmt, length, ((_, n, props), *_) = header
-    if any(t not in PLY_TYPES for t, _ in props) or not {"x", "y", "z"} <= {p for _, p in props}:
+    names = [p for _, p in props]
+    if any(t not in PLY_TYPES for t, _ in props) or not {"x", "y", "z"} <= set(names) \
+            or len(set(names)) < len(names):
         return None
     if fmt == "ascii":
         with open(path, "rb") as fh:
@@ -300,9 +345,9 @@ def count_nonfinite(path):
     if order is None:
         return None
     rec = np.dtype([(name, order + PLY_TYPES[t]) for t, name in props])
+    if length + n * rec.itemsize > os.path.getsize(path):
+        return None     # truncated (a count of 10^11 allocated a terabyte): ply_size_problem says so
     table = np.fromfile(path, dtype=rec, count=n, offset=length)
-    if table.shape[0] < n:
-        return None     # truncated: ply_size_problem says so
     xyz = np.stack([table[c].astype(np.float64) for c in ("x", "y", "z")], axis=1)
     return int((~np.isfinite(xyz).all(axis=1)).sum())
 

@@ -100,3 +100,46 @@ def test_a_binary_ply_of_mixed_faces_cut_short_or_with_bytes_after_them_is_named
         "importer would drop them)")
     assert whole["status"] == "ok" and whole["faces_in"] == 320 and whole["polygons_in"] == 319
     assert proc.returncode == 1 and "Traceback" not in proc.stdout + proc.stderr
+
+
+def test_a_ply_header_blender_would_crash_on_is_named_and_the_batch_goes_on(tmp_path):
+    """Blender's PLY importer aborted the whole batch process on 'element
+    vertex' without a count (std::invalid_argument from stoi), and read
+    freed memory on a property before any element (a header written
+    'ELEMENT vertex 3'): 'Malloc returns null', then a segmentation fault,
+    so no file after it was converted and no report written. A header past
+    64 KiB (a scanner's comments) had every check skipped; a count of 10^11
+    made the NaN check allocate 1 TiB (a MemoryError)."""
+    V, F = icosphere(2)
+    write_ply(tmp_path / "whole.ply", V, F)
+    data = (tmp_path / "whole.ply").read_bytes()
+    (tmp_path / "nocount.ply").write_bytes(data.replace(b"element vertex 162", b"element vertex"))
+    (tmp_path / "caps.ply").write_bytes(data.replace(b"element", b"ELEMENT"))
+    (tmp_path / "huge.ply").write_bytes(data.replace(b"element vertex 162",
+                                                     b"element vertex 99999999999"))
+    (tmp_path / "half.ply").write_bytes(data.replace(b"property float x", b"property float16 x"))
+    comments = b"".join(b"comment %070d\n" % k for k in range(1200))     # 95 kB of header
+    (tmp_path / "long.ply").write_bytes(data.replace(b"ply\n", b"ply\n" + comments, 1)[:-13])
+    names = ["nocount.ply", "caps.ply", "huge.ply", "half.ply", "long.ply", "whole.ply"]
+    proc = run_batch([*names, "--faces", "100", "--format", "obj", "--out", "out",
+                      "--report", "r.json"], tmp_path)
+    assert proc.returncode == 1, proc.stdout + proc.stderr
+    got = {f["name"]: f for f in json.loads((tmp_path / "r.json").read_text())["files"]}
+    assert got["nocount.ply"]["error"] == (
+        "nocount.ply: read failed: nocount.ply: header line 3, 'element vertex', is not 'element "
+        "NAME COUNT' with a count of 0 to 2,147,483,647")
+    assert got["caps.ply"]["error"] == (
+        "caps.ply: read failed: caps.ply: header line 4, 'property float x', comes before any "
+        "'element' line (Blender's importer would crash on it)")
+    assert got["huge.ply"]["error"] == (
+        "huge.ply: read failed: huge.ply: header line 3, 'element vertex 99999999999', is not "
+        "'element NAME COUNT' with a count of 0 to 2,147,483,647")
+    assert got["half.ply"]["error"].startswith(
+        "half.ply: read failed: half.ply: header line 4, 'property float16 x', is not 'property "
+        "TYPE NAME' or 'property list COUNT_TYPE ITEM_TYPE NAME' with PLY's types (char, double,")
+    assert got["long.ply"]["error"] == (
+        "long.ply: read failed: long.ply: its header declares 162 vertex and 320 face elements, "
+        "but the file ends (101,064 bytes) after 319 of the 320 face elements: cut short, or a "
+        "wrong count in the header")
+    assert got["whole.ply"]["status"] == "ok" and got["whole.ply"]["faces_in"] == 320
+    assert [p.name for p in (tmp_path / "out").iterdir()] == ["whole_cage.obj"]
