@@ -25,6 +25,7 @@ import re
 import shutil
 import struct
 import tempfile
+import warnings
 
 import numpy as np
 
@@ -35,7 +36,9 @@ from .file_check import FileCheck, InputFileError
 STL_HEAD, STL_TRIANGLE = 84, 50
 #: control bytes that never occur in a text file (tab, newlines and form feed do)
 _CONTROL = frozenset(range(32)) - {9, 10, 12, 13}
-_VERTEX = re.compile(rb"\bvertex[ \t]+(\S+)[ \t]+(\S+)[ \t]+(\S+)")
+#: per byte value, whether it separates words (blanks, newlines)
+_BLANK_BYTE = np.zeros(256, dtype=bool)
+_BLANK_BYTE[[9, 10, 11, 12, 13, 32]] = True
 #: the keywords that open and close a facet and a solid, as whole words
 _KEYWORDS = re.compile(rb"(?<!\S)(facet|endfacet|endsolid)(?!\S)")
 
@@ -180,11 +183,12 @@ def _ascii_keywords(data):
 def _check_ascii(path):
     """An ASCII STL file: cut short inside a facet is an error ("ends inside
     facet 1,203 (file truncated?)"), after a whole facet without its
-    ``endsolid`` a warning; a NaN or infinite corner an error."""
+    ``endsolid`` a warning; a corner that is not three numbers, a facet of
+    fewer than 3 corners and a NaN or infinite corner are errors naming the
+    line (:func:`_corners`)."""
     with open(path, "rb") as fh:
         data = fh.read().lower()
     starts, ends, closed = _ascii_keywords(data)
-    body = data[data.find(b"\n") + 1:] if b"\n" in data else b""
     name = os.path.basename(path)
     if starts > ends:
         raise InputFileError(f"{name}: ends inside facet {ends + 1:,} (file truncated?): an ASCII "
@@ -192,14 +196,96 @@ def _check_ascii(path):
     warnings = () if closed or not starts else (
         f"{name}: ends after facet {ends:,} without 'endsolid' (file truncated?): read the "
         f"{ends:,} whole facets",)
-    try:
-        V = np.array(_VERTEX.findall(body), dtype=np.float64).reshape(-1, 3)
-    except ValueError:
-        V = np.zeros((0, 3))                      # a bad number: Blender's importer says so
+    V, facet = _corners(path, data)
     finite = np.isfinite(V).all(axis=1)
-    if V.shape[0] % 3 == 0 and not finite.all():
-        raise _nonfinite_error(path, int((~finite.reshape(-1, 3).all(axis=1)).sum()))
+    if not finite.all():
+        raise _nonfinite_error(path, np.unique(facet[~finite]).size)
     return FileCheck(ends, (), warnings)
+
+
+def _keyword_at(b, word):
+    """Byte offsets in ``b`` (uint8) where ``word`` starts as a whole word
+    (blanks or the file's ends on both sides)."""
+    at = np.flatnonzero(b[:max(b.size - len(word) + 1, 0)] == word[0])
+    for k in range(1, len(word)):
+        at = at[b[at + k] == word[k]]
+    before = (at == 0) | _BLANK_BYTE[b[np.maximum(at - 1, 0)]]
+    end = at + len(word)
+    after = (end >= b.size) | _BLANK_BYTE[b[np.minimum(end, b.size - 1)]]
+    return at[before & after]
+
+
+def _corners(path, data):
+    """``(V, facet)``: the corners of an ASCII STL file's bytes ``data``
+    (lower case), (n,3) float64, and the facet (0-based) of each. Raises
+    :class:`InputFileError` naming the line of a ``vertex`` not followed by
+    three numbers (Blender's importer read '1.0 abc 2.0' and '1.0 2.0' on,
+    as 0 or the next line's word: the file came back "ok") and the facet of
+    fewer than 3 corners (dropped as degenerate, with a warning that did not
+    say why)."""
+    b = np.frombuffer(data, dtype=np.uint8)
+    first_line = data.find(b"\n") + 1 if b"\n" in data else len(data)
+    at = _keyword_at(b, b"vertex")
+    at = at[at >= first_line]                      # (the solid's name may hold the word)
+    nl = np.append(np.flatnonzero(b == 10), b.size)
+    stop = nl[np.searchsorted(nl, at)]              # each vertex line's end
+    if at.size == 0:
+        return np.zeros((0, 3)), np.zeros(0, dtype=np.int64)
+    rest = b"\n".join([data[i:j] for i, j in zip((at + 6).tolist(), stop.tolist())]) + b"\n"
+    V = _three_numbers(rest, at.size)
+    if V is None:
+        _raise_bad_vertex(path, data, at, stop)
+    facet = np.searchsorted(_keyword_at(b, b"endfacet"), at)
+    corners = np.bincount(facet)
+    few = np.flatnonzero(corners[:facet.max() + 1 if facet.size else 0] < 3)
+    if few.size:
+        k = int(few[0])
+        line = data.count(b"\n", 0, int(at[facet == k][0])) + 1 if corners[k] else None
+        where = f" (line {line:,})" if line else ""
+        raise InputFileError(
+            f"{os.path.basename(path)}: facet {k + 1:,}{where} has {corners[k]} "
+            f"{'vertex' if corners[k] == 1 else 'vertices'}, not 3: a damaged file (Blender's "
+            f"importer would drop it as a degenerate triangle)")
+    return V, facet
+
+
+def _three_numbers(rest, n):
+    """(n,3) float64 of ``rest`` (a line of three numbers for each of ``n``
+    vertices), or None when a line holds other than three numbers."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")              # (NumPy 1.x: a warning, 2.x: an error)
+        try:
+            values = np.fromstring(rest, dtype=np.float64, sep=" ")
+        except (ValueError, DeprecationWarning):
+            return None
+    r = np.frombuffer(rest, dtype=np.uint8)
+    blank = _BLANK_BYTE[r]
+    first = ~blank
+    first[1:] &= blank[:-1]
+    words = np.bincount(np.searchsorted(np.flatnonzero(r == 10), np.flatnonzero(first)),
+                        minlength=n)
+    if values.size != 3 * n or (words != 3).any():
+        return None
+    return values.reshape(n, 3)
+
+
+def _raise_bad_vertex(path, data, at, stop):
+    """Raise :class:`InputFileError` naming the first ``vertex`` line (at
+    byte offsets ``at`` to ``stop``) that is not three numbers."""
+    for a, e in zip(at.tolist(), stop.tolist()):
+        words = data[a + 6:e].split()
+        bad = next((w for w in words[:3] if _three_numbers(w + b" 0 0\n", 1) is None), None)
+        if bad is None and len(words) == 3:
+            continue
+        text = data[a:e].decode("utf-8", "replace").strip()
+        text = text if len(text) <= 60 else text[:57] + "..."
+        why = (f"holds '{bad.decode('utf-8', 'replace')}', which is not a number" +
+               (" (a decimal comma? STL's numbers take a point)" if b"," in bad else "")
+               if bad is not None else f"has {len(words)} numbers, not the 3 of a corner")
+        line = data.count(b"\n", 0, a) + 1
+        raise InputFileError(f"{os.path.basename(path)}: line {line:,}, '{text}', {why} "
+                             f"(Blender's importer would misread it)")
+    raise InputFileError(f"{os.path.basename(path)}: a 'vertex' line is not three numbers")
 
 
 def check(path):
