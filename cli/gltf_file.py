@@ -143,6 +143,34 @@ def _check_accessors(doc, name):
                                  f"offset)")
 
 
+#: per primitive mode, its name and whether a count of corners makes whole triangles
+_MODES = {4: ("TRIANGLES", lambda n: n % 3 == 0), 5: ("TRIANGLE_STRIP", lambda n: n == 0 or n >= 3),
+          6: ("TRIANGLE_FAN", lambda n: n == 0 or n >= 3)}
+
+
+def _check_primitives(doc, name):
+    """Each triangle primitive's corners (its indices, else its positions)
+    make whole triangles: Blender's importer read 17,411 indices of a
+    TRIANGLES primitive (not a multiple of 3) as 5,803 faces, some of them
+    polygons, and the file came back "ok"."""
+    accessors = _entries(doc, "accessors", name)
+    for i, mesh in enumerate(_entries(doc, "meshes", name)):
+        for j, prim in enumerate(_entries(mesh, "primitives", name)):
+            mode = prim.get("mode", 4)
+            attributes = prim.get("attributes")
+            which = prim.get("indices", attributes.get("POSITION") if isinstance(attributes, dict)
+                             else None)
+            if mode not in _MODES or not isinstance(which, int) or isinstance(which, bool) \
+                    or not 0 <= which < len(accessors):
+                continue
+            n = _number(accessors[which], "count", None)
+            what, whole = _MODES[mode]
+            if n is not None and not whole(n):
+                kind = "indices" if "indices" in prim else "vertices (it has no indices)"
+                raise InputFileError(f"{name}: mesh {i} primitive {j} is {what} of {n:,} {kind}, "
+                                     f"which make no whole triangles (cut short, or a wrong count)")
+
+
 def check(path):
     """What a glTF or GLB file's own structure says (:class:`FileCheck`);
     raises :class:`InputFileError` naming the file when a buffer holds less
@@ -155,4 +183,5 @@ def check(path):
             doc, bin_length = _json(fh.read(), name), None
     _check_buffers(doc, path, name, bin_length)
     _check_accessors(doc, name)
+    _check_primitives(doc, name)
     return FileCheck()

@@ -1,0 +1,35 @@
+"""glTF files Blender's importer reads into something else without a word
+(found by a fuzz of the batch CLI on 2026-12-05, second campaign)."""
+
+import json
+
+from tests.cli.test_batch import run_batch
+from tests.cli.test_real_world_files import write_gltf_nodes
+from tests.mesh_factory import icosphere
+
+
+def test_a_triangle_primitive_whose_indices_make_no_whole_triangles_is_named(tmp_path):
+    """A TRIANGLES primitive of 959 indices (320 triangles, the last index
+    missing) was read by Blender as 319 polygons, triangulated into 321
+    triangles, and the file came back "ok"; a TRIANGLE_STRIP of 2 corners
+    is no triangle either."""
+    V, F = icosphere(2)                                   # 162 vertices, 320 triangles
+    write_gltf_nodes(tmp_path / "whole.gltf", V, F, [{}])
+    doc = json.loads((tmp_path / "whole.gltf").read_text())
+    doc["accessors"][1]["count"] = 959
+    (tmp_path / "short.gltf").write_text(json.dumps(doc))
+    doc["accessors"][1]["count"] = 2
+    doc["meshes"][0]["primitives"][0]["mode"] = 5
+    (tmp_path / "strip.gltf").write_text(json.dumps(doc))
+    proc = run_batch(["short.gltf", "strip.gltf", "whole.gltf", "--faces", "100", "--format",
+                      "obj", "--out", "out", "--report", "r.json"], tmp_path)
+    assert proc.returncode == 1 and "Traceback" not in proc.stdout + proc.stderr
+    short, strip, whole = json.loads((tmp_path / "r.json").read_text())["files"]
+    assert short["status"] == "failed" and short["error"] == (
+        "short.gltf: read failed: short.gltf: mesh 0 primitive 0 is TRIANGLES of 959 indices, "
+        "which make no whole triangles (cut short, or a wrong count)")
+    assert strip["status"] == "failed" and strip["error"] == (
+        "strip.gltf: read failed: strip.gltf: mesh 0 primitive 0 is TRIANGLE_STRIP of 2 indices, "
+        "which make no whole triangles (cut short, or a wrong count)")
+    assert whole["status"] == "ok" and whole["faces_in"] == 320
+    assert [p.name for p in (tmp_path / "out").iterdir()] == ["whole_cage.obj"]
