@@ -153,7 +153,7 @@ def fit_cage(V_dense, F_dense, V_cage, F_cage, *, levels=2, scheme="butterfly", 
     pb = _set_up(V_dense, F_dense, V_cage, F_cage, levels=levels, scheme=scheme, creases=creases,
                  smoothness=smoothness, point_to_point=point_to_point, laplacian=laplacian,
                  samples=samples, seed=seed, symmetry=symmetry, iterations=iterations)
-    X, m = pb.X0.copy(), _match(pb, pb.X0)
+    X, m = pb.X0, _match(pb, pb.X0)
     f2d, d2f, cg_its = [m.fine_to_dense], [m.dense_to_fine], []
     cancelled = False
     for it in range(int(iterations)):
@@ -171,7 +171,9 @@ def fit_cage(V_dense, F_dense, V_cage, F_cage, *, levels=2, scheme="butterfly", 
         cg_its.append(n_cg)
     f2d = np.array(f2d)
     d2f = np.array(d2f)
-    return FitResult(X + pb.centre, 0.5 * (f2d + d2f), f2d, d2f, np.array(cg_its, dtype=np.int64),
+    # (no step kept: the cage as given, not moved there and back through the working origin)
+    V = pb.start if X is pb.X0 else X + pb.centre
+    return FitResult(V, 0.5 * (f2d + d2f), f2d, d2f, np.array(cg_its, dtype=np.int64),
                      bbox_diagonal(pb.V_dense), cancelled)
 
 
@@ -192,6 +194,7 @@ class _Problem(NamedTuple):
     mu: float               #: point-to-point weight
     sym: object             #: the symmetric projection, or None
     centre: np.ndarray      #: (3,) the working origin (dense bounding-box centre)
+    start: np.ndarray       #: (n_c,3) the starting cage as given (symmetrized with a symmetry)
 
 
 def _set_up(V_dense, F_dense, V_cage, F_cage, *, levels, scheme, creases, smoothness,
@@ -222,6 +225,7 @@ def _set_up(V_dense, F_dense, V_cage, F_cage, *, levels, scheme, creases, smooth
         k, sym = _symmetric_projection(V_cage, symmetry)
         centre[k] = 0.0          # the mirror plane through the working origin: sym stays linear
         V_cage = sym(V_cage)
+    start = V_cage
     V_dense, V_cage = dense.V - centre, V_cage - centre
     op = cage_operator(F_cage, V_cage.shape[0], where="fit_cage", levels=levels, scheme=scheme,
                        creases=creases)
@@ -238,7 +242,7 @@ def _set_up(V_dense, F_dense, V_cage, F_cage, *, levels, scheme, creases, smooth
                     np.asarray(sampled.points, dtype=np.float64),
                     _interpolate(N_dense, dense.F, sampled.face, sampled.bary), V_cage,
                     _laplacian(V_cage, F_cage, laplacian), float(smoothness) / V_cage.shape[0],
-                    float(point_to_point), sym, centre)
+                    float(point_to_point), sym, centre, start)
 
 
 def _check_weights(iterations, smoothness, point_to_point, laplacian):

@@ -72,3 +72,20 @@ def test_a_cage_far_larger_than_the_scan_keeps_a_fine_dense_index(monkeypatch):
     monkeypatch.setattr(fit_module, "TriangleIndex", lambda V, F, **kw: TriangleIndex(V, F))
     plain = fit_cage(Vd, Fd, 30 * Vc, Fc, levels=1, iterations=1)
     np.testing.assert_allclose(big.V, plain.V, rtol=0, atol=1e-9 * diag)
+
+
+def test_a_fit_that_keeps_no_step_returns_the_cage_bit_for_bit():
+    """iterations=0 ('returns the input'), or a first step that would not
+    bring the cage closer, gives back the cage as given: it came back
+    through the working origin (minus the dense mesh's centre, plus it
+    again), one ulp off where that centre rounds (0.1 off the origin)."""
+    from tests.mesh_factory import icosphere
+    Vd, Fd = icosphere(3)
+    Vc, Fc = icosphere(1)
+    t = np.array([0.1, -0.1 / 3, 0.1 / 7])
+    start = 0.9 * Vc + t + np.random.default_rng(0).normal(0, 1e-3, Vc.shape)
+    r = fit_cage(Vd + t, Fd, start, Fc, levels=1, iterations=0)
+    assert np.array_equal(r.V, start)
+    fitted = fit_cage(Vd + t, Fd, start, Fc, levels=1, iterations=6).V
+    again = fit_cage(Vd + t, Fd, fitted, Fc, levels=1, iterations=6)
+    assert again.cg_iterations.shape == (0,) and np.array_equal(again.V, fitted)
