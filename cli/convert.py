@@ -36,6 +36,7 @@ from ..core.simplify import ASYMMETRY_NOTE
 from . import blender_io
 from .file_check import InputFileError
 from .outputs import CORE_FORMATS, INCOMPLETE_FOLDER, incomplete_path, write_outputs
+from .runners import file_report
 
 #: a cage with more than (1 + TARGET_SLACK) x its target faces is a warning
 TARGET_SLACK = 0.05
@@ -98,13 +99,7 @@ class _Run:
     def __init__(self, task):
         self.task = task
         self.log = []
-        self.r = {"input": task["input"], "name": task["name"], "status": "ok",
-                  "faces_in": None, "polygons_in": None, "target_faces": None,
-                  "max_error_pct": None, "faces_out": None, "stopped_because": None,
-                  "message": None, "deviation_pct": None, "mean_deviation_pct": None,
-                  "cleaning": None, "fit": None, "refined_faces": None, "phases_s": {},
-                  "outputs": [], "incomplete": [], "warnings": [], "notes": [],
-                  "failed_step": None, "error": None}
+        self.r = file_report(task, "ok")
 
     def step(self, name, fn, *args, **kwargs):
         """Run one step, timed; a failure becomes :class:`StepFailed`."""

@@ -98,15 +98,33 @@ class WorkerProcess:
                              log=text)
 
 
+def file_report(task, status, **fields):
+    """A file's record in the report, every key present whatever its status
+    (a skipped, cancelled or crashed file's had only a few: a pipeline
+    reading ``files[i]["faces_in"]`` of a resumed batch met a KeyError):
+    ``task``'s input and name, ``status``, then ``fields`` over the empty
+    values of the rest. (Here, not in ``cli.report``: Dask sends this module
+    by value, and the workers of a remote cluster cannot import the package.)"""
+    r = {"input": task["input"], "name": task["name"], "status": status,
+         "faces_in": None, "polygons_in": None, "target_faces": None, "max_error_pct": None,
+         "faces_out": None, "stopped_because": None, "message": None, "deviation_pct": None,
+         "mean_deviation_pct": None, "cleaning": None, "fit": None, "refined_faces": None,
+         "phases_s": {}, "outputs": [], "incomplete": [], "warnings": [], "notes": [],
+         "failed_step": None, "error": None, "seconds": None, "log": ""}
+    unknown = set(fields) - set(r)
+    if unknown:
+        raise KeyError(f"file_report: no such field {sorted(unknown)}")
+    r.update(fields)
+    return r
+
+
 def failed_report(task, cause, *, log=""):
-    return {"input": task["input"], "name": task["name"], "status": "failed",
-            "failed_step": "worker", "error": f"{task['name']}: {cause}", "outputs": [],
-            "warnings": [], "notes": [], "phases_s": {}, "log": log}
+    return file_report(task, "failed", failed_step="worker", error=f"{task['name']}: {cause}",
+                       log=log)
 
 
 def cancelled_report(task):
-    return {"input": task["input"], "name": task["name"], "status": "cancelled",
-            "outputs": [], "warnings": [], "notes": [], "phases_s": {}, "log": ""}
+    return file_report(task, "cancelled")
 
 
 def run_processes(tasks, payload, command, jobs, on_done):

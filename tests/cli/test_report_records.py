@@ -1,0 +1,32 @@
+"""Every file's record in the JSON report has the same keys, whatever its
+status (found by a fuzz of the batch CLI on 2026-12-05, second campaign)."""
+
+import json
+
+import core
+from tests.cli.test_batch import run_batch
+from tests.mesh_factory import icosphere
+
+
+def test_skipped_failed_and_converted_files_have_the_same_fields(tmp_path):
+    """A file skipped by --skip-existing (or cancelled, or whose worker
+    died) had a record of 8 keys, no 'faces_in', 'error' or 'seconds': a
+    pipeline reading files[i]['faces_in'] of a resumed batch met a
+    KeyError."""
+    V, F = icosphere(2)
+    core.write_obj(tmp_path / "ball.obj", V, F)
+    core.write_obj(tmp_path / "other.obj", V * 2, F)
+    (tmp_path / "bad.obj").write_text("v 0 0 0\nf 1 2 3\n")
+    run_batch(["ball.obj", "--faces", "100", "--out", "out"], tmp_path)
+    proc = run_batch(["ball.obj", "other.obj", "bad.obj", "--faces", "100", "--out", "out",
+                      "--skip-existing", "--report", "r.json"], tmp_path)
+    assert proc.returncode == 1, proc.stdout + proc.stderr
+    report = json.loads((tmp_path / "r.json").read_text())
+    ball, other, bad = report["files"]
+    assert [ball["status"], other["status"], bad["status"]] == ["skipped", "ok", "failed"]
+    assert sorted(ball) == sorted(other) == sorted(bad)
+    assert ball["faces_in"] is None and ball["error"] is None and ball["incomplete"] == []
+    assert ball["outputs"] == [str(tmp_path / "out" / "ball_cage.obj")]
+    assert other["faces_in"] == 320 and other["faces_out"] == 100
+    assert bad["failed_step"] == "read" and "refers to a missing vertex" in bad["error"]
+    assert report["counts"] == {"ok": 1, "warn": 0, "failed": 1, "skipped": 1, "cancelled": 0}
