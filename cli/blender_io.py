@@ -237,6 +237,12 @@ def read_with_blender(path, log):
     if ext in (".gltf", ".glb"):
         V = V @ gltf_file.FROM_BLENDER
     notes, warnings = list(found.notes), list(found.warnings)
+    if ext == ".stl" and arrays.V.shape[0] < 3 * arrays.n_polygons:
+        # (STL stores each triangle's corners apart; the importer joins those at one position,
+        # so the cleaning's report has no weld to tell: say it here)
+        notes.append(f"Blender's STL importer joined the {3 * arrays.n_polygons:,} corners of "
+                     f"the file's triangles into {arrays.V.shape[0]:,} vertices (those at one "
+                     f"position)")
     expected = found.expected_faces
     if expected is not None and arrays.n_polygons < expected:
         warnings.append(f"Blender's {BLENDER_IMPORT[ext]} importer kept "

@@ -4,6 +4,8 @@ each is named by its line before Blender reads it."""
 
 import json
 
+import numpy as np
+
 from tests.cli.test_batch import run_batch
 from tests.cli.test_file_checks import write_ascii_stl
 from tests.mesh_factory import icosphere
@@ -50,3 +52,23 @@ def test_an_ascii_stl_corner_that_is_not_three_numbers_is_named_by_its_line(tmp_
         got["comma.stl"]["error"]
     assert got["whole.stl"]["status"] == "ok" and got["whole.stl"]["faces_in"] == 320
     assert [p.name for p in (tmp_path / "out").iterdir()] == ["whole_cage.obj"]
+
+
+def test_the_weld_blenders_stl_importer_does_is_reported(tmp_path):
+    """STL stores each triangle's corners apart and Blender's importer joins
+    those at one position, so the cleaning had nothing to weld: an STL of
+    320 triangles (960 corners) reported no weld at all, where the same
+    triangles unwelded in a PLY report 'welded 798 vertices'."""
+    from tests.mesh_factory import write_binary_stl, write_ply
+    V, F = icosphere(2)                                   # 162 vertices
+    write_binary_stl(tmp_path / "ball.stl", V, F)
+    write_ply(tmp_path / "ball.ply", V[F].reshape(-1, 3), np.arange(960).reshape(-1, 3))
+    proc = run_batch(["ball.stl", "ball.ply", "--faces", "100", "--format", "obj", "--out", "out",
+                      "--report", "r.json"], tmp_path)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    stl, ply = json.loads((tmp_path / "r.json").read_text())["files"]
+    assert stl["status"] == ply["status"] == "ok"
+    assert stl["notes"] == ["Blender's STL importer joined the 960 corners of the file's "
+                            "triangles into 162 vertices (those at one position)"]
+    assert ply["notes"] == ["cleaning: welded 798 vertices"]
+    assert stl["faces_out"] == ply["faces_out"] == 100
