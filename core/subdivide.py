@@ -163,6 +163,10 @@ SCHEMES = ("butterfly", "loop")
 #: most faces a subdivision may make (2^28, 268M: about 20 GB of operator and positions)
 MAX_FINE_FACES = 2 ** 28
 
+#: coarse values whose reach times the operator's ``gain`` stay below this are applied
+#: as they are: no partial sum can overflow (half the largest float, for rounding)
+_SAFE_REACH = float(np.finfo(np.float64).max) / 2
+
 __all__ = ["subdivide", "subdivision_operator", "SubdivisionOperator", "SubdivisionResult", "SCHEMES"]
 
 
@@ -186,6 +190,8 @@ class SubdivisionOperator:
     levels : int
     creases : (k,2) int64, the coarse crease edges (sorted ``lo < hi`` rows, unique).
     fingerprint : str, a hash of (F, n_coarse, levels, scheme, creases).
+    gain : float, a bound on ``|apply(X)| / max|X|``: the product of the
+        levels' largest absolute row sums (1 for Loop; butterfly overshoots).
     stencils : tuple of per-level stencils (``core._stencils.Stencil``: CSR
         ``indptr, cols, weights`` with rows sorted, ``n_in``, and the apply
         ``plan``); the fine vertices of level ``i`` are the coarse ones of
@@ -201,6 +207,7 @@ class SubdivisionOperator:
     creases: np.ndarray
     fingerprint: str
     stencils: tuple = field(repr=False)
+    gain: float = 1.0
 
     def _as_2d(self, X, n, what):
         """``X`` as (n, k) float64 values and whether it was (n,): real
@@ -236,10 +243,35 @@ class SubdivisionOperator:
         (n_fine, k) or (n_fine,) float64, a new array.
 
         Raises :class:`InvalidArgumentError` for values of the wrong shape or
-        kind, or NaN / infinite values (naming the first coarse vertex).
+        kind, NaN / infinite values (naming the first coarse vertex), or
+        values so large that the result would exceed the largest float.
         """
         X, one_d = self._as_2d(Vc, self.n_coarse, "apply")
         check_finite_rows(X, where="SubdivisionOperator.apply", what="coarse vertices")
+        return self._within_floats(X, one_d, "SubdivisionOperator.apply", "values",
+                                   InvalidArgumentError)
+
+    def _within_floats(self, X, one_d, where, what, error):
+        """:meth:`_apply` of the finite (n_coarse, k) ``X``; when ``X`` reaches
+        so far that a sum could overflow (coordinates near 1e308: butterfly
+        overshoots its cage), on ``X`` scaled down by a power of two (exact)
+        and back, and ``error`` naming ``where`` if the result does not fit
+        (it came out inf and NaN)."""
+        reach = float(np.abs(X).max()) if X.size else 0.0
+        if reach <= _SAFE_REACH / self.gain:
+            return self._apply(X, one_d)
+        scale = 2.0 ** -int(np.ceil(np.log2(reach) + np.log2(self.gain) - np.log2(_SAFE_REACH)))
+        with np.errstate(over="ignore"):
+            out = self._apply(X * scale, one_d) / scale
+        if not np.isfinite(out).all():
+            raise error(
+                f"{where}: the subdivided {what} would exceed the largest float: the coarse ones "
+                f"reach {reach:.3g} and {self.scheme} x{self.levels} overshoots them by "
+                f"up to {self.gain:.3g}x; scale them down first")
+        return out
+
+    def _apply(self, X, one_d):
+        """The fine values of the (n_coarse, k) float64 ``X``."""
         Xt = np.ascontiguousarray(X.T)          # column-major: each gather reads one column
         if not self.stencils:
             # (a copy: for one column, or one vertex, both transposes were views of Vc)
@@ -436,10 +468,13 @@ def _build(F, n, levels, scheme, creases, where):
     Fl, nl = (T.F, T.n) if levels == 0 else \
         (_rf.split_faces(T.F, T.n, T.face_edge), T.n + T.E.shape[0])
     f2c = np.arange(Fl.shape[0], dtype=np.int64) // (4 ** levels)
+    # (every row has an entry: reduceat's empty-row rule never applies)
+    gain = float(np.prod([np.add.reduceat(np.abs(S.weights), S.indptr[:-1]).max()
+                          for S in stencils if S.n_out]))
     return SubdivisionOperator(
         n_coarse=n, n_fine=nl, F_fine=Fl, fine_to_coarse_face=f2c, scheme=scheme, levels=levels,
         creases=crease_pairs, fingerprint=_fingerprint(F, n, levels, scheme, crease_pairs),
-        stencils=tuple(stencils))
+        stencils=tuple(stencils), gain=gain)
 
 
 @plain_pages
@@ -541,4 +576,5 @@ def subdivide(V, F, *, levels=1, scheme="butterfly", creases=None):
     V, F = check_mesh(V, F, where=where)
     check_subdivision_args(levels, scheme, where, F.shape[0])
     op = _build(F, V.shape[0], levels, scheme, creases, where)
-    return SubdivisionResult(op.apply(V), op.F_fine)
+    return SubdivisionResult(op._within_floats(V, False, where, "positions", InvalidMeshError),
+                             op.F_fine)
