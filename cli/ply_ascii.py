@@ -42,10 +42,11 @@ def _whole(x):
     return bool(np.isfinite(x) and x == np.floor(x))
 
 
-def describe(words, props):
+def describe(words, props, corners=None):
     """What is wrong with one record (its ``words``, bytes) of an element of
     ``props`` (``[(type, name)]``, a list's type ``("list", count type,
-    item type)``), in words, or None."""
+    item type)``), in words, or None; ``corners``: the name of a face's list
+    of corners, whose length Blender's importer takes from 1 to 255."""
     values = []
     for w in words:
         got = _numbers(w)
@@ -60,6 +61,10 @@ def describe(words, props):
                 return (f"holds '{words[at].decode()}' as the length of its {name} list, which "
                         f"is no count")
             n = int(values[at]) if at < len(values) else 0
+            if name == corners and at < len(values) and not 1 <= n <= 255:
+                return (f"is a face of {n:,} corners, and Blender's PLY importer reads faces of "
+                        f"at most 255: triangulate the file's polygons first (e.g. save it as "
+                        f"OBJ)" if n > 255 else f"is a face of {n} corners: a damaged file")
             items = values[at + 1:at + 1 + n]
             bad = [k for k, v in enumerate(items) if not _whole(v)] if t[2] in INTEGER_TYPES \
                 else []
@@ -76,21 +81,22 @@ def describe(words, props):
     return None
 
 
-def record_problem(body, starts, ends, first, count, props):
+def record_problem(body, starts, ends, first, count, props, corners=None):
     """``(line, problem)`` of the first bad record of an element of
     ``count`` records from line ``first`` of ``body`` (bytes; ``starts``,
     ``ends``: each line's byte range; the line 0-based in ``body``) whose
-    properties are ``props``, or None (see the module's docstring)."""
+    properties are ``props`` (``corners``: see :func:`describe`), or None
+    (see the module's docstring)."""
     for s in range(first, first + count, _BLOCK):
         e = min(s + _BLOCK, first + count)
-        k = _first_bad_line(body, starts[s:e], ends[s:e], props)
+        k = _first_bad_line(body, starts[s:e], ends[s:e], props, corners)
         if k is not None:
             line = s + k
-            return line, describe(bytes(body[starts[line]:ends[line]]).split(), props)
+            return line, describe(bytes(body[starts[line]:ends[line]]).split(), props, corners)
     return None
 
 
-def _first_bad_line(body, starts, ends, props):
+def _first_bad_line(body, starts, ends, props, corners):
     """Index (in ``starts``) of the first line whose record :func:`describe`
     finds wrong, or None."""
     seg = np.asarray(body[starts[0]:ends[-1]])
@@ -102,24 +108,24 @@ def _first_bad_line(body, starts, ends, props):
     words = np.bincount(np.searchsorted(rel_ends, np.flatnonzero(first), side="right"),
                         minlength=starts.size)[:starts.size]
     if values is None or values.size != words.sum():
-        return _first_described(body, starts, ends, props)
+        return _first_described(body, starts, ends, props, corners)
     offset = np.cumsum(words) - words
-    bad = _wrong_records(values, offset, words, props)
+    bad = _wrong_records(values, offset, words, props, corners)
     if bad is None:
-        return _first_described(body, starts, ends, props)
+        return _first_described(body, starts, ends, props, corners)
     hits = np.flatnonzero(bad)
     return int(hits[0]) if hits.size else None
 
 
-def _first_described(body, starts, ends, props):
+def _first_described(body, starts, ends, props, corners):
     """The first line :func:`describe` finds wrong (a line at a time)."""
     for k in range(starts.size):
-        if describe(bytes(body[starts[k]:ends[k]]).split(), props):
+        if describe(bytes(body[starts[k]:ends[k]]).split(), props, corners):
             return k
     return None
 
 
-def _wrong_records(values, offset, words, props):
+def _wrong_records(values, offset, words, props, corners):
     """Per record (its words ``values[offset:offset + words]``), whether its
     value count or a whole-number property is wrong; None when a list's
     count cannot be read (the line by line check then finds it)."""
@@ -127,13 +133,15 @@ def _wrong_records(values, offset, words, props):
     bad = np.zeros(words.size, dtype=bool)
     integer = np.zeros(values.size + 1, dtype=np.int64)     # +1 / -1 where int items start / end
     end = offset + words
-    for t, _ in props:
+    for t, name in props:
         inside = at < end
         if isinstance(t, tuple):
             c = np.where(inside, values[np.minimum(at, values.size - 1)], 0.0)
             if not np.isfinite(c).all():
                 return None
             bad |= (c != np.floor(c)) | (c < 0)
+            if name == corners:
+                bad |= inside & ((c < 1) | (c > 255))
             n = np.where(bad, 0, c).astype(np.int64)
             if t[2] in INTEGER_TYPES:
                 lo, hi = np.minimum(at + 1, end), np.minimum(at + 1 + n, end)

@@ -160,14 +160,19 @@ def _ascii_problem(data, length, elements, said):
                 f"importer would drop them or misread them)")
     first = 0
     for element, count, props in elements:
-        bad = record_problem(body, starts, ends, first, count, props) if count else None
+        corners = next((n for t, n in props if isinstance(t, tuple) and element == "face"
+                        and n in ("vertex_indices", "vertex_index")), None)
+        bad = record_problem(body, starts, ends, first, count, props, corners) if count else None
         if bad:
             line = bytes(body[starts[bad[0]]:ends[bad[0]]]).decode("utf-8", "replace").strip()
             line = line if len(line) <= 60 else line[:57] + "..."
-            why = ("a wrong count in the header, or a damaged file" if "values, not the" in
-                   bad[1] else "a damaged file, or one written by a tool that does not follow PLY")
+            why = ("" if "a face of" in bad[1] else
+                   ": a wrong count in the header, or a damaged file (Blender's importer would "
+                   "misread it)" if "values, not the" in bad[1] else
+                   ": a damaged file, or one written by a tool that does not follow PLY "
+                   "(Blender's importer would misread it)")
             return (f"{said}, but the {element} record on line {header_lines + bad[0] + 1:,} "
-                    f"('{line}') {bad[1]}: {why} (Blender's importer would misread it)")
+                    f"('{line}') {bad[1]}{why}")
         first += count
     return None
 

@@ -143,3 +143,20 @@ def test_a_ply_header_blender_would_crash_on_is_named_and_the_batch_goes_on(tmp_
         "wrong count in the header")
     assert got["whole.ply"]["status"] == "ok" and got["whole.ply"]["faces_in"] == 320
     assert [p.name for p in (tmp_path / "out").iterdir()] == ["whole_cage.obj"]
+
+
+def test_an_ascii_ply_face_of_no_corners_or_more_than_255_is_named_by_its_line(tmp_path):
+    """Blender's importer fails on such a face with 'Invalid face size, must
+    be between 1 and 255', naming neither the line nor which face."""
+    V, F = icosphere(1)                                   # 42 vertices, 80 faces
+    _ascii_ply(tmp_path / "empty_face.ply", V, F, replace={42 + 7: b"0"})
+    t = np.linspace(0, 2 * np.pi, 300, endpoint=False)
+    ring = np.stack([np.cos(t), np.sin(t), 0 * t], axis=1)
+    write_ply(tmp_path / "disk.ply", ring, [list(range(300))], ascii=True)
+    assert ply_size_problem(str(tmp_path / "empty_face.ply")) == (
+        "empty_face.ply: its header declares 42 vertex and 80 face elements, but the face record "
+        "on line 59 ('0') is a face of 0 corners: a damaged file")
+    assert ply_size_problem(str(tmp_path / "disk.ply")).endswith(
+        "but the face record on line 310 ('300 0 1 2 3 4 5 6 7 8 9 10 11 12 13 14 15 16 17 18 19 "
+        "20 ...') is a face of 300 corners, and Blender's PLY importer reads faces of at most "
+        "255: triangulate the file's polygons first (e.g. save it as OBJ)")
