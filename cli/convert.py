@@ -140,6 +140,9 @@ def _read(path, log):
     if os.path.isdir(path):               # (a folder named scan.obj in a folder given)
         raise IsADirectoryError(errno.EISDIR, "a folder, not a mesh file", path)
     if not os.path.isfile(path):
+        if os.path.exists(path):          # (a named pipe would block the reader for ever)
+            raise OSError(errno.EINVAL, "not a regular file (a named pipe, a device or a "
+                          "socket)", path)
         raise FileNotFoundError(2, "no such file", path)
     if ext in CORE_FORMATS:
         m = core.read_mesh(path)

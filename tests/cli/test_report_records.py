@@ -30,3 +30,17 @@ def test_skipped_failed_and_converted_files_have_the_same_fields(tmp_path):
     assert other["faces_in"] == 320 and other["faces_out"] == 100
     assert bad["failed_step"] == "read" and "refers to a missing vertex" in bad["error"]
     assert report["counts"] == {"ok": 1, "warn": 0, "failed": 1, "skipped": 1, "cancelled": 0}
+
+
+def test_a_named_pipe_named_like_a_mesh_is_no_regular_file_not_a_missing_one(tmp_path):
+    """A FIFO (or a link to /dev/zero) named scan.obj in a folder was
+    reported 'no such file', though it is right there."""
+    import os
+    os.mkfifo(tmp_path / "pipe.obj")
+    os.symlink("/dev/zero", tmp_path / "zero.stl")
+    proc = run_batch([".", "--faces", "100", "--out", "out", "--report", "r.json"], tmp_path)
+    assert proc.returncode == 1, proc.stdout + proc.stderr
+    pipe, zero = json.loads((tmp_path / "r.json").read_text())["files"]
+    for r, name in ((pipe, "pipe.obj"), (zero, "zero.stl")):
+        assert r["error"] == (f"{name}: read failed: not a regular file (a named pipe, a device "
+                              f"or a socket): {tmp_path / name}")
