@@ -3,6 +3,7 @@ patches, a single triangle, creases, weights at the ends of their ranges."""
 
 import numpy as np
 import pytest
+from hypothesis import given, settings, strategies as st
 
 from core.fit import fit_cage
 from core.subdivide import subdivide
@@ -89,3 +90,34 @@ def test_a_fit_that_keeps_no_step_returns_the_cage_bit_for_bit():
     fitted = fit_cage(Vd + t, Fd, start, Fc, levels=1, iterations=6).V
     again = fit_cage(Vd + t, Fd, fitted, Fc, levels=1, iterations=6)
     assert again.cg_iterations.shape == (0,) and np.array_equal(again.V, fitted)
+
+
+@settings(max_examples=12, deadline=None)
+@given(k=st.integers(3, 14), seed=st.integers(0, 2 ** 16), levels=st.integers(0, 2),
+       scheme=st.sampled_from(["butterfly", "loop"]),
+       smoothness=st.sampled_from([0.0, 0.05, 100.0]), point_to_point=st.sampled_from([0.0, 0.1, 10.0]),
+       laplacian=st.sampled_from(["uniform", "cotangent"]), crease=st.booleans(),
+       merge=st.booleans())
+def test_random_open_cages_fit_finite_monotone_and_leave_their_inputs(k, seed, levels, scheme, smoothness,
+                                                                      point_to_point, laplacian, crease,
+                                                                      merge):
+    """Open fans (a border vertex of valence 2 at each rim corner, an
+    interior vertex of valence k), creased or not, with two vertices moved
+    onto one point or not, over a noisy scan of their surface: the fit is
+    finite, its record never rises, and its inputs are untouched (read-only)."""
+    V, F = _fan(k)
+    F = F[:-1]                                  # open the fan
+    DV, DF, start = _noisy_patch(V, F, seed, shift=0.05)
+    if merge:
+        start[2] = start[3]
+    C = np.array([[0, 1], [0, k // 2 + 1]]) if crease else None
+    args = [DV, DF, start, F] + ([C] if crease else [])
+    for a in args:
+        a.setflags(write=False)
+    copies = [a.copy() for a in args]
+    r = fit_cage(DV, DF, start, F, levels=levels, scheme=scheme, creases=C, iterations=4,
+                 smoothness=smoothness, point_to_point=point_to_point, laplacian=laplacian)
+    assert np.isfinite(r.V).all() and np.isfinite(r.mean_distance).all()
+    assert np.all(np.diff(r.mean_distance) <= 0)
+    for a, b in zip(args, copies):
+        assert np.array_equal(a, b) and not a.flags.writeable
