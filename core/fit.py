@@ -64,6 +64,9 @@ _DENSE_CELL_EDGES = 1.0
 #: scan of all its triangles (a 500-face cage on the 69k-face bunny: 37 s, now 3.5 s)
 _DENSE_CELL_MAX_SHARE = 1 / 8
 
+#: the cotangent Laplacian takes a cage angle's sine to be at least this (a flat face)
+_FLAT_ANGLE_SIN = 1e-12
+
 
 class FitResult(NamedTuple):
     """Fitted cage and the distance record of :func:`fit_cage`."""
@@ -399,14 +402,17 @@ def _laplacian(V, F, kind):
     if kind == "uniform":
         w = np.ones(E.shape[0])
     else:
-        # cotangent of the angle at corner c, accumulated on the opposite edge
+        # cotangent of the angle at corner c, accumulated on the opposite edge; a flat
+        # angle's |cross| is floored relative to |u| |v| (cotangents within 1e12: an
+        # absolute floor made them overflow from cages 1e4 wide), 1e-300 for a point
         w = np.zeros(E.shape[0])
         for c in range(3):
             p = V[F[:, c]]
             u = V[F[:, (c + 1) % 3]] - p
             v = V[F[:, (c + 2) % 3]] - p
             cr = np.linalg.norm(cross_rows(u, v), axis=1)
-            cot = np.einsum("ij,ij->i", u, v) / np.maximum(cr, 1e-300)
+            floor = _FLAT_ANGLE_SIN * np.linalg.norm(u, axis=1) * np.linalg.norm(v, axis=1)
+            cot = np.einsum("ij,ij->i", u, v) / np.maximum(np.maximum(cr, floor), 1e-300)
             w += np.bincount(em.face_edge[:, c], 0.5 * cot, E.shape[0])
         # clamp: negative cotangent weights (obtuse cages) would make the
         # normalised rows unstable; a tiny positive floor keeps every neighbour

@@ -121,3 +121,29 @@ def test_random_open_cages_fit_finite_monotone_and_leave_their_inputs(k, seed, l
     assert np.all(np.diff(r.mean_distance) <= 0)
     for a, b in zip(args, copies):
         assert np.array_equal(a, b) and not a.flags.writeable
+
+
+@pytest.mark.parametrize("scale", [1e4, 1e7, 1e-4])
+def test_a_flat_cage_face_fits_alike_at_any_scale_with_cotangent_weights(scale):
+    """The cotangent of a flat face's angle was its dot product over
+    max(|cross|, 1e-300): at 1e4 units (a 4x4 grid 4e4 wide with one flat
+    face) it overflowed to inf ('overflow encountered in divide'), the
+    Laplacian went NaN, and the fit silently stayed where it started
+    (0.0117 -> 0.0117, against 0.0117 -> 0.0071 at 1 unit)."""
+    import warnings
+    x, y = np.meshgrid(np.arange(5.0), np.arange(5.0))
+    V = np.stack([x.ravel(), y.ravel(), np.zeros(25)], 1)
+    q = (np.arange(4)[:, None] * 5 + np.arange(4)).ravel()
+    F = np.vstack([np.stack([q, q + 1, q + 6], 1), np.stack([q, q + 6, q + 5], 1)])
+    DV, DF = subdivide(V, F, levels=3, scheme="loop")
+    DV = DV + 0.01 * np.random.default_rng(0).standard_normal(DV.shape)
+    start = V.copy()
+    start[6] = [2.0, 0.0, 0.0]            # face (0, 1, 6) flat: its corners on one line
+    kw = dict(levels=1, iterations=3, laplacian="cotangent")
+    unit = fit_cage(DV, DF, start, F, **kw)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        far = fit_cage(DV * scale, DF, start * scale, F, **kw)
+    np.testing.assert_allclose(far.mean_distance / scale, unit.mean_distance, rtol=1e-6)
+    assert unit.mean_distance[-1] < 0.7 * unit.mean_distance[0]
+    np.testing.assert_allclose(far.V / scale, unit.V, rtol=0, atol=1e-6)
