@@ -162,6 +162,8 @@ SCHEMES = ("butterfly", "loop")
 
 #: most faces a subdivision may make (2^28, 268M: about 20 GB of operator and positions)
 MAX_FINE_FACES = 2 ** 28
+#: most levels any mesh may take (one triangle makes MAX_FINE_FACES faces at 14)
+MAX_LEVELS = int(round(np.log(MAX_FINE_FACES) / np.log(4.0)))
 
 #: coarse values whose reach times the operator's ``gain`` stay below this are applied
 #: as they are: no partial sum can overflow (half the largest float, for rounding)
@@ -428,11 +430,15 @@ def check_subdivision_args(levels, scheme, where, n_faces=None):
     :class:`InvalidArgumentError` for an unknown scheme, levels that are not
     an integer >= 0, or levels that would make more than ``MAX_FINE_FACES``
     faces of ``n_faces`` (``levels=40`` allocated for 20 s and ran out of
-    memory)."""
+    memory), or more than ``MAX_LEVELS`` when there are no faces."""
     if scheme not in SCHEMES:
         raise InvalidArgumentError(
             f"{where}: scheme must be one of {', '.join(map(repr, SCHEMES))}, got {scheme!r}")
     levels = check_count(levels, where=where, name="levels")
+    if n_faces == 0 and levels > MAX_LEVELS:     # (no faces: no level makes one, each costs)
+        raise InvalidArgumentError(
+            f"{where}: levels={levels} is more than any mesh takes (at most {MAX_LEVELS}: one "
+            f"triangle makes {4 ** MAX_LEVELS:,} faces)")
     if n_faces and levels > np.log(MAX_FINE_FACES / n_faces) / np.log(4.0):
         made = f"{n_faces * 4.0 ** levels:.3g}" if levels < 500 else "more than 1e300"
         raise InvalidArgumentError(

@@ -77,3 +77,19 @@ def test_coordinates_near_the_float_limit_give_values_or_a_named_error_never_nan
     assert np.array_equal(op.apply(V * s), op.apply(V) * s)
     loop = subdivide(V * 1.7e308, F, levels=levels, scheme="loop").V     # (convex: always fits)
     assert np.isfinite(loop).all()
+
+
+def test_levels_beyond_any_mesh_are_refused_also_without_faces():
+    """Without faces no level made a face, so any levels passed: 10,000 took
+    3 s, 10**6 some five minutes, building one empty level after another.
+    More levels than one triangle may take (14: 4**14 faces) are refused."""
+    V = np.zeros((3, 3))
+    empty = np.zeros((0, 3), dtype=np.int64)
+    assert subdivide(V, empty, levels=14).V.shape == (3, 3)
+    with pytest.raises(InvalidArgumentError, match=r"subdivide: levels=100000 is more than any mesh "
+                                                   r"takes \(at most 14"):
+        subdivide(V, empty, levels=10 ** 5)
+    with pytest.raises(InvalidArgumentError, match=r"subdivision_operator: levels=15 is more"):
+        subdivision_operator(empty, 3, levels=15)
+    with pytest.raises(InvalidArgumentError, match=r"levels=15 would make 1\.07e\+09 faces of 1 "):
+        subdivide(V, [[0, 1, 2]], levels=15)
