@@ -512,7 +512,8 @@ def subdivision_operator(F, n_vertices, *, levels=1, scheme="butterfly", creases
         vertex, or faces that disagree on orientation; the message names the
         first offending edge, vertex or face.
     InvalidArgumentError
-        Unknown scheme, ``levels < 0``, or a crease that is not an edge.
+        Unknown scheme, ``levels < 0``, too many levels or vertices
+        (``MAX_FINE_FACES``), or a crease that is not an edge.
 
     Examples
     --------
@@ -524,6 +525,10 @@ def subdivision_operator(F, n_vertices, *, levels=1, scheme="butterfly", creases
     where = "subdivision_operator"
     levels = check_subdivision_args(levels, scheme, where)
     n = check_count(n_vertices, where=where, name="n_vertices")
+    if n > MAX_FINE_FACES:    # (NumPy's 'array is too big', an OverflowError or a MemoryError)
+        raise InvalidArgumentError(
+            f"{where}: n_vertices={n} is more than a subdivision may hold (at most "
+            f"{MAX_FINE_FACES:,})")
     F = check_faces(F, n, where=where)
     check_subdivision_args(levels, scheme, where, F.shape[0])
     return _build(F, n, levels, scheme, creases, where)

@@ -93,3 +93,13 @@ def test_levels_beyond_any_mesh_are_refused_also_without_faces():
         subdivision_operator(empty, 3, levels=15)
     with pytest.raises(InvalidArgumentError, match=r"levels=15 would make 1\.07e\+09 faces of 1 "):
         subdivide(V, [[0, 1, 2]], levels=15)
+
+
+@pytest.mark.parametrize("n", [2 ** 62, 2 ** 63, 10 ** 30])
+def test_a_vertex_count_beyond_any_subdivision_is_named(n):
+    """n_vertices past what any subdivision makes was NumPy's ValueError
+    ('array is too big'), OverflowError ('Python int too large to convert
+    to C long') or a MemoryError from inside."""
+    with pytest.raises(InvalidArgumentError, match=rf"subdivision_operator: n_vertices={n} is more "
+                                                   r"than a subdivision may hold \(at most 268,435,456\)"):
+        subdivision_operator([[0, 1, 2]], n, levels=1)
