@@ -354,11 +354,12 @@ class SubdivisionOperator:
                     f"SubdivisionOperator.support: mask must be ({self.n_coarse},), got {ids.shape}")
             mask = ids.copy()
         else:
-            ids = ids.astype(np.int64).ravel()
+            ids = ids.ravel()         # (checked before the cast: uint64 past 2**63 wrapped)
             if ids.size and (ids.min() < 0 or ids.max() >= self.n_coarse):
                 raise InvalidArgumentError(
                     f"SubdivisionOperator.support: vertex ids must be in [0, {self.n_coarse}), "
                     f"got {int(ids.min())}..{int(ids.max())}")
+            ids = ids.astype(np.int64)
             mask = np.zeros(self.n_coarse, dtype=bool)
             mask[ids] = True
         for S in self.stencils:

@@ -103,3 +103,11 @@ def test_a_vertex_count_beyond_any_subdivision_is_named(n):
     with pytest.raises(InvalidArgumentError, match=rf"subdivision_operator: n_vertices={n} is more "
                                                    r"than a subdivision may hold \(at most 268,435,456\)"):
         subdivision_operator([[0, 1, 2]], n, levels=1)
+
+
+def test_support_names_an_unsigned_id_past_int64_as_given():
+    """An unsigned id past 2**63 was shown wrapped ('got -9223372036854775807')."""
+    op = subdivision_operator([[0, 1, 2]], 3, levels=1)
+    with pytest.raises(InvalidArgumentError, match=r"must be in \[0, 3\), got 9223372036854775809"):
+        op.support(np.array([2 ** 63 + 1], dtype=np.uint64))
+    assert op.support(np.array([1], dtype=np.uint64)).sum() == 4
