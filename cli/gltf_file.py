@@ -98,6 +98,13 @@ def _held(buffer, i, path, name, bin_length):
     return os.path.getsize(file), uri
 
 
+def _key(v):
+    """``v`` when it can be a key of a table (a number or a string), else
+    None (a list or an object where the JSON has a number failed with
+    "TypeError: unhashable type: 'list'")."""
+    return v if isinstance(v, (int, float, str)) and not isinstance(v, bool) else None
+
+
 def _number(obj, key, default=0):
     v = obj.get(key, default) if isinstance(obj, dict) else None
     return v if isinstance(v, int) and not isinstance(v, bool) and v >= 0 else None
@@ -131,8 +138,8 @@ def _check_accessors(doc, name):
             continue                              # all zeros, or sparse only: nothing to read
         j, off, count = _number(a, "bufferView", None), _number(a, "byteOffset"), \
             _number(a, "count", None)
-        width = _COMPONENT_BYTES.get(a.get("componentType"), 0) * \
-            _TYPE_COMPONENTS.get(a.get("type"), 0)
+        width = _COMPONENT_BYTES.get(_key(a.get("componentType")), 0) * \
+            _TYPE_COMPONENTS.get(_key(a.get("type")), 0)
         if None in (j, off, count) or j >= len(views) or not width:
             raise InputFileError(f"{name}: accessor {i} names no valid bufferView, count or type")
         stride = _number(views[j], "byteStride") or width
@@ -156,7 +163,7 @@ def _check_primitives(doc, name):
     accessors = _entries(doc, "accessors", name)
     for i, mesh in enumerate(_entries(doc, "meshes", name)):
         for j, prim in enumerate(_entries(mesh, "primitives", name)):
-            mode = prim.get("mode", 4)
+            mode = _key(prim.get("mode", 4))
             attributes = prim.get("attributes")
             which = prim.get("indices", attributes.get("POSITION") if isinstance(attributes, dict)
                              else None)

@@ -33,3 +33,23 @@ def test_a_triangle_primitive_whose_indices_make_no_whole_triangles_is_named(tmp
         "which make no whole triangles (cut short, or a wrong count)")
     assert whole["status"] == "ok" and whole["faces_in"] == 320
     assert [p.name for p in (tmp_path / "out").iterdir()] == ["whole_cage.obj"]
+
+
+def test_a_gltf_with_a_list_where_a_number_belongs_is_named_not_a_type_error(tmp_path):
+    """componentType [5126] or mode {} failed as 'TypeError: unhashable type:
+    'list'', naming nothing."""
+    V, F = icosphere(1)
+    write_gltf_nodes(tmp_path / "ball.gltf", V, F, [{}])
+    doc = json.loads((tmp_path / "ball.gltf").read_text())
+    doc["accessors"][0]["componentType"] = [5126]
+    (tmp_path / "list.gltf").write_text(json.dumps(doc))
+    doc = json.loads((tmp_path / "ball.gltf").read_text())
+    doc["meshes"][0]["primitives"][0]["mode"] = {}
+    (tmp_path / "mode.gltf").write_text(json.dumps(doc))
+    proc = run_batch(["list.gltf", "mode.gltf", "--faces", "20", "--format", "obj", "--out",
+                      "out", "--report", "r.json"], tmp_path)
+    assert proc.returncode == 1 and "Traceback" not in proc.stdout + proc.stderr
+    listed, mode = json.loads((tmp_path / "r.json").read_text())["files"]
+    assert listed["error"] == ("list.gltf: read failed: list.gltf: accessor 0 names no valid "
+                               "bufferView, count or type")
+    assert "TypeError" not in mode["error"] and "unhashable" not in mode["error"], mode["error"]
