@@ -35,6 +35,29 @@ def test_a_triangle_primitive_whose_indices_make_no_whole_triangles_is_named(tmp
     assert [p.name for p in (tmp_path / "out").iterdir()] == ["whole_cage.obj"]
 
 
+def test_triangles_blenders_gltf_importer_drops_are_counted_and_warned(tmp_path):
+    """A primitive whose index accessor has no bufferView (all zeros, as
+    glTF reads it) is 160 degenerate triangles, which Blender's importer
+    drops without a word: the file came back "ok" with half its faces. The
+    faces the scene's nodes show (an instanced mesh counted per node) are
+    now compared with those imported, as for PLY and STL."""
+    V, F = icosphere(2)
+    write_gltf_nodes(tmp_path / "two.gltf", V, F, [{}, {"translation": [3, 0, 0]}])
+    doc = json.loads((tmp_path / "two.gltf").read_text())
+    doc["accessors"].append({"componentType": 5125, "count": 480, "type": "SCALAR"})
+    doc["meshes"].append({"primitives": [{"attributes": {"POSITION": 0}, "indices": 1},
+                                         {"attributes": {"POSITION": 0}, "indices": 2}]})
+    doc["nodes"][1]["mesh"] = 1
+    (tmp_path / "zeros.gltf").write_text(json.dumps(doc))
+    proc = run_batch(["two.gltf", "zeros.gltf", "--faces", "100", "--format", "obj", "--out",
+                      "out", "--report", "r.json"], tmp_path)
+    assert proc.returncode == 0 and "Traceback" not in proc.stdout + proc.stderr
+    two, zeros = json.loads((tmp_path / "r.json").read_text())["files"]
+    assert two["status"] == "ok" and two["faces_in"] == 640 and two["warnings"] == []
+    assert zeros["status"] == "warn" and zeros["faces_in"] == 640
+    assert zeros["warnings"] == ["Blender's glTF importer kept 640 of the file's 800 faces"]
+
+
 def test_a_gltf_with_a_list_where_a_number_belongs_is_named_not_a_type_error(tmp_path):
     """componentType [5126] or mode {} failed as 'TypeError: unhashable type:
     'list'', naming nothing."""
