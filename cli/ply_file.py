@@ -325,12 +325,18 @@ def _valid_first(element, count, items, n_vertices):
 def count_nonfinite(path):
     """Vertices with a coordinate that is NaN or infinite, read from the file
     itself (Blender's importer turns those into 0); None when the layout is
-    not one read here (vertices not the first element, list properties on
-    them, a file cut short)."""
+    not one read here (list properties on the vertices, a file cut short).
+    The vertex element may come after others (a file whose faces come first
+    had its NaN read as 0, status ok): ASCII, after their lines; binary,
+    after their bytes (:func:`_records`)."""
     header = ply_header(path)
-    if not header or not header[2] or header[2][0][0] != "vertex":
+    if not header:
         return None
-    fmt, length, ((_, n, props), *_) = header
+    fmt, length, elements = header
+    at = next((k for k, (e, _, _) in enumerate(elements) if e == "vertex"), None)
+    if at is None:
+        return None
+    _, n, props = elements[at]
     names = [p for _, p in props]
     if any(t not in PLY_TYPES for t, _ in props) or not {"x", "y", "z"} <= set(names) \
             or len(set(names)) < len(names):
@@ -339,9 +345,10 @@ def count_nonfinite(path):
         with open(path, "rb") as fh:
             fh.seek(length)
             text = fh.read()
+        skip = sum(count for _, count, _ in elements[:at])   # the lines of the elements before
         try:
-            rows = b" ".join(text.split(b"\n", n)[:n])        # the vertex lines, one string
-            table = np.array(rows.split(), dtype=np.float64).reshape(n, len(props))
+            lines = text.split(b"\n", skip + n)[skip:skip + n]
+            table = np.array(b" ".join(lines).split(), dtype=np.float64).reshape(n, len(props))
         except ValueError:
             return None
         cols = [k for k, (_, name) in enumerate(props) if name in ("x", "y", "z")]
@@ -349,10 +356,15 @@ def count_nonfinite(path):
     order = {"binary_little_endian": "<", "binary_big_endian": ">"}.get(fmt)
     if order is None:
         return None
+    size, pos = os.path.getsize(path), length
+    for element, count, before in elements[:at]:
+        got, pos, bad = _records(path, order, before, pos, count, size, n, element)
+        if bad or got < count:
+            return None         # (ply_size_problem says what is wrong)
     rec = np.dtype([(name, order + PLY_TYPES[t]) for t, name in props])
-    if length + n * rec.itemsize > os.path.getsize(path):
+    if pos + n * rec.itemsize > size:
         return None     # truncated (a count of 10^11 allocated a terabyte): ply_size_problem says so
-    table = np.fromfile(path, dtype=rec, count=n, offset=length)
+    table = np.fromfile(path, dtype=rec, count=n, offset=pos)
     xyz = np.stack([table[c].astype(np.float64) for c in ("x", "y", "z")], axis=1)
     return int((~np.isfinite(xyz).all(axis=1)).sum())
 

@@ -6,8 +6,10 @@ other files of the batch still converted."""
 import json
 
 import numpy as np
+import pytest
 
-from cli.ply_file import ply_size_problem
+from cli.file_check import InputFileError
+from cli.ply_file import check, ply_size_problem
 from tests.cli.test_batch import run_batch
 from tests.mesh_factory import icosphere, write_ply
 
@@ -160,3 +162,27 @@ def test_an_ascii_ply_face_of_no_corners_or_more_than_255_is_named_by_its_line(t
         "but the face record on line 310 ('300 0 1 2 3 4 5 6 7 8 9 10 11 12 13 14 15 16 17 18 19 "
         "20 ...') is a face of 300 corners, and Blender's PLY importer reads faces of at most "
         "255: triangulate the file's polygons first (e.g. save it as OBJ)")
+
+
+def test_a_nan_vertex_after_the_faces_is_refused_not_read_as_0(tmp_path):
+    """The NaN check read the vertices only when they were the file's first
+    element: a file writing its faces first had its NaN read as 0 by
+    Blender, status ok (ASCII and binary)."""
+    V, F = icosphere(1)                                   # 42 vertices, 80 faces
+    head = ("ply\nformat {} 1.0\nelement face 80\nproperty list uchar int vertex_indices\n"
+            "element vertex 42\nproperty float x\nproperty float y\nproperty float z\n"
+            "end_header\n")
+    Vn = np.array(V, dtype="<f4")
+    Vn[5, 0] = np.nan
+    (tmp_path / "text.ply").write_text(head.format("ascii") + "".join(
+        f"3 {a} {b} {c}\n" for a, b, c in F) + "".join(f"{x} {y} {z}\n" for x, y, z in Vn))
+    (tmp_path / "binary.ply").write_bytes(head.format("binary_little_endian").encode() + b"".join(
+        b"\x03" + np.asarray(f, "<i4").tobytes() for f in F) + Vn.tobytes())
+    for name in ("text.ply", "binary.ply"):
+        with pytest.raises(InputFileError, match=f"^{name}: 1 vertex with a coordinate that is "
+                           "not a finite number"):
+            check(str(tmp_path / name))
+    Vn[5, 0] = 0.5
+    (tmp_path / "binary.ply").write_bytes(head.format("binary_little_endian").encode() + b"".join(
+        b"\x03" + np.asarray(f, "<i4").tobytes() for f in F) + Vn.tobytes())
+    assert check(str(tmp_path / "binary.ply")).expected_faces == 80
