@@ -147,3 +147,31 @@ def test_a_flat_cage_face_fits_alike_at_any_scale_with_cotangent_weights(scale):
     np.testing.assert_allclose(far.mean_distance / scale, unit.mean_distance, rtol=1e-6)
     assert unit.mean_distance[-1] < 0.7 * unit.mean_distance[0]
     np.testing.assert_allclose(far.V / scale, unit.V, rtol=0, atol=1e-6)
+
+
+@pytest.mark.parametrize("scheme", ["butterfly", "loop"])
+@pytest.mark.parametrize("levels", [0, 2])
+def test_a_fitted_cage_with_holes_and_creases_binds_back_to_its_scan(scheme, levels):
+    """simplify -> fit_cage -> bind on a holed, creased scan (the cube's
+    creases, three holes, a far origin): the fit never ends farther than it
+    started, and the unedited fitted cage deforms and refines onto the scan
+    to 1e-12 of its diagonal."""
+    from core import TriangleIndex, bind, deform, refine, simplify
+    from tests.mesh_factory import cube
+    V, F = cube(12)
+    V = V + 1e5
+    keep = np.ones(len(F), bool)
+    keep[[5, 300, 301, 700]] = False                   # holes (one of two faces: a notch)
+    F = F[keep]
+    cage = simplify(V, F, target_faces=120, feature_angle_deg=40)
+    assert cage.n_boundary_loops >= 2 and len(cage.feature_edges) > 0
+    fit = fit_cage(V, F, cage.V, cage.F, levels=levels, scheme=scheme, creases=cage.feature_edges,
+                   iterations=4)
+    assert np.all(np.diff(fit.mean_distance) <= 0) and np.isfinite(fit.V).all()
+    b = bind(V, F, fit.V, cage.F, levels=levels, scheme=scheme, creases=cage.feature_edges)
+    diag = np.linalg.norm(V.max(0) - V.min(0))
+    assert np.abs(deform(b, fit.V) - V).max() <= 1e-12 * diag
+    R = refine(b, fit.V)
+    assert R.F.shape[0] == cage.F.shape[0] * 4 ** levels
+    # (closest points of coordinates 1e5 off the origin carry their rounding: 1e-16 of 1e5)
+    assert TriangleIndex(V, F).closest(R.V).distance.max() <= 1e-12 * diag + 1e-16 * 1e5 * 8
