@@ -27,6 +27,7 @@ import urllib.parse
 import numpy as np
 
 from .file_check import FileCheck, InputFileError
+from .gltf_positions import nonfinite_positions
 
 #: a file's ``(x, y, z)`` from Blender's: ``V_file = V_blender @ FROM_BLENDER``
 FROM_BLENDER = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])
@@ -37,7 +38,7 @@ _TYPE_COMPONENTS = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4, "MAT2": 4, "MA
 
 
 def _glb(path, name):
-    """``(JSON document, BIN chunk length or None)`` of a GLB file."""
+    """``(JSON document, BIN chunk or None)`` of a GLB file."""
     with open(path, "rb") as fh:
         data = fh.read()
     if len(data) < _GLB_HEAD + _CHUNK_HEAD or data[:4] != b"glTF":
@@ -57,7 +58,7 @@ def _glb(path, name):
     if _JSON_CHUNK not in chunks:
         raise InputFileError(f"{name}: a GLB file without its JSON chunk")
     doc = _json(chunks[_JSON_CHUNK], name)
-    return doc, (len(chunks[_BIN_CHUNK]) if _BIN_CHUNK in chunks else None)
+    return doc, chunks.get(_BIN_CHUNK)
 
 
 def _json(text, name):
@@ -215,11 +216,18 @@ def check(path):
     than its JSON declares or a view or accessor reaches past it."""
     name = os.path.basename(path)
     if path.lower().endswith(".glb"):
-        doc, bin_length = _glb(path, name)
+        doc, glb_bin = _glb(path, name)
     else:
         with open(path, "rb") as fh:
-            doc, bin_length = _json(fh.read(), name), None
-    _check_buffers(doc, path, name, bin_length)
+            doc, glb_bin = _json(fh.read(), name), None
+    _check_buffers(doc, path, name, None if glb_bin is None else len(glb_bin))
     _check_accessors(doc, name)
     _check_primitives(doc, name)
+    bad = nonfinite_positions(doc, path, glb_bin)
+    if bad:
+        mesh, prim, n = bad
+        raise InputFileError(f"{name}: mesh {mesh} primitive {prim} has {n:,} "
+                             f"{'vertex' if n == 1 else 'vertices'} with a coordinate that is not "
+                             f"a finite number (NaN or infinity; Blender's importer would read "
+                             f"them as 0)")
     return FileCheck(_expected_faces(doc))

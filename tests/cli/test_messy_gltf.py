@@ -76,3 +76,51 @@ def test_a_gltf_with_a_list_where_a_number_belongs_is_named_not_a_type_error(tmp
     assert listed["error"] == ("list.gltf: read failed: list.gltf: accessor 0 names no valid "
                                "bufferView, count or type")
     assert "TypeError" not in mode["error"] and "unhashable" not in mode["error"], mode["error"]
+
+
+def _glb_of(doc):
+    """A GLB file's bytes holding the ``.gltf`` document ``doc`` whose one
+    buffer is a ``data:`` URI (moved into the BIN chunk)."""
+    import base64
+    import struct
+    blob = base64.b64decode(doc["buffers"][0].pop("uri").partition(",")[2])
+    blob += b"\0" * (-len(blob) % 4)
+    text = json.dumps(doc).encode()
+    text += b" " * (-len(text) % 4)
+    size = 12 + 8 + len(text) + 8 + len(blob)
+    return (b"glTF" + struct.pack("<II", 2, size) + struct.pack("<I", len(text)) + b"JSON" + text
+            + struct.pack("<I", len(blob)) + b"BIN\0" + blob)
+
+
+def test_a_gltf_position_that_is_not_a_finite_number_is_refused(tmp_path):
+    """Blender's glTF importer reads a NaN or infinite coordinate as 0: a
+    sphere with one came back "ok", the vertex pulled onto a plane."""
+    import numpy as np
+
+    def write(name, V):           # (its bounds finite, as an exporter skipping NaN writes them)
+        write_gltf_nodes(tmp_path / name, V, F, [{}])
+        doc = json.loads((tmp_path / name).read_text())
+        doc["accessors"][0].update(min=[-1.0] * 3, max=[1.0] * 3)
+        (tmp_path / name).write_text(json.dumps(doc))
+    V, F = icosphere(1)
+    V = np.array(V)
+    V[3, 1] = np.nan
+    write("nan.gltf", V)
+    (tmp_path / "nan.glb").write_bytes(_glb_of(json.loads((tmp_path / "nan.gltf").read_text())))
+    V[3, 1], V[7, 2] = 0.5, -np.inf
+    write("inf.gltf", V)
+    V[7, 2] = 0.25
+    write_gltf_nodes(tmp_path / "fine.gltf", V, F, [{}])
+    (tmp_path / "fine.glb").write_bytes(_glb_of(json.loads((tmp_path / "fine.gltf").read_text())))
+    names = ["nan.gltf", "nan.glb", "inf.gltf", "fine.gltf", "fine.glb"]
+    proc = run_batch([*names, "--faces", "20", "--format", "obj", "--out", "out", "--report",
+                      "r.json"], tmp_path)
+    assert proc.returncode == 1 and "Traceback" not in proc.stdout + proc.stderr
+    got = {f["name"]: f for f in json.loads((tmp_path / "r.json").read_text())["files"]}
+    for name in ("nan.gltf", "nan.glb", "inf.gltf"):
+        assert got[name]["error"] == (
+            f"{name}: read failed: {name}: mesh 0 primitive 0 has 1 vertex with a coordinate "
+            f"that is not a finite number (NaN or infinity; Blender's importer would read them "
+            f"as 0)")
+    assert got["fine.gltf"]["status"] == got["fine.glb"]["status"] == "ok"
+    assert got["fine.glb"]["faces_in"] == 80
