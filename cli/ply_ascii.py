@@ -10,7 +10,7 @@ record, the numbers of a block of lines converted at once::
     for each element, a block of lines at a time:
         values = every word as a number          (a word that is none: that line)
         words per line == the values its properties give (a list's count read)
-        whole numbers where a property is an integer type
+        whole numbers in a list of an integer type (a face's indices)
 """
 
 import warnings
@@ -72,9 +72,7 @@ def describe(words, props, corners=None):
                 return (f"holds '{words[at + 1 + bad[0]].decode()}' in its {name} list, whose "
                         f"items are whole numbers ({t[2]})")
             at, want = at + 1 + n, want + 1 + n
-        else:
-            if t in INTEGER_TYPES and at < len(values) and not _whole(values[at]):
-                return f"holds '{words[at].decode()}' for its {name}, a whole number ({t})"
+        else:               # (a scalar's type is not checked: Blender reads 0.5 as 0.5 there)
             at, want = at + 1, want + 1
     if len(values) != want:
         return f"holds {len(values)} values, not the {want} its properties give"
@@ -127,7 +125,7 @@ def _first_described(body, starts, ends, props, corners):
 
 def _wrong_records(values, offset, words, props, corners):
     """Per record (its words ``values[offset:offset + words]``), whether its
-    value count or a whole-number property is wrong; None when a list's
+    value count, a list's count or an item of a list of integers is wrong; None when a list's
     count cannot be read (the line by line check then finds it)."""
     at = offset.copy()
     bad = np.zeros(words.size, dtype=bool)
@@ -149,10 +147,6 @@ def _wrong_records(values, offset, words, props, corners):
                 np.add.at(integer, hi, -1)
             at = at + 1 + n
         else:
-            if t in INTEGER_TYPES:
-                i = np.flatnonzero(inside)
-                integer[at[i]] += 1
-                integer[at[i] + 1] -= 1
             at = at + 1
     bad |= at != end
     check = np.cumsum(integer[:-1]) > 0

@@ -107,7 +107,7 @@ def ply_size_problem(path):
     bad index, or stops at the declared counts and drops the rest silently.
     Checked here, before Blender: ASCII, a line per element, every one
     holding the values its properties give (:mod:`.ply_ascii`: numbers, whole
-    ones for integer types, a list as long as its count), nothing but blank
+    ones in lists of integers, a list as long as its count), nothing but blank
     lines after the last; binary, the bytes of each fixed-size element and of
     each element with lists, its records counted at once while they have the
     first one's length (all triangles, all quads) and walked one by one from

@@ -186,3 +186,14 @@ def test_a_nan_vertex_after_the_faces_is_refused_not_read_as_0(tmp_path):
     (tmp_path / "binary.ply").write_bytes(head.format("binary_little_endian").encode() + b"".join(
         b"\x03" + np.asarray(f, "<i4").tobytes() for f in F) + Vn.tobytes())
     assert check(str(tmp_path / "binary.ply")).expected_faces == 80
+
+
+def test_a_fraction_in_an_integer_vertex_property_is_read_as_blender_reads_it(tmp_path):
+    """Blender reads '0.5' under 'property int x' as 0.5 (and a face index
+    '1.5' not at all): only list items are held to whole numbers."""
+    head = ("ply\nformat ascii 1.0\nelement vertex 3\nproperty int x\nproperty int y\n"
+            "property int z\nelement face 1\nproperty list uchar int vertex_indices\nend_header\n")
+    (tmp_path / "half.ply").write_text(head + "0.5 0 0\n10 0 0\n0 10.7 0\n3 0 1 2\n")
+    assert ply_size_problem(str(tmp_path / "half.ply")) is None
+    (tmp_path / "index.ply").write_text(head + "0.5 0 0\n10 0 0\n0 10.7 0\n3 0 1 2.5\n")
+    assert "holds '2.5' in its vertex_indices list" in ply_size_problem(str(tmp_path / "index.ply"))
