@@ -132,7 +132,15 @@ _CAPSULE_HEIGHT = 1.0 / 16
 _LEAF = 8                  # BVH leaf size (triangles)
 _BVH_STEP = 2              # BVH levels descended per traversal step (4 children per node)
 _SLAB_LEVELS = 3           # lowest BVH levels that also get cylinder bounds
-_PROBE_BEAM = 8            # BVH nodes per query per level of the probe for a first upper bound
+_PROBE_BEAM = 4            # BVH nodes per query per level of the probe for a first upper bound
+#: a probe farther than this many times the box distance of the leaves it reached, and
+#: than ``_ODD_PROBE_SHARE`` of the mesh's box diagonal, is made again with a beam of
+#: ``_WIDE_BEAM``: points beside a CAD fillet's 100-long strips, inside the boxes of many
+#: nodes, had a beam of 4 miss the big face they lie on (112 of a fit's 464 started 49
+#: units off), and every strip within that distance was scanned
+_ODD_PROBE = 4.0
+_ODD_PROBE_SHARE = 0.01
+_WIDE_BEAM = 16
 #: a scan's query with more pairs than this left within the centroid probe's bound
 #: evaluates the one of smallest lower bound first (:meth:`TriangleIndex._eval_lowest_first`)
 _LOWEST_FIRST = 8
@@ -1589,7 +1597,7 @@ class TriangleIndex:
             return
         if not self._bvh_ready:
             self._build_hierarchy()
-        self._probe_leaves(PT, far, best)
+        self._probe_odd_again(PT, far, best, self._probe_leaves(PT, far, best))
         ub = np.full(PT.shape[1], np.inf)
         for s in range(0, far.size, _QUERY_CHUNK // 4):
             qs = far[s:s + _QUERY_CHUNK // 4]
@@ -1626,15 +1634,30 @@ class TriangleIndex:
                 elif q.size:
                     stack.append((level + 1, q, child, near2))
 
-    def _probe_leaves(self, PT, q, best):
+    def _probe_odd_again(self, PT, q, best, near2):
+        """Probe again, with a beam of ``_WIDE_BEAM``, the queries ``q`` whose
+        probe lies beyond ``_ODD_PROBE`` times the box distance ``near2`` of
+        the leaves it reached and beyond ``_ODD_PROBE_SHARE`` of the mesh's
+        diagonal: a beam that followed boxes holding the point but not the
+        triangle it lies on (a point far from the mesh is as far from the
+        boxes, and is not probed again)."""
+        d2 = best.d2[q]
+        far = _ODD_PROBE_SHARE ** 2 * float(np.square(self._hi - self._lo).sum())
+        odd = q[(d2 > _ODD_PROBE ** 2 * near2) & (d2 > far)]
+        if odd.size:
+            self._probe_leaves(PT, odd, best, beam=_WIDE_BEAM)
+
+    def _probe_leaves(self, PT, q, best, beam=None):
         """An upper bound for the queries ``q`` before the descent: the
         triangles of the leaves a beam search reaches (at each level the
-        ``_PROBE_BEAM`` children nearest each query by box distance, plus a
+        ``beam`` (default ``_PROBE_BEAM``) children nearest each query by box distance, plus a
         billionth of the distance to the box's centre to break ties among
         boxes holding it). Without it a query starts with the farthest-point
         bounds of the boxes only, which prune nothing where the triangles
         are long (a CAD cylinder's sides: every leaf was visited, 2 ms a
-        query on 64k faces)."""
+        query on 64k faces). Returns the smallest squared box distance (with
+        its tie-break term) of the leaves reached, per query."""
+        width = _PROBE_BEAM if beam is None else beam
         beam = np.zeros((q.size, 1), dtype=np.int64)
         p = np.take(PT, q, axis=1)[:, :, None]
         for level in range(1, self._depth + 1):
@@ -1645,14 +1668,15 @@ class TriangleIndex:
                 off = p - 0.5 * (box[:3] + box[3:])
                 key = np.einsum("kqj,kqj->qj", gap, gap) + 1e-9 * np.einsum("kqj,kqj->qj", off, off)
             key[~np.isfinite(key)] = np.inf
-            if node.shape[1] > _PROBE_BEAM:
-                pick = np.argpartition(key, _PROBE_BEAM - 1, axis=1)[:, :_PROBE_BEAM]
+            if node.shape[1] > width:
+                pick = np.argpartition(key, width - 1, axis=1)[:, :width]
                 node, key = (np.take_along_axis(a, pick, axis=1) for a in (node, key))
             best_node = np.take_along_axis(node, key.argmin(axis=1)[:, None], axis=1)
             beam = np.where(np.isfinite(key), node, best_node)   # (a padding node: the best)
         n_leaves = 1 << self._depth
         pair = np.unique(beam + n_leaves * np.arange(q.size)[:, None])  # grouped by query
         self._scan_leaves(PT, q[pair // n_leaves], pair % n_leaves, best)
+        return key.min(axis=1)
 
     def _scan_leaves(self, PT, q, leaf, best, probe=True):
         t, own = ragged_ranges(leaf * _LEAF, np.full(q.size, _LEAF, dtype=np.int64))
