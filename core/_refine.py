@@ -49,23 +49,32 @@ class Topology(NamedTuple):
     nb_sum: np.ndarray     #: (n,) int64, sum of the sharp neighbours (the other one is nb_sum - known)
 
 
-def crease_edge_ids(creases, E, n, where):
-    """Indices into ``E`` of the undirected vertex pairs ``creases``.
-
-    Raises InvalidArgumentError when a pair is not an edge."""
+def crease_pairs(creases, where):
+    """``creases`` as given (an array, for messages) and as a (k,2) int64
+    array, or (None, None) for None or an empty list; raises
+    InvalidArgumentError naming ``where`` when it is not (k,2) integers."""
     if creases is None:
-        return np.zeros(0, dtype=np.int64)
+        return None, None
     shape = f"{where}: creases must be a (k,2) integer array of vertex pairs, got"
     try:
         C_in = np.asarray(creases)
     except ValueError:      # (NumPy's "setting an array element with a sequence")
         raise InvalidArgumentError(f"{shape} rows of different lengths") from None
     if C_in.size == 0:
-        return np.zeros(0, dtype=np.int64)
+        return None, None
     if C_in.ndim != 2 or C_in.shape[1] != 2 or not np.issubdtype(C_in.dtype, np.integer):
         raise InvalidArgumentError(f"{shape} {C_in.shape} {C_in.dtype}")
-    # (unsigned indices past 2^63 wrap to negative ones: refused below, shown as given)
-    C = C_in.astype(np.int64)
+    # (unsigned indices past 2^63 wrap to negative ones: refused by the callers, shown as given)
+    return C_in, C_in.astype(np.int64)
+
+
+def crease_edge_ids(creases, E, n, where):
+    """Indices into ``E`` of the undirected vertex pairs ``creases``.
+
+    Raises InvalidArgumentError when a pair is not an edge."""
+    C_in, C = crease_pairs(creases, where)
+    if C is None:
+        return np.zeros(0, dtype=np.int64)
     lo, hi = np.minimum(C[:, 0], C[:, 1]), np.maximum(C[:, 0], C[:, 1])
     keys = edge_keys(lo, hi, n)
     ekeys = edge_keys(E[:, 0], E[:, 1], n)

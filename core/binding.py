@@ -66,6 +66,7 @@ from .mesh import (area_normals_t, bounding_box, check_faces, check_mesh, check_
                    check_units, check_vertices, cross_columns, dot_columns, stops)
 from .near_query import NearQuery
 from .spatial import TriangleIndex
+from ._refine import crease_pairs
 from .subdivide import cage_operator, check_subdivision_args, subdivision_operator
 from .topology import check_not_soup
 from .unfold import (CageRings, Copies, FaceStars, FineFaceGroups, Repair, away_rows, away_t,
@@ -1632,14 +1633,9 @@ def _vertex_corners(F, n):
 
 
 def _normalise_creases(creases, where):
-    if creases is None:
-        return None
-    C = np.asarray(creases)
-    if C.size == 0:
-        return None
-    if C.ndim != 2 or C.shape[1] != 2 or not np.issubdtype(C.dtype, np.integer):
-        raise InvalidArgumentError(f"{where}: creases must be (k,2) integers, got {C.shape} {C.dtype}")
-    return np.array(C, dtype=np.int64)
+    """``creases`` as a (k,2) int64 array (None for None or none), checked
+    as :func:`~._refine.crease_pairs` checks them."""
+    return crease_pairs(creases, where)[1]
 
 
 def _to_frame(d, fr):

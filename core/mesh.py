@@ -239,10 +239,12 @@ def check_number(value, *, where, name, lo=None, hi=None, open_lo=False, open_hi
         takes = f"{kind} {'<' if open_hi else '<='} {hi:g}"
     else:
         takes = f"a finite {kind[2:]}"
-    ok = isinstance(value, (int, float, np.integer, np.floating)) and \
-        not isinstance(value, (bool, np.bool_)) and np.isfinite(value)
-    if ok and integer:
-        ok = float(value) == int(value)
+    # integers are taken as they are (a float of 2**63 - 1 is 2**63, and np.isfinite
+    # refused Python integers from 2**64 with a TypeError)
+    whole = isinstance(value, (int, np.integer)) and not isinstance(value, (bool, np.bool_))
+    ok = whole or (isinstance(value, (float, np.floating)) and bool(np.isfinite(value)))
+    if ok and integer and not whole:
+        ok = float(value).is_integer()
     if ok and lo is not None:
         ok = value > lo if open_lo else value >= lo
     if ok and hi is not None:

@@ -183,3 +183,28 @@ def test_readers_refuse_what_is_no_obj_and_faces_name_huge_indices(sphere, tmp_p
     with pytest.raises(InvalidMeshError, match=r"face 2 = \[.*, 18446744073709551615\] indexes "
                                                r"a vertex beyond any mesh"):
         core.euler_characteristic(big)                          # (it said -1)
+
+
+@pytest.mark.parametrize("seed", [2**63 - 1, 2**63, 2**64, 2**70, np.uint64(2**64 - 1)])
+def test_any_integer_seed_numpy_takes_is_taken(seed):
+    # 2**63 - 1 was refused as "not an integer" (its float is 2**63), 2**64 and up
+    # raised NumPy's TypeError from np.isfinite
+    V, F = icosphere(1)
+    a = core.sample_surface(V, F, 50, seed=seed)
+    b = core.sample_surface(V, F, 50, seed=seed)
+    assert np.array_equal(np.asarray(a[0] if isinstance(a, tuple) else a),
+                          np.asarray(b[0] if isinstance(b, tuple) else b))
+    for bad in (-1, 2.5, float("inf"), True, "3"):
+        with pytest.raises(InvalidArgumentError, match="sample_surface: seed must be an integer >= 0"):
+            core.sample_surface(V, F, 50, seed=bad)
+
+
+def test_bind_names_a_ragged_crease_list():
+    # a row of one vertex was NumPy's "setting an array element with a sequence"
+    V, F = icosphere(2)
+    Vc, Fc = icosphere(1)
+    with pytest.raises(InvalidArgumentError, match=r"bind: creases must be a \(k,2\) integer array "
+                                                   r"of vertex pairs, got rows of different lengths"):
+        core.bind(V, F, Vc, Fc, creases=[[0, 1], [1]])
+    with pytest.raises(InvalidArgumentError, match=r"bind: creases must be a \(k,2\) integer array"):
+        core.bind(V, F, Vc, Fc, creases=[[0.0, 1.0]])
