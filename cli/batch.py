@@ -197,24 +197,32 @@ def _without_links_to_others(found):
 def plan(files, opts, out):
     """One task per file: its name as shown and its output paths, distinct
     even when input names collide (compared without case)."""
-    stems = [os.path.splitext(os.path.basename(f))[0] for f in files]
+    bases = [_base_name(f) for f in files]
+    stems = [os.path.splitext(b)[0] for b in bases]
     n_stem = Counter(s.casefold() for s in stems)
-    n_base = Counter(os.path.basename(f).casefold() for f in files)
+    n_base = Counter(b.casefold() for b in bases)
     used, tasks = set(), []
-    for f, stem in zip(files, stems):
+    for f, stem, base_name in zip(files, stems, bases):
         if n_stem[stem.casefold()] > 1:
-            stem = f"{stem}_{os.path.splitext(f)[1].lower().lstrip('.')}"
+            stem = f"{stem}_{os.path.splitext(base_name)[1].lower().lstrip('.')}"
         base, k = stem, 2
         while stem.casefold() in used:
             stem, k = f"{base}_{k}", k + 1
         used.add(stem.casefold())
-        fmt = _convert.output_format(f, opts)
-        name = os.path.basename(f) if n_base[os.path.basename(f).casefold()] == 1 else f
+        fmt = _convert.output_format(base_name, opts)
+        name = base_name if n_base[base_name.casefold()] == 1 else f
         tasks.append({"input": os.path.abspath(f), "name": name,
                       "cage": os.path.join(out, f"{stem}_cage.{fmt}"),
                       "refined": os.path.join(out, f"{stem}_refined.{fmt}") if opts.refine
                       else None})
     return tasks
+
+
+def _base_name(path):
+    """The last part of ``path``, also when it ends with a separator (an
+    input 'scans/' that is no folder was shown with an empty name, its
+    outputs named '_cage.obj')."""
+    return os.path.basename(path.rstrip(os.sep) or path)
 
 
 def check_paths(args):

@@ -44,3 +44,18 @@ def test_a_named_pipe_named_like_a_mesh_is_no_regular_file_not_a_missing_one(tmp
     for r, name in ((pipe, "pipe.obj"), (zero, "zero.stl")):
         assert r["error"] == (f"{name}: read failed: not a regular file (a named pipe, a device "
                               f"or a socket): {tmp_path / name}")
+
+
+def test_a_missing_input_given_with_a_trailing_slash_keeps_its_name(tmp_path):
+    """'scans/' that does not exist was shown with an empty name ('| | ... |
+    FAILED: : read failed: no such file') and planned outputs '_cage.obj'."""
+    V, F = icosphere(1)
+    core.write_obj(tmp_path / "ball.obj", V, F)
+    proc = run_batch(["scans/", "ball.obj/", "--faces", "20", "--out", "out", "--report",
+                      "r.json"], tmp_path)
+    assert proc.returncode == 1, proc.stdout + proc.stderr
+    scans, ball = json.loads((tmp_path / "r.json").read_text())["files"]
+    assert scans["name"] == "scans" and scans["error"] == (
+        f"scans: read failed: no such file: {tmp_path / 'scans'}")
+    assert ball["name"] == "ball.obj" and ball["status"] == "ok"
+    assert ball["outputs"] == [str(tmp_path / "out" / "ball_cage.obj")]
