@@ -666,3 +666,50 @@ def test_a_binding_owns_its_arrays_the_callers_can_change_after_the_bind(sphere_
     Vc += 1.0
     Fc[:] = 0
     assert np.array_equal(deform(b, Ve), D0)
+
+
+def test_an_edit_moves_the_scan_the_same_wherever_the_object_is():
+    # dense vertices on a fine edge tie between the two faces there, whose frames differ
+    # (a face's first edge is its tangent): rounding picked one, so Suzanne bound again
+    # 1e3 units off moved 10 of its 507 vertices differently under an edit, up to 1.7e-4
+    # of the diagonal (14% of the vertex's move); now the lowest-numbered face takes them
+    from core import simplify
+    from tests.mesh_factory import load_shared
+    DV, DF = load_shared("suzanne.obj")
+    cage = simplify(DV, DF, target_faces=250, feature_angle_deg=40)
+    V, F, C = cage.V, cage.F, cage.feature_edges
+    diag = bbox_diagonal(DV)
+    rng = np.random.default_rng(0)
+    E = V.copy()
+    sel = rng.random(len(V)) < 0.1
+    E[sel] += 0.001 * diag * rng.standard_normal((int(sel.sum()), 3))
+    t = np.array([0.5, -0.25, 1e3])
+    b = bind(DV, DF, V, F, levels=2, scheme="loop", creases=C)
+    b2 = bind(DV + t, DF, V + t, F, levels=2, scheme="loop", creases=C)
+    on_edges = int(((b.bary == 0).sum(axis=1) >= 1).sum())
+    assert on_edges >= 10                                    # the case holds ties
+    assert np.array_equal(b.fine_face, b2.fine_face)
+    D, D2 = deform(b, E), deform(b2, E + t)
+    assert np.abs(D2 - t - D).max() <= 1e-12 * diag * 1e3    # rounding of coordinates 1e3 off
+    assert np.abs(deform(b, V) - DV).max() <= 1e-12 * diag   # the identity on the moved faces
+
+
+def test_points_on_fine_edges_and_corners_go_to_the_lowest_face():
+    from core.binding import _TieFaces
+    F = np.array([[0, 1, 2], [2, 1, 3], [3, 1, 4]])
+    P = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [1, 1, 0], [2, 0, 0.0]])
+    ties = _TieFaces.of(F, 5)
+    face = np.array([1, 1, 2, 0, 2, 2])
+    bary = np.array([[0.3, 0.0, 0.7],      # face 1, on its edge 3-2: a border, stays
+                     [0.0, 0.4, 0.6],      # face 1, on edge 1-3: face 2 across is higher
+                     [0.0, 1.0, 0.0],      # face 2, at vertex 1 (faces 0, 1, 2): face 0
+                     [0.5, 0.5, 0.0],      # face 0, on its border edge 0-1: stays
+                     [0.5, 0.5, 0.0],      # face 2, on edge 3-1: face 1 across is lower
+                     [0.5, 0.5 - 1e-17, 1e-17]])   # the same within rounding
+    f2, b2 = ties.canonical(face, bary)
+    assert face.tolist() == [1, 1, 2, 0, 2, 2] and bary[4].tolist() == [0.5, 0.5, 0.0]
+    assert f2.tolist() == [1, 1, 0, 0, 1, 1]
+    assert b2[2].tolist() == [0.0, 1.0, 0.0]
+    assert b2[4].tolist() == [0.0, 0.5, 0.5] and b2[5].tolist() == [0.0, 0.5, 0.5]
+    for k in range(6):                     # the same point on the face it moved to
+        assert np.allclose(b2[k] @ P[F[f2[k]]], bary[k] @ P[F[face[k]]], atol=1e-15)
