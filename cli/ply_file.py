@@ -12,6 +12,7 @@ cases first and names the file and the counts:
 """
 
 import os
+import re
 import struct
 
 import numpy as np
@@ -32,6 +33,8 @@ _BLANK = (9, 10, 13, 32)
 
 #: the most bytes read looking for a header's end (a scanner's thousands of comments fit)
 _HEADER_LIMIT = 1 << 24
+#: the line that ends a header
+_END_HEADER = re.compile(rb"(?:\A|\n)(end_header)")
 #: the largest element count Blender's importer reads (a C ``int``; beyond, it aborts)
 _COUNT_LIMIT = 2**31 - 1
 
@@ -44,10 +47,19 @@ def _header_bytes(path):
         while len(head) < _HEADER_LIMIT:
             more = fh.read(1 << 16)
             head += more
-            end = head.find(b"end_header")
+            end = _header_end(head)
             if not more or (end >= 0 and head.find(b"\n", end) >= 0):
                 break
     return head
+
+
+def _header_end(head):
+    """Where the ``end_header`` line starts in ``head``, or -1: a line that
+    starts with the word, as Blender's importer finds it (a comment saying
+    'see end_header below' had ended the header there, and with it every
+    check: a file cut short came back with one warning)."""
+    m = _END_HEADER.search(head)
+    return m.start(1) if m else -1
 
 
 def ply_header(path):
@@ -61,7 +73,7 @@ def ply_header(path):
     property before any element (``ELEMENT vertex 3`` then ``property``: it
     read freed memory, and crashed), a property of a type PLY has not."""
     head = _header_bytes(path)
-    end = head.find(b"end_header")
+    end = _header_end(head)
     if not head.startswith(b"ply") or end < 0:
         return None
     nl = head.find(b"\n", end)

@@ -197,3 +197,21 @@ def test_a_fraction_in_an_integer_vertex_property_is_read_as_blender_reads_it(tm
     assert ply_size_problem(str(tmp_path / "half.ply")) is None
     (tmp_path / "index.ply").write_text(head + "0.5 0 0\n10 0 0\n0 10.7 0\n3 0 1 2.5\n")
     assert "holds '2.5' in its vertex_indices list" in ply_size_problem(str(tmp_path / "index.ply"))
+
+
+def test_a_comment_that_mentions_end_header_does_not_end_the_header(tmp_path):
+    """'comment see end_header below' ended the header there for the checks
+    (not for Blender), so none ran: the file cut short came back with only
+    Blender's warning of an invalid index."""
+    V, F = icosphere(2)
+    write_ply(tmp_path / "ball.ply", V, F)
+    data = (tmp_path / "ball.ply").read_bytes().replace(
+        b"ply\n", b"ply\ncomment exported; see end_header below\n", 1)
+    (tmp_path / "cut.ply").write_bytes(data[:-20])
+    assert ply_size_problem(str(tmp_path / "cut.ply")) == (
+        "cut.ply: its header declares 162 vertex and 320 face elements, but the file ends "
+        f"({len(data) - 20:,} bytes) after 318 of the 320 face elements: cut short, or a wrong "
+        "count in the header")
+    (tmp_path / "whole.ply").write_bytes(data)
+    assert ply_size_problem(str(tmp_path / "whole.ply")) is None
+    assert check(str(tmp_path / "whole.ply")).expected_faces == 320
