@@ -47,6 +47,8 @@ def describe(words, props, corners=None):
     ``props`` (``[(type, name)]``, a list's type ``("list", count type,
     item type)``), in words, or None; ``corners``: the name of a face's list
     of corners, whose length Blender's importer takes from 1 to 255."""
+    if not words and props:
+        return "is blank"
     values = []
     for w in words:
         got = _numbers(w)
@@ -128,13 +130,14 @@ def _wrong_records(values, offset, words, props, corners):
     value count, a list's count or an item of a list of integers is wrong; None when a list's
     count cannot be read (the line by line check then finds it)."""
     at = offset.copy()
+    padded = np.append(values, 0.0)              # (records of no words read a 0 past the end)
     bad = np.zeros(words.size, dtype=bool)
     integer = np.zeros(values.size + 1, dtype=np.int64)     # +1 / -1 where int items start / end
     end = offset + words
     for t, name in props:
         inside = at < end
         if isinstance(t, tuple):
-            c = np.where(inside, values[np.minimum(at, values.size - 1)], 0.0)
+            c = np.where(inside, padded[np.minimum(at, values.size)], 0.0)
             if not np.isfinite(c).all():
                 return None
             bad |= (c != np.floor(c)) | (c < 0)

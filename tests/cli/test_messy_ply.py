@@ -215,3 +215,19 @@ def test_a_comment_that_mentions_end_header_does_not_end_the_header(tmp_path):
     (tmp_path / "whole.ply").write_bytes(data)
     assert ply_size_problem(str(tmp_path / "whole.ply")) is None
     assert check(str(tmp_path / "whole.ply")).expected_faces == 320
+
+
+def test_an_ascii_ply_whose_last_records_are_blank_is_named(tmp_path):
+    """Faces written as blank lines (the lines there, their numbers not)
+    made the record check fail on itself ('IndexError: index -1 is out of
+    bounds', as the cause)."""
+    head = ("ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\n"
+            "property float z\nelement face 2\nproperty list uchar int vertex_indices\n"
+            "end_header\n0 0 0\n1 0 0\n0 1 0\n")
+    (tmp_path / "blank.ply").write_text(head + "  \n\t\n")
+    (tmp_path / "one.ply").write_text(head.replace("face 2", "face 1") + "\n")
+    for name, n in (("blank.ply", 2), ("one.ply", 1)):
+        assert ply_size_problem(str(tmp_path / name)) == (
+            f"{name}: its header declares 3 vertex and {n} face elements, but the face record "
+            f"on line 13 ('') is blank: a damaged file, or one written by a tool that does not "
+            f"follow PLY (Blender's importer would misread it)")
