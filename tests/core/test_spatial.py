@@ -577,6 +577,17 @@ def _segment_distance(P, start, edge):
     return np.linalg.norm(P - start - s[:, None] * edge, axis=1)
 
 
+def _exact_pairs_per_query(monkeypatch, index, V, F, P):
+    """The (point, triangle) pairs ``index`` evaluates exactly per point of
+    ``P``, its answers checked against brute force."""
+    pairs = []
+    ev = TriangleIndex._eval
+    monkeypatch.setattr(TriangleIndex, "_eval",
+                        lambda self, PT, q, t: (pairs.append(q.size), ev(self, PT, q, t))[1])
+    _check_result(V, F, P, index.closest(P))
+    return sum(pairs) / P.shape[0]
+
+
 def test_a_fan_of_needles_is_searched_by_its_needles_not_their_boxes(monkeypatch):
     """A filleted box's end cap (a fan of 1,000 needles from one corner, each
     one's box as wide as the cap; the fillet's 100-long strips): the BVH's
@@ -592,12 +603,7 @@ def test_a_fan_of_needles_is_searched_by_its_needles_not_their_boxes(monkeypatch
     P = np.vstack([P, V[rng.integers(0, V.shape[0], 100)] + rng.normal(0, 0.5, (100, 3))])
     index = TriangleIndex(V, F)
     assert index._capsule_at is not None and (index._capsule_at >= 0).sum() >= 2000
-    pairs = []
-    ev = TriangleIndex._eval
-    monkeypatch.setattr(TriangleIndex, "_eval",
-                        lambda self, PT, q, t: (pairs.append(q.size), ev(self, PT, q, t))[1])
-    _check_result(V, F, P, index.closest(P))
-    assert sum(pairs) / P.shape[0] < 200
+    assert _exact_pairs_per_query(monkeypatch, index, V, F, P) < 200
     for level, rod in index._rod.items():
         group = spatial._LEAF << (index._depth - level)
         X = V[F[index._order]]
@@ -626,12 +632,7 @@ def test_queries_beside_a_fillets_strips_evaluate_a_few_of_them(monkeypatch):
     on_faces = np.c_[rng.uniform(10, 90, 200), np.full(200, 100.0), rng.uniform(90, 95, 200)]
     P = np.vstack([on_fillet, on_faces]) + rng.normal(0, 1e-4, (400, 3))
     index = TriangleIndex(V, F)
-    pairs = []
-    ev = TriangleIndex._eval
-    monkeypatch.setattr(TriangleIndex, "_eval",
-                        lambda self, PT, q, t: (pairs.append(q.size), ev(self, PT, q, t))[1])
-    _check_result(V, F, P, index.closest(P))
-    assert sum(pairs) / P.shape[0] < 30
+    assert _exact_pairs_per_query(monkeypatch, index, V, F, P) < 30
 
 
 @pytest.mark.parametrize("name,V,F", list(_meshes())[:3], ids=[m[0] for m in _meshes()][:3])
