@@ -377,7 +377,8 @@ def count_nonfinite(path):
     if pos + n * rec.itemsize > size:
         return None     # truncated (a count of 10^11 allocated a terabyte): ply_size_problem says so
     table = np.fromfile(path, dtype=rec, count=n, offset=pos)
-    xyz = np.stack([table[c].astype(np.float64) for c in ("x", "y", "z")], axis=1)
+    with np.errstate(invalid="ignore"):          # (NaN in a byte-swapped float32: a warning)
+        xyz = np.stack([table[c].astype(np.float64) for c in ("x", "y", "z")], axis=1)
     return int((~np.isfinite(xyz).all(axis=1)).sum())
 
 
