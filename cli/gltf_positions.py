@@ -35,17 +35,36 @@ def _buffer(doc, i, path, glb_bin, cache):
     return cache[i]
 
 
+def _count(v):
+    """``v`` when it is a count or an index (an int >= 0, not a bool), else None."""
+    return v if isinstance(v, int) and not isinstance(v, bool) and v >= 0 else None
+
+
 def _positions(doc, k, path, glb_bin, cache):
     """(count, 3) float32 of accessor ``k`` when it is one of floats read
-    from a view, else None."""
+    from a view, else None (also when a field is not what glTF says: the
+    checks before, or Blender's importer, name that)."""
     a = doc["accessors"][k]
-    if a.get("componentType") != _FLOAT or a.get("type") != "VEC3" or "bufferView" not in a:
+    if not isinstance(a, dict) or a.get("componentType") != _FLOAT or a.get("type") != "VEC3":
         return None
-    view = doc["bufferViews"][a["bufferView"]]
-    data = _buffer(doc, view["buffer"], path, glb_bin, cache)
-    return np.ndarray((a["count"], 3), dtype="<f4", buffer=data,
-                      offset=view.get("byteOffset", 0) + a.get("byteOffset", 0),
-                      strides=(view.get("byteStride") or 12, 4))
+    j, count, off = _count(a.get("bufferView")), _count(a.get("count")), \
+        _count(a.get("byteOffset", 0))
+    views = doc.get("bufferViews")
+    if None in (j, count, off) or not isinstance(views, list) or j >= len(views) \
+            or not isinstance(views[j], dict):
+        return None
+    view = views[j]
+    i, start = _count(view.get("buffer")), _count(view.get("byteOffset", 0))
+    stride = _count(view.get("byteStride", 12)) or 12
+    buffers = doc.get("buffers")
+    if None in (i, start) or not isinstance(buffers, list) or i >= len(buffers) \
+            or not isinstance(buffers[i], dict) or not isinstance(buffers[i].get("uri", ""), str):
+        return None
+    data = _buffer(doc, i, path, glb_bin, cache)
+    if data is None or start + off + (stride * (count - 1) + 12 if count else 0) > len(data):
+        return None
+    return np.ndarray((count, 3), dtype="<f4", buffer=data, offset=start + off,
+                      strides=(stride, 4))
 
 
 def nonfinite_positions(doc, path, glb_bin):
@@ -53,11 +72,12 @@ def nonfinite_positions(doc, path, glb_bin):
     holds a coordinate that is not a finite number, or None. ``glb_bin``:
     the GLB's BIN chunk (None for a ``.gltf``)."""
     cache, seen = {}, set()
+    accessors = doc.get("accessors")
     for i, mesh in enumerate(doc.get("meshes", [])):
         for j, prim in enumerate(mesh.get("primitives", [])):
-            k = (prim.get("attributes") or {}).get("POSITION")
-            if not isinstance(k, int) or isinstance(k, bool) or k in seen \
-                    or not 0 <= k < len(doc.get("accessors", [])):
+            attributes = prim.get("attributes")
+            k = _count(attributes.get("POSITION")) if isinstance(attributes, dict) else None
+            if k is None or k in seen or not isinstance(accessors, list) or k >= len(accessors):
                 continue            # (no such accessor: Blender's importer says so)
             seen.add(k)
             V = _positions(doc, k, path, glb_bin, cache)
