@@ -71,11 +71,19 @@ def ply_header(path):
     importer would crash on or misread: an element line without a count it
     can read (``element vertex``: the importer aborted the process), a
     property before any element (``ELEMENT vertex 3`` then ``property``: it
-    read freed memory, and crashed), a property of a type PLY has not."""
+    read freed memory, and crashed), a property of a type PLY has not, no
+    ``end_header`` line (``vertex_indicesend_header``: the importer read the
+    data as header lines and crashed, 14 of 500 mutated headers)."""
     head = _header_bytes(path)
     end = _header_end(head)
-    if not head.startswith(b"ply") or end < 0:
-        return None
+    if not head.startswith(b"ply"):
+        return None                  # (Blender's importer says "Invalid PLY header")
+    if end < 0:
+        where = (f"in its first {len(head):,} bytes" if len(head) >= _HEADER_LIMIT else
+                 "(found glued to the end of another line)" if b"end_header" in head else "")
+        raise InputFileError(f"{os.path.basename(path)}: its header has no 'end_header' line"
+                             f"{' ' + where if where else ''}: a damaged file (Blender's importer "
+                             f"would read its data as header lines, and can crash on them)")
     nl = head.find(b"\n", end)
     length = nl + 1 if nl >= 0 else len(head)
     fmt, elements = None, []
