@@ -149,3 +149,34 @@ def test_the_position_check_leaves_fields_it_cannot_read_to_the_others(tmp_path)
             check(str(tmp_path / "odd.gltf"))
         except InputFileError:
             pass
+
+
+def test_a_node_matrix_that_shears_is_refused_one_of_rotation_and_scale_is_read(tmp_path):
+    """glTF allows a node matrix of translation, rotation and scale only;
+    Blender's importer splits it into those and drops a shear, so a sphere
+    under a sheared matrix came back in another shape (vertices up to 1.04
+    off, the volume 9.48 for 2.63) and "ok"."""
+    import numpy as np
+
+    import core
+    V, F = icosphere(1)
+    c, s = np.cos(0.5), np.sin(0.5)
+    turn = np.array([[c, -s, 0, 1], [s, c, 0, 2], [0, 0, 1, 3], [0, 0, 0, 1]])
+    trs = turn @ np.diag([2, -1, .5, 1])                  # (a mirror: determinant -1)
+    shear = trs.copy()
+    shear[0, 1] += 0.8
+    write_gltf_nodes(tmp_path / "trs.gltf", V, F, [{"matrix": trs.T.ravel().tolist()}])
+    write_gltf_nodes(tmp_path / "shear.gltf", V, F, [{"matrix": shear.T.ravel().tolist()}])
+    proc = run_batch(["trs.gltf", "shear.gltf", "--faces", "1000", "--format", "obj", "--out",
+                      "out", "--report", "r.json"], tmp_path)
+    assert "Traceback" not in proc.stdout + proc.stderr
+    ok, sheared = json.loads((tmp_path / "r.json").read_text())["files"]
+    assert ok["status"] == "ok" and ok["faces_out"] == 80
+    Vc, _ = core.read_obj(tmp_path / "out" / "trs_cage.obj")
+    want = np.asarray(V) @ trs[:3, :3].T + trs[:3, 3]
+    assert np.abs(np.sort(Vc, axis=0) - np.sort(want, axis=0)).max() < 1e-5
+    assert sheared["status"] == "failed" and sheared["error"].startswith(
+        "shear.gltf: read failed: shear.gltf: node 0's matrix shears: two of its axes are ")
+    assert sheared["error"].endswith("degrees apart, not 90 (glTF allows translation, rotation "
+                                     "and scale only, and Blender's importer drops the shear: the "
+                                     "mesh would come back in another shape)")
