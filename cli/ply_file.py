@@ -383,7 +383,7 @@ def count_nonfinite(path):
             return None         # (ply_size_problem says what is wrong)
     rec = np.dtype([(name, order + PLY_TYPES[t]) for t, name in props])
     if pos + n * rec.itemsize > size:
-        return None     # truncated (a count of 10^11 allocated a terabyte): ply_size_problem says so
+        return None     # (cut short, or a count of 10^11: 1 TiB allocated); ply_size_problem says
     table = np.fromfile(path, dtype=rec, count=n, offset=pos)
     with np.errstate(invalid="ignore"):          # (NaN in a byte-swapped float32: a warning)
         xyz = np.stack([table[c].astype(np.float64) for c in ("x", "y", "z")], axis=1)
