@@ -247,6 +247,11 @@ def read_with_blender(path, log):
     if expected is not None and arrays.n_polygons < expected:
         warnings.append(f"Blender's {BLENDER_IMPORT[ext]} importer kept "
                         f"{arrays.n_polygons:,} of the file's {expected:,} faces")
+    elif expected is not None and arrays.n_polygons > expected:
+        # (an ASCII STL with an 'endloop' too many: a face the file does not hold, said nothing)
+        warnings.append(f"Blender's {BLENDER_IMPORT[ext]} importer read {arrays.n_polygons:,} "
+                        f"faces from the file's {expected:,}: it holds something else than "
+                        f"the faces it declares (a damaged file?)")
     for line in grouped_warnings(_LOG_PREFIX.sub("", x).strip()
                                  for x in "".join(log).splitlines() if "WARNING" in x):
         warnings.append(f"Blender: {line}")

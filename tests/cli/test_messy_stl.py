@@ -72,3 +72,24 @@ def test_the_weld_blenders_stl_importer_does_is_reported(tmp_path):
                             "triangles into 162 vertices (those at one position)"]
     assert ply["notes"] == ["cleaning: welded 798 vertices"]
     assert stl["faces_out"] == ply["faces_out"] == 100
+
+
+def test_more_faces_than_the_file_holds_is_a_warning(tmp_path):
+    """An ASCII STL facet with a fourth corner (a line of the next facet
+    copied into it) made Blender read 321 faces from 320 facets, a face
+    the file does not hold, and the file came back "ok"; now a warning
+    says so, as one with fewer faces. (STL's facets are triangles.)"""
+    V, F = icosphere(2)
+    write_ascii_stl(tmp_path / "whole.stl", V, F)
+    lines = (tmp_path / "whole.stl").read_text().split("\n")
+    assert lines[103].strip().startswith("vertex") and lines[108].strip().startswith("vertex")
+    (tmp_path / "twice.stl").write_text("\n".join(lines[:104] + [lines[108]] + lines[104:]))
+    proc = run_batch(["twice.stl", "whole.stl", "--faces", "100", "--format", "obj", "--out",
+                      "out", "--report", "r.json"], tmp_path)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    twice, whole = json.loads((tmp_path / "r.json").read_text())["files"]
+    assert whole["status"] == "ok" and whole["warnings"] == []
+    assert twice["status"] == "warn" and twice["faces_in"] == 321
+    assert twice["warnings"] == ["Blender's STL importer read 321 faces from the file's 320: it "
+                                 "holds something else than the faces it declares (a damaged "
+                                 "file?)"]
