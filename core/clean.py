@@ -86,6 +86,10 @@ MIN_COMPONENT_AREA = 1e-4
 #: 3e-6 or more every one (the budget's debris rule then left 3 of its 20,088 faces)
 WIDER_WELDS = (1e-5, 1e-4)
 OPEN_SHARE = 0.005
+#: ... and a wider weld is not kept when it collapses more than this share of the faces
+#: (a strip 0.5 high and 20,000 long, open along its whole length, was welded into
+#: nothing at 1e-4 of its size: 'nothing is left after cleaning')
+WIDER_WELD_LOSS = 0.1
 #: the face budget's debris rule drops its components only when together they hold at
 #: most this share of the total area: beyond, they are the mesh itself in pieces, not
 #: specks, and are kept (simplify then says how far it could go and why)
@@ -584,7 +588,8 @@ def _automatic_weld(shape, F, twin, faces):
     """:func:`_weld` at ``WELD_DISTANCE``, then each of ``WIDER_WELDS`` in
     turn while the weld kept leaves more than ``OPEN_SHARE`` of the
     half-edges open: a wider weld is kept when it closes at least half of
-    them. One that does not is passed over, not the end: a soup whose
+    them and collapses at most ``WIDER_WELD_LOSS`` of the faces. One that
+    does not is passed over, not the end: a soup whose
     copies drifted by 2e-5 to 5e-5 of its size closes a few percent at
     1e-5 (a pair welds only when every axis is within the distance) and
     all at 1e-4 (homer's soup stayed 12,000 one-face pieces)."""
@@ -594,7 +599,8 @@ def _automatic_weld(shape, F, twin, faces):
         if still_open <= OPEN_SHARE * best.twin.size:
             break
         wider = _weld(shape, F, twin, faces, distance)
-        if _open_half_edges(wider) <= 0.5 * still_open:
+        if _open_half_edges(wider) <= 0.5 * still_open and \
+                wider.n_degenerate - best.n_degenerate <= WIDER_WELD_LOSS * F.shape[0]:
             best = wider
     return best
 

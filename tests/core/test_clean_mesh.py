@@ -729,3 +729,20 @@ def test_t_junctions_on_two_faces_that_share_an_edge():
     assert_manifold(r.V, r.F)
     assert r.report.n_t_junctions == 2
     assert topology_summary(r.F, r.V.shape[0]).boundary_loops == 0
+
+
+def test_a_long_thin_strip_is_not_welded_into_nothing():
+    # one zigzag polygon 0.5 high and 19,999 long (an OBJ face of 20,000 corners, fanned):
+    # open along its whole length, so the automatic weld tried 1e-4 of its size (2 units)
+    # and collapsed every face ('nothing is left after cleaning'); a wider weld that
+    # collapses more than a tenth of the faces is not kept
+    n = 20000
+    t = np.arange(n)
+    V = np.stack([t * 1.0, (t % 2) * 0.5, np.zeros(n)], axis=1)
+    F = np.stack([t[:-2], t[1:-1], t[2:]], axis=1)          # a strip of n - 2 triangles
+    F[1::2] = F[1::2][:, ::-1]                               # consistently wound
+    r = core.clean_mesh(V, F)
+    assert not r.report.weld_widened and r.report.n_welded_vertices == 0
+    assert r.F.shape[0] == n - 2 and r.report.n_degenerate_faces == 0
+    cage = core.simplify(V, F, target_faces=200)
+    assert cage.F.shape[0] <= 200 and cage.stopped_because == "target"
