@@ -383,9 +383,8 @@ def _pool_size(ne, m, target, tun, bold=False, grow=1.0, stalled=0):
     0.738 -> 0.754 of Decimate's)."""
     # (at most 2^8 times: the default shares reach every candidate after 3 doublings,
     # and 2.0 ** stalled would overflow a long stall; P is cut to ne below)
-    base = tun.bold_pool_share if bold else tun.pool_share if target is not None \
-        else tun.error_pool_share
-    share = base * 2.0 ** min(max(stalled - tun.stall_grace, 0), 8)
+    share = (tun.bold_pool_share if bold else tun.pool_share) \
+        * 2.0 ** min(max(stalled - tun.stall_grace, 0), 8)
     P = int(np.ceil(share * ne))
     if target is not None:
         goal = grow * tun.pool_goal_factor * (m - target) / 2.0    # (grow may reach inf)

@@ -13,14 +13,7 @@ class Tuning:
     area_power: float = 0.5          #: face plane weight = area^p * mean area^(1-p)
     boundary_weight: float = 100.0   #: boundary plane weight, times the edge length squared
     feature_weight: float = 3.0      #: crease plane weight, times the edge length squared
-    #: at most this share of the candidate edges per pass (0.2 until 2026-12-05 evening: with
-    #: bold passes down to 2.5x the target, 0.4 made 1M -> 10k 14 passes instead of 17; see
-    #: bold_above)
-    pool_share: float = 0.4
-    #: pool_share of a run to a max_error bound, without a target (with 0.4, fandisk with 10
-    #: far-apart vertex pairs pinched came back at max_error=0.3% as its cleaned input: every
-    #: step's cage was over the bound)
-    error_pool_share: float = 0.2
+    pool_share: float = 0.2          #: at most this share of the candidate edges per pass
     pool_goal_factor: float = 4.0    #: ... and at most this many times the collapses still needed
     #: ... doubled for each careful pass in a row past this many that accepted nothing
     #: (a stuck run refused a fifth of its candidates a pass: see ``_collapse._pool_size``)
@@ -34,19 +27,12 @@ class Tuning:
     #: a pass on a mesh of more than this many times the target faces is bold: each
     #: selection round is applied before the next, and later rounds may take collapses
     #: next to earlier ones (only the endpoints of applied collapses wait for the next
-    #: pass); closer to the target a pass is careful: every collapse's one-ring waits (a
-    #: careful pass takes at most about 15% of the faces: from 4x the target, 4.0 until
-    #: 2026-12-05 evening, the 1M -> 10k run took 8 of its 17 passes there; with 2.5 and
-    #: pool_share 0.4, 14 passes, Hausdorff 0.231 -> 0.299% (Decimate's 0.313), mean 0.0204
-    #: -> 0.0214% (0.0215); the 23 shared cases' geometric means against Decimate 0.733 /
-    #: 0.703 -> 0.756 / 0.745, worst 0.98 / 1.21 -> 1.05 / 1.22, 399 -> 320 passes, with
-    #: bold_min_target 128)
-    bold_above: float = 2.5
+    #: pass); closer to the target a pass is careful: every collapse's one-ring waits
+    bold_above: float = 4.0
     #: ... times at least this many faces: the last few hundred faces of any run go in
     #: careful passes (bold ones there save a few ms, and a less even mesh near a small
-    #: target more often leaves only collapses that would fold a face: with bold_above 2.5
-    #: and 64, an open half cube of 600 faces stopped at 5 of the 4 asked; 128 since then)
-    bold_min_target: int = 128
+    #: target more often leaves only collapses that would fold a face)
+    bold_min_target: int = 64
     bold_pool_share: float = 0.35    #: pool_share of a bold pass
     bold_rounds: int = 16            #: selection rounds of a bold pass
     #: a bold pass ends after a round that took fewer than this share of its first

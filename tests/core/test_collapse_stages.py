@@ -340,34 +340,29 @@ def test_a_stalled_run_widens_its_pool_past_the_grace():
     past ``Tuning.stall_grace`` (up to every candidate): a stuck run refused a
     fifth of its candidates a pass, and a messy homer took 10,370 passes."""
     ne, m = 3384, 3300
-    share = TUNING.error_pool_share                  # (no target: a max_error run's share)
-    base = int(np.ceil(share * ne))
+    base = int(np.ceil(TUNING.pool_share * ne))
     sizes = [engine._pool_size(ne, m, None, TUNING, stalled=k) for k in range(8)]
     g = TUNING.stall_grace
     assert sizes[:g + 1] == [base] * (g + 1)
-    assert sizes[g + 1] == int(np.ceil(2 * share * ne))
-    assert sizes[g + 2] == int(np.ceil(4 * share * ne)) and sizes[-1] == ne
-    # with a target, the target runs' share (far from it: the goal bound is not reached)
-    assert engine._pool_size(ne, m, 4, TUNING) == int(np.ceil(TUNING.pool_share * ne))
+    assert sizes[g + 1] == int(np.ceil(2 * TUNING.pool_share * ne))
+    assert sizes[g + 2] == int(np.ceil(4 * TUNING.pool_share * ne)) and sizes[-1] == ne
     # the goal bound still caps it near a target
     assert engine._pool_size(ne, m, m - 10, TUNING, stalled=6) == \
         int(np.ceil(TUNING.pool_goal_factor * 5)) + 1
 
 
-def test_a_stuck_rocker_arm_with_sheets_and_pinholes_takes_fewer_passes():
+@pytest.mark.parametrize("grace", [2, 10**6])
+def test_a_stuck_rocker_arm_with_sheets_and_pinholes_takes_fewer_passes(grace):
     # the rocker-arm with nine double-sided sheets and 10% pinholes asked for 4 faces
-    # (preserve_topology off) stops short; with the pool widened past the grace it took
-    # 75 passes, 146 without (pool_share 0.2), 55 and 86 with pool_share 0.4 (the same
-    # cage size)
+    # (preserve_topology off) stops short; with the pool widened past the grace it takes
+    # 75 passes, 146 without (the same cage size)
     from tests.mesh_factory import load_shared, with_pinholes, with_sheets
     V, F = with_pinholes(*with_sheets(*load_shared("rocker-arm.obj"), k=9, seed=51), share=0.1,
                          seed=53)
-    runs = [simplify(V, F, target_faces=4, preserve_topology=False,
-                     tuning=replace(TUNING, stall_grace=grace)) for grace in (2, 10**6)]
-    for r in runs:
-        assert r.stopped_because == "no_valid_collapse" and r.F.shape[0] > 4
-    assert runs[0].F.shape[0] == runs[1].F.shape[0]
-    assert runs[0].n_passes < 0.75 * runs[1].n_passes
+    r = simplify(V, F, target_faces=4, preserve_topology=False,
+                 tuning=replace(TUNING, stall_grace=grace))
+    assert r.stopped_because == "no_valid_collapse" and r.F.shape[0] > 4
+    assert (r.n_passes < 100) == (grace == 2)
 
 
 def test_a_held_refusal_would_be_refused_again_and_a_fans_spokes_are_held(monkeypatch):

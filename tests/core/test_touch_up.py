@@ -93,9 +93,7 @@ def test_the_largest_distance_never_grows_and_the_topology_stays():
     rng = np.random.default_rng(3)
     Vin, Fin = icosphere(4)
     Vin = Vin * (1.0 + 0.03 * rng.standard_normal((Vin.shape[0], 1)))
-    # (the collapse tuning of 2026-12-05 morning: a cage whose changes hold both kinds)
-    cage = simplify(Vin, Fin, target_faces=150, tuning=dataclasses.replace(
-        TUNING, touch_rounds=0, pool_share=0.2, bold_above=4.0, bold_min_target=64))
+    cage = simplify(Vin, Fin, target_faces=150, tuning=dataclasses.replace(TUNING, touch_rounds=0))
     before = _largest(cage.V, cage.F, Vin, Fin)
     V2, F2, _ = touch_up(cage.V, cage.F, Vin, Fin, np.zeros(cage.V.shape[0], dtype=bool),
                          np.zeros((0, 2), dtype=np.int64), TUNING)
@@ -112,9 +110,7 @@ def test_changes_that_cannot_be_kept_are_not_measured_further():
     rng = np.random.default_rng(5)
     Vin, Fin = icosphere(4)
     Vin = Vin * (1.0 + 0.03 * rng.standard_normal((Vin.shape[0], 1)))
-    # (the collapse tuning of 2026-12-05 morning: a cage whose changes hold both kinds)
-    cage = simplify(Vin, Fin, target_faces=150, tuning=dataclasses.replace(
-        TUNING, touch_rounds=0, pool_share=0.2, bold_above=4.0, bold_min_target=64))
+    cage = simplify(Vin, Fin, target_faces=150, tuning=dataclasses.replace(TUNING, touch_rounds=0))
     V, F = cage.V, cage.F
     inputs = TriangleIndex(Vin, Fin)
     gaps = measure_gaps(V, F, inputs, Vin)
