@@ -13,29 +13,15 @@ record, the numbers of a block of lines converted at once::
         whole numbers in a list of an integer type (a face's indices)
 """
 
-import warnings
-
 import numpy as np
 
-#: bytes that separate the words of a record (as NumPy's number parser skips them)
-_SPACE = np.zeros(256, dtype=bool)
-_SPACE[[9, 10, 11, 12, 13, 32]] = True
+from .ascii_words import numbers, word_starts
+
 #: property types that hold whole numbers
 INTEGER_TYPES = {"char", "int8", "uchar", "uint8", "short", "int16", "ushort", "uint16", "int",
                  "int32", "uint", "uint32"}
 #: lines whose numbers are converted at once
 _BLOCK = 1 << 16
-
-
-def _numbers(text):
-    """The numbers of ``text`` (whitespace-separated words), or None when a
-    word is no number."""
-    with warnings.catch_warnings():
-        warnings.simplefilter("error")              # (NumPy 1.x: a warning, 2.x: an error)
-        try:
-            return np.fromstring(text, dtype=np.float64, sep=" ")
-        except (ValueError, DeprecationWarning):
-            return None
 
 
 def _whole(x):
@@ -51,7 +37,7 @@ def describe(words, props, corners=None):
         return "is blank"
     values = []
     for w in words:
-        got = _numbers(w)
+        got = numbers(w)
         if got is None or got.size != 1:
             comma = " (a decimal comma? PLY's numbers take a point)" if b"," in w else ""
             return f"holds '{w.decode('ascii', 'replace')}', which is not a number{comma}"
@@ -101,11 +87,8 @@ def _first_bad_line(body, starts, ends, props, corners):
     finds wrong, or None."""
     seg = np.asarray(body[starts[0]:ends[-1]])
     rel_ends = ends - starts[0]
-    values = _numbers(seg.tobytes())
-    space = _SPACE[seg]
-    first = ~space
-    first[1:] &= space[:-1]
-    words = np.bincount(np.searchsorted(rel_ends, np.flatnonzero(first), side="right"),
+    values = numbers(seg.tobytes())
+    words = np.bincount(np.searchsorted(rel_ends, word_starts(seg), side="right"),
                         minlength=starts.size)[:starts.size]
     if values is None or values.size != words.sum():
         return _first_described(body, starts, ends, props, corners)

@@ -25,10 +25,10 @@ import re
 import shutil
 import struct
 import tempfile
-import warnings
 
 import numpy as np
 
+from .ascii_words import BLANK, numbers, word_starts
 from .file_check import FileCheck, InputFileError
 
 #: a binary STL file: an 80-byte header and a little-endian uint32 triangle count, then
@@ -36,9 +36,6 @@ from .file_check import FileCheck, InputFileError
 STL_HEAD, STL_TRIANGLE = 84, 50
 #: control bytes that never occur in a text file (tab, newlines and form feed do)
 _CONTROL = frozenset(range(32)) - {9, 10, 12, 13}
-#: per byte value, whether it separates words (blanks, newlines)
-_BLANK_BYTE = np.zeros(256, dtype=bool)
-_BLANK_BYTE[[9, 10, 11, 12, 13, 32]] = True
 #: the keywords that open and close a facet and a solid, as whole words
 _KEYWORDS = re.compile(rb"(?<!\S)(facet|endfacet|endsolid)(?!\S)")
 
@@ -209,9 +206,9 @@ def _keyword_at(b, word):
     at = np.flatnonzero(b[:max(b.size - len(word) + 1, 0)] == word[0])
     for k in range(1, len(word)):
         at = at[b[at + k] == word[k]]
-    before = (at == 0) | _BLANK_BYTE[b[np.maximum(at - 1, 0)]]
+    before = (at == 0) | BLANK[b[np.maximum(at - 1, 0)]]
     end = at + len(word)
-    after = (end >= b.size) | _BLANK_BYTE[b[np.minimum(end, b.size - 1)]]
+    after = (end >= b.size) | BLANK[b[np.minimum(end, b.size - 1)]]
     return at[before & after]
 
 
@@ -252,18 +249,11 @@ def _corners(path, data):
 def _three_numbers(rest, n):
     """(n,3) float64 of ``rest`` (a line of three numbers for each of ``n``
     vertices), or None when a line holds other than three numbers."""
-    with warnings.catch_warnings():
-        warnings.simplefilter("error")              # (NumPy 1.x: a warning, 2.x: an error)
-        try:
-            values = np.fromstring(rest, dtype=np.float64, sep=" ")
-        except (ValueError, DeprecationWarning):
-            return None
+    values = numbers(rest)
+    if values is None:
+        return None
     r = np.frombuffer(rest, dtype=np.uint8)
-    blank = _BLANK_BYTE[r]
-    first = ~blank
-    first[1:] &= blank[:-1]
-    words = np.bincount(np.searchsorted(np.flatnonzero(r == 10), np.flatnonzero(first)),
-                        minlength=n)
+    words = np.bincount(np.searchsorted(np.flatnonzero(r == 10), word_starts(r)), minlength=n)
     if values.size != 3 * n or (words != 3).any():
         return None
     return values.reshape(n, 3)
