@@ -463,12 +463,13 @@ def _flat_flips(V, F, faces, flat):
                          for j in range(3)], axis=1)
     j = np.argmax(opposite, axis=1)
     c, a, b = F[faces, j], F[faces, (j + 1) % 3], F[faces, (j + 2) % 3]
-    g = faces_across(F, n)[faces, j]
+    across, edges = _across(F, n)
+    g = across[faces, j]
     ok = g >= 0
     g = np.where(ok, g, 0)
     d = F[g].sum(axis=1) - a - b
     ok &= ~flat[g] & (c != d)
-    ok &= ~np.isin(edge_keys(c, d, n), edge_keys(F.ravel(), F[:, [1, 2, 0]].ravel(), n))
+    ok &= ~np.isin(edge_keys(c, d, n), edges)
     new = np.stack([np.stack([c, a, d], axis=1), np.stack([c, d, b], axis=1)], axis=1)  # (k,2,3)
     ok &= ~flat_faces(V, new.reshape(-1, 3)).reshape(-1, 2).any(axis=1)
     Ng = cross_rows(V[F[g, 1]] - V[F[g, 0]], V[F[g, 2]] - V[F[g, 0]])

@@ -1645,19 +1645,19 @@ class TriangleIndex:
         far = _ODD_PROBE_SHARE ** 2 * float(np.square(self._hi - self._lo).sum())
         odd = q[(d2 > _ODD_PROBE ** 2 * near2) & (d2 > far)]
         if odd.size:
-            self._probe_leaves(PT, odd, best, beam=_WIDE_BEAM)
+            self._probe_leaves(PT, odd, best, width=_WIDE_BEAM)
 
-    def _probe_leaves(self, PT, q, best, beam=None):
+    def _probe_leaves(self, PT, q, best, width=None):
         """An upper bound for the queries ``q`` before the descent: the
         triangles of the leaves a beam search reaches (at each level the
-        ``beam`` (default ``_PROBE_BEAM``) children nearest each query by box distance, plus a
-        billionth of the distance to the box's centre to break ties among
-        boxes holding it). Without it a query starts with the farthest-point
+        ``width`` (default ``_PROBE_BEAM``) children nearest each query by
+        box distance, plus a billionth of the distance to the box's centre to
+        break ties among boxes holding it). Without it a query starts with the farthest-point
         bounds of the boxes only, which prune nothing where the triangles
         are long (a CAD cylinder's sides: every leaf was visited, 2 ms a
         query on 64k faces). Returns the smallest squared box distance (with
         its tie-break term) of the leaves reached, per query."""
-        width = _PROBE_BEAM if beam is None else beam
+        width = _PROBE_BEAM if width is None else width
         beam = np.zeros((q.size, 1), dtype=np.int64)
         p = np.take(PT, q, axis=1)[:, :, None]
         for level in range(1, self._depth + 1):
