@@ -80,6 +80,15 @@ from .pages import plain_pages
 #: relative length under which a normal or tangent counts as degenerate
 _DEGENERATE = 1e-12
 
+#: a fine vertex normal (the sum of its faces' area normals) shorter than this share of
+#: the square of the cage's size (the power of two above its extent) is none: the faces
+#: around the vertex have no area (a cage vertex moved onto a neighbour folds its fine
+#: faces flat) and the sum is rounding noise, whose direction a deform and an
+#: incremental one (the same positions to 1e-16) drew at random (Suzanne's cage, vertex
+#: 1 put on vertex 22: a dense vertex bound there 1e-3 of the diagonal apart); a real
+#: fine vertex's faces are some 1e5 times larger even at five levels of a 10k-face cage
+_NORMAL_FLOOR = 2.0 ** -40
+
 #: dense meshes up to this many faces get an exact spatial index for the
 #: refine detail (``detail_search="auto"``); larger ones the local search
 _EXACT_DETAIL_FACES = 500_000
@@ -447,7 +456,7 @@ def bind(V_dense, F_dense, V_cage, F_cage, *, levels=2, scheme="butterfly", crea
     shifted = bool(origin.any())
     Vf = op.apply(V_cage - origin)
     VfT = np.ascontiguousarray(Vf.T)
-    NfT = _vertex_normals_t(VfT, op.F_fine)
+    NfT = _vertex_normals_t(VfT, op.F_fine, _normal_floor(V_cage))
     detail = _detail_mode(detail_search, F_dense)
     reach = _typical_distance(V_dense, V_cage, F_cage, scheme, creases, origin) \
         if levels > _REACH_LEVELS else None
@@ -633,12 +642,13 @@ def deform(binding, V_cage_edited, *, F_cage=None, moved=None, out=None):
     Vc = _check_cage(binding, V_cage_edited, F_cage, "deform")
     origin = _deform_origin(binding, Vc)
     X = _fine_levels(binding, Vc, origin)
-    Nf = _vertex_normals_t(X[-1], binding._operator.F_fine)
+    floor = _normal_floor(Vc)
+    Nf = _vertex_normals_t(X[-1], binding._operator.F_fine, floor)
     c = binding._cache
     DT = _positions_t(c["offset_t"], c["corners_t"], c["bary_t"], X[-1], Nf, origin)
     # kept for the incremental deforms that follow (a new object: one in use
     # by an incremental deform is never changed under it)
-    c["geometry"] = _Geometry.of(Vc, X, Nf, origin)
+    c["geometry"] = _Geometry.of(Vc, X, Nf, origin, floor)
     c.pop("drag", None)                   # (the next incremental deform starts a new one)
     c.pop("last_moved", None)
     with _INCREMENTAL_LOCK:
@@ -663,7 +673,8 @@ def _repair_state(binding):
     if "repair" not in c:
         origin = _deform_origin(binding, binding.V_cage_rest)
         VrT = _fine_levels(binding, binding.V_cage_rest, origin)[-1]
-        NrT = _vertex_normals_t(VrT, binding._operator.F_fine)
+        NrT = _vertex_normals_t(VrT, binding._operator.F_fine,
+                                _normal_floor(binding.V_cage_rest))
         rest = _positions_t(c["offset_t"], c["corners_t"], c["bary_t"], VrT, NrT, origin)
         FT = np.ascontiguousarray(binding.F_dense.T)
         c["repair"] = {"V_rest": np.ascontiguousarray(rest.T), "F_t": FT,
@@ -1220,29 +1231,39 @@ def _fine_geometry(binding, V_cage_edited, F_cage, where):
     origin = _deform_origin(binding, Vc)
     op = binding._operator
     VfT = np.ascontiguousarray(op.apply(Vc - origin).T)
-    return VfT, _vertex_normals_t(VfT, op.F_fine), origin
+    return VfT, _vertex_normals_t(VfT, op.F_fine, _normal_floor(Vc)), origin
 
 
-def _vertex_normals_t(PT, F):
+def _normal_floor(Vc):
+    """The length (float) under which a fine vertex normal's sum of area
+    normals is none, for the cage positions ``Vc`` (n,3): ``_NORMAL_FLOOR``
+    times the square of the power of two above the cage's size (the same for
+    every cage of one size class, so a deform and an incremental one agree)."""
+    return _NORMAL_FLOOR * _origin_and_step(Vc)[1] ** 2
+
+
+def _vertex_normals_t(PT, F, floor=0.0):
     """:func:`~.mesh.vertex_normals` in the transposed layout: positions
     (3, n) -> unit normals (3, n), area-weighted, zero where no face (or
-    only degenerate ones) meets a vertex. The same operations in the same
-    order (face normals as ``np.cross`` forms them, summed corner 0, 1, 2
-    with ``bincount``), so bit-identical to it, about 3x faster."""
+    only degenerate ones) meets a vertex, or where the sum of the area
+    normals is not longer than ``floor`` (:func:`_normal_floor`). The same
+    operations in the same order (face normals as ``np.cross`` forms them,
+    summed corner 0, 1, 2 with ``bincount``), so bit-identical to it above
+    ``floor``, about 3x faster."""
     n = PT.shape[1]
     i0, i1, i2 = (np.ascontiguousarray(F[:, k]) for k in range(3))
     fn = area_normals_t(PT, (i0, i1, i2))
     out = np.empty((3, n))
     for k in range(3):
         out[k] = np.bincount(i0, fn[k], n) + np.bincount(i1, fn[k], n) + np.bincount(i2, fn[k], n)
-    return _unit_columns(out)
+    return _unit_columns(out, floor)
 
 
-def _unit_columns(out):
+def _unit_columns(out, floor=0.0):
     """``out`` (3, k) with every column scaled to unit length, in place;
-    zero columns stay zero."""
+    columns not longer than ``floor`` (zero ones too) become zero."""
     length = _length_t(out)
-    ok = length > 0
+    ok = length > floor
     np.divide(out, length, out=out, where=ok)
     out[:, ~ok] = 0.0
     return out
@@ -1256,10 +1277,11 @@ class _Geometry(NamedTuple):
     normals: np.ndarray  #: (3, n_fine) fine vertex normals, valid where not ``stale``
     stale: np.ndarray    #: (n_fine,) bool: normal changed, not recomputed (no row reads it)
     origin: np.ndarray   #: (3,) the levels' positions are relative to it (_working_origin)
+    floor: float         #: the normals' :func:`_normal_floor`
 
     @classmethod
-    def of(cls, Vc, X, normals, origin):
-        return cls(Vc.copy(), X, normals, np.zeros(normals.shape[1], dtype=bool), origin)
+    def of(cls, Vc, X, normals, origin, floor):
+        return cls(Vc.copy(), X, normals, np.zeros(normals.shape[1], dtype=bool), origin, floor)
 
 
 def _working_origin(Vc):
@@ -1344,14 +1366,17 @@ def _update_fine_geometry(binding, Vc, ids, hit):
     everything is evaluated and kept."""
     c = binding._cache
     g = c.get("geometry")
+    floor = _normal_floor(Vc)
     other = None
     if g is not None:
         other = (g.V_cage != Vc).any(axis=1)
         other[ids] = False
-    if g is None or other.any():
+    # (a cage grown or shrunk past a power of two has another normal floor: all anew)
+    if g is None or other.any() or g.floor != floor:
         origin = _deform_origin(binding, Vc)
         X = _fine_levels(binding, Vc, origin)
-        g = _Geometry.of(Vc, X, _vertex_normals_t(X[-1], binding._operator.F_fine), origin)
+        g = _Geometry.of(Vc, X, _vertex_normals_t(X[-1], binding._operator.F_fine, floor),
+                         origin, floor)
         c["geometry"] = g
         return g.levels[-1], g.normals, g.origin
     X = g.levels
@@ -1373,7 +1398,7 @@ def _update_fine_geometry(binding, Vc, ids, hit):
     read = _distinct(np.take(idx["corners_t"], hit.faces, axis=1).ravel(), idx)
     redo = read[g.stale[read]]
     if redo.size:
-        NfT[:, redo] = _normals_at(idx, VfT, redo)
+        NfT[:, redo] = _normals_at(idx, VfT, redo, g.floor)
         g.stale[redo] = False
     return VfT, NfT, g.origin
 
@@ -1437,7 +1462,7 @@ class _Drag(NamedTuple):
             level[:, r] = base + dVT @ W
 
 
-def _normals_at(idx, PT, vertices):
+def _normals_at(idx, PT, vertices, floor):
     """Unit normals (3, k) at the given fine vertices (each on at least one
     face), bit for bit :func:`_vertex_normals_t`'s there: every face around
     them (from the fine vertex -> faces index, ascending) gets its normal
@@ -1459,7 +1484,7 @@ def _normals_at(idx, PT, vertices):
     for d in range(3):
         out[d] = np.bincount(at[0], fn[d], k + 1) + np.bincount(at[1], fn[d], k + 1) \
             + np.bincount(at[2], fn[d], k + 1)
-    return _unit_columns(out[:, :k])         # (a view: the spare slot left off)
+    return _unit_columns(out[:, :k], floor)  # (a view: the spare slot left off)
 
 
 class _Rows(NamedTuple):
