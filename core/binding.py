@@ -456,7 +456,7 @@ def bind(V_dense, F_dense, V_cage, F_cage, *, levels=2, scheme="butterfly", crea
     shifted = bool(origin.any())
     Vf = op.apply(V_cage - origin)
     VfT = np.ascontiguousarray(Vf.T)
-    NfT = _vertex_normals_t(VfT, op.F_fine, _normal_floor(V_cage))
+    NfT = _vertex_normals_t(VfT, op.F_fine, _normal_floor(None, V_cage))
     detail = _detail_mode(detail_search, F_dense)
     reach = _typical_distance(V_dense, V_cage, F_cage, scheme, creases, origin) \
         if levels > _REACH_LEVELS else None
@@ -642,7 +642,7 @@ def deform(binding, V_cage_edited, *, F_cage=None, moved=None, out=None):
     Vc = _check_cage(binding, V_cage_edited, F_cage, "deform")
     origin = _deform_origin(binding, Vc)
     X = _fine_levels(binding, Vc, origin)
-    floor = _normal_floor(Vc)
+    floor = _normal_floor(binding, Vc)
     Nf = _vertex_normals_t(X[-1], binding._operator.F_fine, floor)
     c = binding._cache
     DT = _positions_t(c["offset_t"], c["corners_t"], c["bary_t"], X[-1], Nf, origin)
@@ -674,7 +674,7 @@ def _repair_state(binding):
         origin = _deform_origin(binding, binding.V_cage_rest)
         VrT = _fine_levels(binding, binding.V_cage_rest, origin)[-1]
         NrT = _vertex_normals_t(VrT, binding._operator.F_fine,
-                                _normal_floor(binding.V_cage_rest))
+                                _normal_floor(binding, binding.V_cage_rest))
         rest = _positions_t(c["offset_t"], c["corners_t"], c["bary_t"], VrT, NrT, origin)
         FT = np.ascontiguousarray(binding.F_dense.T)
         c["repair"] = {"V_rest": np.ascontiguousarray(rest.T), "F_t": FT,
@@ -1231,15 +1231,26 @@ def _fine_geometry(binding, V_cage_edited, F_cage, where):
     origin = _deform_origin(binding, Vc)
     op = binding._operator
     VfT = np.ascontiguousarray(op.apply(Vc - origin).T)
-    return VfT, _vertex_normals_t(VfT, op.F_fine, _normal_floor(Vc)), origin
+    return VfT, _vertex_normals_t(VfT, op.F_fine, _normal_floor(binding, Vc)), origin
 
 
-def _normal_floor(Vc):
+def _normal_floor(binding, Vc):
     """The length (float) under which a fine vertex normal's sum of area
-    normals is none, for the cage positions ``Vc`` (n,3): ``_NORMAL_FLOOR``
-    times the square of the power of two above the cage's size (the same for
-    every cage of one size class, so a deform and an incremental one agree)."""
-    return _NORMAL_FLOOR * _origin_and_step(Vc)[1] ** 2
+    normals is none, for the cage positions ``Vc`` (n,3) of ``binding``
+    (None: the rest cage of a bind): ``_NORMAL_FLOOR`` times the square of
+    the power of two above the size of the rest cage or of ``Vc``, the
+    smaller (the same for every cage of one size class, so a deform and an
+    incremental one agree; a cage shrunk to a millionth keeps its normals, a
+    vertex dragged a million sizes away leaves the others' alone); 0.0 for
+    a binding without its rest cage (no floor: the normals as they sum)."""
+    if binding is None:
+        return _NORMAL_FLOOR * _origin_and_step(Vc)[1] ** 2
+    if binding.V_cage_rest is None:
+        return 0.0
+    c = binding._cache
+    if "rest_origin" not in c:
+        c["rest_origin"] = _origin_and_step(binding.V_cage_rest)
+    return _NORMAL_FLOOR * min(c["rest_origin"][1], _origin_and_step(Vc)[1]) ** 2
 
 
 def _vertex_normals_t(PT, F, floor=0.0):
@@ -1366,7 +1377,7 @@ def _update_fine_geometry(binding, Vc, ids, hit):
     everything is evaluated and kept."""
     c = binding._cache
     g = c.get("geometry")
-    floor = _normal_floor(Vc)
+    floor = _normal_floor(binding, Vc)
     other = None
     if g is not None:
         other = (g.V_cage != Vc).any(axis=1)

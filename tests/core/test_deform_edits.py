@@ -7,7 +7,7 @@ import pytest
 from core.binding import bind, deform
 from core.mesh import bbox_diagonal
 from core.simplify import simplify
-from tests.mesh_factory import grid
+from tests.mesh_factory import grid, icosphere
 
 
 @pytest.fixture(scope="module")
@@ -35,3 +35,31 @@ def test_a_cage_vertex_put_on_its_neighbour_deforms_the_same_incrementally(grid_
         deform(b, Ve, moved=[a], out=D)
         assert np.abs(D - full).max() <= tol, (a, c)
         assert np.isfinite(full).all()
+
+
+@pytest.fixture(scope="module")
+def sphere_loop():
+    V, F = icosphere(3)
+    V = V * (1.0 + 0.02 * np.sin(7 * V[:, :1]) * np.cos(5 * V[:, 1:2]))
+    cage = simplify(V, F, target_faces=120)
+    return V, cage, bind(V, F, cage.V, cage.F, levels=2, scheme="loop")
+
+
+def test_one_vertex_dragged_a_million_sizes_away_leaves_the_rest(sphere_loop):
+    # (41009d6's normal floor was taken from the edited cage's size: one vertex dragged
+    # 1e6 away made it 1.0, every real normal of a unit cage fell under it, and every
+    # row moved, 1.5e5 units on the cow; the floor is the rest cage's size class or the
+    # edited one's, the smaller)
+    V, cage, b = sphere_loop
+    D0 = deform(b, cage.V)
+    for v in (0, 7, 20):
+        Ve = cage.V.copy()
+        Ve[v] += 1e6
+        D = deform(b, Ve)
+        keep = ~b.affected([v])
+        keep[b.repaired(D)] = False
+        assert keep.sum() > 0.2 * keep.size
+        assert np.array_equal(D[keep], D0[keep])
+        inc = deform(b, cage.V)
+        deform(b, Ve, moved=[v], out=inc)
+        assert np.abs(inc - D).max() <= 1e-12 * bbox_diagonal(D)
