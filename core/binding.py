@@ -143,6 +143,9 @@ _ARRAY_KEYS = ("fine_face", "bary", "offset", "fine_detail", "F_cage", "n_cage",
                "scheme", "creases", "fingerprint")
 #: the optional keys of :meth:`Binding.to_arrays` (the fold repair's)
 _REPAIR_KEYS = ("F_dense", "V_cage_rest")
+#: the array fields of a :class:`Binding` (held as read-only views)
+_VIEWED_KEYS = ("fine_face", "bary", "offset", "fine_detail", "F_cage", "creases", "F_dense",
+                "V_cage_rest")
 
 
 class Frames(NamedTuple):
@@ -195,6 +198,15 @@ class Binding:
     _cache: dict = field(default=None, repr=False, compare=False)
 
     def __post_init__(self):
+        # the arrays as read-only views: a deform told to write into one (out=b.offset,
+        # C-contiguous after from_arrays) rewrote the binding itself, and every later
+        # deform and to_arrays with it
+        for key in _VIEWED_KEYS:
+            value = getattr(self, key)
+            if isinstance(value, np.ndarray) and value.flags.writeable:
+                value = value.view()
+                value.flags.writeable = False
+                object.__setattr__(self, key, value)
         op = self._operator
         if op is None:
             op = subdivision_operator(self.F_cage, self.n_cage, levels=self.levels,
@@ -252,7 +264,8 @@ class Binding:
         scalars ``n_cage``, ``levels``, ``scheme``, ``fingerprint``; and when
         the binding has them, ``F_dense`` (m_dense,3) int64 and
         ``V_cage_rest`` (n_cage,3) float64 (the fold repair's). Arrays are
-        copies. :meth:`from_arrays` accepts them back, also as int32/float32.
+        copies (writable). :meth:`from_arrays` accepts them back, also as
+        int32/float32.
         """
         creases = np.zeros((0, 2), np.int64) if self.creases is None else self.creases.copy()
         arrays = {"fine_face": self.fine_face.copy(), "bary": self.bary.copy(),
@@ -267,7 +280,9 @@ class Binding:
 
     @classmethod
     def from_arrays(cls, arrays):
-        """Rebuild a :class:`Binding` from :meth:`to_arrays` output.
+        """Rebuild a :class:`Binding` from :meth:`to_arrays` output. The
+        binding keeps copies: changing the arrays given afterwards changes
+        nothing in it.
 
         Raises
         ------
@@ -281,8 +296,10 @@ class Binding:
             raise InvalidArgumentError(f"Binding.from_arrays: missing keys {missing}")
         fine_face = np.asarray(arrays["fine_face"]).astype(np.int64).ravel()
         n = fine_face.shape[0]
-        bary = np.asarray(arrays["bary"], dtype=np.float64).reshape(-1, 3)
-        offset = np.asarray(arrays["offset"], dtype=np.float64).reshape(-1, 3)
+        # copies (astype copies; np.asarray had kept the caller's float64 arrays, so a
+        # buffer reused after loading, e.g. the rest cage, moved the binding's rest)
+        bary = np.asarray(arrays["bary"]).astype(np.float64).reshape(-1, 3)
+        offset = np.asarray(arrays["offset"]).astype(np.float64).reshape(-1, 3)
         if bary.shape[0] != n or offset.shape[0] != n:
             raise InvalidArgumentError(
                 f"Binding.from_arrays: fine_face, bary and offset must have one row per dense "
@@ -295,7 +312,7 @@ class Binding:
                                        lo=0, integer=True) for k in ("n_cage", "levels"))
         return cls(fine_face=fine_face, bary=np.ascontiguousarray(bary),
                    offset=np.ascontiguousarray(offset),
-                   fine_detail=np.asarray(arrays["fine_detail"], dtype=np.float64).reshape(-1, 3),
+                   fine_detail=np.asarray(arrays["fine_detail"]).astype(np.float64).reshape(-1, 3),
                    F_cage=np.asarray(arrays["F_cage"]).astype(np.int64).reshape(-1, 3),
                    n_cage=n_cage, levels=levels,
                    scheme=str(arrays["scheme"]), creases=creases if creases.shape[0] else None,
@@ -303,7 +320,7 @@ class Binding:
                    F_dense=None if arrays.get("F_dense") is None
                    else np.asarray(arrays["F_dense"]).astype(np.int64).reshape(-1, 3),
                    V_cage_rest=None if arrays.get("V_cage_rest") is None
-                   else np.asarray(arrays["V_cage_rest"], dtype=np.float64).reshape(-1, 3))
+                   else np.asarray(arrays["V_cage_rest"]).astype(np.float64).reshape(-1, 3))
 
     def affected(self, cage_vertex_ids):
         """Dense vertices that may move when the given cage vertices move.
@@ -853,7 +870,8 @@ def _welded(binding, state):
 def _check_out(binding, out):
     if not isinstance(out, np.ndarray) or out.shape != (binding.n_dense, 3) \
             or out.dtype != np.float64 or not out.flags.c_contiguous or not out.flags.writeable:
-        desc = (f"{out.shape} {out.dtype}" if isinstance(out, np.ndarray)
+        desc = (f"{out.shape} {out.dtype}" + ("" if out.flags.c_contiguous else ", not C-contiguous")
+                + ("" if out.flags.writeable else ", read-only") if isinstance(out, np.ndarray)
                 else type(out).__name__)
         raise InvalidArgumentError(
             f"deform: out must be a writable C-contiguous ({binding.n_dense}, 3) float64 "

@@ -5,6 +5,7 @@ import numpy as np
 import pytest
 
 from core.binding import bind, deform
+from core.errors import InvalidArgumentError
 from core.mesh import bbox_diagonal
 from core.simplify import simplify
 from tests.mesh_factory import grid, icosphere
@@ -35,6 +36,29 @@ def test_a_cage_vertex_put_on_its_neighbour_deforms_the_same_incrementally(grid_
         deform(b, Ve, moved=[a], out=D)
         assert np.abs(D - full).max() <= tol, (a, c)
         assert np.isfinite(full).all()
+
+
+def test_a_binding_keeps_its_arrays_from_the_caller_and_from_deform(grid_loop):
+    # Binding.from_arrays kept the caller's float64 arrays (np.asarray): a buffer
+    # reused after loading (here the rest cage zeroed) moved the binding's rest, and its
+    # deforms 0.4 of the size off; and deform(b, V, out=b.offset) (C-contiguous after
+    # from_arrays) wrote the dense positions over the binding's own offsets.
+    V, cage, b = grid_loop
+    Ve = cage.V.copy()
+    Ve[[3, 9]] += [0.0, 0.0, 0.2]
+    want = deform(b, Ve)
+    arrays = b.to_arrays()
+    b2 = type(b).from_arrays(arrays)
+    for key in ("bary", "offset", "fine_detail", "V_cage_rest"):
+        arrays[key][...] = 0.0
+    assert np.array_equal(deform(b2, Ve), want)
+    for key in ("bary", "offset"):
+        with pytest.raises(InvalidArgumentError, match="read-only"):
+            deform(b2, Ve, out=getattr(b2, key))
+    assert np.array_equal(deform(b2, Ve), want)
+    assert np.array_equal(type(b).from_arrays(b2.to_arrays()).offset, b.offset)
+    # to_arrays still hands out writable copies
+    assert all(a.flags.writeable for a in b2.to_arrays().values() if isinstance(a, np.ndarray))
 
 
 @pytest.fixture(scope="module")
