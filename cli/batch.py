@@ -113,7 +113,9 @@ def _run_arguments(p):
                    help="output format (default: the input's own, glTF as glb)")
     p.add_argument("--jobs", type=int, default=1, metavar="N",
                    help="files converted at once, each in its own worker process (default 1: "
-                        "in this process); with --dask local, the number of Dask workers")
+                        "one after the other, those Blender reads or writes in one worker "
+                        "process, OBJ and SMF in this one); with --dask local, the number of "
+                        "Dask workers")
     p.add_argument("--dask", metavar="ADDRESS", default=None,
                    help="send each file as a task to a Dask scheduler (tcp://host:8786), or "
                         "'local' for a LocalCluster of --jobs workers; needs dask.distributed, "
@@ -262,21 +264,51 @@ def check_paths(args):
     return problems
 
 
-def worker_main(payload_json):
-    """A worker process: convert one file, print its report on one line."""
+def _as_worker():
+    """A worker's signals: SIGTERM is a cancel (a ``KeyboardInterrupt``), and
+    the terminal's Ctrl-C is the driver's to decide."""
     import signal
 
     def terminate(signum, frame):
         raise KeyboardInterrupt
     signal.signal(signal.SIGTERM, terminate)
-    signal.signal(signal.SIGINT, signal.SIG_IGN)     # the driver decides
-    payload = json.loads(payload_json)
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
+def _worker_convert(payload):
+    """Convert the file of a worker's ``payload`` (its task and options) and
+    print its report on a line of its own; returns False when it was
+    cancelled (SIGTERM)."""
     task = payload["task"]
+    if os.environ.get(runners.CRASH_TEST_VARIABLE) == os.path.basename(task["input"]):
+        os.abort()
     try:
         result = _convert.convert(task, _convert.Options(**payload["options"]))
     except KeyboardInterrupt:
         result = runners.cancelled_report(task)
-    print(runners.RESULT_MARK + json.dumps(report.json_safe(result)), flush=True)
+    # (a newline first: Blender's log may have left a line unfinished)
+    print("\n" + runners.RESULT_MARK + json.dumps(report.json_safe(result)), flush=True)
+    return result["status"] != "cancelled"
+
+
+def worker_main(payload_json):
+    """A worker process (``--worker JSON``): convert one file, print its report."""
+    _as_worker()
+    _worker_convert(json.loads(payload_json))
+    return 0
+
+
+def serve_main():
+    """A serving worker process (``--worker-serve``): convert the file of
+    each JSON line on stdin, printing its report, until stdin ends or a
+    cancel (SIGTERM)."""
+    _as_worker()
+    try:
+        for line in iter(sys.stdin.readline, ""):
+            if not _worker_convert(json.loads(line)):
+                break
+    except KeyboardInterrupt:          # stopped between two files
+        pass
     return 0
 
 
@@ -289,6 +321,8 @@ def main(argv=None, *, entry=None, prog=PROG):
     argv = sys.argv[1:] if argv is None else list(argv)
     if argv[:1] == ["--worker"]:
         return worker_main(argv[1])
+    if argv == ["--worker-serve"]:
+        return serve_main()
     args = parse_args(argv, prog)
     entry = MODULE_ENTRY if entry is None else entry
     t0 = time.perf_counter()
@@ -403,22 +437,26 @@ def _run(args, opts, entry, tasks, todo, results):
         if args.dask is not None:
             return runners.run_dask(sub, payload, entry, args.dask, args.jobs, on_done)
         if args.jobs > 1:
-            return runners.run_processes(sub, payload, lambda p: worker_command(entry, p),
+            return runners.run_processes(sub, payload,
+                                         lambda p: worker_command(entry, ["--worker", p]),
                                          args.jobs, on_done)
-        return runners.run_serial(sub, lambda t: _convert.convert(t, opts), on_done)
+        return runners.run_serial(sub, lambda t: _convert.convert(t, opts), on_done,
+                                  isolate=_convert.uses_blender, payload=payload,
+                                  command=lambda: worker_command(entry, ["--worker-serve"]))
     finally:
         if log_fh is not None:
             log_fh.close()
 
 
-def worker_command(entry, payload_json):
+def worker_command(entry, worker_args):
     """A worker's command line: this Python (or the Blender binary running
-    us) with ``entry`` and the worker's JSON argument."""
+    us) with ``entry`` and ``worker_args`` (``["--worker", JSON]`` or
+    ``["--worker-serve"]``)."""
     bpy = sys.modules.get("bpy")
     binary = getattr(getattr(bpy, "app", None), "binary_path", "") if bpy else ""
     if binary and os.path.basename(binary).lower().startswith("blender") and entry[:1] != ["-m"]:
-        return [binary, "-b", "--factory-startup", "-P", entry[0], "--", "--worker", payload_json]
-    return [sys.executable, *entry, "--worker", payload_json]
+        return [binary, "-b", "--factory-startup", "-P", entry[0], "--", *worker_args]
+    return [sys.executable, *entry, *worker_args]
 
 
 def exit_now(status):

@@ -69,6 +69,14 @@ class Options:
         return max(self.refine, 1) if (self.fit or self.refine) else 2
 
 
+def uses_blender(task):
+    """Whether converting ``task`` takes Blender: its input is read by one of
+    Blender's importers or an output is written by one of its exporters."""
+    outputs = [p for p in (task["cage"], task["refined"]) if p]
+    return (os.path.splitext(task["input"])[1].lower() in blender_io.BLENDER_IMPORT
+            or any(os.path.splitext(p)[1].lower() not in CORE_FORMATS for p in outputs))
+
+
 def output_format(path, opts):
     """The output extension (no dot) for input ``path``."""
     ext = os.path.splitext(path)[1].lower().lstrip(".")

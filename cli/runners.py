@@ -1,17 +1,24 @@
-"""Where the batch's files are converted: in this process, in local worker
-processes (``--jobs N``) or as tasks on a Dask cluster (``--dask``).
+"""Where the batch's files are converted: one by one (``--jobs 1``), in local
+worker processes (``--jobs N``) or as tasks on a Dask cluster (``--dask``).
 
 Every runner calls ``on_done(index, report)`` as each file finishes and
 returns True when it was interrupted (Ctrl-C), after stopping what it started;
 the driver then marks the files without a report as cancelled.
 
-A worker is always a fresh process running this tool with ``--worker JSON``
-(one file; it prints ``MESHADJUST_RESULT <json report>``): Blender as a
-module is neither thread-safe nor safe to fork, and a crash (a segmentation
-fault in an importer) takes one file down, not the batch. Workers start in a
-session of their own, so the terminal's Ctrl-C reaches only the driver, which
-then stops them in order: SIGTERM (the worker turns it into a cancel, removes
-its temporary output and reports), then SIGKILL after :data:`STOP_GRACE_S`.
+A worker is a fresh process running this tool: with ``--worker JSON`` it
+converts one file and prints ``MESHADJUST_RESULT <json report>``; with
+``--worker-serve`` it reads one such JSON per line on its stdin and prints a
+report for each, until its stdin ends. Blender as a module is neither
+thread-safe nor safe to fork, and a crash (a segmentation fault in an
+importer) takes the worker down, not the batch: the file it was converting
+fails with how the worker died, and the batch goes on. A serial batch runs
+the files Blender reads or writes in one serving worker (``bpy`` imported
+once; a new one after a crash) and converts OBJ and SMF in its own process:
+the core is NumPy only and fails by raising, which the file's report takes.
+Workers start in a session of their own, so the terminal's Ctrl-C reaches
+only the driver, which then stops them in order: SIGTERM (the worker turns
+it into a cancel, removes its temporary output and reports), then SIGKILL
+after :data:`STOP_GRACE_S`.
 
 On Dask each task starts such a process on its worker machine with the
 worker's own Python (``python -m meshadjust.cli.batch``, or the checkout's
@@ -22,6 +29,7 @@ running tasks poll; tasks not yet started are cancelled by the client.
 
 import json
 import os
+import select
 import signal
 import subprocess
 import sys
@@ -30,29 +38,83 @@ import time
 import uuid
 
 RESULT_MARK = "MESHADJUST_RESULT "
+#: the environment variable naming a file (its base name) whose conversion in a worker
+#: process aborts that process (``os.abort``: SIGABRT, as a crashing importer does): the
+#: tests' way to crash a real worker; read only by workers (``batch._worker_convert``)
+CRASH_TEST_VARIABLE = "MESHADJUST_TEST_WORKER_CRASH_ON"
 #: seconds a worker gets to stop after SIGTERM before it is killed
 STOP_GRACE_S = 10.0
 _POLL_S = 0.05
 
 
-def run_serial(tasks, convert, on_done):
-    """Convert the files one by one in this process."""
-    for i, task in enumerate(tasks):
-        try:
-            report = convert(task)
-        except KeyboardInterrupt:
-            return True
-        on_done(i, report)
-    return False
+def run_serial(tasks, convert, on_done, *, isolate, payload, command):
+    """Convert the files one by one: those ``isolate(task)`` picks in one
+    serving worker (:class:`ServingWorker`, started with ``command()``;
+    another takes the next of them after one dies), the others in this
+    process with ``convert(task)``. ``payload(task)`` is the worker's JSON
+    line for a task."""
+    worker, in_worker = None, None     # (the task the worker is converting)
+    try:
+        for i, task in enumerate(tasks):
+            if not isolate(task):
+                report = dict(convert(task), pid=os.getpid())
+            else:
+                if worker is not None and worker.poll() is not None:     # it died on a file
+                    worker.close()
+                    worker = None
+                if worker is None:
+                    worker = ServingWorker(command())
+                in_worker = i
+                report = worker.convert(task, payload(task))
+                in_worker = None
+            on_done(i, report)
+        return False
+    except KeyboardInterrupt:
+        if in_worker is not None:
+            on_done(in_worker, _stopped(worker, tasks[in_worker]))
+        return True
+    finally:
+        if worker is not None:
+            worker.close()
 
 
-class WorkerProcess:
-    """One worker process converting one file, its output in a temporary file."""
+def _stopped(worker, task):
+    """Stop ``worker`` after a Ctrl-C; the report of the file it was converting
+    (cancelled, unless it finished in between)."""
+    old = signal.signal(signal.SIGINT, signal.SIG_IGN)   # a second Ctrl-C must not cut this short
+    try:
+        worker.stop()
+        return worker.report(task, stopped=True)
+    finally:
+        signal.signal(signal.SIGINT, old)
 
-    def __init__(self, cmd):
-        self.out = tempfile.TemporaryFile()
-        self.proc = subprocess.Popen(cmd, stdout=self.out, stderr=subprocess.STDOUT,
-                                     stdin=subprocess.DEVNULL, start_new_session=True)
+
+def worker_report(task, text, code, pid, *, stopped=False):
+    """The report a worker process printed in its output ``text`` (the last
+    :data:`RESULT_MARK` line), with ``pid`` its process id; when it printed
+    none, a cancelled report (``stopped``: the driver stopped it) or a failed
+    one saying how the worker ended (``code``: its exit status, negative for
+    a signal) and quoting its last lines, its output as the log."""
+    for line in reversed(text.splitlines()):
+        if line.startswith(RESULT_MARK):
+            return dict(json.loads(line[len(RESULT_MARK):]), pid=pid)
+    if stopped:
+        return dict(cancelled_report(task), pid=pid)
+    how = f"exit status {code}"
+    if code is not None and code < 0:
+        how = f"killed by {signal.Signals(-code).name}"
+    tail = " | ".join(text.strip().splitlines()[-3:])
+    return dict(failed_report(task, f"the worker process died ({how})" +
+                              (f": {tail}" if tail else ""), log=text), pid=pid)
+
+
+class _Worker:
+    """A worker process (``self.proc``) in a session of its own, its stdout
+    and stderr together."""
+
+    def __init__(self, cmd, **streams):
+        self.proc = subprocess.Popen(cmd, stderr=subprocess.STDOUT, start_new_session=True,
+                                     **streams)
 
     def poll(self):
         return self.proc.poll()
@@ -79,23 +141,87 @@ class WorkerProcess:
             except subprocess.TimeoutExpired:
                 continue
 
+
+class WorkerProcess(_Worker):
+    """One worker process converting one file, its output in a temporary file."""
+
+    def __init__(self, cmd):
+        self.out = tempfile.TemporaryFile()
+        super().__init__(cmd, stdout=self.out, stdin=subprocess.DEVNULL)
+
     def report(self, task, *, stopped=False):
-        """The worker's report, or a failed / cancelled one when it has none."""
+        """The worker's report (:func:`worker_report`)."""
         self.out.seek(0)
         text = self.out.read().decode("utf-8", "replace")
         self.out.close()
-        for line in reversed(text.splitlines()):
-            if line.startswith(RESULT_MARK):
-                return json.loads(line[len(RESULT_MARK):])
-        if stopped:
-            return cancelled_report(task)
-        code = self.proc.returncode
-        how = f"exit status {code}"
-        if code is not None and code < 0:
-            how = f"killed by {signal.Signals(-code).name}"
-        tail = " | ".join(text.strip().splitlines()[-3:])
-        return failed_report(task, f"the worker process died ({how})" + (f": {tail}" if tail else ""),
-                             log=text)
+        return worker_report(task, text, self.proc.returncode, self.proc.pid, stopped=stopped)
+
+
+class ServingWorker(_Worker):
+    """One long-lived worker process converting files one after the other
+    (``--worker-serve``): a JSON line per file on its stdin, its output read
+    through a pipe up to the file's :data:`RESULT_MARK` line. The text since
+    the last report is the current file's (the log quoted if it dies)."""
+
+    def __init__(self, cmd):
+        super().__init__(cmd, stdin=subprocess.PIPE, stdout=subprocess.PIPE)
+        self.text = b""
+
+    def convert(self, task, payload_json):
+        """The report of ``task``: the worker's, or a failed one when it died
+        converting it (it then takes no more files)."""
+        try:
+            self.proc.stdin.write(payload_json.encode("utf-8") + b"\n")
+            self.proc.stdin.flush()
+        except BrokenPipeError:             # it died since its last file: said below
+            pass
+        fd = self.proc.stdout.fileno()
+        while True:
+            ready, _, _ = select.select([fd], [], [], _POLL_S)
+            chunk = os.read(fd, 1 << 16) if ready else None
+            if chunk:
+                self.text += chunk
+                if self._has_report():
+                    return self.report(task)
+            elif chunk == b"" or self.proc.poll() is not None:     # the end of its output, or of it
+                try:
+                    self.proc.wait(timeout=STOP_GRACE_S)
+                except subprocess.TimeoutExpired:      # (its output closed, itself alive)
+                    self.stop()
+                return self.report(task)
+
+    def _has_report(self):
+        whole = self.text[:self.text.rfind(b"\n") + 1]
+        return whole.startswith(RESULT_MARK.encode()) or b"\n" + RESULT_MARK.encode() in whole
+
+    def report(self, task, *, stopped=False):
+        """The current file's report (:func:`worker_report`), from the text
+        since the last one; the worker's exit status when it has ended."""
+        if self.proc.poll() is not None:
+            self._drain()
+        text, self.text = self.text.decode("utf-8", "replace"), b""
+        return worker_report(task, text, self.proc.returncode, self.proc.pid, stopped=stopped)
+
+    def _drain(self):
+        """Read what an ended worker left in the pipe, without blocking."""
+        fd = self.proc.stdout.fileno()
+        while select.select([fd], [], [], 0)[0]:
+            chunk = os.read(fd, 1 << 16)
+            if not chunk:
+                return
+            self.text += chunk
+
+    def close(self):
+        """End the worker: its stdin closed, it leaves (stopped if it does not)."""
+        try:
+            self.proc.stdin.close()
+        except BrokenPipeError:
+            pass
+        try:
+            self.proc.wait(timeout=STOP_GRACE_S)
+        except subprocess.TimeoutExpired:
+            self.stop()
+        self.proc.stdout.close()
 
 
 def file_report(task, status, **fields):
@@ -110,7 +236,7 @@ def file_report(task, status, **fields):
          "faces_out": None, "stopped_because": None, "message": None, "deviation_pct": None,
          "mean_deviation_pct": None, "cleaning": None, "fit": None, "refined_faces": None,
          "phases_s": {}, "outputs": [], "incomplete": [], "warnings": [], "notes": [],
-         "failed_step": None, "error": None, "seconds": None, "log": ""}
+         "failed_step": None, "error": None, "seconds": None, "pid": None, "log": ""}
     unknown = set(fields) - set(r)
     if unknown:
         raise KeyError(f"file_report: no such field {sorted(unknown)}")

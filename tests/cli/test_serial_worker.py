@@ -1,0 +1,150 @@
+"""A serial batch (``--jobs 1``) converts the files Blender reads or writes
+in one long-lived worker process: a crash of that worker (an importer's
+segmentation fault) fails the file it was converting, and a new worker takes
+the rest; OBJ and SMF stay in the batch's own process. The crash is real: a
+worker aborts (SIGABRT) on the file named by ``batch.CRASH_TEST_VARIABLE``."""
+
+import json
+import os
+import select
+import signal
+import subprocess
+import sys
+import time
+
+import pytest
+
+import core
+from cli.runners import CRASH_TEST_VARIABLE
+from tests.cli.test_batch import SCRIPT, rows
+from tests.mesh_factory import icosphere, shared_mesh_path, write_binary_stl, write_ply
+
+
+def _batch(args, tmp_path, **env):
+    """The batch in a process of its own: ``(its pid, CompletedProcess)``."""
+    env = dict(os.environ, HOME=str(tmp_path), BLENDER_USER_RESOURCES=str(tmp_path), **env)
+    proc = subprocess.Popen([sys.executable, SCRIPT, *map(str, args)], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True, env=env, cwd=str(tmp_path))
+    out, err = proc.communicate(timeout=300)
+    return proc.pid, subprocess.CompletedProcess(proc.args, proc.returncode, out, err)
+
+
+def _report(tmp_path):
+    return json.loads((tmp_path / "r.json").read_text())
+
+
+def test_a_worker_crash_fails_its_file_and_a_new_worker_takes_the_rest(tmp_path):
+    """An importer crash the file checks do not foresee ended the whole serial
+    batch: no row, no report, no file after it converted."""
+    V, F = icosphere(2)
+    names = [f"s{k}.ply" for k in range(5)]
+    for k, name in enumerate(names):
+        write_ply(tmp_path / name, V * (1 + 0.1 * k), F)
+    _, proc = _batch([*names, "--faces", "100", "--out", "out", "--report", "r.json",
+                      "--log", "blender.log"], tmp_path, **{CRASH_TEST_VARIABLE: "s2.ply"})
+    assert proc.returncode == 1, proc.stdout + proc.stderr
+    assert "Traceback" not in proc.stdout + proc.stderr
+    body = rows(proc.stdout)
+    assert len(body) == 5
+    assert body[2] == ("| s2.ply |  |  |  |  |  |  | FAILED: s2.ply: the worker process died "
+                       "(killed by SIGABRT) |")
+    assert "4 converted, 1 failed; output in out" in proc.stdout
+    assert "5/5" in proc.stderr                          # the progress bar reached the end
+    rep = _report(tmp_path)
+    assert rep["exit_status"] == 1 and not rep["interrupted"]
+    assert rep["counts"] == {"ok": 4, "warn": 0, "failed": 1, "skipped": 0, "cancelled": 0}
+    files = rep["files"]
+    assert [f["name"] for f in files] == names
+    assert [f["status"] for f in files] == ["ok", "ok", "failed", "ok", "ok"]
+    crashed = files[2]
+    assert crashed["failed_step"] == "worker" and crashed["outputs"] == []
+    assert crashed["error"] == "s2.ply: the worker process died (killed by SIGABRT)"
+    for f in files[:2] + files[3:]:
+        assert f["faces_in"] == 320 and f["faces_out"] == 100
+        assert f["outputs"] == [str(tmp_path / "out" / f["name"].replace(".ply", "_cage.ply"))]
+    assert sorted(os.listdir(tmp_path / "out")) == ["s0_cage.ply", "s1_cage.ply",
+                                                    "s3_cage.ply", "s4_cage.ply"]
+    # the files before the crash and the crashed one in one worker, the rest in another
+    pids = [f["pid"] for f in files]
+    assert pids[0] == pids[1] == pids[2] != pids[3] == pids[4]
+    log = (tmp_path / "blender.log").read_text()        # Blender's log of the four, one each
+    assert [ln for ln in log.splitlines() if ln.startswith("==== ")] == [
+        f"==== {tmp_path / n} ====" for n in names if n != "s2.ply"]
+
+
+def test_a_serial_batch_imports_blender_in_one_worker_and_reads_obj_itself(tmp_path):
+    """One worker process for all the files Blender reads or writes (it was
+    the batch's own process, so a crash there ended the batch), not one per
+    file (each would import bpy again); OBJ and SMF in the batch's process."""
+    V, F = icosphere(2)
+    write_ply(tmp_path / "a.ply", V, F)
+    write_binary_stl(tmp_path / "b.stl", V, F)
+    core.write_obj(tmp_path / "c.obj", V, F)
+    write_ply(tmp_path / "d.ply", V, F, ascii=True)
+    core.write_smf(tmp_path / "e.smf", V, F)
+    pid, proc = _batch([".", "--faces", "100", "--out", "out", "--report", "r.json"], tmp_path)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    files = _report(tmp_path)["files"]
+    assert [f["name"] for f in files] == ["a.ply", "b.stl", "c.obj", "d.ply", "e.smf"]
+    assert [f["status"] for f in files] == ["ok"] * 5
+    pids = {f["name"]: f["pid"] for f in files}
+    assert pids["a.ply"] == pids["b.stl"] == pids["d.ply"] != pid
+    assert pids["c.obj"] == pids["e.smf"] == pid
+    # an OBJ written as PLY goes through Blender's exporter: in the worker too
+    _, proc = _batch(["c.obj", "--faces", "100", "--format", "ply", "--out", "out2",
+                      "--report", "r.json"], tmp_path)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    (obj_as_ply,) = _report(tmp_path)["files"]
+    assert obj_as_ply["status"] == "ok" and obj_as_ply["pid"] != pids["c.obj"]
+    assert os.listdir(tmp_path / "out2") == ["c_cage.ply"]
+
+
+def _stderr_until(proc, text, timeout=240):
+    """Read the batch's stderr until ``text`` appears in it; returns what was read."""
+    seen, fd = "", proc.stderr.fileno()
+    while text not in seen:
+        ready, _, _ = select.select([fd], [], [], timeout)
+        chunk = os.read(fd, 4096).decode() if ready else ""
+        if not chunk:
+            raise AssertionError(f"the batch's stderr ended or stalled before {text!r}: {seen}")
+        seen += chunk
+    return seen
+
+
+def test_ctrl_c_in_a_serial_batch_stops_its_worker_and_the_batch_resumes(tmp_path):
+    """Ctrl-C while the serving worker converts a file: that file cancelled
+    and its temporary output removed, the files after it cancelled, the
+    worker gone; ``--skip-existing`` then converts what is left."""
+    V, F = icosphere(2)
+    write_ply(tmp_path / "a.ply", V, F)
+    V, F = core.read_obj(shared_mesh_path("stanford-bunny.obj"))   # seconds each, fitted
+    for k in range(2):
+        write_ply(tmp_path / f"b{k}.ply", V, F)
+    args = [".", "--faces", "1000", "--fit", "--refine", "1", "--out", "out",
+            "--report", "r.json"]
+    # SIGINT at its default in the child (see test_batch._start)
+    proc = subprocess.Popen([sys.executable, SCRIPT, *args], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, env=dict(os.environ, HOME=str(tmp_path)),
+                            cwd=str(tmp_path),
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+    seen = _stderr_until(proc, "1/3 a.ply")             # a.ply done, b0.ply next
+    # (b0.ply takes seconds: a moment for the driver to hand it to the worker, else the
+    # Ctrl-C would come between two files, where b0.ply is cancelled before it starts)
+    time.sleep(0.5)
+    proc.send_signal(signal.SIGINT)
+    out, err = proc.communicate(timeout=120)
+    out, err = out.decode(), seen + err.decode()
+    assert proc.returncode == 130, out + err
+    assert "Traceback" not in err and "interrupted" in err
+    assert [r.rsplit(" | ", 1)[1] for r in rows(out)] == ["ok |", "cancelled |", "cancelled |"]
+    rep = _report(tmp_path)
+    assert rep["interrupted"] and rep["exit_status"] == 130
+    assert [f["status"] for f in rep["files"]] == ["ok", "cancelled", "cancelled"]
+    assert rep["files"][1]["pid"] == rep["files"][0]["pid"]      # stopped in the worker
+    with pytest.raises(ProcessLookupError):                       # and the worker is gone
+        os.kill(rep["files"][0]["pid"], 0)
+    assert sorted(os.listdir(tmp_path / "out")) == ["a_cage.ply", "a_refined.ply"]
+    _, again = _batch([*args[:1], "--faces", "100", "--out", "out", "--report", "r.json",
+                       "--skip-existing", "--refine", "1"], tmp_path)
+    assert again.returncode == 0, again.stdout + again.stderr
+    assert [f["status"] for f in _report(tmp_path)["files"]] == ["skipped", "ok", "ok"]
