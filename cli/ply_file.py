@@ -13,21 +13,14 @@ cases first and names the file and the counts:
 
 import os
 import re
-import struct
 
 import numpy as np
 
 from .file_check import FileCheck, InputFileError
 from .ply_ascii import record_problem
+from .ply_binary import PLY_TYPES, binary_problem, element_records
 
-PLY_TYPES = {"char": "i1", "int8": "i1", "uchar": "u1", "uint8": "u1", "short": "i2",
-              "int16": "i2", "ushort": "u2", "uint16": "u2", "int": "i4", "int32": "i4",
-              "uint": "u4", "uint32": "u4", "float": "f4", "float32": "f4", "double": "f8",
-              "float64": "f8"}
-#: the struct module's code of each NumPy type a list's count may have
-_STRUCT_CODES = {"i1": "b", "u1": "B", "i2": "h", "u2": "H", "i4": "i", "u4": "I", "f4": "f",
-                 "f8": "d"}
-#: bytes of a blank line (and, after a binary file's data, of padding with 0)
+#: bytes of a blank line
 _BLANK = (9, 10, 13, 32)
 
 
@@ -149,7 +142,7 @@ def ply_size_problem(path):
     order = {"binary_little_endian": "<", "binary_big_endian": ">"}.get(fmt)
     if order is None or any(not _known_type(t) for _, _, props in elements for t, _ in props):
         return None
-    return _binary_problem(path, data, order, length, elements, said)
+    return binary_problem(path, data, order, length, elements, said)
 
 
 def _ascii_problem(data, length, elements, said):
@@ -204,142 +197,8 @@ def _blank_lines(body, starts, ends):
     return np.flatnonzero(filled[ends] == filled[starts])
 
 
-def _binary_problem(path, data, order, length, elements, said):
-    """:func:`ply_size_problem` of a binary file."""
-    size = data.size
-    pos = length
-    n_vertices = {e: n for e, n, _ in elements}.get("vertex", 2**63 - 1)
-    for element, count, props in elements:
-        got, end, bad_first = _records(path, order, props, pos, count, size, n_vertices,
-                                       element)
-        if isinstance(bad_first, tuple):
-            k, at, n = bad_first
-            if element == "face" and n > 255:
-                return (f"{os.path.basename(path)}: its face {k + 1:,} (at byte {at:,}) has "
-                        f"{n:,} corners, and Blender's PLY importer reads faces of at most 255: "
-                        f"triangulate the file's polygons first (e.g. save it as OBJ), unless "
-                        f"the file is damaged there")
-            return (f"{said}, but {element} record {k + 1:,} (at byte {at:,}) holds a list of "
-                    f"{n:g} items: the file is damaged there, or a count in the header is wrong")
-        if bad_first == "too many corners":
-            return (f"{os.path.basename(path)}: its first face (at byte {pos:,}) has more than "
-                    f"255 corners, and Blender's PLY importer reads faces of at most 255: "
-                    f"triangulate the file's polygons first (e.g. save it as OBJ)")
-        if bad_first:
-            return (f"{said}, but the first {element} record (at byte {pos:,}) holds no valid "
-                    f"{element}: the data before it is not the size the header's counts give "
-                    f"(a wrong count), or the file is damaged")
-        if got < count:
-            return (f"{said}, but the file ends ({size:,} bytes) after {got:,} of the {count:,} "
-                    f"{element} elements: cut short, or a wrong count in the header")
-        pos = end
-    if np.isin(data[pos:], _BLANK + (0,), invert=True).any():
-        return (f"{said}, but {size - pos:,} bytes follow them (the file is {size:,} bytes, its "
-                f"elements end at byte {pos:,}): the file holds more than its header declares "
-                f"(a wrong count, or data appended; Blender's importer would drop them)")
-    return None
-
-
 def _known_type(t):
     return t in PLY_TYPES or (isinstance(t, tuple) and t[1] in PLY_TYPES and t[2] in PLY_TYPES)
-
-
-def _records(path, order, props, pos, count, size, n_vertices, element):
-    """``(whole records in the file, end byte, what is wrong)`` of a binary
-    PLY element of ``count`` records at byte ``pos`` (see
-    :func:`ply_size_problem`; ``n_vertices``: the vertices declared,
-    bounding a face's indices; ``element``: its name, whose first record
-    :func:`_valid_first` checks). What is wrong: False, True (the first
-    record is none), ``"too many corners"`` (the first face has more than
-    255) or, from :func:`_walk`, ``(record, byte, items)`` of a later record
-    whose list no reader takes. Records of the first one's length are
-    counted at once; from the first of another length on they are walked
-    one by one (mixed lengths had been taken on trust: a file of quads and
-    triangles cut 5 bytes short, or with bytes after it, came back "ok",
-    its last face read from past the end)."""
-    itemsize = {t: np.dtype(PLY_TYPES[t]).itemsize for t in PLY_TYPES}
-    lists = [k for k, (t, _) in enumerate(props) if isinstance(t, tuple)]
-    if not lists:
-        rec = sum(itemsize[t] for t, _ in props)
-        return (min(count, (size - pos) // rec) if rec else count), pos + count * rec, False
-    if count == 0:
-        return 0, pos, False
-    data = np.memmap(path, dtype=np.uint8, mode="r")
-    if len(lists) > 1:
-        return _walk(data, order, props, pos, 0, count, element)
-    k = lists[0]
-    before = sum(itemsize[t] for t, _ in props[:k])
-    after = sum(itemsize[t] for t, _ in props[k + 1:])
-    _, ct, it = props[k][0]
-    at = pos + before + itemsize[ct]                    # the first record's indices
-    if at > size:
-        return 0, pos, False
-    c0 = int(np.frombuffer(data, dtype=order + PLY_TYPES[ct], count=1, offset=at - itemsize[ct])[0])
-    first = np.frombuffer(data, dtype=order + PLY_TYPES[it], offset=at,
-                          count=max(0, min(c0, (size - at) // itemsize[it])))
-    if not _valid_first(element, c0, first, n_vertices):
-        many = element == "face" and c0 > 255 and first.size == c0 \
-            and _valid_first(element, 3, first, n_vertices)
-        return 0, pos, "too many corners" if many else True
-    rec = before + itemsize[ct] + c0 * itemsize[it] + after
-    fits = min(count, (size - pos) // rec)
-    counts = np.frombuffer(data, offset=pos, count=fits, dtype=np.dtype(
-        {"names": ["c"], "formats": [order + PLY_TYPES[ct]], "offsets": [before],
-         "itemsize": rec}))["c"]
-    same = counts == c0
-    run = fits if same.all() else int(np.argmin(same))   # records of the first one's length
-    if run == count:
-        return count, pos + count * rec, False
-    return _walk(data, order, props, pos + run * rec, run, count, element)
-
-
-def _walk(data, order, props, pos, done, count, element):
-    """:func:`_records` of the records ``done`` to ``count`` of an element,
-    the first at byte ``pos``, read one by one (each list's count read, its
-    items skipped): ``(whole records, end byte, what is wrong)``, what is
-    wrong ``(record, byte, items)`` of the first face whose corners Blender's
-    importer refuses (fewer than 1 or more than 255) or list whose count is
-    negative, else False."""
-    plan, fixed = [], 0          # (bytes before, count reader, item bytes, corners?) per list
-    for t, name in props:
-        if isinstance(t, tuple):
-            reader = struct.Struct(order + _STRUCT_CODES[PLY_TYPES[t[1]]])
-            corners = element == "face" and name in ("vertex_indices", "vertex_index")
-            plan.append((fixed, reader, np.dtype(PLY_TYPES[t[2]]).itemsize, corners))
-            fixed = 0
-        else:
-            fixed += np.dtype(PLY_TYPES[t]).itemsize
-    size, buf = data.size, memoryview(data)
-    for k in range(done, count):
-        start = pos
-        for skip, reader, item, corners in plan:
-            pos += skip
-            if pos + reader.size > size:
-                return k, size, False
-            n = reader.unpack_from(buf, pos)[0]
-            if n < 0 or n != int(n) or (corners and not 1 <= n <= 255):
-                return k, start, (k, start, n)
-            pos += reader.size + int(n) * item
-        pos += fixed
-        if pos > size:
-            return k, size, False
-    return count, pos, False
-
-
-def _valid_first(element, count, items, n_vertices):
-    """Whether the first record of a list ``element`` (its ``count`` and
-    ``items`` read) can be one: a face of 1-255 corners (Blender's importer
-    reads no more) on declared vertices, a triangle strip of declared
-    vertices and -1 (the end of a strip: a file's whole strip set is often
-    one record of thousands), anything for another element (its items'
-    meaning unknown)."""
-    if element == "face":
-        return 1 <= count <= 255 and not (items.size and (items.min() < 0 or
-                                                          items.max() >= n_vertices))
-    if element == "tristrips":
-        return count >= 1 and not (items.size and (items.min() < -1 or
-                                                   items.max() >= n_vertices))
-    return count >= 0
 
 
 def count_nonfinite(path):
@@ -348,7 +207,7 @@ def count_nonfinite(path):
     not one read here (list properties on the vertices, a file cut short).
     The vertex element may come after others (a file whose faces come first
     had its NaN read as 0, status ok): ASCII, after their lines; binary,
-    after their bytes (:func:`_records`)."""
+    after their bytes (:func:`.ply_binary.element_records`)."""
     header = ply_header(path)
     if not header:
         return None
@@ -378,7 +237,7 @@ def count_nonfinite(path):
         return None
     size, pos = os.path.getsize(path), length
     for element, count, before in elements[:at]:
-        got, pos, bad = _records(path, order, before, pos, count, size, n, element)
+        got, pos, bad = element_records(path, order, before, pos, count, size, n, element)
         if bad or got < count:
             return None         # (ply_size_problem says what is wrong)
     rec = np.dtype([(name, order + PLY_TYPES[t]) for t, name in props])
