@@ -44,6 +44,24 @@ def rows(stdout):
     return [ln for ln in stdout.splitlines() if ln.startswith("| ") and "---" not in ln][1:]
 
 
+def errors_beside_a_whole_file(tmp_path, bad, whole):
+    """``{name: error}`` of the files ``bad`` (names in ``tmp_path``) run in a
+    batch (``--faces 100 --format obj``) with the file ``whole``, a 320-face
+    icosphere, last; asserted on the way: exit status 1 and no traceback,
+    every bad file failed, the whole one converted and its cage the only
+    output (a bad file takes no other down)."""
+    proc = run_batch([*bad, whole, "--faces", "100", "--format", "obj", "--out", "out",
+                      "--report", "r.json"], tmp_path)
+    assert proc.returncode == 1, proc.stdout + proc.stderr
+    assert "Traceback" not in proc.stdout + proc.stderr
+    got = {f["name"]: f for f in json.loads((tmp_path / "r.json").read_text())["files"]}
+    assert [got[n]["status"] for n in bad] == ["failed"] * len(bad)
+    assert got[whole]["status"] == "ok" and got[whole]["faces_in"] == 320
+    assert [p.name for p in (tmp_path / "out").iterdir()] == [
+        whole.rsplit(".", 1)[0] + "_cage.obj"]
+    return {n: got[n]["error"] for n in bad}
+
+
 def test_smf_in_smf_out_report_and_a_nan_reported_not_zeroed(tmp_path):
     V, F = bumpy_sphere()
     core.write_smf(tmp_path / "ball.smf", V, F)

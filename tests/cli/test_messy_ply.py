@@ -10,7 +10,7 @@ import pytest
 
 from cli.file_check import InputFileError
 from cli.ply_file import check, ply_size_problem
-from tests.cli.test_batch import run_batch
+from tests.cli.test_batch import errors_beside_a_whole_file, run_batch
 from tests.mesh_factory import icosphere, write_ply
 
 
@@ -122,29 +122,22 @@ def test_a_ply_header_blender_would_crash_on_is_named_and_the_batch_goes_on(tmp_
     (tmp_path / "half.ply").write_bytes(data.replace(b"property float x", b"property float16 x"))
     comments = b"".join(b"comment %070d\n" % k for k in range(1200))     # 95 kB of header
     (tmp_path / "long.ply").write_bytes(data.replace(b"ply\n", b"ply\n" + comments, 1)[:-13])
-    names = ["nocount.ply", "caps.ply", "huge.ply", "half.ply", "long.ply", "whole.ply"]
-    proc = run_batch([*names, "--faces", "100", "--format", "obj", "--out", "out",
-                      "--report", "r.json"], tmp_path)
-    assert proc.returncode == 1, proc.stdout + proc.stderr
-    got = {f["name"]: f for f in json.loads((tmp_path / "r.json").read_text())["files"]}
-    assert got["nocount.ply"]["error"] == (
-        "nocount.ply: read failed: nocount.ply: header line 3, 'element vertex', is not 'element "
-        "NAME COUNT' with a count of 0 to 2,147,483,647")
-    assert got["caps.ply"]["error"] == (
-        "caps.ply: read failed: caps.ply: header line 4, 'property float x', comes before any "
-        "'element' line (Blender's importer would crash on it)")
-    assert got["huge.ply"]["error"] == (
-        "huge.ply: read failed: huge.ply: header line 3, 'element vertex 99999999999', is not "
-        "'element NAME COUNT' with a count of 0 to 2,147,483,647")
-    assert got["half.ply"]["error"].startswith(
+    errors = errors_beside_a_whole_file(
+        tmp_path, ["nocount.ply", "caps.ply", "huge.ply", "half.ply", "long.ply"], "whole.ply")
+    assert errors.pop("half.ply").startswith(
         "half.ply: read failed: half.ply: header line 4, 'property float16 x', is not 'property "
         "TYPE NAME' or 'property list COUNT_TYPE ITEM_TYPE NAME' with PLY's types (char, double,")
-    assert got["long.ply"]["error"] == (
-        "long.ply: read failed: long.ply: its header declares 162 vertex and 320 face elements, "
-        "but the file ends (101,064 bytes) after 319 of the 320 face elements: cut short, or a "
-        "wrong count in the header")
-    assert got["whole.ply"]["status"] == "ok" and got["whole.ply"]["faces_in"] == 320
-    assert [p.name for p in (tmp_path / "out").iterdir()] == ["whole_cage.obj"]
+    assert errors == {
+        "nocount.ply": "nocount.ply: read failed: nocount.ply: header line 3, 'element vertex', "
+                       "is not 'element NAME COUNT' with a count of 0 to 2,147,483,647",
+        "caps.ply": "caps.ply: read failed: caps.ply: header line 4, 'property float x', comes "
+                    "before any 'element' line (Blender's importer would crash on it)",
+        "huge.ply": "huge.ply: read failed: huge.ply: header line 3, 'element vertex "
+                    "99999999999', is not 'element NAME COUNT' with a count of 0 to "
+                    "2,147,483,647",
+        "long.ply": "long.ply: read failed: long.ply: its header declares 162 vertex and 320 "
+                    "face elements, but the file ends (101,064 bytes) after 319 of the 320 face "
+                    "elements: cut short, or a wrong count in the header"}
 
 
 def test_an_ascii_ply_face_of_no_corners_or_more_than_255_is_named_by_its_line(tmp_path):
