@@ -63,7 +63,7 @@ from .detail_search import (DetailSurface, dense_points_near, detail_surface, ex
                             is_unwelded)
 from .errors import CancelledError, InvalidArgumentError, TopologyMismatchError
 from .mesh import (area_normals_t, bounding_box, check_faces, check_mesh, check_number,
-                   check_units, check_vertices, cross_columns, dot_columns, stops)
+                   check_units, check_vertices, cross_columns, dot_columns, stops, UNITS)
 from .near_query import NearQuery
 from .spatial import TriangleIndex
 from ._refine import crease_pairs
@@ -287,40 +287,47 @@ class Binding:
         Raises
         ------
         InvalidArgumentError
-            A key is missing or an array has the wrong shape.
+            A key is missing, an array has the wrong shape or kind (indices
+            must be integers, the others real numbers), or a value is NaN or
+            infinite.
+        InvalidMeshError
+            ``V_cage_rest`` beyond the units deform takes (``core.mesh.UNITS``).
         TopologyMismatchError
             The stored fingerprint does not match the rebuilt operator's.
         """
         missing = [k for k in _ARRAY_KEYS if k not in arrays]
         if missing:
             raise InvalidArgumentError(f"Binding.from_arrays: missing keys {missing}")
-        fine_face = np.asarray(arrays["fine_face"]).astype(np.int64).ravel()
+        # copies, checked (np.asarray had kept the caller's float64 arrays, so a buffer
+        # reused after loading, e.g. the rest cage, moved the binding's rest; a NaN offset
+        # deformed to NaN, a float index was truncated, a ragged array was NumPy's
+        # ValueError)
+        fine_face = _stored(arrays, "fine_face", 1)
         n = fine_face.shape[0]
-        # copies (astype copies; np.asarray had kept the caller's float64 arrays, so a
-        # buffer reused after loading, e.g. the rest cage, moved the binding's rest)
-        bary = np.asarray(arrays["bary"]).astype(np.float64).reshape(-1, 3)
-        offset = np.asarray(arrays["offset"]).astype(np.float64).reshape(-1, 3)
+        bary = _stored(arrays, "bary", 3)
+        offset = _stored(arrays, "offset", 3)
         if bary.shape[0] != n or offset.shape[0] != n:
             raise InvalidArgumentError(
                 f"Binding.from_arrays: fine_face, bary and offset must have one row per dense "
                 f"vertex, got {n}, {bary.shape[0]}, {offset.shape[0]}")
-        creases = np.asarray(arrays["creases"]).astype(np.int64).reshape(-1, 2)
+        creases = np.zeros((0, 2), np.int64) if arrays["creases"] is None \
+            else _stored(arrays, "creases", 2)
+        rest = None if arrays.get("V_cage_rest") is None else _stored(arrays, "V_cage_rest", 3)
+        if rest is not None:
+            check_units(rest, where="Binding.from_arrays", name="V_cage_rest")
         # the counts as integers ('x' and None were ValueErrors from int(); a 0-d array, as
         # np.load gives them, is one)
         n_cage, levels = (check_number(np.asarray(arrays[k]).item() if np.ndim(arrays[k]) == 0
                                        else arrays[k], where="Binding.from_arrays", name=k,
                                        lo=0, integer=True) for k in ("n_cage", "levels"))
-        return cls(fine_face=fine_face, bary=np.ascontiguousarray(bary),
-                   offset=np.ascontiguousarray(offset),
-                   fine_detail=np.asarray(arrays["fine_detail"]).astype(np.float64).reshape(-1, 3),
-                   F_cage=np.asarray(arrays["F_cage"]).astype(np.int64).reshape(-1, 3),
-                   n_cage=n_cage, levels=levels,
+        return cls(fine_face=fine_face, bary=bary, offset=offset,
+                   fine_detail=_stored(arrays, "fine_detail", 3),
+                   F_cage=_stored(arrays, "F_cage", 3), n_cage=n_cage, levels=levels,
                    scheme=str(arrays["scheme"]), creases=creases if creases.shape[0] else None,
                    fingerprint=str(arrays["fingerprint"]),
                    F_dense=None if arrays.get("F_dense") is None
-                   else np.asarray(arrays["F_dense"]).astype(np.int64).reshape(-1, 3),
-                   V_cage_rest=None if arrays.get("V_cage_rest") is None
-                   else np.asarray(arrays["V_cage_rest"]).astype(np.float64).reshape(-1, 3))
+                   else _stored(arrays, "F_dense", 3),
+                   V_cage_rest=rest)
 
     def affected(self, cage_vertex_ids):
         """Dense vertices that may move when the given cage vertices move.
@@ -396,6 +403,34 @@ class Binding:
         with _INCREMENTAL_LOCK:
             rows = _influenced_dense(self, ids).rows
         return np.sort(rows) if ordered else rows.copy()
+
+
+def _stored(arrays, key, cols):
+    """``arrays[key]`` for :meth:`Binding.from_arrays`: a new C-contiguous int64
+    (the index keys) or float64 array of ``cols`` columns (1: flat), checked:
+    integers for indices (not booleans or floats), finite real numbers for the
+    rest; :class:`InvalidArgumentError` naming the key otherwise."""
+    where = "Binding.from_arrays"
+    integer = key in ("fine_face", "F_cage", "creases", "F_dense")
+    a = np.asarray(arrays[key])
+    if a.dtype.kind not in ("iu" if integer else "iuf"):
+        raise InvalidArgumentError(
+            f"{where}: {key} must be {'integer indices' if integer else 'real numbers'}, got "
+            f"{a.dtype}")
+    if a.size % cols or (cols > 1 and a.ndim == 2 and a.shape[1] != cols):
+        raise InvalidArgumentError(f"{where}: {key} must have {cols} columns, got {a.shape}")
+    if integer and a.dtype.kind == "u" and a.size and int(a.max()) > np.iinfo(np.int64).max:
+        raise InvalidArgumentError(f"{where}: {key} holds an index {int(a.max())} out of range")
+    out = a.astype(np.int64 if integer else np.float64).reshape((-1, cols) if cols > 1 else -1)
+    if not integer and not np.isfinite(out).all():
+        row = int(np.flatnonzero(~np.isfinite(out).reshape(out.shape[0], -1).all(axis=1))[0])
+        raise InvalidArgumentError(
+            f"{where}: {key} has NaN or infinite values, e.g. row {row} = {out[row].tolist()}")
+    if key in ("offset", "fine_detail") and out.size and float(np.abs(out).max()) > UNITS[1]:
+        raise InvalidArgumentError(
+            f"{where}: {key} reaches {float(np.abs(out).max()):.3g}; deform takes coordinates "
+            f"up to {UNITS[1]:g}")
+    return out
 
 
 @plain_pages

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from core.binding import bind, deform
-from core.errors import InvalidArgumentError
+from core.errors import InvalidArgumentError, InvalidMeshError
 from core.mesh import bbox_diagonal
 from core.simplify import simplify
 from tests.mesh_factory import grid, icosphere
@@ -87,3 +87,34 @@ def test_one_vertex_dragged_a_million_sizes_away_leaves_the_rest(sphere_loop):
         inc = deform(b, cage.V)
         deform(b, Ve, moved=[v], out=inc)
         assert np.abs(inc - D).max() <= 1e-12 * bbox_diagonal(D)
+
+
+@pytest.mark.parametrize("key, value, match", [
+    ("offset", lambda a: np.where(np.arange(a.size).reshape(a.shape) == 4, np.nan, a),
+     "offset has NaN or infinite values"),
+    ("bary", lambda a: np.where(np.arange(a.size).reshape(a.shape) == 0, np.inf, a),
+     "bary has NaN or infinite values"),
+    ("fine_detail", lambda a: a * np.nan, "fine_detail has NaN"),
+    ("V_cage_rest", lambda a: a * np.nan, "V_cage_rest has NaN"),
+    ("offset", lambda a: a * 1e300, "offset reaches"),
+    ("offset", lambda a: a.ravel()[:-1], "offset must have 3 columns"),
+    ("F_dense", lambda a: a[:, :2], "F_dense must have 3 columns"),
+    ("creases", lambda a: np.array([0, 1, 2]), "creases must have 2 columns"),
+    ("fine_face", lambda a: a + 0.5, "fine_face must be integer indices, got float64"),
+    ("fine_face", lambda a: a > 0, "fine_face must be integer indices, got bool"),
+    ("F_cage", lambda a: a.astype(float), "F_cage must be integer indices"),
+    ("bary", lambda a: a.astype(complex), "bary must be real numbers, got complex128"),
+    ("V_cage_rest", lambda a: "abc", "V_cage_rest must be real numbers"),
+])
+def test_from_arrays_names_broken_arrays(sphere_loop, key, value, match):
+    # each was taken (a NaN offset deformed to NaN, a float index truncated, a 1e300
+    # offset overflowed in the fold repair) or NumPy's ValueError / TypeError /
+    # ComplexWarning; None creases are none
+    V, cage, b = sphere_loop
+    arrays = b.to_arrays()
+    arrays[key] = value(arrays[key])
+    with pytest.raises((InvalidArgumentError, InvalidMeshError), match=match):
+        type(b).from_arrays(arrays)
+    arrays = b.to_arrays()
+    arrays["creases"] = None
+    assert np.array_equal(deform(type(b).from_arrays(arrays), cage.V), deform(b, cage.V))
