@@ -417,6 +417,8 @@ def _run(args, opts, entry, tasks, todo, results):
 
     def on_done(k, result):
         i = todo[k]
+        if result["failed_step"] == "worker" and result["pid"] is not None:
+            outputs.remove_dead_parts(tasks[i], result["pid"])
         if log_fh is not None:
             if result.get("log"):
                 log_fh.write(f"==== {result['input']} ====\n{result['log']}\n")

@@ -67,6 +67,23 @@ def _write_one(tmp, path, V, F, log):
         raise OSError(exc.errno, exc.strerror, path) from exc
 
 
+def part_path(path, k, pid):
+    """The temporary name of output ``path``, the ``k``-th of its file's,
+    written by process ``pid``: ``.part-<pid>-<k>.<ext>`` in its folder."""
+    return os.path.join(os.path.dirname(path), f".part-{pid}-{k}{os.path.splitext(path)[1]}")
+
+
+def remove_dead_parts(task, pid):
+    """Remove the temporary outputs of ``task`` (its ``cage`` and ``refined``
+    paths, or its incomplete cage) that process ``pid`` left when it died in
+    the middle of writing them (a worker killed by a crash or SIGKILL: its
+    own clean-up never ran)."""
+    for paths in ([task["cage"], task["refined"]], [incomplete_path(task["cage"])]):
+        for k, path in enumerate(p for p in paths if p):
+            if os.path.isfile(part_path(path, k, pid)):
+                os.remove(part_path(path, k, pid))
+
+
 def write_outputs(outputs, log):
     """Write ``outputs``, a list of ``(path, V, F)``, each to a short
     temporary name in its folder (``.part-<pid>-<k>.<ext>``: any name the
@@ -77,8 +94,7 @@ def write_outputs(outputs, log):
     try:
         for k, (path, V, F) in enumerate(outputs):
             os.makedirs(os.path.dirname(path) or ".", exist_ok=True)
-            tmps.append(os.path.join(os.path.dirname(path),
-                                     f".part-{os.getpid()}-{k}{os.path.splitext(path)[1]}"))
+            tmps.append(part_path(path, k, os.getpid()))
             _write_one(tmps[-1], path, V, F, log)
         for tmp, (path, _, _) in zip(tmps, outputs):
             try:

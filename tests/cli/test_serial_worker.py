@@ -16,7 +16,7 @@ import pytest
 
 import core
 from cli.runners import CRASH_TEST_VARIABLE
-from tests.cli.test_batch import SCRIPT, rows
+from tests.cli.test_batch import ROOT, SCRIPT, rows
 from tests.mesh_factory import icosphere, shared_mesh_path, write_binary_stl, write_ply
 
 
@@ -148,3 +148,26 @@ def test_ctrl_c_in_a_serial_batch_stops_its_worker_and_the_batch_resumes(tmp_pat
                        "--skip-existing", "--refine", "1"], tmp_path)
     assert again.returncode == 0, again.stdout + again.stderr
     assert [f["status"] for f in _report(tmp_path)["files"]] == ["skipped", "ok", "ok"]
+
+
+def test_the_temporary_outputs_a_dead_worker_left_are_removed(tmp_path):
+    """A worker that dies in the middle of a write (an exporter's crash, a
+    SIGKILL) leaves its ``.part-<pid>-<k>`` files: the rename and its own
+    clean-up never come. The batch removes those of the file that failed,
+    by the dead worker's pid, and nothing else."""
+    sys.path.insert(0, os.path.join(ROOT, "scripts"))
+    import meshadjust_batch
+    meshadjust_batch.checkout_package()
+    from meshadjust.cli import outputs
+    task = {"cage": str(tmp_path / "s_cage.ply"), "refined": str(tmp_path / "s_refined.ply")}
+    dead, other = 4_000_001, 4_000_002
+    left = [outputs.part_path(task["cage"], 0, dead), outputs.part_path(task["refined"], 1, dead),
+            outputs.part_path(outputs.incomplete_path(task["cage"]), 0, dead)]
+    kept = [outputs.part_path(task["cage"], 0, other), str(tmp_path / "s_cage.ply")]
+    os.makedirs(os.path.dirname(left[2]))
+    for path in left + kept:
+        open(path, "wb").close()
+    assert [os.path.basename(p) for p in left] == [".part-4000001-0.ply", ".part-4000001-1.ply",
+                                                   ".part-4000001-0.ply"]
+    outputs.remove_dead_parts(task, dead)
+    assert [os.path.exists(p) for p in left + kept] == [False, False, False, True, True]
