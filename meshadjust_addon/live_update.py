@@ -84,21 +84,25 @@ def update_edited(cage):
     edited, binding, V = _live_inputs(cage)
     t1 = time.perf_counter()
     state, moved = _kept_state(edited, binding, V)
-    notes = []
-    if moved is None or moved.size:
-        # (before the buffer changes: a version sculpted since the last write, also
-        # between two live writes, is kept aside; 3-5 ms a million vertices)
-        results.aside_note(results.kept_aside(edited), edited, notes)
     t2 = time.perf_counter()
     if moved is None:
         D = core.deform(binding, V)
         binding.influenced([])      # builds the incremental indices now, not on the first edit
-        t3 = time.perf_counter()
+    else:
+        r = _deform_moved(binding, V, moved, state.D)
+    t3 = time.perf_counter()
+    notes = []
+    if moved is None or moved.size:
+        # (once the deform went through, before the buffer changes: a version sculpted
+        # since the last write, also between two live writes, is kept aside; 3-5 ms a
+        # million vertices. Before the deform, a cage with a NaN made the copy and then
+        # stopped live mode, nothing written)
+        results.aside_note(results.kept_aside(edited), edited, notes)
+    t_aside = time.perf_counter() - t3
+    if moved is None:
         state = _State(binding, V, D, D.astype(np.float32))
         rows = binding.n_dense
     else:
-        r = _deform_moved(binding, V, moved, state.D)
-        t3 = time.perf_counter()
         state.buf[r] = np.take(state.D, r, axis=0)
         rows = r.shape[0]
         state = state._replace(V_cage=V)
@@ -108,8 +112,8 @@ def update_edited(cage):
     _states[edited.session_uid] = state
     t5 = time.perf_counter()
     timing = LiveTiming(moved=V.shape[0] if moved is None else int(moved.size), rows=int(rows),
-                        full=moved is None, read_cage=t1 - t0, compare=t2 - t1,
-                        deform=t3 - t2, convert=t4 - t3, write=t5 - t4, total=t5 - t0,
+                        full=moved is None, read_cage=t1 - t0, compare=t2 - t1 + t_aside,
+                        deform=t3 - t2, convert=t4 - t3 - t_aside, write=t5 - t4, total=t5 - t0,
                         warning=turned_cage_note(cage, binding, V), note="; ".join(notes))
     cage.meshadjust.last_report = timing.summary()
     return timing

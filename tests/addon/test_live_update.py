@@ -161,3 +161,38 @@ def test_live_stops_on_an_internal_error_and_says_so_once(bound_cage, monkeypatc
     assert not cage.meshadjust.live
     assert cage.meshadjust.last_report == ("live refine stopped by an internal error "
                                            "(ValueError: a bug); please report it")
+
+
+def test_a_failed_live_update_keeps_nothing_aside(bound_cage):
+    # The edited original sculpted, then a cage vertex given a NaN (a script, a broken
+    # snap): the update kept the sculpt aside as 'dense_edited.hand' before the deform
+    # refused the cage, so live mode stopped with a new object in the scene and nothing
+    # written. Now the copy is made only once the deform went through: the scene is as
+    # it was, and the first update that writes keeps the sculpt aside.
+    lu, mio, live = _mod("live_update"), _mod("mesh_io"), _mod("live")
+    cage = bound_cage
+    edited = cage.meshadjust.edited
+    lu.update_edited(cage)
+    sculpt = mio.read_positions(edited.data)
+    sculpt[10] += 0.05
+    mio.write_positions(edited.data, sculpt)
+    sculpt = mio.read_positions(edited.data)
+    Vc = mio.read_positions(cage.data)
+    bad = Vc.copy()
+    bad[4, 0] = np.nan
+    mio.write_positions(cage.data, bad)
+    objects, meshes = sorted(bpy.data.objects.keys()), sorted(bpy.data.meshes.keys())
+    cage.meshadjust.live = True
+    live._pending.add(cage.name)
+    live.refine_pending()
+    assert not cage.meshadjust.live
+    assert "NaN or infinite" in cage.meshadjust.last_report
+    assert sorted(bpy.data.objects.keys()) == objects
+    assert sorted(bpy.data.meshes.keys()) == meshes
+    assert np.array_equal(mio.read_positions(edited.data), sculpt)
+    Vc[4] += [0.0, 0.0, 0.03]
+    mio.write_positions(cage.data, Vc)
+    t = lu.update_edited(cage)
+    assert not t.full and t.moved == 1
+    assert "kept as 'dense_edited.hand'" in t.note
+    assert np.array_equal(mio.read_positions(bpy.data.objects["dense_edited.hand"].data), sculpt)
