@@ -190,7 +190,17 @@ def cage_in_source_space(cage, source):
         cage.update_from_editmode()
     V = mesh_io.read_positions(cage.data)
     M = source_space(cage, source)
-    return V @ M[:3, :3].T + M[:3, 3]
+    V_source = V @ M[:3, :3].T + M[:3, 3]
+    bad = ~np.isfinite(V_source).all(axis=1)
+    if bad.any():
+        # (Refine, Bind and Fit had named the core's inner functions: 'turned_faces: 1
+        # vertices of V_new have NaN ...', 'bbox_diagonal: ...')
+        i = int(np.flatnonzero(bad)[0])
+        raise core.InvalidMeshError(
+            f"'{cage.name}' has {int(bad.sum()):,} vertex position{'s' if bad.sum() > 1 else ''} "
+            f"that {'are' if bad.sum() > 1 else 'is'} not a number or infinite (vertex {i} = "
+            f"{V[i].tolist()}): move {'them' if bad.sum() > 1 else 'it'} back, or undo")
+    return V_source
 
 
 def _source_to_cage(cage, source, V):

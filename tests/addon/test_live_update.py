@@ -164,10 +164,10 @@ def test_live_stops_on_an_internal_error_and_says_so_once(bound_cage, monkeypatc
 
 
 def test_a_failed_live_update_keeps_nothing_aside(bound_cage):
-    # The edited original sculpted, then a cage vertex given a NaN (a script, a broken
-    # snap): the update kept the sculpt aside as 'dense_edited.hand' before the deform
-    # refused the cage, so live mode stopped with a new object in the scene and nothing
-    # written. Now the copy is made only once the deform went through: the scene is as
+    # The edited original sculpted, then a cage vertex sent 1e30 away (a script, a
+    # broken snap): the update kept the sculpt aside as 'dense_edited.hand' before the
+    # deform refused the cage ("reaches 1e+30"), so live mode stopped with a new object
+    # in the scene and nothing written. Now the copy is made only once the deform went through: the scene is as
     # it was, and the first update that writes keeps the sculpt aside.
     lu, mio, live = _mod("live_update"), _mod("mesh_io"), _mod("live")
     cage = bound_cage
@@ -179,14 +179,14 @@ def test_a_failed_live_update_keeps_nothing_aside(bound_cage):
     sculpt = mio.read_positions(edited.data)
     Vc = mio.read_positions(cage.data)
     bad = Vc.copy()
-    bad[4, 0] = np.nan
+    bad[4, 0] = 1e30
     mio.write_positions(cage.data, bad)
     objects, meshes = sorted(bpy.data.objects.keys()), sorted(bpy.data.meshes.keys())
     cage.meshadjust.live = True
     live._pending.add(cage.name)
     live.refine_pending()
     assert not cage.meshadjust.live
-    assert "NaN or infinite" in cage.meshadjust.last_report
+    assert "reaches 1e+30" in cage.meshadjust.last_report
     assert sorted(bpy.data.objects.keys()) == objects
     assert sorted(bpy.data.meshes.keys()) == meshes
     assert np.array_equal(mio.read_positions(edited.data), sculpt)
@@ -196,3 +196,31 @@ def test_a_failed_live_update_keeps_nothing_aside(bound_cage):
     assert not t.full and t.moved == 1
     assert "kept as 'dense_edited.hand'" in t.note
     assert np.array_equal(mio.read_positions(bpy.data.objects["dense_edited.hand"].data), sculpt)
+
+
+@pytest.mark.parametrize("step", ["live", "refine", "bind", "fit"])
+def test_a_cage_vertex_that_is_not_a_number_is_named_on_the_cage(bound_cage, step):
+    # Refine, Bind and Fit named the core's inner functions and arguments for it
+    # ("turned_faces: 1 vertices of V_new have NaN ...", "bbox_diagonal: ..."); live
+    # mode the deform's V_cage_edited. Now the cage and its vertex, nothing changed.
+    lu, mio, live = _mod("live_update"), _mod("mesh_io"), _mod("live")
+    cage = bound_cage
+    lu.update_edited(cage)
+    Vc = mio.read_positions(cage.data)
+    Vc[4, 1] = np.inf
+    mio.write_positions(cage.data, Vc)
+    want = "'dense_cage' has 1 vertex position that is not a number or infinite (vertex 4 = ["
+    edited = mio.read_positions(cage.meshadjust.edited.data)
+    if step == "live":
+        cage.meshadjust.live = True
+        live._pending.add(cage.name)
+        live.refine_pending()
+        assert not cage.meshadjust.live
+        assert cage.meshadjust.last_report.startswith("live refine stopped: " + want)
+    else:
+        bpy.context.view_layer.objects.active = cage
+        op = {"refine": bpy.ops.meshadjust.refine, "bind": bpy.ops.meshadjust.bind,
+              "fit": bpy.ops.meshadjust.fit_cage}[step]
+        with pytest.raises(RuntimeError, match=r"has 1 vertex position that is not a number"):
+            op()
+    assert np.array_equal(mio.read_positions(cage.meshadjust.edited.data), edited)
