@@ -196,6 +196,8 @@ class Binding:
     V_cage_rest: object = None  #: None or (n_cage,3) float64
     _operator: object = field(default=None, repr=False, compare=False)
     _cache: dict = field(default=None, repr=False, compare=False)
+    #: what the cache and operator were made for (the arrays' identities and the counts)
+    _owner: tuple = field(default=None, repr=False, compare=False)
 
     def __post_init__(self):
         # the arrays as read-only views: a deform told to write into one (out=b.offset,
@@ -207,6 +209,17 @@ class Binding:
                 value = value.view()
                 value.flags.writeable = False
                 object.__setattr__(self, key, value)
+        # a cache and operator handed over from another binding (dataclasses.replace
+        # passes them) are kept only for the same arrays and counts: replace(b,
+        # offset=...) had deformed with the old offsets, replace(b, levels=3) with the
+        # old operator
+        owner = tuple(id(getattr(self, key)) for key in _VIEWED_KEYS) + (
+            self.n_cage, self.levels, self.scheme, self.fingerprint)
+        given = self._owner
+        if given is not None and given != owner:
+            object.__setattr__(self, "_cache", None)
+            if (given[4], given[5], given[-4:-1]) != (owner[4], owner[5], owner[-4:-1]):
+                object.__setattr__(self, "_operator", None)    # F_cage, creases or counts
         op = self._operator
         if op is None:
             op = subdivision_operator(self.F_cage, self.n_cage, levels=self.levels,
@@ -244,6 +257,7 @@ class Binding:
                 "detail_bary_t": np.ascontiguousarray(d_bary.T),
                 "detail_offset_t": np.ascontiguousarray(self.fine_detail.T),
             })
+        object.__setattr__(self, "_owner", owner)
 
     @property
     def operator(self):

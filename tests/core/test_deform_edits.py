@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from core.binding import bind, deform
-from core.errors import InvalidArgumentError, InvalidMeshError
+from core.errors import InvalidArgumentError, InvalidMeshError, TopologyMismatchError
 from core.mesh import bbox_diagonal
 from core.simplify import simplify
 from tests.mesh_factory import grid, icosphere
@@ -118,3 +118,19 @@ def test_from_arrays_names_broken_arrays(sphere_loop, key, value, match):
     arrays = b.to_arrays()
     arrays["creases"] = None
     assert np.array_equal(deform(type(b).from_arrays(arrays), cage.V), deform(b, cage.V))
+
+
+def test_dataclasses_replace_gives_a_binding_of_its_own_arrays(sphere_loop):
+    # dataclasses.replace hands the cache and the operator over: replace(b, offset=0)
+    # deformed with the old offsets, replace(b, levels=1) kept the level-2 operator
+    # (its fingerprint unchanged, so nothing noticed)
+    import dataclasses
+    V, cage, b = sphere_loop
+    flat = dataclasses.replace(b, offset=np.zeros_like(b.offset))
+    D = deform(flat, cage.V)
+    assert np.abs(D - deform(b, cage.V)).max() > 1e-3
+    assert np.array_equal(D, deform(type(b).from_arrays(flat.to_arrays()), cage.V))
+    with pytest.raises(TopologyMismatchError):
+        dataclasses.replace(b, levels=1)
+    same = dataclasses.replace(b)
+    assert same._operator is b._operator and np.array_equal(deform(same, cage.V), deform(b, cage.V))
