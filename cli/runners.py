@@ -29,11 +29,12 @@ running tasks poll; tasks not yet started are cancelled by the client.
 
 import json
 import os
-import select
+import queue
 import signal
 import subprocess
 import sys
 import tempfile
+import threading
 import time
 import uuid
 
@@ -119,21 +120,29 @@ class _Worker:
     def poll(self):
         return self.proc.poll()
 
+    def _signal(self, hard):
+        """SIGTERM (``hard``: SIGKILL) to the worker's session; where there
+        are no sessions (Windows), Popen's terminate (kill)."""
+        if not hasattr(os, "killpg"):
+            (self.proc.kill if hard else self.proc.terminate)()
+        else:
+            os.killpg(self.proc.pid, signal.SIGKILL if hard else signal.SIGTERM)
+
     def terminate(self):
         """SIGTERM to the worker's session, without waiting."""
         if self.proc.poll() is None:
             try:
-                os.killpg(self.proc.pid, signal.SIGTERM)
+                self._signal(hard=False)
             except ProcessLookupError:     # it ended in between
                 pass
 
     def stop(self):
         """SIGTERM, then SIGKILL after the grace period."""
-        for sig, wait in ((signal.SIGTERM, STOP_GRACE_S), (signal.SIGKILL, 5.0)):
+        for hard, wait in ((False, STOP_GRACE_S), (True, 5.0)):
             if self.proc.poll() is not None:
                 return
             try:
-                os.killpg(self.proc.pid, sig)
+                self._signal(hard)
             except ProcessLookupError:
                 return
             try:
@@ -160,12 +169,25 @@ class WorkerProcess(_Worker):
 class ServingWorker(_Worker):
     """One long-lived worker process converting files one after the other
     (``--worker-serve``): a JSON line per file on its stdin, its output read
-    through a pipe up to the file's :data:`RESULT_MARK` line. The text since
-    the last report is the current file's (the log quoted if it dies)."""
+    up to the file's :data:`RESULT_MARK` line. The text since the last
+    report is the current file's (the log quoted if it dies). A thread
+    reads the worker's output into a queue (``select`` on a pipe is POSIX
+    only), ``None`` at its end."""
 
     def __init__(self, cmd):
         super().__init__(cmd, stdin=subprocess.PIPE, stdout=subprocess.PIPE)
         self.text = b""
+        self.chunks = queue.Queue()
+        self.reader = threading.Thread(target=self._read, daemon=True,
+                                       name="batch-worker-output")
+        self.reader.start()
+
+    def _read(self):
+        """(The reader thread) the worker's output, chunk by chunk, then None."""
+        stream = self.proc.stdout
+        for chunk in iter(lambda: stream.read1(1 << 16), b""):
+            self.chunks.put(chunk)
+        self.chunks.put(None)
 
     def convert(self, task, payload_json):
         """The report of ``task``: the worker's, or a failed one when it died
@@ -173,17 +195,20 @@ class ServingWorker(_Worker):
         try:
             self.proc.stdin.write(payload_json.encode("utf-8") + b"\n")
             self.proc.stdin.flush()
-        except BrokenPipeError:             # it died since its last file: said below
+        except (BrokenPipeError, OSError):    # it died since its last file: said below
             pass
-        fd = self.proc.stdout.fileno()
         while True:
-            ready, _, _ = select.select([fd], [], [], _POLL_S)
-            chunk = os.read(fd, 1 << 16) if ready else None
+            try:
+                chunk = self.chunks.get(timeout=_POLL_S)
+            except queue.Empty:
+                chunk = b""
             if chunk:
                 self.text += chunk
                 if self._has_report():
                     return self.report(task)
-            elif chunk == b"" or self.proc.poll() is not None:     # the end of its output, or of it
+            elif chunk is None or self.proc.poll() is not None:   # the end of its output, or of it
+                if chunk is None:
+                    self.chunks.put(None)         # (the end stays in the queue for _drain)
                 try:
                     self.proc.wait(timeout=STOP_GRACE_S)
                 except subprocess.TimeoutExpired:      # (its output closed, itself alive)
@@ -203,11 +228,16 @@ class ServingWorker(_Worker):
         return worker_report(task, text, self.proc.returncode, self.proc.pid, stopped=stopped)
 
     def _drain(self):
-        """Read what an ended worker left in the pipe, without blocking."""
-        fd = self.proc.stdout.fileno()
-        while select.select([fd], [], [], 0)[0]:
-            chunk = os.read(fd, 1 << 16)
-            if not chunk:
+        """Take what an ended worker left in its output (the reader thread
+        reaches the end of it within ``STOP_GRACE_S``)."""
+        deadline = time.monotonic() + STOP_GRACE_S
+        while True:
+            try:
+                chunk = self.chunks.get(timeout=max(0.0, deadline - time.monotonic()))
+            except queue.Empty:
+                return
+            if chunk is None:
+                self.chunks.put(None)        # (a later report drains nothing more)
                 return
             self.text += chunk
 
@@ -215,12 +245,13 @@ class ServingWorker(_Worker):
         """End the worker: its stdin closed, it leaves (stopped if it does not)."""
         try:
             self.proc.stdin.close()
-        except BrokenPipeError:
+        except (BrokenPipeError, OSError):
             pass
         try:
             self.proc.wait(timeout=STOP_GRACE_S)
         except subprocess.TimeoutExpired:
             self.stop()
+        self.reader.join(timeout=STOP_GRACE_S)
         self.proc.stdout.close()
 
 
