@@ -694,7 +694,7 @@ def deform(binding, V_cage_edited, *, F_cage=None, moved=None, out=None):
             raise InvalidArgumentError(
                 "deform: moved needs out (the dense positions computed before the move)")
         ids = _check_moved(binding, moved)
-        Vc = _check_cage(binding, V_cage_edited, F_cage, "deform")
+        Vc = _apart_from(_check_cage(binding, V_cage_edited, F_cage, "deform"), out)
         if ids.size:
             with _INCREMENTAL_LOCK:
                 hit = _influenced_dense(binding, ids)
@@ -705,7 +705,7 @@ def deform(binding, V_cage_edited, *, F_cage=None, moved=None, out=None):
                     _deform_rows(binding, P, N, hit, out, origin)
                 _keep_repair(binding, out, _unfold(binding, out, Vc, hit, last))
         return out
-    Vc = _check_cage(binding, V_cage_edited, F_cage, "deform")
+    Vc = _apart_from(_check_cage(binding, V_cage_edited, F_cage, "deform"), out)
     origin = _deform_origin(binding, Vc)
     X = _fine_levels(binding, Vc, origin)
     floor = _normal_floor(binding, Vc)
@@ -725,6 +725,14 @@ def deform(binding, V_cage_edited, *, F_cage=None, moved=None, out=None):
             D = out
         _keep_repair(binding, D, _unfold(binding, D, Vc, DT=DT))
     return D
+
+
+def _apart_from(Vc, out):
+    """The cage ``Vc``, copied when it shares memory with ``out`` (the fold
+    repair reads it after the rows are written: a cage held in the output's
+    buffer had been overwritten by then, and a deform that repaired faces came
+    out 0.1 of the size off)."""
+    return Vc.copy() if out is not None and np.may_share_memory(Vc, out) else Vc
 
 
 def _repair_state(binding):

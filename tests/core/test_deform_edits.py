@@ -134,3 +134,24 @@ def test_dataclasses_replace_gives_a_binding_of_its_own_arrays(sphere_loop):
         dataclasses.replace(b, levels=1)
     same = dataclasses.replace(b)
     assert same._operator is b._operator and np.array_equal(deform(same, cage.V), deform(b, cage.V))
+
+
+def test_a_cage_held_in_the_output_buffer():
+    # deform(b, buf[:n], out=buf): the rows overwrote the cage before the fold repair
+    # read it (which cage vertices moved, their rotations), and a deform that repairs
+    # came out 0.1 of the size off (a rough torus); the cage is copied first now
+    from tests.mesh_factory import torus
+    from core.mesh import vertex_normals
+    Vd, Fd = torus(96, 48, bump=0.01)
+    Vd = Vd + 0.01 * np.random.default_rng(0).standard_normal(Vd.shape)
+    cage = simplify(Vd, Fd, target_faces=200)
+    b = bind(Vd, Fd, cage.V, cage.F, levels=2, scheme="butterfly")
+    ring = np.unique(cage.F[(cage.F == 50).any(axis=1)])
+    Ve = cage.V.copy()
+    Ve[ring] += 0.05 * bbox_diagonal(Vd) * vertex_normals(cage.V, cage.F)[50]
+    want = deform(b, Ve)
+    assert b.repaired(want).size > 0
+    n = Ve.shape[0]
+    buf = np.zeros((b.n_dense, 3))
+    buf[:n] = Ve
+    assert np.array_equal(deform(b, buf[:n], out=buf), want)
