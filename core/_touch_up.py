@@ -477,8 +477,11 @@ def _flat_flips(V, F, faces, flat):
         T = V[new[:, t]]
         ok &= np.einsum("ij,ij->i", cross_rows(T[:, 1] - T[:, 0], T[:, 2] - T[:, 0]), Ng) > 0
     # the flat faces are distinct and never across (those are not flat): one flip per
-    # face across a round
+    # face across a round, and one per new edge (two flat faces with one corner c on two
+    # edges whose faces across share d both make (c, d): an edge of four faces)
     sel = np.flatnonzero(ok)[np.unique(g[ok], return_index=True)[1]]
+    first = np.unique(edge_keys(c[sel], d[sel], n), return_index=True)[1]
+    sel = sel[np.isin(np.arange(sel.size), first)]
     if not sel.size:
         return None
     return _Flips(np.concatenate([faces[sel], g[sel]]), np.concatenate([new[sel, 0], new[sel, 1]]),
