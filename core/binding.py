@@ -49,7 +49,7 @@ Properties (tested): ``deform(bind(D, C), C) == D`` to rounding; a rigid motion
 of the cage moves the dense mesh rigidly; moving one cage vertex moves only the
 dense vertices returned by :meth:`Binding.affected` (bit-for-bit elsewhere,
 unless the fold repair changed rows, which it lists);
-an incremental deform equals the full one to rounding.
+an incremental deform equals the full one bit for bit (a drag: to rounding).
 """
 
 import threading
@@ -73,7 +73,7 @@ from .topology import check_not_soup
 from .unfold import (CageRings, Copies, FaceStars, FineFaceGroups, Repair, away_rows, away_t,
                      nearest_rotations, repair, rest_normals, ring_linear_maps, ring_rotations,
                      turned_over)
-from ._groups import distinct, ragged_entries, ragged_ranges
+from ._groups import distinct, ragged_entries
 from ._parallel import WORKERS, blocks, each_in_order, run_blocks, run_each
 from .pages import plain_pages
 
@@ -81,12 +81,14 @@ from .pages import plain_pages
 _DEGENERATE = 1e-12
 
 #: a fine vertex normal (the sum of its faces' area normals) shorter than this share of
-#: the square of the cage's size (the power of two above its extent) is none: the faces
-#: around the vertex have no area (a cage vertex moved onto a neighbour folds its fine
-#: faces flat) and the sum is rounding noise, whose direction a deform and an
-#: incremental one (the same positions to 1e-16) drew at random (Suzanne's cage, vertex
-#: 1 put on vertex 22: a dense vertex bound there 1e-3 of the diagonal apart); a real
-#: fine vertex's faces are some 1e5 times larger even at five levels of a 10k-face cage
+#: the square of the rest cage's size (the power of two above its extent) is none: the
+#: faces around the vertex have no area (a cage vertex moved onto a neighbour folds its
+#: fine faces flat) and the sum is rounding noise, whose direction a drag (its fine
+#: positions from a linear map, 1e-16 from the stencils') drew at random against a full
+#: deform (a cube's cage, a vertex dragged onto its neighbour: 0.10 of the diagonal
+#: apart); a real fine vertex's faces are some 1e5 times larger even at five levels of a
+#: 10k-face cage (a cage shrunk below about a thousandth of its rest size falls under it:
+#: its frames take the fine faces' normals)
 _NORMAL_FLOOR = 2.0 ** -40
 
 #: dense meshes up to this many faces get an exact spatial index for the
@@ -636,12 +638,13 @@ def deform(binding, V_cage_edited, *, F_cage=None, moved=None, out=None):
     -------
     (n_dense,3) float64 ndarray
         ``out`` when given, else a new array. An incremental update equals a
-        full deform of ``V_cage_edited`` to rounding (the same row-wise frame
-        rebuild; its fine positions come from each level's stencil rows,
-        summed in another order than the operator's apply plan: about 1e-16
-        of the diagonal, computed relative to a working origin near the
-        cage; far from the origin, plus the output's own rounding: a
-        rounding step of the coordinates).
+        full deform of ``V_cage_edited`` bit for bit (the same row-wise frame
+        rebuild; its fine positions are each level's stencil rows summed as
+        the operator's apply plan sums them), except in a drag (the same
+        vertices moved again), whose fine positions come from a linear map
+        of the moved vertices: about 1e-16 of the diagonal, computed relative
+        to a working origin near the cage; far from the origin, plus the
+        output's own rounding: a rounding step of the coordinates.
 
     Notes
     -----
@@ -708,7 +711,7 @@ def deform(binding, V_cage_edited, *, F_cage=None, moved=None, out=None):
     Vc = _apart_from(_check_cage(binding, V_cage_edited, F_cage, "deform"), out)
     origin = _deform_origin(binding, Vc)
     X = _fine_levels(binding, Vc, origin)
-    floor = _normal_floor(binding, Vc)
+    floor = _normal_floor(binding)
     Nf = _vertex_normals_t(X[-1], binding._operator.F_fine, floor)
     c = binding._cache
     DT = _positions_t(c["offset_t"], c["corners_t"], c["bary_t"], X[-1], Nf, origin)
@@ -748,7 +751,7 @@ def _repair_state(binding):
         origin = _deform_origin(binding, binding.V_cage_rest)
         VrT = _fine_levels(binding, binding.V_cage_rest, origin)[-1]
         NrT = _vertex_normals_t(VrT, binding._operator.F_fine,
-                                _normal_floor(binding, binding.V_cage_rest))
+                                _normal_floor(binding))
         rest = _positions_t(c["offset_t"], c["corners_t"], c["bary_t"], VrT, NrT, origin)
         FT = np.ascontiguousarray(binding.F_dense.T)
         c["repair"] = {"V_rest": np.ascontiguousarray(rest.T), "F_t": FT,
@@ -1306,26 +1309,27 @@ def _fine_geometry(binding, V_cage_edited, F_cage, where):
     origin = _deform_origin(binding, Vc)
     op = binding._operator
     VfT = np.ascontiguousarray(op.apply(Vc - origin).T)
-    return VfT, _vertex_normals_t(VfT, op.F_fine, _normal_floor(binding, Vc)), origin
+    return VfT, _vertex_normals_t(VfT, op.F_fine, _normal_floor(binding)), origin
 
 
-def _normal_floor(binding, Vc):
+def _normal_floor(binding, V_rest=None):
     """The length (float) under which a fine vertex normal's sum of area
-    normals is none, for the cage positions ``Vc`` (n,3) of ``binding``
-    (None: the rest cage of a bind): ``_NORMAL_FLOOR`` times the square of
-    the power of two above the size of the rest cage or of ``Vc``, the
-    smaller (the same for every cage of one size class, so a deform and an
-    incremental one agree; a cage shrunk to a millionth keeps its normals, a
-    vertex dragged a million sizes away leaves the others' alone); 0.0 for
-    a binding without its rest cage (no floor: the normals as they sum)."""
+    normals is none for ``binding``: ``_NORMAL_FLOOR`` times the square of
+    the power of two above its rest cage's size (``V_rest`` (n,3) when
+    ``binding`` is None: a bind). One value per binding, whatever the edit,
+    so a full deform and every incremental one agree (it had followed the
+    edited cage's size class: a cage collapsed and put back vertex by
+    vertex deformed 2.5% of the diagonal apart from a full deform, rows
+    kept from before a change of class); 0.0 for a binding without its rest
+    cage (no floor: the normals as they sum)."""
     if binding is None:
-        return _NORMAL_FLOOR * _origin_and_step(Vc)[1] ** 2
+        return _NORMAL_FLOOR * _origin_and_step(V_rest)[1] ** 2
     if binding.V_cage_rest is None:
         return 0.0
     c = binding._cache
     if "rest_origin" not in c:
         c["rest_origin"] = _origin_and_step(binding.V_cage_rest)
-    return _NORMAL_FLOOR * min(c["rest_origin"][1], _origin_and_step(Vc)[1]) ** 2
+    return _NORMAL_FLOOR * c["rest_origin"][1] ** 2
 
 
 def _vertex_normals_t(PT, F, floor=0.0):
@@ -1444,23 +1448,22 @@ def _update_fine_geometry(binding, Vc, ids, hit):
     changed normal at a vertex with no bound dense vertex on its faces (a
     fine mesh denser than the dense one) is never read: it is only marked
     stale. Each value is recomputed from the level below, never updated
-    by a difference, so nothing drifts over many updates (rows sum in
-    another order than the apply plan's tables: equal to a full evaluation
-    to about 1e-16); when the same vertices moved in the last incremental
+    by a difference, so nothing drifts over many updates (rows summed as
+    the apply plan sums them: a full evaluation's values bit for bit); when
+    the same vertices moved in the last incremental
     deform too (a drag), from the linear map of them made then
     (:class:`_Drag`). Otherwise (nothing kept yet, or another cage)
     everything is evaluated and kept."""
     c = binding._cache
     g = c.get("geometry")
-    floor = _normal_floor(binding, Vc)
     other = None
     if g is not None:
         other = (g.V_cage != Vc).any(axis=1)
         other[ids] = False
-    # (a cage grown or shrunk past a power of two has another normal floor: all anew)
-    if g is None or other.any() or g.floor != floor:
+    if g is None or other.any():
         origin = _deform_origin(binding, Vc)
         X = _fine_levels(binding, Vc, origin)
+        floor = _normal_floor(binding)
         g = _Geometry.of(Vc, X, _vertex_normals_t(X[-1], binding._operator.F_fine, floor),
                          origin, floor)
         c["geometry"] = g
@@ -1491,12 +1494,60 @@ def _update_fine_geometry(binding, Vc, ids, hit):
 
 def _restencil(op, X, hit):
     """Each level's changed positions (``hit.changed``) of the kept levels
-    ``X`` recomputed in place from their stencil rows over the level below."""
+    ``X`` recomputed in place from their stencil rows over the level below,
+    each summed as the full deform's apply sums it (:func:`_rows_as_planned`:
+    bit for bit; a sum of the rows' entries in another order had left them
+    1e-16 apart, which the normals of fine faces an edit folds flat, rounding
+    noise, turned into dense rows 0.4-2.5% of the diagonal apart)."""
     for S, r, below, level in zip(op.stencils, hit.changed, X[:-1], X[1:]):
-        k, owner = ragged_ranges(S.indptr[r], S.indptr[r + 1] - S.indptr[r])
-        w, cols = S.weights[k], S.cols[k]
-        for d in range(3):
-            level[d, r] = np.bincount(owner, weights=w * below[d].take(cols), minlength=r.shape[0])
+        r = np.sort(r)
+        level[:, r] = _rows_as_planned(S, below, r)
+
+
+def _rows_as_planned(S, X, r):
+    """``S.apply_t(X)[:, r]`` for the rows ``r`` (sorted, distinct) of the
+    stencil ``S`` over ``X`` (3, n_in), each row summed as the apply plan
+    sums it (:meth:`~._stencils.Stencil.apply_t`: a block's padded table
+    row by ``np.einsum``, a long row by ``np.add.reduceat``), so bit for bit
+    the full deform's value."""
+    out = np.empty((X.shape[0], r.shape[0]))
+    p = S.plan
+    if p is None:
+        _reduce_rows(S.indptr, S.cols, S.weights, X, r, out, np.arange(r.shape[0]))
+        return out
+    for b in p.blocks:
+        lo, hi = np.searchsorted(r, (b.start, b.stop))
+        if lo == hi:
+            continue
+        if b.copy:
+            out[:, lo:hi] = X[:, r[lo:hi]]
+            continue
+        local = r[lo:hi] - b.start
+        cols = b.cols.reshape(-1, b.width)[local]
+        weights = np.ascontiguousarray(b.weights[local])
+        g = np.empty(cols.shape)
+        for d in range(X.shape[0]):
+            X[d].take(cols, out=g, mode="wrap")
+            np.einsum("ij,ij->i", g, weights, out=out[d, lo:hi])
+    if p.long_rows.shape[0]:
+        at = np.searchsorted(r, p.long_rows)
+        hit = at < r.shape[0]
+        hit[hit] = r[at[hit]] == p.long_rows[hit]
+        if hit.any():
+            _reduce_rows(S.indptr, S.cols, S.weights, X, p.long_rows[hit], out, at[hit])
+    return out
+
+
+def _reduce_rows(indptr, cols, weights, X, rows, out, slots):
+    """``out[:, slots]`` = the CSR rows ``rows`` over ``X``, each summed in
+    entry order with ``np.add.reduceat`` (as the apply plan sums long rows)."""
+    counts = indptr[rows + 1] - indptr[rows]
+    k = ragged_entries(indptr[rows], counts)
+    starts = np.cumsum(counts) - counts
+    for d in range(X.shape[0]):
+        g = X[d].take(cols[k], mode="wrap")
+        g *= weights[k]
+        out[d, slots] = np.add.reduceat(g, starts)
 
 
 class _Drag(NamedTuple):
