@@ -72,8 +72,7 @@ def sphere_loop():
 def test_one_vertex_dragged_a_million_sizes_away_leaves_the_rest(sphere_loop):
     # (41009d6's normal floor was taken from the edited cage's size: one vertex dragged
     # 1e6 away made it 1.0, every real normal of a unit cage fell under it, and every
-    # row moved, 1.5e5 units on the cow; the floor is the rest cage's size class or the
-    # edited one's, the smaller)
+    # row moved, 1.5e5 units on the cow; the floor is the rest cage's now)
     V, cage, b = sphere_loop
     D0 = deform(b, cage.V)
     for v in (0, 7, 20):
