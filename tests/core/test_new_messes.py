@@ -7,7 +7,9 @@ import numpy as np
 
 from core._touch_up import flip_flat_faces
 from core.mesh import flat_faces
+from core.simplify import simplify
 from core.topology import manifold_report
+from tests.mesh_factory import load_shared
 
 
 def test_flat_flips_of_one_round_never_make_the_same_edge_twice():
@@ -29,3 +31,17 @@ def test_flat_flips_of_one_round_never_make_the_same_edge_twice():
     assert rep.is_oriented_manifold, rep
     assert flat_faces(V, out).sum() == 1
     assert sorted(map(sorted, out.tolist())) != sorted(map(sorted, F.tolist()))
+
+
+def test_cow_in_float32_at_georeferenced_coordinates_simplifies_to_a_manifold():
+    """The cow, 1 m across, placed at (5e6, 4e6, 300) m and stored in float32
+    (steps of 0.5 m in x: its faces fold onto a few planes): its 500-face cage
+    had 5 edges of four faces, from flat-face flips making one edge twice."""
+    V, F = load_shared("cow.obj")
+    V = (V - V.mean(axis=0)) / np.linalg.norm(V.max(axis=0) - V.min(axis=0))
+    V = (V + np.array([5e6, 4e6, 300.0])).astype(np.float32)
+    r = simplify(V, F.astype(np.int32), target_faces=500)
+    assert r.F.shape[0] == 500 and r.stopped_because == "target"
+    rep = manifold_report(r.F, r.V.shape[0])
+    assert rep.is_oriented_manifold, rep
+    assert np.isfinite(r.V).all()
