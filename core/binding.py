@@ -670,8 +670,10 @@ def deform(binding, V_cage_edited, *, F_cage=None, moved=None, out=None):
     word, so a cage vertex that changed and is not listed leaves the rows
     it influences as they were (list every changed vertex, or make a full
     deform). Consecutive incremental deforms
-    moving the same vertices (a drag) take the fine positions from a linear
-    map of them, made at the second (up to 32 MB; a full deform ends it).
+    moving the same few vertices (a drag) take the fine positions from a
+    linear map of them, made at the second when it is smaller than the
+    stencil rows it stands for (a few vertices; up to 32 MB; a full deform
+    ends it).
 
     Raises
     ------
