@@ -59,7 +59,7 @@ from ._parallel import blocks, run_blocks, run_each
 from ._relax import close_smallest_hole, close_triangular_holes, drop_stuck_components
 from ._relocate import relocate, segment_triangles
 from ._touch_up import flip_flat_faces, touch_up
-from .clean import MIN_COMPONENT_AREA, CleanReport, check_span, clean_mesh
+from .clean import MIN_COMPONENT_AREA, CleanReport, bulk_box, check_span, clean_mesh
 from .errors import InvalidArgumentError, InvalidMeshError, MeshAdjustError
 from .mesh import (UNITS, area_normals_rows, bounding_box, check_flag, check_mesh, check_number,
                    check_vertex_mask, diagonal_length, dot_columns, face_normals, has_area,
@@ -107,6 +107,12 @@ FLOOR_NEAR = 1.05
 #: share of its vertices on open borders, says that its borders hold it there
 #: (:attr:`SimplifyResult.border_note`)
 BORDER_HOLDS = 0.75
+#: an input whose coordinates are all float32 numbers (Blender stores positions so),
+#: with float32's step at its largest coordinate above this share of its size, says that
+#: its shape may have been rounded away before it arrived (:attr:`SimplifyResult.float32_note`):
+#: spot 1 m across at (5e6, 4e6, 300) m in float32 (steps of 0.5 m in x) cleaned into
+#: 2,864 double-sided sheets and came back '5,856 -> 8 faces' and nothing more
+FLOAT32_NOTE = 1e-4
 
 
 @dataclass(frozen=True)
@@ -158,6 +164,9 @@ class SimplifyResult:
         cleaning dropped as debris, coincident copies or double-sided
         sheets. None: :meth:`represented` goes by the vertex map alone.
     n_passes : int, batches applied.
+    float32_step : float or None, when every input coordinate is a float32
+        number: float32's step at the largest of them, as a share of the
+        input's size (:func:`float32_step`); None otherwise.
     n_clean_faces : int, the faces the collapse started from (the cleaned
         input, with its capped pinholes): a cage of that many faces is the
         cleaned input unchanged.
@@ -196,6 +205,7 @@ class SimplifyResult:
     n_input_pieces: int = None
     represented_faces: np.ndarray = None
     n_clean_faces: int = 0
+    float32_step: float = None
 
     def represented(self, F):
         """(m_in,) bool per face of ``F`` (the faces given to ``simplify``):
@@ -246,7 +256,7 @@ class SimplifyResult:
             "cancelled": f"cancelled: the cleaned input returned unchanged ({m:,} faces)",
         }[self.stopped_because]
         for note in (self.soup_note, self.floor_note, self.border_note, self.sliver_note,
-                     self.asymmetry_note, self.pieces_note):
+                     self.asymmetry_note, self.pieces_note, self.float32_note):
             if note:
                 text += f"; {note}"
         done = self.cleaning.summary()
@@ -361,6 +371,45 @@ class SimplifyResult:
                 f"the input's own triangles there (nothing lies between their ends for a cage "
                 f"vertex to sit on): remesh the input into even triangles (Blender's Remesh modifier, "
                 f"Voxel) for a cage without them; subdividing keeps their shape")
+
+    @property
+    def float32_note(self):
+        """A sentence when the input's coordinates are float32 numbers whose
+        step where they lie is beyond :data:`FLOAT32_NOTE` of its size
+        (:attr:`float32_step`): its shape below that step was lost before
+        ``simplify`` saw it. "" otherwise."""
+        if self.float32_step is None or self.float32_step <= FLOAT32_NOTE:
+            return ""
+        return (f"its coordinates are float32 numbers whose step where they lie is "
+                f"{100 * self.float32_step:.2g}% of its size: shape finer than that was rounded "
+                f"away before it arrived (keep a scan far from the origin in float64, or move it "
+                f"near the origin before it is stored in float32, e.g. in Blender)")
+
+
+def float32_step(V):
+    """float32's spacing at the largest coordinate of ``V`` (n,3) as a share
+    of the diagonal of its :func:`~.clean.bulk_box`, when every coordinate is
+    a float32 number (a float32 array, or float64 values that came from one);
+    None otherwise, or for an empty mesh or one of no extent.
+
+    Examples
+    --------
+    >>> V = np.array([[5e6, 4e6, 300.0], [5e6 + 1, 4e6, 300.0], [5e6, 4e6 + 1, 300.0]])
+    >>> round(float32_step(V.astype(np.float32)), 3), float32_step(V + 1e-3)
+    (0.354, None)
+    """
+    V = np.asarray(V)
+    if V.size == 0 or V.dtype.kind != "f" or V.dtype.itemsize < 4:
+        return None
+    top = float(np.abs(V).max())
+    if not top <= np.finfo(np.float32).max or \
+            (V.dtype != np.float32 and not np.array_equal(V, V.astype(np.float32))):
+        return None
+    lo, hi = bulk_box(V)
+    size = float(np.linalg.norm(hi.astype(np.float64) - lo))
+    if not size > 0:
+        return None
+    return float(np.spacing(np.float32(top))) / size
 
 
 def check_arguments(n, target_faces, ratio, max_error, feature_angle_deg, vertex_weights, locked,
@@ -995,6 +1044,7 @@ def simplify(V, F, *, target_faces=None, ratio=None, max_error=None, preserve_bo
                                    f"{type(tuning).__name__}")
     V, F = check_mesh(V, F, where=_WHERE)
     n_in = V.shape[0]
+    step = float32_step(V)
     weights, lk = check_arguments(n_in, target_faces, ratio, max_error, feature_angle_deg,
                                   vertex_weights, locked, progress, max_dihedral_deg)
     preserve_boundary, preserve_topology, close_pinholes = check_flags(
@@ -1032,7 +1082,8 @@ def simplify(V, F, *, target_faces=None, ratio=None, max_error=None, preserve_bo
         cage, hausdorff = _within_max_error(su, clean, target, max_error, opts, progress)
         cage = cage._replace(stopped=_stop_reason(cage, target, opts))
     cage = cage._replace(seconds={"clean": t_clean, **cage.seconds})
-    return _result(cage, clean, m_in, n_in, target, hausdorff, t0, preserve_boundary, stood_for)
+    return _result(cage, clean, m_in, n_in, target, hausdorff, t0, preserve_boundary, stood_for,
+                   step)
 
 
 def _collapsed(clean, target, opts, progress):
@@ -1210,7 +1261,8 @@ def target_count(target_faces, ratio, m0):
     return target
 
 
-def _result(cage, clean, m_in, n_in, target, hausdorff, t0, preserve_boundary, stood_for):
+def _result(cage, clean, m_in, n_in, target, hausdorff, t0, preserve_boundary, stood_for,
+            step=None):
     """The :class:`SimplifyResult` of ``cage``, mapped back to the input
     (``stood_for``: :func:`represented_faces` of the input)."""
     vertex_map = input_vertex_map(clean, cage.of_clean)
@@ -1225,4 +1277,4 @@ def _result(cage, clean, m_in, n_in, target, hausdorff, t0, preserve_boundary, s
         n_border_vertices=border_vertex_count(cage.F, cage.V.shape[0], em),
         preserve_boundary=preserve_boundary,
         n_input_pieces=soup_pieces(cage.F, cage.V.shape[0], clean.F, clean.V.shape[0], n_comp),
-        represented_faces=stood_for, n_clean_faces=int(clean.F.shape[0]))
+        represented_faces=stood_for, n_clean_faces=int(clean.F.shape[0]), float32_step=step)

@@ -9,7 +9,7 @@ from core._touch_up import flip_flat_faces
 from core.mesh import flat_faces
 from core.simplify import simplify
 from core.topology import manifold_report
-from tests.mesh_factory import load_shared, torus
+from tests.mesh_factory import icosphere, load_shared, torus
 
 
 def test_flat_flips_of_one_round_never_make_the_same_edge_twice():
@@ -69,3 +69,24 @@ def test_a_halo_of_specks_does_not_widen_the_weld():
     kept = c.face_to_input < F0.shape[0]
     assert np.array_equal(np.sort(c.face_to_input[kept]), np.arange(F0.shape[0]))
     assert c.report.n_debris_components + c.report.n_degenerate_faces >= k - 10
+
+
+def test_a_scan_rounded_by_float32_far_from_the_origin_says_so():
+    """An icosphere 1 unit across at (5e6, 4e6, 300) stored in float32 (steps
+    of 0.5 in x, 0.25 in y there): its faces fold onto a few planes, the
+    cleaning removes most of them as double-sided sheets, and the message
+    said only how many faces were left. It now names float32's step there as
+    a share of the size; float64 positions, or float32 near the origin, do
+    not get the note."""
+    from core.simplify import FLOAT32_NOTE, float32_step
+    V0, F0 = icosphere(4)
+    V0 = V0 / np.linalg.norm(V0.max(axis=0) - V0.min(axis=0))
+    far = (V0 + np.array([5e6, 4e6, 300.0])).astype(np.float32)
+    r = simplify(far, F0, target_faces=500)
+    assert 0.3 < r.float32_step < 0.6      # 0.5 (x's step) over a size of 1 to 1.3 (rounded)
+    assert "float32" in r.message and "rounded away" in r.message
+    assert float32_step(far.astype(np.float64)) == r.float32_step      # values from float32
+    near = simplify(V0.astype(np.float32), F0, target_faces=500)
+    assert near.float32_step < FLOAT32_NOTE and "float32" not in near.message
+    exact = simplify(V0 + np.array([5e6, 4e6, 300.0]), F0, target_faces=500)
+    assert exact.float32_step is None and "float32" not in exact.message
