@@ -157,6 +157,10 @@ class Tuning:
     #: the engine runs afresh at half the smallest step's share, a quarter, ... this many
     #: times, each cage fully measured, before the cleaned input itself is returned
     max_error_retries: int = 4
+    #: ... and when none of those is within it either, the face count is halved this many
+    #: times between the cleaned input's and the target, each cage fully measured
+    #: (``simplify._by_face_count``: collapses that all cost nothing, yet move the surface)
+    max_error_count_halvings: int = 8
     snap_bits: int = 32              #: coordinates snapped to 2^-snap_bits of the diagonal
     snap_share: float = 1e-12        #: (distance / edge length)^2 below which a position is an endpoint
     compact_share: float = 0.5       #: compact the arrays once live faces are fewer than this share

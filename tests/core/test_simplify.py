@@ -1032,7 +1032,8 @@ def test_max_error_runs_afresh_lower_when_the_full_measure_refuses_every_quick_s
     bound = 0.003 * bbox_diagonal(V)
     clean = clean_mesh(V, F)
     quick = Tuning(max_error_quick_samples=0)
-    before = simplify(V, F, max_error=bound, tuning=replace(quick, max_error_retries=0))
+    before = simplify(V, F, max_error=bound, tuning=replace(quick, max_error_retries=0,
+                                                            max_error_count_halvings=0))
     assert before.n_passes == 0 and before.F.shape[0] == clean.F.shape[0]
     r = simplify(V, F, max_error=bound, tuning=quick)
     assert r.stopped_because == "max_error" and 0 < r.n_passes
