@@ -47,8 +47,8 @@ from .mesh import area_normals_rows, bbox_diagonal, check_mesh, check_reach
 from .metrics import surface_distance
 from .mirror import PARTNER_TOLERANCE, axis_index, mirror, mirror_partners  # noqa: F401 (example)
 from .simplify import (SimplifyResult, check_arguments, check_flags, cleaned_input, debris_budget,
-                       input_vertex_map, measuring_frame, per_clean_vertex, represented_faces,
-                       simplify, target_count)
+                       float32_step, input_vertex_map, measuring_frame, per_clean_vertex,
+                       represented_faces, simplify, target_count)
 from .spatial import TriangleIndex
 from .topology import (border_vertex_count, boundary_loops_count, edge_keys, edge_map,
                        face_components, soup_pieces)
@@ -452,7 +452,8 @@ def simplify_symmetric(V, F, *, axis="X", target_faces=None, ratio=None, max_err
                    max_dihedral_deg=max_dihedral_deg, progress=progress,
                    **({} if tuning is None else {"tuning": tuning}))
     whole = _Whole(clean, k, axis, weights, lk, target, max_error, n_in, F.shape[0])
-    r = replace(_symmetric(whole, options), represented_faces=represented_faces(F, clean))
+    r = replace(_symmetric(whole, options), represented_faces=represented_faces(F, clean),
+                float32_step=float32_step(V))
     if (close_pinholes and max_error is None and preserve_topology and target is not None
             and r.F.shape[0] > target and r.stopped_because in ("no_valid_collapse",
                                                                  "topology_floor")):
@@ -461,7 +462,8 @@ def simplify_symmetric(V, F, *, axis="X", target_faces=None, ratio=None, max_err
         if capped is not None:
             again = _symmetric(whole._replace(clean=capped), options)
             if again.stopped_because != "cancelled" and again.F.shape[0] < r.F.shape[0]:
-                return replace(again, represented_faces=r.represented_faces)
+                return replace(again, represented_faces=r.represented_faces,
+                               float32_step=r.float32_step)
     return r
 
 

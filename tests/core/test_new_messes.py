@@ -90,6 +90,10 @@ def test_a_scan_rounded_by_float32_far_from_the_origin_says_so():
     assert near.float32_step < FLOAT32_NOTE and "float32" not in near.message
     exact = simplify(V0 + np.array([5e6, 4e6, 300.0]), F0, target_faces=500)
     assert exact.float32_step is None and "float32" not in exact.message
+    # a symmetric cage says so too (centred on its mirror plane x = 0, far in y)
+    mirrored = simplify((V0 + np.array([0.0, 4e6, 300.0])).astype(np.float32), F0,
+                        target_faces=500, symmetry="X")
+    assert mirrored.float32_step > FLOAT32_NOTE and "rounded away" in mirrored.message
 
 
 def test_max_error_on_a_mesh_whose_collapses_cost_nothing_still_simplifies():
