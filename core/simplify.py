@@ -402,7 +402,8 @@ def float32_step(V):
     if V.size == 0 or V.dtype.kind != "f" or V.dtype.itemsize < 4:
         return None
     top = float(np.abs(V).max())
-    if not top <= np.finfo(np.float32).max or \
+    # (a Python float against float32's largest: NumPy 2 would cast it to float32, overflowing)
+    if not top <= float(np.finfo(np.float32).max) or \
             (V.dtype != np.float32 and not np.array_equal(V, V.astype(np.float32))):
         return None
     lo, hi = bulk_box(V)
