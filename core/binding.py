@@ -520,11 +520,11 @@ def bind(V_dense, F_dense, V_cage, F_cage, *, levels=2, scheme="butterfly", crea
     op = cage_operator(F_cage, V_cage.shape[0], where="bind", levels=levels, scheme=scheme,
                        creases=creases)
     # everything relative to the origin deform takes for this cage (_working_origin)
-    origin = _working_origin(V_cage)
+    origin, step = _origin_and_step(V_cage)
     shifted = bool(origin.any())
     Vf = op.apply(V_cage - origin)
     VfT = np.ascontiguousarray(Vf.T)
-    NfT = _vertex_normals_t(VfT, op.F_fine, _normal_floor(None, V_cage))
+    NfT = _vertex_normals_t(VfT, op.F_fine, _normal_floor(step))
     detail = _detail_mode(detail_search, F_dense)
     reach = _typical_distance(V_dense, F_dense, V_cage, F_cage, scheme, creases, origin) \
         if levels > _REACH_LEVELS else None
@@ -728,7 +728,7 @@ def deform(binding, V_cage_edited, *, F_cage=None, moved=None, out=None):
     Vc = _apart_from(_check_cage(binding, V_cage_edited, F_cage, "deform"), out)
     origin = _deform_origin(binding, Vc)
     X = _fine_levels(binding, Vc, origin)
-    floor = _normal_floor(binding)
+    floor = _binding_floor(binding)
     Nf = _vertex_normals_t(X[-1], binding._operator.F_fine, floor)
     c = binding._cache
     DT = _positions_t(c["offset_t"], c["corners_t"], c["bary_t"], X[-1], Nf, origin)
@@ -768,7 +768,7 @@ def _repair_state(binding):
         origin = _deform_origin(binding, binding.V_cage_rest)
         VrT = _fine_levels(binding, binding.V_cage_rest, origin)[-1]
         NrT = _vertex_normals_t(VrT, binding._operator.F_fine,
-                                _normal_floor(binding))
+                                _binding_floor(binding))
         rest = _positions_t(c["offset_t"], c["corners_t"], c["bary_t"], VrT, NrT, origin)
         FT = np.ascontiguousarray(binding.F_dense.T)
         c["repair"] = {"V_rest": np.ascontiguousarray(rest.T), "F_t": FT,
@@ -1326,27 +1326,26 @@ def _fine_geometry(binding, V_cage_edited, F_cage, where):
     origin = _deform_origin(binding, Vc)
     op = binding._operator
     VfT = np.ascontiguousarray(op.apply(Vc - origin).T)
-    return VfT, _vertex_normals_t(VfT, op.F_fine, _normal_floor(binding)), origin
+    return VfT, _vertex_normals_t(VfT, op.F_fine, _binding_floor(binding)), origin
 
 
-def _normal_floor(binding, V_rest=None):
+def _normal_floor(step):
     """The length (float) under which a fine vertex normal's sum of area
-    normals is none for ``binding``: ``_NORMAL_FLOOR`` times the square of
-    the power of two above its rest cage's size (``V_rest`` (n,3) when
-    ``binding`` is None: a bind). One value per binding, whatever the edit,
-    so a full deform and every incremental one agree (it had followed the
-    edited cage's size class: a cage collapsed and put back vertex by
-    vertex deformed 2.5% of the diagonal apart from a full deform, rows
-    kept from before a change of class); 0.0 for a binding without its rest
-    cage (no floor: the normals as they sum)."""
-    if binding is None:
-        return _NORMAL_FLOOR * _origin_and_step(V_rest)[1] ** 2
+    normals is none, for a cage whose size's power of two above is ``step``
+    (:func:`_origin_and_step`): ``_NORMAL_FLOOR`` times its square."""
+    return _NORMAL_FLOOR * step ** 2
+
+
+def _binding_floor(binding):
+    """:func:`_normal_floor` of the binding's rest cage: one value per
+    binding, whatever the edit, so a full deform and every incremental one
+    agree (it had followed the edited cage's size class: a cage collapsed
+    and put back vertex by vertex deformed 2.5% of the diagonal apart from a
+    full deform, rows kept from before a change of class); 0.0 for a binding
+    without its rest cage (no floor: the normals as they sum)."""
     if binding.V_cage_rest is None:
         return 0.0
-    c = binding._cache
-    if "rest_origin" not in c:
-        c["rest_origin"] = _origin_and_step(binding.V_cage_rest)
-    return _NORMAL_FLOOR * c["rest_origin"][1] ** 2
+    return _normal_floor(_rest_origin(binding)[1])
 
 
 def _vertex_normals_t(PT, F, floor=0.0):
@@ -1430,14 +1429,20 @@ def _deform_origin(binding, Vc):
     far away) the edited cage's own."""
     if binding.V_cage_rest is None:
         return _working_origin(Vc)
-    c = binding._cache
-    if "rest_origin" not in c:
-        c["rest_origin"] = _origin_and_step(binding.V_cage_rest)
-    origin, step = c["rest_origin"]
+    origin, step = _rest_origin(binding)
     lo, hi = bounding_box(Vc)
     if float(np.abs(0.5 * (lo + hi) - origin).max()) <= 2.0 * step:
         return origin
     return _working_origin(Vc)
+
+
+def _rest_origin(binding):
+    """:func:`_origin_and_step` of the binding's rest cage (it has one),
+    kept in its cache."""
+    c = binding._cache
+    if "rest_origin" not in c:
+        c["rest_origin"] = _origin_and_step(binding.V_cage_rest)
+    return c["rest_origin"]
 
 
 def _fine_levels(binding, Vc, origin=None):
@@ -1480,7 +1485,7 @@ def _update_fine_geometry(binding, Vc, ids, hit):
     if g is None or other.any():
         origin = _deform_origin(binding, Vc)
         X = _fine_levels(binding, Vc, origin)
-        floor = _normal_floor(binding)
+        floor = _binding_floor(binding)
         g = _Geometry.of(Vc, X, _vertex_normals_t(X[-1], binding._operator.F_fine, floor),
                          origin, floor)
         c["geometry"] = g
