@@ -198,7 +198,8 @@ class Binding:
     V_cage_rest: object = None  #: None or (n_cage,3) float64
     _operator: object = field(default=None, repr=False, compare=False)
     _cache: dict = field(default=None, repr=False, compare=False)
-    #: what the cache and operator were made for (the arrays' identities and the counts)
+    #: what the cache and operator were made for: (the operator's arrays' identities and
+    #: counts, every array's identity, the fingerprint)
     _owner: tuple = field(default=None, repr=False, compare=False)
 
     def __post_init__(self):
@@ -215,13 +216,15 @@ class Binding:
         # passes them) are kept only for the same arrays and counts: replace(b,
         # offset=...) had deformed with the old offsets, replace(b, levels=3) with the
         # old operator
-        owner = tuple(id(getattr(self, key)) for key in _VIEWED_KEYS) + (
-            self.n_cage, self.levels, self.scheme, self.fingerprint)
+        # (what the operator is made of first: F_cage, creases and the counts)
+        made_of = (id(self.F_cage), id(self.creases), self.n_cage, self.levels, self.scheme)
+        owner = (made_of, tuple(id(getattr(self, key)) for key in _VIEWED_KEYS),
+                 self.fingerprint)
         given = self._owner
         if given is not None and given != owner:
             object.__setattr__(self, "_cache", None)
-            if (given[4], given[5], given[-4:-1]) != (owner[4], owner[5], owner[-4:-1]):
-                object.__setattr__(self, "_operator", None)    # F_cage, creases or counts
+            if given[0] != made_of:
+                object.__setattr__(self, "_operator", None)
         op = self._operator
         if op is None:
             op = subdivision_operator(self.F_cage, self.n_cage, levels=self.levels,
