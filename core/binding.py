@@ -1520,59 +1520,13 @@ def _update_fine_geometry(binding, Vc, ids, hit):
 def _restencil(op, X, hit):
     """Each level's changed positions (``hit.changed``) of the kept levels
     ``X`` recomputed in place from their stencil rows over the level below,
-    each summed as the full deform's apply sums it (:func:`_rows_as_planned`:
+    each summed as the full deform's apply sums it (``Stencil.rows_t``:
     bit for bit; a sum of the rows' entries in another order had left them
     1e-16 apart, which the normals of fine faces an edit folds flat, rounding
     noise, turned into dense rows 0.4-2.5% of the diagonal apart)."""
     for S, r, below, level in zip(op.stencils, hit.changed, X[:-1], X[1:]):
         r = np.sort(r)
-        level[:, r] = _rows_as_planned(S, below, r)
-
-
-def _rows_as_planned(S, X, r):
-    """``S.apply_t(X)[:, r]`` for the rows ``r`` (sorted, distinct) of the
-    stencil ``S`` over ``X`` (3, n_in), each row summed as the apply plan
-    sums it (:meth:`~._stencils.Stencil.apply_t`: a block's padded table
-    row by ``np.einsum``, a long row by ``np.add.reduceat``), so bit for bit
-    the full deform's value."""
-    out = np.empty((X.shape[0], r.shape[0]))
-    p = S.plan
-    if p is None:
-        _reduce_rows(S.indptr, S.cols, S.weights, X, r, out, np.arange(r.shape[0]))
-        return out
-    for b in p.blocks:
-        lo, hi = np.searchsorted(r, (b.start, b.stop))
-        if lo == hi:
-            continue
-        if b.copy:
-            out[:, lo:hi] = X[:, r[lo:hi]]
-            continue
-        local = r[lo:hi] - b.start
-        cols = b.cols.reshape(-1, b.width)[local]
-        weights = np.ascontiguousarray(b.weights[local])
-        g = np.empty(cols.shape)
-        for d in range(X.shape[0]):
-            X[d].take(cols, out=g, mode="wrap")
-            np.einsum("ij,ij->i", g, weights, out=out[d, lo:hi])
-    if p.long_rows.shape[0]:
-        at = np.searchsorted(r, p.long_rows)
-        hit = at < r.shape[0]
-        hit[hit] = r[at[hit]] == p.long_rows[hit]
-        if hit.any():
-            _reduce_rows(S.indptr, S.cols, S.weights, X, p.long_rows[hit], out, at[hit])
-    return out
-
-
-def _reduce_rows(indptr, cols, weights, X, rows, out, slots):
-    """``out[:, slots]`` = the CSR rows ``rows`` over ``X``, each summed in
-    entry order with ``np.add.reduceat`` (as the apply plan sums long rows)."""
-    counts = indptr[rows + 1] - indptr[rows]
-    k = ragged_entries(indptr[rows], counts)
-    starts = np.cumsum(counts) - counts
-    for d in range(X.shape[0]):
-        g = X[d].take(cols[k], mode="wrap")
-        g *= weights[k]
-        out[d, slots] = np.add.reduceat(g, starts)
+        level[:, r] = S.rows_t(below, r)
 
 
 class _Drag(NamedTuple):
