@@ -106,7 +106,11 @@ def check_vertices(V, *, where, name="V", copy=True, faces=None):
 def check_finite_rows(X, *, where, what):
     """Raise :class:`InvalidArgumentError` when a row of ``X`` (k,d) holds NaN
     or an infinite value, saying how many rows of ``what`` (e.g. "query
-    points") do and giving the first, with its values."""
+    points") do and giving the first, with its values. (The whole array is
+    tested first: a reduction along rows of three is 15x slower, 14 ms for
+    a million points, once per block of a bind's queries.)"""
+    if np.isfinite(X).all():
+        return
     bad = ~np.isfinite(X).all(axis=1)
     if bad.any():
         k = int(np.flatnonzero(bad)[0])
