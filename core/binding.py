@@ -1002,13 +1002,14 @@ def _deform_rows(binding, P, N, hit, out, origin):
     operations of :func:`_frames_t` in the same order, so it is bit for bit
     what a full deform gives on the same fine positions and normals."""
     idx = binding._cache["incremental"]
-    # per face: its first corner, edges and corner normals, as _frames_t takes them
+    # per face: its first corner, edges, their size and corner normals, as _frames_t takes them
     Fh = np.take(idx["corners_t"], hit.faces, axis=1)
     A = np.take(P, Fh[0], axis=1)
     E1 = np.take(P, Fh[1], axis=1)
     E1 -= A
     E2 = np.take(P, Fh[2], axis=1)
     E2 -= A
+    size_f = _edges_size(E1, E2)
     Nk = [np.take(N, Fh[k], axis=1) for k in range(3)]
     count = idx["dense_count"][hit.faces]
     end = np.cumsum(count)
@@ -1026,7 +1027,8 @@ def _deform_rows(binding, P, N, hit, out, origin):
         f0, f1 = span
         s, e = int(end[f0 - 1]) if f0 else 0, int(end[f1 - 1])
         c = count[f0:f1]
-        b0, b1, b2 = (np.take(idx["bary_by_face"][k], hit.sorted_at[s:e]) for k in range(3))
+        runs = hit.sorted_at[s:e]     # (in range: "wrap" gathers, half the time of "raise")
+        b0, b1, b2 = (np.take(idx["bary_by_face"][k], runs, mode="wrap") for k in range(3))
         point = np.repeat(A[:, f0:f1], c, axis=1)
         e1 = np.repeat(E1[:, f0:f1], c, axis=1)
         e2 = np.repeat(E2[:, f0:f1], c, axis=1)
@@ -1040,10 +1042,12 @@ def _deform_rows(binding, P, N, hit, out, origin):
         normal += tmp
         np.multiply(np.repeat(Nk[2][:, f0:f1], c, axis=1), b2, out=tmp)
         normal += tmp
-        X = _compose_t(np.take(idx["offset_by_face"], hit.sorted_at[s:e], axis=1),
-                       *_frames_finish(point, e1, e2, normal, tmp))
+        X = _compose_t(np.take(idx["offset_by_face"], runs, axis=1, mode="wrap"),
+                       *_frames_finish(point, e1, e2, normal, tmp, np.repeat(size_f[f0:f1], c)))
+        if moved_origin:
+            X += origin[:, None]
         for d in range(3):            # a coordinate at a time: no (r,3) copy to scatter
-            flat[at[s:e] + d] = X[d] + origin[d] if moved_origin else X[d]
+            np.put(flat[d:], at[s:e], X[d], mode="wrap")
     run_each(block, list(zip(cuts[:-1].tolist(), cuts[1:].tolist())), threads=threads)
 
 
@@ -1252,10 +1256,12 @@ def _frames_t(VfT, NfT, cornersT, baryT):
     return _frames_finish(point, e1, e2, normal, tmp)
 
 
-def _frames_finish(point, e1, e2, normal, tmp):
+def _frames_finish(point, e1, e2, normal, tmp, size=None):
     """The rest of :func:`_frames_t` from the point, the face's edges
     ``e1``, ``e2``, the blended normal (not yet normalised) and a scratch
-    (3, q) array; all are reused for the result.
+    (3, q) array; all are reused for the result. ``size`` (q,): the longer
+    of ``e1`` and ``e2`` where the caller has it (the incremental deform
+    computes it once per face: the same values), else computed here.
 
     Degenerate is relative to the face's size (the longer of ``e1`` and
     ``e2``), not to the edge itself: an edge between two corners at the same
@@ -1264,8 +1270,8 @@ def _frames_finish(point, e1, e2, normal, tmp):
     whose bow-tie vertex was split, refined 0.2% of its size off the rotated
     result where that noise was taken for a tangent)."""
     bad = _normalise_t(normal, 1.0)
-    e1_length = _length_t(e1)
-    size = np.maximum(e1_length, _length_t(e2))
+    if size is None:
+        size = _edges_size(e1, e2)
     if bad.any():
         fn = cross_columns(e1[:, bad], e2[:, bad])
         fbad = _normalise_t(fn, size[bad] * size[bad])
@@ -1297,6 +1303,12 @@ def _frames_finish(point, e1, e2, normal, tmp):
     np.multiply(normal[0], tangent[1], out=bitangent[2])
     bitangent[2] -= normal[1] * tangent[0]
     return point, tangent, bitangent, normal
+
+
+def _edges_size(e1, e2):
+    """The longer of the edges ``e1``, ``e2`` (3, q) of each column, (q,):
+    what :func:`_frames_finish` measures degeneracy against."""
+    return np.maximum(_length_t(e1), _length_t(e2))
 
 
 def _check_cage(binding, V_cage_edited, F_cage, where):

@@ -45,8 +45,8 @@ import numpy as np
 
 from ._groups import distinct, ragged_entries, ragged_ranges
 from ._parallel import WORKERS, blocks, run_blocks, run_each
-from .mesh import (NORMALS_BLOCK, area_normals_rows, area_normals_t, dot_columns, normal_dots,
-                   squared_edges, unit_rows)
+from .mesh import (DOTS_BLOCK, NORMALS_BLOCK, area_normals_rows, area_normals_t, dot_columns,
+                   normal_dots, squared_edges, unit_rows)
 from .topology import edge_map
 
 __all__ = ["CageRings", "Copies", "FaceStars", "FineFaceGroups", "Neighbours", "Repair", "away_rows",
@@ -344,10 +344,16 @@ def away_rows(X, FT, faces, rest_normals):
     order: ascending stays ascending): :func:`~.mesh.normal_dots` below 0,
     in a part per worker thread from ``_AWAY_THREADS_MIN`` columns on (the
     gathers are most of it: 48k faces around 5 moved cage vertices' rows,
-    1.66 -> 1.28 ms on two)."""
+    1.66 -> 1.28 ms on two), each part ``DOTS_BLOCK`` columns at a time
+    (their corners and rest normals gathered for the block: 0.15 of 1.7 ms
+    against the part's at once)."""
     def part(span):
-        c = faces[span[0]:span[1]]
-        return c[normal_dots(X, np.take(FT, c, axis=1), np.take(rest_normals, c, axis=1)) < 0]
+        found = []
+        for s in range(span[0], span[1], DOTS_BLOCK):
+            c = faces[s:min(s + DOTS_BLOCK, span[1])]
+            found.append(c[normal_dots(X, np.take(FT, c, axis=1, mode="wrap"),   # (in range)
+                                       np.take(rest_normals, c, axis=1, mode="wrap")) < 0])
+        return np.concatenate(found) if found else faces[:0]
     n = faces.shape[0]
     return np.concatenate(run_each(part, blocks(n, -(-n // WORKERS)) or [(0, 0)],
                                    threads=n >= _AWAY_THREADS_MIN))

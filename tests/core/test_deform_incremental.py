@@ -356,3 +356,27 @@ def test_a_drag_too_large_for_its_map_takes_the_stencils(torus_case, monkeypatch
         deform(b, Ve, moved=[2, 7], out=D)
     assert b._cache.get("drag") is None
     assert np.abs(D - deform(b, Ve)).max() <= _tol(Vd)
+
+
+@pytest.mark.parametrize("scheme", ["loop", "butterfly"])
+def test_first_moves_are_the_full_deform_bit_for_bit_near_and_far_from_the_origin(scheme):
+    """An incremental deform (not a drag) rewrites its rows with the full
+    deform's operations: the same bits, with the edges' size taken once per
+    fine face and the rows relative to a working origin away from zero (a
+    scan 1e5 of its size off: the origin added back to the rows)."""
+    import core.binding as binding_module
+    Vd, Fd = _bumpy_sphere(3)
+    cage = simplify(Vd, Fd, target_faces=80)
+    rng = np.random.default_rng(11)
+    for shift in (0.0, 1e5):
+        Vs, Cs = Vd + shift, cage.V + shift
+        b = bind(Vs, Fd, Cs, cage.F, levels=2, scheme=scheme)
+        assert binding_module._deform_origin(b, Cs).any() == bool(shift)
+        D = deform(b, Cs)
+        Ve = Cs.copy()
+        for k in (1, 3, 5):
+            ids = rng.choice(Cs.shape[0], k, replace=False)
+            Ve[ids] += 0.03 * rng.standard_normal((k, 3))
+            deform(b, Ve, moved=ids, out=D)
+            assert np.array_equal(D, deform(b, Ve))
+            deform(b, Ve, out=D)         # (a full deform between: no drag)

@@ -420,3 +420,29 @@ def test_the_repair_maps_need_no_lapack_solve(rough_torus, monkeypatch):
     # a uniform scale is that scale
     assert np.abs(unfold.ring_linear_maps(cage.V, 0.5 * cage.V, rings, vertices)
                   - 0.5 * np.eye(3)).max() <= 1e-14
+
+
+@pytest.mark.parametrize("reference_dtype", [np.float32, np.float64])
+def test_normal_dots_are_the_area_normals_dotted_bit_for_bit_in_blocks(reference_dtype):
+    # normal_dots gathers the corners' coordinates one at a time from the flat
+    # positions, DOTS_BLOCK faces at a time (here several blocks and a partial one): the
+    # same bits as the area normals (np.cross's operations) dotted with the reference,
+    # for corner indices int32 or int64 and positions contiguous or not
+    from core.mesh import DOTS_BLOCK, area_normals_rows, normal_dots
+    rng = np.random.default_rng(4)
+    n = 5000
+    V = rng.standard_normal((n, 3))
+    F = rng.integers(0, n, (2 * DOTS_BLOCK + 321, 3))
+    reference = rng.standard_normal((3, F.shape[0])).astype(reference_dtype)
+    normals = area_normals_rows(V, F.T)
+    expected = reference[0] * normals[:, 0]
+    expected += reference[1] * normals[:, 1]
+    expected += reference[2] * normals[:, 2]
+    wide = np.zeros((n, 6))
+    wide[:, 1:4] = V
+    for X in (V, wide[:, 1:4]):
+        for T in (np.ascontiguousarray(F.T), F.T.astype(np.int32)):
+            got = normal_dots(X, T, reference)
+            assert got.dtype == np.float64
+            assert np.array_equal(got, expected)
+    assert normal_dots(V, F[:0].T, reference[:, :0]).shape == (0,)
