@@ -65,8 +65,8 @@ from ._clean import (BOUNDARY, NON_MANIFOLD, coincident_pairs, corner_fans, face
 from ._groups import ragged_entries
 from ._parallel import blocks, run_blocks, run_each
 from .errors import InvalidArgumentError, InvalidMeshError
-from .mesh import (bounding_box, check_count, check_mesh, check_vertex_mask, cross_rows,
-                   diagonal_length, face_normals, flat_faces)
+from .mesh import (any_in_rows, bounding_box, check_count, check_mesh, check_vertex_mask,
+                   cross_rows, diagonal_length, face_normals, flat_faces, row_sums)
 from .topology import connected_labels, edge_keys, face_components
 from .copies import coincident_copies, doubled_quads, pillow_layers, stacked_copies
 from .pages import plain_pages
@@ -427,7 +427,7 @@ def _drop_flat_ears(w, inner, turned):
     folded flat onto an edge that had one face), which stayed in the surface
     and in a cage at or above the cleaned face count. Counted as degenerate.
     Returns the interior edges and the ``turned`` mask of the faces kept."""
-    ears = (w.twin.reshape(-1, 3) < 0).sum(axis=1) >= 2
+    ears = row_sums(w.twin.reshape(-1, 3) < 0) >= 2
     cand = np.flatnonzero(ears)
     ears[cand] = flat_faces(w.V, w.F[cand])
     if not ears.any() or ears.all():                # (all flat: simplify names that)
@@ -766,7 +766,7 @@ def _may_repeat(twin, out):
     g = np.where(t >= 0, t // 3, -1 - np.arange(3))   # distinct negatives never match
     np.equal(g[:, 0], g[:, 1], out=out)
     out |= (g[:, 1] == g[:, 2]) | (g[:, 0] == g[:, 2])
-    out |= (t == NON_MANIFOLD).any(axis=1)
+    out |= any_in_rows(t == NON_MANIFOLD)
 
 
 def _one_side_mends(F, twin, n, faces, size):

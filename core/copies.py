@@ -41,7 +41,7 @@ import numpy as np
 
 from ._clean import BOUNDARY, NON_MANIFOLD, coincident_pairs, half_edge_ends
 from ._groups import ragged_ranges
-from .mesh import face_areas
+from .mesh import face_areas, row_sums
 from .topology import connected_labels, face_components, numbered, vertex_labels
 
 __all__ = ["coincident_copies", "doubled_quads", "pillow_layers", "stacked_copies"]
@@ -172,7 +172,7 @@ def doubled_quads(F, twin):
     its rim edges on a border of the mesh has that edge in two faces only,
     and is left to the pairing.)
     """
-    rims = (twin.reshape(-1, 3) == NON_MANIFOLD).sum(axis=1) == 2
+    rims = row_sums(twin.reshape(-1, 3) == NON_MANIFOLD) == 2
     if not rims.any():
         return None
     # interior edges (h < twin[h]) between two faces whose other two edges are non-manifold

@@ -24,6 +24,7 @@ import numpy as np
 
 from ._clean import half_edge_ends
 from .clean import clean_mesh
+from .mesh import any_in_rows, row_norms, row_sums
 from .near_query import cell_for_reach
 from .spatial import TriangleIndex, point_triangle_closest, triangle_boxes
 from ._groups import group_argmin, ragged_ranges
@@ -180,7 +181,7 @@ def dense_points_near(V_dense, F_dense, F_fine, nearest, P, reach=None):
         point, corners, bary = _closest_in_groups(V_dense, F_dense, P, j[owner],
                                                   fans.faces[idx], count)
         q[j] = point
-        rim[j] = (bary * (corners == k[:, None])).sum(axis=1) <= 0.0
+        rim[j] = row_sums(bary * (corners == k[:, None])) <= 0.0
 
     run_blocks(on_fan, blocks(has.shape[0], _DETAIL_BLOCK))
     if rim.any():
@@ -200,9 +201,9 @@ def _near_enough(V_dense, F_fine, nearest, P):
     has = np.flatnonzero(nearest >= 0)
     if has.size == 0:
         return nearest
-    d = np.sqrt(np.square(V_dense[nearest[has]] - P[has]).sum(axis=1))
+    d = row_norms(V_dense[nearest[has]] - P[has])
     U, W = half_edge_ends(F_fine)
-    edge = float(np.sqrt(np.square(P[U] - P[W]).sum(axis=1)).mean()) if U.size else 0.0
+    edge = float(row_norms(P[U] - P[W]).mean()) if U.size else 0.0
     far = d > _NEAREST_REACH * max(float(np.percentile(d, 90)), edge)
     if not far.any():
         return nearest
@@ -219,7 +220,7 @@ def _distance_bound(V_dense, F_fine, nearest, P, missing):
     missing vertex takes the dense vertex of a neighbour that has one);
     None when no fine vertex has one."""
     # the edges into missing vertices lie on the fine faces with a missing corner
-    U, W = half_edge_ends(F_fine[(nearest[F_fine] < 0).any(axis=1)])
+    U, W = half_edge_ends(F_fine[any_in_rows(nearest[F_fine] < 0)])
     src, dst = np.concatenate([U, W]), np.concatenate([W, U])      # both ways along each
     into = nearest[dst] < 0
     src, dst = src[into], dst[into]
@@ -232,7 +233,7 @@ def _distance_bound(V_dense, F_fine, nearest, P, missing):
     got = found[missing]
     if (got < 0).any():
         return None
-    return float(np.sqrt(np.square(P[missing] - V_dense[got]).sum(axis=1)).max())
+    return float(row_norms(P[missing] - V_dense[got]).max())
 
 
 def _faces_near(V, F, P, r):

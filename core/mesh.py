@@ -354,6 +354,33 @@ def diagonal_length(lo, hi):
     return s * float(np.sqrt(np.sum((d / s) ** 2)))
 
 
+def row_sums(X):
+    """The sums of the rows of ``X`` (k,3), (k,): ``X.sum(axis=1)`` (the same
+    bits: NumPy adds a row's three left to right; a bool array counts its
+    True) about 10x faster than NumPy's reduction along rows of three (0.9 ms
+    for 65k rows, against 0.09 for the three columns added)."""
+    first = X[:, 0].astype(np.intp) if X.dtype == bool else X[:, 0]
+    return first + X[:, 1] + X[:, 2]
+
+
+def row_norms(X):
+    """The Euclidean lengths of the rows of ``X`` (k,3), (k,): the bits of
+    ``np.linalg.norm(X, axis=1)`` (the squares summed left to right, as its
+    reduction does) without its reduction along rows of three (see
+    :func:`row_sums`)."""
+    return np.sqrt(X[:, 0] * X[:, 0] + X[:, 1] * X[:, 1] + X[:, 2] * X[:, 2])
+
+
+def any_in_rows(B):
+    """``B.any(axis=1)`` of a bool (k,3) array, by its columns (see :func:`row_sums`)."""
+    return B[:, 0] | B[:, 1] | B[:, 2]
+
+
+def all_in_rows(B):
+    """``B.all(axis=1)`` of a bool (k,3) array, by its columns (see :func:`row_sums`)."""
+    return B[:, 0] & B[:, 1] & B[:, 2]
+
+
 def dot_columns(a, b):
     """Dot products of the columns of two (3, k) arrays, (k,) (coordinates
     first: each row a contiguous coordinate)."""
@@ -472,7 +499,7 @@ def _corner_edges(X, T):
 
 def unit_rows(X):
     """The rows of ``X`` (k,3) normalised, a new array (zero rows stay zero)."""
-    length = np.linalg.norm(X, axis=1)
+    length = row_norms(X)
     return np.divide(X, length[:, None], out=np.zeros_like(X), where=length[:, None] > 0)
 
 
@@ -490,7 +517,8 @@ def power_of_two_scale(V, F):
     1e-200 they were zero), and give the same bits where neither happened."""
     if F.size == 0:
         return 1.0
-    largest = float(np.abs(V).max(axis=1)[F].max())
+    A = np.abs(V)
+    largest = float(np.maximum(np.maximum(A[:, 0], A[:, 1]), A[:, 2])[F].max())
     exponent = int(np.frexp(largest)[1])
     if largest == 0 or abs(exponent) < SAFE_EXPONENT:
         return 1.0
@@ -561,7 +589,7 @@ def face_areas(V, F):
     V, F = check_mesh(V, F, where="face_areas", copy=False)
     N, s = scaled_area_normals(V, F)
     with np.errstate(over="ignore"):
-        return 0.5 * np.linalg.norm(N, axis=1) * s * s
+        return 0.5 * row_norms(N) * s * s
 
 
 def vertex_normals(V, F):

@@ -61,9 +61,9 @@ from ._relocate import relocate, segment_triangles
 from ._touch_up import flip_flat_faces, touch_up
 from .clean import MIN_COMPONENT_AREA, CleanReport, bulk_box, check_span, clean_mesh
 from .errors import InvalidArgumentError, InvalidMeshError, MeshAdjustError
-from .mesh import (UNITS, area_normals_rows, bounding_box, check_flag, check_mesh, check_number,
-                   check_vertex_mask, diagonal_length, dot_columns, face_normals, has_area,
-                   squared_edges)
+from .mesh import (UNITS, all_in_rows, area_normals_rows, bounding_box, check_flag, check_mesh,
+                   check_number, check_vertex_mask, diagonal_length, dot_columns, face_normals,
+                   has_area, squared_edges)
 from .metrics import DistanceFrom, surface_distance
 from .topology import (border_vertex_count, boundary_loops_count, collapsible_edges, edge_map,
                        face_components, soup_pieces)
@@ -1242,7 +1242,7 @@ def represented_faces(F, clean):
     as a coincident copy or as a double-sided sheet removed whole, even when
     other faces keep its corners."""
     K = clean.input_to_clean[F]
-    mapped = (K >= 0).all(axis=1)
+    mapped = all_in_rows(K >= 0)
     kept = np.zeros(F.shape[0], dtype=bool)
     kept[clean.face_to_input] = True
     collapsed = (K[:, 0] == K[:, 1]) | (K[:, 1] == K[:, 2]) | (K[:, 0] == K[:, 2])
