@@ -71,21 +71,25 @@ def run_serial(tasks, convert, on_done, *, isolate, payload, command):
             on_done(i, report)
         return False
     except KeyboardInterrupt:
-        if in_worker is not None:
-            on_done(in_worker, _stopped(worker, tasks[in_worker]))
+        _stop_all({} if in_worker is None else {in_worker: worker}, tasks, on_done)
         return True
     finally:
         if worker is not None:
             worker.close()
 
 
-def _stopped(worker, task):
-    """Stop ``worker`` after a Ctrl-C; the report of the file it was converting
-    (cancelled, unless it finished in between)."""
-    old = signal.signal(signal.SIGINT, signal.SIG_IGN)   # a second Ctrl-C must not cut this short
+def _stop_all(running, tasks, on_done):
+    """After a Ctrl-C: SIGTERM to every worker of ``running`` ({task index:
+    worker}) at once, then each stopped in turn (:meth:`_Worker.stop`) and
+    its file reported (cancelled, unless it finished in between). A second
+    Ctrl-C is ignored meanwhile: it must not cut this short."""
+    old = signal.signal(signal.SIGINT, signal.SIG_IGN)
     try:
-        worker.stop()
-        return worker.report(task, stopped=True)
+        for w in running.values():
+            w.terminate()
+        for i, w in running.items():
+            w.stop()
+            on_done(i, w.report(tasks[i], stopped=True))
     finally:
         signal.signal(signal.SIGINT, old)
 
@@ -301,15 +305,7 @@ def run_processes(tasks, payload, command, jobs, on_done):
             time.sleep(_POLL_S)
         return False
     except KeyboardInterrupt:
-        old = signal.signal(signal.SIGINT, signal.SIG_IGN)   # a second Ctrl-C must not cut this short
-        try:
-            for w in running.values():      # all at once, then wait for each
-                w.terminate()
-            for i, w in running.items():
-                w.stop()
-                on_done(i, w.report(tasks[i], stopped=True))
-        finally:
-            signal.signal(signal.SIGINT, old)
+        _stop_all(running, tasks, on_done)
         return True
 
 
