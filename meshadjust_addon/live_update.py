@@ -85,21 +85,23 @@ def update_edited(cage):
     t1 = time.perf_counter()
     state, moved = _kept_state(edited, binding, V)
     t2 = time.perf_counter()
-    if moved is None:
+    full = moved is None                # (no state kept that still applies, or most moved)
+    changed = full or moved.size > 0    # (else nothing moved since the last update)
+    if full:
         D = core.deform(binding, V)
         binding.influenced([])      # builds the incremental indices now, not on the first edit
     else:
         r = _deform_moved(binding, V, moved, state.D)
     t3 = time.perf_counter()
     notes = []
-    if moved is None or moved.size:
+    if changed:
         # (once the deform went through, before the buffer changes: a version sculpted
         # since the last write, also between two live writes, is kept aside; 3-5 ms a
         # million vertices. Before the deform, a cage with a NaN made the copy and then
         # stopped live mode, nothing written)
         results.aside_note(results.kept_aside(edited), edited, notes)
     t_aside = time.perf_counter() - t3
-    if moved is None:
+    if full:
         state = _State(binding, V, D, D.astype(np.float32))
         rows = binding.n_dense
     else:
@@ -107,12 +109,12 @@ def update_edited(cage):
         rows = r.shape[0]
         state = state._replace(V_cage=V)
     t4 = time.perf_counter()
-    if moved is None or moved.size:
+    if changed:
         _write(edited, state.buf)
     _states[edited.session_uid] = state
     t5 = time.perf_counter()
-    timing = LiveTiming(moved=V.shape[0] if moved is None else int(moved.size), rows=int(rows),
-                        full=moved is None, read_cage=t1 - t0, compare=t2 - t1 + t_aside,
+    timing = LiveTiming(moved=V.shape[0] if full else int(moved.size), rows=int(rows),
+                        full=full, read_cage=t1 - t0, compare=t2 - t1 + t_aside,
                         deform=t3 - t2, convert=t4 - t3 - t_aside, write=t5 - t4, total=t5 - t0,
                         warning=turned_cage_note(cage, binding, V), note="; ".join(notes))
     cage.meshadjust.last_report = timing.summary()
