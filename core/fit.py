@@ -165,7 +165,7 @@ def fit_cage(V_dense, F_dense, V_cage, F_cage, *, levels=2, scheme="butterfly", 
             X, cancelled = X_new, True
             cg_its.append(n_cg)
             break
-        m_new = _match(pb, X_new)
+        m_new = _match(pb, X_new, reach=m.reach)
         if not m_new.mean <= m.mean:   # a step away from the surface (or NaN): undone, and
             break                      # the next would be the same (same correspondences)
         X, m = X_new, m_new
@@ -295,17 +295,30 @@ class _Matches(NamedTuple):
         """The two-sided mean distance (``FitResult.mean_distance``)."""
         return 0.5 * (self.fine_to_dense + self.dense_to_fine)
 
+    @property
+    def reach(self):
+        """The dense samples' median distance to the fine surface: the next
+        iteration's search over the fine surface takes cells at least
+        :func:`~.near_query.cell_for_reach` of it wide. Its cells are set
+        by the fine triangles, and where they are far smaller than the gaps
+        (a gravel scan's pebbles, each a tetrahedron of the cage and a
+        small blob of the fine surface inside it) most samples lay beyond
+        the cells around their own (the search's slow path; the answers are
+        the same, exact, either way)."""
+        return float(np.median(self.hit.distance))
 
-def _match(pb, X):
+
+def _match(pb, X, reach=None):
     """The correspondences of the cage ``X``: each fine vertex's closest
     point on the dense surface (weighted by its area share) and each dense
-    sample's closest point on the fine surface."""
+    sample's closest point on the fine surface (``reach``: the samples'
+    typical distance from it, when known, :attr:`_Matches.reach`)."""
     Vf = pb.op.apply(X)
     Ff = pb.op.F_fine
     area = _vertex_areas(Vf, Ff, pb.op.n_fine)
     total = area.sum()
     area = area / total if total > 0 else np.full(pb.op.n_fine, 1.0 / pb.op.n_fine)
-    hit = search_for(Vf, Ff, pb.P.shape[0]).closest(pb.P)
+    hit = search_for(Vf, Ff, pb.P.shape[0], reach=reach).closest(pb.P)
     return _Matches(area, pb.dense_index.closest(Vf), hit)
 
 

@@ -256,12 +256,16 @@ class NearQuery:
         return result
 
 
-def search_for(V, F, n_queries):
+def search_for(V, F, n_queries, *, reach=None):
     """The closest-point search over ``(V, F)`` for ``n_queries`` points near
     it (the same exact distances either way), of the kind :func:`search_kind`
-    names. Among exactly equidistant faces the two kinds may name different
-    ones."""
-    return search_kind(F.shape[0], n_queries)(V, F)
+    names, its cells at least :func:`cell_for_reach` of ``reach`` (the
+    queries' typical distance, when known) wide. Among exactly equidistant
+    faces the two kinds may name different ones."""
+    kind = search_kind(F.shape[0], n_queries)
+    if kind is NearQuery:
+        return NearQuery(V, F, reach=reach)
+    return TriangleIndex(V, F, min_cell=cell_for_reach(reach))
 
 
 def search_kind(n_faces, n_queries):
