@@ -49,7 +49,7 @@ from .mesh import (DOTS_BLOCK, NORMALS_BLOCK, area_normals_rows, area_normals_t,
                    normal_dots, squared_edges, unit_rows)
 from .topology import edge_map
 
-__all__ = ["CageRings", "Copies", "FaceStars", "FineFaceGroups", "Neighbours", "Repair", "away_rows",
+__all__ = ["CageRings", "Copies", "FaceBatch", "FaceStars", "FineFaceGroups", "Neighbours", "Repair", "away_rows",
            "away_t", "nearest_rotations", "repair", "rest_normals", "ring_linear_maps",
            "ring_rotations", "turned_over"]
 
@@ -167,6 +167,55 @@ class FineFaceGroups(NamedTuple):
         values of :func:`away_rows`)."""
         away = away_rows(X, self.corners, entries, self.rest)
         return np.unique(self.faces[away]).astype(np.int64, copy=False)
+
+
+class FaceBatch(NamedTuple):
+    """Faces the fold test reads again and again (those around the rows of a
+    drag, moved again at every step), their corner rows and rest normals as
+    the first test gathered them, block by block: each test then reads them
+    in order (no gathers but the positions')."""
+
+    columns: np.ndarray   #: (k,) int, the columns of the triangles gathered
+    faces: object         #: (c,) int face of each column (None: the columns are the faces)
+    blocks: dict          #: first column of each block of :func:`_below_zero` -> (3,b) corners, rest
+
+    @staticmethod
+    def size(FT, columns, rest_normals):
+        """The bytes the batch of :meth:`tested` takes."""
+        return columns.shape[0] * (3 * FT.itemsize + 3 * rest_normals.itemsize
+                                   + columns.itemsize)
+
+    @classmethod
+    def tested(cls, X, FT, columns, rest_normals, faces=None, keep=True):
+        """``(away, batch)``: the faces (distinct, ascending, int64) of the
+        ``columns`` (k,) of the triangles ``FT`` (3,c) and their
+        ``rest_normals`` (3,c) whose normal on ``X`` points away from rest
+        (:func:`away_rows`' test, its blocks gathered as it gathers them; the
+        face of column ``j`` is ``faces[j]``, or ``j`` for None: a column
+        may stand for a face twice, :class:`FineFaceGroups`' entries), and the
+        batch of those columns: the gathered blocks kept (None without
+        ``keep``)."""
+        batch = cls(columns, faces, {}) if keep else None
+
+        def dots(s, e):
+            T = np.take(FT, columns[s:e], axis=1, mode="wrap")                # (in range)
+            R = np.take(rest_normals, columns[s:e], axis=1, mode="wrap")
+            if keep:
+                batch.blocks[s] = (T, R)
+            return normal_dots(X, T, R)
+        return _faces_of(columns[_below_zero(columns.shape[0], dots)], faces), batch
+
+    def away(self, X):
+        """The faces (distinct, ascending, int64) whose area normal over ``X``
+        (n,3) points away from their rest normal (:func:`away_rows`' test)."""
+        at = _below_zero(self.columns.shape[0], lambda s, e: normal_dots(X, *self.blocks[s]))
+        return _faces_of(self.columns[at], self.faces)
+
+
+def _faces_of(columns, faces):
+    """The distinct faces (ascending int64) of ``columns`` (``faces[columns]``, or
+    the columns themselves for ``faces`` None)."""
+    return np.unique(columns if faces is None else faces[columns]).astype(np.int64, copy=False)
 
 
 class CageRings(NamedTuple):
@@ -347,14 +396,20 @@ def away_rows(X, FT, faces, rest_normals):
     1.66 -> 1.28 ms on two), each part ``DOTS_BLOCK`` columns at a time
     (their corners and rest normals gathered for the block: 0.15 of 1.7 ms
     against the part's at once)."""
+    at = _below_zero(faces.shape[0], lambda s, e: normal_dots(
+        X, np.take(FT, faces[s:e], axis=1, mode="wrap"),                  # (in range)
+        np.take(rest_normals, faces[s:e], axis=1, mode="wrap")))
+    return faces[at]
+
+
+def _below_zero(n, dots):
+    """The columns (ascending int64) of ``range(n)`` whose ``dots(s, e)``
+    (the values of columns ``s:e``) are below 0: ``DOTS_BLOCK`` columns at a
+    time, in a part per worker thread from ``_AWAY_THREADS_MIN`` on."""
     def part(span):
-        found = []
-        for s in range(span[0], span[1], DOTS_BLOCK):
-            c = faces[s:min(s + DOTS_BLOCK, span[1])]
-            found.append(c[normal_dots(X, np.take(FT, c, axis=1, mode="wrap"),   # (in range)
-                                       np.take(rest_normals, c, axis=1, mode="wrap")) < 0])
-        return np.concatenate(found) if found else faces[:0]
-    n = faces.shape[0]
+        found = [np.flatnonzero(dots(s, min(s + DOTS_BLOCK, span[1])) < 0) + s
+                 for s in range(span[0], span[1], DOTS_BLOCK)]
+        return np.concatenate(found) if found else np.zeros(0, dtype=np.int64)
     return np.concatenate(run_each(part, blocks(n, -(-n // WORKERS)) or [(0, 0)],
                                    threads=n >= _AWAY_THREADS_MIN))
 

@@ -21,7 +21,8 @@ from core.fit import fit_cage
 from core.mesh import bbox_diagonal, face_normals, turned_faces, vertex_normals
 from core.simplify import simplify
 from core import unfold
-from core.unfold import (FLAT_AT_REST, CageRings, FaceStars, FineFaceGroups, away_rows, away_t,
+from core.unfold import (FLAT_AT_REST, CageRings, FaceBatch, FaceStars, FineFaceGroups, away_rows,
+                         away_t,
                          nearest_rotations, repair, rest_normals, ring_rotations, turned_over,
                          TURNED_DEG)
 from tests.mesh_factory import load_shared, regular_grid, torus
@@ -160,6 +161,23 @@ def test_faces_pointing_away_are_the_same_found_in_parts_on_the_threads():
     assert 0 < expected.size < faces.size
     assert np.array_equal(away_rows(X, FT, faces, rest), expected)
     assert away_rows(X, FT, faces[:0], rest).size == 0
+    # the same faces gathered once as they are tested (a FaceBatch, kept over a drag), in
+    # any order, some twice: the same faces found then and from the batch
+    again = np.concatenate([faces[::-1], faces[:500]])
+    away, batch = FaceBatch.tested(X, FT, again, rest)
+    assert np.array_equal(away, expected) and np.array_equal(batch.away(X), expected)
+    corners, normals = (np.concatenate([batch.blocks[s][i] for s in sorted(batch.blocks)], axis=1)
+                        for i in (0, 1))
+    assert np.array_equal(corners, FT[:, again]) and np.array_equal(normals, rest[:, again])
+    assert corners.nbytes + normals.nbytes + batch.columns.nbytes == FaceBatch.size(FT, again, rest)
+    away, none = FaceBatch.tested(X, FT, again, rest, keep=False)
+    assert np.array_equal(away, expected) and none is None
+    # columns standing for faces (here each face twice, as under two fine faces' groups)
+    twice = np.repeat(faces, 2)
+    columns = np.arange(twice.size)[::-1]
+    assert np.array_equal(FaceBatch.tested(X, FT[:, twice], columns, rest[:, twice], twice)[0],
+                          expected)
+    assert FaceBatch.tested(X, FT, faces[:0], rest)[1].away(X).size == 0
 
 
 def test_cage_rings_give_the_vertex_normals_at_a_few_vertices():
@@ -258,6 +276,30 @@ def test_a_drag_through_repairs_equals_full_at_both_test_paths(levels):
         repaired.append(b.repaired(D).size)
     assert max(repaired) > 0 and repaired[-1] == 0
     assert np.abs(D - Vd).max() <= 1e-12 * bbox_diagonal(Vd)     # back at rest: the scan
+
+
+@pytest.mark.parametrize("levels", [1, 2])
+def test_the_faces_kept_between_tests_change_nothing(levels, monkeypatch):
+    # a drag through repairs with the faces around its rows kept between the moves (a
+    # FaceBatch) and with none kept (over _KEPT_BATCH_BYTES): the same bits, both paths
+    import core.binding as binding_module
+    Vd, Fd, cage, b, normal, ring = _rough_torus_at(levels)
+    results = []
+    for kept in (binding_module._KEPT_BATCH_BYTES, 0):
+        monkeypatch.setattr(binding_module, "_KEPT_BATCH_BYTES", kept)
+        fresh = dataclasses.replace(b, _cache=None)      # (nothing kept from before)
+        cur = cage.V.copy()
+        D = deform(fresh, cur)
+        steps = []
+        for lift in (0.05, 0.1, 0.08):
+            cur[ring] = cage.V[ring] + lift * bbox_diagonal(Vd) * normal
+            deform(fresh, cur, moved=ring, out=D)
+            steps.append((D.copy(), fresh.repaired(D)))
+        assert (fresh._cache["repair"]["around"]["batch"] is not None) == bool(kept)
+        results.append(steps)
+    assert any(rows.size for _, rows in results[0])
+    for (D0, r0), (D1, r1) in zip(*results):
+        assert np.array_equal(D0, D1) and np.array_equal(r0, r1)
 
 
 # ------------------------------------------------------------------ through deform
