@@ -140,10 +140,11 @@ _GROUPS_SHARE = 0.25
 #: a drag's linear map (changed fine positions x moved cage vertices) is kept up to
 #: this many entries (32 MB)
 _DRAG_ENTRIES = 1 << 22
-#: the faces around an incremental deform's rows, gathered for the fold test, are kept
-#: for the next test of the same rows up to this many bytes (about 28 a face: the bunny
-#: x16's 52k faces around 5 moved cage vertices take 1.5 MB; a million faces around the
-#: rows of a third of the cage, 28 MB)
+#: a drag's gathers (the faces around its rows with their corners and rest normals, about
+#: 28 bytes a face; its rows' barycentric coordinates and offsets, 48 a row) are kept for
+#: its next steps up to this many bytes each (the bunny x16's 5 moved cage vertices:
+#: 52k faces, 1.5 MB, and 33k rows, 1.6 MB; a million faces around the rows of a third
+#: of the cage, 28 MB)
 _KEPT_BATCH_BYTES = 1 << 25
 
 #: keys of :meth:`Binding.to_arrays`
@@ -1018,7 +1019,9 @@ def _deform_rows(binding, P, N, hit, out, origin):
     and the rows' barycentric coordinates and offsets come from the
     face-sorted copies (contiguous runs, not a scattered gather); blocks of
     whole faces, about ``_ROW_BLOCK`` rows each, on the worker threads from
-    ``_THREADED_ROWS`` rows (each block writes its own rows). Each row goes through the
+    ``_THREADED_ROWS`` rows (each block writes its own rows); a drag's
+    blocks keep their gathered coordinates and offsets (:func:`_kept_rows`:
+    4.47 -> 4.23 ms a step of the bunny x16's). Each row goes through the
     operations of :func:`_frames_t` in the same order, so it is bit for bit
     what a full deform gives on the same fine positions and normals."""
     idx = binding._cache["incremental"]
@@ -1042,13 +1045,20 @@ def _deform_rows(binding, P, N, hit, out, origin):
     at = 3 * hit.rows                 # row starts in the flat (C-contiguous) out
     flat = out.reshape(-1)
     moved_origin = bool(origin.any())
+    kept = _kept_rows(idx, hit)
 
     def block(span):
         f0, f1 = span
         s, e = int(end[f0 - 1]) if f0 else 0, int(end[f1 - 1])
         c = count[f0:f1]
-        runs = hit.sorted_at[s:e]     # (in range: "wrap" gathers, half the time of "raise")
-        b0, b1, b2 = (np.take(idx["bary_by_face"][k], runs, mode="wrap") for k in range(3))
+        if f0 in kept:
+            b0, b1, b2, offsets = kept[f0]
+        else:
+            runs = hit.sorted_at[s:e]     # (in range: "wrap" gathers, half the time of "raise")
+            b0, b1, b2 = (np.take(idx["bary_by_face"][k], runs, mode="wrap") for k in range(3))
+            offsets = np.take(idx["offset_by_face"], runs, axis=1, mode="wrap")
+            if kept.keep:
+                kept[f0] = b0, b1, b2, offsets
         point = np.repeat(A[:, f0:f1], c, axis=1)
         e1 = np.repeat(E1[:, f0:f1], c, axis=1)
         e2 = np.repeat(E2[:, f0:f1], c, axis=1)
@@ -1062,13 +1072,39 @@ def _deform_rows(binding, P, N, hit, out, origin):
         normal += tmp
         np.multiply(np.repeat(Nk[2][:, f0:f1], c, axis=1), b2, out=tmp)
         normal += tmp
-        X = _compose_t(np.take(idx["offset_by_face"], runs, axis=1, mode="wrap"),
-                       *_frames_finish(point, e1, e2, normal, tmp, np.repeat(size_f[f0:f1], c)))
+        X = _compose_t(offsets, *_frames_finish(point, e1, e2, normal, tmp,
+                                                np.repeat(size_f[f0:f1], c)))
         if moved_origin:
             X += origin[:, None]
         for d in range(3):            # a coordinate at a time: no (r,3) copy to scatter (indexed
             flat[d:][at[s:e]] = X[d]  # assignment to an offset view: half np.put's time)
     run_each(block, list(zip(cuts[:-1].tolist(), cuts[1:].tolist())), threads=threads)
+
+
+class _KeptRows(dict):
+    """The gathered barycentric coordinates and offsets of a drag's rows,
+    by the first fine face of each block of :func:`_deform_rows` (the blocks
+    depend on the rows alone); ``keep``: whether the blocks gathered now are
+    to be kept."""
+
+    def __init__(self, hit, keep=False):
+        super().__init__()
+        self.hit, self.keep = hit, keep
+
+
+def _kept_rows(idx, hit):
+    """The :class:`_KeptRows` of ``hit`` (an :class:`_Influenced`) in the
+    incremental index ``idx``: kept from the second deform of the same rows (a
+    drag's second step; its first is any move's, and pays nothing for it)
+    while they take at most ``_KEPT_BATCH_BYTES``."""
+    kept = idx.get("kept_rows")
+    if kept is None or kept.hit is not hit:
+        kept = idx["kept_rows"] = _KeptRows(hit)          # (a first deform of these rows)
+    elif not kept.keep and not kept:
+        kept.keep = 48 * hit.rows.shape[0] <= _KEPT_BATCH_BYTES
+    else:
+        kept.keep = False                                 # (kept, or too large to keep)
+    return kept
 
 
 def _influenced_dense(binding, ids):

@@ -380,3 +380,30 @@ def test_first_moves_are_the_full_deform_bit_for_bit_near_and_far_from_the_origi
             deform(b, Ve, moved=ids, out=D)
             assert np.array_equal(D, deform(b, Ve))
             deform(b, Ve, out=D)         # (a full deform between: no drag)
+
+
+def test_a_drag_keeps_its_rows_gathers_and_gives_the_same_bits(torus_case, monkeypatch):
+    """From a drag's second step its rows' barycentric coordinates and offsets
+    are kept, block by block (many tiny blocks here, on the worker threads):
+    the steps give the bits they give with nothing kept."""
+    import core.binding as binding_module
+    Vd, Vc, b = torus_case
+    monkeypatch.setattr(binding_module, "_ROW_BLOCK", 7)
+    monkeypatch.setattr(binding_module, "_THREADED_ROWS", 1)
+    ids = np.array([3, 11, 12])
+    results = []
+    for kept in (binding_module._KEPT_BATCH_BYTES, 0):
+        monkeypatch.setattr(binding_module, "_KEPT_BATCH_BYTES", kept)
+        fresh = dataclasses.replace(b, _cache=None)
+        D = deform(fresh, Vc)
+        Ve = Vc.copy()
+        steps = []
+        for step in range(4):
+            Ve[ids] += 0.01 * (step + 1)
+            deform(fresh, Ve, moved=ids, out=D)
+            steps.append(D.copy())
+        assert len(fresh._cache["incremental"]["kept_rows"]) > 1 if kept else \
+            not fresh._cache["incremental"]["kept_rows"]
+        results.append(steps)
+    for kept_step, plain_step in zip(*results):
+        assert np.array_equal(kept_step, plain_step)

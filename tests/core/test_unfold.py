@@ -281,7 +281,8 @@ def test_a_drag_through_repairs_equals_full_at_both_test_paths(levels):
 @pytest.mark.parametrize("levels", [1, 2])
 def test_the_faces_kept_between_tests_change_nothing(levels, monkeypatch):
     # a drag through repairs with the faces around its rows kept between the moves (a
-    # FaceBatch) and with none kept (over _KEPT_BATCH_BYTES): the same bits, both paths
+    # FaceBatch), and its rows' gathers, and with none kept (over _KEPT_BATCH_BYTES): the
+    # same bits, both paths
     import core.binding as binding_module
     Vd, Fd, cage, b, normal, ring = _rough_torus_at(levels)
     results = []
@@ -296,6 +297,7 @@ def test_the_faces_kept_between_tests_change_nothing(levels, monkeypatch):
             deform(fresh, cur, moved=ring, out=D)
             steps.append((D.copy(), fresh.repaired(D)))
         assert (fresh._cache["repair"]["around"]["batch"] is not None) == bool(kept)
+        assert bool(fresh._cache["incremental"]["kept_rows"]) == bool(kept)
         results.append(steps)
     assert any(rows.size for _, rows in results[0])
     for (D0, r0), (D1, r1) in zip(*results):
