@@ -836,7 +836,8 @@ def _away_around(binding, state, D, hit, incremental=False):
         FT, rest, faces = groups.corners, groups.rest, groups.faces
     else:
         FT, rest, faces = state["F_t"], state["normals"], None
-    keep = around["incremental"] and FaceBatch.size(FT, around["columns"], rest) <= _KEPT_BATCH_BYTES
+    keep = around["incremental"] and \
+        FaceBatch.size(FT, around["columns"], rest) <= _KEPT_BATCH_BYTES
     away, around["batch"] = FaceBatch.tested(D, FT, around["columns"], rest, faces, keep)
     around["incremental"] |= incremental
     return away

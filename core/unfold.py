@@ -49,9 +49,9 @@ from .mesh import (DOTS_BLOCK, NORMALS_BLOCK, area_normals_rows, area_normals_t,
                    normal_dots, squared_edges, unit_rows)
 from .topology import edge_map
 
-__all__ = ["CageRings", "Copies", "FaceBatch", "FaceStars", "FineFaceGroups", "Neighbours", "Repair", "away_rows",
-           "away_t", "nearest_rotations", "repair", "rest_normals", "ring_linear_maps",
-           "ring_rotations", "turned_over"]
+__all__ = ["CageRings", "Copies", "FaceBatch", "FaceStars", "FineFaceGroups", "Neighbours",
+           "Repair", "away_rows", "away_t", "nearest_rotations", "repair", "rest_normals",
+           "ring_linear_maps", "ring_rotations", "turned_over"]
 
 #: Jacobi sweeps per round of the repair
 SWEEPS = 8
@@ -177,7 +177,7 @@ class FaceBatch(NamedTuple):
 
     columns: np.ndarray   #: (k,) int, the columns of the triangles gathered
     faces: object         #: (c,) int face of each column (None: the columns are the faces)
-    blocks: dict          #: first column of each block of :func:`_below_zero` -> (3,b) corners, rest
+    blocks: dict          #: first column of each :func:`_below_zero` block -> corners, rest (3,b)
 
     @staticmethod
     def size(FT, columns, rest_normals):
