@@ -1271,7 +1271,28 @@ class TriangleIndex:
         best.v[qq] = v[win]
         best.w[qq] = w[win]
 
-    def _scan(self, PT, q, t, best, probe=True, edges=True):
+    def _fold_lowest_face(self, q, t, v, w, d2, best):
+        """Fold pair results (points ``q``, triangles ``t``) into ``best``:
+        per query the smallest squared distance and, among exactly equal ones
+        (the best so far too), the lowest face of ``F``, whatever the order
+        the pairs came in (the hierarchy's rule: its searches by groups visit
+        the leaves in another order than one query's search)."""
+        if q.size == 0:
+            return
+        face = self._order[t]
+        order = np.lexsort((face, d2, q))
+        qs = q[order]
+        head = np.concatenate([[True], qs[1:] != qs[:-1]])
+        win, qq = order[head], qs[head]
+        old = best.d2[qq]
+        better = (d2[win] < old) | ((d2[win] == old) & (face[win] < self._order[best.t[qq]]))
+        qq, win = qq[better], win[better]
+        best.d2[qq] = d2[win]
+        best.t[qq] = t[win]
+        best.v[qq] = v[win]
+        best.w[qq] = w[win]
+
+    def _scan(self, PT, q, t, best, probe=True, edges=True, lowest_face=False):
         """Exact minimum over candidate pairs (q, t), grouped contiguously by query.
 
         Two cheap lower bounds (:func:`_bounding_rows`) discard most pairs: the
@@ -1281,6 +1302,8 @@ class TriangleIndex:
         centroid is evaluated first, for a tight bound (see :meth:`_fold_probe`
         for which pair wins a tie). Without ``edges``, the edge-line bound is
         left out (far queries: it prunes little there and costs 16 rows a pair).
+        With ``lowest_face``, a tie goes to the lowest face instead
+        (:meth:`_fold_lowest_face`).
         """
         if q.size == 0:
             return
@@ -1298,6 +1321,9 @@ class TriangleIndex:
             keep, lb = keep[other], lb[other]
             if keep.size:
                 at, v, w, d2 = self._eval_lowest_first(PT, q, t, keep, lb, bound)
+                if lowest_face:
+                    self._fold_lowest_face(q[at], t[at], v, w, d2, best)
+                    return
                 order = np.argsort(at, kind="stable")          # (the scan's order: same ties)
                 at, v, w, d2 = at[order], v[order], w[order], d2[order]
                 self._fold(q[at], t[at], v, w, d2, _run_lengths(q[at]), best)
@@ -1314,6 +1340,11 @@ class TriangleIndex:
         left = ~is_first[keep]
         keep, lb = keep[left], lb[left]
         at, v, w, d2 = self._eval_lowest_first(PT, q, t, keep, lb, bound)
+        if lowest_face:
+            self._fold_lowest_face(q[np.concatenate([first, at])], t[np.concatenate([first, at])],
+                                   np.concatenate([v0, v]), np.concatenate([w0, w]),
+                                   np.concatenate([d0, d2]), best)
+            return
         at = np.concatenate([first, at])
         order = np.argsort(at, kind="stable")
         self._fold_probe(q, t, X, S, dc2, counts, pre, at[order],
@@ -1558,7 +1589,8 @@ class TriangleIndex:
         per = max(1, _PAIR_CHUNK // m)
         for s in range(0, far.size, per):
             qs = far[s:s + per]
-            self._scan(PT, np.repeat(qs, m), np.tile(np.arange(m), qs.size), best, edges=False)
+            self._scan(PT, np.repeat(qs, m), np.tile(np.arange(m), qs.size), best, edges=False,
+                       lowest_face=True)
 
     def _node_bounds(self, p, child, level):
         """Squared distance bounds from the points ``p`` (3, k) to the BVH
@@ -1762,9 +1794,11 @@ class TriangleIndex:
         return beam
 
     def _scan_leaves(self, PT, q, leaf, best, probe=True):
+        """Scan the triangles of the leaves ``leaf`` for the queries ``q``
+        (grouped by query); ties to the lowest face."""
         t, own = ragged_ranges(leaf * _LEAF, np.full(q.size, _LEAF, dtype=np.int64))
         ok = t < self.n_faces
-        self._scan(PT, q[own[ok]], t[ok], best, probe, edges=False)
+        self._scan(PT, q[own[ok]], t[ok], best, probe, edges=False, lowest_face=True)
 
 
 class _Best:
