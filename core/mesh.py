@@ -17,8 +17,8 @@ from .errors import InvalidArgumentError, InvalidMeshError
 NORMALS_BLOCK = 1 << 14
 #: triangles per block of :func:`normal_dots` (its nine gathered coordinate rows and
 #: products, 64 kB each, stay in the core's cache: 52k faces, the fold test around
-#: 5 moved cage vertices' rows of the bunny x16, 1.5 ms against 1.7 all at once and 1.6
-#: in blocks of 16k; 2.2 for the (k,3) gathers it had before)
+#: 5 moved cage vertices' rows of the bunny x16, 1.5 ms in blocks of 8k or 16k, 1.6 of
+#: 4k, 1.7 all at once; 2.2 with the (k,3) gathers it had before)
 DOTS_BLOCK = 1 << 13
 #: a face is flat (its corners collinear, up to the rounding of their coordinates) when
 #: twice its area is at most this times its longest edge times the largest coordinate
