@@ -17,13 +17,16 @@ file system: an immediate error naming the path, exit status 2). Outputs
 appear under their final names only when every step of their file succeeded;
 a file that failed after the simplify keeps its cage as
 ``incomplete/NAME_cage.<fmt>`` in the output folder (and ``--skip-existing``
-runs it again). At the
+runs it again). Every file is converted in a worker process
+(``cli.runners``): a file that crashes its worker fails alone, and with
+``--timeout SECONDS`` a file still converting after that long is stopped
+and fails, timed out in the step it was in, leaving no output. At the
 end one table row per file (status ``ok``, ``warn`` with the reason,
 ``FAILED`` with the step and the cause, ``skipped``, ``cancelled``), a
 summary line, and with ``--report`` a JSON report of every file. Exit status:
-0 all converted (warnings allowed unless ``--strict``), 1 a file failed
-(or warned, with ``--strict``), 2 bad arguments, 130 interrupted (Ctrl-C: the
-workers are stopped, the summary and the report still written).
+0 all converted (warnings allowed unless ``--strict``), 1 a file failed or
+timed out (or warned, with ``--strict``), 2 bad arguments, 130 interrupted
+(Ctrl-C: the workers are stopped, the summary and the report still written).
 """
 
 import argparse
@@ -61,7 +64,7 @@ def parse_args(argv, prog=PROG):
         description="Simplify meshes into cages with MeshAdjust (QEM), optionally fit the "
                     "cages to the originals and refine them back with the detail.",
         epilog="Exit status: 0 all files converted (warnings allowed unless --strict), 1 a file "
-               "failed, 2 bad arguments or output paths, 130 interrupted. Inside Blender put the "
+               "failed or timed out, 2 bad arguments or output paths, 130 interrupted. Inside Blender put the "
                "options after '--': blender -b -P scripts/meshadjust_batch.py -- IN... --faces N.")
     p.add_argument("inputs", nargs="+", help="mesh files or folders (.obj .smf: NumPy only; "
                    ".ply .stl .gltf .glb: Blender's importers)")
@@ -113,9 +116,14 @@ def _run_arguments(p):
                    help="output format (default: the input's own, glTF as glb)")
     p.add_argument("--jobs", type=int, default=1, metavar="N",
                    help="files converted at once, each in its own worker process (default 1: "
-                        "one after the other, those Blender reads or writes in one worker "
-                        "process, OBJ and SMF in this one); with --dask local, the number of "
-                        "Dask workers")
+                        "one after the other in one worker process, a new one after a file "
+                        "crashes it or times out); with --dask local, the number of Dask "
+                        "workers")
+    p.add_argument("--timeout", type=float, default=None, metavar="SECONDS",
+                   help="stop a file still converting SECONDS after its first step began "
+                        "(wall-clock; default: no limit) as Ctrl-C stops a worker: the file "
+                        "fails, timed out in the step it was in, leaves no output "
+                        "(--skip-existing runs it again), and the batch goes on")
     p.add_argument("--dask", metavar="ADDRESS", default=None,
                    help="send each file as a task to a Dask scheduler (tcp://host:8786), or "
                         "'local' for a LocalCluster of --jobs workers; needs dask.distributed, "
@@ -147,6 +155,8 @@ def _check(p, args):
         p.error("--max-dihedral must be in (0, 180) degrees")
     if args.weld_distance is not None and not 0 <= args.weld_distance < 1:
         p.error("--weld-distance must be in [0, 1) (a share of the bounding-box diagonal)")
+    if args.timeout is not None and not 0 < args.timeout < math.inf:
+        p.error(f"--timeout must be a positive number of seconds, got {args.timeout:g}")
     if args.refine < 0 or args.jobs < 1:
         p.error("--refine must be >= 0 and --jobs >= 1")
 
@@ -277,13 +287,20 @@ def _as_worker():
 
 def _worker_convert(payload):
     """Convert the file of a worker's ``payload`` (its task and options) and
-    print its report on a line of its own; returns False when it was
-    cancelled (SIGTERM)."""
+    print its report on a line of its own, and each step's start as it
+    begins (``runners.STEP_MARK``); returns False when it was cancelled
+    (SIGTERM)."""
     task = payload["task"]
     if os.environ.get(runners.CRASH_TEST_VARIABLE) == os.path.basename(task["input"]):
         os.abort()
+    t0 = time.perf_counter()
+
+    def began(step):
+        # (a newline first: Blender's log may have left a line unfinished)
+        print(f"\n{runners.STEP_MARK}{time.perf_counter() - t0:.4f} {step}", flush=True)
+
     try:
-        result = _convert.convert(task, _convert.Options(**payload["options"]))
+        result = _convert.convert(task, _convert.Options(**payload["options"]), on_step=began)
     except KeyboardInterrupt:
         result = runners.cancelled_report(task)
     # (a newline first: Blender's log may have left a line unfinished)
@@ -351,6 +368,7 @@ def main(argv=None, *, entry=None, prog=PROG):
         report.write_json(args.report, {
             "tool": prog, "started": started, "arguments": argv, "options": asdict(opts),
             "out": os.path.abspath(args.out), "log": os.path.abspath(args.log) if args.log else None,
+            "timeout_s": args.timeout,
             "seconds": round(time.perf_counter() - t0, 3), "interrupted": interrupted,
             "exit_status": status, "counts": c, "files": [report.json_safe(r) for r in results]})
     return status
@@ -417,7 +435,7 @@ def _run(args, opts, entry, tasks, todo, results):
 
     def on_done(k, result):
         i = todo[k]
-        if result["failed_step"] == "worker" and result["pid"] is not None:
+        if (result["failed_step"] == "worker" or result["timed_out"]) and result["pid"] is not None:
             outputs.remove_dead_parts(tasks[i], result["pid"])
         if log_fh is not None:
             if result.get("log"):
@@ -437,14 +455,15 @@ def _run(args, opts, entry, tasks, todo, results):
         if not sub:
             return False
         if args.dask is not None:
-            return runners.run_dask(sub, payload, entry, args.dask, args.jobs, on_done)
+            return runners.run_dask(sub, payload, entry, args.dask, args.jobs, on_done,
+                                    timeout=args.timeout)
         if args.jobs > 1:
             return runners.run_processes(sub, payload,
                                          lambda p: worker_command(entry, ["--worker", p]),
-                                         args.jobs, on_done)
-        return runners.run_serial(sub, lambda t: _convert.convert(t, opts), on_done,
-                                  isolate=_convert.uses_blender, payload=payload,
-                                  command=lambda: worker_command(entry, ["--worker-serve"]))
+                                         args.jobs, on_done, timeout=args.timeout)
+        return runners.run_serial(sub, payload,
+                                  lambda: worker_command(entry, ["--worker-serve"]), on_done,
+                                  timeout=args.timeout)
     finally:
         if log_fh is not None:
             log_fh.close()

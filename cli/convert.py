@@ -69,14 +69,6 @@ class Options:
         return max(self.refine, 1) if (self.fit or self.refine) else 2
 
 
-def uses_blender(task):
-    """Whether converting ``task`` takes Blender: its input is read by one of
-    Blender's importers or an output is written by one of its exporters."""
-    outputs = [p for p in (task["cage"], task["refined"]) if p]
-    return (os.path.splitext(task["input"])[1].lower() in blender_io.BLENDER_IMPORT
-            or any(os.path.splitext(p)[1].lower() not in CORE_FORMATS for p in outputs))
-
-
 def output_format(path, opts):
     """The output extension (no dot) for input ``path``."""
     ext = os.path.splitext(path)[1].lower().lstrip(".")
@@ -102,15 +94,19 @@ def _cause(exc):
 
 
 class _Run:
-    """The report of one file, filled in as the steps run."""
+    """The report of one file, filled in as the steps run; ``on_step(name)``
+    is called as each step begins (None: nothing)."""
 
-    def __init__(self, task):
+    def __init__(self, task, on_step=None):
         self.task = task
+        self.on_step = on_step
         self.log = []
         self.r = file_report(task, "ok")
 
     def step(self, name, fn, *args, **kwargs):
         """Run one step, timed; a failure becomes :class:`StepFailed`."""
+        if self.on_step is not None:
+            self.on_step(name)
         t = time.perf_counter()
         try:
             return fn(*args, **kwargs)
@@ -351,15 +347,18 @@ def _stl_joins(outputs):
     return warnings
 
 
-def convert(task, opts):
+def convert(task, opts, *, on_step=None):
     """Convert one file; returns its report (a JSON-able dict).
 
     ``task``: ``input`` (path), ``name`` (as shown), ``cage`` (output path),
     ``refined`` (output path or None). Never raises for a bad file: the
     report's ``status`` is ``"failed"`` and ``error`` names the file, the
-    step and the cause. ``KeyboardInterrupt`` goes through.
+    step and the cause. ``KeyboardInterrupt`` goes through. ``on_step(name)``
+    is called as each step (``read``, ``simplify``, ... ``write``) begins: a
+    worker prints it, and the batch's ``--timeout`` names the step a file
+    was stopped in.
     """
-    run = _Run(task)
+    run = _Run(task, on_step)
     r = run.r
     t_start = time.perf_counter()
     try:

@@ -19,6 +19,7 @@ written: the file system's limits on names (a 250-character stem) and the
 folder's permissions are only known by trying.
 """
 
+import contextlib
 import os
 
 from .. import core
@@ -96,17 +97,34 @@ def write_outputs(outputs, log):
             os.makedirs(os.path.dirname(path) or ".", exist_ok=True)
             tmps.append(part_path(path, k, os.getpid()))
             _write_one(tmps[-1], path, V, F, log)
-        for tmp, (path, _, _) in zip(tmps, outputs):
-            try:
-                os.replace(tmp, path)
-            except OSError as exc:
-                raise OSError(exc.errno, exc.strerror, path) from exc
+        _rename_all(tmps, [path for path, _, _ in outputs])
     finally:
         for tmp in tmps:
             if os.path.exists(tmp):
                 os.remove(tmp)
     for path, _, _ in outputs:
         _remove_incomplete(incomplete_path(path))
+
+
+def _rename_all(tmps, paths):
+    """Rename each of ``tmps`` to its path of ``paths``, all or none: when a
+    rename fails or a cancel (``KeyboardInterrupt``: a worker's SIGTERM, from
+    Ctrl-C or ``--timeout``) comes between two, those already renamed are
+    removed again (a cancel there would leave a cage under its final name
+    without its refined mesh, its file reported cancelled or timed out)."""
+    renamed = []
+    try:
+        for tmp, path in zip(tmps, paths):
+            try:
+                os.replace(tmp, path)
+            except OSError as exc:
+                raise OSError(exc.errno, exc.strerror, path) from exc
+            renamed.append(path)
+    except (OSError, KeyboardInterrupt):
+        for path in renamed:
+            with contextlib.suppress(OSError):
+                os.remove(path)
+        raise
 
 
 def _remove_incomplete(path):

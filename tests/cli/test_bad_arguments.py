@@ -2,7 +2,8 @@
 line saying why, before any file is read (found by a fuzz of the batch CLI on
 2026-12-05: a NaN or infinite --max-error and a --feature-angle outside (0,
 180] failed every file one by one, exit 1; a --dask address that names no
-scheduler ended in distributed's traceback)."""
+scheduler ended in distributed's traceback). --timeout takes a positive,
+finite number of seconds."""
 
 import pytest
 
@@ -17,8 +18,13 @@ from tests.mesh_factory import icosphere
     (["--faces", "40", "--feature-angle", "nan"], "--feature-angle must be in (0, 180] degrees"),
     (["--faces", "40", "--feature-angle", "-5"], "--feature-angle must be in (0, 180] degrees"),
     (["--faces", "40", "--feature-angle", "1e9"], "--feature-angle must be in (0, 180] degrees"),
+    (["--faces", "40", "--timeout", "0"], "--timeout must be a positive number of seconds, got 0"),
+    (["--faces", "40", "--timeout", "-3"], "--timeout must be a positive number of seconds, got -3"),
+    (["--faces", "40", "--timeout", "nan"], "--timeout must be a positive number of seconds, got nan"),
+    (["--faces", "40", "--timeout", "inf"], "--timeout must be a positive number of seconds, got inf"),
+    (["--faces", "40", "--timeout", "30s"], "argument --timeout: invalid float value: '30s'"),
 ])
-def test_a_number_the_simplify_cannot_take_is_a_bad_argument(tmp_path, args, said):
+def test_a_number_the_batch_cannot_use_is_a_bad_argument(tmp_path, args, said):
     core.write_obj(tmp_path / "ball.obj", *icosphere(2))
     proc = run_batch(["ball.obj", "--out", "out", *args], tmp_path)
     assert proc.returncode == 2 and said in proc.stderr, proc.stdout + proc.stderr

@@ -315,13 +315,17 @@ from meshadjust.cli import batch
 def broken(*a, **k):
     raise core.InvalidMeshError("subdivision_operator: 3 non-manifold vertices")
 setattr(core, sys.argv[1], broken)
-sys.exit(batch.main(sys.argv[2:]))
+# the workers convert: they run this script too, with the same function broken
+sys.exit(batch.main(sys.argv[2:], entry=[__file__, sys.argv[1]]))
 """
 
 
 def run_broken(function, args, tmp_path):
-    """The batch with the core's ``function`` failing as a subdivision does."""
-    return subprocess.run([sys.executable, "-c", BROKEN, function, *map(str, args)],
+    """The batch with the core's ``function`` failing as a subdivision does
+    (in the batch's process and its workers')."""
+    script = tmp_path / "broken_batch.py"
+    script.write_text(BROKEN)
+    return subprocess.run([sys.executable, str(script), function, *map(str, args)],
                           capture_output=True, text=True, cwd=tmp_path, timeout=120)
 
 
@@ -387,7 +391,7 @@ def test_help_and_bad_arguments(tmp_path):
     assert proc.returncode == 0
     for opt in ("--faces", "--ratio", "--max-error", "--fit", "--refine", "--scheme", "--out",
                 "--format", "--jobs", "--dask", "--report", "--log", "--skip-existing",
-                "--strict", ".smf"):
+                "--strict", "--timeout", ".smf"):
         assert opt in proc.stdout, opt
     proc = run_batch(["x.obj", "--ratio", "2"], tmp_path)
     assert proc.returncode == 2 and "--ratio" in proc.stderr

@@ -4,12 +4,14 @@ output paths checked before any compute, a measure that fails."""
 
 import json
 import os
+import sys
 import time
 
 import numpy as np
+import pytest
 
 import core
-from tests.cli.test_batch import bumpy_sphere, rows, run_batch, run_broken
+from tests.cli.test_batch import ROOT, bumpy_sphere, rows, run_batch, run_broken
 from tests.mesh_factory import icosphere
 
 
@@ -105,3 +107,32 @@ def test_a_stray_loose_vertex_does_not_loosen_the_max_error(tmp_path):
     assert stray["faces_out"] == ball["faces_out"]
     assert stray["deviation_pct"] <= 0.5 and ball["deviation_pct"] <= 0.5
     assert core.surface_diagonal(np.vstack([V, [[50.0, 0.0, 0.0]]]), F) == core.bbox_diagonal(V)
+
+
+@pytest.mark.parametrize("cause", [KeyboardInterrupt(), PermissionError(13, "Permission denied")],
+                         ids=["cancel", "refused"])
+def test_a_cancel_between_two_renames_leaves_neither_output(tmp_path, monkeypatch, cause):
+    """A worker's SIGTERM (Ctrl-C, --timeout) is a KeyboardInterrupt wherever
+    it lands: between the cage's rename and the refined mesh's it would
+    leave the cage under its final name, the file reported cancelled or
+    timed out; so would a second rename the file system refuses."""
+    sys.path.insert(0, os.path.join(ROOT, "scripts"))
+    import meshadjust_batch
+    meshadjust_batch.checkout_package()
+    from meshadjust.cli import outputs
+    V, F = icosphere(1)
+    out = [(str(tmp_path / "s_cage.obj"), V, F), (str(tmp_path / "s_refined.obj"), V, F)]
+    real, calls = os.replace, []
+
+    def replace(src, dst):
+        calls.append(dst)
+        if len(calls) == 2:
+            raise cause
+        real(src, dst)
+    monkeypatch.setattr(outputs.os, "replace", replace)
+    with pytest.raises(OSError if isinstance(cause, OSError) else KeyboardInterrupt) as raised:
+        outputs.write_outputs(out, [])
+    if isinstance(cause, OSError):             # named by the path asked for
+        assert str(raised.value) == f"[Errno 13] Permission denied: '{out[1][0]}'"
+    assert calls == [out[0][0], out[1][0]]          # (the cage was renamed, then removed)
+    assert os.listdir(tmp_path) == []

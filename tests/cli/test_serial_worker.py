@@ -1,8 +1,10 @@
-"""A serial batch (``--jobs 1``) converts the files Blender reads or writes
-in one long-lived worker process: a crash of that worker (an importer's
-segmentation fault) fails the file it was converting, and a new worker takes
-the rest; OBJ and SMF stay in the batch's own process. The crash is real: a
-worker aborts (SIGABRT) on the file named by ``batch.CRASH_TEST_VARIABLE``."""
+"""A serial batch (``--jobs 1``) converts every file in one long-lived worker
+process: a crash of that worker (an importer's segmentation fault, the OOM
+killer on a scan too large for the memory) fails the file it was converting,
+and a new worker takes the rest. Until 2026-12-05 23:45 OBJ and SMF were
+converted in the batch's own process, where such a crash ended the batch.
+The crash is real: a worker aborts (SIGABRT) on the file named by
+``batch.CRASH_TEST_VARIABLE``."""
 
 import json
 import os
@@ -15,7 +17,7 @@ import time
 import pytest
 
 import core
-from cli.runners import CRASH_TEST_VARIABLE
+from cli.runners import CRASH_TEST_VARIABLE, RESULT_MARK
 from tests.cli.test_batch import ROOT, SCRIPT, rows
 from tests.mesh_factory import icosphere, shared_mesh_path, write_binary_stl, write_ply
 
@@ -72,10 +74,10 @@ def test_a_worker_crash_fails_its_file_and_a_new_worker_takes_the_rest(tmp_path)
         f"==== {tmp_path / n} ====" for n in names if n != "s2.ply"]
 
 
-def test_a_serial_batch_imports_blender_in_one_worker_and_reads_obj_itself(tmp_path):
-    """One worker process for all the files Blender reads or writes (it was
-    the batch's own process, so a crash there ended the batch), not one per
-    file (each would import bpy again); OBJ and SMF in the batch's process."""
+def test_a_serial_batch_converts_every_file_in_one_worker(tmp_path):
+    """One worker process for all the files (it was the batch's own process
+    for all of them, then for OBJ and SMF: a crash there ended the batch),
+    not one per file (each would import bpy again)."""
     V, F = icosphere(2)
     write_ply(tmp_path / "a.ply", V, F)
     write_binary_stl(tmp_path / "b.stl", V, F)
@@ -87,16 +89,81 @@ def test_a_serial_batch_imports_blender_in_one_worker_and_reads_obj_itself(tmp_p
     files = _report(tmp_path)["files"]
     assert [f["name"] for f in files] == ["a.ply", "b.stl", "c.obj", "d.ply", "e.smf"]
     assert [f["status"] for f in files] == ["ok"] * 5
-    pids = {f["name"]: f["pid"] for f in files}
-    assert pids["a.ply"] == pids["b.stl"] == pids["d.ply"] != pid
-    assert pids["c.obj"] == pids["e.smf"] == pid
-    # an OBJ written as PLY goes through Blender's exporter: in the worker too
+    assert len({f["pid"] for f in files}) == 1 and files[0]["pid"] != pid
+    # an OBJ written as PLY goes through Blender's exporter
     _, proc = _batch(["c.obj", "--faces", "100", "--format", "ply", "--out", "out2",
                       "--report", "r.json"], tmp_path)
     assert proc.returncode == 0, proc.stdout + proc.stderr
     (obj_as_ply,) = _report(tmp_path)["files"]
-    assert obj_as_ply["status"] == "ok" and obj_as_ply["pid"] != pids["c.obj"]
+    assert obj_as_ply["status"] == "ok"
     assert os.listdir(tmp_path / "out2") == ["c_cage.ply"]
+
+
+def test_an_obj_file_that_crashes_its_worker_fails_alone(tmp_path):
+    """An OBJ whose conversion ends the process (a native crash, the OOM
+    killer) ended the whole serial batch, converted in the batch's own
+    process: no row, no report, no later file."""
+    V, F = icosphere(2)
+    core.write_obj(tmp_path / "a.obj", V, F)
+    core.write_obj(tmp_path / "b.obj", V * 2, F)
+    core.write_smf(tmp_path / "c.smf", V * 3, F)
+    _, proc = _batch([".", "--faces", "100", "--out", "out", "--report", "r.json"], tmp_path,
+                     **{CRASH_TEST_VARIABLE: "b.obj"})
+    assert proc.returncode == 1, proc.stdout + proc.stderr
+    assert "Traceback" not in proc.stdout + proc.stderr
+    assert rows(proc.stdout)[1] == ("| b.obj |  |  |  |  |  |  | FAILED: b.obj: the worker "
+                                    "process died (killed by SIGABRT) |")
+    assert "2 converted, 1 failed; output in out" in proc.stdout
+    a, b, c = _report(tmp_path)["files"]
+    assert [a["status"], b["status"], c["status"]] == ["ok", "failed", "ok"]
+    assert b["failed_step"] == "worker" and b["outputs"] == [] and not b["timed_out"]
+    assert a["pid"] == b["pid"] != c["pid"]             # a new worker after the crash
+    assert sorted(os.listdir(tmp_path / "out")) == ["a_cage.obj", "c_cage.smf"]
+
+
+def _maps_bpy(pid):
+    """Whether process ``pid`` has Blender's module (``bpy/__init__.so`` and
+    its libraries) mapped."""
+    with open(f"/proc/{pid}/maps") as fh:
+        return any(f"{os.sep}bpy{os.sep}" in line for line in fh)
+
+
+def _serve(worker, tmp_path, name):
+    """Send the serving ``worker`` the file ``name`` (in ``tmp_path``) and
+    return its report."""
+    task = {"input": str(tmp_path / name), "name": name, "refined": None,
+            "cage": str(tmp_path / "out" / name.replace(".", "_cage."))}
+    worker.stdin.write(json.dumps({"task": task, "options": {"faces": 100}}) + "\n")
+    worker.stdin.flush()
+    for line in iter(worker.stdout.readline, ""):
+        if line.startswith(RESULT_MARK):
+            return json.loads(line[len(RESULT_MARK):])
+    raise AssertionError(f"the worker ended before it reported {name}")
+
+
+@pytest.mark.skipif(not os.path.exists("/proc/self/maps"), reason="needs /proc (Linux)")
+def test_a_worker_imports_blender_only_for_a_file_that_needs_it(tmp_path):
+    """Every file of a serial batch goes through its serving worker: one
+    that only meets OBJ and SMF must not pay for Blender (bpy's import, its
+    memory), which it meets first with a PLY."""
+    pytest.importorskip("bpy")
+    V, F = icosphere(2)
+    core.write_obj(tmp_path / "a.obj", V, F)
+    core.write_smf(tmp_path / "b.smf", V, F)
+    write_ply(tmp_path / "c.ply", V, F)
+    env = dict(os.environ, HOME=str(tmp_path), BLENDER_USER_RESOURCES=str(tmp_path))
+    worker = subprocess.Popen([sys.executable, SCRIPT, "--worker-serve"], stdin=subprocess.PIPE,
+                              stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+                              env=env, cwd=str(tmp_path))
+    try:
+        assert _serve(worker, tmp_path, "a.obj")["status"] == "ok"
+        assert _serve(worker, tmp_path, "b.smf")["status"] == "ok"
+        assert not _maps_bpy(worker.pid)
+        assert _serve(worker, tmp_path, "c.ply")["status"] == "ok"
+        assert _maps_bpy(worker.pid)                 # (the check sees Blender when it is there)
+    finally:
+        worker.stdin.close()
+        worker.wait(timeout=60)
 
 
 def _stderr_until(proc, text, timeout=240):
