@@ -272,3 +272,44 @@ def test_a_cage_of_many_small_closed_pieces_is_not_a_soup():
     assert fitted.V.shape == V.shape and np.isfinite(fitted.V).all()
     b = bind(V, F, V, F, levels=1)
     np.testing.assert_allclose(deform(b, V), V, atol=1e-12 * bbox_diagonal(V))
+
+
+@pytest.mark.parametrize("scheme", ["loop", "butterfly"])
+def test_the_preconditioner_blocks_are_the_normal_matrix_block_row_sums(scheme):
+    """The conjugate gradients' preconditioner: its 3x3 block of each cage
+    vertex is its block row of the normal matrix summed (``A`` applied to
+    every vertex moved by one along x, y, z; the Laplacian's rows sum to 0),
+    and each inverse is of that block plus the Laplacian's diagonal, raised
+    only where its Gershgorin bound fell below the floor (to it)."""
+    import core.fit as fit_module
+    Vd, Fd = torus(48, 24, bump=0.02, bump_waves=(8, 4))
+    Vc, Fc = torus(8, 5)
+    pb = fit_module._set_up(Vd, Fd, Vc * 0.97, Fc, levels=2, scheme=scheme, creases=None,
+                            smoothness=0.05, point_to_point=0.1, laplacian="uniform",
+                            samples=None, seed=0, symmetry=None, iterations=1)
+    m = fit_module._match(pb, pb.X0)
+    A, rhs, blocks = fit_module._normal_equations(pb, m)
+    n = pb.X0.shape[0]
+    for k in range(3):
+        e = np.zeros((n, 3))
+        e[:, k] = 1.0
+        np.testing.assert_allclose(A(e.ravel()).reshape(n, 3), blocks[:, :, k],
+                                   rtol=1e-9, atol=1e-12 * np.abs(blocks).max())
+    np.testing.assert_allclose(blocks, blocks.transpose(0, 2, 1), atol=1e-15)
+    rows, cols, w = pb.laplacian
+    diagonal = pb.lam * fit_module._lt_l_diagonal(rows, cols, w, n)
+    inv = fit_module._inverse_blocks(blocks, diagonal)
+    full = blocks + diagonal[:, None, None] * np.eye(3)
+    floor = 1e-3 * np.einsum("nii->n", full).max() / 3
+    d = np.einsum("nii->ni", full)
+    low = (d - (np.abs(full).sum(axis=2) - np.abs(d))).min(axis=1)    # Gershgorin
+    raised = np.linalg.inv(inv) - full                  # t I, t = floor - that bound where below
+    t = np.maximum(floor - low, 0.0)
+    np.testing.assert_allclose(raised, t[:, None, None] * np.eye(3), atol=1e-9 * np.abs(full).max())
+    assert (np.linalg.eigvalsh(full + t[:, None, None] * np.eye(3))[:, 0] >= floor * (1 - 1e-9)).all()
+    assert (t == 0).sum() >= 0.5 * n
+    # a singular block (no data, no Laplacian) is raised to the floor, not inverted as is
+    flat = np.zeros((2, 3, 3))
+    flat[0] = np.diag([1.0, 1.0, 0.0])
+    inv = fit_module._inverse_blocks(flat, np.zeros(2))
+    assert np.isfinite(inv).all() and (np.linalg.eigvalsh(inv) > 0).all()
