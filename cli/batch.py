@@ -425,6 +425,16 @@ def _skipped(tasks, skip_existing):
     return results, todo
 
 
+def may_leave_parts(result):
+    """Whether the worker process named in the file record ``result`` (its
+    ``pid``) may have left temporary outputs of the file (``.part-<pid>-*``):
+    it died, or was stopped for the time limit or by a Ctrl-C, where the
+    SIGKILL after the grace period cuts its own clean-up short."""
+    stopped = result["failed_step"] == "worker" or result["timed_out"] \
+        or result["status"] == "cancelled"
+    return stopped and result["pid"] is not None
+
+
 def _run(args, opts, entry, tasks, todo, results):
     """Run the tasks ``todo`` (on Dask, worker processes or here), each
     result into ``results`` as it comes, with the progress bar and the
@@ -435,7 +445,7 @@ def _run(args, opts, entry, tasks, todo, results):
 
     def on_done(k, result):
         i = todo[k]
-        if (result["failed_step"] == "worker" or result["timed_out"]) and result["pid"] is not None:
+        if may_leave_parts(result):
             outputs.remove_dead_parts(tasks[i], result["pid"])
         if log_fh is not None:
             if result.get("log"):

@@ -238,3 +238,22 @@ def test_the_temporary_outputs_a_dead_worker_left_are_removed(tmp_path):
                                                    ".part-4000001-0.ply"]
     outputs.remove_dead_parts(task, dead)
     assert [os.path.exists(p) for p in left + kept] == [False, False, False, True, True]
+
+
+def test_the_parts_of_a_stopped_file_are_looked_for():
+    """The records whose worker may have left temporary outputs: one that
+    died, one stopped for its time limit, and one stopped by a Ctrl-C (a
+    SIGKILL after the grace period leaves its parts as a crash does); never
+    a converted file, nor a file no worker started (no pid)."""
+    sys.path.insert(0, os.path.join(ROOT, "scripts"))
+    import meshadjust_batch
+    meshadjust_batch.checkout_package()
+    from meshadjust.cli import batch, runners
+    task = {"input": "in/s.obj", "name": "s.obj"}
+    died = dict(runners.failed_report(task, "the worker process died (killed by SIGKILL)"), pid=7)
+    slow = runners.file_report(task, "failed", timed_out=True, failed_step="fit", pid=7)
+    cancelled = dict(runners.cancelled_report(task), pid=7)
+    converted = runners.file_report(task, "ok", pid=7)
+    unstarted = runners.cancelled_report(task)
+    assert [batch.may_leave_parts(r) for r in (died, slow, cancelled, converted, unstarted)] \
+        == [True, True, True, False, False]
