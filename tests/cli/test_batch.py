@@ -517,3 +517,21 @@ def test_an_stl_cage_whose_split_bow_tie_would_be_joined_again_warns(tmp_path):
     proc = run_batch(["pair.obj", "--faces", "600", "--out", "o", "--report", "obj.json"], tmp_path)
     rep = json.loads((tmp_path / "obj.json").read_text())["files"][0]
     assert not any("share a position" in w for w in rep["warnings"])
+
+
+def test_a_closing_cluster_logs_nothing_below_critical():
+    """A Dask cluster's shutdown races its own messages and distributed logs
+    each closed comm with a traceback: while the batch closes it, the
+    ``distributed`` loggers (the parent and every child, even one with its
+    own level) take only CRITICAL, and get their levels back after."""
+    import logging
+    from cli.runners import quiet_logs
+    parent, child = logging.getLogger("distributed"), logging.getLogger("distributed.batched")
+    other = logging.getLogger("distributedness")
+    child.setLevel(logging.INFO)
+    before = (parent.level, child.level, other.level)
+    with quiet_logs("distributed"):
+        assert not child.isEnabledFor(logging.ERROR) and not parent.isEnabledFor(logging.ERROR)
+        assert child.isEnabledFor(logging.CRITICAL)
+        assert other.level == before[2]
+    assert (parent.level, child.level, other.level) == before
