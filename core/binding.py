@@ -536,6 +536,9 @@ def bind(V_dense, F_dense, V_cage, F_cage, *, levels=2, scheme="butterfly", crea
     VfT = np.ascontiguousarray(Vf.T)
     NfT = _vertex_normals_t(VfT, op.F_fine, _normal_floor(step))
     detail = _detail_mode(detail_search, F_dense)
+    # the faces at each dense vertex: whether the scan is unwelded, which vertices are used
+    degree = (np.bincount(F_dense.ravel(), minlength=V_dense.shape[0]) if detail == "local"
+              else None)
     reach = _typical_distance(V_dense, F_dense, V_cage, F_cage, scheme, creases, origin) \
         if levels > _REACH_LEVELS else None
     if detail == "exact":
@@ -544,7 +547,7 @@ def bind(V_dense, F_dense, V_cage, F_cage, *, levels=2, scheme="butterfly", crea
         query, dense_index = run_each(lambda build: build(), [
             lambda: NearQuery(Vf, op.F_fine, reach=reach),
             lambda: exact_detail_index(V_dense - origin if shifted else V_dense, F_dense)])
-    elif detail == "local" and is_unwelded(F_dense, V_dense.shape[0]):
+    elif detail == "local" and is_unwelded(F_dense, V_dense.shape[0], degree):
         # an unwelded scan's vertices have fans of one triangle: the local search looks on
         # its cleaned surface, made beside the index
         query, surface = run_each(lambda build: build(), [
@@ -562,7 +565,7 @@ def bind(V_dense, F_dense, V_cage, F_cage, *, levels=2, scheme="butterfly", crea
     near = None
     if detail == "local":
         on = surface.to_surface
-        near = _NearSearch(vfr.point, _used_vertices(F_dense, V_dense.shape[0]) if on is None
+        near = _NearSearch(vfr.point, _used_vertices(degree) if on is None
                            else (None if (on >= 0).all() else on >= 0))
     dense = _bind_dense(query, V_dense, VfT, NfT, op.F_fine, _reporter(progress, 0.05, 0.6),
                         near, origin if shifted else None)
@@ -1733,10 +1736,10 @@ class _NearSearch(NamedTuple):
     used: object        #: (n_dense,) bool, dense vertices on a face; None: all are
 
 
-def _used_vertices(F, n):
-    """(n,) bool mask of the vertices some face of ``F`` uses, or None when all are."""
-    used = np.zeros(n, dtype=bool)
-    used[F.ravel()] = True
+def _used_vertices(degree):
+    """(n,) bool mask of the vertices some face uses (``degree``: the faces at
+    each), or None when all are."""
+    used = degree > 0
     return None if used.all() else used
 
 

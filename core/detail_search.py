@@ -78,10 +78,12 @@ def detail_surface(V_dense, F_dense):
     return DetailSurface(V_dense, F_dense, None)
 
 
-def is_unwelded(F_dense, n_dense):
+def is_unwelded(F_dense, n_dense, degree=None):
     """Whether the local search must look on the cleaned scan: more than
-    ``_LONE_SHARE`` of the used vertices have a fan of one triangle."""
-    deg = np.bincount(F_dense.ravel(), minlength=n_dense)
+    ``_LONE_SHARE`` of the used vertices have a fan of one triangle
+    (``degree``: the faces at each vertex, when the caller has counted them;
+    a count of a 2M-face scan's corners is 15 ms)."""
+    deg = np.bincount(F_dense.ravel(), minlength=n_dense) if degree is None else degree
     return bool(np.count_nonzero(deg == 1) > _LONE_SHARE * np.count_nonzero(deg))
 
 
