@@ -63,8 +63,8 @@ from .detail_search import (DetailSurface, dense_points_near, detail_surface, ex
                             is_unwelded)
 from .errors import CancelledError, InvalidArgumentError, TopologyMismatchError
 from .mesh import (area_normals_t, bounding_box, check_faces, check_mesh, check_number,
-                   check_units, check_vertices, cross_columns, dot_columns, row_sums, stops,
-                   UNITS)
+                   check_units, check_vertices, cross_columns, cross_rows, dot_columns, row_norms,
+                   row_sums, stops, UNITS)
 from .near_query import NearQuery
 from .spatial import TriangleIndex
 from ._refine import crease_pairs
@@ -604,7 +604,7 @@ def _typical_distance(V_dense, F_dense, V_cage, F_cage, scheme, creases, origin)
                               creases=creases)
     if F_dense.shape[0]:
         T = V_dense[F_dense[::max(1, F_dense.shape[0] // _REACH_SAMPLES)]]
-        P, weight = T[:, 0], np.linalg.norm(np.cross(T[:, 1] - T[:, 0], T[:, 2] - T[:, 0]), axis=1)
+        P, weight = T[:, 0], row_norms(cross_rows(T[:, 1] - T[:, 0], T[:, 2] - T[:, 0]))
     else:
         P, weight = V_dense[::max(1, V_dense.shape[0] // _REACH_SAMPLES)], None
     distance = TriangleIndex(op.apply(V_cage - origin), op.F_fine).closest(P - origin).distance

@@ -1340,16 +1340,14 @@ class TriangleIndex:
         left = ~is_first[keep]
         keep, lb = keep[left], lb[left]
         at, v, w, d2 = self._eval_lowest_first(PT, q, t, keep, lb, bound)
-        if lowest_face:
-            self._fold_lowest_face(q[np.concatenate([first, at])], t[np.concatenate([first, at])],
-                                   np.concatenate([v0, v]), np.concatenate([w0, w]),
-                                   np.concatenate([d0, d2]), best)
-            return
         at = np.concatenate([first, at])
+        v, w, d2 = np.concatenate([v0, v]), np.concatenate([w0, w]), np.concatenate([d0, d2])
+        if lowest_face:
+            self._fold_lowest_face(q[at], t[at], v, w, d2, best)
+            return
         order = np.argsort(at, kind="stable")
-        self._fold_probe(q, t, X, S, dc2, counts, pre, at[order],
-                         np.concatenate([v0, v])[order], np.concatenate([w0, w])[order],
-                         np.concatenate([d0, d2])[order], best)
+        self._fold_probe(q, t, X, S, dc2, counts, pre, at[order], v[order], w[order], d2[order],
+                         best)
 
     def _eval_lowest_first(self, PT, q, t, keep, lb, bound):
         """Evaluate the scan's pairs ``keep`` (ascending, their lower bounds
@@ -1746,7 +1744,8 @@ class TriangleIndex:
         that followed boxes holding the point but not the triangle it lies
         on (a point far from the mesh is as far from the boxes, and is not
         probed again)."""
-        q, counts, centre, _ = self._query_groups(PT, far, np.full(far.size, _PROBE_CELLS * self._h))
+        q, counts, centre, _ = self._query_groups(PT, far,
+                                                  np.full(far.size, _PROBE_CELLS * self._h))
         beam = self._beam(centre, width)[np.repeat(np.arange(counts.size), counts)]
         n_leaves = 1 << self._depth
         pair = np.unique(beam + n_leaves * np.arange(q.size)[:, None])  # grouped by query
