@@ -5,6 +5,8 @@ Blender objects are made and read with the add-on's own fast mesh transfer
 add-on runs; test meshes come from ``tests/mesh_factory``.
 """
 
+import ctypes
+import glob
 import os
 import sys
 
@@ -14,6 +16,14 @@ for path in (ROOT, os.path.join(ROOT, "scripts")):
         sys.path.insert(0, path)
 
 SHARED_MESHES = os.path.normpath(os.path.join(ROOT, "..", "shared", "meshes"))
+
+#: OpenBLAS's kernel sets for the CPU's widest vectors (``OPENBLAS_CORETYPE`` names), the
+#: widest first, with the /proc/cpuinfo flags each needs
+BLAS_KERNELS = (("SkylakeX", {"avx512f", "avx512bw", "avx512dq", "avx512vl", "avx512cd"}),
+                ("Haswell", {"avx2", "fma"}))
+
+#: OpenBLAS kernel sets for AVX2 or wider: no hint when NumPy runs one of these
+WIDE_KERNELS = {"Haswell", "Zen", "SkylakeX", "Cooperlake", "SapphireRapids"}
 
 
 def mesh_io():
@@ -49,3 +59,42 @@ def evaluated_positions(ob):
     import bpy
     ev = ob.evaluated_get(bpy.context.evaluated_depsgraph_get())
     return mesh_io().read_positions(ev.data)
+
+
+def blas_kernels():
+    """The kernel set NumPy's OpenBLAS runs on this CPU (its own name for it:
+    ``"SkylakeX"``, ``"Haswell"``, ``"Prescott"``...), or None when NumPy's
+    BLAS is not an OpenBLAS that says. An OpenBLAS older than the CPU falls
+    back to old kernels: NumPy 1.26.4's (0.3.23) runs Prescott's (SSE3) on a
+    Sapphire Rapids virtual machine where NumPy 2.4's picks SkylakeX, and its
+    float32 products of the bind's tile bounds take 5-7x as long."""
+    import numpy
+    libs = os.path.join(os.path.dirname(os.path.dirname(numpy.__file__)), "numpy.libs")
+    for path in sorted(glob.glob(os.path.join(libs, "*openblas*.so*"))):
+        lib = ctypes.CDLL(path)         # the library NumPy has loaded: the same handle
+        for name in ("openblas_get_corename64_", "scipy_openblas_get_corename64_",
+                     "openblas_get_corename"):
+            corename = getattr(lib, name, None)
+            if corename is not None:
+                corename.restype = ctypes.c_char_p
+                return corename().decode()
+    return None
+
+
+def blas_line():
+    """One line for a benchmark's header: NumPy's version, the BLAS kernels it
+    runs and, when they are older than the CPU's widest vectors, the
+    ``OPENBLAS_CORETYPE`` that gives the CPU's own."""
+    import numpy
+    kernels = blas_kernels()
+    line = f"NumPy {numpy.__version__}, OpenBLAS kernels {kernels or 'unknown'}"
+    try:
+        with open("/proc/cpuinfo") as fh:
+            flags = set(next(r for r in fh if r.startswith("flags")).split(":")[1].split())
+    except (OSError, StopIteration):
+        return line
+    best = next((name for name, need in BLAS_KERNELS if need <= flags), None)
+    if best and kernels and kernels not in WIDE_KERNELS:
+        line += (f" (older than this CPU's: OPENBLAS_CORETYPE={best} before starting "
+                 "Python gives its own)")
+    return line

@@ -67,7 +67,8 @@ from core.spatial import closest_points  # noqa: E402
 from core.subdivide import subdivision_operator  # noqa: E402
 from tests.mesh_factory import (BUMP, analytic_bend as bend, bumpy_tube, midpoint_split,  # noqa: E402
                                  torus)
-from _bench import blender_object, empty_scene, evaluated_positions, mesh_io  # noqa: E402
+from _bench import (blas_line, blender_object, empty_scene, evaluated_positions,  # noqa: E402
+                    mesh_io)
 
 SHARED = os.path.normpath(os.path.join(ROOT, "..", "shared", "meshes"))
 
@@ -505,7 +506,7 @@ def main(argv=None):
     args = ap.parse_args(argv)
     parts = set(args.only or ("bend", "scale", "fit", "folds", "live"))
     lines = [f"run of {time.strftime('%Y-%m-%d %H:%M', time.gmtime())} UTC, 1-minute load average at the "
-             f"start {os.getloadavg()[0]:.1f}", ""]
+             f"start {os.getloadavg()[0]:.1f}; {blas_line()}", ""]
     if "live" in parts:
         for levels in args.live_levels or (0, 2):
             lines += _live_section(args.quick, levels)

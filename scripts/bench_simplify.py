@@ -54,7 +54,7 @@ from core.mesh import bbox_diagonal, face_normals  # noqa: E402
 from core.simplify import simplify  # noqa: E402
 from core.spatial import TriangleIndex  # noqa: E402
 from core.topology import edge_map, euler_characteristic, manifold_report  # noqa: E402
-from _bench import blender_object, empty_scene, evaluated_arrays  # noqa: E402
+from _bench import blas_line, blender_object, empty_scene, evaluated_arrays  # noqa: E402
 
 MESHES = os.path.normpath(os.path.join(ROOT, "..", "shared", "meshes"))
 SEED = 0
@@ -441,7 +441,7 @@ def main():
     load = os.getloadavg() if hasattr(os, "getloadavg") else None
     text += "\nDistances: core.metrics.surface_distance, % of the input's bounding-box diagonal."
     text += (f"\nRun {time.strftime('%Y-%m-%d %H:%M')} on this machine ({os.cpu_count()} cores"
-             + (f", load average {load[0]:.1f} at the end" if load else "") + ").")
+             + (f", load average {load[0]:.1f} at the end" if load else "") + f"); {blas_line()}.")
     print()
     print(text)
     out = os.path.join(ROOT, "bench_results")

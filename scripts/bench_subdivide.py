@@ -32,7 +32,7 @@ import numpy as np  # noqa: E402
 from core.io_obj import read_obj  # noqa: E402
 from core.subdivide import subdivide, subdivision_operator  # noqa: E402
 from tests.mesh_factory import midpoint_split  # noqa: E402
-from _bench import blender_object, empty_scene  # noqa: E402
+from _bench import blas_line, blender_object, empty_scene  # noqa: E402
 
 MESHES = os.path.normpath(os.path.join(ROOT, "..", "shared", "meshes"))
 
@@ -129,7 +129,7 @@ def main():
         "Reference figure (not run here): MeshLab's butterfly filter takes 4.9 s for two levels of a "
         "270k-triangle scan to 4.3M triangles on this machine.",
         f"Machine load average when the run ended: {os.getloadavg()[0]:.1f} (2 shared cores); "
-        "wall-clock times grow with it.",
+        f"wall-clock times grow with it. {blas_line()}.",
     ]
     table = "\n".join(lines)
     print()
