@@ -1266,10 +1266,7 @@ class TriangleIndex:
         qq = q[win]
         better = d2[win] < best.d2[qq]
         qq, win = qq[better], win[better]
-        best.d2[qq] = d2[win]
-        best.t[qq] = t[win]
-        best.v[qq] = v[win]
-        best.w[qq] = w[win]
+        best.put(qq, t[win], v[win], w[win], d2[win])
 
     def _fold_lowest_face(self, q, t, v, w, d2, best):
         """Fold pair results (points ``q``, triangles ``t``) into ``best``:
@@ -1287,10 +1284,7 @@ class TriangleIndex:
         old = best.d2[qq]
         better = (d2[win] < old) | ((d2[win] == old) & (face[win] < self._order[best.t[qq]]))
         qq, win = qq[better], win[better]
-        best.d2[qq] = d2[win]
-        best.t[qq] = t[win]
-        best.v[qq] = v[win]
-        best.w[qq] = w[win]
+        best.put(qq, t[win], v[win], w[win], d2[win])
 
     def _scan(self, PT, q, t, best, probe=True, edges=True, lowest_face=False):
         """Exact minimum over candidate pairs (q, t), grouped contiguously by query.
@@ -1511,10 +1505,7 @@ class TriangleIndex:
         qq = qa[win]
         better = d2[win] < best.d2[qq]
         qq, win = qq[better], win[better]
-        best.d2[qq] = d2[win]
-        best.t[qq] = t[at[win]]
-        best.v[qq] = v[win]
-        best.w[qq] = w[win]
+        best.put(qq, t[at[win]], v[win], w[win], d2[win])
 
     def _eval(self, PT, q, t):
         """The exact kernel on the pairs (query columns q of PT, internal triangles t)."""
@@ -1808,6 +1799,13 @@ class _Best:
         self.t = np.zeros(n, dtype=np.int64)
         self.v = np.zeros(n)
         self.w = np.zeros(n)
+
+    def put(self, rows, t, v, w, d2):
+        """Make the pairs ``(t, v, w, d2)`` the best of the queries ``rows``."""
+        self.t[rows] = t
+        self.v[rows] = v
+        self.w[rows] = w
+        self.d2[rows] = d2
 
 
 def _widen_bounds(near2, far2, rho):
