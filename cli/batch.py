@@ -297,16 +297,20 @@ def _worker_convert(payload):
     t0 = time.perf_counter()
 
     def began(step):
-        # (a newline first: Blender's log may have left a line unfinished)
-        print(f"\n{runners.STEP_MARK}{time.perf_counter() - t0:.4f} {step}", flush=True)
+        _say_to_parent(f"{runners.STEP_MARK}{time.perf_counter() - t0:.4f} {step}")
 
     try:
         result = _convert.convert(task, _convert.Options(**payload["options"]), on_step=began)
     except KeyboardInterrupt:
         result = runners.cancelled_report(task)
-    # (a newline first: Blender's log may have left a line unfinished)
-    print("\n" + runners.RESULT_MARK + json.dumps(report.json_safe(result)), flush=True)
+    _say_to_parent(runners.RESULT_MARK + json.dumps(report.json_safe(result)))
     return result["status"] != "cancelled"
+
+
+def _say_to_parent(line):
+    """Print a marked ``line`` for the parent process on a line of its own (a
+    newline first: Blender's log may have left a line unfinished)."""
+    print("\n" + line, flush=True)
 
 
 def worker_main(payload_json):
