@@ -13,6 +13,7 @@ problem size alone and every block writes its own slice.
 import os
 import threading
 from concurrent.futures import ThreadPoolExecutor
+from typing import NamedTuple
 
 #: worker threads (at most 4: the hot loops are memory bound beyond that;
 #: the environment variable MESHADJUST_THREADS overrides it, 1 runs everything inline)
@@ -78,3 +79,26 @@ def each_in_order(fn, items):
     finally:
         for future in futures:
             future.cancel()
+
+
+class _Done(NamedTuple):
+    """A result already there (:func:`in_background` run inline)."""
+
+    value: object
+
+    def result(self):
+        return self.value
+
+    def cancel(self):
+        return False
+
+
+def in_background(fn):
+    """Start ``fn()`` on a worker thread (inline when :func:`run_each` would
+    run it inline) and return at once: ``.result()`` waits for its value (or
+    raises its exception), ``.cancel()`` drops it if it has not started.
+    The worker runs it alone (its own ``run_each`` calls inline), while the
+    caller's further work runs on the other workers."""
+    if _inline([fn, fn]):
+        return _Done(fn())
+    return _executor().submit(fn)

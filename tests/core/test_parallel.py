@@ -53,3 +53,37 @@ def test_leaving_early_cancels_the_items_not_started():
     gen.close()                           # leaving the loop early
     time.sleep(0.1)                       # the ones running finish; the rest never start
     assert len(started) < 20
+
+
+def test_in_background_runs_beside_the_caller_and_gives_its_result_or_error():
+    started = threading.Event()
+    release = threading.Event()
+
+    def build():
+        started.set()
+        assert release.wait(5)
+        # on its worker, its own blocks run inline (no wait on the pool it holds)
+        return threading.current_thread().name, parallel.run_each(lambda i: i * i, range(4))
+
+    if parallel.WORKERS > 1:
+        job = parallel.in_background(build)
+        assert started.wait(5)          # it runs while the caller goes on
+        assert parallel.run_each(lambda i: -i, range(3)) == [0, -1, -2]
+        release.set()
+        name, squares = job.result()
+        assert name.startswith("meshadjust") and squares == [0, 1, 4, 9]
+    else:
+        release.set()
+        assert parallel.in_background(build).result()[1] == [0, 1, 4, 9]
+
+    def fails():
+        raise ValueError("no index")
+    with pytest.raises(ValueError, match="no index"):
+        parallel.in_background(fails).result()
+
+
+def test_in_background_on_a_worker_runs_inline():
+    def outer(_):
+        job = parallel.in_background(lambda: threading.current_thread().name)
+        return job.result() == threading.current_thread().name and not job.cancel()
+    assert all(parallel.run_each(outer, range(2)))
