@@ -290,18 +290,44 @@ def place_columns(q, p0, p1):
 
 
 def _place_block(q, p0, p1):
-    """:func:`place_columns` on one block of columns."""
-    q0, q1, q2, q3, q4, q5, b0, b1, b2 = q[:9]
+    """:func:`place_columns` on one block of columns. The 3x3 solve runs on
+    the well-conditioned columns alone (on a flat or CAD mesh nearly every
+    quadric is singular: the whole solve was computed, then replaced by the
+    fallback); each column's result is the same bits either way."""
+    q0, q1, q2, q3, q4, q5 = q[:6]
     c00 = q3 * q5 - q4 * q4
     c01 = q2 * q4 - q1 * q5
     c02 = q1 * q4 - q2 * q3
-    c11 = q0 * q5 - q2 * q2
-    c12 = q1 * q2 - q0 * q4
-    c22 = q0 * q3 - q1 * q1
     det = q0 * c00 + q1 * c01 + q2 * c02
     tr = (q0 + q3 + q5) * (1.0 / 3.0)
     ok = np.abs(det) > DET_EPS * tr * tr * tr
-    inv = -1.0 / np.where(ok, det, 1.0)
+    d = p1 - p0
+    good = np.flatnonzero(ok)
+    if good.size == 0:
+        return _segment_fallback(q, p0, p1, d)
+    if good.size == ok.size:
+        X, err, ok = _solved(q, p0, p1, d, det, c00, c01, c02)
+    else:
+        X, err = np.empty(p0.shape), np.empty(ok.size)
+        X[:, good], err[good], ok[good] = _solved(*(np.take(a, good, axis=-1)
+                                                    for a in (q, p0, p1, d, det, c00, c01, c02)))
+    bad = np.flatnonzero(~ok)
+    if bad.size:
+        X[:, bad], err[bad] = _segment_fallback(*(np.take(a, bad, axis=1) for a in (q, p0, p1, d)))
+    return X, err
+
+
+def _solved(q, p0, p1, d, det, c00, c01, c02):
+    """The closed-form solve of :func:`_place_block` on well-conditioned
+    columns (ends ``p0``, ``p1``, ``d = p1 - p0``; ``det`` and the first
+    cofactors ``c0j`` of each quadric's 3x3 part): the points (3,k), their
+    errors (k,), and whether each stays within ``MAX_DRIFT`` edge lengths
+    (k,) bool."""
+    q0, q1, q2, q3, q4, q5, b0, b1, b2 = q[:9]
+    c11 = q0 * q5 - q2 * q2
+    c12 = q1 * q2 - q0 * q4
+    c22 = q0 * q3 - q1 * q1
+    inv = -1.0 / det
     mid = 0.5 * (p0 + p1)
     mx, my, mz = mid
     r0 = q0 * mx + q1 * my + q2 * mz + b0
@@ -310,18 +336,11 @@ def _place_block(q, p0, p1):
     y0 = (c00 * r0 + c01 * r1 + c02 * r2) * inv
     y1 = (c01 * r0 + c11 * r1 + c12 * r2) * inv
     y2 = (c02 * r0 + c12 * r1 + c22 * r2) * inv
-    d = p1 - p0
     len2 = d[0] * d[0] + d[1] * d[1] + d[2] * d[2]
-    ok &= y0 * y0 + y1 * y1 + y2 * y2 <= (MAX_DRIFT * MAX_DRIFT) * len2
-    X = np.stack([mx + np.where(ok, y0, 0.0), my + np.where(ok, y1, 0.0), mz + np.where(ok, y2, 0.0)])
-    err = quadric_at(q, X[0], X[1], X[2])
-    bad = np.flatnonzero(~ok)
-    if bad.size:
-        if bad.size == ok.size:
-            X, err = _segment_fallback(q, p0, p1, d)
-        else:
-            X[:, bad], err[bad] = _segment_fallback(*(np.take(a, bad, axis=1) for a in (q, p0, p1, d)))
-    return X, err
+    ok = y0 * y0 + y1 * y1 + y2 * y2 <= (MAX_DRIFT * MAX_DRIFT) * len2
+    X = np.stack([mx + np.where(ok, y0, 0.0), my + np.where(ok, y1, 0.0),
+                  mz + np.where(ok, y2, 0.0)])
+    return X, quadric_at(q, X[0], X[1], X[2]), ok
 
 
 def _segment_fallback(qb, s0, s1, db):
