@@ -546,7 +546,8 @@ def bind(V_dense, F_dense, V_cage, F_cage, *, levels=2, scheme="butterfly", crea
         # the dense mesh's index (on one thread: 0.4 of a 0.6 s bind of a 100k-vertex scan)
         # is not needed before the dense vertices are bound: built beside that work
         dense_index = in_background(
-            lambda: exact_detail_index(V_dense - origin if shifted else V_dense, F_dense))
+            lambda: exact_detail_index(V_dense - origin if shifted else V_dense, F_dense,
+                                       op.n_fine))
         query = NearQuery(Vf, op.F_fine, reach=reach)
     elif detail == "local" and is_unwelded(F_dense, V_dense.shape[0], degree):
         # an unwelded scan's vertices have fans of one triangle: the local search looks on

@@ -97,7 +97,7 @@ __all__ = ["ClosestPoints", "IndexTables", "TriangleClosest", "TriangleIndex", "
 # --- tolerances and tuning, in one place -------------------------------------------------------
 _THIN_SIN2 = 1e-4          # |ab x ac|^2 < this * |ab|^2 |ac|^2 (and same at B): robust path
 _FLAT_SIN2 = 1e-16         # below this sin^2 at A a triangle is treated as its three edges
-_CELL_FACTOR = 1.5         # grid cell size = this * mean triangle bounding-box extent
+CELL_FACTOR = 1.5          # grid cell size = this * mean triangle bounding-box extent
 _MAX_CELLS = 1 << 23       # dense grid cap (int64 offsets: 64 MiB)
 _MAX_REFS_PER_FACE = 12    # grow the cells if triangles would be referenced more often
 _MIN_REF_BUDGET = 1 << 22  # ... and more than this often in all (32 MiB)
@@ -953,12 +953,12 @@ class TriangleIndex:
     """
 
     @plain_pages
-    def __init__(self, V, F, *, cell_factor=_CELL_FACTOR, min_cell=None):
+    def __init__(self, V, F, *, cell_factor=CELL_FACTOR, min_cell=None):
         V, F = check_mesh(V, F, where="TriangleIndex", allow_empty=False)
         check_reach(V, where="TriangleIndex", name="V")
         # (1e-300 never found a grid: an UnboundLocalError; a bool passed as a number)
         cell_factor = check_number(cell_factor, where="TriangleIndex", name="cell_factor",
-                                   lo=_CELL_FACTOR / 1e3, hi=_CELL_FACTOR * 1e3)
+                                   lo=CELL_FACTOR / 1e3, hi=CELL_FACTOR * 1e3)
         if min_cell is not None:
             min_cell = check_number(min_cell, where="TriangleIndex", name="min_cell (or None)",
                                     lo=0, open_lo=True)
@@ -992,8 +992,8 @@ class TriangleIndex:
         # diagonals off the bunny put all of it in one cell, 69,451 faces that did not count
         # as crowded, and a NearQuery's windows over it took 24 GB
         self.crowded_cell = CROWDED_CELL * max(1.0, (h / boxed / natural) ** 2 if natural > 0 else 1.0)
-        # (natural / _CELL_FACTOR is the mean extent the cell_factor multiplies)
-        own = cell_factor * natural / _CELL_FACTOR
+        # (natural / CELL_FACTOR is the mean extent the cell_factor multiplies)
+        own = cell_factor * natural / CELL_FACTOR
         self.cell_growth = max(1.0, min(h / boxed, min_cell or 0.0) / own) if own > 0 else 1.0
         self._build_tables(V, Fo, spans, ext, h, dims)
         self._bvh = None                          # built on first need (far queries)
@@ -1035,7 +1035,7 @@ class TriangleIndex:
         smaller; at least ``min_cell``), grown by 1.25 until the
         grid has at most ``_MAX_CELLS`` cells and the triangles' boxes cover
         at most ``_MAX_REFS_PER_FACE`` cells each on average; the size the
-        default ``_CELL_FACTOR`` alone gives; and the factor by which the
+        default ``CELL_FACTOR`` alone gives; and the factor by which the
         cells grew for the cap on cells alone (a box much larger than its
         triangles: an outlier far off)."""
         m = ext.shape[0]
@@ -1045,7 +1045,7 @@ class TriangleIndex:
         span = float(extent.max())
         # (a min_cell a million times the mesh is one cell all the same: 1e300 overflowed below)
         h = max(cell_factor * mean, min(min_cell or 0.0, 1e6 * span))
-        natural = _CELL_FACTOR * mean
+        natural = CELL_FACTOR * mean
         if not h > 0:
             h = span / 64 if span > 0 else 1.0
         boxed = 1.0

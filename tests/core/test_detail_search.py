@@ -8,7 +8,7 @@ import pytest
 
 from core.detail_search import dense_points_near
 from core.mesh import bbox_diagonal
-from core.spatial import closest_points
+from core.spatial import TriangleIndex, closest_points
 from core.subdivide import subdivide
 from tests.mesh_factory import icosphere, load_shared, torus
 
@@ -73,3 +73,19 @@ def test_an_unbound_patch_the_fine_edges_do_not_reach_uses_the_whole_scan():
     q = dense_points_near(Vd, Fd, Ff, nearest, P)
     exact = closest_points(Vd, Fd, P[Vs.shape[0]:])
     np.testing.assert_allclose(q[Vs.shape[0]:], exact.point, rtol=0, atol=1e-12)
+
+
+def test_the_exact_detail_index_grows_its_cells_for_few_queries_and_stays_exact():
+    from core.detail_search import detail_cell_factor, exact_detail_index
+    from core.spatial import CELL_FACTOR
+    assert detail_cell_factor(1000, 1000) == detail_cell_factor(2000, 1000) == CELL_FACTOR
+    growth = [detail_cell_factor(f, 1000) for f in (4000, 32000, 320000)]
+    assert growth == sorted(growth) and growth[0] > CELL_FACTOR
+    assert growth[1] == pytest.approx(2 * CELL_FACTOR)               # (16x the faces: twice)
+    assert detail_cell_factor(10, 0) >= CELL_FACTOR                  # (no query: no error)
+    Vd, Fd = torus(200, 100, bump=0.02)                              # 40k faces
+    rng = np.random.default_rng(3)
+    P = Vd[rng.integers(Vd.shape[0], size=500)] + 0.01 * rng.standard_normal((500, 3))
+    index = exact_detail_index(Vd, Fd, P.shape[0])                   # cells 2.8x the default
+    assert index.tables.cell_size > 2 * TriangleIndex(Vd, Fd).tables.cell_size
+    assert index.closest(P).distance.tolist() == closest_points(Vd, Fd, P).distance.tolist()

@@ -147,10 +147,10 @@ def test_groups_answer_as_one_query_at_a_time(monkeypatch, scene):
     sixth of the default), by groups."""
     Vd, Fd, Vc, Fc, Vf, Ff, P = scene
     seen = _spy_groups(monkeypatch)
-    grouped = TriangleIndex(Vf, Ff, cell_factor=spatial._CELL_FACTOR / 6).closest(P)
+    grouped = TriangleIndex(Vf, Ff, cell_factor=spatial.CELL_FACTOR / 6).closest(P)
     assert seen["bvh"] > 0.5 * P.shape[0] and max(int(s.max()) for s in seen["sizes"]) >= 10
     _one_by_one(monkeypatch)
-    alone = TriangleIndex(Vf, Ff, cell_factor=spatial._CELL_FACTOR / 6).closest(P)
+    alone = TriangleIndex(Vf, Ff, cell_factor=spatial.CELL_FACTOR / 6).closest(P)
     for got, want in zip(grouped, alone):
         np.testing.assert_array_equal(got, want)
 
