@@ -195,3 +195,32 @@ def test_a_pinched_grid_gives_cages_without_flat_faces():
         em = edge_map(r.F, r.V.shape[0])
         keys = em.E[:, 0] * r.V.shape[0] + em.E[:, 1]
         assert np.isin(r.feature_edges[:, 0] * r.V.shape[0] + r.feature_edges[:, 1], keys).all()
+
+
+def test_the_few_face_searches_give_the_exact_closest_points():
+    # a cage of a few faces is searched over every pair, and the input for a few queries
+    # over the faces whose bounding spheres reach them: NearQuery's distances bit for bit,
+    # and its faces near the mesh (the lowest of exactly equidistant ones)
+    from core.near_query import NearQuery
+    rng = np.random.default_rng(5)
+    V, F = load_shared("fandisk.obj")
+    V = (V - V.mean(axis=0)) / np.linalg.norm(np.ptp(V, axis=0))
+    k = stages._FEW_QUERIES
+    for spread in (1e-4, 0.05, 0.5):
+        P = V[rng.integers(0, V.shape[0], k)] + spread * rng.normal(size=(k, 3))
+        few, exact = stages._FewQueries(V, F).closest(P), NearQuery(V, F).closest(P)
+        assert np.array_equal(few.distance, exact.distance)
+        if spread < 1e-3:
+            assert np.array_equal(few.face, exact.face) and np.array_equal(few.point, exact.point)
+    cage = F[rng.choice(F.shape[0], stages._FEW_FACES, replace=False)]
+    P = V[rng.integers(0, V.shape[0], 500)]
+    every, exact = stages._exhaustive(V, cage, P), NearQuery(V, cage).closest(P)
+    assert np.array_equal(every.distance, exact.distance)
+    # the face named is the lowest of those at that distance
+    d = np.stack([stages._exhaustive(V, cage[j:j + 1], P).distance
+                  for j in range(cage.shape[0])], axis=1)
+    assert np.array_equal(every.face, np.argmax(d == every.distance[:, None], axis=1))
+    # more queries than a few at once: the input's NearQuery, from then on
+    search = stages._FewQueries(V, F)
+    search.closest(V[:k + 1])
+    assert search.near is not None
