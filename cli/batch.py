@@ -51,7 +51,7 @@ if __name__ == "__main__" and __package__ == "cli":
 
 from . import blender_io  # noqa: E402
 from . import convert as _convert  # noqa: E402
-from . import outputs, report, runners  # noqa: E402
+from . import dask_runner, outputs, report, runners  # noqa: E402
 
 PROG = "meshadjust-batch"
 #: how a worker process is started from an installed package
@@ -357,7 +357,7 @@ def main(argv=None, *, entry=None, prog=PROG):
     results, todo = _skipped(tasks, args.skip_existing)
     try:
         interrupted = _run(args, opts, entry, tasks, todo, results)
-    except runners.SchedulerUnreachable as exc:
+    except dask_runner.SchedulerUnreachable as exc:
         print(f"\n{prog}: --dask: {exc}", file=sys.stderr)
         return 2
     if interrupted:
@@ -470,8 +470,8 @@ def _run(args, opts, entry, tasks, todo, results):
         if not sub:
             return False
         if args.dask is not None:
-            return runners.run_dask(sub, payload, entry, args.dask, args.jobs, on_done,
-                                    timeout=args.timeout)
+            return dask_runner.run_dask(sub, payload, entry, args.dask, args.jobs, on_done,
+                                        timeout=args.timeout)
         if args.jobs > 1:
             return runners.run_processes(sub, payload,
                                          lambda p: worker_command(entry, ["--worker", p]),

@@ -525,7 +525,7 @@ def test_a_closing_cluster_logs_nothing_below_critical():
     ``distributed`` loggers (the parent and every child, even one with its
     own level) take only CRITICAL, and get their levels back after."""
     import logging
-    from cli.runners import quiet_logs
+    from cli.dask_runner import quiet_logs
     parent, child = logging.getLogger("distributed"), logging.getLogger("distributed.batched")
     other = logging.getLogger("distributedness")
     child.setLevel(logging.INFO)
@@ -535,3 +535,27 @@ def test_a_closing_cluster_logs_nothing_below_critical():
         assert child.isEnabledFor(logging.CRITICAL)
         assert other.level == before[2]
     assert (parent.level, child.level, other.level) == before
+
+
+def test_the_dask_task_travels_by_value(tmp_path):
+    """The function each Dask task runs loads in a Python that cannot import
+    this package (a cluster's scheduler and workers only run the tool):
+    nothing of cli/ goes by reference, though it now spans two modules."""
+    cloudpickle = pytest.importorskip("cloudpickle", reason="cloudpickle (with dask) is not "
+                                      "installed (scripts/setup installs it into .venv)")
+    from cli.dask_runner import task_function
+    blob = tmp_path / "task.pickle"
+    blob.write_bytes(cloudpickle.dumps(task_function()))
+    probe = ("import pickle, sys\n"
+             "for name in ('cli', 'meshadjust'):\n"
+             "    try:\n"
+             "        __import__(name)\n"
+             "        sys.exit(name + ' is importable here: the probe proves nothing')\n"
+             "    except ImportError:\n"
+             "        pass\n"
+             f"task = pickle.loads(open({str(blob)!r}, 'rb').read())\n"
+             "print(task.__code__.co_names)\n")
+    run = subprocess.run([sys.executable, "-I", "-c", probe], cwd=tmp_path,
+                         capture_output=True, text=True, timeout=60)
+    assert run.returncode == 0, run.stderr[-2000:] + run.stdout
+    assert "_dask_task" in run.stdout
