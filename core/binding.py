@@ -858,7 +858,8 @@ def _groups(binding, state):
     """The :class:`~.unfold.FineFaceGroups` of the repair state (built on first use)."""
     if state["groups"] is None:
         state["groups"] = FineFaceGroups.of(binding.F_dense, binding.fine_face,
-                                            binding._operator.F_fine.shape[0], state["normals"])
+                                            binding._operator.F_fine.shape[0], state["normals"],
+                                            block=4 ** binding.levels)   # (a cage face's)
     return state["groups"]
 
 

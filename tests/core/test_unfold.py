@@ -242,6 +242,28 @@ def test_fine_face_groups_find_the_faces_around_the_rows(rough_torus):
     assert np.array_equal(b.fine_face[Fd[groups.faces[:Fd.shape[0]], 0]], owned)
 
 
+def test_fine_face_groups_in_blocks_list_the_same_faces(rough_torus):
+    # blocks of a cage face's fine faces (16 at two levels): a whole asked block's shared
+    # entries owned in it are left out before the owner test, the faces listed the same
+    # for whole blocks, part blocks and single fine faces
+    Vd, Fd, cage, b, normal, ring = rough_torus
+    rest = _rest_normals(Vd, Fd)
+    m_fine = b.operator.F_fine.shape[0]
+    plain = FineFaceGroups.of(Fd, b.fine_face, m_fine, rest)
+    rng = np.random.default_rng(3)
+    asked = [np.unique(b.fine_face[b.influenced(ring)]), np.arange(16, 48), np.array([5]),
+             np.arange(m_fine), np.zeros(0, dtype=np.int64)]
+    asked += [np.sort(rng.choice(m_fine, k, replace=False)) for k in (1, 30, 700)]
+    for block in (16, 5, 1):
+        groups = FineFaceGroups.of(Fd, b.fine_face, m_fine, rest, block=block)
+        assert groups.owning.sum() == np.count_nonzero(np.diff(groups.start))
+        for fine in asked:
+            entries = groups.entries(fine)
+            assert np.array_equal(np.sort(groups.faces[entries]),
+                                  np.sort(plain.faces[plain.entries(fine)]))
+            assert not groups.seen.any()
+
+
 @pytest.mark.parametrize("levels", [1, 2])
 def test_incremental_equals_full_through_repairs_at_both_test_paths(levels):
     # one level: the fine mesh is 4x coarser than the dense one, the faces are
