@@ -164,20 +164,24 @@ class State:
         return self.NrefT.T
 
 
+#: the declaration of every State array (name -> its :func:`_array` metadata), in
+#: declaration order (read at each compaction: ``dataclasses.fields`` there cost ~1 ms a run)
+_DECLARED = {f.name: f.metadata for f in fields(State) if f.metadata}
+
+
 def _meta(name):
-    return next(f.metadata for f in fields(State) if f.name == name)
+    return _DECLARED[name]
 
 
 def _per(name):
-    return _meta(name)["per"]
+    return _DECLARED[name]["per"]
 
 
 def _declared(*per, reset=None):
     """Names of the State arrays indexed by one of ``per`` (any when empty),
     only those with that ``reset`` flag when given."""
-    return [f.name for f in fields(State) if f.metadata
-            and (not per or f.metadata["per"] in per)
-            and (reset is None or f.metadata["reset"] == reset)]
+    return [name for name, meta in _DECLARED.items()
+            if (not per or meta["per"] in per) and (reset is None or meta["reset"] == reset)]
 
 
 def _rows_of(st, name):
@@ -467,8 +471,20 @@ def _acceptance_bound(limit, totals, tun):
     without any penalty)."""
     if totals.size == 0 or limit >= tun.plateau_share * float(totals.max()):
         return limit             # (the median is at most the largest: no plateau)
-    med = float(np.median(totals))
+    med = _median(totals)
     return med if limit < tun.plateau_share * med else limit
+
+
+def _median(x):
+    """``float(np.median(x))`` of a non-empty float array whose largest value
+    is not NaN (the same bits: the middle value, or the mean of the two
+    middle ones), without ``np.median``'s overhead (some 20 us a call; a
+    pass judges a few dozen rounds)."""
+    k = x.size // 2
+    if x.size % 2:
+        return float(np.partition(x, k)[k])
+    part = np.partition(x, (k - 1, k))
+    return float((part[k - 1] + part[k]) / 2.0)
 
 
 # ---------------------------------------------------------------- independent collapses
@@ -708,6 +724,7 @@ class _CheckedAhead(NamedTuple):
 
     at: np.ndarray       #: (P,) row of each pool edge in the results (-1: not checked)
     found: "_Checked"
+    start: np.ndarray    #: (k+1,) the star rows of result i are ``start[i]:start[i + 1]``
 
     @classmethod
     def of(cls, st, pool, active, faces, tun, haus, dihedral_cos):
@@ -726,15 +743,21 @@ class _CheckedAhead(NamedTuple):
         found = _check(st, A, B, pool.XT[:, active], pool.interior[active], star, kf, tun, haus, dihedral_cos)
         at = np.full(pool.key.size, -1, dtype=np.int64)
         at[active] = np.arange(active.size)
-        return cls(at, found)
+        # (the rows come by collapse: a round's results are runs of them, not a mask of all)
+        start = np.searchsorted(found.rows[1], np.arange(active.size + 1, dtype=np.int64))
+        return cls(at, found, start)
 
     def results(self, sel):
         """The results of the pool edges ``sel`` (ascending), as :func:`_check`
         returns them for that selection."""
         i = _take(self.at, sel)
-        keep = np.zeros(self.found.ok.size, dtype=bool)
-        keep[i] = True
-        return self.found.subset(i, keep)
+        first, count = _take(self.start, i), _take(self.start, i + 1) - _take(self.start, i)
+        kf = np.repeat(np.arange(i.size, dtype=np.int64), count)
+        r = np.arange(kf.size, dtype=np.int64) + _take(first - (np.cumsum(count) - count), kf)
+        c = self.found
+        star, _, coll, cA, cB = (_take(col, r) for col in c.rows)
+        return _Checked(_take(c.ok, i), _take(c.pen, i), (star, kf, coll, cA, cB),
+                        _take(c.wit, i, axis=0), _take(c.bent, i), _take(c.flip, i, axis=0))
 
 
 def _drop_invalid(st, pool, ahead, active, passes):
@@ -841,11 +864,6 @@ class _Checked(NamedTuple):
     wit: np.ndarray      #: (k,3) the survivor's witness
     bent: np.ndarray     #: (k,) bool: refused only by the dihedral bound
     flip: np.ndarray     #: (k,3) faces the collapse flips (-1: none; big stars only)
-
-    def subset(self, i, keep):
-        """The collapses ``i`` (ascending; ``keep``: the same as a (k,) mask)."""
-        return _Checked(_take(self.ok, i), _take(self.pen, i), _keep_rows(self.rows, keep),
-                        _take(self.wit, i, axis=0), _take(self.bent, i), _take(self.flip, i, axis=0))
 
 
 def _check(st, A, B, XT, interior, star, kf, tun, haus=True, dihedral_cos=None, quick=True):
