@@ -372,7 +372,8 @@ def main(argv=None, *, entry=None, prog=PROG):
     if args.report:
         report.write_json(args.report, {
             "tool": prog, "started": started, "arguments": argv, "options": asdict(opts),
-            "out": os.path.abspath(args.out), "log": os.path.abspath(args.log) if args.log else None,
+            "out": os.path.abspath(args.out),
+            "log": os.path.abspath(args.log) if args.log else None,
             "timeout_s": args.timeout,
             "seconds": round(time.perf_counter() - t0, 3), "interrupted": interrupted,
             "exit_status": status, "counts": c, "files": [report.json_safe(r) for r in results]})

@@ -40,7 +40,8 @@ def _status(r):
 
 
 def summary_table(results):
-    lines = ["| file | faces in | cage faces | target | max dev % | refined faces | time s | status |",
+    lines = ["| file | faces in | cage faces | target | max dev % | refined faces | time s "
+             "| status |",
              "| --- | ---: | ---: | ---: | ---: | ---: | ---: | --- |"]
 
     def num(v, fmt="{:,}"):

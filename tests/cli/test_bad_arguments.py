@@ -18,10 +18,14 @@ from tests.mesh_factory import icosphere
     (["--faces", "40", "--feature-angle", "nan"], "--feature-angle must be in (0, 180] degrees"),
     (["--faces", "40", "--feature-angle", "-5"], "--feature-angle must be in (0, 180] degrees"),
     (["--faces", "40", "--feature-angle", "1e9"], "--feature-angle must be in (0, 180] degrees"),
-    (["--faces", "40", "--timeout", "0"], "--timeout must be a positive number of seconds, got 0"),
-    (["--faces", "40", "--timeout", "-3"], "--timeout must be a positive number of seconds, got -3"),
-    (["--faces", "40", "--timeout", "nan"], "--timeout must be a positive number of seconds, got nan"),
-    (["--faces", "40", "--timeout", "inf"], "--timeout must be a positive number of seconds, got inf"),
+    (["--faces", "40", "--timeout", "0"],
+     "--timeout must be a positive number of seconds, got 0"),
+    (["--faces", "40", "--timeout", "-3"],
+     "--timeout must be a positive number of seconds, got -3"),
+    (["--faces", "40", "--timeout", "nan"],
+     "--timeout must be a positive number of seconds, got nan"),
+    (["--faces", "40", "--timeout", "inf"],
+     "--timeout must be a positive number of seconds, got inf"),
     (["--faces", "40", "--timeout", "30s"], "argument --timeout: invalid float value: '30s'"),
 ])
 def test_a_number_the_batch_cannot_use_is_a_bad_argument(tmp_path, args, said):

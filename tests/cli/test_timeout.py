@@ -91,7 +91,8 @@ def test_a_generous_limit_changes_nothing(tmp_path):
             plain.pop(key), limited.pop(key)
         assert plain == limited
     for name in ("a_cage.obj", "b_cage.obj"):
-        assert (tmp_path / "limited" / name).read_bytes() == (tmp_path / "plain" / name).read_bytes()
+        limited_bytes = (tmp_path / "limited" / name).read_bytes()
+        assert limited_bytes == (tmp_path / "plain" / name).read_bytes()
 
 
 def test_a_timed_out_record_names_the_step_and_times_the_steps_before_it():
