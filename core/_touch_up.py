@@ -217,7 +217,7 @@ def _closest_on(D, P, q, t):
     squared distance, the lowest triangle among exactly equal ones."""
     v, w, d2 = closest_pairs(np.ascontiguousarray(P.T), q, D, t)
     order = np.lexsort((t, d2, q))
-    first = order[np.flatnonzero(np.r_[True, q[order[1:]] != q[order[:-1]]])]
+    first = order[np.flatnonzero(np.diff(q[order], prepend=-1))]
     return closest_result(_Rows(D, np.arange(D.shape[1])), t[first], v[first], w[first],
                           d2[first])
 
@@ -252,7 +252,9 @@ class _FewQueries:
         if self.near is not None:
             return self.near.closest(P)
         step = max(1, _PAIRS_BLOCK // self.F.shape[0])
-        pairs = [self._near_pairs(P[s:s + step], s) for s in range(0, P.shape[0], step)]
+        none = np.zeros(0, dtype=np.int64)
+        pairs = [(none, none)] + [self._near_pairs(P[s:s + step], s)
+                                  for s in range(0, P.shape[0], step)]
         return _closest_on(self.D, P, *(np.concatenate(c) for c in zip(*pairs)))
 
     def _near_pairs(self, P, first):
