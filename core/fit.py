@@ -41,6 +41,7 @@ from .mesh import (barycentric_gather, barycentric_scatter, bbox_diagonal, bound
                    squared_edges, stops, vertex_normals)
 from .metrics import MAX_SAMPLES, sample_surface
 from .mirror import axis_index, mirror_partners, symmetrize
+from ._parallel import run_each
 from .near_query import search_for
 from .spatial import TriangleIndex
 from .subdivide import cage_operator, check_subdivision_args
@@ -318,8 +319,12 @@ def _match(pb, X, reach=None):
     area = _vertex_areas(Vf, Ff, pb.op.n_fine)
     total = area.sum()
     area = area / total if total > 0 else np.full(pb.op.n_fine, 1.0 / pb.op.n_fine)
-    hit = search_for(Vf, Ff, pb.P.shape[0], reach=reach).closest(pb.P)
-    return _Matches(area, pb.dense_index.closest(Vf), hit)
+    # the two searches do not depend on each other, and each answers its points on one
+    # thread: side by side on the worker threads (each point's answer is its own)
+    to_dense, hit = run_each(lambda search: search(), [
+        lambda: pb.dense_index.closest(Vf),
+        lambda: search_for(Vf, Ff, pb.P.shape[0], reach=reach).closest(pb.P)])
+    return _Matches(area, to_dense, hit)
 
 
 def _metric(mu, N, Y):
