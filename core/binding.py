@@ -101,6 +101,11 @@ _DETAIL_SEARCHES = ("auto", "exact", "local")
 #: worker-thread task; 16 blocks for 1M vertices keep the two threads evenly busy)
 _BIND_BLOCK = 65_536
 
+#: the fewest points a block of the bind's passes takes: fewer than 4 ``_BIND_BLOCK``
+#: are cut in 4 blocks (of at least this), so that both threads work on a 36k-vertex scan
+#: and on a 2,000-face cage's 16k fine vertices (one block each: one thread)
+_MIN_BIND_BLOCK = 4_096
+
 #: above this many levels, the bind's query is told how far the dense vertices lie
 #: from the fine surface (:func:`_typical_distance`, measured on the surface this many
 #: levels down): a fine mesh as dense as the scan has cells smaller than the scan's
@@ -1704,7 +1709,7 @@ class _Rows(NamedTuple):
 def _closest_on(index, P, report=None, point=False):
     """Closest points of ``P`` on an indexed mesh: (face (q,) int64, bary (q,3)
     float64), or with ``point`` the (q,3) points, queried in fixed blocks of
-    ``_BIND_BLOCK`` points on the worker threads (NumPy releases the GIL in
+    :func:`_bind_blocks` on the worker threads (NumPy releases the GIL in
     the index's array work; the blocks depend on the size alone, so results
     do not depend on the number of threads), a round of blocks at a time,
     ``report(fraction)`` after each round."""
@@ -1716,7 +1721,7 @@ def _closest_on(index, P, report=None, point=False):
         face[start:stop] = hit.face
         bary[start:stop] = hit.point if point else hit.bary
 
-    spans = blocks(P.shape[0], _BIND_BLOCK)
+    spans = _bind_blocks(P.shape[0])
     for i in range(0, len(spans), WORKERS):
         run_blocks(query, spans[i:i + WORKERS])
         if report is not None:
@@ -1757,7 +1762,7 @@ def _bind_dense(query, V_dense, VfT, NfT, F_fine, report=None, near=None, origin
     fine surface (``query``, a :class:`~.near_query.NearQuery`), then the
     frame components of each vertex's offset from its point (the frames in
     the transposed layout of deform, bit-identical to :func:`frames`), block
-    by block on the worker threads (fixed blocks of ``_BIND_BLOCK``: results
+    by block on the worker threads (fixed blocks, :func:`_bind_blocks`: results
     do not depend on the number of threads), ``report(fraction)`` as each
     block is done, in order (returning False cancels the blocks not yet
     started). With ``near`` (a :class:`_NearSearch`), each block also
@@ -1792,7 +1797,7 @@ def _bind_dense(query, V_dense, VfT, NfT, F_fine, report=None, near=None, origin
     def run(span):
         return block(*span), span[1]
 
-    for part, stop in each_in_order(run, blocks(n, _BIND_BLOCK)):
+    for part, stop in each_in_order(run, _bind_blocks(n)):
         parts.append(part)
         if report is not None:
             report(stop / n)
@@ -1859,6 +1864,14 @@ class _TieFaces(NamedTuple):
             moved += b[:, k:k + 1] * (new == old[:, k:k + 1])
         bary[rows] = moved
         face[rows] = g
+
+
+def _bind_blocks(n):
+    """The blocks of the bind's passes over ``n`` points: ``_BIND_BLOCK``
+    each, or a quarter of them (at least ``_MIN_BIND_BLOCK``) when that is
+    smaller; fixed by ``n`` alone (every point's answer is its own, and
+    :func:`_nearest_of` combines blocks in any cut the same)."""
+    return blocks(n, min(_BIND_BLOCK, max(_MIN_BIND_BLOCK, -(-n // 4))))
 
 
 def _nearest_parts(near, V, start, corners, face, n_dense):
