@@ -445,8 +445,8 @@ def test_a_far_outlier_does_not_make_the_bulk_one_window():
     index = q.index
     per_cell = np.diff(index.tables.cell_start)
     assert per_cell.max() > 1000                            # the sphere in a few cells ...
-    assert index.crowded_cell <= spatial.CROWDED_CELL * (near_query._CELL_FACTOR / spatial._CELL_FACTOR) ** 2 \
-        + 1e-9
+    growth = near_query._CELL_FACTOR / spatial.CELL_FACTOR
+    assert index.crowded_cell <= spatial.CROWDED_CELL * growth ** 2 + 1e-9
     rng = np.random.default_rng(3)
     P = _near_points(V[:-3], F[:-1], rng, n=300)
     T = index.tables
