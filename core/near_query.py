@@ -65,6 +65,7 @@ from .errors import InvalidArgumentError
 from .mesh import check_finite_rows
 from .spatial import CROWDED_CELL, PRUNE_SLACK, TriangleIndex, closest_pairs, closest_result
 from .pages import plain_pages
+from ._parallel import run_each
 
 __all__ = ["NearQuery", "cell_for_reach", "search_for", "search_kind"]
 
@@ -245,8 +246,9 @@ class NearQuery:
         crowded, order, _ = self.index.split_crowded(key, limit=self._index_cell)
         best = _Best.empty(q)
         far = [crowded]
-        far += [_block(T, self.index, P, order[s:s + _BLOCK], cell3, best)
-                for s in range(0, order.size, _BLOCK)]
+        # (on the worker threads: each block writes its own points' rows of best)
+        far += run_each(lambda s: _block(T, self.index, P, order[s:s + _BLOCK], cell3, best),
+                        range(0, order.size, _BLOCK))
         far = np.concatenate(far)
         result = closest_result(T.tables, best.t, best.v, best.w, best.d2)
         if far.size:

@@ -1232,8 +1232,10 @@ class TriangleIndex:
                                        * _PAIR_CHUNK)
                 nk = order.size
                 bounds = np.unique(np.concatenate([[0, nk], cuts, np.arange(0, nk, _QUERY_CHUNK)]))
-                far += [self._grid_chunk(PT, order[s:e], cc, cid, best)
-                        for s, e in zip(bounds[:-1], bounds[1:]) if e > s]
+                # (on the worker threads: each chunk writes its own queries' rows of best)
+                far += run_each(lambda span: self._grid_chunk(PT, order[span[0]:span[1]], cc,
+                                                              cid, best),
+                                [(s, e) for s, e in zip(bounds[:-1], bounds[1:]) if e > s])
             far = np.concatenate(far)
             if far.size:
                 self._bvh_query(PT, far, best)

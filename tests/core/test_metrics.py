@@ -289,3 +289,23 @@ def test_scale_of_meshes_without_faces_or_extent():
     assert core.face_areas(V, F).tolist() == [0.0]
     assert core.vertex_normals(V, F).tolist() == [[0.0] * 3] * 3
     assert core.face_areas(V, F[:0]).shape == (0,)
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.integers(1, 40), st.lists(st.tuples(st.integers(0, 39), st.integers(0, 39),
+                                              st.integers(0, 39)), max_size=30))
+def test_used_vertices_is_unique_of_the_faces(n, faces):
+    from core.mesh import used_vertices
+    F = np.array([f for f in faces if max(f) < n], dtype=np.int64).reshape(-1, 3)
+    got = used_vertices(F, n)
+    assert got.dtype == np.int64 and got.tolist() == np.unique(F).tolist()
+
+
+def test_surface_diagonal_names_a_bad_face():
+    V, F = cube(2)
+    assert core.surface_diagonal(V, F) == pytest.approx(core.bbox_diagonal(V))
+    far = np.vstack([V, [[50.0, 50.0, 50.0]]])                 # a loose vertex: not counted
+    assert core.surface_diagonal(far, F) == core.surface_diagonal(V, F)
+    for bad in (F - 1, F + V.shape[0]):
+        with pytest.raises(InvalidMeshError, match="surface_diagonal: .*faces index vertices"):
+            core.surface_diagonal(V, bad)
