@@ -139,9 +139,16 @@ _LEAF = 8                  # BVH leaf size (triangles)
 #: least 2**-_GROUP_LEVELS of one). A gravel scan's fit (dense samples 1.7 to 36 cells from
 #: a fine surface of small blobs, 82k of them far) searched them in 3.25 s, one by one, and
 #: in 1.65 s so; probe cubes of 2, 4, 8, 16 cells: 2.56, 1.80, 1.65, 1.79 s, descent shares
-#: of 0.5, 1, 2, 4 (probe cubes of 2 cells): 2.83, 2.56, 3.16, 5.69 s (CPU, 2026-12-05)
+#: of 0.5, 1, 2, 4 (probe cubes of 2 cells): 2.83, 2.56, 3.16, 5.69 s (CPU, 2026-12-05).
+#: But a descent group of many members scans every member against every leaf the group
+#: reached: 100k points spread over twice the box of a 160k-face torus (scripts/
+#: bench_spatial.py's far case) took 15.0 s CPU one by one, and with a share of 1.0 over
+#: 5 minutes and 20 GiB (20k of them: 58 s, 4.8 GiB; the machine killed the benchmark);
+#: shares 0.25 / 0.125 / 0.0625: 55.4 / 20.6 / 14.2 s. The gravel fits at 1.0 / 0.25 /
+#: 0.0625: 150 pebbles 1.77 / 1.48 / 1.60 s, the cow and 2,000 pebbles 34.6 / 34.7 / 33.0 s
+#: (the same cages; CPU, one thread, 2026-12-06, load 2-4)
 _PROBE_CELLS = 8
-_GROUP_SHARE = 1.0
+_GROUP_SHARE = 1.0 / 16
 _GROUP_LEVELS = 2
 _BVH_STEP = 2              # BVH levels descended per traversal step (4 children per node)
 _SLAB_LEVELS = 3           # lowest BVH levels that also get cylinder bounds
