@@ -1665,35 +1665,42 @@ class TriangleIndex:
             np.cumsum(counts), np.arange(1, far.size // (_QUERY_CHUNK // 4) + 1)
             * (_QUERY_CHUNK // 4), side="right")]))
         cuts = cuts[cuts <= counts.size]
-        for a, b in zip(cuts[:-1].tolist(), cuts[1:].tolist()):
-            if b == a:
+        spans = [(a, b) for a, b in zip(cuts[:-1].tolist(), cuts[1:].tolist()) if b > a]
+        # (on the worker threads: a chunk's groups, bounds and queries are its own)
+        run_each(lambda span: self._descend(PT, q_all, starts, counts, centre, rho, ub, span,
+                                            best), spans)
+
+    def _descend(self, PT, q_all, starts, counts, centre, rho, ub, span, best):
+        """:meth:`_bvh_query`'s descent of the groups ``span[0] .. span[1]``
+        (their bounds ``ub`` tightened in place), then their members' scans
+        of the leaves reached."""
+        a, b = span
+        stack = [(0, np.arange(a, b), np.zeros(b - a, dtype=np.int64))]
+        while stack:
+            level, g, node = stack.pop()
+            if level == self._depth:
+                self._scan_group_leaves(PT, q_all, starts, counts, g, node, best)
                 continue
-            stack = [(0, np.arange(a, b), np.zeros(b - a, dtype=np.int64))]
-            while stack:
-                level, g, node = stack.pop()
-                if level == self._depth:
-                    self._scan_group_leaves(PT, q_all, starts, counts, g, node, best)
-                    continue
-                # descend _BVH_STEP levels at once (a 2**_BVH_STEP-ary tree)
-                step = min(_BVH_STEP, self._depth - level)
-                child = ((node[:, None] << step) + np.arange(1 << step)).ravel()
-                g = np.repeat(g, 1 << step)
-                level += step - 1
-                near2, far2 = self._node_bounds(np.take(centre, g, axis=1), child, level + 1)
-                near2, far2 = _widen_bounds(near2, far2, rho[g])
-                runs = _run_lengths(g)
-                first = np.cumsum(runs) - runs
-                ug = g[first]
-                ub[ug] = np.minimum(ub[ug], np.minimum.reduceat(far2, first))
-                keep = near2 <= ub[g] * (1 + 4 * PRUNE_SLACK)
-                g, child = g[keep], child[keep]
-                if g.size > _FRONTIER_CAP:
-                    pieces = -(-g.size // _FRONTIER_CAP)
-                    for gg, cn in reversed(list(zip(np.array_split(g, pieces),
-                                                    np.array_split(child, pieces)))):
-                        stack.append((level + 1, gg, cn))
-                elif g.size:
-                    stack.append((level + 1, g, child))
+            # descend _BVH_STEP levels at once (a 2**_BVH_STEP-ary tree)
+            step = min(_BVH_STEP, self._depth - level)
+            child = ((node[:, None] << step) + np.arange(1 << step)).ravel()
+            g = np.repeat(g, 1 << step)
+            level += step - 1
+            near2, far2 = self._node_bounds(np.take(centre, g, axis=1), child, level + 1)
+            near2, far2 = _widen_bounds(near2, far2, rho[g])
+            runs = _run_lengths(g)
+            first = np.cumsum(runs) - runs
+            ug = g[first]
+            ub[ug] = np.minimum(ub[ug], np.minimum.reduceat(far2, first))
+            keep = near2 <= ub[g] * (1 + 4 * PRUNE_SLACK)
+            g, child = g[keep], child[keep]
+            if g.size > _FRONTIER_CAP:
+                pieces = -(-g.size // _FRONTIER_CAP)
+                for gg, cn in reversed(list(zip(np.array_split(g, pieces),
+                                                np.array_split(child, pieces)))):
+                    stack.append((level + 1, gg, cn))
+            elif g.size:
+                stack.append((level + 1, g, child))
 
     def _scan_group_leaves(self, PT, q_all, starts, counts, g, leaf, best):
         """The leaves ``leaf`` the groups ``g`` reached, for each of their

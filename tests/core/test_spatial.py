@@ -10,8 +10,8 @@ import core.spatial as spatial
 from core.errors import InvalidArgumentError, InvalidMeshError
 from core.spatial import (KERNEL_BLOCK, ClosestPoints, TriangleIndex, closest_on_triangles,
                           closest_pairs, closest_points, point_triangle_closest, triangle_rows)
-from tests.mesh_factory import (cad_cylinder, cube, fillet_cap, icosphere, load_shared, regular_grid,
-                                torus)
+from tests.mesh_factory import (cad_cylinder, cube, fillet_cap, icosphere, load_shared,
+                                midpoint_split, regular_grid, torus)
 
 
 # --- references written independently of the module ---------------------------------------------
@@ -690,3 +690,32 @@ def test_the_grid_references_are_the_same_a_run_of_triangles_at_a_time(monkeypat
         monkeypatch.undo()
         assert np.array_equal(whole.cell_start, runs.cell_start)
         assert np.array_equal(whole.cell_tri, runs.cell_tri)
+
+
+def test_far_queries_spread_around_a_mesh_keep_their_memory_bounded():
+    """5,000 points spread over twice the box of a 40k-face torus (nearly all on
+    the far path: the BVH, searched by groups of nearby queries). A group's
+    members are each scanned against every leaf the group reached: groups as
+    wide as the points' distance held dozens, and took 975 MiB here (100k points
+    near a 160k-face torus: 20 GiB). The answers are the one-by-one search's."""
+    import tracemalloc
+    V, F = torus(50, 25)
+    for _ in range(2):
+        V, F = midpoint_split(V, F)
+    rng = np.random.default_rng(1)
+    lo, hi = V.min(axis=0), V.max(axis=0)
+    P = 0.5 * (lo + hi) + (rng.random((5000, 3)) - 0.5) * 2 * (hi - lo)
+    index = TriangleIndex(V, F)
+    index.closest(P[:100])                          # (the hierarchy built outside the count)
+    tracemalloc.start()
+    try:
+        hit = index.closest(P)
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert peak < 250 * 2**20
+    some = rng.choice(P.shape[0], 40, replace=False)
+    d2 = ((V[F].mean(axis=1)[None] - P[some, None]) ** 2).sum(axis=2)    # centroids lie on
+    assert (hit.distance[some] <= np.sqrt(d2.min(axis=1)) + 1e-12).all()  # the mesh
+    one = [TriangleIndex(V, F).closest(P[[i]]).distance[0] for i in some[:5]]   # (scans all)
+    np.testing.assert_array_equal(hit.distance[some[:5]], one)
