@@ -101,6 +101,13 @@ _DETAIL_SEARCHES = ("auto", "exact", "local")
 #: worker-thread task; 16 blocks for 1M vertices keep the two threads evenly busy)
 _BIND_BLOCK = 65_536
 
+#: an edited cage counts as the rest cage mirrored when the least-squares linear map
+#: between them has a negative determinant of at least this share of the volume a
+#: conformal map of its size has (a mirror: all of it; a flattening: little)
+_MIRROR_CONDITION = 0.25
+#: the mirror the repair's maps of a mirrored cage start from (any one would do)
+_MIRROR = np.array([-1.0, 1.0, 1.0])
+
 #: the fewest points a block of the bind's passes takes: fewer than 4 ``_BIND_BLOCK``
 #: are cut in 4 blocks (of at least this), so that both threads work on a 36k-vertex scan
 #: and on a 2,000-face cage's 16k fine vertices (one block each: one thread)
@@ -741,6 +748,9 @@ def deform(binding, V_cage_edited, *, F_cage=None, moved=None, out=None):
                 "deform: moved needs out (the dense positions computed before the move)")
         ids = _check_moved(binding, moved)
         Vc = _apart_from(_check_cage(binding, V_cage_edited, F_cage, "deform"), out)
+        if ids.size and _handedness(binding, Vc) != binding._cache.get("handed", 1.0):
+            # (the cage mirrored or back since out was made: every row changes)
+            return deform(binding, V_cage_edited, F_cage=F_cage, out=out)
         if ids.size:
             with _INCREMENTAL_LOCK:
                 hit = _influenced_dense(binding, ids)
@@ -748,7 +758,8 @@ def deform(binding, V_cage_edited, *, F_cage=None, moved=None, out=None):
                 last = _repair_of(binding, out)
                 out[last.rows] = last.raw       # the rows as deformed, before out's repair
                 if hit.rows.size:
-                    _deform_rows(binding, P, N, hit, out, origin)
+                    _deform_rows(binding, P, N, hit, out, origin,
+                                 binding._cache.get("handed", 1.0))
                 _keep_repair(binding, out, _unfold(binding, out, Vc, hit, last))
         return out
     Vc = _apart_from(_check_cage(binding, V_cage_edited, F_cage, "deform"), out)
@@ -757,7 +768,8 @@ def deform(binding, V_cage_edited, *, F_cage=None, moved=None, out=None):
     floor = _binding_floor(binding)
     Nf = _vertex_normals_t(X[-1], binding._operator.F_fine, floor)
     c = binding._cache
-    DT = _positions_t(c["offset_t"], c["corners_t"], c["bary_t"], X[-1], Nf, origin)
+    c["handed"] = handed = _handedness(binding, Vc)
+    DT = _positions_t(c["offset_t"], c["corners_t"], c["bary_t"], X[-1], Nf, origin, handed)
     # kept for the incremental deforms that follow (a new object: one in use
     # by an incremental deform is never changed under it)
     c["geometry"] = _Geometry.of(Vc, X, Nf, origin, floor)
@@ -895,7 +907,7 @@ def _keep_repair(binding, D, repaired):
         kept.pop(id(D), None)
 
 
-def _rotation(binding, Vc):
+def _rotation(binding, Vc, handed=1.0):
     """``(rotate, transform)``, each ``f(vertices, vectors)`` -> (j,3): the
     vectors turned by the rotation of the cage where each dense vertex lies
     (over its fine face's coarse face: the mean of its corners'
@@ -904,8 +916,16 @@ def _rotation(binding, Vc):
     corners' :func:`~.unfold.ring_linear_maps`: also scaled and stretched as
     the cage is there). A rigid motion of the cage turns them by exactly its
     rotation (to rounding). Each cage vertex's rotation and map are computed
-    once, when a coarse face it is a corner of is first asked for."""
+    once, when a coarse face it is a corner of is first asked for. For a
+    mirrored cage (``handed`` -1, :func:`_handedness`), the maps are those
+    from the rest cage mirrored (x -> -x) after that mirror, and a normal
+    (which follows the faces' winding, turned inside out by a mirror) is
+    turned and then reversed."""
     rings = _repair_state(binding)["cage_rings"]
+    V_rest = binding.V_cage_rest
+    if handed < 0:
+        V_rest = V_rest * _MIRROR
+
     ring_R = np.empty((binding.n_cage, 3, 3))
     ring_A = np.empty((binding.n_cage, 3, 3))
     known = np.zeros((2, binding.n_cage), dtype=bool)
@@ -917,17 +937,21 @@ def _rotation(binding, Vc):
         new = np.unique(corners)
         new = new[~known[kind, new]]
         if new.size:
-            table[new] = of(binding.V_cage_rest, Vc, rings, new)
+            table[new] = of(V_rest, Vc, rings, new)
             known[kind, new] = True
         return corners, at.ravel()
 
     def rotate(vertices, vectors):
         corners, at = corners_of(vertices, 0, ring_R, ring_rotations)
         R = nearest_rotations(ring_R[corners].sum(axis=1))
+        if handed < 0:
+            return -np.einsum("kij,kj->ki", R[at], vectors * _MIRROR)
         return np.einsum("kij,kj->ki", R[at], vectors)
 
     def transform(vertices, vectors):
         corners, at = corners_of(vertices, 1, ring_A, ring_linear_maps)
+        if handed < 0:
+            vectors = vectors * _MIRROR
         return np.einsum("kij,kj->ki", ring_A[corners].mean(axis=1)[at], vectors)
     return rotate, transform
 
@@ -961,7 +985,7 @@ def _unfold(binding, D, Vc, hit=None, last=None, DT=None):
         if last.rows.size or last.away.size:
             around = np.union1d(_stars(binding, state).around(last.rows), last.away)
             away = np.union1d(away, away_rows(D, FT, around, rest))
-    rotate, transform = _rotation(binding, Vc)
+    rotate, transform = _rotation(binding, Vc, binding._cache.get("handed", 1.0))
     folded = turned_over(D, FT, away, rest, rotate)
     if not folded.size:
         return repair(D, state["V_rest"], binding.F_dense, FT, None, folded, rest, rotate, away)
@@ -989,7 +1013,8 @@ def _welded(binding, state):
 def _check_out(binding, out):
     if not isinstance(out, np.ndarray) or out.shape != (binding.n_dense, 3) \
             or out.dtype != np.float64 or not out.flags.c_contiguous or not out.flags.writeable:
-        desc = (f"{out.shape} {out.dtype}" + ("" if out.flags.c_contiguous else ", not C-contiguous")
+        desc = (f"{out.shape} {out.dtype}"
+                + ("" if out.flags.c_contiguous else ", not C-contiguous")
                 + ("" if out.flags.writeable else ", read-only") if isinstance(out, np.ndarray)
                 else type(out).__name__)
         raise InvalidArgumentError(
@@ -1027,9 +1052,10 @@ class _Influenced(NamedTuple):
     normals: np.ndarray    #: (j,) int64 fine vertices whose normal changes (ascending)
 
 
-def _deform_rows(binding, P, N, hit, out, origin):
+def _deform_rows(binding, P, N, hit, out, origin, handed=1.0):
     """Rebuild the dense rows ``hit.rows`` of ``out`` on the fine positions
-    and normals ``P``, ``N`` (3, n_fine), relative to ``origin`` (3,) (the
+    and normals ``P``, ``N`` (3, n_fine), relative to ``origin`` (3,), the
+    normal components times ``handed`` (:func:`_handedness`) (the
     incremental deform's row work).
 
     The rows are grouped by fine face, so the face's corner, edges and
@@ -1091,7 +1117,7 @@ def _deform_rows(binding, P, N, hit, out, origin):
         np.multiply(np.repeat(Nk[2][:, f0:f1], c, axis=1), b2, out=tmp)
         normal += tmp
         X = _compose_t(offsets, *_frames_finish(point, e1, e2, normal, tmp,
-                                                np.repeat(size_f[f0:f1], c)))
+                                                np.repeat(size_f[f0:f1], c)), handed)
         if moved_origin:
             X += origin[:, None]
         for d in range(3):            # a coordinate at a time: no (r,3) copy to scatter (indexed
@@ -1132,8 +1158,8 @@ def _influenced_dense(binding, ids):
 
     The chain, all on index sets of the fine mesh (O(fine support + result),
     never O(dense or fine mesh): distinct values by :func:`_distinct`, whose
-    cost is bounded by a multiple of its input's): fine vertices the stencils reach from ``ids`` level by
-    level with nonzero weights (positions change) -> every corner of a fine
+    cost is bounded by a multiple of its input's): fine vertices the stencils
+    reach from ``ids`` level by level with nonzero weights (positions change) -> every corner of a fine
     face touching them (normals change) -> the fine faces with such a corner
     (their bound dense vertices move). The fine face -> dense vertices, fine
     vertex -> fine faces and transposed stencil indices are built on first
@@ -1247,10 +1273,11 @@ def refine(binding, V_cage_edited, *, F_cage=None):
     TopologyMismatchError, InvalidMeshError
         As :func:`deform`.
     """
-    Vf, Nf, origin = _fine_geometry(binding, V_cage_edited, F_cage, "refine")
+    Vc = _check_cage(binding, V_cage_edited, F_cage, "refine")
+    Vf, Nf, origin = _fine_geometry(binding, Vc, None, "refine")
     c = binding._cache
     VT = _positions_t(c["detail_offset_t"], c["detail_corners_t"], c["detail_bary_t"], Vf, Nf,
-                      origin)
+                      origin, _handedness(binding, Vc))
     return RefineResult(np.ascontiguousarray(VT.T), binding._operator.F_fine.copy())
 
 
@@ -1283,11 +1310,12 @@ def frames(Vf, Nf, corners, bary):
     return Frames(p.T.copy(), t.T.copy(), b.T.copy(), n.T.copy())
 
 
-def _positions_t(oT, cT, bT, VfT, NfT, origin=None):
+def _positions_t(oT, cT, bT, VfT, NfT, origin=None, handed=1.0):
     """The points (3, n) at the frame components ``oT`` of the fine surface
     points at corners ``cT``, barycentric coordinates ``bT`` (each (3, n)),
     on fine positions and normals ``VfT``, ``NfT`` (3, n_fine) relative to
-    ``origin`` (3,) (added to the result; None or zeros: none):
+    ``origin`` (3,) (added to the result; None or zeros: none), the normal
+    components times ``handed`` (:func:`_handedness`):
     :func:`_frames_t` and :func:`_compose_t` a block of ``_ROW_BLOCK``
     points at a time (the temporaries stay small and are reused), bit for
     bit the same as on the whole arrays."""
@@ -1297,7 +1325,8 @@ def _positions_t(oT, cT, bT, VfT, NfT, origin=None):
     shift = origin is not None and bool(origin.any())
 
     def block(s, e):
-        out[:, s:e] = _compose_t(oT[:, s:e], *_frames_t(VfT, NfT, cT[:, s:e], bT[:, s:e]))
+        out[:, s:e] = _compose_t(oT[:, s:e], *_frames_t(VfT, NfT, cT[:, s:e], bT[:, s:e]),
+                                 handed)
         if shift:
             out[:, s:e] += origin[:, None]
     run_blocks(block, blocks(n, _ROW_BLOCK))
@@ -1951,17 +1980,49 @@ def _to_frame(d, fr):
     return np.stack([_dot(d, fr.tangent), _dot(d, fr.bitangent), _dot(d, fr.normal)], axis=1)
 
 
-def _compose_t(oT, point, tangent, bitangent, normal):
-    """Points ``point + o0 tangent + o1 bitangent + o2 normal`` from (3,q)
-    inputs (``oT`` the components): ``point``, updated in place (the frame
-    vectors are overwritten)."""
+def _compose_t(oT, point, tangent, bitangent, normal, handed=1.0):
+    """Points ``point + o0 tangent + o1 bitangent + handed o2 normal`` from
+    (3,q) inputs (``oT`` the components; ``handed`` -1 for a mirrored cage,
+    :func:`_handedness`): ``point``, updated in place (the frame vectors are
+    overwritten)."""
     tangent *= oT[0]
     point += tangent
     bitangent *= oT[1]
     point += bitangent
     normal *= oT[2]
+    if handed < 0:
+        np.negative(normal, out=normal)
     point += normal
     return point
+
+
+def _handedness(binding, Vc):
+    """-1.0 when the cage ``Vc`` is the rest cage mirrored as a whole (the
+    least-squares linear map M between them, both centred, has a negative
+    determinant and fills at least ``_MIRROR_CONDITION`` of the volume a
+    conformal map of its size would: |det M| against (|M|_F / sqrt 3)^3),
+    else 1.0. A frame's normal follows the faces' winding, which a mirror
+    turns inside out while it keeps the tangent and the bitangent (``n x t``)
+    as the mirror takes them: the detail's normal components are then turned
+    back, and the mirrored cage gives the mirrored mesh (they went inward:
+    bumps became dents). A flat cage has no such map (1.0: its mirror across
+    its own plane does not move it; a binding without its rest cage,
+    :meth:`Binding.from_arrays` without the repair's keys: 1.0 too). No
+    LAPACK call (a 3x3 solve there costs milliseconds on a loaded machine:
+    ``test_the_repair_maps_need_no_lapack_solve``)."""
+    if binding.V_cage_rest is None:
+        return 1.0
+    X = binding.V_cage_rest - binding.V_cage_rest.mean(axis=0)
+    Y = Vc - Vc.mean(axis=0)
+    XX, YX = X.T @ X, Y.T @ X
+    adjugate = np.cross(XX[[1, 2, 0]], XX[[2, 0, 1]])          # rows: XX symmetric
+    det_xx = float(XX[0] @ adjugate[0])
+    if not det_xx > 1e-12 * float(np.trace(XX)) ** 3:
+        return 1.0
+    M = YX @ adjugate / det_xx
+    det_m = float(M[0] @ np.cross(M[1], M[2]))
+    size = float(np.sqrt((M * M).sum() / 3.0))
+    return -1.0 if det_m < -_MIRROR_CONDITION * size ** 3 else 1.0
 
 
 def _dot(a, b):

@@ -176,3 +176,61 @@ def test_a_collapsed_cage_put_back_vertex_by_vertex_deforms_as_a_full_deform(sph
         if k % 7 == 0:
             assert np.array_equal(D, deform(b, Ve)), k
     assert np.array_equal(D, deform(b, Vc))
+
+
+@pytest.mark.parametrize("scheme", ["loop", "butterfly"])
+def test_a_mirrored_cage_gives_the_mirrored_mesh_with_its_detail(scheme):
+    """A cage mirrored as a whole (Edit Mode's Mirror of every vertex) keeps
+    its faces' winding, so frames from it point inward: the detail came out
+    inverted (bumps as dents, 4 bump heights off). Now the mirror of the mesh,
+    full, incremental, back again and refined; a local edit of the mirrored
+    cage deforms as it does unmirrored, mirrored."""
+    from core.binding import refine
+    from tests.mesh_factory import torus
+    V, F = torus(60, 30, bump=0.02, bump_waves=(12, 6))
+    cage = simplify(V, F, target_faces=300)
+    b = bind(V, F, cage.V, cage.F, levels=2, scheme=scheme)
+    M = np.diag([1.0, -1.0, 1.0])                       # (not the repair's own x -> -x)
+    tol = 1e-12 * bbox_diagonal(V)
+    D = deform(b, cage.V @ M)
+    assert np.abs(D - V @ M).max() <= tol
+    np.testing.assert_allclose(refine(b, cage.V @ M).V, refine(b, cage.V).V @ M, rtol=0, atol=tol)
+    Ve = cage.V.copy()
+    Ve[7] += 0.02 * bbox_diagonal(V) * np.array([0.3, -0.5, 0.8])
+    plain = deform(b, Ve)
+    D = deform(b, cage.V @ M)
+    deform(b, Ve @ M, moved=[7], out=D)                 # an edit of the mirrored cage
+    assert np.abs(D - plain @ M).max() <= tol
+    assert np.abs(D - deform(b, Ve @ M)).max() <= tol
+    back = D.copy()
+    deform(b, Ve, moved=np.arange(cage.V.shape[0]), out=back)   # mirrored back, incrementally
+    assert np.abs(back - plain).max() <= tol
+
+
+def test_a_flat_cage_and_a_fold_through_are_not_mirrors():
+    """Only a whole, well-conditioned mirror turns the detail back: a flat cage
+    has no mirror that moves it, and an edit pushing part of a cage through
+    the rest is an edit (the deform as before, not a flipped one)."""
+    import core.binding as binding
+    from tests.mesh_factory import torus
+    V, F = grid(20, 20)
+    cage = simplify(V, F, target_faces=50)                # flat: its mirror in z is itself
+    bumpy = V + np.c_[np.zeros((V.shape[0], 2)), 0.01 * np.sin(7 * V[:, 0])]
+    b = bind(bumpy, F, cage.V, cage.F, levels=1, scheme="loop")
+    assert np.abs(cage.V[:, 2]).max() == 0.0
+    assert binding._handedness(b, cage.V * [1.0, 1.0, -1.0]) == 1.0
+    assert np.array_equal(deform(b, cage.V * [1.0, 1.0, -1.0]), deform(b, cage.V))
+    Vt, Ft = torus(40, 20)
+    ct = simplify(Vt, Ft, target_faces=200)
+    bt = bind(Vt, Ft, ct.V, ct.F, levels=1, scheme="loop")
+    pushed = ct.V.copy()
+    top = np.argsort(-pushed[:, 2])[:8]
+    pushed[top, 2] *= -3.0                              # 8 top vertices pushed through
+    assert binding._handedness(bt, pushed) == 1.0
+    assert binding._handedness(bt, ct.V * [-1.0, 1.0, 1.0]) == -1.0
+    assert binding._handedness(bt, 2.5 * ct.V @ _rotation_z(0.7).T * [1, -1, 1] + 3.0) == -1.0
+
+
+def _rotation_z(angle):
+    c, s = np.cos(angle), np.sin(angle)
+    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
