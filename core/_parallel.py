@@ -41,10 +41,15 @@ def blocks(n, size):
 
 
 def _inline(items, threads=True):
-    """Whether ``items`` run inline: fewer than two, one worker, already on
-    a worker, or ``threads`` False."""
-    return (not threads or len(items) <= 1 or WORKERS == 1
-            or threading.current_thread().name.startswith("meshadjust"))
+    """Whether ``items`` run inline: fewer than two, ``threads`` False, or
+    :func:`_no_workers`."""
+    return not threads or len(items) <= 1 or _no_workers()
+
+
+def _no_workers():
+    """Whether work runs inline whatever its size: one worker, or already on
+    a worker."""
+    return WORKERS == 1 or threading.current_thread().name.startswith("meshadjust")
 
 
 def run_each(fn, items, threads=True):
@@ -94,11 +99,12 @@ class _Done(NamedTuple):
 
 
 def in_background(fn):
-    """Start ``fn()`` on a worker thread (inline when :func:`run_each` would
-    run it inline) and return at once: ``.result()`` waits for its value (or
-    raises its exception), ``.cancel()`` drops it if it has not started.
+    """Start ``fn()`` on a worker thread (inline where there is none to hand
+    it to: :func:`_no_workers`) and return at once: ``.result()`` waits for
+    its value (or raises its exception), ``.cancel()`` drops it if it has
+    not started.
     The worker runs it alone (its own ``run_each`` calls inline), while the
     caller's further work runs on the other workers."""
-    if _inline([fn, fn]):
+    if _no_workers():
         return _Done(fn())
     return _executor().submit(fn)

@@ -60,7 +60,7 @@ import numpy as np
 
 from ._collapse import compactness
 from ._face_tracker import faces_across
-from .mesh import cross_rows, flat_faces
+from .mesh import cross_rows, flat_faces, used_vertices
 from .near_query import NearQuery
 from .spatial import closest_pairs, closest_result, point_triangle_closest, triangle_rows
 from .topology import edge_keys, edge_map
@@ -167,7 +167,7 @@ def touch_up(V, F, Vin, Fin, fixed, keep_edges, tun, N_keep=None):
         return V, F, moved
     # (a NearQuery's queries near the input: half the time of an index's)
     inputs = _FewQueries(Vin, Fin) if F.shape[0] <= _FEW_FACES else NearQuery(Vin, Fin)
-    P = Vin[np.unique(Fin)]
+    P = Vin[used_vertices(Fin, Vin.shape[0])]
     keep = _edge_keys(keep_edges, V.shape[0])
     gaps = measure_gaps(V, F, inputs, P)
     for _ in range(tun.touch_rounds):

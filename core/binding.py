@@ -748,18 +748,18 @@ def deform(binding, V_cage_edited, *, F_cage=None, moved=None, out=None):
                 "deform: moved needs out (the dense positions computed before the move)")
         ids = _check_moved(binding, moved)
         Vc = _apart_from(_check_cage(binding, V_cage_edited, F_cage, "deform"), out)
-        if ids.size and _handedness(binding, Vc) != binding._cache.get("handed", 1.0):
-            # (the cage mirrored or back since out was made: every row changes)
-            return deform(binding, V_cage_edited, F_cage=F_cage, out=out)
         if ids.size:
+            handed = _handedness(binding, Vc)
+            if handed != binding._cache.get("handed", 1.0):
+                # (the cage mirrored or back since out was made: every row changes)
+                return deform(binding, V_cage_edited, F_cage=F_cage, out=out)
             with _INCREMENTAL_LOCK:
                 hit = _influenced_dense(binding, ids)
                 P, N, origin = _update_fine_geometry(binding, Vc, ids, hit)
                 last = _repair_of(binding, out)
                 out[last.rows] = last.raw       # the rows as deformed, before out's repair
                 if hit.rows.size:
-                    _deform_rows(binding, P, N, hit, out, origin,
-                                 binding._cache.get("handed", 1.0))
+                    _deform_rows(binding, P, N, hit, out, origin, handed)
                 _keep_repair(binding, out, _unfold(binding, out, Vc, hit, last))
         return out
     Vc = _apart_from(_check_cage(binding, V_cage_edited, F_cage, "deform"), out)
@@ -1159,8 +1159,9 @@ def _influenced_dense(binding, ids):
     The chain, all on index sets of the fine mesh (O(fine support + result),
     never O(dense or fine mesh): distinct values by :func:`_distinct`, whose
     cost is bounded by a multiple of its input's): fine vertices the stencils
-    reach from ``ids`` level by level with nonzero weights (positions change) -> every corner of a fine
-    face touching them (normals change) -> the fine faces with such a corner
+    reach from ``ids`` level by level with nonzero weights (positions change)
+    -> every corner of a fine face touching them (normals change) -> the
+    fine faces with such a corner
     (their bound dense vertices move). The fine face -> dense vertices, fine
     vertex -> fine faces and transposed stencil indices are built on first
     use and cached in the binding, with the last answer (so
