@@ -131,8 +131,11 @@ _CELL_FACTOR = 2.5
 #: own) and 2.0-2.6 s with the median at 0.11-0.22 of a cell
 _REACH_SHARE = 0.15
 
-#: smallest window widths; beyond the last, each class is twice the previous
-_WIDTHS = (4, 8, 12, 16, 24, 32, 48, 64)
+#: smallest window widths; beyond the last, each class is twice the previous (a cell's
+#: window is the narrowest class it fits: with 20, 28, 40 and 56 too, 9.6% fewer (point,
+#: reference) pairs bounded and 3-5% less CPU time for 500k points near a 160k-face fine
+#: surface, a third of them in cells of 33-48 references; classes every 4 gained no more)
+_WIDTHS = (4, 8, 12, 16, 20, 24, 28, 32, 40, 48, 56, 64)
 
 
 def _neighbour_offsets():
