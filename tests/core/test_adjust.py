@@ -299,6 +299,21 @@ def test_inputs_are_not_modified(sphere_binding):
     assert np.array_equal(Vc, Vc0) and np.array_equal(Fc, Fc0) and np.array_equal(Ve, Ve0)
 
 
+@pytest.mark.parametrize("detail_search", ["exact", "local"])
+def test_binding_keeps_its_own_faces(sphere_binding, detail_search):
+    """The binding's dense faces are its own: a caller changing its array
+    after the bind changes neither them nor what deform gives (int64 faces
+    are checked without a copy, the binding's copy is made on a worker)."""
+    Vd, Fd, Vc, Fc, _ = sphere_binding
+    F_mine = Fd.copy()
+    b = bind(Vd, F_mine, Vc, Fc, levels=2, detail_search=detail_search)
+    D0 = deform(b, Vc * 1.2)
+    F_mine[:] = F_mine[:, ::-1]                       # every face turned over
+    assert not np.may_share_memory(b.F_dense, F_mine)
+    assert np.array_equal(b.F_dense, Fd)
+    assert np.array_equal(deform(b, Vc * 1.2), D0)
+
+
 def test_points_without_faces_and_empty_dense_mesh():
     # a point cloud binds and deforms (refine then has no detail to carry)
     Vc, Fc = icosphere(1)
