@@ -5,10 +5,10 @@ search).
 Two ways, chosen by ``bind(detail_search=...)``: an exact closest point on
 the cleaned dense surface (:func:`exact_detail_index`, an index of the whole
 scan, :func:`detail_surface`: welded, without debris or double-sided sheets;
-``"auto"`` takes it up to 500,000 faces), or for larger scans a local search
+``"auto"`` takes it up to 100,000 faces), or for larger scans a local search
 around the dense vertices the bind found near each fine vertex
-(:func:`dense_points_near`), on the cleaned surface where the scan is
-unwelded (:func:`is_unwelded`), else on the scan itself::
+(:func:`dense_points_near`), on the cleaned surface up to 500,000 faces or
+where the scan is unwelded (:func:`is_unwelded`), else on the scan itself::
 
     j has a bound dense vertex k nearest to it   closest point on k's fan; on k's
                                                  two-ring where that lands on the rim

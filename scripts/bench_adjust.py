@@ -19,8 +19,9 @@ subdivided bent cage (what the edit gives without the detail).
 Part 2, scale: a bumpy torus of 1M vertices bound to a 10k-face cage at two
 levels (targets: bind <= 15 s, re-deform <= 0.3 s, bind <= 0.5x Surface
 Deform's); Surface Deform on the same pair, binds alternating, best of 3, wall
-and CPU time. Then binds at an artist's sizes (the bunny, bumpy tori of 100k
-and 250k vertices, 2,000-face cages, Loop x2) against Surface Deform's.
+and CPU time. Then binds at an artist's sizes (the bunny, bumpy tori of 100k,
+250k and 1M vertices, 2,000-face cages, Loop x2, and the 1M one also at the
+add-on's default levels, Auto) against Surface Deform's.
 
 Part 4, folds (``--only folds``): for every mesh in ../shared/meshes and a
 1.1M-triangle synthetic scan (the bunny split twice, with noise), a QEM cage
@@ -219,25 +220,33 @@ def run_scale(quick):
 
 def run_typical_binds(quick):
     """Binds at an artist's sizes (a scan of 36k-250k vertices, a 2,000-face
-    cage, two levels, the add-on's Loop), ours and Surface Deform's
-    alternating, best of 3 (of 1 with ``quick``): rows (case, dense vertices,
+    cage, two levels, the add-on's Loop; and, without ``quick``, a 1M-vertex
+    scan at two levels and at the add-on's default, Auto: the levels closest
+    to the scan's face count), ours and Surface Deform's alternating, best
+    of 3 (of 1 with ``quick``): rows (case, dense vertices, levels label,
     ours s, Surface Deform s)."""
     cases = [("bumpy torus 100k", *bumpy_torus(400, 250))]
     if not quick:
         cases.append(("bumpy torus 250k", *bumpy_torus(625, 400)))
+        cases.append(("bumpy torus 1M", *bumpy_torus(1000, 1000)))
     bunny = os.path.join(SHARED, "stanford-bunny.obj")
     if os.path.exists(bunny):
         cases.insert(0, ("stanford-bunny", *read_obj(bunny)))
+    from meshadjust_batch import load_package
+    auto_levels = load_package().meshadjust_addon.cage_steps.auto_levels
     rows = []
     for name, V, F in cases:
         cage = simplify(V, F, target_faces=2000)
-        ours, theirs = [], []
-        for _ in range(1 if quick else 3):
-            t = time.perf_counter()
-            bind(V, F, cage.V, cage.F, levels=2, scheme="loop")
-            ours.append(time.perf_counter() - t)
-            theirs.append(surface_deform_bound(V, F, cage.V, cage.F)[2])
-        rows.append((name, V.shape[0], min(ours), min(theirs)))
+        auto = auto_levels(cage.F.shape[0], F.shape[0])
+        for levels in [2] + ([auto] if name.endswith("1M") and auto != 2 else []):
+            ours, theirs = [], []
+            for _ in range(1 if quick else 3):
+                t = time.perf_counter()
+                bind(V, F, cage.V, cage.F, levels=levels, scheme="loop")
+                ours.append(time.perf_counter() - t)
+                theirs.append(surface_deform_bound(V, F, cage.V, cage.F)[2])
+            label = f"{levels}" + (" (Auto)" if levels == auto else "")
+            rows.append((name, V.shape[0], label, min(ours), min(theirs)))
     return rows
 
 
@@ -570,12 +579,12 @@ def _scale_section(quick):
     lines += [f"| {r[0]} | {_fmt(r[1], 2)} | {_fmt(r[2], 3)} | {_fmt(r[3], 3)} |" for r in rows]
     lines += ["", "targets: bind <= 15 s, deform <= 0.3 s; 1-minute load average of the "
               f"2-core machine after the run: {os.getloadavg()[0]:.1f}", ""]
-    lines += [f"### Binds at an artist's sizes (2,000-face cage, Loop x2; best of {1 if quick else 3}"
+    lines += [f"### Binds at an artist's sizes (2,000-face cage, Loop; best of {1 if quick else 3}"
               ", alternating)",
-              "", "| scan | dense vertices | ours s | Surface Deform s | ours / Surface Deform |",
-              "| --- | ---: | ---: | ---: | ---: |"]
-    lines += [f"| {name} | {n:,} | {ours:.3f} | {sd:.3f} | **{ours / sd:.2f}** |"
-              for name, n, ours, sd in run_typical_binds(quick)]
+              "", "| scan | dense vertices | levels | ours s | Surface Deform s "
+              "| ours / Surface Deform |", "| --- | ---: | ---: | ---: | ---: | ---: |"]
+    lines += [f"| {name} | {n:,} | {levels} | {ours:.3f} | {sd:.3f} | **{ours / sd:.2f}** |"
+              for name, n, levels, ours, sd in run_typical_binds(quick)]
     return lines + [""]
 
 

@@ -153,7 +153,7 @@ def test_a_cage_scaled_down_folds_no_face_of_the_scan(factor, levels):
 
 @pytest.mark.parametrize("mess", ["unwelded", "far speck"])
 def test_the_local_detail_search_looks_on_the_cleaned_scan(mess):
-    # the local search (detail_search="auto" above 500k faces) looked on the scan as it
+    # the local search (detail_search="auto" above 100k faces) looked on the scan as it
     # came: an unwelded scan's vertex had a fan of one triangle (70% of the fine vertices
     # refined off the scan's closest point), and a far speck bound near the cage was the
     # nearest bound vertex of some fine vertices (refined 1.7e3 diagonals away)
@@ -298,11 +298,11 @@ def test_the_operator_at_level_zero_returns_new_arrays(shape):
         assert np.array_equal(Y, X) and not np.shares_memory(X, Y)
 
 
-def test_a_welded_scan_is_searched_as_it_is(monkeypatch):
+def test_a_large_welded_scan_is_searched_as_it_is(monkeypatch):
     # cleaning a welded 2M-face scan for the local search was 60% of its bind: a welded scan
-    # (with a far speck, which the search keeps off) is not cleaned, and its refine detail
-    # is the exact search's but for the few fine vertices whose closest triangle lies
-    # beyond their nearest bound vertex's two-ring
+    # above the cleaning limit (with a far speck, which the search keeps off) is not
+    # cleaned, and its refine detail is the exact search's but for the few fine vertices
+    # whose closest triangle lies beyond their nearest bound vertex's two-ring
     import core.binding as binding
     from core.detail_search import is_unwelded
     from tests.mesh_factory import unwelded, with_far_speck
@@ -311,9 +311,32 @@ def test_a_welded_scan_is_searched_as_it_is(monkeypatch):
     Vc, Fc = icosphere(1)
     Vc = 0.97 * Vc
     exact = refine(bind(Vd, Fd, Vc, Fc, levels=3, detail_search="exact"), Vc).V
+    monkeypatch.setattr(binding, "_CLEAN_LOCAL_FACES", Fd.shape[0] - 1)
     monkeypatch.setattr(binding, "detail_surface", lambda *a: pytest.fail("cleaned"))
     local = refine(bind(Vd, Fd, Vc, Fc, levels=3, detail_search="local"), Vc).V
     off = np.linalg.norm(local - exact, axis=1)
+    assert off.max() < 0.05 * _diagonal(Vc)
+    assert np.count_nonzero(off > 1e-9) <= 0.01 * off.shape[0]
+
+
+def test_the_local_search_looks_on_the_cleaned_scan_up_to_its_limit(monkeypatch):
+    # "auto" takes the local search above 100k faces: up to the cleaning limit it looks on
+    # the cleaned scan, where specks of debris on the surface are not the nearest bound
+    # vertices the detail is searched from, and it refines as the exact search does but
+    # for the few fine vertices whose closest triangle lies beyond their two-ring
+    import core.binding as binding
+    from tests.mesh_factory import with_debris
+    Vd, Fd = with_debris(*_bumpy_sphere())
+    Vc, Fc = icosphere(1)
+    Vc = 0.97 * Vc
+    exact = refine(bind(Vd, Fd, Vc, Fc, levels=3, detail_search="exact"), Vc).V
+    cleaned = []
+    real = binding.detail_surface
+    monkeypatch.setattr(binding, "detail_surface", lambda *a: cleaned.append(1) or real(*a))
+    monkeypatch.setattr(binding, "_EXACT_DETAIL_FACES", Fd.shape[0] - 1)
+    auto = refine(bind(Vd, Fd, Vc, Fc, levels=3), Vc).V
+    assert cleaned
+    off = np.linalg.norm(auto - exact, axis=1)
     assert off.max() < 0.05 * _diagonal(Vc)
     assert np.count_nonzero(off > 1e-9) <= 0.01 * off.shape[0]
 
