@@ -570,6 +570,9 @@ def bind(V_dense, F_dense, V_cage, F_cage, *, levels=2, scheme="butterfly", crea
     NfT = _vertex_normals_t(VfT, op.F_fine, _normal_floor(step))
     F_own, degree = aside.result()
     reach = typical.result() if typical is not None else None
+    # the fine faces at each fine edge and vertex (one thread; 0.8 s at five levels), made
+    # beside the fine surface's index, which leaves a core idle part of the time
+    ties = in_background(lambda: _TieFaces.of(op.F_fine, op.n_fine))
     dense_index = None
     if detail == "exact":
         # the dense mesh's index (on one thread: 0.4 of a 0.6 s bind of a 100k-vertex scan)
@@ -602,7 +605,8 @@ def bind(V_dense, F_dense, V_cage, F_cage, *, levels=2, scheme="butterfly", crea
                            else (None if (on >= 0).all() else on >= 0))
     try:
         dense = _bind_dense(query, V_dense, VfT, NfT, op.F_fine,
-                            _reporter(progress, 0.05, 0.6), near, origin if shifted else None)
+                            _reporter(progress, 0.05, 0.6), near, origin if shifted else None,
+                            ties.result())
     except BaseException:
         if dense_index is not None:
             dense_index.cancel()            # (not started yet: dropped; else it finishes unread)
@@ -1833,7 +1837,8 @@ def _used_vertices(degree):
     return None if used.all() else used
 
 
-def _bind_dense(query, V_dense, VfT, NfT, F_fine, report=None, near=None, origin=None):
+def _bind_dense(query, V_dense, VfT, NfT, F_fine, report=None, near=None, origin=None,
+                ties=None):
     """The :class:`_DenseBound` of the dense vertices: closest points on the
     fine surface (``query``, a :class:`~.near_query.NearQuery`), then the
     frame components of each vertex's offset from its point (the frames in
@@ -1845,12 +1850,13 @@ def _bind_dense(query, V_dense, VfT, NfT, F_fine, report=None, near=None, origin
     offers its vertices as the nearest bound ones of its faces' corners
     (:func:`_nearest_parts`), combined into ``nearest``. With ``origin``
     (3,), the fine surface is relative to it: so are the dense vertices,
-    a block at a time (no copy of the whole dense mesh)."""
+    a block at a time (no copy of the whole dense mesh). ``ties``: the fine
+    surface's :class:`_TieFaces` when the caller made them."""
     n = V_dense.shape[0]
     out = _DenseBound(np.empty(n, dtype=np.int64), np.empty((3, n), dtype=np.int64),
                       np.empty((3, n)), np.empty((3, n)), None)
     parts = []
-    ties = _TieFaces.of(F_fine, VfT.shape[1])
+    ties = _TieFaces.of(F_fine, VfT.shape[1]) if ties is None else ties
 
     def block(start, stop):
         P = V_dense[start:stop] if origin is None else V_dense[start:stop] - origin
