@@ -570,9 +570,10 @@ def bind(V_dense, F_dense, V_cage, F_cage, *, levels=2, scheme="butterfly", crea
     NfT = _vertex_normals_t(VfT, op.F_fine, _normal_floor(step))
     F_own, degree = aside.result()
     reach = typical.result() if typical is not None else None
-    # the fine faces at each fine edge and vertex (one thread; 0.8 s at five levels), made
-    # beside the fine surface's index, which leaves a core idle part of the time
-    ties = in_background(lambda: _TieFaces.of(op.F_fine, op.n_fine))
+    # the fine faces at each fine edge and vertex and the fine vertices' frames (one thread;
+    # 1.1 s at five levels), made beside the fine surface's index, which leaves a core idle
+    # part of the time
+    fine = in_background(lambda: _fine_vertex_parts(op, VfT, NfT, detail is not None))
     dense_index = None
     if detail == "exact":
         # the dense mesh's index (on one thread: 0.4 of a 0.6 s bind of a 100k-vertex scan)
@@ -596,8 +597,7 @@ def bind(V_dense, F_dense, V_cage, F_cage, *, levels=2, scheme="butterfly", crea
         surface = DetailSurface(V_dense - origin if shifted else V_dense, F_dense, None)
     else:
         query = NearQuery(Vf, op.F_fine, reach=reach)      # halves on the threads
-    d_face, d_bary = _vertex_corners(op.F_fine, op.n_fine)
-    vfr = _fine_frames(VfT, NfT, op.F_fine, d_face, d_bary) if detail is not None else None
+    ties, d_face, d_bary, vfr = fine.result()
     near = None
     if detail == "local":
         on = surface.to_surface
@@ -606,7 +606,7 @@ def bind(V_dense, F_dense, V_cage, F_cage, *, levels=2, scheme="butterfly", crea
     try:
         dense = _bind_dense(query, V_dense, VfT, NfT, op.F_fine,
                             _reporter(progress, 0.05, 0.6), near, origin if shifted else None,
-                            ties.result())
+                            ties)
     except BaseException:
         if dense_index is not None:
             dense_index.cancel()            # (not started yet: dropped; else it finishes unread)
@@ -627,6 +627,16 @@ def bind(V_dense, F_dense, V_cage, F_cage, *, levels=2, scheme="butterfly", crea
                    fingerprint=op.fingerprint, F_dense=F_own, V_cage_rest=V_cage,
                    _operator=op,
                    _cache=_binding_cache(dense, op.F_fine, d_face, d_bary, fine_detail))
+
+
+def _fine_vertex_parts(op, VfT, NfT, frames_too):
+    """What the bind needs of the fine surface ``op`` (positions and normals
+    ``VfT``, ``NfT``) besides its index: its :class:`_TieFaces`, each fine
+    vertex's face and barycentric coordinates (:func:`_vertex_corners`) and,
+    when ``frames_too``, their frames (:func:`_fine_frames`; else None)."""
+    d_face, d_bary = _vertex_corners(op.F_fine, op.n_fine)
+    return (_TieFaces.of(op.F_fine, op.n_fine), d_face, d_bary,
+            _fine_frames(VfT, NfT, op.F_fine, d_face, d_bary) if frames_too else None)
 
 
 def _faces_aside(F_dense, n_dense, copy, degree):
