@@ -85,7 +85,7 @@ from .errors import InvalidArgumentError
 from .mesh import (check_finite_rows, check_mesh, check_number, check_reach, cross_rows,
                    unit_rows)
 from ._groups import group_argmin, ragged_ranges
-from ._parallel import blocks, run_each
+from ._parallel import blocks, run_blocks, run_each
 from .pages import plain_pages
 
 #: serialises the lazy BVH builds of indexes queried from several threads at once
@@ -773,7 +773,7 @@ def _leaf_cylinders(Xg, Ng, valid):
         t[a:b] = np.abs(h).max(axis=1)
         size[a:b] = np.abs(rel).max(axis=(1, 2))
         rod[:, a:b] = _rod_rows(c[a:b], rel, size[a:b])
-    run_each(lambda span: block(*span), blocks(g, _CYLINDER_BLOCK))
+    run_blocks(block, blocks(g, _CYLINDER_BLOCK))
     return c, n, r, t, size, valid.sum(axis=1), nsum, rod
 
 
