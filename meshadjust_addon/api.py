@@ -29,9 +29,10 @@ import numpy as np
 
 from .. import core
 from . import carry, mesh_io, names, results, store
-from .cage_steps import (MAX_AUTO_LEVELS, OUTPUT_NAMES, CageJob, auto_levels, bind_object,  # noqa: F401
-                         check_source_in_place, commit_bind, commit_fit, compute_bind,
-                         compute_fit, fit_cage_object, prepare_cage_job, prepare_fit, read_source,
+from .cage_steps import (MAX_AUTO_LEVELS, MAX_EDIT_LEVELS, OUTPUT_NAMES, CageJob,  # noqa: F401
+                         auto_levels, bind_object, check_source_in_place, commit_bind,
+                         commit_fit, compute_bind, compute_fit, edit_levels, fit_cage_object,
+                         prepare_cage_job, prepare_fit, read_source, refine_levels,
                          refine_object, source_edit_problem)
 from .report import Report, about, user_cause  # noqa: F401
 from .rollback import all_or_nothing, retire

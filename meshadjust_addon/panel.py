@@ -16,6 +16,7 @@ in ``settings.py``, and the buttons get them through
 import bpy
 
 from . import settings
+from .cage_steps import refine_levels
 from .operators import binding_warnings, cage_of, cage_unavailable, simplify_unavailable
 from .results import reference_key_problem
 
@@ -57,6 +58,17 @@ def refine_messages(context):
         if cage.meshadjust.last_report:
             out.append((cage.meshadjust.last_report[:160], False))
     return out
+
+
+def bound_text(cage, levels):
+    """The Refine panel's line on the bound cage ``cage``: its scheme and
+    levels, and the refined mesh's levels when Refine at ``levels`` (0:
+    Auto) makes it at others (:func:`~.cage_steps.refine_levels`)."""
+    cs = cage.meshadjust
+    finer = levels or refine_levels(cs.levels, len(cage.data.polygons),
+                                    cs.edited.meshadjust.dense_faces)
+    return f"Bound: {cs.scheme}, {cs.levels} levels" + \
+        (f"; refined at {finer}" if finer != cs.levels else "")
 
 
 def basis_lost(context):
@@ -165,7 +177,7 @@ class MESHADJUST_PT_refine(_Panel, bpy.types.Panel):
         op = sub.operator("meshadjust.refine", icon='MOD_SUBSURF')
         settings.copy_to_operator(s, op, settings.REFINE)
         if cage is not None and cage.meshadjust.edited is not None:
-            layout.label(text=f"Bound: {cage.meshadjust.scheme}, {cage.meshadjust.levels} levels")
+            layout.label(text=bound_text(cage, s.levels))
         offered = False
         for text, rebind in refine_messages(context):
             layout.label(text=text, icon='ERROR' if rebind else 'INFO')

@@ -114,9 +114,11 @@ SETTINGS = {
     "hide_source": Setting('BOOL', "Hide source", "Hide the source object once its cage is made "
                            "(the source itself is never modified)", False),
     # --- binding
-    "levels": Setting('INT', "Levels", "Subdivision levels of the binding, each multiplying the "
-                      "faces by 4. 0 (Auto): the cage's current levels, or for a new cage those "
-                      "that bring the refined mesh closest to the source's face count", 0,
+    "levels": Setting('INT', "Levels", "Subdivision levels, each multiplying the faces by 4. "
+                      "0 (Auto): Bind keeps the cage's current levels, a new cage is bound at "
+                      "those that bring the refined mesh closest to the source's face count, at "
+                      "most 2 (fast binds and live edits), and Refine makes the refined mesh at "
+                      "the closest ones. Other levels: the edit and the refined mesh at those", 0,
                       {"min": 0, "max": 5}),
     "scheme": Setting('ENUM', "Scheme", "Subdivision scheme of the binding", 'loop',
                       {"items": SCHEMES}),

@@ -14,7 +14,8 @@ import numpy as np
 
 from .. import core
 from . import cage_steps, mesh_io, names, results, settings, store
-from .cage_steps import CageJob, auto_levels, fit_levels, read_source, transform_problem
+from .cage_steps import (CageJob, auto_levels, edit_levels, fit_levels, read_source,
+                         transform_problem)
 from .report import Report, user_cause
 from .rollback import all_or_nothing
 
@@ -43,8 +44,9 @@ class SimplifyParams:
     ``max_error_pct`` is given; with several, the run stops at whichever is
     reached first (``core.simplify``: of two face counts, the larger); with
     none, the default face count.
-    ``levels=0`` picks the levels whose refined mesh comes closest to the
-    source's face count (:func:`auto_levels`).
+    ``levels=0`` binds at the levels whose refined mesh comes closest to the
+    source's face count, at most two (:func:`edit_levels`; Refine makes the
+    refined mesh at the closest, :func:`refine_levels`).
     """
 
     target_faces: int = None
@@ -172,6 +174,15 @@ def prepare_simplify(source, params, *, depsgraph=None):
     return job
 
 
+def _auto_note(levels, cage_faces, source_faces):
+    """What the report says of levels chosen automatically: the bind's, and
+    Refine's when they differ (:func:`edit_levels`)."""
+    closest = auto_levels(cage_faces, source_faces)
+    if closest == levels:
+        return ", automatic: closest to the source's faces"
+    return f", automatic: refined at {closest}, closest to the source's faces"
+
+
 def compute_simplify(job, *, progress=None):
     """Run the core on a :class:`SimplifyJob` (pure NumPy, any thread).
 
@@ -196,7 +207,7 @@ def compute_simplify(job, *, progress=None):
         job.cancelled = True
         return job
     job.V_cage = res.V
-    job.levels = p.levels or auto_levels(res.F.shape[0], job.F.shape[0])
+    job.levels = p.levels or edit_levels(res.F.shape[0], job.F.shape[0])
     if p.measure and res.n_input_pieces is None:
         # the deviation of the cage QEM produced (the classic measure of a
         # simplification), before any fitting moves it (not of a soup's pieces,
@@ -325,7 +336,7 @@ def commit_simplify(source, job):
                            p.scheme, binding=job.binding, V_now=job.V_cage, V_edited=job.V,
                            source_fingerprint=job.source_fingerprint)
             cage_steps.commit_bind(cage, bjob)
-            auto = ", automatic: closest to the source's faces" if not p.levels else ""
+            auto = "" if p.levels else _auto_note(job.levels, res.F.shape[0], job.F.shape[0])
             msg += f"; bound '{source.name}' (levels {job.levels}{auto}, {p.scheme})"
         elif job.bind_error:
             warnings.append(f"{job.bind_error}; the cage is kept, not bound")

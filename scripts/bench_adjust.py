@@ -20,8 +20,9 @@ Part 2, scale: a bumpy torus of 1M vertices bound to a 10k-face cage at two
 levels (targets: bind <= 15 s, re-deform <= 0.3 s, bind <= 0.5x Surface
 Deform's); Surface Deform on the same pair, binds alternating, best of 3, wall
 and CPU time. Then binds at an artist's sizes (the bunny, bumpy tori of 100k,
-250k and 1M vertices, 2,000-face cages, Loop x2, and the 1M one also at the
-add-on's default levels, Auto) against Surface Deform's.
+250k and 1M vertices, 2,000-face cages, Loop x2: the add-on's Auto levels for
+the edit; and the 1M one also at five, Auto's levels for the refined mesh,
+which a Refine binds at when asked for it) against Surface Deform's.
 
 Part 4, folds (``--only folds``): for every mesh in ../shared/meshes and a
 1.1M-triangle synthetic scan (the bunny split twice, with noise), a QEM cage
@@ -38,7 +39,8 @@ Part 5, live (``--only live``): one live update of a 1M-vertex scan through
 the add-on (simplify + bind by the operator, then 5 neighbouring cage
 vertices moved and ``live_update.update_edited``), with its breakdown, each
 update moving other cage vertices; then a drag (the same vertices moved
-again); at the add-on's default levels (Auto: five for this scan) and at two.
+again); at the add-on's default levels (Auto: two for the edit) and at five
+(the levels closest to this scan's face count, chosen by hand).
 
 Part 3, fit (when ../shared/meshes is present): the QEM cage of 2,000
 faces of the bunny, homer, rocker-arm and spot, before and after
@@ -221,10 +223,10 @@ def run_scale(quick):
 def run_typical_binds(quick):
     """Binds at an artist's sizes (a scan of 36k-250k vertices, a 2,000-face
     cage, two levels, the add-on's Loop; and, without ``quick``, a 1M-vertex
-    scan at two levels and at the add-on's default, Auto: the levels closest
-    to the scan's face count), ours and Surface Deform's alternating, best
-    of 3 (of 1 with ``quick``): rows (case, dense vertices, levels label,
-    ours s, Surface Deform s)."""
+    scan at two levels and at the levels closest to its face count, the
+    add-on's Auto for the refined mesh), ours and Surface Deform's
+    alternating, best of 3 (of 1 with ``quick``): rows (case, dense
+    vertices, levels label, ours s, Surface Deform s)."""
     cases = [("bumpy torus 100k", *bumpy_torus(400, 250))]
     if not quick:
         cases.append(("bumpy torus 250k", *bumpy_torus(625, 400)))
@@ -233,11 +235,12 @@ def run_typical_binds(quick):
     if os.path.exists(bunny):
         cases.insert(0, ("stanford-bunny", *read_obj(bunny)))
     from meshadjust_batch import load_package
-    auto_levels = load_package().meshadjust_addon.cage_steps.auto_levels
+    steps = load_package().meshadjust_addon.cage_steps
     rows = []
     for name, V, F in cases:
         cage = simplify(V, F, target_faces=2000)
-        auto = auto_levels(cage.F.shape[0], F.shape[0])
+        edit = steps.edit_levels(cage.F.shape[0], F.shape[0])
+        auto = steps.auto_levels(cage.F.shape[0], F.shape[0])
         for levels in [2] + ([auto] if name.endswith("1M") and auto != 2 else []):
             ours, theirs = [], []
             for _ in range(1 if quick else 3):
@@ -245,7 +248,8 @@ def run_typical_binds(quick):
                 bind(V, F, cage.V, cage.F, levels=levels, scheme="loop")
                 ours.append(time.perf_counter() - t)
                 theirs.append(surface_deform_bound(V, F, cage.V, cage.F)[2])
-            label = f"{levels}" + (" (Auto)" if levels == auto else "")
+            label = f"{levels}" + (" (Auto)" if levels == edit else
+                                   " (Auto, refined)" if levels == auto else "")
             rows.append((name, V.shape[0], label, min(ours), min(theirs)))
     return rows
 
@@ -437,7 +441,8 @@ def run_live(quick, updates=5, seed=0, levels=0):
     """One live update of a bound scan through the add-on, in Blender: a
     bumpy torus (1M vertices; 62.5k with --quick) simplified to a 2,000-face
     cage and bound (Loop, ``levels``; 0, the default, is the add-on's own
-    default, Auto: the levels closest to the source's face count) by the
+    default, Auto: the levels closest to the source's face count, at most
+    two) by the
     add-on's own operator; then, per update, a cage vertex and 4 of its
     neighbours are moved and ``live_update.update_edited`` brings the edited
     original up to date; then the last 5 are moved again ``updates`` times
@@ -534,7 +539,7 @@ def main(argv=None):
                     help="subdivision levels of the folds part (fits use at most 2)")
     ap.add_argument("--live-levels", type=int, action="append",
                     help="levels of the live part (repeatable; 0 = Auto, the add-on's default; "
-                         "default: 0 and 2)")
+                         "default: 0 and 5)")
     ap.add_argument("--only", choices=("bend", "scale", "fit", "folds", "live"), action="append",
                     help="run only these parts (repeatable); the results file is then not written")
     args = ap.parse_args(argv)
@@ -542,7 +547,7 @@ def main(argv=None):
     lines = [f"run of {time.strftime('%Y-%m-%d %H:%M', time.gmtime())} UTC, 1-minute load average at the "
              f"start {os.getloadavg()[0]:.1f}; {blas_line()}", ""]
     if "live" in parts:
-        for levels in args.live_levels or (0, 2):
+        for levels in args.live_levels or (0, 5):
             lines += _live_section(args.quick, levels)
     if "folds" in parts:
         lines += _folds_section(args.quick, args.levels)

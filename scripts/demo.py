@@ -131,8 +131,9 @@ def main(argv=None):
     p.add_argument("mesh", nargs="?", help="a mesh file to use instead of the built-in Suzanne")
     p.add_argument("--faces", type=int, default=1500, help="cage faces (default 1500)")
     p.add_argument("--levels", type=int, default=0,
-                   help="subdivision levels (default 0, Auto as in the add-on: the level whose "
-                        "refined mesh is closest to the source's face count)")
+                   help="subdivision levels (default 0, Auto as in the add-on: the refined "
+                        "mesh at the level whose face count is closest to the source's, the "
+                        "edit bound at it or at 2, whichever is fewer)")
     p.add_argument("--out", default=os.path.join(ROOT, "out"), help="output folder")
     args = p.parse_args(argv)
     os.makedirs(args.out, exist_ok=True)

@@ -13,7 +13,7 @@ import pytest
 
 from tests.addon.conftest import MODULE, make_object
 from tests.addon.test_nothing_lost import assert_unchanged, mod, scene_snapshot
-from tests.addon.test_operators import bumpy_sphere, simplify
+from tests.addon.test_operators import bumpy_sphere, mio, simplify
 from tests.mesh_factory import cad_cylinder, icosphere, mobius_strip, torus
 
 
@@ -104,6 +104,60 @@ def test_automatic_levels_and_the_refined_count_in_the_report(scene):
     # levels chosen by hand, far from the source's count: the report does not say "about"
     assert bpy.ops.meshadjust.refine(output='REFINED', levels=1) == {'FINISHED'}
     assert "refined: 1,200 faces, loop x1, the source has 5,120" in cage.meshadjust.last_report
+
+
+def test_auto_binds_the_edit_at_two_levels_and_refines_at_the_sources_density(scene):
+    """Auto levels: the edit bound at most two levels down (fast binds and
+    live updates), the refined mesh at the levels closest to the source's
+    face count, made from a finer binding in memory that leaves the edit's
+    as it was; a re-bind rewrites the refined mesh at those levels too."""
+    steps, store, core = mod("cage_steps"), mod("store"), sys.modules[MODULE + ".core"]
+    V, F = bumpy_sphere(4)                          # 5,120 faces
+    dense = make_object("dense", V, F)
+    assert bpy.ops.meshadjust.simplify(target_mode='FACES', target_faces=80) == {'FINISHED'}
+    cage = dense.meshadjust.cage
+    assert len(cage.data.polygons) == 80 and cage.meshadjust.levels == steps.MAX_EDIT_LEVELS == 2
+    assert "levels 2, automatic: refined at 3, closest to the source's faces" in \
+        cage.meshadjust.last_report                 # 80 * 64 = 5,120
+    edited = cage.meshadjust.edited
+    bound = store.load_binding(edited, cage)
+    assert bound.levels == 2
+    Vc = mio().read_positions(cage.data)
+    moved = Vc.copy()
+    moved[:3] *= 1.05                               # an edit
+    mio().write_positions(cage.data, moved)
+    moved = mio().read_positions(cage.data)         # (as the mesh holds it: float32)
+    assert bpy.ops.meshadjust.refine(output='BOTH') == {'FINISHED'}
+    assert "refined: 5,120 faces, loop x3, about the source's 5,120" in \
+        cage.meshadjust.last_report
+    # the edit's binding is unchanged (two levels, the same object); the edited original is
+    # its deform, the refined mesh a three-level binding's refine of the same rest shape
+    assert cage.meshadjust.levels == 2 and store.load_binding(edited, cage) is bound
+    D = mio().read_positions(edited.data)
+    assert np.array_equal(D, core.deform(bound, moved).astype(np.float32))
+    V_rest = store.load_rest(cage)
+    finer = core.bind(V, F, V_rest, bound.F_cage, levels=3, scheme="loop",
+                      creases=bound.creases)
+    refined = cage.meshadjust.refined
+    Vr, Fr = mio().read_positions(refined.data), mio().read_triangles(refined.data)[0]
+    want = core.refine(finer, moved)
+    assert np.array_equal(Fr, want.F)
+    assert np.abs(Vr - want.V).max() <= 1e-6 * core.bbox_diagonal(V)
+    bound_text = mod("panel").bound_text
+    assert bound_text(cage, 0) == "Bound: loop, 2 levels; refined at 3"
+    assert bound_text(cage, 2) == "Bound: loop, 2 levels"
+    kept = steps._refine_bindings[edited.session_uid][1]
+    assert kept.levels == 3 and kept.n_dense == 0   # (kept without its dense vertices)
+    assert bpy.ops.meshadjust.refine(output='REFINED') == {'FINISHED'}
+    assert steps._refine_bindings[edited.session_uid][1] is kept     # reused, not re-made
+    # a re-bind (Auto: the cage's two levels) rewrites the refined mesh at three
+    assert bpy.ops.meshadjust.bind(levels=0, scheme='BOUND', keep_edit=True) == {'FINISHED'}
+    assert cage.meshadjust.levels == 2 and len(refined.data.polygons) == 5120
+    assert np.abs(mio().read_positions(refined.data) - want.V).max() <= \
+        1e-6 * core.bbox_diagonal(V)
+    # levels asked for: the edit and the refined mesh at those
+    assert bpy.ops.meshadjust.refine(output='REFINED', levels=3) == {'FINISHED'}
+    assert cage.meshadjust.levels == 3 and "loop x3" in cage.meshadjust.last_report
 
 
 def test_a_bug_is_not_reported_as_the_users_mistake(scene, monkeypatch):
