@@ -155,6 +155,13 @@ def test_auto_binds_the_edit_at_two_levels_and_refines_at_the_sources_density(sc
     assert cage.meshadjust.levels == 2 and len(refined.data.polygons) == 5120
     assert np.abs(mio().read_positions(refined.data) - want.V).max() <= \
         1e-6 * core.bbox_diagonal(V)
+    # a re-bind cancelled inside the refined mesh's bind leaves both bindings as they were
+    job = steps.prepare_cage_job(cage, keep_edit=True)
+    assert (job.levels, job.refine_levels) == (2, 3)
+    fractions = []
+    steps.compute_bind(job, progress=lambda f: fractions.append(f) or f < 0.5)
+    assert job.cancelled and job.refine_binding is None and 0.2 < fractions[-1] < 0.9
+    assert store.load_binding(edited, cage).levels == 2
     # levels asked for: the edit and the refined mesh at those
     assert bpy.ops.meshadjust.refine(output='REFINED', levels=3) == {'FINISHED'}
     assert cage.meshadjust.levels == 3 and "loop x3" in cage.meshadjust.last_report
