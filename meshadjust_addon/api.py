@@ -17,8 +17,9 @@ with the source's transform, and a cage moved as an object is mapped back
 through both transforms, so object transforms are respected. An edit is the
 cage's current shape minus its rest shape; Fit and re-bind keep it.
 
-The steps live in :mod:`.simplify_step` (simplify) and :mod:`.cage_steps`
-(bind, fit, refine); this module gathers them and adds ``subdivide_object``.
+The steps live in :mod:`.simplify_step` (simplify), :mod:`.cage_steps`
+(bind, fit) and :mod:`.refine_step` (refine); this module gathers them and
+adds ``subdivide_object``.
 """
 
 import contextlib
@@ -33,7 +34,9 @@ from .cage_steps import (MAX_AUTO_LEVELS, MAX_EDIT_LEVELS, OUTPUT_NAMES, CageJob
                          auto_levels, bind_object, check_source_in_place, commit_bind,
                          commit_fit, compute_bind, compute_fit, edit_levels, fit_cage_object,
                          prepare_cage_job, prepare_fit, read_source, refine_levels,
-                         refine_object, source_edit_problem)
+                         source_edit_problem)
+from .refine_step import (RefineJob, commit_refine, compute_refine, prepare_refine,  # noqa: F401
+                          refine_object)
 from .report import Report, about, user_cause  # noqa: F401
 from .rollback import all_or_nothing, retire
 from .simplify_step import (MEASURE_SAMPLES, TARGET_TOLERANCE, SimplifyJob,  # noqa: F401

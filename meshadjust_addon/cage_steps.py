@@ -1,4 +1,5 @@
-"""Steps on a cage: bind, fit and refine (the compute / commit split).
+"""Steps on a cage: bind and fit (the compute / commit split; Refine is
+:mod:`.refine_step`).
 
 An edit is the difference between the cage's current shape and its *rest
 shape* (the point attribute ``meshadjust_rest``, saved at bind time). Fit and
@@ -8,7 +9,6 @@ can fail is computed or checked before a commit writes anything; the commits
 run inside :func:`.rollback.all_or_nothing`.
 """
 
-import time
 from dataclasses import dataclass, replace
 
 import bpy
@@ -16,7 +16,6 @@ import numpy as np
 
 from .. import core
 from . import mesh_io, results, settings, staleness, store
-from .report import Report, about
 from .rollback import all_or_nothing
 
 #: most levels the automatic choice picks
@@ -452,9 +451,9 @@ def commit_bind(cage, job):
             finer = job.refine_binding if job.refine_binding is not None else job.binding
             results.write_refined(cage, source, *core.refine(finer, V_now), notes=notes)
         if job.refine_binding is not None:
-            _refine_bindings[edited.session_uid] = (job.binding, job.refine_binding)
+            keep_refine_binding(edited.session_uid, job.binding, job.refine_binding)
         if results.shape_key_of(source, cage) is not None:
-            _write_key(source, cage, edited, job.binding, job.V_edited, V_rest=job.V_cage,
+            write_key(source, cage, edited, job.binding, job.V_edited, V_rest=job.V_cage,
                        notes=notes)
         job.note = "; ".join(notes)
         staleness.touched(cage)
@@ -532,7 +531,7 @@ def fit_cage_object(cage, *, levels=None, scheme=None, rebind=settings.default("
 _rest_dense = {}   #: edited session_uid -> (binding, dense positions of its rest shape)
 
 
-def _write_key(source, cage, edited, binding, V_edited, *, V_rest=None, notes=None):
+def write_key(source, cage, edited, binding, V_edited, *, V_rest=None, notes=None):
     """The shape-key output: relative to the mesh that was bound."""
     V_bound = None
     if not results.only_own_keys_and_no_modifiers(source):
@@ -561,46 +560,21 @@ def refine_binding(V, F, V_rest, binding, levels, *, progress=None):
     return replace(finer, fine_face=np.zeros(0, np.int64), bary=none, offset=none, F_dense=None)
 
 
-def _binding_for_refine(cage, edited, binding, levels):
-    """:func:`refine_binding` at ``levels`` for the edit's ``binding``, made
-    from the dense mesh it binds and its rest shape (the same mesh, whatever
-    happened to the source since), kept while that binding stays the one in
-    use (a re-bind or an undo makes another)."""
-    hit = _refine_bindings.get(edited.session_uid)
+def kept_refine_binding(edited_uid, binding, levels):
+    """The refined mesh's binding at ``levels`` kept for the edit's
+    ``binding`` of the edited original ``edited_uid`` (its ``session_uid``),
+    or None: kept while that binding stays the one in use (a re-bind or an
+    undo makes another)."""
+    hit = _refine_bindings.get(edited_uid)
     if hit is not None and hit[0] is binding and hit[1].levels == levels:
         return hit[1]
-    V_rest = binding.V_cage_rest
-    if V_rest is None:                 # (bound before rest shapes were kept: unedited)
-        V_rest = cage_in_source_space(cage, cage.meshadjust.source)
-    finer = refine_binding(core.deform(binding, V_rest), binding.F_dense, V_rest, binding,
-                           levels)
-    _refine_bindings[edited.session_uid] = (binding, finer)
-    return finer
+    return None
 
 
-def _refined_with(cage, edited, binding, levels, job):
-    """The binding Refine makes the refined mesh with: ``binding`` at the
-    ``levels`` asked for (it was re-bound at them), else at
-    :func:`refine_levels` (the re-bind ``job``'s finer binding, or one made
-    now or kept from the last Refine)."""
-    if levels:
-        return binding
-    if job is not None and job.refine_binding is not None:
-        return job.refine_binding
-    finer = refine_levels(binding.levels, binding.F_cage.shape[0], edited.meshadjust.dense_faces)
-    return binding if finer == binding.levels else \
-        _binding_for_refine(cage, edited, binding, finer)
-
-
-def _density_note(n_refined, n_source):
-    """``", about the source's 252k"`` when the refined mesh is within 2x
-    of the source's face count, else what the source has (``", the
-    source has 252k"``); nothing when the source's count is not known."""
-    if not n_source:
-        return ""
-    if 0.5 <= n_refined / n_source <= 2.0:
-        return f", about the source's {about(n_source)}"
-    return f", the source has {about(n_source)}"
+def keep_refine_binding(edited_uid, binding, finer):
+    """Keep ``finer`` (:func:`refine_binding`) for the edit's ``binding`` of
+    the edited original ``edited_uid`` (the last one only)."""
+    _refine_bindings[edited_uid] = (binding, finer)
 
 
 def turned_cage_note(cage, binding, V_cage):
@@ -618,136 +592,3 @@ def turned_cage_note(cage, binding, V_cage):
     return (f"the edit turns {turned.size:,} face{'s' if turned.size > 1 else ''} of "
             f"'{cage.name}' over (face index {listed}{more}): the result folds there; "
             f"move those vertices back a little")
-
-
-@dataclass
-class _RefineJob:
-    """What a Refine computed and checked before it writes anything."""
-
-    binding: object              #: the binding used (a new one when ``rebind`` is set)
-    rebind: object               #: the :class:`CageJob` of a re-bind at other levels, or None
-    finer: object                #: the refined mesh's binding (``binding`` or a finer one)
-    V_edited: object             #: the edited original's positions (None: not asked for)
-    refined: object              #: (V, F) of the refined mesh (None: not asked for)
-    parts: list                  #: the report's sentences so far
-    warnings: list
-
-
-def _refine_compute(cage, output, levels, scheme):
-    """The compute half of :func:`refine_object`: the binding (re-bound in
-    memory at other levels or scheme), the checks of the output, the deformed
-    and refined meshes. Everything is computed and checked here, so a
-    refusal changes nothing (a re-bind written and then refused had left the
-    binding and its data changed)."""
-    cs, source, edited = cage.meshadjust, cage.meshadjust.source, cage.meshadjust.edited
-    job, parts, warnings = None, [], []
-    why = results.edit_mode_problem(edited)    # (its binding is read from its mesh)
-    if why:
-        raise core.MeshAdjustError(f"Refine: {why}")
-    if (levels and levels != cs.levels) or (scheme is not None and scheme != cs.scheme):
-        job = prepare_cage_job(cage, levels=levels, scheme=scheme, keep_edit=True)
-        if levels:                     # (levels asked for: the refined mesh's too)
-            job.refine_levels = 0
-        binding = compute_bind(job).binding
-        parts.append(f"re-bound from the rest shape ({job.old_scheme} x{job.old_levels} -> "
-                     f"{job.scheme} x{job.levels}), the edit kept")
-    else:
-        check_source_in_place(cage, source)
-        binding = store.load_binding(edited, cage)
-    V_cage = cage_in_source_space(cage, source)
-    turned = turned_cage_note(cage, binding, V_cage)
-    if turned:
-        warnings.append(turned)
-    why = results.shape_key_unavailable(source, binding.n_dense, cage) if output == 'SHAPE_KEY' else \
-        results.edited_problem(edited) if output in ('EDITED', 'BOTH') else None
-    why = why or results.edit_mode_problem(cs.refined if output in ('REFINED', 'BOTH') else None)
-    if why:
-        raise core.MeshAdjustError(f"Refine: {why}")
-    V_edited = None
-    if output in ('EDITED', 'BOTH', 'SHAPE_KEY'):
-        V_edited = core.deform(binding, V_cage)
-        repaired = binding.repaired(V_edited).size
-        if repaired:
-            parts.append(f"{repaired:,} dense vertices put back where the edit turned "
-                         f"faces over")
-    finer, refined = binding, None
-    if output in ('REFINED', 'BOTH'):
-        finer = _refined_with(cage, edited, binding, levels, job)
-        refined = core.refine(finer, V_cage)
-    return _RefineJob(binding, job, finer, V_edited, refined, parts, warnings)
-
-
-def _refine_commit(cage, output, rj):
-    """The Blender half of :func:`refine_object`: the re-bind, the edited
-    original, the shape key and the refined mesh written (all or nothing);
-    their sentences added to ``rj.parts``."""
-    source, edited, binding, parts = cage.meshadjust.source, cage.meshadjust.edited, rj.binding, \
-        rj.parts
-    with all_or_nothing() as rb:
-        if rj.rebind is not None:
-            commit_bind(cage, rj.rebind)
-            parts.extend([rj.rebind.note] if rj.rebind.note else [])
-        if output in ('EDITED', 'BOTH'):
-            if not edited.users_collection:         # deleted by the artist: shown again
-                parts.append(results.link_back(edited, source))
-            else:
-                results.aside_note(results.kept_aside(edited), edited, parts)
-            rb.keep(edited.data)
-            results.record_written(edited, mesh_io.write_positions(edited.data, rj.V_edited))
-            parts.append(f"'{edited.name}' deformed ({binding.n_dense:,} vertices)")
-        if output == 'SHAPE_KEY':
-            rb.keep(source.data)
-            key = _write_key(source, cage, edited, binding, rj.V_edited, notes=parts)
-            parts.append(f"shape key '{key.name}' of '{source.name}' updated "
-                         f"({binding.n_dense:,} vertices)")
-        if rj.refined is not None:
-            Vr, Fr = rj.refined
-            refined = results.write_refined(cage, source, Vr, Fr, notes=parts)
-            parts.append(f"'{refined.name}' refined: {Fr.shape[0]:,} faces, {rj.finer.scheme} x"
-                         f"{rj.finer.levels}" + _density_note(Fr.shape[0],
-                                                              edited.meshadjust.dense_faces))
-
-
-def refine_object(cage, *, output='EDITED', levels=None, scheme=None):
-    """Update the results of an edited cage; returns a :class:`Report`.
-
-    ``output``: ``'EDITED'`` (the bound copy of the source, deformed; same
-    topology, UVs and attributes), ``'SHAPE_KEY'`` (the edit as a shape key
-    of the source named after the cage), ``'REFINED'`` (the subdivided cage
-    with the source's detail) or ``'BOTH'`` (edited and refined). Results
-    are created once and updated in place afterwards. Other ``levels`` /
-    ``scheme`` than the binding's re-bind from the rest shape, keeping the
-    edit (and the report says so). A source changed since the bind makes the
-    report a warning.
-    """
-    if output not in OUTPUT_NAMES:
-        raise core.InvalidArgumentError(f"refine: output must be one of {OUTPUT_NAMES}, "
-                                        f"got {output!r}")
-    t0 = time.perf_counter()
-    cs = cage.meshadjust
-    source, edited = cs.source, cs.edited
-    if source is None:
-        raise core.MeshAdjustError(f"'{cage.name}' is not a MeshAdjust cage (no source linked)")
-    if edited is None:
-        raise core.MeshAdjustError(f"'{cage.name}' is not bound yet: bind it first")
-    why = results.copy_problem(cage)
-    if why:
-        raise core.MeshAdjustError(why)
-    rj = _refine_compute(cage, output, levels, None if scheme == 'BOUND' else scheme)
-    _refine_commit(cage, output, rj)
-    warnings = rj.warnings
-    stale = staleness.source_change(source, edited.meshadjust.source_fingerprint, fresh=True)
-    if stale:
-        warnings.append(f"{stale}: the result uses the mesh that was bound; re-bind to use the "
-                        f"new one")
-    data = staleness.source_data_change(source, edited, fresh=True) \
-        if output in ('EDITED', 'BOTH') and not stale else None
-    if data:
-        warnings.append(f"{data}: re-bind to bring them over")
-    dt = time.perf_counter() - t0
-    msg = "; ".join(rj.parts) + f", {dt:.2f} s"
-    if warnings:
-        msg += "; WARNING: " + "; ".join(warnings)
-    cs.last_report = msg
-    return Report(msg, seconds=dt, level='WARNING' if warnings else 'INFO',
-                  warnings=tuple(warnings))

@@ -4,7 +4,7 @@ Each catches the core's own errors (``core.MeshAdjustError``, which the
 add-on's Blender layer raises too) and turns them into
 ``self.report({'ERROR'}, ...)`` plus ``{'CANCELLED'}``; any other exception
 is a bug and surfaces as one. Nothing is changed in the scene before the
-compute part has succeeded. Simplify, Fit and Bind run modal from the UI
+compute part has succeeded. Simplify, Fit, Bind and Refine run modal from the UI
 (work in a worker thread, a progress bar, Esc cancels) and synchronously
 from scripts and in background mode. Their properties are declared once, in
 ``settings.py``.
@@ -353,12 +353,16 @@ def _edit_mode(obj):
 
 
 class _CageJobStep(_Background, _CageStep):
-    """Mixin for the long cage steps (fit, bind): every selected cage in turn
+    """Mixin for the long cage steps (fit, bind, refine): every selected cage in turn
     from ``execute()``; a single cage runs in the background from ``invoke()``.
     Subclasses implement ``_prepare(cage) -> job`` (main thread),
-    ``_compute(job, progress) -> job`` (any thread) and ``_commit() -> message``.
+    ``_compute(job, progress) -> job`` (any thread) and ``_commit()`` (a
+    message or an :class:`api.Report`), and may narrow ``_cages(context)``.
     Several cages run as :func:`run_each` says: a cage that fails is named,
     the others still run."""
+
+    def _cages(self, context):
+        return selected_cages(context)
 
     def execute(self, context):
         give_back = getattr(self, "give_back", None) or (lambda: None)
@@ -369,15 +373,15 @@ class _CageJobStep(_Background, _CageStep):
                 self._job = self._compute(self._prepare(cage))
                 if self._job.cancelled:
                     raise core.MeshAdjustError(f"{self.bl_label} cancelled: nothing was changed")
-                return api.Report(self._commit())
+                return _as_report(self._commit())
             except USER_ERRORS:
                 give_back()
                 raise
 
-        return run_each(self, selected_cages(context), step)
+        return run_each(self, self._cages(context), step)
 
     def invoke(self, context, event):
-        cages = selected_cages(context)
+        cages = self._cages(context)
         if bpy.app.background or len(cages) != 1:
             return self.execute(context)
         try:
@@ -392,12 +396,18 @@ class _CageJobStep(_Background, _CageStep):
                                      lambda progress: self._compute(job, progress))
 
     def finish(self, context):
-        self.report({'INFO'}, self._commit())
+        report = _as_report(self._commit())
+        self.report({report.level}, report.message)
         return {'FINISHED'}
 
     def _cage(self):
         """The cage the job was prepared for, also when renamed since."""
         return object_by_uid(self._cage_uid, self._job.cage_name, self.bl_label)
+
+
+def _as_report(result):
+    """A step's commit result (a message or an :class:`api.Report`) as a Report."""
+    return result if isinstance(result, api.Report) else api.Report(result)
 
 
 def _edit_note(job):
@@ -476,7 +486,7 @@ class MESHADJUST_OT_bind(BindProps, _CageJobStep, bpy.types.Operator):
         return msg
 
 
-class MESHADJUST_OT_refine(RefineProps, _CageStep, bpy.types.Operator):
+class MESHADJUST_OT_refine(RefineProps, _CageJobStep, bpy.types.Operator):
     """Refine the edited cage: deform the bound copy of the source, write the edit as a shape key of the source, and/or build the subdivided cage with the source's detail"""
 
     bl_idname = "meshadjust.refine"
@@ -485,10 +495,18 @@ class MESHADJUST_OT_refine(RefineProps, _CageStep, bpy.types.Operator):
 
     _needs_binding = True
 
-    def execute(self, context):
-        cages = [c for c in selected_cages(context) if c.meshadjust.edited is not None]
-        return run_each(self, cages, lambda cage: api.refine_object(
-            cage, output=self.output, levels=self.levels or None, scheme=self.scheme))
+    def _cages(self, context):
+        return [c for c in selected_cages(context) if c.meshadjust.edited is not None]
+
+    def _prepare(self, cage):
+        return api.prepare_refine(cage, output=self.output, levels=self.levels or None,
+                                  scheme=self.scheme)
+
+    def _compute(self, job, progress=None):
+        return api.compute_refine(job, progress=progress)
+
+    def _commit(self):
+        return api.commit_refine(self._cage(), self._job)
 
 
 class MESHADJUST_OT_subdivide(SubdivideProps, bpy.types.Operator):

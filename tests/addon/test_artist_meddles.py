@@ -48,7 +48,7 @@ def _background(op, obj, meddle, scene=None, **props):
     fake = SimpleNamespace(bl_label=cls.bl_label, _error=None, _cancel=False, _fraction=0.0,
                            _timer=None, report=lambda level, msg: reports.append((level, msg)),
                            **props)
-    for name in ("finish", "_prepare", "_compute", "_commit", "_cage", "give_back"):
+    for name in ("finish", "_prepare", "_compute", "_commit", "_cage", "_cages", "give_back"):
         if hasattr(cls, name):
             setattr(fake, name, getattr(cls, name).__get__(fake))
     api = mod("api")
@@ -126,6 +126,49 @@ def test_what_the_artist_changes_while_a_step_runs_is_followed_or_refused_by_nam
     assert result == {'CANCELLED'} and reports == [
         ({'ERROR'}, "'gone' was deleted while Simplify to Cage ran: nothing was changed")]
     assert set(bpy.data.objects) == objects
+
+
+def test_a_refine_in_the_background_is_followed_or_refused_by_name(scene):
+    """Refine runs in the background too (its first refined mesh at Auto
+    levels binds the source at them): the artist's renames are followed,
+    what would make its results wrong is refused, nothing changed; a
+    cancelled Refine changes nothing either."""
+    dense = make_object("dense", *bumpy_sphere(3))                # 1,280 faces
+    assert simplify(20, fit=False, levels=0) == {'FINISHED'}      # bound at 2, refined at 3
+    cage = dense.meshadjust.cage
+    assert cage.meshadjust.levels == 2
+    lift_top(cage)
+    props = dict(output='BOTH', levels=0, scheme='BOUND')
+    before = full_snapshot()
+    api = mod("api")
+    rj = api.compute_refine(api.prepare_refine(cage, output='BOTH'), progress=lambda f: f < 0.5)
+    assert rj.cancelled and rj.refined is None
+    with pytest.raises(mod("cage_steps").core.MeshAdjustError, match="cancelled"):
+        api.commit_refine(cage, rj)
+    assert_all_unchanged(before)
+    edited = cage.meshadjust.edited
+
+    def edit_mode(obj):
+        activate(obj)
+        bpy.ops.object.mode_set(mode='EDIT')
+
+    result, reports = _background("refine", cage, lambda: setattr(cage, "name", "Renamed"),
+                                  **props)
+    assert result == {'FINISHED'} and "loop x3, about the source's 1,280" in reports[0][1]
+    cases = [(lambda: edit_mode(edited), "'dense_edited' is in Edit Mode"),
+             (lambda: _rotate_an_edge(cage), "'Renamed' changed topology while")]
+    for meddle, message in cases:
+        before = []
+
+        def meddle_then_look():
+            meddle()
+            before.append(full_snapshot())     # the scene as the artist left it
+
+        result, reports = _background("refine", cage, meddle_then_look, **props)
+        assert result == {'CANCELLED'} and message in reports[0][1], reports
+        assert_all_unchanged(before[0])
+        if edited.mode == 'EDIT':
+            bpy.ops.object.mode_set(mode='OBJECT')
 
 
 def test_a_simplify_ending_with_its_collection_excluded_and_another_scene_shown(scene):
@@ -338,7 +381,7 @@ def test_a_fit_from_edit_mode_refused_before_it_starts_gives_edit_mode_back(boun
     reports = []
     fake = SimpleNamespace(rebind=True, bl_label=cls.bl_label,
                            report=lambda level, msg: reports.append((level, msg)))
-    for name in ("_prepare", "give_back"):
+    for name in ("_prepare", "_cages", "give_back"):
         setattr(fake, name, getattr(cls, name).__get__(fake))
     assert cls.invoke(fake, bpy.context, SimpleNamespace(type='LEFTMOUSE')) == {'CANCELLED'}
     assert "'dense' has a zero scale" in reports[0][1]

@@ -537,7 +537,7 @@ def test_a_bind_failing_after_the_edited_original_was_remade_gives_back_its_mesh
     # a re-bind at one level writes the key, then the refined mesh fails (none yet: made)
     ('SHAPE_KEY', "results", "write_refined"),
     # a re-bind at one level writes a new refined mesh, then the report fails
-    ('BOTH', "cage_steps", "_density_note")])
+    ('BOTH', "refine_step", "_density_note")])
 def test_a_refine_re_binding_and_failing_late_is_undone(bound, monkeypatch, first, module, name):
     dense, cage = bound
     lift_top(cage)
