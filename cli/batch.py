@@ -71,7 +71,8 @@ def parse_args(argv, prog=PROG):
                    ".ply .stl .gltf .glb: Blender's importers)")
     _cage_arguments(p)
     p.add_argument("--fit", action="store_true", help="fit the cage so its subdivision "
-                   "matches the input (undoes QEM's shrinkage)")
+                   "matches the input (undoes QEM's shrinkage; evaluated at --refine's levels, "
+                   "at most 2: more gain nothing)")
     p.add_argument("--refine", type=int, metavar="LEVELS", default=0,
                    help="also write the cage refined LEVELS times with the input's detail")
     p.add_argument("--scheme", choices=("butterfly", "loop"), default="butterfly",

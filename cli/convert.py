@@ -243,11 +243,12 @@ def _fitted(run, V, F, res, opts, creases):
     """The cage's positions: fitted with ``--fit`` (the fit reported)."""
     if not opts.fit:
         return res.V
-    fit = run.step("fit", core.fit_cage, V, F, res.V, res.F, levels=opts.levels,
+    levels = min(opts.levels, core.MAX_FIT_LEVELS)        # (more cost, gain nothing)
+    fit = run.step("fit", core.fit_cage, V, F, res.V, res.F, levels=levels,
                    scheme=opts.scheme, creases=creases, symmetry=opts.symmetry)
     d = fit.mean_distance
     run.r["fit"] = {"mean_before_pct": 100 * d[0] / fit.diagonal,
-                    "mean_after_pct": 100 * d[-1] / fit.diagonal}
+                    "mean_after_pct": 100 * d[-1] / fit.diagonal, "levels": levels}
     return fit.V
 
 

@@ -36,7 +36,7 @@ from .clean import CleanReport, CleanResult, clean_mesh
 from .simplify import SimplifyResult, simplify
 from .mirror import mirror_partners, symmetrize
 from .symmetry import simplify_symmetric
-from .fit import FitResult, fit_cage
+from .fit import MAX_FIT_LEVELS, FitResult, fit_cage
 from .binding import Binding, RefineResult, bind, deform, refine
 
 __all__ = [
@@ -51,5 +51,6 @@ __all__ = [
     "subdivide", "subdivision_operator", "SubdivisionOperator", "SubdivisionResult",
     "clean_mesh", "CleanResult", "CleanReport", "simplify", "SimplifyResult",
     "simplify_symmetric", "mirror_partners", "symmetrize", "fit_cage", "FitResult",
+    "MAX_FIT_LEVELS",
     "bind", "deform", "refine", "Binding", "RefineResult",
 ]

@@ -26,11 +26,6 @@ MAX_AUTO_LEVELS = 5
 #: at two) and a 1M-vertex scan on a 2,000-face cage binds 10x faster and
 #: updates live 2x faster (0.80 against 8.52 s, 16 against 36 ms; 2026-12-06)
 MAX_EDIT_LEVELS = 2
-#: most levels a fit evaluates the cage at: the fit undoes the shrinkage of
-#: simplification, which two levels already show (on the bunny, 1,400 faces:
-#: mean distance 0.0551% at 2 levels in 4.7 s, 0.0549% at 3 levels in 15 s);
-#: the binding still uses all the levels asked for
-MAX_FIT_LEVELS = 2
 OUTPUT_NAMES = tuple(item[0] for item in settings.OUTPUTS)
 #: cage faces a report names (then "...")
 _LISTED_FACES = 5
@@ -38,7 +33,7 @@ _LISTED_FACES = 5
 
 def fit_levels(levels):
     """The levels a fit uses for a binding of ``levels``."""
-    return min(int(levels), MAX_FIT_LEVELS)
+    return min(int(levels), core.MAX_FIT_LEVELS)
 
 
 def auto_levels(cage_faces, source_faces, *, max_levels=MAX_AUTO_LEVELS):

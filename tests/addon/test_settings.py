@@ -154,4 +154,4 @@ def test_auto_levels_bring_the_refined_mesh_closest_to_the_source(addon):
         errs = [abs(cage * 4 ** k - source) for k in range(1, api.MAX_AUTO_LEVELS + 1)]
         assert errs[L - 1] == min(errs)
     steps = mod("cage_steps")
-    assert [steps.fit_levels(k) for k in (1, 2, 4)] == [1, 2, steps.MAX_FIT_LEVELS]
+    assert [steps.fit_levels(k) for k in (1, 2, 4)] == [1, 2, steps.core.MAX_FIT_LEVELS]

@@ -88,6 +88,7 @@ def test_smf_in_smf_out_report_and_a_nan_reported_not_zeroed(tmp_path):
     assert ball["stopped_because"] == "target" and ball["message"]
     assert 0 < ball["mean_deviation_pct"] <= ball["deviation_pct"] < 2
     assert ball["fit"]["mean_after_pct"] < ball["fit"]["mean_before_pct"]
+    assert ball["fit"]["levels"] == 1                   # (--refine 1)
     assert list(ball["phases_s"]) == ["read", "simplify", "fit", "measure", "bind", "refine",
                                       "write"]
     assert all(t >= 0 for t in ball["phases_s"].values())
@@ -282,6 +283,20 @@ def test_skip_existing_resumes_a_batch(tmp_path):
     assert proc.returncode == 0 and len(rows(proc.stdout)) == 2, proc.stdout
     proc = run_batch([".", "--faces", "100", "--out", ".", "--skip-existing"], tmp_path)
     assert proc.returncode == 0 and "0 converted, 0 failed, 2 skipped" in proc.stdout
+
+
+def test_the_fit_takes_at_most_two_levels_the_refined_mesh_all_asked_for(tmp_path):
+    """A fit gains nothing past two levels (``core.MAX_FIT_LEVELS``) and costs 3-4x
+    more at three: ``--refine 3`` fits at two and refines at three."""
+    V, F = bumpy_sphere()
+    core.write_obj(tmp_path / "ball.obj", V, F)
+    proc = run_batch(["ball.obj", "--faces", "80", "--fit", "--refine", "3", "--out", "out",
+                      "--report", "rep.json"], tmp_path)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    ball = json.loads((tmp_path / "rep.json").read_text())["files"][0]
+    assert ball["fit"]["levels"] == core.MAX_FIT_LEVELS == 2
+    assert ball["fit"]["mean_after_pct"] < ball["fit"]["mean_before_pct"]
+    assert ball["faces_out"] == 80 and ball["refined_faces"] == 80 * 4 ** 3
 
 
 def test_fit_or_refine_failing_after_the_simplify_keeps_the_cage(tmp_path):
