@@ -449,7 +449,7 @@ def commit_bind(cage, job):
             keep_refine_binding(edited.session_uid, job.binding, job.refine_binding)
         if results.shape_key_of(source, cage) is not None:
             write_key(source, cage, edited, job.binding, job.V_edited, V_rest=job.V_cage,
-                       notes=notes)
+                      notes=notes)
         job.note = "; ".join(notes)
         staleness.touched(cage)
         staleness.touched(source)
