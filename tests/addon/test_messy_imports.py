@@ -693,3 +693,42 @@ def test_a_subdivided_copy_shows_the_materials_its_source_shows(scene):
     assert [(s.link, s.material.name) for s in out.material_slots] == \
         [(s.link, s.material.name) for s in obj.material_slots] == \
         [('OBJECT', "object_gold"), ('DATA', "mesh_blue")]
+
+
+def test_an_unwelded_scan_refined_at_auto_levels_above_the_edit_s_before_and_after_a_reload(
+        scene, tmp_path):
+    """An STL-like scan (every triangle its own vertices), bound at Auto's
+    two levels and refined at three (the source's density): the refined mesh
+    is the source bound at three levels and refined, in the session and
+    after a reload (the binding then read back from float32 attributes and
+    the finer one made again from it)."""
+    from tests.addon.conftest import make_object
+    from tests.addon.test_operators import bumpy_sphere
+    from tests.mesh_factory import unwelded
+    core = sys.modules[MODULE + ".core"]
+    V, F = unwelded(*bumpy_sphere(4))                           # 5,120 faces, 15,360 vertices
+    make_object("scan", V, F)
+    assert bpy.ops.meshadjust.simplify(target_mode='FACES', target_faces=80) == {'FINISHED'}
+    cage = bpy.data.objects["scan_cage"]
+    assert cage.meshadjust.levels == 2 and len(cage.data.polygons) == 80
+    Vc = pos(cage)
+    Vc[int(np.argmax(Vc[:, 2]))] *= 1.1                         # an edit
+    mod("mesh_io").write_positions(cage.data, Vc)
+    activate(cage)
+    assert bpy.ops.meshadjust.refine(output='BOTH') == {'FINISHED'}
+    assert "refined: 5,120 faces, loop x3" in cage.meshadjust.last_report
+    binding = mod("store").load_binding(cage.meshadjust.edited, cage)
+    finer = core.bind(V, F, mod("store").load_rest(cage), binding.F_cage, levels=3,
+                      scheme="loop", creases=binding.creases)
+    want = core.refine(finer, pos(cage)).V
+    diag = core.bbox_diagonal(V)
+    in_session = pos(cage.meshadjust.refined)
+    assert np.abs(in_session - want).max() <= 1e-6 * diag       # (float32 positions: 3e-8)
+    path = str(tmp_path / "scan.blend")
+    bpy.ops.wm.save_as_mainfile(filepath=path)
+    bpy.ops.wm.open_mainfile(filepath=path)
+    cage = bpy.data.objects["scan_cage"]
+    activate(cage)
+    assert bpy.ops.meshadjust.refine(output='REFINED') == {'FINISHED'}
+    assert "refined: 5,120 faces, loop x3" in cage.meshadjust.last_report
+    assert np.abs(pos(cage.meshadjust.refined) - in_session).max() <= 1e-6 * diag   # (2e-8)
