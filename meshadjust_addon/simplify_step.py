@@ -188,7 +188,7 @@ def compute_simplify(job, *, progress=None):
 
     ``progress(fraction)`` returning False cancels; ``job.cancelled`` says so.
     Simplify takes the first 70% of the bar; measure, fit and bind the rest
-    (the bind reports from inside its searches: at Auto levels on a
+    (the bind reports from inside its searches: at five levels on a
     1M-vertex scan it is the longest step, and Esc there stops it). A fit or
     bind that fails with the core's error is recorded (``fit_error``,
     ``bind_error``) and the cage is kept: nothing computed is thrown away.
