@@ -2073,19 +2073,34 @@ def _handedness(binding, Vc):
     :meth:`Binding.from_arrays` without the repair's keys: 1.0 too). No
     LAPACK call (a 3x3 solve there costs milliseconds on a loaded machine:
     ``test_the_repair_maps_need_no_lapack_solve``)."""
-    if binding.V_cage_rest is None:
+    rest = _rest_moments(binding)
+    if rest is None:
         return 1.0
-    X = binding.V_cage_rest - binding.V_cage_rest.mean(axis=0)
+    X, adjugate, det_xx = rest
     Y = Vc - Vc.mean(axis=0)
-    XX, YX = X.T @ X, Y.T @ X
-    adjugate = np.cross(XX[[1, 2, 0]], XX[[2, 0, 1]])          # rows: XX symmetric
-    det_xx = float(XX[0] @ adjugate[0])
-    if not det_xx > 1e-12 * float(np.trace(XX)) ** 3:
-        return 1.0
-    M = YX @ adjugate / det_xx
+    M = (Y.T @ X) @ adjugate / det_xx
     det_m = float(M[0] @ np.cross(M[1], M[2]))
     size = float(np.sqrt((M * M).sum() / 3.0))
     return -1.0 if det_m < -_MIRROR_CONDITION * size ** 3 else 1.0
+
+
+def _rest_moments(binding):
+    """What :func:`_handedness` needs of the rest cage, computed once per
+    binding (kept in its cache): the centred rest positions X, the adjugate
+    of X^T X and its determinant; None without a rest cage or for a flat
+    one (no linear map to the rest: no mirror to find)."""
+    c = binding._cache
+    if "rest_moments" not in c:
+        rest = None
+        if binding.V_cage_rest is not None:
+            X = binding.V_cage_rest - binding.V_cage_rest.mean(axis=0)
+            XX = X.T @ X
+            adjugate = np.cross(XX[[1, 2, 0]], XX[[2, 0, 1]])          # rows: XX symmetric
+            det_xx = float(XX[0] @ adjugate[0])
+            if det_xx > 1e-12 * float(np.trace(XX)) ** 3:
+                rest = (X, adjugate, det_xx)
+        c["rest_moments"] = rest
+    return c["rest_moments"]
 
 
 def _dot(a, b):
