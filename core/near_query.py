@@ -63,7 +63,8 @@ from numpy.lib.stride_tricks import sliding_window_view
 
 from .errors import InvalidArgumentError
 from .mesh import check_finite_rows
-from .spatial import CROWDED_CELL, PRUNE_SLACK, TriangleIndex, closest_pairs, closest_result
+from .spatial import (CROWDED_CELL, PRUNE_SLACK, BestPairs, TriangleIndex, closest_pairs,
+                      closest_result)
 from .pages import plain_pages
 from ._parallel import run_each
 
@@ -250,7 +251,7 @@ class NearQuery:
         # points in a crowded cell (see _INDEX_CELL) go to the index's
         # hierarchy: a cage of long thin triangles, a CAD cylinder's, made cells of thousands
         crowded, order, _ = self.index.split_crowded(key, limit=self._index_cell)
-        best = _Best.empty(q)
+        best = BestPairs(q)
         far = [crowded]
         # (on the worker threads: each block writes its own points' rows of best)
         far += run_each(lambda s: _block(T, self.index, P, order[s:s + _BLOCK], cell3, best),
@@ -303,20 +304,6 @@ def _check_points(P):
             f"NearQuery.closest: P must be (q,3) floats, got {P.shape} {P.dtype}")
     check_finite_rows(P, where="NearQuery.closest", what="query points")
     return P
-
-
-class _Best(NamedTuple):
-    """Per query: internal triangle, kernel (v, w) and squared distance."""
-
-    t: np.ndarray
-    v: np.ndarray
-    w: np.ndarray
-    d2: np.ndarray
-
-    @classmethod
-    def empty(cls, q):
-        """Room for ``q`` queries (filled block by block)."""
-        return cls(np.zeros(q, dtype=np.int64), np.zeros(q), np.zeros(q), np.zeros(q))
 
 
 # --- tables ------------------------------------------------------------------------------------
@@ -450,7 +437,7 @@ def _block(T, index, P, q, cell3, best, known=None):
     rest &= tri != done[owner]
     t, v, w, d2, rest = _crowded_next(T, B.X, owner, tri, lb, rest, (t, v, w, d2))
     t, v, w, d2 = _fold(T, B.X, owner[rest], tri[rest], t, v, w, d2)
-    best.t[B.q], best.v[B.q], best.w[B.q], best.d2[B.q] = t, v, w, d2
+    best.put(B.q, t, v, w, d2)
     return np.concatenate([lost, B.q[far]])
 
 

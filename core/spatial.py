@@ -1250,7 +1250,7 @@ class TriangleIndex:
                 f"TriangleIndex.closest: P must be (q,3) floats, got {P.shape} {P.dtype}")
         check_finite_rows(P, where="TriangleIndex.closest", what="query points")
         nq = P.shape[0]
-        best = _Best(nq)
+        best = BestPairs(nq)
         if nq:
             PT = np.ascontiguousarray(P.T)
             h, dims, lo = self._h, self._dims, self._lo
@@ -1833,8 +1833,10 @@ class TriangleIndex:
         self._scan(PT, q[own[ok]], t[ok], best, probe, edges=False, lowest_face=True)
 
 
-class _Best:
-    """Running per-query best: squared distance, internal triangle id, (v, w)."""
+class BestPairs:
+    """Running per-query best of a closest-point search: squared distance
+    (infinite until one is found), internal triangle id and the kernel's
+    ``(v, w)`` (:func:`closest_result` makes the answers of them)."""
 
     def __init__(self, n):
         self.d2 = np.full(n, np.inf)
