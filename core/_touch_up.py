@@ -207,7 +207,7 @@ def _exhaustive(V, F, P):
     t = np.tile(np.arange(m), k)
     v, w, d2 = closest_pairs(np.ascontiguousarray(P.T), np.repeat(np.arange(k), m), D, t)
     best = np.arange(k) * m + d2.reshape(k, m).argmin(axis=1)   # (the first: the lowest face)
-    return closest_result(_Rows(D, np.arange(m)), t[best], v[best], w[best], d2[best])
+    return closest_result(D, np.arange(m), t[best], v[best], w[best], d2[best])
 
 
 def _closest_on(D, P, q, t):
@@ -218,16 +218,7 @@ def _closest_on(D, P, q, t):
     v, w, d2 = closest_pairs(np.ascontiguousarray(P.T), q, D, t)
     order = np.lexsort((t, d2, q))
     first = order[np.flatnonzero(np.diff(q[order], prepend=-1))]
-    return closest_result(_Rows(D, np.arange(D.shape[1])), t[first], v[first], w[first],
-                          d2[first])
-
-
-class _Rows(NamedTuple):
-    """The two fields of :class:`~.spatial.IndexTables` that
-    :func:`~.spatial.closest_result` reads."""
-
-    rows: np.ndarray
-    face: np.ndarray
+    return closest_result(D, np.arange(D.shape[1]), t[first], v[first], w[first], d2[first])
 
 
 class _FewQueries:

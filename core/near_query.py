@@ -257,7 +257,7 @@ class NearQuery:
         far += run_each(lambda s: _block(T, self.index, P, order[s:s + _BLOCK], cell3, best),
                         range(0, order.size, _BLOCK))
         far = np.concatenate(far)
-        result = closest_result(T.tables, best.t, best.v, best.w, best.d2)
+        result = closest_result(T.tables.rows, T.tables.face, best.t, best.v, best.w, best.d2)
         if far.size:
             hit = self.index.closest(P[far], crowded_cell=self._index_cell)
             for out, value in zip(result, hit):

@@ -433,16 +433,18 @@ def _bary(v, w):
     return np.clip(bary, 0.0, 1.0, out=bary)
 
 
-def closest_result(tables, t, v, w, d2):
-    """The :class:`ClosestPoints` of kernel results: internal triangles ``t`` (q,),
-    the kernel's ``v, w`` and squared distances ``d2`` (q,) over an index's
-    :class:`IndexTables` (the point ``A + v ab + w ac``, barycentric coordinates
-    ``(1-v-w, v, w)`` clipped to [0, 1])."""
+def closest_result(rows, face, t, v, w, d2):
+    """The :class:`ClosestPoints` of kernel results: triangles ``t`` (q,) of
+    the kernel ``rows`` (16, m) (:func:`triangle_rows`; an index's
+    :class:`IndexTables` ``rows``), whose faces are ``face`` (m,), the
+    kernel's ``v, w`` and squared distances ``d2`` (q,) (the point
+    ``A + v ab + w ac``, barycentric coordinates ``(1-v-w, v, w)`` clipped
+    to [0, 1])."""
     point = np.empty((t.shape[0], 3))
     for k in range(3):
-        point[:, k] = (np.take(tables.rows[k], t) + v * np.take(tables.rows[3 + k], t)
-                       + w * np.take(tables.rows[6 + k], t))
-    return ClosestPoints(tables.face[t].astype(np.int64), point, _bary(v, w), np.sqrt(d2))
+        point[:, k] = (np.take(rows[k], t) + v * np.take(rows[3 + k], t)
+                       + w * np.take(rows[6 + k], t))
+    return ClosestPoints(face[t].astype(np.int64), point, _bary(v, w), np.sqrt(d2))
 
 
 # --- small vectorised helpers --------------------------------------------------------------------
@@ -1272,7 +1274,8 @@ class TriangleIndex:
             far = np.concatenate(far)
             if far.size:
                 self._bvh_query(PT, far, best)
-        return closest_result(self.tables, best.t, best.v, best.w, best.d2)
+        return closest_result(self.tables.rows, self.tables.face, best.t, best.v, best.w,
+                              best.d2)
 
     def split_crowded(self, cid, limit=None):
         """For queries in the grid cells ``cid``: those whose cell is crowded
