@@ -35,8 +35,8 @@ from .cage_steps import (MAX_AUTO_LEVELS, MAX_EDIT_LEVELS, OUTPUT_NAMES, CageJob
                          commit_fit, compute_bind, compute_fit, edit_levels, fit_cage_object,
                          prepare_cage_job, prepare_fit, read_source, refine_levels,
                          source_edit_problem)
-from .refine_step import (RefineJob, commit_refine, compute_refine, prepare_refine,  # noqa: F401
-                          refine_object)
+from .refine_step import (RefineJob, commit_refine, compute_refine, make_finer,  # noqa: F401
+                          prepare_refine, refine_object)
 from .report import Report, about, user_cause  # noqa: F401
 from .rollback import all_or_nothing, retire
 from .simplify_step import (MEASURE_SAMPLES, TARGET_TOLERANCE, SimplifyJob,  # noqa: F401

@@ -7,11 +7,15 @@ stays responsive on dense meshes. The edited original is updated by
 :func:`.live_update.update_edited`: only the cage vertices that moved since
 the last update are followed through the binding (``core.deform`` with
 ``moved=``), so an update costs what the edit touches, not the whole scan.
-The other outputs go through ``api.refine_object``. Errors turn live mode
-off for that cage and are kept in its ``last_report`` rather than raised
-inside the handler.
+The other outputs go through ``api.refine_object``; the first refined mesh
+at more levels than the edit's binding needs its own binding (seconds on a
+large scan, :func:`.refine_step.make_finer`), made in a worker thread while
+the viewport stays responsive, the refined mesh updated when it is there.
+Errors turn live mode off for that cage and are kept in its ``last_report``
+rather than raised inside the handler.
 """
 
+import threading
 import time
 
 import bpy
@@ -22,6 +26,11 @@ from .properties import preferences
 
 _pending = set()
 _last_run = {}
+#: cage name -> (worker thread making its refined mesh's finer binding, {"error": exception},
+#: the timer that looks for it)
+_finer = {}
+#: seconds between looks at a finer binding's worker
+_FINER_POLL = 0.25
 
 
 def _interval():
@@ -46,8 +55,10 @@ def refine_pending():
             if output in ('EDITED', 'BOTH'):
                 report = live_update.update_edited(cage).summary()
                 if output == 'BOTH':
-                    report += "; " + api.refine_object(cage, output='REFINED').message
+                    report += "; " + _refine_refined(cage)
                 cage.meshadjust.last_report = report
+            elif output == 'REFINED':
+                cage.meshadjust.last_report = _refine_refined(cage)
             else:
                 api.refine_object(cage, output=output)
         except core.MeshAdjustError as exc:
@@ -59,6 +70,62 @@ def refine_pending():
                                            f"({type(exc).__name__}: {exc}); please report it")
             raise
         _last_run[name] = time.monotonic()
+    return None
+
+
+def _refine_refined(cage):
+    """Live's update of the cage's refined mesh (a Refine of it); its report.
+    When the refined mesh first needs its finer binding, that binding is made
+    in a worker thread (:func:`finer_done` looks for it, then refines)."""
+    if cage.name in _finer:
+        return "the refined mesh's binding is being made (first time): it follows then"
+    rj = api.prepare_refine(cage, output='REFINED')
+    if not rj.finer_levels:
+        return api.commit_refine(cage, api.compute_refine(rj)).message
+    box = {}
+
+    def work():
+        try:
+            api.make_finer(rj)
+        except Exception as exc:      # (reported from the main thread by finer_done)
+            box["error"] = exc
+
+    thread = threading.Thread(target=work, daemon=True)
+    name = cage.name
+
+    def look():
+        return finer_done(name)
+    _finer[name] = (thread, box, look)
+    thread.start()
+    bpy.app.timers.register(look, first_interval=_FINER_POLL)
+    return (f"binding the refined mesh at {rj.finer_levels} levels in the background (first "
+            f"time): it follows then")
+
+
+def finer_done(name):
+    """The timer that looks for the finer binding of cage ``name`` (live
+    mode): while its worker runs, again in ``_FINER_POLL`` seconds; then the
+    refined mesh updated (a live refine of the cage), or its error reported
+    and live mode stopped. Returns the next interval or None."""
+    thread, box, _ = _finer.get(name, (None, {}, None))
+    if thread is not None and thread.is_alive():
+        return _FINER_POLL
+    _finer.pop(name, None)
+    cage = bpy.data.objects.get(name)
+    if cage is None or not cage.meshadjust.live:
+        return None
+    error = box.get("error")
+    if isinstance(error, core.MeshAdjustError):
+        cage.meshadjust.live = False
+        cage.meshadjust.last_report = f"live refine stopped: {error}"
+    elif error is not None:          # a bug: live stops, and it shows as one
+        cage.meshadjust.live = False
+        cage.meshadjust.last_report = (f"live refine stopped by an internal error "
+                                       f"({type(error).__name__}: {error}); please report it")
+        raise error
+    else:
+        _pending.add(name)
+        refine_pending()
     return None
 
 
@@ -100,7 +167,9 @@ def register():
 
 def unregister():
     app_handlers.remove(_HANDLERS)
-    if bpy.app.timers.is_registered(refine_pending):
-        bpy.app.timers.unregister(refine_pending)
+    for look in [entry[2] for entry in _finer.values()] + [refine_pending]:
+        if bpy.app.timers.is_registered(look):
+            bpy.app.timers.unregister(look)
     _pending.clear()
+    _finer.clear()
     live_update.forget()

@@ -143,20 +143,29 @@ def compute_refine(rj, *, progress=None):
                             f"faces over")
     if rj.output not in ('REFINED', 'BOTH'):
         return rj
-    if rj.finer_levels:
-        try:
-            rj.finer = refine_binding(core.deform(binding, rj.finer_rest), binding.F_dense,
-                                      rj.finer_rest, binding, rj.finer_levels,
-                                      progress=share(0.1, 0.95))
-        except core.CancelledError:
-            rj.cancelled = True
-            return rj
-        keep_refine_binding(rj.edited_uid, binding, rj.finer)
+    if rj.finer_levels and make_finer(rj, progress=share(0.1, 0.95)).cancelled:
+        return rj
     if rj.finer is None:
         rj.finer = binding
     rj.refined = core.refine(rj.finer, rj.V_cage)
     if progress is not None and progress(1.0) is False:
         rj.cancelled = True
+    return rj
+
+
+def make_finer(rj, *, progress=None):
+    """Make the refined mesh's finer binding ``rj`` plans (``rj.finer_levels``;
+    pure NumPy, any thread) and keep it for the edit's binding
+    (:func:`~.cage_steps.keep_refine_binding`); ``progress`` returning False
+    cancels (``rj.cancelled``). Returns ``rj``."""
+    binding = rj.binding
+    try:
+        rj.finer = refine_binding(core.deform(binding, rj.finer_rest), binding.F_dense,
+                                  rj.finer_rest, binding, rj.finer_levels, progress=progress)
+    except core.CancelledError:
+        rj.cancelled = True
+        return rj
+    keep_refine_binding(rj.edited_uid, binding, rj.finer)
     return rj
 
 

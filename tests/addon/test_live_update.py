@@ -224,3 +224,45 @@ def test_a_cage_vertex_that_is_not_a_number_is_named_on_the_cage(bound_cage, ste
         with pytest.raises(RuntimeError, match=r"has 1 vertex position that is not a number"):
             op()
     assert np.array_equal(mio.read_positions(cage.meshadjust.edited.data), edited)
+
+
+@pytest.mark.parametrize("output", ['REFINED', 'BOTH'])
+def test_live_makes_the_refined_mesh_s_first_finer_binding_in_the_background(scene, output):
+    """Live with the refined mesh at Auto levels above the edit's: its first
+    tick starts the finer binding in a worker and returns (the viewport is
+    not held for the seconds it takes on a large scan); once made, the timer
+    refines, and the refined mesh is what a Refine makes."""
+    from tests.addon.test_operators import bumpy_sphere, simplify
+    live, core = _mod("live"), sys.modules[MODULE + ".core"]
+    dense = make_object("dense", *bumpy_sphere(4))                 # 5,120 faces
+    assert simplify(80, levels=0) == {'FINISHED'}                   # bound at 2, refined at 3
+    cage = dense.meshadjust.cage
+    bpy.context.scene.meshadjust.output = output
+    cage.meshadjust.live = True
+    mio = _mod("mesh_io")
+    Vc = mio.read_positions(cage.data)
+    Vc[:4] *= 1.05
+    mio.write_positions(cage.data, Vc)
+    live._pending.add(cage.name)
+    live.refine_pending()
+    assert "binding the refined mesh at 3 levels in the background" in \
+        cage.meshadjust.last_report
+    assert cage.meshadjust.refined is None                         # (not yet)
+    thread = live._finer[cage.name][0]
+    thread.join()
+    assert live.finer_done(cage.name) is None                      # (the timer's last call)
+    refined = cage.meshadjust.refined
+    assert refined is not None and len(refined.data.polygons) == 80 * 4 ** 3
+    assert cage.name not in live._finer and cage.meshadjust.live
+    got = mio.read_positions(refined.data)
+    assert bpy.ops.meshadjust.refine(output='REFINED') == {'FINISHED'}
+    assert np.array_equal(mio.read_positions(refined.data), got)
+    assert "loop x3" in cage.meshadjust.last_report
+    # the next ticks refine at once with the kept binding
+    Vc[:4] *= 1.05
+    mio.write_positions(cage.data, Vc)
+    live._pending.add(cage.name)
+    live.refine_pending()
+    assert cage.name not in live._finer and "loop x3" in cage.meshadjust.last_report
+    assert np.abs(mio.read_positions(refined.data) - got).max() > 1e-3 * \
+        core.bbox_diagonal(mio.read_positions(dense.data))
