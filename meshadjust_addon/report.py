@@ -39,5 +39,7 @@ def user_cause(exc, what, obj_name):
 
 
 def about(n):
-    """A face count as a reader says it: 5,120 or 252k."""
+    """A face count as a reader says it: 5,120, 252k, 2M or 1.1M."""
+    if n >= 999_500:
+        return f"{n / 1e6:.1f}".removesuffix(".0") + "M"
     return f"{n / 1000:.0f}k" if n >= 10_000 else f"{n:,}"

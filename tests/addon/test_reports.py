@@ -106,6 +106,14 @@ def test_automatic_levels_and_the_refined_count_in_the_report(scene):
     assert "refined: 1,200 faces, loop x1, the source has 5,120" in cage.meshadjust.last_report
 
 
+def test_face_counts_are_said_as_a_reader_says_them(addon):
+    about = mod("api").about
+    assert [about(n) for n in (5120, 9_999, 10_000, 251_904, 999_499)] == \
+        ["5,120", "9,999", "10k", "252k", "999k"]
+    assert [about(n) for n in (999_500, 2_000_000, 2_048_000, 1_111_216, 12_600_000)] == \
+        ["1M", "2M", "2M", "1.1M", "12.6M"]          # (2,000,000 was "2000k")
+
+
 def test_auto_binds_the_edit_at_two_levels_and_refines_at_the_sources_density(scene):
     """Auto levels: the edit bound at most two levels down (fast binds and
     live updates), the refined mesh at the levels closest to the source's
