@@ -328,6 +328,24 @@ def _results(run, V, F, res, opts):
     return outputs, None
 
 
+def _shared_positions(V, F):
+    """How many of the vertices ``F`` uses sit where another used vertex
+    sits (the used vertices less their distinct positions): a mask, a sort
+    of the x coordinates, and a sort of the rows only among equal ones
+    (``np.unique(F)`` and ``np.unique(..., axis=0)`` took 4.5 s for 2M
+    vertices, this 0.3)."""
+    used = np.zeros(V.shape[0], dtype=bool)
+    used[F.ravel()] = True
+    P = V[used]
+    order = np.argsort(P[:, 0], kind="stable")
+    tie = np.flatnonzero(P[order[1:], 0] == P[order[:-1], 0])
+    if not tie.size:
+        return 0
+    Q = P[order[np.union1d(tie, tie + 1)]]
+    S = Q[np.lexsort(Q.T[::-1])]
+    return int(np.count_nonzero((S[1:] == S[:-1]).all(axis=1)))
+
+
 def _stl_joins(outputs):
     """Warnings for the STL ``outputs`` (``(path, V, F)``) with vertices that
     share a position with another (a bow-tie the cleaning split, a seam):
@@ -338,8 +356,7 @@ def _stl_joins(outputs):
     for path, V, F in outputs:
         if os.path.splitext(path)[1].lower() != ".stl":
             continue
-        used = np.unique(F)
-        shared = used.shape[0] - np.unique(V[used], axis=0).shape[0]
+        shared = _shared_positions(V, F)
         if shared:
             warnings.append(
                 f"{os.path.basename(path)}: {shared:,} of its vertices share a position with "
