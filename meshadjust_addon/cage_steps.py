@@ -377,7 +377,8 @@ def compute_bind(job, *, progress=None):
     try:
         job.binding = core.bind(
             job.V, job.F, job.V_cage, job.F_cage, levels=job.levels, scheme=job.scheme,
-            creases=job.creases, progress=None if progress is None else (lambda f: progress(share * f)))
+            creases=job.creases,
+            progress=None if progress is None else (lambda f: progress(share * f)))
         if job.refine_levels:
             job.refine_binding = refine_binding(
                 job.V, job.F, job.V_cage, job.binding, job.refine_levels,
