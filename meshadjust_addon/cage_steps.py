@@ -296,13 +296,17 @@ def _check_rest(cage, V_rest, V_now, F_cage):
             f"off makes the current shape the rest shape")
 
 
-def prepare_cage_job(cage, *, levels=None, scheme=None, from_rest=False, keep_edit=False):
+def prepare_cage_job(cage, *, levels=None, scheme=None, from_rest=False, keep_edit=False,
+                     refined=None):
     """Read what a bind or a fit of ``cage`` needs (main thread).
 
     ``levels`` / ``scheme`` None (or 0 / ``'BOUND'``) keep the cage's. With
     ``keep_edit`` (or the older name ``from_rest``), the cage's saved rest
     shape is bound or fitted and the edit (current - rest) carried over; a
-    cage without a rest shape counts as unedited."""
+    cage without a rest shape counts as unedited. ``refined``: whether the
+    re-bind also binds at the refined mesh's levels (:func:`refine_levels`)
+    when they are not the binding's (None: when the cage has a refined
+    mesh, which the commit rewrites)."""
     cs = cage.meshadjust
     source = cs.source
     if source is None:
@@ -330,7 +334,9 @@ def prepare_cage_job(cage, *, levels=None, scheme=None, from_rest=False, keep_ed
     if scheme in (None, 'BOUND'):
         scheme = cs.scheme
     bound = cs.edited is not None
-    finer = refine_levels(levels, F_cage.shape[0], src.F.shape[0]) if cs.refined else 0
+    if refined is None:
+        refined = cs.refined is not None
+    finer = refine_levels(levels, F_cage.shape[0], src.F.shape[0]) if refined else 0
     return CageJob(cage.name, src.V, src.F, V_now if V_rest is None else V_rest, F_cage, creases,
                    levels, scheme, V_rest is not None, V_now=V_now, source_fingerprint=fp,
                    old_levels=cs.levels if bound else 0, old_scheme=cs.scheme if bound else "",

@@ -70,19 +70,19 @@ def prepare_refine(cage, *, output='EDITED', levels=None, scheme=None):
         raise core.MeshAdjustError(f"Refine: {why}")
     job, binding = None, None
     if (levels and levels != cs.levels) or (scheme is not None and scheme != cs.scheme):
-        job = prepare_cage_job(cage, levels=levels, scheme=scheme, keep_edit=True)
-        if levels:                     # (levels asked for: the refined mesh's too)
-            job.refine_levels = 0
-        n_dense = job.V.shape[0]
+        # (levels asked for are the refined mesh's too; at Auto, its own are bound beside)
+        job = prepare_cage_job(cage, levels=levels, scheme=scheme, keep_edit=True,
+                               refined=not levels and (cs.refined is not None
+                                                       or output in ('REFINED', 'BOTH')))
+        n_dense, F_cage = job.V.shape[0], job.F_cage
     else:
         check_source_in_place(cage, source)
-        binding = store.load_binding(edited, cage)
-        n_dense = binding.n_dense
+        binding = store.load_binding(edited, cage)   # (of the cage's topology as it is now)
+        n_dense, F_cage = binding.n_dense, binding.F_cage
     rj = RefineJob(cage.name, output, binding, job, cage_in_source_space(cage, source),
-                   store.cage_topology(cage)[0], edited.session_uid,
-                   edited.meshadjust.dense_faces, started=started)
+                   F_cage, edited.session_uid, edited.meshadjust.dense_faces, started=started)
     _check_outputs(cage, rj, n_dense)
-    if output in ('REFINED', 'BOTH') and not levels:
+    if output in ('REFINED', 'BOTH') and not levels and job is None:
         _plan_finer(cage, rj)
     return rj
 
@@ -99,15 +99,12 @@ def _check_outputs(cage, rj, n_dense):
 
 
 def _plan_finer(cage, rj):
-    """The refined mesh's binding at Auto levels (:func:`refine_levels`):
-    a re-bind makes it beside the edit's; else the one kept from the last
+    """The refined mesh's binding at Auto levels (:func:`refine_levels`) for
+    the edit's binding as it is (a re-bind makes it beside the edit's,
+    :func:`~.cage_steps.prepare_cage_job`): the one kept from the last
     Refine, or the levels and rest shape :func:`compute_refine` binds at."""
-    bound_levels = rj.rebind.levels if rj.rebind is not None else rj.binding.levels
-    finer = refine_levels(bound_levels, rj.F_cage.shape[0], rj.dense_faces)
-    if finer == bound_levels:
-        return
-    if rj.rebind is not None:
-        rj.rebind.refine_levels = finer
+    finer = refine_levels(rj.binding.levels, rj.F_cage.shape[0], rj.dense_faces)
+    if finer == rj.binding.levels:
         return
     rj.finer = kept_refine_binding(rj.edited_uid, rj.binding, finer)
     if rj.finer is None:

@@ -175,6 +175,24 @@ def test_auto_binds_the_edit_at_two_levels_and_refines_at_the_sources_density(sc
     assert cage.meshadjust.levels == 3 and "loop x3" in cage.meshadjust.last_report
 
 
+def test_a_refine_in_another_scheme_at_auto_levels_binds_its_refined_mesh_beside(scene):
+    """Another scheme re-binds the edit (two levels) and, at Auto, the
+    refined mesh at its own levels beside it, kept for the next Refine."""
+    steps, store = mod("cage_steps"), mod("store")
+    dense = make_object("dense", *bumpy_sphere(4))                 # 5,120 faces
+    assert bpy.ops.meshadjust.simplify(target_mode='FACES', target_faces=80) == {'FINISHED'}
+    cage = dense.meshadjust.cage
+    assert cage.meshadjust.refined is None
+    assert bpy.ops.meshadjust.refine(output='REFINED', scheme='butterfly') == {'FINISHED'}
+    report = cage.meshadjust.last_report
+    assert "re-bound from the rest shape (loop x2 -> butterfly x2)" in report
+    assert "refined: 5,120 faces, butterfly x3" in report
+    bound = store.load_binding(cage.meshadjust.edited, cage)
+    assert (bound.levels, bound.scheme) == (2, "butterfly")
+    kept = steps.kept_refine_binding(cage.meshadjust.edited.session_uid, bound, 3)
+    assert kept is not None and kept.scheme == "butterfly" and kept.n_dense == 0
+
+
 def test_a_bug_is_not_reported_as_the_users_mistake(scene, monkeypatch):
     V, F = bumpy_sphere(3)
     dense = make_object("dense", V, F)
