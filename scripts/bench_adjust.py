@@ -345,30 +345,43 @@ def best_of(fn, repeat=3):
     return min(times)
 
 
-def deform_timings(b, Vc, Fc, centre, seed=0):
+def deform_timings(b, Vc, Fc, centre, seed=0, sets=3):
     """Seconds: full deform of the unedited cage; for the one-ring of
     ``centre`` moved and for 5 random cage vertices moved, the incremental
-    deform of a first move (from the unedited result; best of 3), of a drag
-    (the same vertices moved again: best of the 3rd to 5th moves) and the full
-    deform of the same edited cage (what they replace: it also tests the
-    edited region for folds; best of 3). The first incremental call, which
-    builds the index, is not timed."""
+    deform of a first move (best of ``sets`` first moves, each of a set of
+    cage vertices never moved before: the one-rings of ``centre`` and of
+    random cage vertices, or other random fives; each from the unedited
+    result, after a full deform), of a drag (the first set moved again: best
+    of the 3rd to 5th moves) and the full deform of the first set's edited
+    cage (what they replace: it also tests the edited region for folds; best
+    of 3). A first move of the same vertices again would reuse what the last
+    one found (the rows and the faces around them) and be faster than an
+    artist's. The first incremental call, which builds the index, moves
+    another vertex and is not timed."""
     D = deform(b, Vc)
     t_full = best_of(lambda: deform(b, Vc, out=D))
     out = {"full": t_full}
     rng = np.random.default_rng(seed)
     full = np.empty_like(D)
-    for label, ids in (("one-ring", one_ring(Fc, centre)),
-                       ("5 random", rng.choice(Vc.shape[0], 5, replace=False))):
-        Ve = Vc.copy()
-        Ve[ids] += 0.001
-        deform(b, Ve, moved=ids, out=D)
+    n = Vc.shape[0]
+    rings = [one_ring(Fc, v) for v in [centre, *rng.choice(n, sets - 1, replace=False)]]
+    fives = [rng.choice(n, 5, replace=False) for _ in range(sets)]
+    spare = int(np.setdiff1d(np.arange(n), np.concatenate(rings + fives))[0])
+    Ve = Vc.copy()
+    Ve[spare] += 0.001
+    deform(b, Ve, moved=[spare], out=D)
+    for label, id_sets in (("one-ring", rings), ("5 random", fives)):
         first = []
-        for _ in range(3):
+        for ids in id_sets:
+            Ve = Vc.copy()
+            Ve[ids] += 0.001
             deform(b, Vc, out=D)                   # (a full deform: the next move is a first one)
             t = time.perf_counter()
             deform(b, Ve, moved=ids, out=D)
             first.append(time.perf_counter() - t)
+        ids = id_sets[0]
+        Ve = Vc.copy()
+        Ve[ids] += 0.001
         drag, Vd = [], Ve.copy()
         for _ in range(5):
             Vd[ids] += 1e-4
