@@ -455,6 +455,32 @@ class Binding:
             rows = _influenced_dense(self, ids).rows
         return np.sort(rows) if ordered else rows.copy()
 
+    def refined_rows(self, cage_vertex_ids):
+        """The fine vertices an incremental :func:`refine` recomputes when
+        the given cage vertices move (the rows of its ``V`` that may change;
+        found without touching the whole fine mesh). The first call (also
+        with an empty list) builds the indices the incremental refine uses.
+
+        Parameters
+        ----------
+        cage_vertex_ids : (k,) int, duplicates allowed
+
+        Returns
+        -------
+        (r,) int64 ndarray, distinct and ascending
+
+        Raises
+        ------
+        InvalidArgumentError
+            An index is out of range or not an integer.
+        """
+        ids = _check_moved(self, cage_vertex_ids, "Binding.refined_rows")
+        with _INCREMENTAL_LOCK:
+            _fine_index(self)
+            if ids.size == 0:
+                return np.zeros(0, dtype=np.int64)
+            return _influenced_fine(self, ids).rows.copy()
+
 
 def _stored(arrays, key, cols):
     """``arrays[key]`` for :meth:`Binding.from_arrays`: a new C-contiguous int64
@@ -1053,15 +1079,19 @@ def _welded(binding, state):
     return state["welded"]
 
 
-def _check_out(binding, out):
-    if not isinstance(out, np.ndarray) or out.shape != (binding.n_dense, 3) \
+def _check_out(binding, out, rows=None, where="deform"):
+    """Raise :class:`InvalidArgumentError` unless ``out`` is a writable
+    C-contiguous (rows, 3) float64 array (rows: the dense vertices' count
+    when None)."""
+    rows = binding.n_dense if rows is None else rows
+    if not isinstance(out, np.ndarray) or out.shape != (rows, 3) \
             or out.dtype != np.float64 or not out.flags.c_contiguous or not out.flags.writeable:
         desc = (f"{out.shape} {out.dtype}"
                 + ("" if out.flags.c_contiguous else ", not C-contiguous")
                 + ("" if out.flags.writeable else ", read-only") if isinstance(out, np.ndarray)
                 else type(out).__name__)
         raise InvalidArgumentError(
-            f"deform: out must be a writable C-contiguous ({binding.n_dense}, 3) float64 "
+            f"{where}: out must be a writable C-contiguous ({rows}, 3) float64 "
             f"array, got {desc}")
 
 
@@ -1216,19 +1246,40 @@ def _influenced_dense(binding, ids):
     last = idx.get("last")
     if last is not None and last[0] == key:    # Binding.influenced, then deform, same ids
         return last[1]
+    changed, fine = _changed_levels(idx, ids)
+    touched = _faces_around(idx, fine)
+    normal_changed = _distinct(np.take(idx["corners_t"], touched, axis=1).ravel(), idx)
+    faces = _faces_around(idx, normal_changed, with_rows=True)      # ascending
+    k = ragged_entries(idx["dense_start"][faces], idx["dense_count"][faces])
+    result = _Influenced(idx["dense_by_face"][k], k, faces, changed, normal_changed)
+    idx["last"] = (key, result)
+    return result
+
+
+def _fine_index(binding):
+    """The incremental index (:func:`_incremental_index`) with what an
+    incremental refine adds to it (built on first use): each fine vertex's
+    frame face (:func:`_vertex_corners`)."""
+    idx = _incremental_index(binding)
+    if "frame_face" not in idx:
+        op = binding._operator
+        idx["frame_face"] = _vertex_corners(op.F_fine, op.n_fine)[0]
+    return idx
+
+
+def _changed_levels(idx, ids):
+    """Per level 1..L, the vertices (ascending int64) whose position changes
+    when the cage vertices ``ids`` move: level by level, the rows of the
+    transposed stencils (``idx["levels_t"]``) reading a changed vertex.
+    Returns ``(changed, fine)``: that tuple and the fine level's (``ids``
+    at zero levels)."""
     changed, pos_changed = [], ids
-    for T in idx["levels_t"]:        # level by level: the rows reading a changed vertex
+    for T in idx["levels_t"]:
         start = T.indptr[pos_changed]
         k = ragged_entries(start, T.indptr[pos_changed + 1] - start)
         pos_changed = _distinct(T.cols[k], idx)
         changed.append(pos_changed)
-    touched = _faces_around(idx, pos_changed)
-    normal_changed = _distinct(np.take(idx["corners_t"], touched, axis=1).ravel(), idx)
-    faces = _faces_around(idx, normal_changed, with_rows=True)      # ascending
-    k = ragged_entries(idx["dense_start"][faces], idx["dense_count"][faces])
-    result = _Influenced(idx["dense_by_face"][k], k, faces, tuple(changed), normal_changed)
-    idx["last"] = (key, result)
-    return result
+    return tuple(changed), pos_changed
 
 
 def _incremental_index(binding):
@@ -1299,7 +1350,7 @@ def _distinct(values, idx):
 
 
 @plain_pages
-def refine(binding, V_cage_edited, *, F_cage=None):
+def refine(binding, V_cage_edited, *, F_cage=None, moved=None, out=None):
     """The subdivided edited cage with the dense mesh's detail as displacements.
 
     Each fine vertex is moved by its stored offset to the dense surface,
@@ -1307,22 +1358,131 @@ def refine(binding, V_cage_edited, *, F_cage=None):
     unedited cage refines onto the dense surface and an edited one carries
     the detail along. The result has the regular connectivity ``F_fine``.
 
+    Parameters
+    ----------
+    binding : Binding
+    V_cage_edited : (n_cage,3) float
+        New cage positions (same vertex order as at bind time).
+    F_cage : (m,3) int, optional
+        The edited cage's faces; when given they must equal the bound ones.
+    moved : (k,) int, optional
+        Incremental update, as :func:`deform`'s: the cage vertices whose
+        positions differ from the ones ``out`` was computed from
+        (duplicates allowed, empty for none). Only the fine vertices they
+        move (:meth:`Binding.refined_rows`) are recomputed, in ``out``; the
+        others are left as they are. Needs ``out``, written by a refine of
+        this binding (before any, or when the cage was mirrored since, the
+        whole of ``out`` is written).
+    out : (n_fine,3) float64 C-contiguous ndarray, optional
+        Where to write the refined positions (returned as ``V``).
+
     Returns
     -------
     RefineResult
-        ``(V, F)``: (n_fine,3) float64 and (m_fine,3) int64.
+        ``(V, F)``: (n_fine,3) float64 (``out`` when given) and (m_fine,3)
+        int64: a copy of the fine faces, or with ``out`` a read-only view
+        of the binding's (no copy of 24 bytes a face at every update). An
+        incremental update equals a full refine bit for bit, except in a
+        drag (about 1e-16 of the diagonal; see :func:`deform`).
+
+    Notes
+    -----
+    Every refine keeps the subdivided cage it computed in the binding's
+    cache, as :func:`deform` does (they share it), for the incremental
+    updates that follow; ``moved`` is taken at its word, as there.
 
     Raises
     ------
     TopologyMismatchError, InvalidMeshError
         As :func:`deform`.
+    InvalidArgumentError
+        ``moved`` holds a non-integer or out-of-range index, ``moved`` is
+        given without ``out``, or ``out`` is not a writable (n_fine,3)
+        float64 C-contiguous array.
+
+    Examples
+    --------
+    >>> R = refine(b, V_cage).V                                   # doctest: +SKIP
+    >>> V_cage[[3, 7]] += 0.01                                    # doctest: +SKIP
+    >>> refine(b, V_cage, moved=[3, 7], out=R)                    # doctest: +SKIP
     """
-    Vc = _check_cage(binding, V_cage_edited, F_cage, "refine")
-    Vf, Nf, origin = _fine_geometry(binding, Vc, None, "refine")
+    if out is not None:
+        _check_out(binding, out, binding._operator.n_fine, "refine")
+    Vc = _apart_from(_check_cage(binding, V_cage_edited, F_cage, "refine"), out)
     c = binding._cache
-    VT = _positions_t(c["detail_offset_t"], c["detail_corners_t"], c["detail_bary_t"], Vf, Nf,
-                      origin, _handedness(binding, Vc))
-    return RefineResult(np.ascontiguousarray(VT.T), binding._operator.F_fine.copy())
+    if moved is not None:
+        if out is None:
+            raise InvalidArgumentError(
+                "refine: moved needs out (the refined positions computed before the move)")
+        ids = _check_moved(binding, moved, "refine")
+        handed = _handedness(binding, Vc) if ids.size else None
+        if ids.size and handed == c.get("refined_handed"):
+            with _INCREMENTAL_LOCK:
+                hit = _influenced_fine(binding, ids)
+                P, N, origin = _update_fine_geometry(binding, Vc, ids, hit)
+                out[hit.rows] = _refined_t(binding, hit.rows, P, N, origin, handed).T
+        if not ids.size or handed == c.get("refined_handed"):
+            return RefineResult(out, _fine_faces_view(binding))
+    origin = _deform_origin(binding, Vc)
+    X = _fine_levels(binding, Vc, origin)
+    floor = _binding_floor(binding)
+    Nf = _vertex_normals_t(X[-1], binding._operator.F_fine, floor)
+    c["refined_handed"] = handed = _handedness(binding, Vc)
+    VT = _refined_t(binding, None, X[-1], Nf, origin, handed)
+    # kept for the incremental updates that follow (deform's too: the same subdivided cage)
+    c["geometry"] = _Geometry.of(Vc, X, Nf, origin, floor)
+    c.pop("drag", None)
+    c.pop("last_moved", None)
+    if out is None:
+        return RefineResult(np.ascontiguousarray(VT.T), binding._operator.F_fine.copy())
+    out[...] = VT.T
+    return RefineResult(out, _fine_faces_view(binding))
+
+
+def _refined_t(binding, rows, VfT, NfT, origin, handed):
+    """The refined positions (3, k) of the fine vertices ``rows`` (None: all)
+    on the fine positions and normals ``VfT``, ``NfT`` (3, n_fine) relative
+    to ``origin``: :func:`_positions_t` of their detail (column by column, so
+    a subset is bit for bit the same columns of the whole)."""
+    c = binding._cache
+    parts = (c["detail_offset_t"], c["detail_corners_t"], c["detail_bary_t"])
+    if rows is not None:
+        parts = (np.take(a, rows, axis=1) for a in parts)
+    return _positions_t(*parts, VfT, NfT, origin, handed)
+
+
+def _fine_faces_view(binding):
+    """The binding's fine faces as a read-only view."""
+    F = binding._operator.F_fine.view()
+    F.flags.writeable = False
+    return F
+
+
+def _influenced_fine(binding, ids):
+    """The fine vertices whose refined position depends on the cage vertices
+    ``ids``, as an :class:`_Influenced` whose ``rows`` are those fine
+    vertices (ascending) and ``faces`` the fine faces their frames are taken
+    on (what :func:`_update_fine_geometry` reads the normals of). A fine
+    vertex's frame is taken at its own corner of its frame face
+    (:func:`_vertex_corners`): it reads its own normal (the other corners'
+    weigh 0) and the face's corner positions (its edges). So the rows are the
+    vertices whose normal changes: the corners of the fine faces around a
+    changed position (each level's, as :func:`_influenced_dense`), which
+    include every vertex whose frame face has a changed corner. The last
+    answer is kept (so :meth:`Binding.refined_rows` followed by the refine
+    of the same ids searches once)."""
+    idx = _fine_index(binding)
+    key = ids.tobytes()
+    last = idx.get("last_fine")
+    if last is not None and last[0] == key:
+        return last[1]
+    changed, fine = _changed_levels(idx, ids)
+    touched = _faces_around(idx, fine)
+    rows = _distinct(np.take(idx["corners_t"], touched, axis=1).ravel(), idx)
+    result = _Influenced(rows, np.zeros(0, dtype=np.int64),
+                         _distinct(idx["frame_face"][rows], idx), changed, rows)
+    idx["last_fine"] = (key, result)
+    return result
 
 
 def frames(Vf, Nf, corners, bary):
@@ -1495,17 +1655,6 @@ def _check_cage(binding, V_cage_edited, F_cage, where):
                 f"changing the cage's topology")
     check_units(Vc, where=where, name="V_cage_edited")
     return Vc
-
-
-def _fine_geometry(binding, V_cage_edited, F_cage, where):
-    """Check an edited cage against the binding; return fine positions and
-    normals, transposed (3, n_fine), relative to the origin (3,) returned
-    third (:func:`_deform_origin`)."""
-    Vc = _check_cage(binding, V_cage_edited, F_cage, where)
-    origin = _deform_origin(binding, Vc)
-    op = binding._operator
-    VfT = np.ascontiguousarray(op.apply(Vc - origin).T)
-    return VfT, _vertex_normals_t(VfT, op.F_fine, _binding_floor(binding)), origin
 
 
 def _normal_floor(step):

@@ -7,10 +7,12 @@ stays responsive on dense meshes. The edited original is updated by
 :func:`.live_update.update_edited`: only the cage vertices that moved since
 the last update are followed through the binding (``core.deform`` with
 ``moved=``), so an update costs what the edit touches, not the whole scan.
-The other outputs go through ``api.refine_object``; the first refined mesh
-at more levels than the edit's binding needs its own binding (seconds on a
-large scan, :func:`.refine_step.make_finer`), made in a worker thread while
-the viewport stays responsive, the refined mesh updated when it is there.
+The refined mesh goes the same way (:func:`.live_update.update_refined`:
+``core.refine`` with ``moved=``); the shape key through ``api.refine_object``.
+The first refined mesh at more levels than the edit's binding needs its own
+binding (seconds on a large scan, :func:`.refine_step.make_finer`), made in
+a worker thread while the viewport stays responsive, the refined mesh
+updated when it is there.
 Errors turn live mode off for that cage and are kept in its ``last_report``
 rather than raised inside the handler.
 """
@@ -81,7 +83,7 @@ def _refine_refined(cage):
         return "the refined mesh's binding is being made (first time): it follows then"
     rj = api.prepare_refine(cage, output='REFINED')
     if not rj.finer_levels:
-        return api.commit_refine(cage, api.compute_refine(rj)).message
+        return live_update.update_refined(cage, rj).summary()
     box = {}
 
     def work():

@@ -1,4 +1,5 @@
-"""Live update of the edited original: recompute and convert only what moved.
+"""Live update of the edited original and of the refined mesh: recompute and
+convert only what moved.
 
 The fast path of live mode. Per edited object it keeps the state of the last
 update: the cage positions used (in the source's space), the dense positions
@@ -23,6 +24,12 @@ aside first (:func:`~.results.kept_aside`). The state is rebuilt (one full defor
 the binding object changes (re-bind, other levels or scheme), when the
 edited mesh's vertex count changes, or when more than a quarter of the
 cage moved (e.g. the cage's transform changed).
+
+The refined mesh (:func:`update_refined`) goes the same way with
+``core.refine(..., moved=, out=)`` and ``Binding.refined_rows``: its state is
+rebuilt by a full Refine (:func:`~.refine_step.commit_refine`, which also
+creates the refined mesh or links it back) when its binding changes or the
+refined mesh is not the one the state wrote (its vertex or face count).
 """
 
 import time
@@ -33,11 +40,16 @@ import numpy as np
 from .. import core
 from . import mesh_io, results, store
 from .cage_steps import cage_in_source_space, check_source_in_place, turned_cage_note
+from .refine_step import commit_refine, compute_refine
+from .report import vertices
 
 #: above this fraction of moved cage vertices a full deform is cheaper
 FULL_FRACTION = 0.25
 
 _states = {}
+
+#: refined object's session_uid -> its :class:`_RefinedState`
+_refined_states = {}
 
 
 class LiveTiming(NamedTuple):
@@ -56,7 +68,7 @@ class LiveTiming(NamedTuple):
     note: str = ""     #: what else happened (a changed version of the edited original kept aside)
 
     def summary(self):
-        what = "full deform" if self.full else f"{self.moved} cage vertices moved"
+        what = "full deform" if self.full else f"{vertices(self.moved, 'cage')} moved"
         return (f"live: {what}, {self.rows:,} dense vertices updated in "
                 f"{1e3 * self.total:.1f} ms (deform {1e3 * self.deform:.1f}, "
                 f"write {1e3 * self.write:.1f})" + (f"; {self.note}" if self.note else "")
@@ -68,6 +80,33 @@ class _State(NamedTuple):
     V_cage: np.ndarray   #: (n_cage,3) float64, source space, of the last update
     D: np.ndarray        #: (n_dense,3) float64, core.deform of V_cage
     buf: np.ndarray      #: (n_dense,3) float32, what was written to Blender
+
+
+class RefinedTiming(NamedTuple):
+    """What one live update of the refined mesh did and where the time went
+    (seconds)."""
+
+    moved: int         #: cage vertices that moved (all of them on a full update)
+    rows: int          #: refined vertices recomputed
+    full: bool         #: True when it was a full Refine
+    refine: float      #: core.refine (incremental), or the whole Refine when full
+    write: float       #: the rows converted, foreach_set of the position attribute
+    total: float
+    message: str = ""  #: the full Refine's report, or what else happened
+
+    def summary(self):
+        if self.full:
+            return self.message
+        return (f"refined mesh: {vertices(self.moved, 'cage')} moved, {vertices(self.rows)} "
+                f"updated in {1e3 * self.total:.1f} ms (refine {1e3 * self.refine:.1f}, write "
+                f"{1e3 * self.write:.1f})" + (f"; {self.message}" if self.message else ""))
+
+
+class _RefinedState(NamedTuple):
+    binding: object      #: the refined mesh's binding
+    V_cage: np.ndarray   #: (n_cage,3) float64, source space, of the last update
+    R: np.ndarray        #: (n_fine,3) float64, core.refine of V_cage
+    buf: np.ndarray      #: (n_fine,3) float32, what was written to Blender
 
 
 def update_edited(cage):
@@ -173,10 +212,58 @@ def _write(edited, buf):
     results.record_live(edited, buf)
 
 
+def update_refined(cage, rj):
+    """Bring the cage's refined mesh up to date with the cage, recomputing
+    only the refined vertices the edit since the last update moved; ``rj``:
+    the :class:`~.refine_step.RefineJob` of a Refine of the refined mesh
+    (:func:`~.refine_step.prepare_refine`: everything read and checked),
+    whose refined mesh's binding is there (no finer binding to make). A
+    full Refine (``rj`` computed and committed) when no kept state applies.
+    Returns a :class:`RefinedTiming`."""
+    t0 = time.perf_counter()
+    binding = rj.finer if rj.finer is not None else rj.binding
+    refined = cage.meshadjust.refined
+    state = _refined_states.get(refined.session_uid) if refined is not None else None
+    V = rj.V_cage
+    moved = None
+    if state is not None and state.binding is binding and refined.users_collection \
+            and len(refined.data.vertices) == state.R.shape[0] \
+            and len(refined.data.polygons) == binding.operator.F_fine.shape[0]:
+        moved = np.flatnonzero((V != state.V_cage).any(axis=1))
+        if moved.size > FULL_FRACTION * V.shape[0]:
+            moved = None
+    if moved is None:
+        message = commit_refine(cage, compute_refine(rj)).message
+        refined = cage.meshadjust.refined
+        R = rj.refined.V
+        binding.refined_rows([])          # (the incremental indices built now, not at the edit)
+        buf = np.ascontiguousarray(R, dtype=np.float32)
+        _refined_states[refined.session_uid] = _RefinedState(binding, V, R, buf)
+        results.record_live(refined, buf.reshape(-1))
+        dt = time.perf_counter() - t0
+        return RefinedTiming(V.shape[0], R.shape[0], True, dt, 0.0, dt, message)
+    notes = []
+    rows = binding.refined_rows(moved)
+    if moved.size:
+        core.refine(binding, V, moved=moved, out=state.R)
+    t1 = time.perf_counter()
+    if moved.size:
+        results.aside_note(results.kept_aside(refined), refined, notes)
+        state.buf[rows] = np.take(state.R, rows, axis=0)
+        _write(refined, state.buf)
+    _refined_states[refined.session_uid] = state._replace(V_cage=V)
+    t2 = time.perf_counter()
+    warning = turned_cage_note(cage, rj.binding, V)
+    notes += [f"WARNING: {warning}"] if warning else []
+    return RefinedTiming(int(moved.size), int(rows.shape[0]), False, t1 - t0, t2 - t1,
+                         t2 - t0, "; ".join(notes))
+
+
 def forget(edited=None):
-    """Drop the kept state of one edited object (or of all): the next update
-    is a full deform."""
+    """Drop the kept state of one edited object (or of all, the refined
+    meshes' too): the next update is a full deform."""
     if edited is None:
         _states.clear()
+        _refined_states.clear()
     else:
         _states.pop(edited.session_uid, None)

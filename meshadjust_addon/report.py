@@ -38,6 +38,12 @@ def user_cause(exc, what, obj_name):
     return f"{what} '{obj_name}' failed: {cause}" + (f" ({text})" if text else "")
 
 
+def vertices(n, kind=""):
+    """``n`` vertices as a report says it: "1 cage vertex", "3,001 cage
+    vertices" (``kind`` "cage"), "0 vertices"."""
+    return f"{n:,} " + (f"{kind} " if kind else "") + ("vertex" if n == 1 else "vertices")
+
+
 def about(n):
     """A face count as a reader says it: 5,120, 252k, 2M or 1.1M."""
     if n >= 999_500:

@@ -117,6 +117,14 @@ def icosphere(subdivisions=2, radius=1.0):
     return V * radius, F
 
 
+def noisy_sphere(k=3, amp=0.03, seed=0):
+    """An :func:`icosphere` of ``k`` subdivisions, each vertex moved along
+    its radius by ``amp`` times a standard normal draw (``seed``)."""
+    V, F = icosphere(k)
+    rng = np.random.default_rng(seed)
+    return V * (1 + amp * rng.standard_normal((V.shape[0], 1))), F
+
+
 def grid(nx=10, ny=10, size=1.0, z=None):
     """Open (nx+1)x(ny+1)-vertex grid on [0,size]^2, triangulated with
     alternating diagonals (regular valence 6 inside needs a fixed diagonal:

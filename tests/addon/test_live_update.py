@@ -1,7 +1,9 @@
-"""Live mode's incremental update of the edited original
-(``meshadjust_addon.live_update``): equal to a full refine, only what moved
-is recomputed, nothing is written when nothing moved, a re-bind starts over."""
+"""Live mode's incremental update of the edited original and of the refined
+mesh (``meshadjust_addon.live_update``): equal to a full refine, only what
+moved is recomputed, nothing is written when nothing moved, a re-bind starts
+over."""
 
+import re
 import sys
 
 import bpy
@@ -263,6 +265,92 @@ def test_live_makes_the_refined_mesh_s_first_finer_binding_in_the_background(sce
     mio.write_positions(cage.data, Vc)
     live._pending.add(cage.name)
     live.refine_pending()
-    assert cage.name not in live._finer and "loop x3" in cage.meshadjust.last_report
+    # (incremental: the kept finer binding's refine of the 4 moved cage vertices only)
+    assert cage.name not in live._finer and \
+        "refined mesh: 4 cage vertices moved" in cage.meshadjust.last_report
     assert np.abs(mio.read_positions(refined.data) - got).max() > 1e-3 * \
         core.bbox_diagonal(mio.read_positions(dense.data))
+
+
+def _live_tick(cage, output):
+    """One live update of ``cage`` with the scene's output ``output``; its report."""
+    live = _mod("live")
+    bpy.context.scene.meshadjust.output = output
+    cage.meshadjust.live = True
+    live._pending.add(cage.name)
+    live.refine_pending()
+    return cage.meshadjust.last_report
+
+
+def _moved_cage(cage, ids, by):
+    mio = _mod("mesh_io")
+    Vc = mio.read_positions(cage.data)
+    Vc[ids] += by
+    mio.write_positions(cage.data, Vc)
+
+
+def test_live_refined_mesh_recomputes_only_what_moved(bound_cage):
+    # live mode refined the whole refined mesh at every tick (0.35 s for a 1M-vertex
+    # one): now the first tick is a Refine, the next ones recompute the refined vertices
+    # the moved cage vertices move (core.refine(moved=, out=)), with the same result
+    mio = _mod("mesh_io")
+    cage = bound_cage
+    first = _live_tick(cage, 'REFINED')
+    refined = cage.meshadjust.refined
+    assert refined is not None and f"'{refined.name}' refined: " in first
+    n = len(refined.data.vertices)
+    _moved_cage(cage, [3, 4, 5], [0.0, 0.02, 0.05])
+    report = _live_tick(cage, 'REFINED')
+    assert report.startswith("refined mesh: 3 cage vertices moved, "), report
+    rows = int(re.search(r"moved, ([\d,]+) vertices", report).group(1).replace(",", ""))
+    assert 0 < rows < n // 2
+    live = mio.read_positions(refined.data)
+    assert bpy.ops.meshadjust.refine(output='REFINED') == {'FINISHED'}
+    assert np.array_equal(mio.read_positions(refined.data), live)
+    # nothing moved: nothing recomputed or written
+    assert _live_tick(cage, 'REFINED').startswith("refined mesh: 0 cage vertices moved, 0 ")
+    assert np.array_equal(mio.read_positions(refined.data), live)
+
+
+def test_live_both_outputs_follow_a_drag(bound_cage):
+    mio = _mod("mesh_io")
+    cage = bound_cage
+    _live_tick(cage, 'BOTH')
+    refined, edited = cage.meshadjust.refined, cage.meshadjust.edited
+    for _ in range(4):                    # the same vertices again and again: a drag
+        _moved_cage(cage, [7, 8], [0.01, 0.0, -0.01])
+        report = _live_tick(cage, 'BOTH')
+        assert "2 cage vertices moved" in report and "refined mesh: 2 cage vertices" in report
+    got_refined, got_edited = mio.read_positions(refined.data), mio.read_positions(edited.data)
+    assert bpy.ops.meshadjust.refine(output='BOTH') == {'FINISHED'}
+    assert np.abs(mio.read_positions(refined.data) - got_refined).max() <= 1e-6
+    assert np.abs(mio.read_positions(edited.data) - got_edited).max() <= 1e-6
+
+
+def test_live_refined_mesh_keeps_a_hand_change_aside_and_links_a_deleted_one_back(bound_cage):
+    mio = _mod("mesh_io")
+    cage = bound_cage
+    _live_tick(cage, 'REFINED')
+    refined = cage.meshadjust.refined
+    hand = mio.read_positions(refined.data)
+    hand[7] += 0.1
+    mio.write_positions(refined.data, hand)
+    hand = mio.read_positions(refined.data)
+    _moved_cage(cage, [3], [0.0, 0.0, 0.03])
+    report = _live_tick(cage, 'REFINED')
+    assert report.startswith("refined mesh: 1 cage vertex moved")
+    copy = bpy.data.objects[f"{refined.name}.hand"]
+    assert f"kept as '{copy.name}'" in report
+    assert np.array_equal(mio.read_positions(copy.data), hand)
+    got = mio.read_positions(refined.data)
+    assert bpy.ops.meshadjust.refine(output='REFINED') == {'FINISHED'}
+    assert np.array_equal(mio.read_positions(refined.data), got)     # the cage's refine again
+    # deleted by the artist (unlinked): the next tick is a Refine, which links it back
+    for collection in list(refined.users_collection):
+        collection.objects.unlink(refined)
+    _moved_cage(cage, [4], [0.0, 0.0, 0.03])
+    report = _live_tick(cage, 'REFINED')
+    assert refined.users_collection and not report.startswith("refined mesh:")
+    got = mio.read_positions(refined.data)
+    assert bpy.ops.meshadjust.refine(output='REFINED') == {'FINISHED'}
+    assert np.array_equal(mio.read_positions(refined.data), got)

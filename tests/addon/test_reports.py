@@ -114,6 +114,12 @@ def test_face_counts_are_said_as_a_reader_says_them(addon):
         ["1M", "2M", "2M", "1.1M", "12.6M"]          # (2,000,000 was "2000k")
 
 
+def test_vertex_counts_are_said_in_the_singular_for_one(addon):
+    vertices = mod("report").vertices
+    assert [vertices(0), vertices(1, "cage"), vertices(3_001, "cage")] == \
+        ["0 vertices", "1 cage vertex", "3,001 cage vertices"]       # (was "1 cage vertices")
+
+
 def test_auto_binds_the_edit_at_two_levels_and_refines_at_the_sources_density(scene):
     """Auto levels: the edit bound at most two levels down (fast binds and
     live updates), the refined mesh at the levels closest to the source's

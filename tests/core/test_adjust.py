@@ -18,14 +18,8 @@ from core.errors import InvalidArgumentError, InvalidMeshError, TopologyMismatch
 from core.mesh import bbox_diagonal, vertex_normals
 from core.spatial import closest_points
 from tests.mesh_factory import (BEND_RADIUS, BUMP, TUBE_LENGTH, analytic_bend,
-                                 bumpy_tube, cube, icosphere, load_shared,
+                                 bumpy_tube, cube, icosphere, load_shared, noisy_sphere,
                                  torus)
-
-
-def _bumpy_sphere(k=3, amp=0.03, seed=0):
-    V, F = icosphere(k)
-    rng = np.random.default_rng(seed)
-    return V * (1 + amp * rng.standard_normal((V.shape[0], 1))), F
 
 
 def _random_rigid(seed):
@@ -38,7 +32,7 @@ def _random_rigid(seed):
 
 @pytest.fixture(scope="module")
 def sphere_binding():
-    Vd, Fd = _bumpy_sphere()
+    Vd, Fd = noisy_sphere()
     Vc, Fc = icosphere(1)
     Vc = 0.97 * Vc
     return Vd, Fd, Vc, Fc, bind(Vd, Fd, Vc, Fc, levels=2)
@@ -329,7 +323,7 @@ def test_points_without_faces_and_empty_dense_mesh():
 
 
 def test_levels_zero_binds_to_the_cage_itself():
-    Vd, Fd = _bumpy_sphere(2)
+    Vd, Fd = noisy_sphere(2)
     Vc, Fc = icosphere(1)
     b = bind(Vd, Fd, Vc, Fc, levels=0)
     assert b.operator.F_fine.shape == Fc.shape
@@ -344,7 +338,7 @@ def test_deep_levels_widen_the_query_cells_and_bind_the_same(monkeypatch):
     import core.binding as binding_module
     import core.near_query as near_query_module
     NearQuery = near_query_module.NearQuery
-    Vd, Fd = _bumpy_sphere(4, amp=0.02)
+    Vd, Fd = noisy_sphere(4, amp=0.02)
     Vc, Fc = icosphere(1)
     Vc = 0.97 * Vc
     cells = []

@@ -19,18 +19,12 @@ from core.binding import bind, deform
 from core.errors import InvalidArgumentError
 from core.mesh import bbox_diagonal
 from core.simplify import simplify
-from tests.mesh_factory import icosphere, torus
-
-
-def _bumpy_sphere(k=4, amp=0.02, seed=0):
-    V, F = icosphere(k)
-    rng = np.random.default_rng(seed)
-    return V * (1 + amp * rng.standard_normal((V.shape[0], 1))), F
+from tests.mesh_factory import noisy_sphere, torus
 
 
 @pytest.fixture(scope="module", params=["butterfly", "loop"])
 def case(request):
-    Vd, Fd = _bumpy_sphere()
+    Vd, Fd = noisy_sphere(4, amp=0.02)
     cage = simplify(Vd, Fd, target_faces=120)
     b = bind(Vd, Fd, cage.V, cage.F, levels=2, scheme=request.param)
     return Vd, cage.V, b
@@ -203,7 +197,7 @@ def test_influenced_unordered_is_the_same_set_and_a_copy(torus_case):
 @pytest.mark.parametrize("levels", [0, 1, 3])
 @pytest.mark.parametrize("scheme", ["butterfly", "loop"])
 def test_incremental_equals_full_at_other_levels(levels, scheme):
-    Vd, Fd = _bumpy_sphere(k=3)
+    Vd, Fd = noisy_sphere(3, amp=0.02)
     cage = simplify(Vd, Fd, target_faces=80)
     b = bind(Vd, Fd, cage.V, cage.F, levels=levels, scheme=scheme)
     rng = np.random.default_rng(levels)
@@ -264,7 +258,7 @@ def test_chain_on_a_fine_mesh_denser_than_the_dense_one(scheme):
     """Most fine faces have no dense vertex bound to them: the normals no row
     reads are not kept up to date, the ones rows read are."""
     import pickle
-    Vd, Fd = _bumpy_sphere(k=3)
+    Vd, Fd = noisy_sphere(3, amp=0.02)
     cage = simplify(Vd, Fd, target_faces=80)
     b = bind(Vd, Fd, cage.V, cage.F, levels=3, scheme=scheme)
     assert b.operator.F_fine.shape[0] > 3 * Vd.shape[0]
@@ -323,7 +317,7 @@ def test_a_drag_tracks_the_full_deform_and_does_not_drift(scheme, levels):
     reused on positions it did not make), each step equal to a full deform on
     a copy of the binding; 200 small moves leave no drift."""
     import pickle
-    Vd, Fd = _bumpy_sphere(k=3)
+    Vd, Fd = noisy_sphere(3, amp=0.02)
     cage = simplify(Vd, Fd, target_faces=80)
     b = bind(Vd, Fd, cage.V, cage.F, levels=levels, scheme=scheme)
     ref = pickle.loads(pickle.dumps(b))
@@ -365,7 +359,7 @@ def test_first_moves_are_the_full_deform_bit_for_bit_near_and_far_from_the_origi
     fine face and the rows relative to a working origin away from zero (a
     scan 1e5 of its size off: the origin added back to the rows)."""
     import core.binding as binding_module
-    Vd, Fd = _bumpy_sphere(3)
+    Vd, Fd = noisy_sphere(3, amp=0.02)
     cage = simplify(Vd, Fd, target_faces=80)
     rng = np.random.default_rng(11)
     for shift in (0.0, 1e5):

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from core.binding import bind, deform, frames, refine
-from tests.mesh_factory import icosphere
+from tests.mesh_factory import icosphere, noisy_sphere
 
 
 def _rotation(seed, angle_deg=None):
@@ -44,12 +44,6 @@ def test_frames_of_a_face_with_two_corners_at_one_point_turn_with_a_rotation(see
         assert np.abs(b - a @ Q.T).max() < 1e-12
 
 
-def _bumpy_sphere(k=3, amp=0.03, seed=0):
-    V, F = icosphere(k)
-    rng = np.random.default_rng(seed)
-    return V * (1 + amp * rng.standard_normal((V.shape[0], 1))), F
-
-
 def _diagonal(V):
     return float(np.linalg.norm(V.max(axis=0) - V.min(axis=0)))
 
@@ -60,7 +54,7 @@ def test_a_scan_far_from_the_origin_comes_back_unedited_to_1e12_of_its_size(sche
     # georeferenced scans sit 1e5-1e6 from the origin: the frames were built from
     # differences of coordinates rounded at 1e-11..1e-10, and the unedited cage gave
     # the scan back 4e-12 / 3e-11 of its size off
-    Vd, Fd = _bumpy_sphere()
+    Vd, Fd = noisy_sphere()
     Vc, Fc = icosphere(1)
     o = np.array([far, -0.7 * far, 0.3 * far])
     b = bind(Vd + o, Fd, 0.97 * Vc + o, Fc, levels=2, scheme=scheme)
@@ -158,7 +152,7 @@ def test_the_local_detail_search_looks_on_the_cleaned_scan(mess):
     # refined off the scan's closest point), and a far speck bound near the cage was the
     # nearest bound vertex of some fine vertices (refined 1.7e3 diagonals away)
     from tests.mesh_factory import unwelded, with_far_speck
-    Vd, Fd = _bumpy_sphere()
+    Vd, Fd = noisy_sphere()
     Vd, Fd = unwelded(Vd, Fd) if mess == "unwelded" else with_far_speck(Vd, Fd)
     Vc, Fc = icosphere(1)
     Vc = 0.97 * Vc
@@ -226,7 +220,7 @@ def test_bad_meshes_are_refused_naming_the_argument(step):
     # nor the function the user called
     from core import InvalidArgumentError, InvalidMeshError, fit_cage
     call = bind if step == "bind" else fit_cage
-    Vd, Fd = _bumpy_sphere(2)
+    Vd, Fd = noisy_sphere(2)
     Vc, Fc = icosphere(1)
     cases = [
         ((Vd[:, :2], Fd, Vc, Fc), InvalidMeshError, f"{step}: V_dense must be"),
@@ -249,7 +243,7 @@ def test_bad_meshes_are_refused_naming_the_argument(step):
 
 
 def test_an_unsigned_moved_index_beyond_int64_is_named_as_given():
-    Vd, Fd = _bumpy_sphere(2)
+    Vd, Fd = noisy_sphere(2)
     Vc, Fc = icosphere(1)
     b = bind(Vd, Fd, Vc, Fc, levels=1)
     D = deform(b, Vc)
@@ -262,7 +256,7 @@ def test_an_edit_of_a_scan_far_from_the_origin_changes_no_row_it_does_not_reach(
     # the working origin followed the edited cage's box: a vertex pulled past the box
     # moved it, and every row of a scan 1e5-1e6 from the origin changed in its last bit,
     # also those the edit does not reach (Binding.affected); it stays the rest cage's
-    Vd, Fd = _bumpy_sphere()
+    Vd, Fd = noisy_sphere()
     Vc, Fc = icosphere(1)
     Vc = 0.97 * Vc
     for far in (1e5 + 0.3, 1e6 + 0.7):
@@ -306,7 +300,7 @@ def test_a_large_welded_scan_is_searched_as_it_is(monkeypatch):
     import core.binding as binding
     from core.detail_search import is_unwelded
     from tests.mesh_factory import unwelded, with_far_speck
-    Vd, Fd = with_far_speck(*_bumpy_sphere())
+    Vd, Fd = with_far_speck(*noisy_sphere())
     assert not is_unwelded(Fd, Vd.shape[0]) and is_unwelded(unwelded(Vd, Fd)[1], 3 * Fd.shape[0])
     Vc, Fc = icosphere(1)
     Vc = 0.97 * Vc
@@ -326,7 +320,7 @@ def test_the_local_search_looks_on_the_cleaned_scan_up_to_its_limit(monkeypatch)
     # for the few fine vertices whose closest triangle lies beyond their two-ring
     import core.binding as binding
     from tests.mesh_factory import with_debris
-    Vd, Fd = with_debris(*_bumpy_sphere())
+    Vd, Fd = with_debris(*noisy_sphere())
     Vc, Fc = icosphere(1)
     Vc = 0.97 * Vc
     exact = refine(bind(Vd, Fd, Vc, Fc, levels=3, detail_search="exact"), Vc).V
