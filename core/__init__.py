@@ -17,6 +17,7 @@ The public API (one module per algorithm family):
 ``fit_cage``                cage positions whose subdivision fits a surface
 ``bind`` / ``deform``       carry a dense mesh (and its detail) on a cage
 ``refine``                  the subdivided edited cage with the detail
+``bind_refined``            a binding's detail at other levels, for refine
 ``TriangleIndex``           exact closest points on a triangle mesh
 ``surface_distance``        two-sided Hausdorff / mean / RMS (Metro)
 ``DistanceFrom``            the same from one mesh to many (its index kept)
@@ -37,7 +38,7 @@ from .simplify import SimplifyResult, simplify
 from .mirror import mirror_partners, symmetrize
 from .symmetry import simplify_symmetric
 from .fit import MAX_FIT_LEVELS, FitResult, fit_cage
-from .binding import Binding, RefineResult, bind, deform, refine
+from .binding import Binding, RefineResult, bind, bind_refined, deform, refine
 
 __all__ = [
     "MeshAdjustError", "InvalidMeshError", "InvalidArgumentError", "TopologyMismatchError",
@@ -52,5 +53,5 @@ __all__ = [
     "clean_mesh", "CleanResult", "CleanReport", "simplify", "SimplifyResult",
     "simplify_symmetric", "mirror_partners", "symmetrize", "fit_cage", "FitResult",
     "MAX_FIT_LEVELS",
-    "bind", "deform", "refine", "Binding", "RefineResult",
+    "bind", "bind_refined", "deform", "refine", "Binding", "RefineResult",
 ]

@@ -425,6 +425,36 @@ def _merge_rows(S, n_in):
     return indptr, c, wsum
 
 
+def parametric_faces(face, bary, depth):
+    """The faces ``depth`` levels finer (coarser when negative) over which the
+    points at barycentric coordinates ``bary`` (k,3) of the faces ``face``
+    (k,) lie parametrically: at each level the child of the 1-to-4 split
+    whose triangle holds the point (child ``i`` when coordinate ``i`` is at
+    least 1/2, else the middle one, 3), its coordinates taken there; going
+    up, the parent (``face // 4``). The faces are an operator's levels'
+    (child ``4 f + i`` of face ``f``, see the notes above), so a point of a
+    coarse face is followed to the fine face it lies over in the parameter
+    domain (not the closest one: the surface bulges off it).
+
+    Returns
+    -------
+    (k,) int64 ndarray
+    """
+    if depth <= 0:
+        return face // 4 ** -depth
+    b = np.array(bary, dtype=np.float64)
+    rows = np.arange(b.shape[0])
+    for _ in range(depth):
+        k = np.argmax(b, axis=1)
+        corner = b[rows, k] >= 0.5
+        child = np.where(corner, k, 3)
+        # child i: 2 b, less 1 at i; the middle one: 1 - 2 b (CHILD_BARY inverted)
+        b = np.where(corner[:, None], 2.0 * b, 1.0 - 2.0 * b)
+        b[rows[corner], k[corner]] -= 1.0
+        face = 4 * face + child
+    return face
+
+
 def check_subdivision_args(levels, scheme, where, n_faces=None):
     """``levels`` as an int, checked with ``scheme`` for ``where`` (the public
     function the caller called, so a message names what the user called):
