@@ -623,9 +623,8 @@ def bind(V_dense, F_dense, V_cage, F_cage, *, levels=2, scheme="butterfly", crea
     ties, d_face, d_bary, vfr = fine.result()
     near = _near_search(surface, degree, vfr.point) if detail == "local" else None
     try:
-        dense = _bind_dense(query, V_dense, VfT, NfT, op.F_fine,
-                            _reporter(progress, 0.05, 0.6), near, origin if shifted else None,
-                            ties)
+        dense = _bind_dense(query, V_dense, VfT, NfT, op.F_fine, ties,
+                            _reporter(progress, 0.05, 0.6), near, origin if shifted else None)
     except BaseException:
         if dense_index is not None:
             dense_index.cancel()            # (not started yet: dropped; else it finishes unread)
@@ -2174,8 +2173,7 @@ def _used_vertices(degree):
     return None if used.all() else used
 
 
-def _bind_dense(query, V_dense, VfT, NfT, F_fine, report=None, near=None, origin=None,
-                ties=None):
+def _bind_dense(query, V_dense, VfT, NfT, F_fine, ties, report=None, near=None, origin=None):
     """The :class:`_DenseBound` of the dense vertices: closest points on the
     fine surface (``query``, a :class:`~.near_query.NearQuery`), then the
     frame components of each vertex's offset from its point (the frames in
@@ -2188,12 +2186,11 @@ def _bind_dense(query, V_dense, VfT, NfT, F_fine, report=None, near=None, origin
     (:func:`_nearest_parts`), combined into ``nearest``. With ``origin``
     (3,), the fine surface is relative to it: so are the dense vertices,
     a block at a time (no copy of the whole dense mesh). ``ties``: the fine
-    surface's :class:`_TieFaces` when the caller made them."""
+    surface's :class:`_TieFaces`."""
     n = V_dense.shape[0]
     out = _DenseBound(np.empty(n, dtype=np.int64), np.empty((3, n), dtype=np.int64),
                       np.empty((3, n)), np.empty((3, n)), None)
     parts = []
-    ties = _TieFaces.of(F_fine, VfT.shape[1]) if ties is None else ties
 
     def block(start, stop):
         P = V_dense[start:stop] if origin is None else V_dense[start:stop] - origin
