@@ -629,7 +629,7 @@ def bind(V_dense, F_dense, V_cage, F_cage, *, levels=2, scheme="butterfly", crea
         if dense_index is not None:
             dense_index.cancel()            # (not started yet: dropped; else it finishes unread)
         raise
-    fine_detail = _fine_detail(detail, vfr, op.F_fine, reach, index=dense_index,
+    fine_detail = _fine_detail(detail, op, vfr, reach, index=dense_index,
                                surface=surface if detail == "local" else None,
                                nearest=dense.nearest, report=_reporter(progress, 0.65, 0.95))
     return Binding(fine_face=dense.face, bary=dense.bary_t.T, offset=dense.offset_t.T,
@@ -737,8 +737,7 @@ def bind_refined(binding, V_dense, levels, *, V_cage=None, detail_search="auto",
         nearest = _seeded_nearest(binding, V_dense, shifted, op.F_fine, levels,
                                   _near_search(surface, degree, vfr.point),
                                   _reporter(progress, 0.05, 0.4))
-    fine_detail = _fine_detail(detail, vfr, op.F_fine,
-                               typical.result() if typical is not None else None,
+    fine_detail = _fine_detail(detail, op, vfr, typical.result() if typical is not None else None,
                                index=index, surface=surface, nearest=nearest,
                                report=_reporter(progress, 0.45, 0.95))
     none = np.zeros((0, 3))
@@ -810,10 +809,11 @@ def _near_search(surface, degree, points):
                        else (None if (on >= 0).all() else on >= 0))
 
 
-def _fine_detail(detail, vfr, F_fine, reach, *, index=None, surface=None, nearest=None,
+def _fine_detail(detail, op, vfr, reach, *, index=None, surface=None, nearest=None,
                  report=None):
-    """The fine vertices' detail (n_fine,3): the offset from each one's frame
-    point to its point of the dense surface, in its frame ``vfr``.
+    """The detail (n_fine,3) of the fine vertices of the operator ``op``: the
+    offset from each one's frame point to its point of the dense surface, in
+    its frame ``vfr``.
     ``detail`` (:func:`_detail_mode`): ``"exact"``, the closest point on
     ``index`` (a future of :func:`~.detail_search.exact_detail_index`;
     ``report(fraction)`` as it goes); ``"local"``,
@@ -821,14 +821,14 @@ def _fine_detail(detail, vfr, F_fine, reach, *, index=None, surface=None, neares
     ``nearest`` (each fine vertex's nearest dense vertex, in the dense
     mesh's numbering; -1 for none); None, zeros."""
     if detail is None:
-        return np.zeros((vfr.point.shape[0], 3))
+        return np.zeros((op.n_fine, 3))
     if detail == "exact":
         q = _closest_on(index.result(), vfr.point, report, point=True)
     else:
         on = surface.to_surface
         if on is not None:
             nearest = np.where(nearest >= 0, on[nearest], -1)
-        q = dense_points_near(surface.V, surface.F, F_fine, nearest, vfr.point, reach)
+        q = dense_points_near(surface.V, surface.F, op.F_fine, nearest, vfr.point, reach)
     return _to_frame(q - vfr.point, vfr)
 
 

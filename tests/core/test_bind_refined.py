@@ -21,7 +21,7 @@ from core.mesh import bbox_diagonal
 from core.simplify import simplify
 from core.spatial import TriangleIndex
 from core.subdivide import parametric_faces, subdivision_operator
-from tests.mesh_factory import noisy_sphere, torus, unwelded
+from tests.mesh_factory import icosahedron, noisy_sphere, torus, unwelded
 
 
 @pytest.fixture(scope="module")
@@ -100,6 +100,16 @@ def test_an_unwelded_scan_and_coarser_levels(torus_scan):
                       cage.V).V
         assert np.mean(np.abs(got - want).max(axis=1) <= 1e-12 * diag) >= 0.995
         assert index.closest(got).distance.max() <= 1e-9 * diag
+
+
+def test_a_point_cloud_and_an_empty_mesh_have_no_detail():
+    Vc, Fc = icosahedron()
+    P = np.random.default_rng(0).standard_normal((50, 3))
+    for V in (P, np.zeros((0, 3))):
+        b = bind(V, np.zeros((0, 3), np.int64), Vc, Fc, levels=1)
+        got = bind_refined(b, V, 3)
+        assert not got.fine_detail.any()
+        assert np.abs(refine(got, Vc).V - got.operator.apply(Vc)).max() <= 1e-14
 
 
 def test_inputs_are_not_modified_and_a_cancel_stops_it(torus_scan):
