@@ -293,6 +293,8 @@ def _check_bound(r, res, V, F, size):
     if size < whole * (1 - 1e-9):
         why = (f"the bound is a share of the size of all the file's faces ({whole:.6g} across), "
                f"the deviation of the faces the cage stands for ({size:.6g}){done}")
+    elif res.bound_note and not r["fit"]:
+        why = res.bound_note           # (a symmetric cage of an input whose sides differ)
     elif res.hausdorff is not None and not r["fit"]:
         why = (f"the bound holds against the input as cleaned, which the cage is "
                f"{100 * res.hausdorff / size:.3f}% off{done}")

@@ -134,6 +134,16 @@ class _Region(NamedTuple):
     vertex: int         #: the vertex it moves (-1: none, an edge flip)
     to: np.ndarray      #: (3,) where it moves it
 
+    def new_edge(self, n):
+        """The key (``lo * n + hi``, :func:`~.topology.edge_keys`) of the edge
+        an edge flip makes, ``(c, d)`` of its rows ``(c, a, d), (c, d, b)``
+        (None for a move). Two flips of one round on disjoint faces can make
+        the same edge (a torus at 1e5 simplified to 28 faces: an edge of four
+        faces): only the first is taken."""
+        if self.vertex >= 0:
+            return None
+        return int(edge_keys(self.rows[0, 0], self.rows[0, 2], n))
+
 
 def touch_up(V, F, Vin, Fin, fixed, keep_edges, tun, N_keep=None):
     """Lower the cage's largest distance to the input at its worst places.
@@ -172,6 +182,7 @@ def touch_up(V, F, Vin, Fin, fixed, keep_edges, tun, N_keep=None):
     gaps = measure_gaps(V, F, inputs, P)
     for _ in range(tun.touch_rounds):
         taken = np.zeros(F.shape[0], dtype=bool)
+        made = set()                   # the edges this round's flips made
         changes = list(_candidates(V, F, gaps, fixed, keep, tun, inputs))
         tris = [_points_after(V, c, c.rows) for c in changes]      # (r,3,3) each
         ok = _acceptable(V, F, changes, tris, tun, N_keep)
@@ -183,9 +194,13 @@ def touch_up(V, F, Vin, Fin, fixed, keep_edges, tun, N_keep=None):
             # (evaluated all at once on the round's cage: a change whose faces no
             # earlier one took sees its region as it was, and the input vertices
             # there, which a change only ever takes into its own faces)
+            edge = change.new_edge(V.shape[0])
             if after is None or taken[change.faces].any() or \
+                    (edge is not None and edge in made) or \
                     after.far >= tun.touch_gain * _region_was(change.faces, after.points, gaps):
                 continue
+            if edge is not None:
+                made.add(edge)
             F[change.faces] = change.rows      # (V, F: this call's own copies)
             if change.vertex >= 0:
                 V[change.vertex] = change.to

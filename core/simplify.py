@@ -47,7 +47,7 @@ diagonal before anything else, so the result does not depend on the units.
 
 import copy
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import NamedTuple
 
 import numpy as np
@@ -151,7 +151,9 @@ class SimplifyResult:
     target : int or None, the face count asked for.
     hausdorff : float or None, with ``max_error``: the two-sided Hausdorff
         distance of the cage to the cleaned input (``core.surface_distance``),
-        at most ``max_error``.
+        at most ``max_error`` (with ``symmetry``, as far as the input's two
+        sides allow: above it the message says so, :attr:`bound_note`).
+    bound : float or None, the ``max_error`` asked (mesh units).
     n_boundary_loops, n_components : int, of the cage.
     n_border_vertices : int, the cage's vertices on its open borders.
     preserve_boundary : bool, as asked.
@@ -175,7 +177,9 @@ class SimplifyResult:
         ``"pool"``, ``"pick and check"``, ``"apply"``, ``"compact"``),
         ``"relocate and output"``, ``"touch-up"`` (when it ran: see
         :mod:`._touch_up`), with ``max_error`` ``"measure"`` (the distance
-        measures) and ``"steps"`` (the bound's other steps), and ``"total"``.
+        measures) and ``"steps"`` (the bound's other steps), and ``"total"``;
+        with ``symmetry``, the last half's stages, ``"symmetry"`` (the cut,
+        the other half runs, the mirror and the maps back) and ``"total"``.
     asymmetry : float or None, with ``symmetry``: how far the cleaned input
         is from its own mirror image, as a share of its bounding-box
         diagonal (the largest distance between its positive side and its
@@ -206,6 +210,7 @@ class SimplifyResult:
     represented_faces: np.ndarray = None
     n_clean_faces: int = 0
     float32_step: float = None
+    bound: float = None
 
     def represented(self, F):
         """(m_in,) bool per face of ``F`` (the faces given to ``simplify``):
@@ -255,8 +260,8 @@ class SimplifyResult:
                                  f"or squash a face" + (f" ({kept})" if self.n_boundary_loops else ""),
             "cancelled": f"cancelled: the cleaned input returned unchanged ({m:,} faces)",
         }[self.stopped_because]
-        for note in (self.soup_note, self.floor_note, self.border_note, self.sliver_note,
-                     self.asymmetry_note, self.pieces_note, self.float32_note):
+        for note in (self.bound_note, self.soup_note, self.floor_note, self.border_note,
+                     self.sliver_note, self.asymmetry_note, self.pieces_note, self.float32_note):
             if note:
                 text += f"; {note}"
         done = self.cleaning.summary()
@@ -307,6 +312,25 @@ class SimplifyResult:
         return (f"its borders hold it there: {self.n_border_vertices:,} of its {n:,} vertices lie "
                 f"on open borders, whose shape preserve_boundary keeps (turn it off to let them "
                 f"move)")
+
+    @property
+    def bound_note(self):
+        """A sentence when the cage is farther from the cleaned input than the
+        ``max_error`` asked (:attr:`hausdorff` above :attr:`bound`), and why;
+        "" otherwise. Only a symmetric cage can be: it follows the input's
+        positive side, and where the other side differs in its faces (a hole
+        or faces on one side only; :attr:`asymmetry` measures vertices, which
+        such a side can share) it lies off the input (an icosphere holed on
+        one side, 1e-3 asked: 0.0415, said to be stopped by the bound)."""
+        if self.hausdorff is None or self.bound is None or \
+                not self.hausdorff > self.bound * (1 + 1e-9):
+            return ""
+        why = (": the input's two sides differ more than that (holes or faces on one side "
+               "only) and the symmetric cage follows its positive side (turn symmetry off to "
+               "meet the bound)" if self.asymmetry is not None else "")
+        return (f"it lies {self.hausdorff / self.bound:.1f}x the error bound off the input "
+                f"(Hausdorff distance {self.hausdorff:.4g} against the {self.bound:.4g} "
+                f"asked){why}")
 
     @property
     def asymmetry_note(self):
@@ -1114,8 +1138,8 @@ def simplify(V, F, *, target_faces=None, ratio=None, max_error=None, preserve_bo
         cage, hausdorff = _within_max_error(su, clean, target, max_error, opts, progress)
         cage = cage._replace(stopped=_stop_reason(cage, target, opts))
     cage = cage._replace(seconds={"clean": t_clean, **cage.seconds})
-    return _result(cage, clean, m_in, n_in, target, hausdorff, t0, preserve_boundary, stood_for,
-                   step)
+    return replace(_result(cage, clean, m_in, n_in, target, hausdorff, t0, preserve_boundary,
+                           stood_for, step), bound=None if max_error is None else float(max_error))
 
 
 def _collapsed(clean, target, opts, progress):

@@ -36,6 +36,7 @@ symmetric cage is at least half the scan's own asymmetry (its two-sided
 Hausdorff distance to its mirror image) away from it.
 """
 
+import time
 from dataclasses import replace
 from typing import NamedTuple
 
@@ -444,8 +445,10 @@ def simplify_symmetric(V, F, *, axis="X", target_faces=None, ratio=None, max_err
     preserve_boundary, preserve_topology, close_pinholes = check_flags(
         preserve_boundary=preserve_boundary, preserve_topology=preserve_topology,
         close_pinholes=close_pinholes)
+    t0 = time.perf_counter()
     clean = cleaned_input(V, F, weld_distance, min_component_area,
                           debris_budget(target_faces, ratio, max_error, F.shape[0]), lk)
+    t_clean = time.perf_counter() - t0
     target = target_count(target_faces, ratio, clean.F.shape[0])
     options = dict(preserve_topology=preserve_topology, feature_angle_deg=feature_angle_deg,
                    weld_distance=weld_distance, min_component_area=min_component_area,
@@ -453,7 +456,8 @@ def simplify_symmetric(V, F, *, axis="X", target_faces=None, ratio=None, max_err
                    **({} if tuning is None else {"tuning": tuning}))
     whole = _Whole(clean, k, axis, weights, lk, target, max_error, n_in, F.shape[0])
     r = replace(_symmetric(whole, options), represented_faces=represented_faces(F, clean),
-                float32_step=float32_step(V))
+                float32_step=float32_step(V),
+                bound=None if max_error is None else float(max_error))
     if (close_pinholes and max_error is None and preserve_topology and target is not None
             and r.F.shape[0] > target and r.stopped_because in ("no_valid_collapse",
                                                                  "topology_floor")):
@@ -462,9 +466,18 @@ def simplify_symmetric(V, F, *, axis="X", target_faces=None, ratio=None, max_err
         if capped is not None:
             again = _symmetric(whole._replace(clean=capped), options)
             if again.stopped_because != "cancelled" and again.F.shape[0] < r.F.shape[0]:
-                return replace(again, represented_faces=r.represented_faces,
-                               float32_step=r.float32_step)
-    return r
+                r = replace(again, represented_faces=r.represented_faces,
+                            float32_step=r.float32_step, bound=r.bound)
+    return replace(r, seconds=_seconds(r.seconds, t_clean, time.perf_counter() - t0))
+
+
+def _seconds(half, t_clean, total):
+    """The symmetric result's :attr:`~.simplify.SimplifyResult.seconds`: the
+    cleaning, the last half run's stages (``half``, its own cleaning and total
+    left out), the rest as ``"symmetry"``, and the total."""
+    stages = {k: v for k, v in (half or {}).items() if k not in ("clean", "total")}
+    rest = max(0.0, total - t_clean - sum(stages.values()))
+    return {"clean": t_clean, **stages, "symmetry": rest, "total": total}
 
 
 class _Whole(NamedTuple):
@@ -523,6 +536,7 @@ def _symmetric(whole, options):
         cleaning=clean.report, n_input_faces=int(whole.m_in), target=whole.target,
         hausdorff=hausdorff, n_boundary_loops=boundary_loops_count(cage.F, cage.V.shape[0], em),
         n_components=n_comp, n_passes=r.n_passes, asymmetry=hs.asymmetry / diag,
+        seconds=r.seconds,
         n_border_vertices=border_vertex_count(cage.F, cage.V.shape[0], em),
         preserve_boundary=r.preserve_boundary,
         n_input_pieces=soup_pieces(cage.F, cage.V.shape[0], clean.F, clean.V.shape[0], n_comp),

@@ -253,6 +253,28 @@ def test_ratio_and_max_error():
     assert_symmetric(r.V, r.F, "X")
     assert r.hausdorff is not None and r.hausdorff <= bound
     assert hausdorff(V, F, r) <= bound and r.F.shape[0] < F.shape[0] / 4
+    assert r.bound == bound and not r.bound_note
+    assert set(r.seconds) >= {"clean", "symmetry", "total"}     # (was None with symmetry)
+    assert r.seconds["total"] >= sum(v for k, v in r.seconds.items() if k != "total") - 1e-9
+
+
+def test_a_bound_the_symmetric_cage_misses_is_said():
+    """An icosphere with one-face holes on its positive side only: every vertex
+    has its mirror image (the vertex asymmetry is 0), the faces differ; with a
+    tight ``max_error`` the symmetric cage (the positive side mirrored: holed on
+    both) lies 12x the bound off the input, and was said to be stopped by the
+    bound, no note."""
+    V, F = icosphere(3)
+    centres = V[F].mean(axis=1)
+    F = np.delete(F, np.flatnonzero(centres[:, 0] > 0.3)[::40], axis=0)
+    bound = 1e-3 * bbox_diagonal(V)
+    plain = simplify(V, F, max_error=bound)
+    assert plain.hausdorff <= bound and not plain.bound_note
+    r = simplify(V, F, max_error=bound, symmetry="X")
+    assert r.asymmetry < 1e-12 and r.hausdorff > 5 * bound
+    assert r.bound_note.startswith(f"it lies {r.hausdorff / bound:.1f}x the error bound off the "
+                                   f"input") and "turn symmetry off" in r.bound_note
+    assert r.bound_note in r.message
 
 
 def test_cancel_returns_the_cleaned_input_and_inputs_are_not_modified():

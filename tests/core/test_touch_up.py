@@ -21,7 +21,7 @@ from core.topology import edge_map, manifold_report
 from core.tuning import TUNING
 from core import _touch_up as stages
 from core._touch_up import measure_gaps, touch_up
-from tests.mesh_factory import grid, icosphere, load_shared, pinched, regular_grid
+from tests.mesh_factory import grid, icosphere, load_shared, pinched, regular_grid, torus
 
 
 def _roof(n=20, h=0.3):
@@ -224,3 +224,20 @@ def test_the_few_face_searches_give_the_exact_closest_points():
     search = stages._FewQueries(V, F)
     search.closest(V[:k + 1])
     assert search.near is not None
+
+
+def test_two_flips_of_one_round_never_make_the_same_edge():
+    # A clean torus a thousandth of a unit across at 1e5 from the origin, to 28 faces:
+    # two of a round's flips, on disjoint face pairs, both made the edge (11, 13): an
+    # edge of four faces in the cage (Euler 1), which bind and fit then refused and the
+    # batch wrote as an ok cage. Now a round takes the first flip making an edge.
+    from core.topology import euler_characteristic
+    V, F = torus()
+    res = simplify(V * 1e-3 + 1e5, F, target_faces=28)
+    assert res.stopped_because == "target" and res.F.shape[0] == 28
+    report = manifold_report(res.F, res.V.shape[0])
+    assert report.is_manifold, report
+    assert euler_characteristic(res.F, res.V.shape[0]) == 0
+    rows = np.array([[0, 1, 2], [0, 2, 3]])                  # (c, a, d), (c, d, b): edge (0, 2)
+    assert stages._Region(np.array([4, 5]), rows, -1, None).new_edge(10) == 2
+    assert stages._Region(np.array([4]), rows[:1], 3, np.zeros(3)).new_edge(10) is None
