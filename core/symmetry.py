@@ -602,7 +602,8 @@ def _simplify_half(run, clean, target, max_error, most):
     ``MAX_ERROR_SHARES`` steps until the whole cage's Hausdorff distance is
     within it. Returns (result, cage, Hausdorff distance or None)."""
     hausdorff = None
-    for share in (MAX_ERROR_SHARES if max_error is not None else (None,)):
+    shares = MAX_ERROR_SHARES if max_error is not None else (None,)
+    for i, share in enumerate(shares):
         bound = None if share is None else share * float(max_error)
         half_target = None if target is None else target // 2
         for _ in range(TARGET_RETRIES + 1):
@@ -618,9 +619,21 @@ def _simplify_half(run, clean, target, max_error, most):
         centre, scale = measuring_frame(clean.V)
         hausdorff = scale * surface_distance((clean.V - centre) / scale, clean.F,
                                              (cage.V - centre) / scale, cage.F).hausdorff
-        if hausdorff <= max_error:
+        if hausdorff <= max_error or not _lower_may_meet(hausdorff, bound, shares[i + 1:],
+                                                         float(max_error)):
             break
     return r, cage, hausdorff
+
+
+def _lower_may_meet(hausdorff, bound, shares, max_error):
+    """Whether a lower share of the bound can bring the whole cage within
+    ``max_error``: the cage made with ``bound`` lies within it of the
+    symmetrised half and its mirror, so those lie ``hausdorff - bound`` or
+    more from the whole input, and the cage of the next share, within
+    ``share * max_error`` of them, at least that less its own bound. (300
+    spheres scattered on both sides, 290x the bound off: every share was
+    made and measured, 10 s, where the first said none could.)"""
+    return bool(shares) and hausdorff - bound - shares[0] * max_error <= max_error
 
 
 def _mirrored_at_least_one_face(run, half_target, bound, most):
