@@ -101,7 +101,9 @@ class MeshAdjustObjectState(bpy.types.PropertyGroup):
                                             "wrote on its source (a key sculpted since is kept "
                                             "aside, not overwritten)")
     live: BoolProperty(name="Live", default=False,
-                       description="Update the results while the cage is edited")
+                       description="Update the results (the Output chosen under Refine) while "
+                                   "the cage is edited: only what the moved cage vertices "
+                                   "reach is recomputed")
     last_report: StringProperty(name="Last report", default="",
                                 description="What the last MeshAdjust step on this cage did")
 
