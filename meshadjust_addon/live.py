@@ -79,8 +79,12 @@ def _refine_refined(cage):
     """Live's update of the cage's refined mesh (a Refine of it); its report.
     When the refined mesh first needs its finer binding, that binding is made
     in a worker thread (:func:`finer_done` looks for it, then refines)."""
-    if cage.name in _finer:
+    entry = _finer.get(cage.name)
+    if entry is not None and bpy.app.timers.is_registered(entry[2]):
         return "the refined mesh's binding is being made (first time): it follows then"
+    # (an entry whose timer is gone: a file was loaded while its worker ran, and the
+    # binding it makes is of that file's objects; every later tick had waited for it)
+    _finer.pop(cage.name, None)
     rj = api.prepare_refine(cage, output='REFINED')
     if not rj.finer_levels:
         return live_update.update_refined(cage, rj).summary()

@@ -29,7 +29,9 @@ The refined mesh (:func:`update_refined`) goes the same way with
 ``core.refine(..., moved=, out=)`` and ``Binding.refined_rows``: its state is
 rebuilt by a full Refine (:func:`~.refine_step.commit_refine`, which also
 creates the refined mesh or links it back) when its binding changes or the
-refined mesh is not the one the state wrote (its vertex or face count).
+refined mesh is not the one the state wrote (its vertex or face count, or a
+Refine wrote it since: :func:`~.results.holds_written`; the edited
+original's state too).
 """
 
 import time
@@ -170,7 +172,7 @@ def _live_inputs(cage):
     if not edited.users_collection:
         raise core.MeshAdjustError(f"'{edited.name}' was deleted: Refine (Edited original) "
                                    f"links it back")
-    why = results.copy_problem(cage) or results.edited_problem(edited) \
+    why = results.copy_problem(cage) or results.keyed_problem(edited) \
         or results.edit_mode_problem(edited)
     if why:
         raise core.MeshAdjustError(why)
@@ -184,7 +186,8 @@ def _kept_state(edited, binding, V):
     ``FULL_FRACTION`` of them moved)."""
     state = _states.get(edited.session_uid)
     if state is None or state.binding is not binding or state.V_cage.shape != V.shape \
-            or state.D.shape[0] != len(edited.data.vertices):
+            or state.D.shape[0] != len(edited.data.vertices) \
+            or not results.holds_written(edited, state.buf):
         return None, None
     moved = np.flatnonzero((V != state.V_cage).any(axis=1))
     return state, (None if moved.size > FULL_FRACTION * V.shape[0] else moved)
@@ -228,7 +231,8 @@ def update_refined(cage, rj):
     moved = None
     if state is not None and state.binding is binding and refined.users_collection \
             and len(refined.data.vertices) == state.R.shape[0] \
-            and len(refined.data.polygons) == binding.operator.F_fine.shape[0]:
+            and len(refined.data.polygons) == binding.operator.F_fine.shape[0] \
+            and results.holds_written(refined, state.buf):
         moved = np.flatnonzero((V != state.V_cage).any(axis=1))
         if moved.size > FULL_FRACTION * V.shape[0]:
             moved = None
@@ -239,7 +243,7 @@ def update_refined(cage, rj):
         binding.refined_rows([])          # (the incremental indices built now, not at the edit)
         buf = np.ascontiguousarray(R, dtype=np.float32)
         _refined_states[refined.session_uid] = _RefinedState(binding, V, R, buf)
-        results.record_live(refined, buf.reshape(-1))
+        results.record_live(refined, buf)
         dt = time.perf_counter() - t0
         return RefinedTiming(V.shape[0], R.shape[0], True, dt, 0.0, dt, message)
     notes = []

@@ -91,9 +91,11 @@ def _check_outputs(cage, rj, n_dense):
     """Raise :class:`core.MeshAdjustError` when an output of ``rj`` cannot
     be written now (a shape key's source, a result in Edit Mode, ...)."""
     cs, output = cage.meshadjust, rj.output
+    refined = cs.refined if output in ('REFINED', 'BOTH') else None
     why = results.shape_key_unavailable(cs.source, n_dense, cage) if output == 'SHAPE_KEY' else \
-        results.edited_problem(cs.edited) if output in ('EDITED', 'BOTH') else None
-    why = why or results.edit_mode_problem(cs.refined if output in ('REFINED', 'BOTH') else None)
+        results.keyed_problem(cs.edited) if output in ('EDITED', 'BOTH') else None
+    why = why or results.edit_mode_problem(refined) or \
+        (results.keyed_problem(refined) if refined is not None else None)
     if why:
         raise core.MeshAdjustError(f"Refine: {why}")
 

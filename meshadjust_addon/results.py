@@ -88,6 +88,17 @@ def record_live(obj, buf):
     live_written[obj.session_uid] = buf
 
 
+def holds_written(obj, buf):
+    """Whether MeshAdjust's last write on the result ``obj`` was the
+    positions ``buf``: live mode's buffer (kept by reference), or after a
+    save, which turns that mark into a checksum, the same positions. Not
+    when a Refine wrote it since (another cage's result: a live update that
+    found nothing moved had left it so)."""
+    if obj.meshadjust.written == LIVE:
+        return live_written.get(obj.session_uid) is buf
+    return obj.meshadjust.written == _checksum(buf)
+
+
 def settle_live_written():
     """Replace the ``live`` marks by the checksums of what live mode wrote
     (before a save: the buffers do not outlive the session)."""
@@ -346,13 +357,14 @@ def edit_mode_problem(*objects):
     return None
 
 
-def edited_problem(edited):
-    """Why the edited original ``edited`` cannot take a deformed shape, or
-    None: shape keys of its own (its mesh is written, and Blender shows the
-    keys' mix over it: a Refine said "deformed" and nothing moved)."""
-    keys = edited.data.shape_keys
+def keyed_problem(result):
+    """Why the result ``result`` (the edited original or the refined mesh)
+    cannot take the positions MeshAdjust writes, or None: shape keys of its
+    own (its mesh is written, and Blender shows the keys' mix over it: a
+    Refine said "deformed" or "refined" and nothing moved)."""
+    keys = result.data.shape_keys
     if keys is not None and len(keys.key_blocks):
-        return (f"'{edited.name}' has shape keys, which hide the mesh Refine writes: delete them "
+        return (f"'{result.name}' has shape keys, which hide the mesh Refine writes: delete them "
                 f"(Shape Keys > Delete All Shape Keys), or add your keys to a copy of it")
     return None
 

@@ -354,3 +354,63 @@ def test_live_refined_mesh_keeps_a_hand_change_aside_and_links_a_deleted_one_bac
     got = mio.read_positions(refined.data)
     assert bpy.ops.meshadjust.refine(output='REFINED') == {'FINISHED'}
     assert np.array_equal(mio.read_positions(refined.data), got)
+
+
+@pytest.mark.parametrize("output", ['EDITED', 'REFINED'])
+def test_a_live_update_after_a_refine_of_another_cage_writes_the_cage_s_result(bound_cage,
+                                                                               output):
+    # live at the cage V0; a Refine at V1 (outside live); the cage back at V0 (as an
+    # undo does): the next live update found no cage vertex moved since its own last
+    # update and wrote nothing, leaving V1's result. Now it sees the result is not what
+    # it wrote last and makes a full update.
+    mio = _mod("mesh_io")
+    cage = bound_cage
+    _live_tick(cage, output)
+    result = cage.meshadjust.edited if output == 'EDITED' else cage.meshadjust.refined
+    V0 = mio.read_positions(cage.data)
+    _moved_cage(cage, [3, 4, 5], [0.0, 0.02, 0.05])
+    cage.meshadjust.live = False
+    assert bpy.ops.meshadjust.refine(output=output) == {'FINISHED'}
+    at_v1 = mio.read_positions(result.data)
+    mio.write_positions(cage.data, V0)
+    _live_tick(cage, output)
+    got = mio.read_positions(result.data)
+    assert np.abs(got - at_v1).max() > 1e-3
+    assert bpy.ops.meshadjust.refine(output=output) == {'FINISHED'}
+    assert np.array_equal(mio.read_positions(result.data), got)
+
+
+def test_a_refined_mesh_with_shape_keys_is_refused_by_name(bound_cage):
+    # Blender shows the keys' mix over the mesh Refine writes: a Refine (and live
+    # mode) said "refined" and nothing moved on screen
+    mio = _mod("mesh_io")
+    cage = bound_cage
+    _live_tick(cage, 'REFINED')
+    refined = cage.meshadjust.refined
+    refined.shape_key_add(name="Basis")
+    refined.shape_key_add(name="mine")
+    before = mio.read_positions(refined.data)
+    _moved_cage(cage, [3], [0.0, 0.0, 0.03])
+    report = _live_tick(cage, 'REFINED')
+    assert not cage.meshadjust.live
+    assert report.startswith(f"live refine stopped: Refine: '{refined.name}' has shape keys")
+    assert np.array_equal(mio.read_positions(refined.data), before)
+    with pytest.raises(RuntimeError, match="has shape keys, which hide the mesh Refine writes"):
+        bpy.ops.meshadjust.refine(output='REFINED')
+
+
+def test_a_finer_binding_whose_timer_went_with_a_file_load_is_started_again(scene):
+    # the worker of the refined mesh's first binding and its timer: a file loaded before
+    # the timer ran removed the timer, and every later tick of a cage of that name said
+    # "being made" for ever
+    from tests.addon.test_operators import bumpy_sphere, simplify
+    live = _mod("live")
+    dense = make_object("dense", *bumpy_sphere(4))
+    assert simplify(80, levels=0) == {'FINISHED'}                   # bound at 2, refined at 3
+    cage = dense.meshadjust.cage
+    live._finer[cage.name] = (None, {}, lambda: None)              # (its timer not registered)
+    report = _live_tick(cage, 'REFINED')
+    assert "binding the refined mesh at 3 levels in the background" in report
+    live._finer[cage.name][0].join()
+    assert live.finer_done(cage.name) is None
+    assert cage.meshadjust.refined is not None

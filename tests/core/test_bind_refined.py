@@ -107,9 +107,22 @@ def test_a_point_cloud_and_an_empty_mesh_have_no_detail():
     P = np.random.default_rng(0).standard_normal((50, 3))
     for V in (P, np.zeros((0, 3))):
         b = bind(V, np.zeros((0, 3), np.int64), Vc, Fc, levels=1)
+        with pytest.raises(CancelledError):          # (it had no point to cancel at)
+            bind_refined(b, V, 3, progress=lambda f: False)
         got = bind_refined(b, V, 3)
         assert not got.fine_detail.any()
         assert np.abs(refine(got, Vc).V - got.operator.apply(Vc)).max() <= 1e-14
+
+
+@pytest.mark.parametrize("levels", [0, 1])
+def test_from_a_coarse_binding_the_dense_vertices_are_bound_again(torus_scan, levels):
+    # (a 60-face cage's binding at 0 levels, taken to 3: bind's points for 94% of the fine
+    # vertices; from fewer than two levels the seeds are bind's own)
+    Vd, Fd, cage = torus_scan
+    b = bind(Vd, Fd, cage.V, cage.F, levels=levels, detail_search="local")
+    got = refine(bind_refined(b, Vd, 3, detail_search="local"), cage.V).V
+    want = refine(bind(Vd, Fd, cage.V, cage.F, levels=3, detail_search="local"), cage.V).V
+    assert np.array_equal(got, want)
 
 
 def test_inputs_are_not_modified_and_a_cancel_stops_it(torus_scan):

@@ -178,3 +178,27 @@ def test_bad_moved_and_out_raise_named_errors(case):
     with pytest.raises(InvalidArgumentError, match="Binding.refined_rows: moved index 99999"):
         b.refined_rows([99999])
     assert b.refined_rows([]).shape == (0,)
+
+
+@pytest.mark.parametrize("far", [1e3, 1e9])
+def test_a_cage_moved_far_away_and_back_is_refined_and_deformed_as_a_full_one(torus_case, far):
+    # the working origin changes with a cage moved far away (or back): every row's
+    # rounding changes, so the update is a full one (it had kept the kept cage's origin:
+    # 9e-8 of the diagonal off the full result at 1e9)
+    from core.binding import Binding
+    Vd, _, cage, b = torus_case
+    fresh = Binding.from_arrays(b.to_arrays())
+    every = np.arange(cage.V.shape[0])
+    R, D = refine(b, cage.V).V, deform(b, cage.V)
+    for V in (cage.V + far, cage.V.copy()):
+        refine(b, V, moved=every, out=R)
+        deform(b, V, moved=every, out=D)
+        assert np.array_equal(R, refine(fresh, V).V)
+        assert np.array_equal(D, deform(fresh, V))
+    V = cage.V + far                 # the last full ones far away, then back incrementally
+    refine(b, V, out=R)
+    deform(b, V, out=D)
+    refine(b, cage.V, moved=every, out=R)
+    deform(b, cage.V, moved=every, out=D)
+    assert np.array_equal(R, refine(fresh, cage.V).V)
+    assert np.array_equal(D, deform(fresh, cage.V))
