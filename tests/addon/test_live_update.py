@@ -414,3 +414,32 @@ def test_a_finer_binding_whose_timer_went_with_a_file_load_is_started_again(scen
     live._finer[cage.name][0].join()
     assert live.finer_done(cage.name) is None
     assert cage.meshadjust.refined is not None
+
+
+def test_a_cage_mirrored_or_turned_as_a_whole_is_not_said_to_fold(bound_cage):
+    # the cage object scaled by -1 in X: its results are the exact mirror, and the
+    # report warned that the edit turned 207 faces over; a half turn the same
+    mio = _mod("mesh_io")
+    cage = bound_cage
+    _live_tick(cage, 'REFINED')
+    refined = cage.meshadjust.refined
+    R = mio.read_positions(refined.data)
+    for scale, rotation in (((-1.0, 1.0, 1.0), (0.0, 0.0, 0.0)), ((1.0, 1.0, 1.0), (0.0, 3.0, 0.0))):
+        cage.scale, cage.rotation_euler = scale, rotation
+        bpy.context.view_layer.update()
+        report = _live_tick(cage, 'REFINED')
+        assert "WARNING" not in report and "turns" not in report, report
+    cage.scale, cage.rotation_euler = (-1.0, 1.0, 1.0), (0.0, 0.0, 0.0)
+    bpy.context.view_layer.update()
+    _live_tick(cage, 'REFINED')
+    ox = cage.matrix_world.translation.x
+    assert np.abs(mio.read_positions(refined.data) - (R * [-1, 1, 1] + [2 * ox, 0, 0])).max() \
+        <= 1e-5
+    # a fold made by the edit itself is still said
+    cage.scale = (1.0, 1.0, 1.0)
+    bpy.context.view_layer.update()
+    Vc = mio.read_positions(cage.data)
+    top = int(np.argmax(Vc[:, 2]))
+    Vc[top] = [0.0, 0.0, -0.5]
+    mio.write_positions(cage.data, Vc)
+    assert "WARNING: the edit turns " in _live_tick(cage, 'REFINED')
