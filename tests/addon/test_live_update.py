@@ -424,7 +424,8 @@ def test_a_cage_mirrored_or_turned_as_a_whole_is_not_said_to_fold(bound_cage):
     _live_tick(cage, 'REFINED')
     refined = cage.meshadjust.refined
     R = mio.read_positions(refined.data)
-    for scale, rotation in (((-1.0, 1.0, 1.0), (0.0, 0.0, 0.0)), ((1.0, 1.0, 1.0), (0.0, 3.0, 0.0))):
+    for scale, rotation in (((-1.0, 1.0, 1.0), (0.0, 0.0, 0.0)),
+                            ((1.0, 1.0, 1.0), (0.0, 3.0, 0.0))):
         cage.scale, cage.rotation_euler = scale, rotation
         bpy.context.view_layer.update()
         report = _live_tick(cage, 'REFINED')
