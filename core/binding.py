@@ -707,25 +707,8 @@ def bind_refined(binding, V_dense, levels, *, V_cage=None, detail_search="auto",
     CancelledError
         ``progress`` returned False.
     """
-    where = "bind_refined"
-    if not isinstance(binding, Binding):
-        raise InvalidArgumentError(f"{where}: expected a Binding, got {type(binding).__name__}")
+    V_dense, V_cage = _refined_args(binding, V_dense, levels, V_cage, detail_search, progress)
     F_dense = binding.F_dense
-    if F_dense is None:
-        raise InvalidArgumentError(f"{where}: the binding has no dense faces (F_dense); bind "
-                                   f"the dense mesh again, or use bind()")
-    V_cage = binding.V_cage_rest if V_cage is None else V_cage
-    if V_cage is None:
-        raise InvalidArgumentError(f"{where}: the binding has no rest cage: give V_cage")
-    V_dense = _checked_positions(V_dense, binding.n_dense, where, "V_dense", "dense vertices")
-    V_cage = _checked_positions(V_cage, binding.n_cage, where, "V_cage", "cage vertices")
-    if detail_search not in _DETAIL_SEARCHES:
-        raise InvalidArgumentError(
-            f"{where}: detail_search must be one of {_DETAIL_SEARCHES}, got {detail_search!r}")
-    if progress is not None and not callable(progress):
-        raise InvalidArgumentError(f"{where}: progress must be callable or None, got "
-                                   f"{type(progress)}")
-    check_subdivision_args(levels, binding.scheme, where, binding.F_cage.shape[0])
     detail = _detail_mode(detail_search, F_dense)
     if detail == "local" and binding.levels < _SEED_LEVELS:
         return _without_dense(bind(V_dense, F_dense, V_cage, binding.F_cage, levels=levels,
@@ -736,7 +719,7 @@ def bind_refined(binding, V_dense, levels, *, V_cage=None, detail_search="auto",
     typical = in_background(lambda: _typical_distance(
         V_dense, F_dense, V_cage, binding.F_cage, binding.scheme, binding.creases, origin)) \
         if levels > _REACH_LEVELS and detail == "local" else None
-    op = cage_operator(binding.F_cage, binding.n_cage, where=where, levels=levels,
+    op = cage_operator(binding.F_cage, binding.n_cage, where="bind_refined", levels=levels,
                        scheme=binding.scheme, creases=binding.creases)
     VfT = np.ascontiguousarray(op.apply(V_cage - origin).T)
     NfT = _vertex_normals_t(VfT, op.F_fine, _normal_floor(step))
@@ -770,6 +753,30 @@ def _without_dense(binding):
     none = np.zeros((0, 3))
     return replace(binding, fine_face=np.zeros(0, dtype=np.int64), bary=none, offset=none,
                    F_dense=None)
+
+
+def _refined_args(binding, V_dense, levels, V_cage, detail_search, progress):
+    """:func:`bind_refined`'s arguments checked (its Raises); returns the
+    dense and cage positions as float64 (the rest cage for ``V_cage`` None)."""
+    where = "bind_refined"
+    if not isinstance(binding, Binding):
+        raise InvalidArgumentError(f"{where}: expected a Binding, got {type(binding).__name__}")
+    if binding.F_dense is None:
+        raise InvalidArgumentError(f"{where}: the binding has no dense faces (F_dense); bind "
+                                   f"the dense mesh again, or use bind()")
+    V_cage = binding.V_cage_rest if V_cage is None else V_cage
+    if V_cage is None:
+        raise InvalidArgumentError(f"{where}: the binding has no rest cage: give V_cage")
+    V_dense = _checked_positions(V_dense, binding.n_dense, where, "V_dense", "dense vertices")
+    V_cage = _checked_positions(V_cage, binding.n_cage, where, "V_cage", "cage vertices")
+    if detail_search not in _DETAIL_SEARCHES:
+        raise InvalidArgumentError(
+            f"{where}: detail_search must be one of {_DETAIL_SEARCHES}, got {detail_search!r}")
+    if progress is not None and not callable(progress):
+        raise InvalidArgumentError(f"{where}: progress must be callable or None, got "
+                                   f"{type(progress)}")
+    check_subdivision_args(levels, binding.scheme, where, binding.F_cage.shape[0])
+    return V_dense, V_cage
 
 
 def _checked_positions(V, n, where, name, what):
