@@ -179,7 +179,9 @@ def _check_target(r, res):
     :data:`TARGET_SLACK`, with the simplify's own sentence as the reason."""
     out, target = r["faces_out"], r["target_faces"]
     if out >= res.n_clean_faces and res.stopped_because != "target":
-        r["warnings"].append(f"the cage came back unchanged, no collapse possible "
+        what = "the cage came back unchanged" if res.asymmetry is None else \
+            "the cage is the input's positive side mirrored"   # (its face count may be more)
+        r["warnings"].append(f"{what}, no collapse possible "
                              f"({res.stopped_because.replace('_', ' ')}): {res.message}")
     elif target is not None and out > (1 + TARGET_SLACK) * target:
         r["warnings"].append(f"target {target:,} missed by {100 * (out / max(target, 1) - 1):.0f}%"

@@ -602,3 +602,22 @@ def test_a_symmetric_cage_off_the_bound_says_why(tmp_path):
     off = [w for w in r["warnings"] if "more than the 0.1% asked" in w]
     assert len(off) == 1 and "turn symmetry off to meet the bound" in off[0], r["warnings"]
     assert "the bound holds against the input as cleaned" not in off[0]
+    assert not any("came back unchanged" in w for w in r["warnings"])
+
+
+def test_an_uncollapsed_symmetric_cage_is_not_said_to_be_unchanged():
+    # a symmetric cage no collapse could shrink is the positive side mirrored, often more
+    # faces than the input (1,268 -> 1,288): "came back unchanged" was not true
+    from types import SimpleNamespace
+    sys.path.insert(0, os.path.join(ROOT, "scripts"))
+    import meshadjust_batch
+    meshadjust_batch.checkout_package()
+    from meshadjust.cli import convert
+    for asymmetry, want in ((None, "the cage came back unchanged, no collapse possible"),
+                            (0.0, "the cage is the input's positive side mirrored, no collapse "
+                                  "possible")):
+        res = SimpleNamespace(n_clean_faces=1268, stopped_because="max_error", message="m",
+                              asymmetry=asymmetry)
+        r = {"faces_out": 1288, "target_faces": None, "warnings": []}
+        convert._check_target(r, res)
+        assert r["warnings"] == [f"{want} (max error): m"]
