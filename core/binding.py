@@ -483,7 +483,7 @@ class Binding:
         """
         ids = _check_moved(self, cage_vertex_ids, "Binding.refined_rows")
         with _INCREMENTAL_LOCK:
-            _fine_index(self)
+            _incremental_index(self)
             if ids.size == 0:
                 return np.zeros(0, dtype=np.int64)
             return _influenced_fine(self, ids).rows.copy()
@@ -1471,17 +1471,6 @@ def _influenced_dense(binding, ids):
     return result
 
 
-def _fine_index(binding):
-    """The incremental index (:func:`_incremental_index`) with what an
-    incremental refine adds to it (built on first use): each fine vertex's
-    frame face (:func:`_vertex_corners`)."""
-    idx = _incremental_index(binding)
-    if "frame_face" not in idx:
-        op = binding._operator
-        idx["frame_face"] = _vertex_corners(op.F_fine, op.n_fine)[0]
-    return idx
-
-
 def _changed_levels(idx, ids):
     """Per level 1..L, the vertices (ascending int64) whose position changes
     when the cage vertices ``ids`` move: level by level, the rows of the
@@ -1636,7 +1625,8 @@ def refine(binding, V_cage_edited, *, F_cage=None, moved=None, out=None):
         if ids.size and handed == c.get("refined_handed"):
             with _INCREMENTAL_LOCK:
                 hit = _influenced_fine(binding, ids)
-                P, N, origin = _update_fine_geometry(binding, Vc, ids, hit)
+                # (a row reads its own normal: the others of its frame face weigh 0)
+                P, N, origin = _update_fine_geometry(binding, Vc, ids, hit, read=hit.rows)
                 out[hit.rows] = _refined_t(binding, hit.rows, P, N, origin, handed).T
         if not ids.size or handed == c.get("refined_handed"):
             return RefineResult(out, _fine_faces_view(binding))
@@ -1689,17 +1679,18 @@ def _fine_faces_view(binding):
 def _influenced_fine(binding, ids):
     """The fine vertices whose refined position depends on the cage vertices
     ``ids``, as an :class:`_Influenced` whose ``rows`` are those fine
-    vertices (ascending) and ``faces`` the fine faces their frames are taken
-    on (what :func:`_update_fine_geometry` reads the normals of). A fine
-    vertex's frame is taken at its own corner of its frame face
-    (:func:`_vertex_corners`): it reads its own normal (the other corners'
-    weigh 0) and the face's corner positions (its edges). So the rows are the
+    vertices (ascending; no ``faces``). A fine vertex's frame is taken at
+    its own corner of its frame face (:func:`_vertex_corners`): it reads its
+    own normal (the other corners' weigh 0: their normals are not brought up
+    to date for it, :func:`_update_fine_geometry`'s ``read``; the same
+    values, the sign of a zero aside) and the face's corner positions (its
+    edges). So the rows are the
     vertices whose normal changes: the corners of the fine faces around a
     changed position (each level's, as :func:`_influenced_dense`), which
     include every vertex whose frame face has a changed corner. The last
     answer is kept (so :meth:`Binding.refined_rows` followed by the refine
     of the same ids searches once)."""
-    idx = _fine_index(binding)
+    idx = _incremental_index(binding)
     key = ids.tobytes()
     last = idx.get("last_fine")
     if last is not None and last[0] == key:
@@ -1707,8 +1698,8 @@ def _influenced_fine(binding, ids):
     changed, fine = _changed_levels(idx, ids)
     touched = _faces_around(idx, fine)
     rows = _distinct(np.take(idx["corners_t"], touched, axis=1).ravel(), idx)
-    result = _Influenced(rows, np.zeros(0, dtype=np.int64),
-                         _distinct(idx["frame_face"][rows], idx), changed, rows)
+    none = np.zeros(0, dtype=np.int64)
+    result = _Influenced(rows, none, none, changed, rows)
     idx["last_fine"] = (key, result)
     return result
 
@@ -2013,7 +2004,7 @@ def _fine_levels(binding, Vc, origin=None):
     return X
 
 
-def _update_fine_geometry(binding, Vc, ids, hit):
+def _update_fine_geometry(binding, Vc, ids, hit, read=None):
     """Fine positions and normals (3, n_fine) for the cage ``Vc``, from the
     kept :class:`_Geometry` (callers hold ``_INCREMENTAL_LOCK``), and the
     origin (3,) the positions are relative to (the kept geometry's).
@@ -2021,8 +2012,9 @@ def _update_fine_geometry(binding, Vc, ids, hit):
     When the kept cage differs from ``Vc`` at most at ``ids``, only what
     they move is recomputed, in place: each level's changed vertices
     (``hit.changed``) from their stencil rows over the level below, then the
-    changed normals the rows read (at the corners of ``hit.faces``) from
-    the faces around them (:func:`_normals_at`). A
+    changed normals the rows read (``read``, distinct fine vertices; by
+    default the corners of ``hit.faces``) from the faces around them
+    (:func:`_normals_at`). A
     changed normal at a vertex with no bound dense vertex on its faces (a
     fine mesh denser than the dense one) is never read: it is only marked
     stale. Each value is recomputed from the level below, never updated
@@ -2062,7 +2054,8 @@ def _update_fine_geometry(binding, Vc, ids, hit):
     VfT, NfT = X[-1], g.normals
     g.stale[hit.normals] = True
     idx = c["incremental"]
-    read = _distinct(np.take(idx["corners_t"], hit.faces, axis=1).ravel(), idx)
+    if read is None:
+        read = _distinct(np.take(idx["corners_t"], hit.faces, axis=1).ravel(), idx)
     redo = read[g.stale[read]]
     if redo.size:
         NfT[:, redo] = _normals_at(idx, VfT, redo, g.floor)
