@@ -40,9 +40,6 @@ from .runners import file_report
 
 #: a cage with more than (1 + TARGET_SLACK) x its target faces is a warning
 TARGET_SLACK = 0.05
-#: above this many levels the refined output's detail is found from a binding at these
-#: (:func:`refine_binding`)
-SEED_LEVELS = 2
 #: samples per surface for the deviation (as in the add-on's reports)
 MEASURE_SAMPLES = 60_000
 INPUT_EXTENSIONS = CORE_FORMATS | set(blender_io.BLENDER_IMPORT)
@@ -337,13 +334,14 @@ def _results(run, V, F, res, opts):
 
 def refine_binding(V, F, V_cage, F_cage, levels, scheme, creases):
     """The binding the refined output is made with: ``V``, ``F`` bound to the
-    cage at ``levels``, or above ``SEED_LEVELS`` bound at those and the
+    cage at ``levels``, or above ``core.SEED_LEVELS`` bound at those and the
     detail found at ``levels`` from that binding (:func:`core.bind_refined`:
     a 1M-vertex scan at five levels in 2.6x less CPU time than a bind there,
     nearly every refined vertex the same)."""
-    if levels <= SEED_LEVELS:
+    if levels <= core.SEED_LEVELS:
         return core.bind(V, F, V_cage, F_cage, levels=levels, scheme=scheme, creases=creases)
-    seed = core.bind(V, F, V_cage, F_cage, levels=SEED_LEVELS, scheme=scheme, creases=creases)
+    seed = core.bind(V, F, V_cage, F_cage, levels=core.SEED_LEVELS, scheme=scheme,
+                     creases=creases)
     return core.bind_refined(seed, V, levels)
 
 

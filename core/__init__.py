@@ -38,7 +38,7 @@ from .simplify import SimplifyResult, simplify
 from .mirror import mirror_partners, symmetrize
 from .symmetry import simplify_symmetric
 from .fit import MAX_FIT_LEVELS, FitResult, fit_cage
-from .binding import Binding, RefineResult, bind, bind_refined, deform, refine
+from .binding import SEED_LEVELS, Binding, RefineResult, bind, bind_refined, deform, refine
 
 __all__ = [
     "MeshAdjustError", "InvalidMeshError", "InvalidArgumentError", "TopologyMismatchError",
@@ -53,5 +53,5 @@ __all__ = [
     "clean_mesh", "CleanResult", "CleanReport", "simplify", "SimplifyResult",
     "simplify_symmetric", "mirror_partners", "symmetrize", "fit_cage", "FitResult",
     "MAX_FIT_LEVELS",
-    "bind", "bind_refined", "deform", "refine", "Binding", "RefineResult",
+    "bind", "bind_refined", "deform", "refine", "Binding", "RefineResult", "SEED_LEVELS",
 ]

@@ -176,8 +176,9 @@ _KEPT_BATCH_BYTES = 1 << 25
 #: bind_refined takes its seeds from a binding at this many levels or more (from a
 #: coarser one the faces taken down the levels are too far off the closest ones: a 60-face
 #: cage's binding at 0 levels to 3 gave bind's points for 94% of the fine vertices); below,
-#: it binds the dense vertices again
-_SEED_LEVELS = 2
+#: it binds the dense vertices again. A caller binding only to refine at more levels binds
+#: at these first (the batch's refined output)
+SEED_LEVELS = 2
 
 #: keys of :meth:`Binding.to_arrays`
 _ARRAY_KEYS = ("fine_face", "bary", "offset", "fine_detail", "F_cage", "n_cage", "levels",
@@ -710,7 +711,7 @@ def bind_refined(binding, V_dense, levels, *, V_cage=None, detail_search="auto",
     V_dense, V_cage = _refined_args(binding, V_dense, levels, V_cage, detail_search, progress)
     F_dense = binding.F_dense
     detail = _detail_mode(detail_search, F_dense)
-    if detail == "local" and binding.levels < _SEED_LEVELS:
+    if detail == "local" and binding.levels < SEED_LEVELS:
         return _without_dense(bind(V_dense, F_dense, V_cage, binding.F_cage, levels=levels,
                                    scheme=binding.scheme, creases=binding.creases,
                                    detail_search=detail_search, progress=progress))
@@ -1030,11 +1031,8 @@ def deform(binding, V_cage_edited, *, F_cage=None, moved=None, out=None):
         ids = _check_moved(binding, moved)
         Vc = _apart_from(_check_cage(binding, V_cage_edited, F_cage, "deform"), out)
         if ids.size:
-            handed = _handedness(binding, Vc)
-            if handed != binding._cache.get("handed", 1.0) or \
-                    _origin_moved(binding, Vc, "deform_origin"):
-                # (the cage mirrored, or moved far away or back, since out was made:
-                # every row changes)
+            holds, handed = _incremental_holds(binding, Vc, "deform")
+            if not holds:
                 return deform(binding, V_cage_edited, F_cage=F_cage, out=out)
             with _INCREMENTAL_LOCK:
                 hit = _influenced_dense(binding, ids)
@@ -1046,19 +1044,9 @@ def deform(binding, V_cage_edited, *, F_cage=None, moved=None, out=None):
                 _keep_repair(binding, out, _unfold(binding, out, Vc, hit, last))
         return out
     Vc = _apart_from(_check_cage(binding, V_cage_edited, F_cage, "deform"), out)
-    origin = _deform_origin(binding, Vc)
-    X = _fine_levels(binding, Vc, origin)
-    floor = _binding_floor(binding)
-    Nf = _vertex_normals_t(X[-1], binding._operator.F_fine, floor)
+    PT, NT, origin, handed = _full_geometry(binding, Vc, "deform")
     c = binding._cache
-    c["handed"] = handed = _handedness(binding, Vc)
-    c["deform_origin"] = origin
-    DT = _positions_t(c["offset_t"], c["corners_t"], c["bary_t"], X[-1], Nf, origin, handed)
-    # kept for the incremental deforms that follow (a new object: one in use
-    # by an incremental deform is never changed under it)
-    c["geometry"] = _Geometry.of(Vc, X, Nf, origin, floor)
-    c.pop("drag", None)                   # (the next incremental deform starts a new one)
-    c.pop("last_moved", None)
+    DT = _positions_t(c["offset_t"], c["corners_t"], c["bary_t"], PT, NT, origin, handed)
     with _INCREMENTAL_LOCK:
         if out is None:
             D = np.ascontiguousarray(DT.T)
@@ -1613,48 +1601,70 @@ def refine(binding, V_cage_edited, *, F_cage=None, moved=None, out=None):
     if out is not None:
         _check_out(binding, out, binding._operator.n_fine, "refine")
     Vc = _apart_from(_check_cage(binding, V_cage_edited, F_cage, "refine"), out)
-    c = binding._cache
     if moved is not None:
         if out is None:
             raise InvalidArgumentError(
                 "refine: moved needs out (the refined positions computed before the move)")
         ids = _check_moved(binding, moved, "refine")
-        handed = _handedness(binding, Vc) if ids.size else None
-        if handed is not None and _origin_moved(binding, Vc, "refined_origin"):
-            handed = None                  # (moved far away or back: every row changes)
-        if ids.size and handed == c.get("refined_handed"):
+        holds, handed = _incremental_holds(binding, Vc, "refine") if ids.size else (True, None)
+        if ids.size and holds:
             with _INCREMENTAL_LOCK:
                 hit = _influenced_fine(binding, ids)
                 # (a row reads its own normal: the others of its frame face weigh 0)
                 P, N, origin = _update_fine_geometry(binding, Vc, ids, hit, read=hit.rows)
                 out[hit.rows] = _refined_t(binding, hit.rows, P, N, origin, handed).T
-        if not ids.size or handed == c.get("refined_handed"):
+        if holds:
             return RefineResult(out, _fine_faces_view(binding))
-    origin = _deform_origin(binding, Vc)
-    X = _fine_levels(binding, Vc, origin)
-    floor = _binding_floor(binding)
-    Nf = _vertex_normals_t(X[-1], binding._operator.F_fine, floor)
-    c["refined_handed"] = handed = _handedness(binding, Vc)
-    c["refined_origin"] = origin
-    VT = _refined_t(binding, None, X[-1], Nf, origin, handed)
-    # kept for the incremental updates that follow (deform's too: the same subdivided cage)
-    c["geometry"] = _Geometry.of(Vc, X, Nf, origin, floor)
-    c.pop("drag", None)
-    c.pop("last_moved", None)
+    PT, NT, origin, handed = _full_geometry(binding, Vc, "refine")
+    VT = _refined_t(binding, None, PT, NT, origin, handed)
     if out is None:
         return RefineResult(np.ascontiguousarray(VT.T), binding._operator.F_fine.copy())
     out[...] = VT.T
     return RefineResult(out, _fine_faces_view(binding))
 
 
-def _origin_moved(binding, Vc, key):
-    """Whether the working origin of the cage ``Vc`` (:func:`_deform_origin`)
-    differs from the one the last full deform or refine used (kept under
-    ``key``): a cage moved far away, or back, changes every row's rounding,
-    so an incremental update is a full one then (it had kept the old origin:
-    rows 9e-8 of the diagonal off the full result for a cage 1e9 away)."""
-    kept = binding._cache.get(key)
-    return kept is not None and not np.array_equal(kept, _deform_origin(binding, Vc))
+#: per kind of output, the cache keys of the handedness and working origin its last
+#: full update used, and the handedness taken when none is kept (a refine's output
+#: none wrote is written whole)
+_FRAME_KEYS = {"deform": ("handed", "deform_origin", 1.0),
+               "refine": ("refined_handed", "refined_origin", None)}
+
+
+def _full_geometry(binding, Vc, kind):
+    """The subdivided cage ``Vc`` a full deform or refine (``kind``) reads:
+    fine positions and normals (3, n_fine), the working origin
+    (:func:`_deform_origin`) and the handedness (:func:`_handedness`). Kept
+    in the binding's cache for the incremental updates that follow (deform's
+    and refine's alike; a new object: one in use by an incremental update is
+    never changed under it), the origin and handedness under ``kind``'s
+    keys (:func:`_incremental_holds`); a drag ends."""
+    origin = _deform_origin(binding, Vc)
+    X = _fine_levels(binding, Vc, origin)
+    floor = _binding_floor(binding)
+    NT = _vertex_normals_t(X[-1], binding._operator.F_fine, floor)
+    handed = _handedness(binding, Vc)
+    c = binding._cache
+    handed_key, origin_key, _ = _FRAME_KEYS[kind]
+    c[handed_key], c[origin_key] = handed, origin
+    c["geometry"] = _Geometry.of(Vc, X, NT, origin, floor)
+    c.pop("drag", None)                   # (the next incremental update starts a new one)
+    c.pop("last_moved", None)
+    return X[-1], NT, origin, handed
+
+
+def _incremental_holds(binding, Vc, kind):
+    """``(holds, handed)``: whether an incremental deform or refine
+    (``kind``) of the cage ``Vc`` can keep the rows it does not recompute
+    (the last full one used the same handedness and working origin: a cage
+    mirrored, or moved far away or back, changes every row; a kept origin
+    had left rows 9e-8 of the diagonal off the full result for a cage 1e9
+    away), and the cage's handedness."""
+    handed_key, origin_key, assumed = _FRAME_KEYS[kind]
+    c = binding._cache
+    handed = _handedness(binding, Vc)
+    kept = c.get(origin_key)
+    moved = kept is not None and not np.array_equal(kept, _deform_origin(binding, Vc))
+    return handed == c.get(handed_key, assumed) and not moved, handed
 
 
 def _refined_t(binding, rows, VfT, NfT, origin, handed):
@@ -2030,8 +2040,8 @@ def _update_fine_geometry(binding, Vc, ids, hit, read=None):
     if g is not None:
         other = (g.V_cage != Vc).any(axis=1)
         other[ids] = False
-    if g is None or other.any() or not np.array_equal(g.origin, _deform_origin(binding, Vc)):
-        origin = _deform_origin(binding, Vc)
+    origin = _deform_origin(binding, Vc)
+    if g is None or other.any() or not np.array_equal(g.origin, origin):
         X = _fine_levels(binding, Vc, origin)
         floor = _binding_floor(binding)
         g = _Geometry.of(Vc, X, _vertex_normals_t(X[-1], binding._operator.F_fine, floor),
