@@ -48,10 +48,8 @@ from .report import vertices
 #: above this fraction of moved cage vertices a full deform is cheaper
 FULL_FRACTION = 0.25
 
+#: result object's session_uid (an edited original or a refined mesh) -> its :class:`_State`
 _states = {}
-
-#: refined object's session_uid -> its :class:`_RefinedState`
-_refined_states = {}
 
 
 class LiveTiming(NamedTuple):
@@ -78,10 +76,12 @@ class LiveTiming(NamedTuple):
 
 
 class _State(NamedTuple):
-    binding: object
+    """The last live update of one result (an edited original or a refined mesh)."""
+
+    binding: object      #: the binding it was computed with
     V_cage: np.ndarray   #: (n_cage,3) float64, source space, of the last update
-    D: np.ndarray        #: (n_dense,3) float64, core.deform of V_cage
-    buf: np.ndarray      #: (n_dense,3) float32, what was written to Blender
+    out: np.ndarray      #: (n,3) float64, core.deform (or core.refine) of V_cage
+    buf: np.ndarray      #: (n,3) float32, what was written to Blender
 
 
 class RefinedTiming(NamedTuple):
@@ -104,13 +104,6 @@ class RefinedTiming(NamedTuple):
                 f"{1e3 * self.write:.1f})" + (f"; {self.message}" if self.message else ""))
 
 
-class _RefinedState(NamedTuple):
-    binding: object      #: the refined mesh's binding
-    V_cage: np.ndarray   #: (n_cage,3) float64, source space, of the last update
-    R: np.ndarray        #: (n_fine,3) float64, core.refine of V_cage
-    buf: np.ndarray      #: (n_fine,3) float32, what was written to Blender
-
-
 def update_edited(cage):
     """Bring the cage's edited original up to date with the cage, touching
     only what the edit since the last update moved. Returns a
@@ -124,7 +117,7 @@ def update_edited(cage):
     t0 = time.perf_counter()
     edited, binding, V = _live_inputs(cage)
     t1 = time.perf_counter()
-    state, moved = _kept_state(edited, binding, V)
+    state, moved = _kept_state(edited, binding, V, binding.n_dense)
     t2 = time.perf_counter()
     full = moved is None                # (no state kept that still applies, or most moved)
     changed = full or moved.size > 0    # (else nothing moved since the last update)
@@ -132,7 +125,7 @@ def update_edited(cage):
         D = core.deform(binding, V)
         binding.influenced([])      # builds the incremental indices now, not on the first edit
     else:
-        r = _deform_moved(binding, V, moved, state.D)
+        r = _deform_moved(binding, V, moved, state.out)
     t3 = time.perf_counter()
     notes = []
     if changed:
@@ -146,7 +139,7 @@ def update_edited(cage):
         state = _State(binding, V, D, D.astype(np.float32))
         rows = binding.n_dense
     else:
-        state.buf[r] = np.take(state.D, r, axis=0)
+        state.buf[r] = np.take(state.out, r, axis=0)
         rows = r.shape[0]
         state = state._replace(V_cage=V)
     t4 = time.perf_counter()
@@ -180,14 +173,17 @@ def _live_inputs(cage):
     return edited, store.load_binding(edited, cage), cage_in_source_space(cage, source)
 
 
-def _kept_state(edited, binding, V):
-    """The state of the last update when it still applies, and the cage
-    vertices moved since (None: a full update, also when more than
-    ``FULL_FRACTION`` of them moved)."""
-    state = _states.get(edited.session_uid)
+def _kept_state(result, binding, V, n):
+    """The state of the last update of the result ``result`` (``n`` rows
+    computed with ``binding``) when it still applies, and the cage vertices
+    moved since (None: a full update, also when more than ``FULL_FRACTION``
+    of them moved). It applies while it is of ``binding`` and of a cage of
+    ``V``'s size, and ``result`` has ``n`` vertices and holds what it wrote
+    (:func:`~.results.holds_written`: not a Refine's since)."""
+    state = _states.get(result.session_uid)
     if state is None or state.binding is not binding or state.V_cage.shape != V.shape \
-            or state.D.shape[0] != len(edited.data.vertices) \
-            or not results.holds_written(edited, state.buf):
+            or state.out.shape[0] != n or len(result.data.vertices) != n \
+            or not results.holds_written(result, state.buf):
         return None, None
     moved = np.flatnonzero((V != state.V_cage).any(axis=1))
     return state, (None if moved.size > FULL_FRACTION * V.shape[0] else moved)
@@ -226,36 +222,31 @@ def update_refined(cage, rj):
     t0 = time.perf_counter()
     binding = rj.finer if rj.finer is not None else rj.binding
     refined = cage.meshadjust.refined
-    state = _refined_states.get(refined.session_uid) if refined is not None else None
     V = rj.V_cage
-    moved = None
-    if state is not None and state.binding is binding and refined.users_collection \
-            and len(refined.data.vertices) == state.R.shape[0] \
-            and len(refined.data.polygons) == binding.operator.F_fine.shape[0] \
-            and results.holds_written(refined, state.buf):
-        moved = np.flatnonzero((V != state.V_cage).any(axis=1))
-        if moved.size > FULL_FRACTION * V.shape[0]:
-            moved = None
+    state, moved = None, None
+    if refined is not None and refined.users_collection \
+            and len(refined.data.polygons) == binding.operator.F_fine.shape[0]:
+        state, moved = _kept_state(refined, binding, V, binding.operator.n_fine)
     if moved is None:
         message = commit_refine(cage, compute_refine(rj)).message
         refined = cage.meshadjust.refined
         R = rj.refined.V
         binding.refined_rows([])          # (the incremental indices built now, not at the edit)
         buf = np.ascontiguousarray(R, dtype=np.float32)
-        _refined_states[refined.session_uid] = _RefinedState(binding, V, R, buf)
+        _states[refined.session_uid] = _State(binding, V, R, buf)
         results.record_live(refined, buf)
         dt = time.perf_counter() - t0
         return RefinedTiming(V.shape[0], R.shape[0], True, dt, 0.0, dt, message)
     notes = []
     rows = binding.refined_rows(moved)
     if moved.size:
-        core.refine(binding, V, moved=moved, out=state.R)
+        core.refine(binding, V, moved=moved, out=state.out)
     t1 = time.perf_counter()
     if moved.size:
         results.aside_note(results.kept_aside(refined), refined, notes)
-        state.buf[rows] = np.take(state.R, rows, axis=0)
+        state.buf[rows] = np.take(state.out, rows, axis=0)
         _write(refined, state.buf)
-    _refined_states[refined.session_uid] = state._replace(V_cage=V)
+    _states[refined.session_uid] = state._replace(V_cage=V)
     t2 = time.perf_counter()
     warning = turned_cage_note(cage, rj.binding, V)
     notes += [f"WARNING: {warning}"] if warning else []
@@ -264,10 +255,9 @@ def update_refined(cage, rj):
 
 
 def forget(edited=None):
-    """Drop the kept state of one edited object (or of all, the refined
-    meshes' too): the next update is a full deform."""
+    """Drop the kept state of one edited object (or of every result, the
+    refined meshes' too): the next update is a full deform."""
     if edited is None:
         _states.clear()
-        _refined_states.clear()
     else:
         _states.pop(edited.session_uid, None)
