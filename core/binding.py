@@ -463,6 +463,25 @@ class Binding:
             rows = _influenced_dense(self, ids).rows
         return np.sort(rows) if ordered else rows.copy()
 
+    def rest_as_a_whole(self, V_cage):
+        """The rest cage (centred) taken by the linear map that best takes it
+        to ``V_cage`` as a whole (least squares about the centroids; the map
+        :func:`deform` finds a mirrored cage by), so that a cage mirrored,
+        turned or scaled as a whole turns no face of it over by that alone
+        (``core.turned_faces(b.rest_as_a_whole(V), V, F)``); the rest cage
+        itself for a flat one, None without one.
+
+        Returns
+        -------
+        (n_cage,3) float64 ndarray or None
+        """
+        if self.V_cage_rest is None:
+            return None
+        M = _rest_map(self, np.asarray(V_cage, dtype=np.float64))
+        if M is None:
+            return self.V_cage_rest
+        return _rest_moments(self)[0] @ M.T
+
     def refined_rows(self, cage_vertex_ids):
         """The fine vertices an incremental :func:`refine` recomputes when
         the given cage vertices move (the rows of its ``V`` that may change;
@@ -2451,15 +2470,24 @@ def _handedness(binding, Vc):
     :meth:`Binding.from_arrays` without the repair's keys: 1.0 too). No
     LAPACK call (a 3x3 solve there costs milliseconds on a loaded machine:
     ``test_the_repair_maps_need_no_lapack_solve``)."""
-    rest = _rest_moments(binding)
-    if rest is None:
+    M = _rest_map(binding, Vc)
+    if M is None:
         return 1.0
-    X, adjugate, det_xx = rest
-    Y = Vc - Vc.mean(axis=0)
-    M = (Y.T @ X) @ adjugate / det_xx
     det_m = float(M[0] @ np.cross(M[1], M[2]))
     size = float(np.sqrt((M * M).sum() / 3.0))
     return -1.0 if det_m < -_MIRROR_CONDITION * size ** 3 else 1.0
+
+
+def _rest_map(binding, Vc):
+    """The linear map M (3,3) that best takes the rest cage to the cage
+    ``Vc`` as a whole (least squares about their centroids: ``Vc - mean ~
+    (rest - mean) @ M.T``), from the rest's kept moments; None without a
+    rest cage or for a flat one."""
+    rest = _rest_moments(binding)
+    if rest is None:
+        return None
+    X, adjugate, det_xx = rest
+    return ((Vc - Vc.mean(axis=0)).T @ X) @ adjugate / det_xx
 
 
 def _rest_moments(binding):

@@ -568,20 +568,6 @@ def refine_binding(V, F, V_rest, binding, levels, *, progress=None):
     return replace(finer, fine_face=np.zeros(0, np.int64), bary=none, offset=none, F_dense=None)
 
 
-def rest_as_a_whole(V_rest, V_cage):
-    """The rest cage ``V_rest`` taken by the linear map that best takes it to
-    ``V_cage`` as a whole (least squares, about the centroids), so that a
-    cage mirrored, turned or scaled as a whole turns no face over by that
-    alone (a cage object scaled by -1 in X: 207 faces said to be turned over,
-    its result the exact mirror); ``V_rest`` itself for a flat cage (no such
-    map)."""
-    X = V_rest - V_rest.mean(axis=0)
-    XX = X.T @ X
-    if not abs(np.linalg.det(XX)) > 1e-12 * float(np.trace(XX)) ** 3:
-        return V_rest
-    return X @ np.linalg.solve(XX, X.T @ (V_cage - V_cage.mean(axis=0)))
-
-
 def kept_refine_binding(edited_uid, binding, levels):
     """The refined mesh's binding at ``levels`` kept for the edit's
     ``binding`` of the edited original ``edited_uid`` (its ``session_uid``),
@@ -602,13 +588,13 @@ def keep_refine_binding(edited_uid, binding, finer):
 def turned_cage_note(cage, binding, V_cage):
     """A warning when the edit turned faces of the cage itself over (normal
     more than 90 degrees from its rest normal, as the cage's map as a whole
-    takes it: :func:`rest_as_a_whole`): the results fold there whatever the
+    takes it: ``Binding.rest_as_a_whole``; a cage object mirrored (scale -1)
+    had been said to turn 207 faces over): the results fold there whatever the
     scheme, and only the edit can undo it. Empty otherwise, or when the
     binding has no rest shape."""
     if binding.V_cage_rest is None:
         return ""
-    turned = core.turned_faces(rest_as_a_whole(binding.V_cage_rest, V_cage), V_cage,
-                               binding.F_cage)
+    turned = core.turned_faces(binding.rest_as_a_whole(V_cage), V_cage, binding.F_cage)
     if not turned.size:
         return ""
     listed = ", ".join(str(f) for f in turned[:_LISTED_FACES].tolist())

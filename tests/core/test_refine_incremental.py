@@ -202,3 +202,19 @@ def test_a_cage_moved_far_away_and_back_is_refined_and_deformed_as_a_full_one(to
     deform(b, cage.V, moved=every, out=D)
     assert np.array_equal(R, refine(fresh, cage.V).V)
     assert np.array_equal(D, deform(fresh, cage.V))
+
+
+def test_rest_as_a_whole_takes_a_mirror_or_turn_of_the_whole_cage(torus_case):
+    # (the add-on's turned-cage warning compares with it: a cage mirrored or turned as a
+    # whole turns no face over; a vertex pushed through the cage still does)
+    import dataclasses
+    from core.mesh import turned_faces
+    Vd, _, cage, b = torus_case
+    assert turned_faces(cage.V, cage.V * [-1.0, 1.0, 1.0], cage.F).size > 100
+    c, s = np.cos(3.0), np.sin(3.0)
+    for V in (cage.V * [-1.0, 1.0, 1.0], cage.V @ np.array([[c, -s, 0], [s, c, 0], [0, 0, 1]])):
+        assert turned_faces(b.rest_as_a_whole(V), V, cage.F).size == 0
+    V = cage.V.copy()
+    V[0] = -V[0]
+    assert turned_faces(b.rest_as_a_whole(V), V, cage.F).size > 0
+    assert dataclasses.replace(b, V_cage_rest=None).rest_as_a_whole(V) is None
