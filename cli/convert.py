@@ -322,7 +322,7 @@ def _results(run, V, F, res, opts):
     outputs = [(task["cage"], V_cage, res.F)]
     if task.get("refined"):
         try:
-            binding = run.step("bind", refine_binding, V, F, V_cage, res.F, opts.levels,
+            binding = run.step("bind", bind_for_refined, V, F, V_cage, res.F, opts.levels,
                                opts.scheme, creases)
             Vr, Fr = run.step("refine", core.refine, binding, V_cage)
         except StepFailed as exc:
@@ -332,7 +332,7 @@ def _results(run, V, F, res, opts):
     return outputs, None
 
 
-def refine_binding(V, F, V_cage, F_cage, levels, scheme, creases):
+def bind_for_refined(V, F, V_cage, F_cage, levels, scheme, creases):
     """The binding the refined output is made with: ``V``, ``F`` bound to the
     cage at ``levels``, or above ``core.SEED_LEVELS`` bound at those and the
     detail found at ``levels`` from that binding (:func:`core.bind_refined`:

@@ -117,6 +117,30 @@ def icosphere(subdivisions=2, radius=1.0):
     return V * radius, F
 
 
+def sphere_binding(scheme):
+    """A noisy sphere (4 subdivisions), its 120-face QEM cage and their
+    binding at two levels of ``scheme``: ``(V_dense, V_cage, binding)``, the
+    incremental deform's and refine's test case."""
+    from core.binding import bind
+    from core.simplify import simplify
+    Vd, Fd = noisy_sphere(4, amp=0.02)
+    cage = simplify(Vd, Fd, target_faces=120)
+    return Vd, cage.V, bind(Vd, Fd, cage.V, cage.F, levels=2, scheme=scheme)
+
+
+def drawn_edit(data, V_cage):
+    """A cage edit drawn by hypothesis (``data``: ``st.data()``): 1-12 cage
+    vertices (duplicates allowed) moved by normal noise of 0.05; ``(ids,
+    edited copy of V_cage)``."""
+    from hypothesis import strategies as st
+    n = V_cage.shape[0]
+    seed = data.draw(st.integers(0, 2**31 - 1))
+    ids = np.array(data.draw(st.lists(st.integers(0, n - 1), min_size=1, max_size=12)))
+    Ve = V_cage.copy()
+    Ve[ids] += 0.05 * np.random.default_rng(seed).standard_normal((ids.shape[0], 3))
+    return ids, Ve
+
+
 def noisy_sphere(k=3, amp=0.03, seed=0):
     """An :func:`icosphere` of ``k`` subdivisions, each vertex moved along
     its radius by ``amp`` times a standard normal draw (``seed``)."""

@@ -297,7 +297,7 @@ def test_the_fit_takes_at_most_two_levels_the_refined_mesh_all_asked_for(tmp_pat
     assert ball["fit"]["levels"] == core.MAX_FIT_LEVELS == 2
     assert ball["fit"]["mean_after_pct"] < ball["fit"]["mean_before_pct"]
     assert ball["faces_out"] == 80 and ball["refined_faces"] == 80 * 4 ** 3
-    # (its detail found from a two-level binding, cli.convert.refine_binding): the refined
+    # (its detail found from a two-level binding, cli.convert.bind_for_refined): the refined
     # mesh of the unedited cage lies on the input's surface
     Vr, Fr = core.read_obj(tmp_path / "out" / "ball_refined.obj")
     assert Fr.shape == (80 * 4 ** 3, 3)

@@ -19,15 +19,12 @@ from core.binding import bind, deform
 from core.errors import InvalidArgumentError
 from core.mesh import bbox_diagonal
 from core.simplify import simplify
-from tests.mesh_factory import noisy_sphere, torus
+from tests.mesh_factory import drawn_edit, noisy_sphere, sphere_binding, torus
 
 
 @pytest.fixture(scope="module", params=["butterfly", "loop"])
 def case(request):
-    Vd, Fd = noisy_sphere(4, amp=0.02)
-    cage = simplify(Vd, Fd, target_faces=120)
-    b = bind(Vd, Fd, cage.V, cage.F, levels=2, scheme=request.param)
-    return Vd, cage.V, b
+    return sphere_binding(request.param)
 
 
 @pytest.fixture(scope="module")
@@ -45,13 +42,8 @@ def _tol(Vd):
 @given(data=st.data())
 def test_incremental_equals_full_for_random_moved_sets(case, data):
     Vd, Vc, b = case
-    n = Vc.shape[0]
-    seed = data.draw(st.integers(0, 2**31 - 1))
-    ids = np.array(data.draw(st.lists(st.integers(0, n - 1), min_size=1, max_size=12)))
-    rng = np.random.default_rng(seed)
+    ids, Ve = drawn_edit(data, Vc)
     D = deform(b, Vc)
-    Ve = Vc.copy()
-    Ve[ids] += 0.05 * rng.standard_normal((ids.shape[0], 3))
     got = deform(b, Ve, moved=ids, out=D)
     assert got is D
     assert np.abs(D - deform(b, Ve)).max() <= _tol(Vd)

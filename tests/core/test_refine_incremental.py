@@ -19,14 +19,12 @@ from core.binding import bind, deform, refine
 from core.errors import InvalidArgumentError
 from core.mesh import bbox_diagonal
 from core.simplify import simplify
-from tests.mesh_factory import noisy_sphere, torus
+from tests.mesh_factory import drawn_edit, sphere_binding, torus
 
 
 @pytest.fixture(scope="module", params=["butterfly", "loop"])
 def case(request):
-    Vd, Fd = noisy_sphere(4, amp=0.02)
-    cage = simplify(Vd, Fd, target_faces=120)
-    return Vd, cage.V, bind(Vd, Fd, cage.V, cage.F, levels=2, scheme=request.param)
+    return sphere_binding(request.param)
 
 
 @pytest.fixture(scope="module")
@@ -40,13 +38,8 @@ def torus_case():
 @given(data=st.data())
 def test_incremental_equals_full_for_random_moved_sets(case, data):
     Vd, Vc, b = case
-    n = Vc.shape[0]
-    seed = data.draw(st.integers(0, 2**31 - 1))
-    ids = np.array(data.draw(st.lists(st.integers(0, n - 1), min_size=1, max_size=12)))
-    rng = np.random.default_rng(seed)
+    ids, Ve = drawn_edit(data, Vc)
     R = refine(b, Vc).V
-    Ve = Vc.copy()
-    Ve[ids] += 0.05 * rng.standard_normal((ids.shape[0], 3))
     got = refine(b, Ve, moved=ids, out=R)
     assert got.V is R
     assert np.array_equal(R, refine(b, Ve).V)          # the same operations, column by column
