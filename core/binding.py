@@ -49,7 +49,7 @@ Properties (tested): ``deform(bind(D, C), C) == D`` to rounding; a rigid motion
 of the cage moves the dense mesh rigidly; moving one cage vertex moves only the
 dense vertices returned by :meth:`Binding.affected` (bit-for-bit elsewhere,
 unless the fold repair changed rows, which it lists);
-an incremental deform equals the full one bit for bit (a drag: to rounding).
+an incremental deform equals the full one bit for bit.
 """
 
 import threading
@@ -85,10 +85,9 @@ _DEGENERATE = 1e-12
 #: a fine vertex normal (the sum of its faces' area normals) shorter than this share of
 #: the square of the rest cage's size (the power of two above its extent) is none: the
 #: faces around the vertex have no area (a cage vertex moved onto a neighbour folds its
-#: fine faces flat) and the sum is rounding noise, whose direction a drag (its fine
-#: positions from a linear map, 1e-16 from the stencils') drew at random against a full
-#: deform (a cube's cage, a vertex dragged onto its neighbour: 0.10 of the diagonal
-#: apart); a real fine vertex's faces are some 1e5 times larger even at five levels of a
+#: fine faces flat) and the sum is rounding noise, whose direction fine positions 1e-16
+#: apart draw at random (a cube's cage, a vertex dragged onto its neighbour: 0.10 of the
+#: diagonal between two deforms of one edit); a real fine vertex's faces are some 1e5 times larger even at five levels of a
 #: 10k-face cage (a cage shrunk below about a thousandth of its rest size falls under it:
 #: its frames take the fine faces' normals)
 _NORMAL_FLOOR = 2.0 ** -40
@@ -163,9 +162,6 @@ _REPAIR_ALL_SHARE = 0.25
 #: the dense faces (see _away_around)
 _GROUPS_SHARE = 0.25
 
-#: a drag's linear map (changed fine positions x moved cage vertices) is kept up to
-#: this many entries (32 MB)
-_DRAG_ENTRIES = 1 << 22
 #: a drag's gathers (the faces around its rows with their corners and rest normals, about
 #: 28 bytes a face; its rows' barycentric coordinates and offsets, 48 a row) are kept for
 #: its next steps up to this many bytes each (the bunny x16's 5 moved cage vertices:
@@ -474,10 +470,18 @@ class Binding:
         Returns
         -------
         (n_cage,3) float64 ndarray or None
+
+        Raises
+        ------
+        TopologyMismatchError
+            ``V_cage`` has another vertex count than the bound cage.
+        InvalidMeshError
+            ``V_cage`` is not (n,3) finite numbers.
         """
+        Vc = _check_cage(self, V_cage, None, "Binding.rest_as_a_whole")
         if self.V_cage_rest is None:
             return None
-        M = _rest_map(self, np.asarray(V_cage, dtype=np.float64))
+        M = _rest_map(self, Vc)
         if M is None:
             return self.V_cage_rest
         return _rest_moments(self)[0] @ M.T
@@ -986,11 +990,8 @@ def deform(binding, V_cage_edited, *, F_cage=None, moved=None, out=None):
         ``out`` when given, else a new array. An incremental update equals a
         full deform of ``V_cage_edited`` bit for bit (the same row-wise frame
         rebuild; its fine positions are each level's stencil rows summed as
-        the operator's apply plan sums them), except in a drag (the same
-        vertices moved again), whose fine positions come from a linear map
-        of the moved vertices: about 1e-16 of the diagonal, computed relative
-        to a working origin near the cage; far from the origin, plus the
-        output's own rounding: a rounding step of the coordinates.
+        the operator's apply plan sums them), a drag (the same vertices
+        moved again and again) included.
 
     Notes
     -----
@@ -1018,11 +1019,9 @@ def deform(binding, V_cage_edited, *, F_cage=None, moved=None, out=None):
     rewrites only the rows ``moved`` influences: ``moved`` is taken at its
     word, so a cage vertex that changed and is not listed leaves the rows
     it influences as they were (list every changed vertex, or make a full
-    deform). Consecutive incremental deforms
-    moving the same few vertices (a drag) take the fine positions from a
-    linear map of them, made at the second when it is smaller than the
-    stencil rows it stands for (a few vertices; up to 32 MB; a full deform
-    ends it).
+    deform). Consecutive incremental deforms moving the same vertices (a
+    drag) keep what they gather for the next steps (the rows' coordinates
+    and offsets, the faces around them: up to 32 MB each).
 
     Raises
     ------
@@ -1593,8 +1592,7 @@ def refine(binding, V_cage_edited, *, F_cage=None, moved=None, out=None):
         ``(V, F)``: (n_fine,3) float64 (``out`` when given) and (m_fine,3)
         int64: a copy of the fine faces, or with ``out`` a read-only view
         of the binding's (no copy of 24 bytes a face at every update). An
-        incremental update equals a full refine bit for bit, except in a
-        drag (about 1e-16 of the diagonal; see :func:`deform`).
+        incremental update equals a full refine bit for bit.
 
     Notes
     -----
@@ -1656,7 +1654,7 @@ def _full_geometry(binding, Vc, kind):
     in the binding's cache for the incremental updates that follow (deform's
     and refine's alike; a new object: one in use by an incremental update is
     never changed under it), the origin and handedness under ``kind``'s
-    keys (:func:`_incremental_holds`); a drag ends."""
+    keys (:func:`_incremental_holds`)."""
     origin = _deform_origin(binding, Vc)
     X = _fine_levels(binding, Vc, origin)
     floor = _binding_floor(binding)
@@ -1666,8 +1664,6 @@ def _full_geometry(binding, Vc, kind):
     handed_key, origin_key, _ = _FRAME_KEYS[kind]
     c[handed_key], c[origin_key] = handed, origin
     c["geometry"] = _Geometry.of(Vc, X, NT, origin, floor)
-    c.pop("drag", None)                   # (the next incremental update starts a new one)
-    c.pop("last_moved", None)
     return X[-1], NT, origin, handed
 
 
@@ -2048,10 +2044,8 @@ def _update_fine_geometry(binding, Vc, ids, hit, read=None):
     fine mesh denser than the dense one) is never read: it is only marked
     stale. Each value is recomputed from the level below, never updated
     by a difference, so nothing drifts over many updates (rows summed as
-    the apply plan sums them: a full evaluation's values bit for bit); when
-    the same vertices moved in the last incremental
-    deform too (a drag), from the linear map of them made then
-    (:class:`_Drag`). Otherwise (nothing kept yet, or another cage)
+    the apply plan sums them: a full evaluation's values bit for bit).
+    Otherwise (nothing kept yet, or another cage)
     everything is evaluated and kept."""
     c = binding._cache
     g = c.get("geometry")
@@ -2070,16 +2064,7 @@ def _update_fine_geometry(binding, Vc, ids, hit, read=None):
     X = g.levels
     X[0][:, ids] = (Vc[ids] - g.origin).T
     g.V_cage[ids] = Vc[ids]
-    key, drag = ids.tobytes(), c.get("drag")
-    if drag is not None and drag.key == key and drag.geometry is g:
-        drag.move(X, hit, Vc[ids])
-    else:
-        _restencil(binding._operator, X, hit)
-        # the same cage vertices moved twice in a row: a drag, whose next moves
-        # are cheaper as a linear map
-        c["drag"] = _Drag.of(binding._operator, g, ids, hit, Vc, c["incremental"]) \
-            if c.get("last_moved") == key else None
-    c["last_moved"] = key
+    _restencil(binding._operator, X, hit)
     VfT, NfT = X[-1], g.normals
     g.stale[hit.normals] = True
     idx = c["incremental"]
@@ -2102,63 +2087,6 @@ def _restencil(op, X, hit):
     for S, r, below, level in zip(op.stencils, hit.changed, X[:-1], X[1:]):
         r = np.sort(r)
         level[:, r] = S.rows_t(below, r)
-
-
-class _Drag(NamedTuple):
-    """The changed positions of every level as a linear function of the
-    moved cage vertices (a drag: the same ones moved again and again):
-    ``base + (V - V0)^T @ weights`` per level, each value from the positions
-    when the drag began, so nothing drifts over many moves (equal to the
-    stencil rows to about 1e-16). Kept while the next incremental deform
-    moves the same vertices of the same kept geometry."""
-
-    key: bytes           #: the moved cage vertex ids' bytes
-    geometry: object     #: the :class:`_Geometry` it belongs to
-    V0: np.ndarray       #: (k,3) the moved vertices then
-    base: tuple          #: per level, (3, r_l) the changed positions then
-    weights: tuple       #: per level, (k, r_l) each moved vertex's weight in each
-
-    @classmethod
-    def of(cls, op, g, ids, hit, Vc, idx):
-        """The drag of the moved cage vertices ``ids`` (distinct, ascending)
-        whose changed positions ``hit.changed`` were just computed in ``g``
-        (``idx``: the incremental index, for its scratch); None when its maps
-        would have more than ``_DRAG_ENTRIES`` entries, or more than the
-        stencil rows they stand for: a map has an entry per changed position
-        and moved vertex, so with more moved vertices than a stencil row has
-        entries (about 6) applying it is more work than the rows, and making
-        it is more still (the bunny x16's 2,000-face cage, Loop x2, 300
-        vertices of a proportional edit moved: the second move 112-116 ms
-        where a full deform takes 51-54 and the stencil rows 50; one thread,
-        2026-12-05)."""
-        k = ids.shape[0]
-        counts = [S.indptr[r + 1] - S.indptr[r] for S, r in zip(op.stencils, hit.changed)]
-        size = k * sum(r.shape[0] for r in hit.changed)
-        if size > _DRAG_ENTRIES or size > sum(int(c.sum()) for c in counts):
-            return None
-        seen, slot = idx["seen"], idx["stamp"]
-        below, weights = ids, np.eye(k)
-        out = []
-        for S, r, count in zip(op.stencils, hit.changed, counts):   # (every row has entries)
-            e = ragged_entries(S.indptr[r], count)
-            col = S.cols[e]
-            slot[below] = np.arange(below.shape[0])
-            seen[below] = True
-            on = seen[col]                                  # (the other entries do not move)
-            seen[below] = False
-            W = np.take(weights, np.where(on, slot[col], 0), axis=1)
-            W *= np.where(on, S.weights[e], 0.0)
-            weights = np.add.reduceat(W, np.cumsum(count) - count, axis=1)
-            out.append(weights)
-            below = r
-        base = tuple(level[:, r].copy() for level, r in zip(g.levels[1:], hit.changed))
-        return cls(ids.tobytes(), g, Vc[ids].copy(), base, tuple(out))
-
-    def move(self, X, hit, V):
-        """The changed positions of the levels ``X`` for the moved vertices at ``V`` (k,3)."""
-        dVT = np.ascontiguousarray((V - self.V0).T)
-        for level, r, base, W in zip(X[1:], hit.changed, self.base, self.weights):
-            level[:, r] = base + dVT @ W
 
 
 def _normals_at(idx, PT, vertices, floor):

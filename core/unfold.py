@@ -67,6 +67,11 @@ TURNED_DEG = 60.0
 #: height over that edge below this share of it) is degenerate at rest: never turned over
 FLAT_AT_REST = 1e-6
 
+#: the relaxation weighs an edge shorter than this share of its region's mean edge as
+#: that long (a zero-length edge of an unwelded scan's welded copies, or of a degenerate
+#: face, would weigh infinitely)
+EDGE_FLOOR = 1e-3
+
 #: faces per block of :func:`away_t`
 _AWAY_BLOCK = 1 << 16
 
@@ -504,15 +509,22 @@ def ring(stars, F, faces):
 
 class Neighbours(NamedTuple):
     """Per vertex of a region, the other corners of its faces (each counted
-    once per face), grouped by region vertex: ``other[start[i]:start[i] + count[i]]``."""
+    once per face), grouped by region vertex: ``other[start[i]:start[i] +
+    count[i]]``, each weighted by the inverse of its rest edge's length
+    (``weight``; ``total``: their sum per region vertex)."""
 
     other: np.ndarray   #: (p,) int64, neighbour vertices, region vertex by region vertex
     start: np.ndarray   #: (r,) int64, where each region vertex's run begins
-    count: np.ndarray   #: (r,) float64, its length (at least 2: every vertex is on a face)
+    count: np.ndarray   #: (r,) int64, its length (at least 2: every vertex is on a face)
+    weight: np.ndarray  #: (p,) float64, 1 / the rest length of each neighbour's edge
+    total: np.ndarray   #: (r,) float64, the weights' sum per region vertex
 
     @classmethod
-    def of(cls, F, stars, region):
-        """The neighbours of ``region`` (distinct vertices, ascending) on the faces ``F``."""
+    def of(cls, F, stars, region, V_rest):
+        """The neighbours of ``region`` (distinct vertices, ascending) on the
+        faces ``F``, weighted by the rest positions ``V_rest`` (an edge shorter
+        than ``EDGE_FLOOR`` of the region's mean edge counts as that long; a
+        region of zero-length edges alone weighs them all equally)."""
         T = F[stars.around(region)]
         owner, other = [], []
         for k in range(3):
@@ -522,20 +534,36 @@ class Neighbours(NamedTuple):
                 owner.append(s[keep])
                 other.append(T[keep, (k + j) % 3])
         owner, other = np.concatenate(owner), np.concatenate(other)
+        order = np.argsort(owner, kind="stable")
+        owner, other = owner[order], other[order]
         count = np.bincount(owner, minlength=region.shape[0])
-        return cls(other[np.argsort(owner, kind="stable")], np.cumsum(count) - count,
-                   count.astype(np.float64))
+        edge = V_rest[region[owner]] - V_rest[other]
+        length = np.sqrt(np.einsum("ij,ij->i", edge, edge))
+        floor = EDGE_FLOOR * float(length.mean())
+        weight = 1.0 / np.maximum(length, floor) if floor > 0 else np.ones_like(length)
+        start = np.cumsum(count) - count
+        return cls(other, start, count, weight, np.add.reduceat(weight, start))
 
     def means(self, X):
-        """The mean neighbour position of each region vertex, (r,3)."""
-        return np.add.reduceat(X[self.other], self.start, axis=0) / self.count[:, None]
+        """The weighted mean neighbour position of each region vertex, (r,3)."""
+        return np.add.reduceat(X[self.other] * self.weight[:, None], self.start,
+                               axis=0) / self.total[:, None]
 
 
 def relax(X, V_rest, F, stars, region, transform):
     """``SWEEPS`` Jacobi sweeps of ``x_i = mean(x_j) + A_i d_i`` over
-    ``region`` of ``X`` (in place); ``transform(vertices, vectors)`` maps the
-    rest offsets ``d_i`` by the cage's local map ``A_i``."""
-    near = Neighbours.of(F, stars, region)
+    ``region`` of ``X`` (in place), the means weighted by the inverse rest
+    edge lengths (:class:`Neighbours`); ``transform(vertices, vectors)`` maps
+    the rest offsets ``d_i`` by the cage's local map ``A_i``.
+
+    Weighted, a short edge keeps its length where the uniform mean stretched
+    it as much as a long one: the region's boundary moves a share of the
+    edit's slope onto each edge, and on a scan's thin triangles the uniform
+    share of a short edge turned them over (faces left turned over after the
+    repair, 100 edits of 3% on 1,000-face cages: rocker-arm 28 -> 2, bunny
+    219 -> 101, homer 149 -> 98, cow 24 -> 19; the relaxation itself had
+    turned faces the raw deform had not)."""
+    near = Neighbours.of(F, stars, region, V_rest)
     offset = transform(region, V_rest[region] - near.means(V_rest))
     for _ in range(SWEEPS):
         X[region] = near.means(X) + offset

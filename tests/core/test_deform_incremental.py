@@ -302,12 +302,13 @@ def test_distinct_is_unique_on_both_paths_and_leaves_the_scratch_clean(span):
 
 
 @pytest.mark.parametrize("scheme,levels", [("butterfly", 2), ("loop", 2), ("loop", 3)])
-def test_a_drag_tracks_the_full_deform_and_does_not_drift(scheme, levels):
-    """The same cage vertices moved again and again (a drag: from the second
-    move on, the fine positions come from a linear map of them), with a move
-    of other vertices in between (the map must then be made again, never
-    reused on positions it did not make), each step equal to a full deform on
-    a copy of the binding; 200 small moves leave no drift."""
+def test_a_drag_and_the_moves_after_it_are_the_full_deform_bit_for_bit(scheme, levels):
+    """The same cage vertices moved again and again (a drag), with moves of
+    other vertices in between and after it, each step equal to a full deform
+    on a copy of the binding bit for bit (a drag's fine positions had come
+    from a linear map of the moved vertices, 1e-16 of the diagonal off, which
+    the updates after the drag kept in 1,084 rows of a campaign's case); 200
+    small moves leave no drift."""
     import pickle
     Vd, Fd = noisy_sphere(3, amp=0.02)
     cage = simplify(Vd, Fd, target_faces=80)
@@ -316,32 +317,16 @@ def test_a_drag_tracks_the_full_deform_and_does_not_drift(scheme, levels):
     rng = np.random.default_rng(levels)
     D = deform(b, cage.V)
     Ve = cage.V.copy()
-    drag = np.array([5, 9, 12])
+    drag, single = np.array([5, 9]), np.array([12])
     other = np.array([30, 31])
-    for ids in [drag] * 4 + [other] + [drag] * 3 + [other, drag]:
+    for ids in [drag] * 4 + [other] + [single] * 5 + [drag] * 3 + [other, drag, other]:
         Ve[ids] += 0.03 * rng.standard_normal((ids.shape[0], 3))
         deform(b, Ve, moved=ids, out=D)
-        assert np.abs(D - deform(ref, Ve)).max() <= _tol(Vd)
-    assert b._cache.get("drag") is None          # a single move after another set: no map yet
+        assert np.array_equal(D, deform(ref, Ve))
     for _ in range(200):
         Ve[drag] += 1e-3 * rng.standard_normal((drag.shape[0], 3))
         deform(b, Ve, moved=drag, out=D)
-    assert b._cache["drag"] is not None
-    assert np.abs(D - deform(ref, Ve)).max() <= _tol(Vd)
-
-
-def test_a_drag_too_large_for_its_map_takes_the_stencils(torus_case, monkeypatch):
-    """Past ``_DRAG_ENTRIES`` no map is kept; the moves stay exact."""
-    import core.binding as binding_module
-    Vd, Vc, b = torus_case
-    monkeypatch.setattr(binding_module, "_DRAG_ENTRIES", 10)
-    D = deform(b, Vc)
-    Ve = Vc.copy()
-    for _ in range(3):
-        Ve[[2, 7]] += 0.01
-        deform(b, Ve, moved=[2, 7], out=D)
-    assert b._cache.get("drag") is None
-    assert np.abs(D - deform(b, Ve)).max() <= _tol(Vd)
+    assert np.array_equal(D, deform(ref, Ve))
 
 
 @pytest.mark.parametrize("scheme", ["loop", "butterfly"])

@@ -82,16 +82,18 @@ def test_refined_rows_are_the_rows_that_change_and_the_only_ones_written(torus_c
     assert (R[rows] != before[rows]).any(axis=1).mean() > 0.95
 
 
-def test_a_drag_tracks_the_full_refine_and_does_not_drift(torus_case):
+def test_a_drag_and_a_move_after_it_are_the_full_refine_bit_for_bit(torus_case):
     Vd, _, cage, b = torus_case
     R = refine(b, cage.V).V
     Ve = cage.V.copy()
     ids = np.array([5, 6, 30])
-    for step in range(40):                   # the same vertices again: a drag's linear map
+    for step in range(40):                   # the same vertices again and again: a drag
         Ve[ids] += 0.002 * np.array([1.0, -0.5, 0.25])
         refine(b, Ve, moved=ids, out=R)
-    assert "drag" in b._cache
-    assert np.abs(R - refine(b, Ve).V).max() <= 1e-12 * bbox_diagonal(Vd)
+    assert np.array_equal(R, refine(b, Ve).V)
+    Ve[70] += 0.01                           # and another vertex after it
+    refine(b, Ve, moved=[70], out=R)
+    assert np.array_equal(R, refine(b, Ve).V)
 
 
 def test_deform_and_refine_share_the_kept_subdivided_cage(torus_case):
@@ -211,3 +213,15 @@ def test_rest_as_a_whole_takes_a_mirror_or_turn_of_the_whole_cage(torus_case):
     V[0] = -V[0]
     assert turned_faces(b.rest_as_a_whole(V), V, cage.F).size > 0
     assert dataclasses.replace(b, V_cage_rest=None).rest_as_a_whole(V) is None
+
+
+def test_rest_as_a_whole_names_a_cage_it_cannot_take(torus_case):
+    from core.errors import InvalidMeshError, TopologyMismatchError
+    _, _, cage, b = torus_case
+    with pytest.raises(TopologyMismatchError, match="rest_as_a_whole.*5 vertices"):
+        b.rest_as_a_whole(cage.V[:5])
+    bad = cage.V.copy()
+    bad[3, 1] = np.nan
+    for V in (cage.V[:, :2], "x", bad):
+        with pytest.raises(InvalidMeshError, match="rest_as_a_whole"):
+            b.rest_as_a_whole(V)
