@@ -87,9 +87,9 @@ _DEGENERATE = 1e-12
 #: faces around the vertex have no area (a cage vertex moved onto a neighbour folds its
 #: fine faces flat) and the sum is rounding noise, whose direction fine positions 1e-16
 #: apart draw at random (a cube's cage, a vertex dragged onto its neighbour: 0.10 of the
-#: diagonal between two deforms of one edit); a real fine vertex's faces are some 1e5 times larger even at five levels of a
-#: 10k-face cage (a cage shrunk below about a thousandth of its rest size falls under it:
-#: its frames take the fine faces' normals)
+#: diagonal between two deforms of one edit); a real fine vertex's faces are some 1e5
+#: times larger even at five levels of a 10k-face cage (a cage shrunk below about a
+#: thousandth of its rest size falls under it: its frames take the fine faces' normals)
 _NORMAL_FLOOR = 2.0 ** -40
 
 #: dense meshes up to this many faces get an exact spatial index for the
