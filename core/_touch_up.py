@@ -552,10 +552,10 @@ def _flat_flips(V, F, faces, flat):
     c, a, b = F[faces, j], F[faces, (j + 1) % 3], F[faces, (j + 2) % 3]
     across, edges = _across(F, n)
     g = across[faces, j]
-    ok = g >= 0
-    g = np.where(ok, g, 0)
+    inside = np.flatnonzero(g >= 0)       # (a longest edge on the border has no face across)
+    faces, c, a, b, g = faces[inside], c[inside], a[inside], b[inside], g[inside]
     d = F[g].sum(axis=1) - a - b
-    ok &= ~flat[g] & (c != d)
+    ok = ~flat[g] & (c != d)
     ok &= ~np.isin(edge_keys(c, d, n), edges)
     new = np.stack([np.stack([c, a, d], axis=1), np.stack([c, d, b], axis=1)], axis=1)  # (k,2,3)
     ok &= ~flat_faces(V, new.reshape(-1, 3)).reshape(-1, 2).any(axis=1)

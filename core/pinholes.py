@@ -80,18 +80,20 @@ class _Loops(NamedTuple):
         return self.label == np.arange(self.h.shape[0])
 
 
-def cap_pinholes(clean, face_budget):
+def cap_pinholes(clean, face_budget, bend_cos=None):
     """The :class:`~.clean.CleanResult` ``clean`` with its pinholes for a cage
     of ``face_budget`` faces capped: the caps after its faces, each mapped to
     the input face beside its rim edge (``face_to_input``, ``area``), the twin
     table rebuilt, ``n_pinholes`` / ``n_pinhole_faces`` in its report; None
-    when it has no pinhole."""
+    when it has no pinhole. With ``bend_cos`` (the cosine of a dihedral
+    bound), a hole whose cap would bend two adjacent faces beyond it is left
+    open (see :func:`close_pinholes`)."""
     n = clean.V.shape[0]
     twin = clean.twin if clean.twin is not None else twin_table(clean.F, n)
     lo, hi = bounding_box(clean.V)
     Vs = (clean.V - lo) / (diagonal_length(lo, hi) or 1.0)    # unit-free: no overflow at 1e200
     area = face_areas(Vs, clean.F)
-    capped = close_pinholes(Vs, clean.F, twin, area, face_budget)
+    capped = close_pinholes(Vs, clean.F, twin, area, face_budget, bend_cos)
     if capped is None:
         return None
     report = replace(clean.report, n_pinholes=capped.n_holes,
@@ -102,17 +104,24 @@ def cap_pinholes(clean, face_budget):
         area=None if clean.area is None else np.concatenate([clean.area, clean.area[capped.beside]]))
 
 
-def close_pinholes(V, F, twin, face_area, face_budget):
+def close_pinholes(V, F, twin, face_area, face_budget, bend_cos=None):
     """Cap the pinholes (see the module docstring) of the oriented
     vertex-manifold mesh ``(V, F)`` with twin table ``twin``; ``face_area``
-    (m,) the faces' areas, ``face_budget`` the cage's face count. Returns :class:`Pinholes`, or
-    None when there is none."""
-    if not face_budget or F.shape[0] == 0:
+    (m,) the faces' areas, ``face_budget`` the cage's face count. With
+    ``bend_cos``, a hole whose cap has two adjacent faces (among its own and
+    those around its rim) whose normals' cosine is below it is left open: a
+    cap is a fan over the rim, which on a bumpy surface bends where the
+    surface did not, and ``simplify(max_dihedral_deg=)`` promises no such
+    bend (a bumpy torus with 20 one-ring holes, bent 18 degrees at most, had
+    capped edges bent 60 degrees with a bound of 30). Returns
+    :class:`Pinholes`, or None when there is none."""
+    if face_budget is None or F.shape[0] == 0:
         return None
     loops = _border_loops(V, F, twin)
     if loops is None:
         return None
-    longest = np.sqrt(4.0 * np.pi * PINHOLE_FACES * float(face_area.sum()) / face_budget)
+    # (a target of 0 faces is the smallest cage: a budget of 1)
+    longest = np.sqrt(4.0 * np.pi * PINHOLE_FACES * float(face_area.sum()) / max(face_budget, 1))
     heads = np.flatnonzero(loops.heads() & (loops.count >= 3) & (loops.count <= MAX_PINHOLE_EDGES)
                            & (loops.perimeter <= longest))
     if heads.size == 0:
@@ -122,11 +131,32 @@ def close_pinholes(V, F, twin, face_area, face_budget):
         return None
     rim, count = _rims(loops, heads)
     caps, beside = _fans(V, F, rim, count, loops)
+    if bend_cos is not None and caps.shape[0]:
+        keep = _caps_within(V, F, caps, beside[:, 1], bend_cos)
+        caps, beside = caps[keep], beside[keep]
     if caps.shape[0] == 0:
         return None
     F2 = np.concatenate([F, caps])
     n_holes = int(np.unique(beside[:, 1]).shape[0])
     return Pinholes(F2, twin_table(F2, V.shape[0]), beside[:, 0], n_holes)
+
+
+def _caps_within(V, F, caps, hole, bend_cos):
+    """(k,) bool: the cap faces ``caps`` (k,3) of the holes whose every cap
+    face meets each of its neighbours (the other faces of its cap, the faces
+    around the rim) with normals whose cosine is at least ``bend_cos``
+    (``hole``: each cap face's hole)."""
+    m = F.shape[0]
+    F2 = np.concatenate([F, caps])
+    twin = twin_table(F2, V.shape[0])
+    across = twin[3 * m:].reshape(-1, 3) // 3                  # the faces beside each cap edge
+    P = V[F2]
+    normal = np.cross(P[:, 1] - P[:, 0], P[:, 2] - P[:, 0])
+    length = np.linalg.norm(normal, axis=1)
+    unit = normal / np.where(length > 0, length, 1.0)[:, None]      # (no area: no normal, bent)
+    cos = np.einsum("kij,kj->ki", unit[across], unit[m:])
+    bent = ((cos < bend_cos) & (across >= 0)).any(axis=1) | (length[m:] == 0)
+    return ~np.isin(hole, hole[bent])
 
 
 def face_floor(V, F, twin):

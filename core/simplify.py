@@ -380,8 +380,12 @@ class SimplifyResult:
         vertex between their ends for a cage vertex to sit on)."""
         if not self.F.shape[0]:
             return 0
-        twice_area = np.linalg.norm(area_normals_rows(self.V, self.F.T), axis=1)
-        g = compactness(twice_area, squared_edges(self.V, self.F).sum(axis=1))
+        # unit-free: areas of a cage 1e-90 units across underflowed (every face a sliver),
+        # of one 1e160 across overflowed
+        lo, hi = bounding_box(self.V)
+        V = (self.V - lo) / (diagonal_length(lo, hi) or 1.0)
+        twice_area = np.linalg.norm(area_normals_rows(V, self.F.T), axis=1)
+        g = compactness(twice_area, squared_edges(V, self.F).sum(axis=1))
         return int(np.count_nonzero(g < TUNING.gamma_hard))
 
     @property
@@ -1012,7 +1016,8 @@ def simplify(V, F, *, target_faces=None, ratio=None, max_error=None, preserve_bo
         Refuse every collapse that would bend two adjacent cage faces (the
         angle between their normals) by more than this, except across the
         input's creases (``feature_angle_deg``); the final relocation is
-        undone if it would. Short of the target for that reason,
+        undone if it would, and a pinhole whose cap would is left open
+        (``close_pinholes``). Short of the target for that reason,
         ``stopped_because == "max_dihedral"``.
     preserve_boundary : bool
         Add heavy constraint planes on open borders so they keep their shape;
@@ -1124,8 +1129,8 @@ def simplify(V, F, *, target_faces=None, ratio=None, max_error=None, preserve_bo
     if clean.F.shape[0] == 0:
         cage = _unchanged(clean)._replace(stopped="target")
     elif max_error is None:
-        capped = cap_pinholes(clean, target) if close_pinholes and target is not None \
-            and opts["preserve_topology"] else None
+        capped = cap_pinholes(clean, target, opts["dihedral_cos"]) \
+            if close_pinholes and target is not None and opts["preserve_topology"] else None
         if capped is not None and \
                 face_floor(clean.V, clean.F, clean.twin) > opts["tuning"].pinhole_floor_share * target:
             clean, capped = capped, None        # kept, the holes could not reach it: see below
@@ -1213,7 +1218,7 @@ def cleaned_input(V, F, weld_distance, min_component_area, budget, locked):
     used[F.ravel()] = True
     check_span(V[used], where=_WHERE)
     clean = clean_mesh(V, F, weld_distance=weld_distance, min_component_area=min_component_area,
-                       face_budget=budget or None, protected=locked)
+                       face_budget=None if budget is None else max(budget, 1), protected=locked)
     if clean.F.shape[0] == 0 and F.shape[0] > 0:
         raise InvalidMeshError(
             f"{_WHERE}: nothing is left after cleaning the {F.shape[0]:,} faces "
@@ -1301,7 +1306,8 @@ def _far_off(V):
 def debris_budget(target_faces, ratio, max_error, m):
     """The face count below which a component is too small for one face of
     the target (debris), or None: never with ``max_error`` (dropping a
-    component could break its bound)."""
+    component could break its bound). (A target of 0 faces is the smallest
+    cage: a budget of 1 face, not None, which had kept the debris.)"""
     if max_error is not None:
         return None
     return target_faces if ratio is None else max(target_faces or 0, round(ratio * m))

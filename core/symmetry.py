@@ -462,7 +462,8 @@ def simplify_symmetric(V, F, *, axis="X", target_faces=None, ratio=None, max_err
             and r.F.shape[0] > target and r.stopped_because in ("no_valid_collapse",
                                                                  "topology_floor")):
         # pinholes (core.pinholes) of the whole: the halves' seams are holes of theirs
-        capped = cap_pinholes(clean, target)
+        capped = cap_pinholes(clean, target, None if max_dihedral_deg is None
+                              else float(np.cos(np.radians(max_dihedral_deg))))
         if capped is not None:
             again = _symmetric(whole._replace(clean=capped), options)
             if again.stopped_because != "cancelled" and again.F.shape[0] < r.F.shape[0]:

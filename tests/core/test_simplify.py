@@ -950,10 +950,14 @@ def test_a_cage_of_slivers_says_so():
     assert res.n_slivers == int((g < TUNING.gamma_hard).sum()) > 0.3 * res.F.shape[0]
     assert f"{res.n_slivers:,} of the cage's 500 faces are slivers" in res.message
     assert "remesh the input" in res.sliver_note
+    import dataclasses
+    for scale in (1e-90, 1e160):      # (unit-free: areas underflowed, or overflowed)
+        assert dataclasses.replace(res, V=res.V * scale).n_slivers == res.n_slivers
     V, F = icosphere(4)
     for target in (1000, 100, 20):
         res = simplify(V, F, target_faces=target)
         assert res.n_slivers == 0 and res.sliver_note == "" and "sliver" not in res.message
+        assert dataclasses.replace(res, V=res.V * 1e-90).n_slivers == 0
 
 
 def test_star_glyphs_whose_cheapest_edges_are_folding_fan_spokes_take_few_passes():
@@ -1054,3 +1058,31 @@ def test_a_collapse_far_beyond_the_target_scale_waits_while_others_are_near():
     assert r.stopped_because == "target" and r.F.shape[0] <= 500
     on_rims = np.minimum(np.abs(r.V[:, 2]), np.abs(r.V[:, 2] - 10.0))
     assert on_rims.max() < 1e-6
+
+
+def test_a_target_of_no_faces_is_the_smallest_cage_as_a_target_of_one():
+    # a zero target had read as "no target" to the debris removal and the pinhole caps
+    # (a campaign, 2026-12-06: an icosphere with 2% pinholes 512 faces for 0, 4 for 1)
+    from tests.mesh_factory import with_debris, with_pinholes
+    for V, F in (with_pinholes(*icosphere(4)), with_debris(*icosphere(4))):
+        zero, one = simplify(V, F, target_faces=0), simplify(V, F, target_faces=1)
+        assert zero.F.shape[0] == one.F.shape[0] == 4
+        assert np.array_equal(zero.F, one.F) and np.array_equal(zero.V, one.V)
+        assert simplify(V, F, ratio=1e-9).F.shape[0] == 4
+
+
+def test_a_dihedral_bound_leaves_open_the_pinholes_whose_caps_would_bend_beyond_it():
+    # a bumpy torus with 20 one-ring holes, bent 18 degrees at most: the caps (fans over
+    # the rims) had edges bent 60 degrees against a bound of 30 (a campaign, 2026-12-06)
+    from tests.mesh_factory import bend_angles_deg
+    V, F = torus(40, 20, bump=0.2)
+    keep = np.ones(F.shape[0], dtype=bool)
+    for v in np.random.default_rng(1).choice(np.unique(F), 20, replace=False):
+        keep &= ~(F == v).any(axis=1)
+    F = F[keep]
+    assert bend_angles_deg(V, F).max() < 30.0
+    r = simplify(V, F, target_faces=40, max_dihedral_deg=30.0)
+    assert r.stopped_because == "max_dihedral"
+    assert bend_angles_deg(r.V, r.F, r.feature_edges).max() <= 30.0 + 1e-9
+    assert 0 < r.cleaning.n_pinholes < 15                 # the caps within it are made
+    assert manifold_report(r.F, r.V.shape[0]).is_oriented_manifold

@@ -179,6 +179,16 @@ def test_a_flat_face_on_a_border_is_left_and_a_clean_cage_is_returned_as_it_is()
     Vs, Fs = icosphere(2)
     F3, _ = stages.flip_flat_faces(Vs, Fs, creases)
     assert F3 is Fs
+    # a grid's border vertex moved onto its neighbours' border edge: the far corner of
+    # "the face across" the border had been made up from face 0 (a campaign's IndexError
+    # at target_faces = the face count, 2026-12-06)
+    V, F = regular_grid(10, 10)
+    V[53] = 0.5 * (V[54] + V[65])
+    assert flat_faces(V, F).sum() == 1
+    assert stages.flip_flat_faces(V, F, creases)[0] is F
+    r = simplify(V, F, target_faces=200)
+    assert r.F.shape[0] == 200 and r.stopped_because == "target"
+    assert manifold_report(r.F, r.V.shape[0]).is_manifold
 
 
 def test_a_pinched_grid_gives_cages_without_flat_faces():
