@@ -21,8 +21,9 @@ The repair, on the dense mesh itself:
              the cage turned by 20 is not)
     region   the vertices of the turned-over faces and their one-ring
     relax    ``SWEEPS`` Jacobi sweeps of ``x_i = mean(x_j) + A_i d_i`` over
-             the region (neighbours ``j`` around the faces of ``i``; ``d_i``
-             the rest offset from that mean, mapped by the cage's local
+             the region (neighbours ``j`` around the faces of ``i``, weighted
+             by the inverse of their rest edge's length; ``d_i`` the rest
+             offset from that mean, mapped by the cage's local
              linear map ``A_i`` (:func:`ring_linear_maps`: its rotation, and
              its scale and stretch, so a region of a cage scaled to half
              takes its rest shape at half the size, not at full size between
