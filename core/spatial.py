@@ -534,21 +534,25 @@ def _largest_sides(V, F, out):
 
 def _area_edge(V, F):
     """The edge of an equilateral triangle of the geometric mean area of
-    the triangles ``F`` with an area (of an even sample of 4,096; 0 for
-    none): the cells' size where long slivers
-    make the mean box side no measure of how finely the surface is cut (a
-    CAD cylinder, half its triangles its full height long and a thousandth
-    of it wide, the other half a fan of needles on each cap: its mean box
-    side made one cell of every triangle, and a query scanned hundreds of
-    them: 20,000 points near a 4,000-face one took 5.4 s and 2.6 GB, near a
-    24,000-face one more than 24 GB; 0.3 s with cells of this size)."""
+    the triangles ``F`` with an area (of an even sample of 4,096, measured
+    unit-free; 0 for none): the cells' size where long slivers make the mean
+    box side no measure of how finely the surface is cut (a CAD cylinder,
+    half its triangles its full height long and a thousandth of it wide, the
+    other half a fan of needles on each cap: its mean box side made one cell
+    of every triangle, and a query scanned hundreds of them: 20,000 points
+    near a 4,000-face one took 5.4 s and 2.6 GB, near a 24,000-face one more
+    than 24 GB; 0.8 s and 0.3 GB with cells of this size)."""
     A, B, C = _corners(V, F[::max(1, F.shape[0] // 4096)])
-    n = cross_rows(B - A, C - A)
+    ab, ac = B - A, C - A
+    size = float(max(np.abs(ab).max(initial=0.0), np.abs(ac).max(initial=0.0)))
+    if not size > 0 or not np.isfinite(size):
+        return 0.0
+    n = cross_rows(ab / size, ac / size)     # (unit-free: no underflow at 1e-200, overflow at 1e200)
     twice = np.sqrt(np.einsum("ij,ij->i", n, n))
     twice = twice[twice > 0]
     if not twice.size:
         return 0.0
-    return float(np.sqrt(2.0 * np.exp(np.log(twice).mean()) / np.sqrt(3.0)))
+    return size * float(np.sqrt(2.0 * np.exp(np.log(twice).mean()) / np.sqrt(3.0)))
 
 
 def _long_thin(V, F, ext):
