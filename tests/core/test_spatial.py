@@ -362,6 +362,12 @@ def test_index_far_from_origin_and_unit_invariance():
         np.testing.assert_allclose(r.distance, base * scale, rtol=1e-9,
                                    atol=1e-15 * (scale + shift))
     _check_result(V * 1e-3, F, P * 1e-3, TriangleIndex(V * 1e-3, F).closest(P * 1e-3))
+    # the same cells at any scale, the CAD cylinder's (sized by its triangles' area) too: at
+    # 1e-200 the areas had underflowed and the cells were a sixteenth of the size
+    for Vm, Fm in ((V, F), cad_cylinder(400)):
+        h = TriangleIndex(Vm, Fm)._h
+        for scale in (1e-200, 1e-3, 1e4, 1e50):
+            assert np.isclose(TriangleIndex(Vm * scale, Fm)._h, h * scale, rtol=1e-9)
 
 
 def test_index_exact_on_sphere_analytic():
