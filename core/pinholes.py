@@ -36,7 +36,8 @@ from typing import NamedTuple
 import numpy as np
 
 from ._clean import BOUNDARY, half_edge_ends, interior_edges, twin_table
-from .mesh import bounding_box, diagonal_length, face_areas, flat_faces
+from .mesh import (area_normals_rows, bounding_box, diagonal_length, face_areas, flat_faces,
+                   row_norms, unit_rows)
 from .topology import connected_labels, edge_keys, vertex_labels
 
 __all__ = ["PINHOLE_FACES", "PINHOLE_SURFACE", "MAX_PINHOLE_EDGES", "Pinholes", "cap_pinholes",
@@ -131,31 +132,33 @@ def close_pinholes(V, F, twin, face_area, face_budget, bend_cos=None):
         return None
     rim, count = _rims(loops, heads)
     caps, beside = _fans(V, F, rim, count, loops)
-    if bend_cos is not None and caps.shape[0]:
-        keep = _caps_within(V, F, caps, beside[:, 1], bend_cos)
-        caps, beside = caps[keep], beside[keep]
     if caps.shape[0] == 0:
         return None
     F2 = np.concatenate([F, caps])
+    twin2 = twin_table(F2, V.shape[0])
+    if bend_cos is not None:
+        keep = _caps_within(V, F2, twin2, F.shape[0], beside[:, 1], bend_cos)
+        if not keep.all():
+            caps, beside = caps[keep], beside[keep]
+            if caps.shape[0] == 0:
+                return None
+            F2 = np.concatenate([F, caps])
+            twin2 = twin_table(F2, V.shape[0])
     n_holes = int(np.unique(beside[:, 1]).shape[0])
-    return Pinholes(F2, twin_table(F2, V.shape[0]), beside[:, 0], n_holes)
+    return Pinholes(F2, twin2, beside[:, 0], n_holes)
 
 
-def _caps_within(V, F, caps, hole, bend_cos):
-    """(k,) bool: the cap faces ``caps`` (k,3) of the holes whose every cap
-    face meets each of its neighbours (the other faces of its cap, the faces
-    around the rim) with normals whose cosine is at least ``bend_cos``
-    (``hole``: each cap face's hole)."""
-    m = F.shape[0]
-    F2 = np.concatenate([F, caps])
-    twin = twin_table(F2, V.shape[0])
+def _caps_within(V, F2, twin, m, hole, bend_cos):
+    """(k,) bool: the cap faces (``F2[m:]``, twin table ``twin``) of the
+    holes whose every cap face meets each of its neighbours (the other faces
+    of its cap, the faces around the rim) with normals whose cosine is at
+    least ``bend_cos`` (``hole``: each cap face's hole; a cap face with no
+    area has no normal: bent)."""
     across = twin[3 * m:].reshape(-1, 3) // 3                  # the faces beside each cap edge
-    P = V[F2]
-    normal = np.cross(P[:, 1] - P[:, 0], P[:, 2] - P[:, 0])
-    length = np.linalg.norm(normal, axis=1)
-    unit = normal / np.where(length > 0, length, 1.0)[:, None]      # (no area: no normal, bent)
-    cos = np.einsum("kij,kj->ki", unit[across], unit[m:])
-    bent = ((cos < bend_cos) & (across >= 0)).any(axis=1) | (length[m:] == 0)
+    cap = area_normals_rows(V, F2[m:].T)
+    beside = unit_rows(area_normals_rows(V, F2[np.maximum(across, 0).ravel()].T))
+    cos = np.einsum("kij,kj->ki", beside.reshape(-1, 3, 3), unit_rows(cap))
+    bent = ((cos < bend_cos) & (across >= 0)).any(axis=1) | (row_norms(cap) == 0)
     return ~np.isin(hole, hole[bent])
 
 

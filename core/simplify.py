@@ -63,7 +63,7 @@ from .clean import MIN_COMPONENT_AREA, CleanReport, bulk_box, check_span, clean_
 from .errors import InvalidArgumentError, InvalidMeshError, MeshAdjustError
 from .mesh import (UNITS, all_in_rows, area_normals_rows, bounding_box, check_flag, check_mesh,
                    check_number, check_vertex_mask, diagonal_length, dot_columns, face_normals,
-                   has_area, squared_edges)
+                   has_area, power_of_two_scale, squared_edges)
 from .metrics import DistanceFrom, surface_distance
 from .topology import (border_vertex_count, boundary_loops_count, collapsible_edges, edge_map,
                        face_components, soup_pieces)
@@ -380,10 +380,9 @@ class SimplifyResult:
         vertex between their ends for a cage vertex to sit on)."""
         if not self.F.shape[0]:
             return 0
-        # unit-free: areas of a cage 1e-90 units across underflowed (every face a sliver),
-        # of one 1e160 across overflowed
-        lo, hi = bounding_box(self.V)
-        V = (self.V - lo) / (diagonal_length(lo, hi) or 1.0)
+        # (scaled exactly: areas of a cage 1e-90 units across underflowed, every face a
+        # sliver; of one 1e160 across overflowed)
+        V = self.V / power_of_two_scale(self.V, self.F)
         twice_area = np.linalg.norm(area_normals_rows(V, self.F.T), axis=1)
         g = compactness(twice_area, squared_edges(V, self.F).sum(axis=1))
         return int(np.count_nonzero(g < TUNING.gamma_hard))
@@ -1134,8 +1133,7 @@ def simplify(V, F, *, target_faces=None, ratio=None, max_error=None, preserve_bo
     target = target_count(target_faces, ratio, clean.F.shape[0])
     opts = dict(tuning=TUNING if tuning is None else tuning, preserve_boundary=preserve_boundary,
                 preserve_topology=preserve_topology, feature_angle_deg=feature_angle_deg,
-                dihedral_cos=None if max_dihedral_deg is None
-                else float(np.cos(np.radians(max_dihedral_deg))),
+                dihedral_cos=dihedral_cos(max_dihedral_deg),
                 weights=None if weights is None else per_clean_vertex(weights, clean),
                 locked=None if lk is None else per_clean_vertex(lk, clean))
     hausdorff = None
@@ -1314,6 +1312,12 @@ def _far_off(V):
     return (f", or lost in rounding: the mesh is {size:.3g} across and {far:.3g} from the origin, "
             f"so its coordinates keep only {digits} significant digits of its shape: move it to "
             f"the origin first")
+
+
+def dihedral_cos(max_dihedral_deg):
+    """The cosine the engine compares adjacent faces' normals with for
+    ``max_dihedral_deg`` (None for none)."""
+    return None if max_dihedral_deg is None else float(np.cos(np.radians(max_dihedral_deg)))
 
 
 def debris_budget(target_faces, ratio, max_error, m):

@@ -48,8 +48,8 @@ from .mesh import area_normals_rows, bbox_diagonal, check_mesh, check_reach
 from .metrics import surface_distance
 from .mirror import PARTNER_TOLERANCE, axis_index, mirror, mirror_partners  # noqa: F401 (example)
 from .simplify import (SimplifyResult, check_arguments, check_flags, cleaned_input, debris_budget,
-                       float32_step, input_vertex_map, measuring_frame, per_clean_vertex,
-                       represented_faces, simplify, target_count)
+                       dihedral_cos, float32_step, input_vertex_map, measuring_frame,
+                       per_clean_vertex, represented_faces, simplify, target_count)
 from .spatial import TriangleIndex
 from .topology import (border_vertex_count, boundary_loops_count, edge_keys, edge_map,
                        face_components, soup_pieces)
@@ -462,8 +462,7 @@ def simplify_symmetric(V, F, *, axis="X", target_faces=None, ratio=None, max_err
             and r.F.shape[0] > target and r.stopped_because in ("no_valid_collapse",
                                                                  "topology_floor")):
         # pinholes (core.pinholes) of the whole: the halves' seams are holes of theirs
-        capped = cap_pinholes(clean, target, None if max_dihedral_deg is None
-                              else float(np.cos(np.radians(max_dihedral_deg))))
+        capped = cap_pinholes(clean, target, dihedral_cos(max_dihedral_deg))
         if capped is not None:
             again = _symmetric(whole._replace(clean=capped), options)
             if again.stopped_because != "cancelled" and again.F.shape[0] < r.F.shape[0]:

@@ -510,13 +510,13 @@ def ring(stars, F, faces):
 
 class Neighbours(NamedTuple):
     """Per vertex of a region, the other corners of its faces (each counted
-    once per face), grouped by region vertex: ``other[start[i]:start[i] +
-    count[i]]``, each weighted by the inverse of its rest edge's length
-    (``weight``; ``total``: their sum per region vertex)."""
+    once per face), grouped by region vertex in runs starting at ``start``
+    (each at least 2 long: every vertex is on a face), each weighted by the
+    inverse of its rest edge's length (``weight``; ``total``: their sum per
+    region vertex)."""
 
     other: np.ndarray   #: (p,) int64, neighbour vertices, region vertex by region vertex
     start: np.ndarray   #: (r,) int64, where each region vertex's run begins
-    count: np.ndarray   #: (r,) int64, its length (at least 2: every vertex is on a face)
     weight: np.ndarray  #: (p,) float64, 1 / the rest length of each neighbour's edge
     total: np.ndarray   #: (r,) float64, the weights' sum per region vertex
 
@@ -543,7 +543,7 @@ class Neighbours(NamedTuple):
         floor = EDGE_FLOOR * float(length.mean())
         weight = 1.0 / np.maximum(length, floor) if floor > 0 else np.ones_like(length)
         start = np.cumsum(count) - count
-        return cls(other, start, count, weight, np.add.reduceat(weight, start))
+        return cls(other, start, weight, np.add.reduceat(weight, start))
 
     def means(self, X):
         """The weighted mean neighbour position of each region vertex, (r,3)."""
