@@ -15,6 +15,7 @@ from typing import NamedTuple
 import numpy as np
 
 from ._groups import ragged_entries
+from ._parallel import blocks as blocks_of, run_each
 from ._refine import NEXT_CORNER, fan_ranks, next_corner
 
 
@@ -89,16 +90,21 @@ class Stencil(NamedTuple):
                 out[d] = np.add.reduceat(g, starts)
             return out
         p = self.plan
-        for b in p.blocks:
+        chunks = _apply_chunks(p.blocks)
+
+        def chunk(c):
+            b, r0, r1 = c
             if b.copy:      # row by row: a 2-D copy into a transposed ``out`` is ~7x slower
                 for d in range(k):
-                    out[d, b.start:b.stop] = Xt[d, b.start:b.stop]
-                continue
-            g = np.empty(b.cols.shape[0])
-            g2 = g.reshape(b.stop - b.start, b.width)
+                    out[d, b.start + r0:b.start + r1] = Xt[d, b.start + r0:b.start + r1]
+                return
+            cols = b.cols[r0 * b.width:r1 * b.width]
+            g = np.empty(cols.shape[0])
+            g2 = g.reshape(r1 - r0, b.width)
             for d in range(k):
-                Xt[d].take(b.cols, out=g, mode="wrap")
-                np.einsum("ij,ij->i", g2, b.weights, out=out[d, b.start:b.stop])
+                Xt[d].take(cols, out=g, mode="wrap")
+                np.einsum("ij,ij->i", g2, b.weights[r0:r1], out=out[d, b.start + r0:b.start + r1])
+        run_each(chunk, chunks, threads=self.n_out >= _THREADED_APPLY)
         if p.long_rows.shape[0]:
             for d in range(k):
                 g = Xt[d].take(p.long_cols, mode="wrap")
@@ -171,6 +177,21 @@ class Stencil(NamedTuple):
 
 
 _MAX_WIDTH = 16
+#: rows of a plan's block evaluated at once by :meth:`Stencil.apply_t` (a chunk's
+#: gathered values stay in cache), and the rows of a level from which its chunks
+#: run on the worker threads (the bunny at two levels, a re-apply on two cores:
+#: butterfly 17.6 -> 10.1 ms, Loop 14.4 -> 8.2 ms, the same bits)
+_APPLY_CHUNK = 32768
+_THREADED_APPLY = 1 << 16
+
+
+def _apply_chunks(blocks):
+    """``(block, r0, r1)``: the plan's ``blocks`` cut into runs of at most
+    ``_APPLY_CHUNK`` rows (``r0:r1`` relative to the block's start). A row
+    is summed as in its whole block (one ``np.einsum`` row), so the results
+    do not depend on the cuts."""
+    return [(b, r0, r1) for b in blocks
+            for r0, r1 in blocks_of(b.stop - b.start, _APPLY_CHUNK)]
 
 
 def make_plan(S, bounds):

@@ -127,7 +127,7 @@ def main():
         "Blender's modifier at as many faces (CC level L gives 3*4^(L-1) quads per triangle, "
         "i.e. 3/4 of our face count and 1.5x our vertex count); re-apply >= 10x faster than build.",
         "Reference figure (not run here): MeshLab's butterfly filter takes 4.9 s for two levels of a "
-        "270k-triangle scan to 4.3M triangles on this machine.",
+        "270k-triangle scan to 4.3M triangles (measured once, on an earlier machine).",
         f"Machine load average when the run ended: {os.getloadavg()[0]:.1f} (2 shared cores); "
         f"wall-clock times grow with it. {blas_line()}.",
     ]
