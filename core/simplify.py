@@ -186,6 +186,10 @@ class SimplifyResult:
         mirrored negative side, from the vertices of each to the other); the
         cage lies between the two sides, so above
         :data:`ASYMMETRY_NOTE` the message says so (:attr:`asymmetry_note`).
+    locked : (n_cage,) bool or None, with ``locked``: the cage vertices that
+        stand for a locked input vertex (they never moved). A cage that
+        stopped short of its target where edges join two of them says so in
+        its message (:attr:`lock_note`): such an edge never collapses.
     """
 
     V: np.ndarray
@@ -211,6 +215,7 @@ class SimplifyResult:
     n_clean_faces: int = 0
     float32_step: float = None
     bound: float = None
+    locked: np.ndarray = None
 
     def represented(self, F):
         """(m_in,) bool per face of ``F`` (the faces given to ``simplify``):
@@ -250,14 +255,19 @@ class SimplifyResult:
         asked = f" of {self.target:,} asked" if self.target is not None else ""
         kept = (f"{self.n_boundary_loops:,} border loop{'s' * (self.n_boundary_loops != 1)}, "
                 f"{self.n_components:,} component{'s' * (self.n_components != 1)} kept")
+        locks = self.lock_note
+        held = f" or join two locked vertices ({locks})" if locks else ""
         text = {
             "target": f"{self.n_input_faces:,} → {m:,} faces",
             "max_error": f"{self.n_input_faces:,} → {m:,} faces, where the error bound stopped it",
             "max_dihedral": f"stopped at {m:,} faces{asked}: every collapse left would bend two "
-                            f"faces beyond the dihedral bound",
-            "topology_floor": f"stopped at {m:,} faces{asked}: the topology floor ({kept})",
+                            f"faces beyond the dihedral bound{held}",
+            "topology_floor": f"stopped at {m:,} faces{asked}: the topology floor ({kept})" if not
+                              locks else f"stopped at {m:,} faces{asked}: every edge left would "
+                              f"change the topology{held[:-1]}, {kept})",
             "no_valid_collapse": f"stopped at {m:,} faces{asked}: every collapse left would fold "
-                                 f"or squash a face" + (f" ({kept})" if self.n_boundary_loops else ""),
+                                 f"or squash a face"
+                                 + (f" ({kept})" if self.n_boundary_loops else "") + held,
             "cancelled": f"cancelled: the cleaned input returned unchanged ({m:,} faces)",
         }[self.stopped_because]
         for note in (self.bound_note, self.soup_note, self.floor_note, self.border_note,
@@ -266,6 +276,30 @@ class SimplifyResult:
                 text += f"; {note}"
         done = self.cleaning.summary()
         return f"{text}; {done}" if done else text
+
+    @property
+    def lock_note(self):
+        """What the locked vertices hold, when the cage stopped short of its
+        target (or, with only ``max_error``, at the topology floor) and some of
+        its edges join two locked vertices (:attr:`locked`; such an edge never
+        collapses): "all 642 vertices locked" or "1,152 of its 1,280 vertices
+        locked, 1,701 of its 1,920 edges between two of them, unlock some to go
+        lower"; "" otherwise (the message had blamed the topology floor or the
+        geometry alone)."""
+        short = self.stopped_because in ("topology_floor", "no_valid_collapse", "max_dihedral")
+        if self.locked is None or not short or \
+                (self.target is not None and self.F.shape[0] <= self.target):
+            return ""
+        n = self.V.shape[0]
+        E = edge_map(self.F, n).E
+        both = int(np.count_nonzero(self.locked[E[:, 0]] & self.locked[E[:, 1]]))
+        if both == 0:
+            return ""
+        n_locked = int(np.count_nonzero(self.locked))
+        if n_locked == n:
+            return f"all {n:,} vertices locked, unlock some to go lower"
+        return (f"{n_locked:,} of its {n:,} vertices locked, {both:,} of its {E.shape[0]:,} edges "
+                f"between two of them, unlock some to go lower")
 
     @property
     def soup_note(self):
@@ -819,9 +853,9 @@ def _stop_reason(cage, target, opts):
         return cage.stopped
     em, ok = collapsible_edges(cage.F, cage.V.shape[0])
     if opts["locked"] is not None:
+        # (a cage vertex that merged a locked vertex is locked: the collapse kept it there)
         locked = np.zeros(cage.V.shape[0], dtype=bool)
-        kept = cage.of_clean >= 0
-        locked[cage.of_clean[kept]] = opts["locked"][kept]
+        locked[cage.of_clean[(cage.of_clean >= 0) & opts["locked"]]] = True
         ok &= ~(locked[em.E[:, 0]] & locked[em.E[:, 1]])
     return "topology_floor" if not ok.any() else cage.stopped
 
@@ -1105,13 +1139,13 @@ def simplify(V, F, *, target_faces=None, ratio=None, max_error=None, preserve_bo
     progress = _never_back(progress)
     if symmetry is not None:
         from .symmetry import simplify_symmetric
-        return simplify_symmetric(
+        return _with_locks(simplify_symmetric(
             V, F, axis=symmetry, target_faces=target_faces, ratio=ratio, max_error=max_error,
             preserve_boundary=preserve_boundary, preserve_topology=preserve_topology,
             feature_angle_deg=feature_angle_deg, vertex_weights=vertex_weights, locked=locked,
             weld_distance=weld_distance, min_component_area=min_component_area,
             max_dihedral_deg=max_dihedral_deg, close_pinholes=close_pinholes, progress=progress,
-            tuning=tuning)
+            tuning=tuning), locked)
     if tuning is not None and not isinstance(tuning, Tuning):
         raise InvalidArgumentError(f"{_WHERE}: tuning must be a core.tuning.Tuning, not "
                                    f"{type(tuning).__name__}")
@@ -1154,8 +1188,21 @@ def simplify(V, F, *, target_faces=None, ratio=None, max_error=None, preserve_bo
         cage, hausdorff = _within_max_error(su, clean, target, max_error, opts, progress)
         cage = cage._replace(stopped=_stop_reason(cage, target, opts))
     cage = cage._replace(seconds={"clean": t_clean, **cage.seconds})
-    return replace(_result(cage, clean, m_in, n_in, target, hausdorff, t0, preserve_boundary,
-                           stood_for, step), bound=None if max_error is None else float(max_error))
+    return _with_locks(replace(
+        _result(cage, clean, m_in, n_in, target, hausdorff, t0, preserve_boundary, stood_for, step),
+        bound=None if max_error is None else float(max_error)), lk)
+
+
+def _with_locks(result, locked):
+    """``result`` with its :attr:`~SimplifyResult.locked` cage vertices, those
+    of the ``locked`` input vertices (a checked (n,) mask, or None: left as
+    it is)."""
+    if locked is None:
+        return result
+    mask = np.zeros(result.V.shape[0], dtype=bool)
+    at = result.vertex_map[np.asarray(locked, dtype=bool)]
+    mask[at[at >= 0]] = True
+    return replace(result, locked=mask)
 
 
 def _collapsed(clean, target, opts, progress):

@@ -201,6 +201,50 @@ def test_locked_vertices_never_move_or_disappear():
     assert r.stopped_because in ("target", "no_valid_collapse")
 
 
+def test_locked_cage_vertices_are_reported_and_a_stop_they_cause_names_them():
+    """``SimplifyResult.locked`` marks the cage vertices of the locked input
+    vertices; a cage held short of its target by edges between two locked
+    vertices says so with their counts (it had blamed the topology floor, or
+    the geometry, and a cage vertex that had merged a locked one counted as
+    unlocked when the last clean vertex mapped to it was not)."""
+    V, F = bumpy_sphere(3, seed=4)
+    unlocked = simplify(V, F, target_faces=50)
+    assert unlocked.locked is None and unlocked.lock_note == ""
+    first = np.arange(V.shape[0])
+    for share, locked in ((1.0, first < V.shape[0]), (0.9, first < 0.9 * V.shape[0]),
+                          (0.5, V[:, 2] > 0), (0.02, first < 0.02 * V.shape[0])):
+        r = simplify(V, F, target_faces=50, locked=locked)
+        assert_clean(r, V, F)
+        expected = np.zeros(r.V.shape[0], dtype=bool)
+        expected[r.vertex_map[locked]] = True
+        assert np.array_equal(r.locked, expected)
+        assert np.array_equal(r.V[r.vertex_map[locked]], V[locked])
+        E = np.unique(np.sort(np.concatenate([r.F[:, [0, 1]], r.F[:, [1, 2]], r.F[:, [2, 0]]]),
+                              axis=1), axis=0)
+        both = int((expected[E[:, 0]] & expected[E[:, 1]]).sum())
+        head = r.message.split("; ")[0]                 # (what the add-on shows)
+        if share == 0.02:
+            assert r.stopped_because == "target" and r.lock_note == "" and "locked" not in head
+            continue
+        assert r.F.shape[0] > 50 and both > 0
+        assert expected.all() == (share > 0.5)      # (the upper half keeps an unlocked vertex)
+        if expected.all():
+            assert r.stopped_because == "topology_floor"
+            assert r.lock_note == f"all {r.V.shape[0]:,} vertices locked, unlock some to go lower"
+        else:
+            assert r.lock_note == (f"{int(expected.sum()):,} of its {r.V.shape[0]:,} vertices "
+                                   f"locked, {both:,} of its {E.shape[0]:,} edges between two of "
+                                   f"them, unlock some to go lower")
+        assert "join two locked vertices (" + r.lock_note in head
+    # the same on a symmetric run, its locks read on both sides
+    locked = np.abs(V[:, 0]) > 0.3
+    r = simplify(V, F, target_faces=30, locked=locked, symmetry="X")
+    expected = np.zeros(r.V.shape[0], dtype=bool)
+    expected[r.vertex_map[locked]] = True
+    assert np.array_equal(r.locked, expected) and r.F.shape[0] > 30
+    assert r.lock_note and r.lock_note in r.message
+
+
 def test_vertex_weights_keep_detail_where_heavy():
     V, F = bumpy_sphere(3, seed=2)
     w = np.where(V[:, 0] > 0.3, 100.0, 1.0)
