@@ -148,16 +148,42 @@ def sample_surface(V, F, n_samples, *, seed=0):
     return _sample(V, F, n, np.random.default_rng(check_seed(seed, where="sample_surface")))
 
 
-def _one_side(index, P_samples, P_vertices):
+class _Side(NamedTuple):
+    """What one side of :meth:`DistanceFrom.to` searches: sample points,
+    vertex indices, and the counts of all its samples and vertices (those
+    left out on shared faces count as distance 0)."""
+
+    points: np.ndarray
+    vertices: np.ndarray
+    counts: tuple
+
+
+def _unshared(samples, F, used, shared):
+    """The :class:`_Side` of a mesh's ``samples`` (SurfaceSamples) and
+    ``used`` vertices, without those on its ``shared`` faces alone (None:
+    every one)."""
+    counts = (samples.points.shape[0], used.shape[0])
+    if shared is None:
+        return _Side(samples.points, used, counts)
+    on_other = np.zeros(int(F.max()) + 1, dtype=bool)        # (F has faces: checked)
+    on_other[F[~shared].ravel()] = True
+    return _Side(samples.points[~shared[samples.face]], used[on_other[used]], counts)
+
+
+def _one_side(index, P_samples, P_vertices, counts=None):
+    """(max, mean, rms) of the distances of ``P_samples`` and ``P_vertices``
+    to ``index``; ``counts``: the samples' and vertices' counts the means
+    are over (more than given: the others at distance 0; None: as given)."""
+    n_s, n_v = counts if counts is not None else (P_samples.shape[0], P_vertices.shape[0])
     d_s = index.closest(P_samples).distance if P_samples.shape[0] else np.zeros(0)
-    d_v = index.closest(P_vertices).distance
+    d_v = index.closest(P_vertices).distance if P_vertices.shape[0] else np.zeros(0)
     dmax = float(max(d_s.max(initial=0.0), d_v.max(initial=0.0)))
-    if d_s.size:
-        mean = float(d_s.mean())
-        rms = float(np.sqrt(np.mean(d_s * d_s)))
+    if n_s:                    # (np.mean's sum and division: the same bits)
+        mean = float(np.sum(d_s) / n_s)
+        rms = float(np.sqrt(np.sum(d_s * d_s) / n_s))
     else:                      # no samples asked for: fall back to the vertices
-        mean = float(d_v.mean())
-        rms = float(np.sqrt(np.mean(d_v * d_v)))
+        mean = float(np.sum(d_v) / n_v)
+        rms = float(np.sqrt(np.sum(d_v * d_v) / n_v))
     return dmax, mean, rms
 
 
@@ -230,14 +256,24 @@ class DistanceFrom:
     def __init__(self, V_a, F_a):
         self.V, self.F = check_mesh(V_a, F_a, where="surface_distance (mesh a)", allow_empty=False)
         check_units(self.V, where="surface_distance", name="mesh a")
-        self.used = self.V[used_vertices(self.F, self.V.shape[0])]
-        self.diagonal = bbox_diagonal(self.used)
+        self._used = used_vertices(self.F, self.V.shape[0])
+        self.diagonal = bbox_diagonal(self.V[self._used])
         self._samples = {}                  # (count, seed) -> points
         self._searches = {}                 # kind -> search
 
-    def to(self, V_b, F_b, *, samples=None, seed=0):
+    def to(self, V_b, F_b, *, samples=None, seed=0, shared=None):
         """:func:`surface_distance` from ``A`` to the mesh ``V_b``, ``F_b``
-        (same parameters, same result)."""
+        (same parameters, same result).
+
+        ``shared``: ``(on_a, on_b)``, (m_a,) and (m_b,) bool, the faces of
+        each mesh that are faces of the other too (the same three corner
+        positions, bit for bit), or None. Their samples, and the vertices on
+        them alone, lie on the other surface: they count as distance 0 and
+        are not searched (a cage that keeps most of its input, measured in
+        the time of what changed: the bunny jittered by 1% of its size, to
+        ``max_error`` 0.5%, 21.5 -> 2.9-3.3 s). The maxima are those of the
+        search of every sample (whose distance there is 0, or a rounding
+        step of it), the means and RMS to rounding."""
         V_b, F_b = check_mesh(V_b, F_b, where="surface_distance (mesh b)", allow_empty=False)
         check_units(V_b, where="surface_distance", name="mesh b")
         if samples is None:
@@ -245,14 +281,19 @@ class DistanceFrom:
         else:
             n = check_number(samples, where="surface_distance", name="samples", lo=0,
                              hi=MAX_SAMPLES, integer=True)
-        used_b = V_b[used_vertices(F_b, V_b.shape[0])]
+        used_b = used_vertices(F_b, V_b.shape[0])
         seed = check_seed(seed, where="surface_distance")
         s_a = self._sampled(n, seed)
-        s_b = _sample(V_b, F_b, n, np.random.default_rng(seed)).points
-        ab_max, ab_mean, ab_rms = _one_side(search_for(V_b, F_b, s_a.shape[0] + self.used.shape[0]),
-                                            s_a, self.used)
-        ba_max, ba_mean, ba_rms = _one_side(self._search(s_b.shape[0] + used_b.shape[0]), s_b,
-                                            used_b)
+        s_b = _sample(V_b, F_b, n, np.random.default_rng(seed))
+        on_a, on_b = (None, None) if shared is None else shared
+        a_side = _unshared(s_a, self.F, self._used, on_a)
+        b_side = _unshared(s_b, F_b, used_b, on_b)
+        ab_max, ab_mean, ab_rms = _one_side(
+            search_for(V_b, F_b, a_side.points.shape[0] + a_side.vertices.shape[0]),
+            a_side.points, self.V[a_side.vertices], a_side.counts)
+        ba_max, ba_mean, ba_rms = _one_side(
+            self._search(b_side.points.shape[0] + b_side.vertices.shape[0]), b_side.points,
+            V_b[b_side.vertices], b_side.counts)
         return SurfaceDistance(
             hausdorff=max(ab_max, ba_max), mean=max(ab_mean, ba_mean), rms=max(ab_rms, ba_rms),
             a_to_b_max=ab_max, a_to_b_mean=ab_mean, b_to_a_max=ba_max, b_to_a_mean=ba_mean,
@@ -261,7 +302,7 @@ class DistanceFrom:
     def _sampled(self, n, seed):
         """``A``'s ``n`` samples drawn with ``seed`` (kept)."""
         if (n, seed) not in self._samples:
-            self._samples[(n, seed)] = _sample(self.V, self.F, n, np.random.default_rng(seed)).points
+            self._samples[(n, seed)] = _sample(self.V, self.F, n, np.random.default_rng(seed))
         return self._samples[(n, seed)]
 
     def _search(self, n_queries):

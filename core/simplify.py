@@ -897,7 +897,8 @@ def _within_max_error(su, clean, target, max_error, opts, progress):
             # times: 95-105 s)
             return 0.0
         t = time.perf_counter()
-        d = scale * source.to((cage.V - centre) / scale, cage.F, samples=samples).hausdorff
+        d = scale * source.to((cage.V - centre) / scale, cage.F, samples=samples,
+                              shared=_shared_faces(cage, clean)).hausdorff
         measured[0] += time.perf_counter() - t
         return d
 
@@ -949,6 +950,28 @@ def _within_max_error(su, clean, target, max_error, opts, progress):
     if found is not None:
         return timed(*found)
     return timed(_unchanged(clean)._replace(stopped="max_error"), 0.0)
+
+
+def _shared_faces(cage, clean):
+    """``(on_clean, on_cage)``: the faces of the cleaned input that are faces
+    of ``cage`` too, and those of the cage that are input faces, for
+    :meth:`~.metrics.DistanceFrom.to`'s ``shared``: a cage face whose corners
+    are those of the input face it descends from, each a cage vertex never
+    moved (bit for bit the input vertex it kept). Work in the cage's faces
+    only (a cage of 2,395 faces of the 1.1M-face bunny x16: 33 ms a measure
+    by the input's face keys); None when there is none."""
+    corners = clean.F[cage.face_from]                   # (m_cage, 3) clean vertices
+    at = cage.of_clean[corners]
+    same = (np.sort(at, axis=1) == np.sort(cage.F, axis=1)).all(axis=1)
+    rows = np.flatnonzero(same)
+    rows = rows[(clean.V[corners[rows]] == cage.V[at[rows]]).all(axis=(1, 2))]
+    if rows.size == 0:
+        return None
+    on_cage = np.zeros(cage.F.shape[0], dtype=bool)
+    on_cage[rows] = True
+    on_clean = np.zeros(clean.F.shape[0], dtype=bool)
+    on_clean[cage.face_from[rows]] = True
+    return on_clean, on_cage
 
 
 def _is_input(cage, clean):

@@ -233,6 +233,43 @@ def test_distance_from_one_mesh_to_many_is_surface_distance_and_builds_its_searc
         source.to(V, F[:, :2])
 
 
+def test_shared_faces_are_not_searched_and_the_distances_stay_surface_distance_s():
+    """``DistanceFrom.to(shared=...)``: a copy of a bumpy torus with a patch
+    moved and re-triangulated keeps most faces of the original; leaving their
+    samples out (distance 0) gives surface_distance's maxima bit for bit and
+    its means and RMS to rounding, and searches only the samples off them."""
+    V, F = torus(60, 30, bump=0.1)
+    rng = np.random.default_rng(2)
+    W = V.copy()
+    patch = np.flatnonzero(np.linalg.norm(V - V[17], axis=1) < 0.4)
+    W[patch] += 0.02 * rng.standard_normal((patch.size, 3))
+    G = F.copy()
+    G[:40] = G[:40, [0, 2, 1]]                 # (another winding: still the same triangles)
+    W = np.concatenate([W, [[5.0, 5.0, 5.0]]])  # (an unused vertex of its own)
+    on_b = ~np.isin(G, patch).any(axis=1)
+    on_a = on_b.copy()
+    source = DistanceFrom(V, F)
+    searched = []
+    real = metrics.search_for
+    try:
+        metrics.search_for = lambda V_, F_, n: (searched.append(n), real(V_, F_, n))[1]
+        for ask in (dict(), dict(samples=0), dict(samples=5000, seed=3)):
+            whole = source.to(W, G, **ask)
+            n_whole = searched[-1]
+            part = source.to(W, G, shared=(on_a, on_b), **ask)
+            n_part = searched[-1]
+            assert whole == surface_distance(V, F, W, G, **ask)
+            assert (part.hausdorff, part.a_to_b_max, part.b_to_a_max) == \
+                (whole.hausdorff, whole.a_to_b_max, whole.b_to_a_max) and whole.hausdorff > 0.01
+            for k in ("mean", "rms", "a_to_b_mean", "b_to_a_mean", "a_to_b_rms", "b_to_a_rms"):
+                assert getattr(part, k) == pytest.approx(getattr(whole, k), rel=1e-12, abs=1e-15)
+            assert n_part < 0.2 * n_whole
+    finally:
+        metrics.search_for = real
+    nothing = np.zeros(F.shape[0], dtype=bool)
+    assert source.to(W, G, shared=(nothing, nothing)) == source.to(W, G)
+
+
 def test_real_mesh_bunny_vs_perturbed_copy():
     V, F = load_shared("stanford-bunny.obj")
     used = np.unique(F)
