@@ -63,6 +63,22 @@ def test_a_missed_target_is_a_warning_with_the_cores_reason(scene):
     assert report.warnings and "WARNING" in cage.meshadjust.last_report
 
 
+def test_a_lock_group_that_holds_the_cage_short_is_named_in_the_warning(scene):
+    # the upper half locked: the cage stops far above its target, and the warning says the
+    # locked vertices hold it (it had blamed the geometry: "every collapse left would fold")
+    V, F = icosphere(3)
+    obj = make_object("sphere", V, F)
+    obj.vertex_groups.new(name="pinned").add(np.flatnonzero(V[:, 2] > 0).tolist(), 1.0, 'REPLACE')
+    cage, report = mod("api").simplify_object(obj, target_faces=50, lock_group="pinned",
+                                              fit=False, bind=False)
+    m = len(cage.data.polygons)
+    assert report.level == 'WARNING' and m > 100
+    assert f"stopped at {m:,} faces of 50 asked" in report.message
+    assert "join two locked vertices (" in report.message and "unlock some to go lower" in \
+        report.message
+    assert "WARNING" in cage.meshadjust.last_report
+
+
 def test_a_cage_of_slivers_is_a_warning_saying_what_to_do(scene):
     V, F = cad_cylinder(600)                # sides one row of long thin triangles
     obj = make_object("cylinder", V, F)
