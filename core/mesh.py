@@ -289,12 +289,17 @@ def stops(answer):
 
 
 def check_vertex_mask(mask, n, *, where, name):
-    """A per-vertex flag array (n,) as booleans, or
+    """A per-vertex flag array (n,) as booleans (:func:`check_mask`)."""
+    return check_mask(mask, n, where=where, name=name, per="vertex")
+
+
+def check_mask(mask, n, *, where, name, per):
+    """A flag array (n,) as booleans, one ``per`` item (e.g. "vertex"), or
     :class:`InvalidArgumentError` naming ``name`` and the length ``n`` it
-    needs (booleans or integers accepted)."""
+    needs (booleans or integers accepted: nonzero is True)."""
     a = _as_array(mask, name, f"({n},) booleans", where, InvalidArgumentError)
     if a.shape != (n,) or not (a.dtype == bool or np.issubdtype(a.dtype, np.integer)):
-        raise InvalidArgumentError(f"{where}: {name} must be ({n},) booleans (one per vertex), "
+        raise InvalidArgumentError(f"{where}: {name} must be ({n},) booleans (one per {per}), "
                                    f"got {a.shape} {a.dtype}")
     return a.astype(bool)
 

@@ -25,8 +25,9 @@ from typing import NamedTuple
 
 import numpy as np
 
-from .mesh import (bbox_diagonal, check_mesh, check_number, check_seed, check_units, face_areas,
-                   used_vertices)
+from .errors import InvalidArgumentError
+from .mesh import (bbox_diagonal, check_mask, check_mesh, check_number, check_seed, check_units,
+                   face_areas, used_vertices)
 from .near_query import search_for, search_kind
 from .pages import plain_pages
 
@@ -146,6 +147,21 @@ def sample_surface(V, F, n_samples, *, seed=0):
     n = check_number(n_samples, where="sample_surface", name="n_samples", lo=0, hi=MAX_SAMPLES,
                      integer=True)
     return _sample(V, F, n, np.random.default_rng(check_seed(seed, where="sample_surface")))
+
+
+def _checked_shared(shared, m_a, m_b):
+    """``(on_a, on_b)`` of :meth:`DistanceFrom.to`'s ``shared`` as (m_a,) and
+    (m_b,) booleans ((None, None) for None), or
+    :class:`~.errors.InvalidArgumentError` naming what is wrong."""
+    if shared is None:
+        return None, None
+    if not isinstance(shared, (tuple, list)) or len(shared) != 2:
+        raise InvalidArgumentError(f"surface_distance: shared must be a pair (on_a, on_b) of face "
+                                   f"masks, got {type(shared).__name__}")
+    return (check_mask(shared[0], m_a, where="surface_distance", name="shared[0]",
+                       per="face of mesh a"),
+            check_mask(shared[1], m_b, where="surface_distance", name="shared[1]",
+                       per="face of mesh b"))
 
 
 class _Side(NamedTuple):
@@ -273,7 +289,8 @@ class DistanceFrom:
         the time of what changed: the bunny jittered by 1% of its size, to
         ``max_error`` 0.5%, 21.5 -> 2.9-3.3 s). The maxima are those of the
         search of every sample (whose distance there is 0, or a rounding
-        step of it), the means and RMS to rounding."""
+        step of it), the means and RMS to rounding. The masks are the
+        caller's word: a face called shared that is not is measured as 0."""
         V_b, F_b = check_mesh(V_b, F_b, where="surface_distance (mesh b)", allow_empty=False)
         check_units(V_b, where="surface_distance", name="mesh b")
         if samples is None:
@@ -285,7 +302,7 @@ class DistanceFrom:
         seed = check_seed(seed, where="surface_distance")
         s_a = self._sampled(n, seed)
         s_b = _sample(V_b, F_b, n, np.random.default_rng(seed))
-        on_a, on_b = (None, None) if shared is None else shared
+        on_a, on_b = _checked_shared(shared, self.F.shape[0], F_b.shape[0])
         a_side = _unshared(s_a, self.F, self._used, on_a)
         b_side = _unshared(s_b, F_b, used_b, on_b)
         ab_max, ab_mean, ab_rms = _one_side(

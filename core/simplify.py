@@ -84,6 +84,12 @@ STOP_REASONS = ("target", "max_error", "max_dihedral", "topology_floor", "no_val
 #: bunny made symmetric in X came back 'ok' 11.9% and 35.8% off, their sides 16.6%
 #: and 36.9% apart (spot in X: 0.0%)
 ASYMMETRY_NOTE = 0.05
+#: a cage that met its target with this many faces fewer, and this share of the target,
+#: says so (:attr:`SimplifyResult.under_note`): a symmetric cage comes in steps of its
+#: seam's faces (spot in X: 30 or 36, none between); a collapse removes one or two faces,
+#: a mirrored pair about four. A symmetric run that far under asks its half for more first.
+UNDER_SLACK = 4
+UNDER_SHARE = 0.05
 #: a cage whose small pieces, collapsed to at most ``FLOOR_PIECE_FACES`` faces each (a
 #: closed piece's floor is a tetrahedron), hold more than this share of its faces while
 #: a larger piece is left says so (:attr:`SimplifyResult.pieces_note`): the bunny
@@ -187,9 +193,12 @@ class SimplifyResult:
         cage lies between the two sides, so above
         :data:`ASYMMETRY_NOTE` the message says so (:attr:`asymmetry_note`).
     locked : (n_cage,) bool or None, with ``locked``: the cage vertices that
-        stand for a locked input vertex (they never moved). A cage that
-        stopped short of its target where edges join two of them says so in
-        its message (:attr:`lock_note`): such an edge never collapses.
+        stand for a locked input vertex, each where that vertex is (with
+        ``symmetry``: those its half locked and their mirror copies, where
+        the symmetric half has them; a vertex on the mirror plane is never
+        locked). A cage that stopped short of its target where edges join
+        two of them says so in its message (:attr:`lock_note`): such an edge
+        never collapses.
     """
 
     V: np.ndarray
@@ -258,7 +267,7 @@ class SimplifyResult:
         locks = self.lock_note
         held = f" or join two locked vertices ({locks})" if locks else ""
         text = {
-            "target": f"{self.n_input_faces:,} → {m:,} faces",
+            "target": f"{self.n_input_faces:,} → {m:,} faces{self.under_note}",
             "max_error": f"{self.n_input_faces:,} → {m:,} faces, where the error bound stopped it",
             "max_dihedral": f"stopped at {m:,} faces{asked}: every collapse left would bend two "
                             f"faces beyond the dihedral bound{held}",
@@ -276,6 +285,20 @@ class SimplifyResult:
                 text += f"; {note}"
         done = self.cleaning.summary()
         return f"{text}; {done}" if done else text
+
+    @property
+    def under_note(self):
+        """" (of 36 asked: ...)" after the face count when the cage met its
+        target with :data:`UNDER_SLACK` faces and :data:`UNDER_SHARE` of it
+        fewer (a symmetric cage comes in steps: none nearer within it); ""
+        otherwise."""
+        m = self.F.shape[0]
+        if self.stopped_because != "target" or self.target is None or \
+                self.target - m < max(UNDER_SLACK, UNDER_SHARE * self.target):
+            return ""
+        why = ": a mirrored cage comes in steps of its seam's faces" \
+            if self.asymmetry is not None else ""
+        return f" (of {self.target:,} asked{why})"
 
     @property
     def lock_note(self):
@@ -1162,13 +1185,13 @@ def simplify(V, F, *, target_faces=None, ratio=None, max_error=None, preserve_bo
     progress = _never_back(progress)
     if symmetry is not None:
         from .symmetry import simplify_symmetric
-        return _with_locks(simplify_symmetric(
+        return simplify_symmetric(
             V, F, axis=symmetry, target_faces=target_faces, ratio=ratio, max_error=max_error,
             preserve_boundary=preserve_boundary, preserve_topology=preserve_topology,
             feature_angle_deg=feature_angle_deg, vertex_weights=vertex_weights, locked=locked,
             weld_distance=weld_distance, min_component_area=min_component_area,
             max_dihedral_deg=max_dihedral_deg, close_pinholes=close_pinholes, progress=progress,
-            tuning=tuning), locked)
+            tuning=tuning)
     if tuning is not None and not isinstance(tuning, Tuning):
         raise InvalidArgumentError(f"{_WHERE}: tuning must be a core.tuning.Tuning, not "
                                    f"{type(tuning).__name__}")

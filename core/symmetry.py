@@ -47,9 +47,10 @@ from .errors import InvalidArgumentError
 from .mesh import area_normals_rows, bbox_diagonal, check_mesh, check_reach
 from .metrics import surface_distance
 from .mirror import PARTNER_TOLERANCE, axis_index, mirror, mirror_partners  # noqa: F401 (example)
-from .simplify import (SimplifyResult, check_arguments, check_flags, cleaned_input, debris_budget,
-                       dihedral_cos, float32_step, input_vertex_map, measuring_frame,
-                       per_clean_vertex, represented_faces, simplify, target_count)
+from .simplify import (UNDER_SHARE, UNDER_SLACK, SimplifyResult, check_arguments, check_flags,
+                       cleaned_input, debris_budget, dihedral_cos, float32_step, input_vertex_map,
+                       measuring_frame, per_clean_vertex, represented_faces, simplify,
+                       target_count)
 from .spatial import TriangleIndex
 from .topology import (border_vertex_count, boundary_loops_count, edge_keys, edge_map,
                        face_components, soup_pieces)
@@ -68,15 +69,12 @@ MAX_ERROR_SHARES = (1.0, 0.7, 0.5)
 #: the diagonal): apart from its own mirror copy, well inside ``PARTNER_TOLERANCE``
 LIFT = PARTNER_TOLERANCE / 8
 #: a cage over its target (chords split before mirroring add faces) asks the half for
-#: that many fewer faces, and one at least ``UNDER_SLACK`` faces under it (lone triangles
-#: on the seam dropped: spot, 36 asked, 30 made) for that many more, at most this many
-#: times; the closest of the cages made wins (see :func:`_closer`)
+#: that many fewer faces, and one under it by :data:`~.simplify.UNDER_SLACK` faces and
+#: :data:`~.simplify.UNDER_SHARE` of the target (lone triangles on the seam dropped: spot,
+#: 36 asked, 30 made) for a few more, at most this many times; the closest of the cages
+#: made wins (see :func:`_closer`)
 TARGET_RETRIES = 2
-#: faces under the target a symmetric cage may come without asking its half for more
-#: (a collapse on the half removes about two faces there, four in the whole cage), and
-#: the share of the target it must miss by too (each retry simplifies the half again)
-UNDER_SLACK = 4
-UNDER_SHARE = 0.05
+
 #: rounds of putting back vertices whose faces the symmetrising turned over
 SYMMETRISE_ROUNDS = 4
 
@@ -547,7 +545,24 @@ def _symmetric(whole, options):
         n_border_vertices=border_vertex_count(cage.F, cage.V.shape[0], em),
         preserve_boundary=r.preserve_boundary,
         n_input_pieces=soup_pieces(cage.F, cage.V.shape[0], clean.F, clean.V.shape[0], n_comp),
-        n_clean_faces=int(clean.F.shape[0]))
+        n_clean_faces=int(clean.F.shape[0]), locked=_whole_locks(r.locked, cage))
+
+
+def _whole_locks(half_locked, cage):
+    """The mirrored ``cage``'s locked vertices: those of the half's cage that
+    the half's run locked (``half_locked``, its result's
+    :attr:`~.simplify.SimplifyResult.locked`: never a seam vertex) and their
+    mirror copies; None when the run had no locks."""
+    if half_locked is None:
+        return None
+    n = cage.copy_of.shape[0]
+    kept = np.flatnonzero(cage.of_half >= 0)
+    half = np.zeros(n, dtype=bool)                 # (vertices the chord splits add: unlocked)
+    half[cage.of_half[kept]] = half_locked[kept]
+    whole = np.zeros(cage.V.shape[0], dtype=bool)
+    whole[:n] = half
+    whole[cage.copy_of] |= half
+    return whole
 
 
 def _check_crosses(clean, s, k, axis):
@@ -615,6 +630,7 @@ def _simplify_half(run, clean, target, max_error, most):
         half_target = None if target is None else target // 2
         best, tried = None, set()
         for _ in range(TARGET_RETRIES + 1):
+            tried.add(half_target)                 # (asked, and as raised to mirror a face)
             r, cage, half_target = _mirrored_at_least_one_face(run, half_target, bound, most)
             if cage is None:
                 return r, None, None

@@ -268,6 +268,17 @@ def test_shared_faces_are_not_searched_and_the_distances_stay_surface_distance_s
         metrics.search_for = real
     nothing = np.zeros(F.shape[0], dtype=bool)
     assert source.to(W, G, shared=(nothing, nothing)) == source.to(W, G)
+    # masks of 0/1 integers or lists are booleans (an int mask's ~ had indexed the last face);
+    # anything else is refused, naming it
+    zeros = np.zeros(F.shape[0], dtype=np.int64)
+    assert source.to(W, G, shared=(zeros, list(zeros))) == source.to(W, G)
+    for bad, what in (((nothing.astype(float), nothing), r"shared\[0\] must be \(%d,\) booleans "
+                       r"\(one per face of mesh a\), got \(%d,\) float64" % (len(F), len(F))),
+                      ((nothing, nothing[:-1]), r"shared\[1\] must be \(%d,\) booleans" % len(G)),
+                      ((nothing,), r"shared must be a pair \(on_a, on_b\) of face masks"),
+                      (nothing, r"shared must be a pair")):
+        with pytest.raises(InvalidArgumentError, match=what):
+            source.to(W, G, shared=bad)
 
 
 def test_real_mesh_bunny_vs_perturbed_copy():

@@ -236,13 +236,18 @@ def test_locked_cage_vertices_are_reported_and_a_stop_they_cause_names_them():
                                    f"locked, {both:,} of its {E.shape[0]:,} edges between two of "
                                    f"them, unlock some to go lower")
         assert "join two locked vertices (" + r.lock_note in head
-    # the same on a symmetric run, its locks read on both sides
+    # a symmetric run: the half's locks (read on both sides) and their mirror copies; a
+    # vertex on the mirror plane is never locked (the run does not hold it there)
     locked = np.abs(V[:, 0]) > 0.3
     r = simplify(V, F, target_faces=30, locked=locked, symmetry="X")
-    expected = np.zeros(r.V.shape[0], dtype=bool)
-    expected[r.vertex_map[locked]] = True
-    assert np.array_equal(r.locked, expected) and r.F.shape[0] > 30
-    assert r.lock_note and r.lock_note in r.message
+    assert r.F.shape[0] > 30 and r.lock_note and r.lock_note in r.message
+    assert r.locked[r.vertex_map[locked & (V[:, 0] > 0)]].all()
+    mirrored = r.V[r.locked] * [-1.0, 1.0, 1.0]
+    gap = np.linalg.norm(mirrored[:, None] - r.V[r.locked][None], axis=2).min(axis=1)
+    assert gap.max() < 1e-9 and not r.locked[r.V[:, 0] == 0.0].any()
+    on_plane = np.abs(V[:, 0]) < 1e-12
+    seam = simplify(V, F, target_faces=4, locked=on_plane, symmetry="X")
+    assert on_plane.any() and not seam.locked.any() and seam.lock_note == ""
 
 
 def test_vertex_weights_keep_detail_where_heavy():

@@ -117,7 +117,7 @@ def test_a_small_target_is_met_within_a_few_faces_not_undershot(axis):
     faces) and said "target". A cage ``UNDER_SLACK`` or more under (and
     ``UNDER_SHARE`` of the target) asks the half for a few more faces, and
     the closest cage within the target wins: 36 here (a half of 17)."""
-    from core.symmetry import UNDER_SHARE, UNDER_SLACK
+    from core.simplify import UNDER_SHARE, UNDER_SLACK
     V, F = load_shared("spot.obj")[:2]
     V = V - 0.5 * (V.min(axis=0) + V.max(axis=0))
     for target in (8, 12, 16, 20, 24, 30, 36, 40, 50, 64, 100):
@@ -127,6 +127,12 @@ def test_a_small_target_is_met_within_a_few_faces_not_undershot(axis):
         assert target - r.F.shape[0] < max(UNDER_SLACK, UNDER_SHARE * target), target
         if (axis, target) == ("X", 36):
             assert r.F.shape[0] == 36
+        assert r.message.split("; ")[0] == f"{F.shape[0]:,} → {r.F.shape[0]:,} faces"
+    if axis == "X":        # 34 asked: 30 or 36 (none between), and the message says so
+        r = simplify(V, F, target_faces=34, symmetry=axis)
+        assert r.F.shape[0] == 30 and r.stopped_because == "target"
+        assert r.message.split("; ")[0] == (f"{F.shape[0]:,} → 30 faces (of 34 asked: a mirrored "
+                                            f"cage comes in steps of its seam's faces)")
 
 
 @pytest.mark.parametrize("axis", ["X", "Z"])
