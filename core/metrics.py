@@ -274,7 +274,7 @@ class DistanceFrom:
         check_units(self.V, where="surface_distance", name="mesh a")
         self._used = used_vertices(self.F, self.V.shape[0])
         self.diagonal = bbox_diagonal(self.V[self._used])
-        self._samples = {}                  # (count, seed) -> points
+        self._samples = {}                  # (count, seed) -> SurfaceSamples
         self._searches = {}                 # kind -> search
 
     def to(self, V_b, F_b, *, samples=None, seed=0, shared=None):

@@ -74,7 +74,6 @@ LIFT = PARTNER_TOLERANCE / 8
 #: 36 asked, 30 made) for a few more, at most this many times; the closest of the cages
 #: made wins (see :func:`_closer`)
 TARGET_RETRIES = 2
-
 #: rounds of putting back vertices whose faces the symmetrising turned over
 SYMMETRISE_ROUNDS = 4
 
