@@ -266,14 +266,14 @@ class SimplifyResult:
                 f"{self.n_components:,} component{'s' * (self.n_components != 1)} kept")
         locks = self.lock_note
         held = f" or join two locked vertices ({locks})" if locks else ""
+        floor = (f"every edge left would change the topology or join two locked vertices "
+                 f"({locks}, {kept})" if locks else f"the topology floor ({kept})")
         text = {
             "target": f"{self.n_input_faces:,} → {m:,} faces{self.under_note}",
             "max_error": f"{self.n_input_faces:,} → {m:,} faces, where the error bound stopped it",
             "max_dihedral": f"stopped at {m:,} faces{asked}: every collapse left would bend two "
                             f"faces beyond the dihedral bound{held}",
-            "topology_floor": f"stopped at {m:,} faces{asked}: the topology floor ({kept})" if not
-                              locks else f"stopped at {m:,} faces{asked}: every edge left would "
-                              f"change the topology{held[:-1]}, {kept})",
+            "topology_floor": f"stopped at {m:,} faces{asked}: {floor}",
             "no_valid_collapse": f"stopped at {m:,} faces{asked}: every collapse left would fold "
                                  f"or squash a face"
                                  + (f" ({kept})" if self.n_boundary_loops else "") + held,
@@ -876,9 +876,7 @@ def _stop_reason(cage, target, opts):
         return cage.stopped
     em, ok = collapsible_edges(cage.F, cage.V.shape[0])
     if opts["locked"] is not None:
-        # (a cage vertex that merged a locked vertex is locked: the collapse kept it there)
-        locked = np.zeros(cage.V.shape[0], dtype=bool)
-        locked[cage.of_clean[(cage.of_clean >= 0) & opts["locked"]]] = True
+        locked = _cage_locks(cage.of_clean, opts["locked"], cage.V.shape[0])
         ok &= ~(locked[em.E[:, 0]] & locked[em.E[:, 1]])
     return "topology_floor" if not ok.any() else cage.stopped
 
@@ -1246,10 +1244,17 @@ def _with_locks(result, locked):
     it is)."""
     if locked is None:
         return result
-    mask = np.zeros(result.V.shape[0], dtype=bool)
-    at = result.vertex_map[np.asarray(locked, dtype=bool)]
-    mask[at[at >= 0]] = True
-    return replace(result, locked=mask)
+    return replace(result, locked=_cage_locks(result.vertex_map, locked, result.V.shape[0]))
+
+
+def _cage_locks(cage_of, locked, n_cage):
+    """(n_cage,) bool: the cage vertices that a ``locked`` vertex maps to
+    (``cage_of``: each vertex's cage vertex, -1 for none). A cage vertex
+    that merged a locked vertex is locked, whatever the others it merged:
+    the collapse kept it where the locked one is."""
+    mask = np.zeros(n_cage, dtype=bool)
+    mask[cage_of[(cage_of >= 0) & locked]] = True
+    return mask
 
 
 def _collapsed(clean, target, opts, progress):
