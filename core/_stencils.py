@@ -39,6 +39,7 @@ class ApplyPlan(NamedTuple):
     arrays with ``np.add.reduceat``."""
 
     blocks: tuple
+    chunks: tuple             #: ``(block, r0, r1)`` runs of rows (:func:`_apply_chunks`)
     long_rows: np.ndarray     #: (q,) int64
     long_starts: np.ndarray   #: (q,) offsets of each long row's entries in long_cols
     long_cols: np.ndarray     #: the long rows' CSR columns, row by row, gathered once
@@ -90,7 +91,6 @@ class Stencil(NamedTuple):
                 out[d] = np.add.reduceat(g, starts)
             return out
         p = self.plan
-        chunks = _apply_chunks(p.blocks)
 
         def chunk(c):
             b, r0, r1 = c
@@ -104,7 +104,7 @@ class Stencil(NamedTuple):
             for d in range(k):
                 Xt[d].take(cols, out=g, mode="wrap")
                 np.einsum("ij,ij->i", g2, b.weights[r0:r1], out=out[d, b.start + r0:b.start + r1])
-        run_each(chunk, chunks, threads=self.n_out >= _THREADED_APPLY)
+        run_each(chunk, p.chunks, threads=self.n_out >= _THREADED_APPLY)
         if p.long_rows.shape[0]:
             for d in range(k):
                 g = Xt[d].take(p.long_cols, mode="wrap")
@@ -190,8 +190,8 @@ def _apply_chunks(blocks):
     ``_APPLY_CHUNK`` rows (``r0:r1`` relative to the block's start). A row
     is summed as in its whole block (one ``np.einsum`` row), so the results
     do not depend on the cuts."""
-    return [(b, r0, r1) for b in blocks
-            for r0, r1 in blocks_of(b.stop - b.start, _APPLY_CHUNK)]
+    return tuple((b, r0, r1) for b in blocks
+                 for r0, r1 in blocks_of(b.stop - b.start, _APPLY_CHUNK))
 
 
 def make_plan(S, bounds):
@@ -233,7 +233,8 @@ def make_plan(S, bounds):
     starts = np.zeros(long_rows.shape[0], dtype=np.int64)
     np.cumsum(ll[:-1], out=starts[1:])
     entries = np.repeat(S.indptr[long_rows] - starts, ll) + np.arange(int(ll.sum()))
-    return ApplyPlan(tuple(blocks), long_rows, starts, S.cols[entries], S.weights[entries])
+    return ApplyPlan(tuple(blocks), _apply_chunks(blocks), long_rows, starts, S.cols[entries],
+                     S.weights[entries])
 
 
 class _Table(NamedTuple):
