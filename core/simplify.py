@@ -61,9 +61,9 @@ from ._relocate import relocate, segment_triangles
 from ._touch_up import flip_flat_faces, touch_up
 from .clean import MIN_COMPONENT_AREA, CleanReport, bulk_box, check_span, clean_mesh
 from .errors import InvalidArgumentError, InvalidMeshError, MeshAdjustError
-from .mesh import (UNITS, all_in_rows, area_normals_rows, bounding_box, check_flag, check_mesh,
-                   check_number, check_vertex_mask, diagonal_length, dot_columns, face_normals,
-                   has_area, power_of_two_scale, squared_edges)
+from .mesh import (UNITS, all_in_rows, area_normals_rows, bbox_diagonal, bounding_box, check_flag,
+                   check_mesh, check_number, check_vertex_mask, diagonal_length, dot_columns,
+                   face_normals, has_area, power_of_two_scale, squared_edges)
 from .metrics import DistanceFrom, surface_distance
 from .topology import (border_vertex_count, boundary_loops_count, collapsible_edges, edge_map,
                        face_components, soup_pieces)
@@ -90,6 +90,10 @@ ASYMMETRY_NOTE = 0.05
 #: a mirrored pair about four. A symmetric run that far under asks its half for more first.
 UNDER_SLACK = 4
 UNDER_SHARE = 0.05
+#: a cage within this share of its diagonal beyond ``max_error`` is within it
+#: (:attr:`SimplifyResult.bound_note`): a mirrored cage of a symmetric icosphere lies
+#: 2.2e-16 off it, which a bound of 0 had called over (and divided by 0 to say how far)
+BOUND_ROUNDING = 1e-12
 #: a cage whose small pieces, collapsed to at most ``FLOOR_PIECE_FACES`` faces each (a
 #: closed piece's floor is a tetrahedron), hold more than this share of its faces while
 #: a larger piece is left says so (:attr:`SimplifyResult.pieces_note`): the bunny
@@ -379,15 +383,17 @@ class SimplifyResult:
         or faces on one side only; :attr:`asymmetry` measures vertices, which
         such a side can share) it lies off the input (an icosphere holed on
         one side, 1e-3 asked: 0.0415, said to be stopped by the bound)."""
-        if self.hausdorff is None or self.bound is None or \
-                not self.hausdorff > self.bound * (1 + 1e-9):
+        if self.hausdorff is None or self.bound is None:
+            return ""
+        if not self.hausdorff > self.bound * (1 + 1e-9) + BOUND_ROUNDING * bbox_diagonal(self.V):
             return ""
         why = (": the input's two sides differ more than that (holes or faces on one side "
                "only) and the symmetric cage follows its positive side (turn symmetry off to "
                "meet the bound)" if self.asymmetry is not None else "")
-        return (f"it lies {self.hausdorff / self.bound:.1f}x the error bound off the input "
-                f"(Hausdorff distance {self.hausdorff:.4g} against the {self.bound:.4g} "
-                f"asked){why}")
+        how_far = f"{self.hausdorff / self.bound:.1f}x the error bound" if self.bound > 0 \
+            else "beyond the error bound"
+        return (f"it lies {how_far} off the input (Hausdorff distance {self.hausdorff:.4g} "
+                f"against the {self.bound:.4g} asked){why}")
 
     @property
     def asymmetry_note(self):
@@ -849,6 +855,7 @@ def _run_all(mesh, target, max_err_n, opts, progress, m0):
         # the link condition stopped every collapse: close 3-edge holes, drop
         # components that cannot shrink, cap the shortest longer hole, and go on
         need = mesh.F.shape[0] - target if target is not None else mesh.F.shape[0]
+        before, m_before = copy.deepcopy(mesh), mesh.m_live
         changed = close_triangular_holes(mesh)
         if not changed:
             size = tun.relax_max_size if max_err_n is None else min(tun.relax_max_size, max_err_n)
@@ -860,7 +867,21 @@ def _run_all(mesh, target, max_err_n, opts, progress, m0):
         stopped, more = run(mesh, target, max_err_n, opts["preserve_boundary"], progress, m0, tun,
                             opts["dihedral_cos"])
         passes += more
+        if stopped == "no_valid_collapse" and mesh.m_live >= m_before:
+            _restore(mesh, before)
+            break
     return stopped, passes
+
+
+def _restore(mesh, before):
+    """Put the engine state ``mesh`` back as its copy ``before`` was (its
+    seconds kept): a cap whose faces nothing could collapse (every vertex of
+    its rim locked) had left the cage with more faces than the input (an
+    icosphere with 8% of its faces removed, every vertex locked, asked for
+    20 faces: 1,182 -> 1,320)."""
+    seconds = mesh.seconds
+    vars(mesh).update(vars(before))
+    mesh.seconds = seconds
 
 
 def _stop_reason(cage, target, opts):
@@ -1221,37 +1242,36 @@ def simplify(V, F, *, target_faces=None, ratio=None, max_error=None, preserve_bo
     elif max_error is None:
         capped = cap_pinholes(clean, target, opts["dihedral_cos"]) \
             if close_pinholes and target is not None and opts["preserve_topology"] else None
+        uncapped = None
         if capped is not None and \
                 face_floor(clean.V, clean.F, clean.twin) > opts["tuning"].pinhole_floor_share * target:
-            clean, capped = capped, None        # kept, the holes could not reach it: see below
+            clean, capped, uncapped = capped, None, clean   # the holes could not reach it: below
         cage, clean = _collapsed(clean, target, opts, progress)
         if capped is not None:
             cage, clean = _through_pinholes(cage, clean, capped, target, progress, opts)
+        elif uncapped is not None and cage.F.shape[0] > uncapped.F.shape[0]:
+            # the caps stayed (their rims locked): the input without them is closer
+            cage, clean = _through_pinholes(cage, clean, uncapped, target, progress, opts)
     else:
         su = _set_up(clean, opts)
         clean = clean._replace(twin=None, area=None)   # (3m,) and (m,): not needed past the set-up
         cage, hausdorff = _within_max_error(su, clean, target, max_error, opts, progress)
         cage = cage._replace(stopped=_stop_reason(cage, target, opts))
     cage = cage._replace(seconds={"clean": t_clean, **cage.seconds})
-    return _with_locks(replace(
+    return replace(
         _result(cage, clean, m_in, n_in, target, hausdorff, t0, preserve_boundary, stood_for, step),
-        bound=None if max_error is None else float(max_error)), lk)
-
-
-def _with_locks(result, locked):
-    """``result`` with its :attr:`~SimplifyResult.locked` cage vertices, those
-    of the ``locked`` input vertices (a checked (n,) mask, or None: left as
-    it is)."""
-    if locked is None:
-        return result
-    return replace(result, locked=_cage_locks(result.vertex_map, locked, result.V.shape[0]))
+        bound=None if max_error is None else float(max_error),
+        locked=None if lk is None else _cage_locks(cage.of_clean, opts["locked"], cage.V.shape[0]))
 
 
 def _cage_locks(cage_of, locked, n_cage):
     """(n_cage,) bool: the cage vertices that a ``locked`` vertex maps to
     (``cage_of``: each vertex's cage vertex, -1 for none). A cage vertex
     that merged a locked vertex is locked, whatever the others it merged:
-    the collapse kept it where the locked one is."""
+    the collapse kept it where the locked one is. Taken over the cleaned
+    input's vertices (``SimplifyResult.locked`` had been taken over the
+    input's, through ``vertex_map``, which names one of the copies a locked
+    bow-tie vertex is split into: the engine held both, the result marked one)."""
     mask = np.zeros(n_cage, dtype=bool)
     mask[cage_of[(cage_of >= 0) & locked]] = True
     return mask
@@ -1280,7 +1300,9 @@ def _through_pinholes(cage, clean, capped, target, progress, opts):
     ``Tuning.pinhole_floor_share`` of the target; the
     bunny with 5% of its faces missing has 2,491 pinholes for a 50-face
     target. The second run is then left for targets just under that floor,
-    where the collapse may still stop short.)"""
+    where the collapse may still stop short; and with the roles swapped, when
+    that cage kept more faces than ``clean`` without its caps has: every rim
+    locked, the caps could not collapse.)"""
     if cage.F.shape[0] <= target or cage.stopped not in ("no_valid_collapse", "topology_floor"):
         return cage, clean
     done = (clean.F.shape[0] - cage.F.shape[0]) / max(clean.F.shape[0] - target, 1)

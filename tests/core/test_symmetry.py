@@ -309,6 +309,24 @@ def test_a_bound_the_symmetric_cage_misses_is_said(monkeypatch):
     assert r.bound_note in r.message
 
 
+def test_a_bound_of_zero():
+    """``max_error=0``: a mirrored cage of a symmetric icosphere lies a rounding
+    step off it (2.2e-16), which is within the bound (its note had divided by
+    the bound); the holed one is far off, and said to be, without a ratio."""
+    V, F = icosphere(3)
+    r = simplify(V, F, max_error=0.0, symmetry="X")
+    assert_symmetric(r.V, r.F, "X")
+    assert r.bound == 0.0 and 0.0 <= r.hausdorff <= 1e-12 * bbox_diagonal(V)
+    assert r.bound_note == "" and "bound" in r.message
+    centres = V[F].mean(axis=1)
+    F = np.delete(F, np.flatnonzero(centres[:, 0] > 0.3)[::40], axis=0)
+    r = simplify(V, F, max_error=0.0, symmetry="X")
+    assert r.hausdorff > 1e-3 * bbox_diagonal(V)
+    assert r.bound_note.startswith("it lies beyond the error bound off the input (Hausdorff "
+                                   f"distance {r.hausdorff:.4g} against the 0 asked)")
+    assert r.bound_note in r.message
+
+
 def test_cancel_returns_the_cleaned_input_and_inputs_are_not_modified():
     V, F = bumpy_sphere(3)
     V0, F0 = V.copy(), F.copy()
