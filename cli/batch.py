@@ -36,7 +36,9 @@ import json
 import math
 import os
 import shutil
+import signal
 import sys
+import threading
 import time
 from collections import Counter
 from dataclasses import asdict
@@ -200,6 +202,20 @@ def collect_inputs(paths, out=None):
     return files
 
 
+def _unlistable(paths):
+    """Messages for the input folders of ``paths`` whose files cannot be
+    listed (no read permission: the batch had ended in a raw PermissionError,
+    exit 1, the other inputs not converted)."""
+    found = []
+    for path in paths:
+        if os.path.isdir(path):
+            try:
+                os.listdir(path)
+            except OSError as exc:
+                found.append(f"{path}: cannot list the folder's files ({exc.strerror})")
+    return found
+
+
 def _without_links_to_others(found):
     """The files ``found`` in a folder but the symbolic links to another of
     them: the file is converted under its own name (a link sorted before it,
@@ -356,8 +372,10 @@ def main(argv=None, *, entry=None, prog=PROG):
             print(f"{prog}: {msg}", file=sys.stderr)
         return 2
     results, todo = _skipped(tasks, args.skip_existing)
+    terminated = []
     try:
-        interrupted = _run(args, opts, entry, tasks, todo, results)
+        with _terminate_as_interrupt(terminated):
+            interrupted = _run(args, opts, entry, tasks, todo, results)
     except dask_runner.SchedulerUnreachable as exc:
         print(f"\n{prog}: --dask: {exc}", file=sys.stderr)
         return 2
@@ -369,7 +387,8 @@ def main(argv=None, *, entry=None, prog=PROG):
     print(report.summary_table(results))
     print(report.summary_line(results, args.out))
     c = report.counts(results)
-    status = 130 if interrupted else 1 if c["failed"] or (args.strict and c["warn"]) else 0
+    status = (143 if terminated else 130) if interrupted \
+        else 1 if c["failed"] or (args.strict and c["warn"]) else 0
     if args.report:
         report.write_json(args.report, {
             "tool": prog, "started": started, "arguments": argv, "options": asdict(opts),
@@ -381,11 +400,38 @@ def main(argv=None, *, entry=None, prog=PROG):
     return status
 
 
+class _terminate_as_interrupt:
+    """While the batch runs, SIGTERM (what ``kill``, ``timeout``, Slurm,
+    systemd and ``docker stop`` send) stops it as Ctrl-C does: the workers
+    stopped, the summary printed, the report written; the signal's number is
+    added to ``terminated`` (the exit status is then 143, 128 + SIGTERM). It
+    had killed the driver outright: no summary, no report, the worker left
+    running until its next step. (Only from the main thread, where Python
+    takes signals.)"""
+
+    def __init__(self, terminated):
+        self.terminated, self.previous = terminated, None
+
+    def __enter__(self):
+        if threading.current_thread() is threading.main_thread():
+            self.previous = signal.signal(signal.SIGTERM, self._handle)
+        return self
+
+    def _handle(self, signum, frame):
+        self.terminated.append(signum)
+        raise KeyboardInterrupt
+
+    def __exit__(self, *exc):
+        if self.previous is not None:
+            signal.signal(signal.SIGTERM, self.previous)
+        return False
+
+
 def _planned(args):
     """(options, tasks, problems) of the batch: ``problems`` the messages of
     why it cannot run (paths missing, no input, an output path that is a
     folder or cannot be written), empty when it can."""
-    problems = check_paths(args)
+    problems = check_paths(args) + _unlistable(args.inputs)
     if problems:
         return None, None, problems
     files = collect_inputs(args.inputs, args.out)

@@ -111,7 +111,7 @@ def run_dask(tasks, payload, entry, address, jobs, on_done, *, timeout=None):
                 collect(fut)
             return False
         except KeyboardInterrupt:
-            old = signal.signal(signal.SIGINT, signal.SIG_IGN)
+            old = {s: signal.signal(s, signal.SIG_IGN) for s in (signal.SIGINT, signal.SIGTERM)}
             try:
                 Event(cancel_event, client=client).set()
                 running = {k for keys in client.processing().values() for k in keys}
@@ -127,7 +127,8 @@ def run_dask(tasks, payload, entry, address, jobs, on_done, *, timeout=None):
                     if f.status == "finished":
                         collect(f)
             finally:
-                signal.signal(signal.SIGINT, old)
+                for s, handler in old.items():
+                    signal.signal(s, handler)
             return True
     finally:
         with quiet_logs("distributed"):

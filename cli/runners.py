@@ -88,8 +88,8 @@ def _stop_all(running, tasks, on_done):
     """After a Ctrl-C: SIGTERM to every worker of ``running`` ({task index:
     worker}) at once, then each stopped in turn (:meth:`_Worker.stop`) and
     its file reported (cancelled, unless it finished in between). A second
-    Ctrl-C is ignored meanwhile: it must not cut this short."""
-    old = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    Ctrl-C or SIGTERM is ignored meanwhile: it must not cut this short."""
+    old = {s: signal.signal(s, signal.SIG_IGN) for s in (signal.SIGINT, signal.SIGTERM)}
     try:
         for w in running.values():
             w.terminate()
@@ -97,7 +97,8 @@ def _stop_all(running, tasks, on_done):
             w.stop()
             on_done(i, w.report(tasks[i], stopped=True))
     finally:
-        signal.signal(signal.SIGINT, old)
+        for s, handler in old.items():
+            signal.signal(s, handler)
 
 
 def step_marks(text):

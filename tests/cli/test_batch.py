@@ -135,6 +135,30 @@ def test_out_is_checked_before_any_compute(tmp_path):
     assert proc.returncode == 2 and "1 output path(s) are folders, e.g. " in proc.stderr
 
 
+def test_a_folder_whose_files_cannot_be_listed_is_a_bad_path(tmp_path, monkeypatch, capsys):
+    """An input folder without read permission: exit 2 naming it, before any
+    compute (a raw PermissionError had ended the batch, exit 1). (Called in
+    this process, os.listdir refusing the folder: the tests may run as root,
+    whom permissions do not stop.)"""
+    sys.path.insert(0, os.path.join(ROOT, "scripts"))
+    import meshadjust_batch
+    meshadjust_batch.checkout_package()
+    from meshadjust.cli import batch
+    (tmp_path / "scans").mkdir()
+    core.write_obj(tmp_path / "ok.obj", *bumpy_sphere(3))
+    listdir = os.listdir
+
+    def refusing(path="."):
+        if os.path.basename(os.path.normpath(path)) == "scans":
+            raise PermissionError(13, "Permission denied", path)
+        return listdir(path)
+    monkeypatch.setattr(os, "listdir", refusing)
+    monkeypatch.chdir(tmp_path)
+    assert batch.main(["scans", "ok.obj", "--faces", "100", "--out", "out"]) == 2
+    assert "scans: cannot list the folder's files (Permission denied)" in capsys.readouterr().err
+    assert not os.path.exists(tmp_path / "out" / "ok_cage.obj")
+
+
 def test_one_row_per_file_whatever_the_error_text(tmp_path):
     bad = tmp_path / "two\nlines | pipe.obj"
     bad.write_text("v 0 0 0\nv 1 x 0\n")
@@ -360,10 +384,17 @@ def _start(args, tmp_path):
                             preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
 
 
-@pytest.mark.parametrize("mode", [["--jobs", "2"], ["--jobs", "1"],
-                                  ["--dask", "local", "--jobs", "2"]],
-                         ids=["jobs2", "serial", "dask"])
-def test_ctrl_c_stops_the_workers_prints_the_summary_and_exits_130(tmp_path, mode):
+@pytest.mark.parametrize("mode, sig", [(["--jobs", "2"], signal.SIGINT),
+                                       (["--jobs", "1"], signal.SIGINT),
+                                       (["--dask", "local", "--jobs", "2"], signal.SIGINT),
+                                       (["--jobs", "2"], signal.SIGTERM),
+                                       (["--jobs", "1"], signal.SIGTERM)],
+                         ids=["jobs2", "serial", "dask", "jobs2-sigterm", "serial-sigterm"])
+def test_ctrl_c_stops_the_workers_prints_the_summary_and_exits_130(tmp_path, mode, sig):
+    """Ctrl-C, or SIGTERM (``kill``, ``timeout``, Slurm, ``docker stop``: it had
+    killed the batch with no summary or report, its worker left running):
+    the workers stopped, the summary printed, the report written, exit 130
+    (143 for SIGTERM)."""
     if "--dask" in mode:
         pytest.importorskip("distributed", reason="dask.distributed is not installed")
     V, F = core.read_obj(shared_mesh_path("stanford-bunny.obj"))   # ~5 s each with fit + refine
@@ -373,16 +404,17 @@ def test_ctrl_c_stops_the_workers_prints_the_summary_and_exits_130(tmp_path, mod
                   *mode, "--out", "out", "--report", "r.json"], tmp_path)
     time.sleep(2.5)
     t = time.perf_counter()
-    proc.send_signal(signal.SIGINT)
+    proc.send_signal(sig)
     out, err = proc.communicate(timeout=60)
-    assert proc.returncode == 130, out + err
+    status = 130 if sig == signal.SIGINT else 143
+    assert proc.returncode == status, out + err
     assert time.perf_counter() - t < 15
     assert "Traceback" not in err and "interrupted" in err
     body = rows(out)
     assert len(body) == 4 and sum(r.endswith("| cancelled |") for r in body) >= 2
     assert "cancelled; output in out" in out
     rep = json.loads((tmp_path / "r.json").read_text())
-    assert rep["interrupted"] and rep["exit_status"] == 130
+    assert rep["interrupted"] and rep["exit_status"] == status
     assert not [n for n in os.listdir(tmp_path / "out") if ".part" in n]   # no half-written file
     for r in rep["files"]:
         for path in r["outputs"]:
