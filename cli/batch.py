@@ -442,7 +442,20 @@ def _planned(args):
     blocked = [p for t in tasks for p in (t["cage"], t["refined"]) if p and os.path.isdir(p)]
     if blocked:
         return None, None, [f"{len(blocked)} output path(s) are folders, e.g. {blocked[0]}"]
-    return opts, tasks, _unwritable(tasks)
+    return opts, tasks, _inputs_overwritten(tasks) or _unwritable(tasks)
+
+
+def _inputs_overwritten(tasks):
+    """Messages for the outputs that are inputs of the batch (``scans/*.obj
+    --out scans`` with a ``scan_cage.obj`` among them: scan.obj's cage had
+    replaced it before it was read, and the report described the cage as
+    that input), at most 5, then how many more."""
+    inputs = {os.path.realpath(t["input"]): t["name"] for t in tasks}
+    found = [f"{t['name']}: its output {path} is the input {inputs[os.path.realpath(path)]}; "
+             f"choose another --out folder" for t in tasks for path in (t["cage"], t["refined"])
+             if path and os.path.realpath(path) in inputs]
+    more = [f"... and {len(found) - 5:,} more outputs that are inputs"]
+    return found[:5] + (more if len(found) > 5 else [])
 
 
 def _unwritable(tasks):

@@ -159,6 +159,24 @@ def test_a_folder_whose_files_cannot_be_listed_is_a_bad_path(tmp_path, monkeypat
     assert not os.path.exists(tmp_path / "out" / "ok_cage.obj")
 
 
+def test_an_output_that_is_an_input_is_refused_before_any_compute(tmp_path):
+    """``scans/*.obj --out scans`` with a ``scan_cage.obj`` among the inputs:
+    scan.obj's cage had replaced it before it was read (the report then
+    described the cage as that input); exit 2 naming both, nothing written."""
+    (tmp_path / "scans").mkdir()
+    core.write_obj(tmp_path / "scans" / "scan.obj", *bumpy_sphere(3))
+    mine = tmp_path / "scans" / "scan_cage.obj"
+    core.write_obj(mine, *icosphere(2))
+    before = mine.read_bytes()
+    proc = run_batch(["scans/scan.obj", "scans/scan_cage.obj", "--faces", "100", "--out",
+                      "scans"], tmp_path)
+    assert proc.returncode == 2 and proc.stdout == ""
+    assert (f"scan.obj: its output {mine} is the input scan_cage.obj; choose "
+            f"another --out folder") in proc.stderr
+    assert mine.read_bytes() == before and sorted(os.listdir(tmp_path / "scans")) == [
+        "scan.obj", "scan_cage.obj"]
+
+
 def test_one_row_per_file_whatever_the_error_text(tmp_path):
     bad = tmp_path / "two\nlines | pipe.obj"
     bad.write_text("v 0 0 0\nv 1 x 0\n")
