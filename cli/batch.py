@@ -138,9 +138,10 @@ def _run_arguments(p):
     p.add_argument("--log", metavar="FILE", default=None,
                    help="write Blender's log here (default: into the report, never to stdout)")
     p.add_argument("--skip-existing", action="store_true",
-                   help="skip a file whose outputs all exist already (to resume a batch; "
-                        "outputs are written only when every step succeeded; a failed file "
-                        "keeps its cage in OUT/incomplete/ and runs again)")
+                   help="skip a file whose outputs all exist already, made from it as it is "
+                        "now (to resume a batch; outputs are written only when every step "
+                        "succeeded; a failed file keeps its cage in OUT/incomplete/ and runs "
+                        "again; OUT/.meshadjust-sources.json records each output's input)")
     p.add_argument("--strict", action="store_true",
                    help="exit 1 when a file only warned (missed target, unchanged cage)")
 
@@ -371,7 +372,7 @@ def main(argv=None, *, entry=None, prog=PROG):
         for msg in problems:
             print(f"{prog}: {msg}", file=sys.stderr)
         return 2
-    results, todo = _skipped(tasks, args.skip_existing)
+    results, todo = _skipped(tasks, args.skip_existing, args.out)
     terminated = []
     try:
         with _terminate_as_interrupt(terminated):
@@ -473,18 +474,27 @@ def _unwritable(tasks):
     return found[:5] + (more if len(found) > 5 else [])
 
 
-def _skipped(tasks, skip_existing):
+def _skipped(tasks, skip_existing, out):
     """(results, todo): the reports of the tasks skipped because their outputs
     exist (with ``skip_existing``; None for the others) and the indices of
     the tasks to run. Final names hold only whole results (``cli.outputs``);
     a file whose last run failed (its cage in ``incomplete/``) runs again,
-    even beside the outputs of an earlier run."""
+    even beside the outputs of an earlier run, and so does one whose outputs
+    the output folder's record (:data:`~.outputs.SOURCES_FILE`) does not say
+    were made from this input as it is now: same-named inputs of several
+    folders are numbered by their place in the run (``scan_obj_2_cage.obj``),
+    and a run over other folders had taken another scan's cage for done; a
+    scan exported again since had kept its old cage."""
+    sources = outputs.read_sources(out) if skip_existing else {}
     results = [None] * len(tasks)
     todo = []
     for i, task in enumerate(tasks):
         outs = [p for p in (task["cage"], task["refined"]) if p]
+        stamp = outputs.source_stamp(task["input"])
         if skip_existing and all(os.path.isfile(p) for p in outs) and \
-                not os.path.exists(outputs.incomplete_path(task["cage"])):
+                not os.path.exists(outputs.incomplete_path(task["cage"])) and \
+                stamp is not None and all(sources.get(os.path.basename(p)) == stamp
+                                          for p in outs):
             results[i] = dict(runners.cancelled_report(task), status="skipped", outputs=outs)
         else:
             todo.append(i)
@@ -513,6 +523,10 @@ def _run(args, opts, entry, tasks, todo, results):
         i = todo[k]
         if may_leave_parts(result):
             outputs.remove_dead_parts(tasks[i], result["pid"])
+        if result["status"] in ("ok", "warn") and result["outputs"]:
+            stamp = outputs.source_stamp(tasks[i]["input"])
+            outputs.record_sources(args.out, {os.path.basename(p): stamp
+                                              for p in result["outputs"]})
         if log_fh is not None:
             if result.get("log"):
                 log_fh.write(f"==== {result['input']} ====\n{result['log']}\n")

@@ -20,6 +20,7 @@ folder's permissions are only known by trying.
 """
 
 import contextlib
+import json
 import os
 
 from .. import core
@@ -28,6 +29,51 @@ from . import blender_io
 CORE_FORMATS = {".obj", ".smf"}
 #: the folder, in the output folder, of the results a failed step left
 INCOMPLETE_FOLDER = "incomplete"
+
+
+#: in the output folder: per output file written there, the input it was made from (its
+#: real path, size and modification time), which ``--skip-existing`` compares
+SOURCES_FILE = ".meshadjust-sources.json"
+
+
+def source_stamp(path):
+    """What identifies the input file ``path`` for :data:`SOURCES_FILE`: its
+    real path, size and modification time (None when it cannot be read)."""
+    try:
+        st = os.stat(path)
+    except OSError:
+        return None
+    return {"input": os.path.realpath(path), "size": st.st_size, "mtime_ns": st.st_mtime_ns}
+
+
+def read_sources(folder):
+    """The :data:`SOURCES_FILE` of ``folder``: output file name -> its input's
+    :func:`source_stamp` (empty when there is none or it cannot be read)."""
+    try:
+        with open(os.path.join(folder, SOURCES_FILE), encoding="utf-8") as fh:
+            found = json.load(fh)
+    except (OSError, ValueError):
+        return {}
+    return found if isinstance(found, dict) else {}
+
+
+def record_sources(folder, written):
+    """Add ``written`` (output file name -> :func:`source_stamp` of its input)
+    to ``folder``'s :data:`SOURCES_FILE` (written to a temporary name and
+    renamed). Returns False when it could not be written: a later
+    ``--skip-existing`` then converts those inputs again, nothing worse."""
+    sources = read_sources(folder)
+    sources.update(written)
+    tmp = os.path.join(folder, f"{SOURCES_FILE}.part-{os.getpid()}")
+    try:
+        with open(tmp, "w", encoding="utf-8") as fh:
+            json.dump(sources, fh, indent=0, sort_keys=True)
+        os.replace(tmp, os.path.join(folder, SOURCES_FILE))
+    except OSError:
+        with contextlib.suppress(OSError):
+            os.remove(tmp)
+        return False
+    return True
 
 
 def incomplete_path(path):

@@ -40,6 +40,12 @@ def scattered(builder, k, spacing=4.0):
     return V, F
 
 
+def out_files(folder):
+    """The names in an output ``folder``, sorted, but the batch's own hidden
+    record of each output's input (``cli.outputs.SOURCES_FILE``)."""
+    return sorted(n for n in os.listdir(folder) if not n.startswith("."))
+
+
 def rows(stdout):
     return [ln for ln in stdout.splitlines() if ln.startswith("| ") and "---" not in ln][1:]
 
@@ -57,7 +63,7 @@ def errors_beside_a_whole_file(tmp_path, bad, whole):
     got = {f["name"]: f for f in json.loads((tmp_path / "r.json").read_text())["files"]}
     assert [got[n]["status"] for n in bad] == ["failed"] * len(bad)
     assert got[whole]["status"] == "ok" and got[whole]["faces_in"] == 320
-    assert [p.name for p in (tmp_path / "out").iterdir()] == [
+    assert out_files(tmp_path / "out") == [
         whole.rsplit(".", 1)[0] + "_cage.obj"]
     return {n: got[n]["error"] for n in bad}
 
@@ -108,10 +114,10 @@ def test_same_named_inputs_all_survive(tmp_path):
     proc = run_batch(["scan.obj", "scan.smf", "a/scan.obj", "scan.obj", "--faces", "100",
                       "--format", "obj", "--out", "out"], tmp_path)
     assert proc.returncode == 0, proc.stdout + proc.stderr
-    assert sorted(os.listdir(tmp_path / "out")) == ["scan_obj_2_cage.obj", "scan_obj_cage.obj",
+    assert out_files(tmp_path / "out") == ["scan_obj_2_cage.obj", "scan_obj_cage.obj",
                                                    "scan_smf_cage.obj"]
     scale = {n: np.abs(core.read_obj(tmp_path / "out" / n)[0]).max()
-             for n in os.listdir(tmp_path / "out")}
+             for n in out_files(tmp_path / "out")}
     assert scale["scan_obj_cage.obj"] < scale["scan_smf_cage.obj"] < scale["scan_obj_2_cage.obj"]
     assert len(rows(proc.stdout)) == 3          # scan.obj named twice is converted once
     assert "| a/scan.obj |" in proc.stdout and "| scan.smf |" in proc.stdout
@@ -327,6 +333,30 @@ def test_skip_existing_resumes_a_batch(tmp_path):
     assert proc.returncode == 0 and "0 converted, 0 failed, 2 skipped" in proc.stdout
 
 
+def test_skip_existing_skips_only_outputs_made_from_the_same_input(tmp_path):
+    """Same-named scans in several folders are numbered by their place in the
+    run: day 1 over s1 and s2, day 2 over s2 and a new s3, and s3/scan.obj
+    had been skipped for s2's cage (``scan_obj_2_cage.obj``), exit 0; a scan
+    exported again since its cage was made had kept the old cage. The output
+    folder records each output's input (path, size, time)."""
+    for k, level in ((1, 2), (2, 3)):
+        (tmp_path / f"s{k}").mkdir()
+        core.write_obj(tmp_path / f"s{k}" / "scan.obj", *icosphere(level))
+    args = ["--faces", "60", "--out", "out", "--skip-existing"]
+    assert run_batch(["s1", "s2", *args], tmp_path).returncode == 0
+    (tmp_path / "s3").mkdir()
+    core.write_obj(tmp_path / "s3" / "scan.obj", *bumpy_sphere(3))
+    proc = run_batch(["s2", "s3", *args], tmp_path)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    assert [r.split(" | ")[-1] for r in rows(proc.stdout)] == ["ok |", "ok |"]   # both renumbered
+    proc = run_batch(["s2", "s3", *args], tmp_path)
+    assert "0 converted, 0 failed, 2 skipped" in proc.stdout
+    core.write_obj(tmp_path / "s3" / "scan.obj", *bumpy_sphere(4))        # exported again
+    proc = run_batch(["s2", "s3", *args], tmp_path)
+    assert "1 converted, 0 failed, 1 skipped" in proc.stdout and "| s3/scan.obj | 5,120 |" \
+        in proc.stdout.replace("  ", " "), proc.stdout
+
+
 def test_the_fit_takes_at_most_two_levels_the_refined_mesh_all_asked_for(tmp_path):
     """A fit gains nothing past two levels (``core.MAX_FIT_LEVELS``) and costs 3-4x
     more at three: ``--refine 3`` fits at two and refines at three."""
@@ -453,7 +483,7 @@ def test_dask_local_cluster_batch_with_a_broken_file(tmp_path):
     assert "refers to a missing vertex" in body[0] and all(r.endswith("| ok |") for r in body[1:])
     assert "3 converted, 1 failed" in proc.stdout
     assert "4/4" in proc.stderr                          # the progress bar reached the end
-    assert sorted(os.listdir(tmp_path / "out")) == [f"s{k}_cage.obj" for k in range(3)]
+    assert out_files(tmp_path / "out") == [f"s{k}_cage.obj" for k in range(3)]
     rep = json.loads((tmp_path / "r.json").read_text())
     assert [f["status"] for f in rep["files"]] == ["failed", "ok", "ok", "ok"]
 
@@ -522,7 +552,7 @@ def test_dask_scheduler_and_worker_processes(tmp_path):
                          tmp_path)
         assert proc.returncode == 0, proc.stdout + proc.stderr
         assert "2 converted, 0 failed" in proc.stdout
-        assert sorted(os.listdir(tmp_path / "out")) == ["a_cage.obj", "b_cage.smf"]
+        assert out_files(tmp_path / "out") == ["a_cage.obj", "b_cage.smf"]
     finally:
         for p in reversed(procs):
             p.terminate()
@@ -563,7 +593,7 @@ def test_outputs_are_named_by_their_files_and_the_run_leaves_nothing_outside_out
                               timeout=300, cwd=str(tmp_path))
         assert proc.returncode == 0, proc.stdout + proc.stderr
         assert os.listdir(temp) == []                       # Blender's session folder removed
-        names = sorted(os.listdir(tmp_path / f"out{k}"))
+        names = out_files(tmp_path / f"out{k}")
         assert names == sorted([f"{long_stem}_cage.glb", "zeta_cage.glb"])   # no link's row
         outs.append({n: (tmp_path / f"out{k}" / n).read_bytes() for n in names})
     assert outs[0] == outs[1]                               # the same bytes, run after run

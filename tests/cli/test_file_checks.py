@@ -8,7 +8,7 @@ import struct
 
 import numpy as np
 
-from tests.cli.test_batch import rows, run_batch
+from tests.cli.test_batch import out_files, rows, run_batch
 from tests.cli.gltf_writer import write_gltf
 from tests.mesh_factory import icosphere, write_ply
 
@@ -42,7 +42,7 @@ def test_an_ascii_stl_cut_short_is_refused_or_warned_naming_the_file(tmp_path):
     assert opened["status"] == "warn" and opened["faces_in"] == 320
     assert opened["warnings"] == ["open.stl: ends after facet 320 without 'endsolid' (file "
                                   "truncated?): read the 320 whole facets"]
-    assert sorted(p.name for p in (tmp_path / "out").iterdir()) == ["open_cage.obj",
+    assert out_files(tmp_path / "out") == ["open_cage.obj",
                                                                     "whole_cage.obj"]
 
 
@@ -81,7 +81,7 @@ def test_a_ply_holding_more_than_its_header_declares_is_named_before_blender(tmp
             "record on line 172 ('3 0 46 43') holds 4 values, not the 3 its properties give") \
         in shifted
     assert padded.startswith("| padded.ply | 320 | 100 |") and padded.endswith("| ok |")
-    assert [p.name for p in (tmp_path / "out").iterdir()] == ["padded_cage.obj"]
+    assert out_files(tmp_path / "out") == ["padded_cage.obj"]
 
 
 def _cut_glb_bin(data, short):
@@ -120,7 +120,7 @@ def test_a_gltf_buffer_shorter_than_its_json_says_is_named_not_a_traceback(tmp_p
     full = (tmp_path / "ball.glb").stat().st_size
     assert cut["error"] == (f"cut.glb: read failed: cut.glb: its GLB header says {full:,} bytes, "
                             f"the file has {full - 100:,} (file truncated?)")
-    assert [p.name for p in (tmp_path / "out").iterdir()] == ["ball_gltf_cage.obj"]
+    assert out_files(tmp_path / "out") == ["ball_gltf_cage.obj"]
 
 
 def test_a_python_error_in_blenders_gltf_importer_is_one_line_naming_the_file(tmp_path):

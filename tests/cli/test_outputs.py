@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 import core
-from tests.cli.test_batch import ROOT, bumpy_sphere, rows, run_batch, run_broken
+from tests.cli.test_batch import bumpy_sphere, out_files, ROOT, rows, run_batch, run_broken
 from tests.mesh_factory import icosphere
 
 
@@ -25,16 +25,16 @@ def test_skip_existing_runs_again_a_file_whose_fit_failed(tmp_path):
     assert proc.returncode == 0, proc.stdout + proc.stderr
     row, = rows(proc.stdout)
     assert row.endswith("| ok |") and "1 converted, 0 failed; output in out" in proc.stdout
-    assert sorted(os.listdir(tmp_path / "out")) == ["ball_cage.obj"]     # incomplete/ removed
+    assert out_files(tmp_path / "out") == ["ball_cage.obj"]     # incomplete/ removed
     proc = run_batch(args, tmp_path)
     assert "0 converted, 0 failed, 1 skipped" in proc.stdout
     # a whole result of an earlier run beside a later run's failure: run again too
     proc = run_broken("fit_cage", args[:-1], tmp_path)
     assert proc.returncode == 1
-    assert sorted(os.listdir(tmp_path / "out")) == ["ball_cage.obj", "incomplete"]
+    assert out_files(tmp_path / "out") == ["ball_cage.obj", "incomplete"]
     proc = run_batch(args, tmp_path)
     assert proc.returncode == 0 and "1 converted, 0 failed; output in out" in proc.stdout
-    assert sorted(os.listdir(tmp_path / "out")) == ["ball_cage.obj"]
+    assert out_files(tmp_path / "out") == ["ball_cage.obj"]
 
 
 def test_the_deviation_reported_is_the_fitted_cages(tmp_path):
@@ -64,7 +64,7 @@ def test_an_output_name_too_long_is_refused_before_any_compute(tmp_path):
     assert proc.returncode == 2 and proc.stdout == "", proc.stdout + proc.stderr
     assert proc.stderr == (f"meshadjust_batch.py: {long_stem}.obj: cannot write its output "
                            f"{tmp_path / 'out' / long_stem}_cage.obj (File name too long)\n")
-    assert time.perf_counter() - t < 10 and os.listdir(tmp_path / "out") == []
+    assert time.perf_counter() - t < 10 and out_files(tmp_path / "out") == []
     proc = run_batch(["ok.obj", "--faces", "100", "--report", f"{long_stem}.json.report"],
                      tmp_path)
     assert proc.returncode == 2 and proc.stderr == (

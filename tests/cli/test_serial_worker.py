@@ -18,7 +18,7 @@ import pytest
 
 import core
 from cli.runners import CRASH_TEST_VARIABLE, RESULT_MARK
-from tests.cli.test_batch import ROOT, SCRIPT, rows
+from tests.cli.test_batch import out_files, ROOT, rows, SCRIPT
 from tests.mesh_factory import icosphere, shared_mesh_path, write_binary_stl, write_ply
 
 
@@ -64,7 +64,7 @@ def test_a_worker_crash_fails_its_file_and_a_new_worker_takes_the_rest(tmp_path)
     for f in files[:2] + files[3:]:
         assert f["faces_in"] == 320 and f["faces_out"] == 100
         assert f["outputs"] == [str(tmp_path / "out" / f["name"].replace(".ply", "_cage.ply"))]
-    assert sorted(os.listdir(tmp_path / "out")) == ["s0_cage.ply", "s1_cage.ply",
+    assert out_files(tmp_path / "out") == ["s0_cage.ply", "s1_cage.ply",
                                                     "s3_cage.ply", "s4_cage.ply"]
     # the files before the crash and the crashed one in one worker, the rest in another
     pids = [f["pid"] for f in files]
@@ -96,7 +96,7 @@ def test_a_serial_batch_converts_every_file_in_one_worker(tmp_path):
     assert proc.returncode == 0, proc.stdout + proc.stderr
     (obj_as_ply,) = _report(tmp_path)["files"]
     assert obj_as_ply["status"] == "ok"
-    assert os.listdir(tmp_path / "out2") == ["c_cage.ply"]
+    assert out_files(tmp_path / "out2") == ["c_cage.ply"]
 
 
 def test_an_obj_file_that_crashes_its_worker_fails_alone(tmp_path):
@@ -118,7 +118,7 @@ def test_an_obj_file_that_crashes_its_worker_fails_alone(tmp_path):
     assert [a["status"], b["status"], c["status"]] == ["ok", "failed", "ok"]
     assert b["failed_step"] == "worker" and b["outputs"] == [] and not b["timed_out"]
     assert a["pid"] == b["pid"] != c["pid"]             # a new worker after the crash
-    assert sorted(os.listdir(tmp_path / "out")) == ["a_cage.obj", "c_cage.smf"]
+    assert out_files(tmp_path / "out") == ["a_cage.obj", "c_cage.smf"]
 
 
 def _maps_bpy(pid):
@@ -210,7 +210,7 @@ def test_ctrl_c_in_a_serial_batch_stops_its_worker_and_the_batch_resumes(tmp_pat
     assert rep["files"][1]["pid"] == rep["files"][0]["pid"]      # stopped in the worker
     with pytest.raises(ProcessLookupError):                       # and the worker is gone
         os.kill(rep["files"][0]["pid"], 0)
-    assert sorted(os.listdir(tmp_path / "out")) == ["a_cage.ply", "a_refined.ply"]
+    assert out_files(tmp_path / "out") == ["a_cage.ply", "a_refined.ply"]
     _, again = _batch([*args[:1], "--faces", "100", "--out", "out", "--report", "r.json",
                        "--skip-existing", "--refine", "1"], tmp_path)
     assert again.returncode == 0, again.stdout + again.stderr

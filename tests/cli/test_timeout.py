@@ -13,7 +13,7 @@ import pytest
 
 import core
 from cli import runners
-from tests.cli.test_batch import rows, run_batch
+from tests.cli.test_batch import out_files, rows, run_batch
 from tests.mesh_factory import icosphere
 
 LIMIT = "1.5"
@@ -63,7 +63,7 @@ def test_a_file_past_its_time_limit_fails_timed_out_and_the_batch_goes_on(tmp_pa
     assert body[1].endswith(f"| FAILED: {b['error']} |")
     assert "2 converted, 1 failed; output in out" in proc.stdout
     # nothing left of it in the output folder: no cage, no temporary part, no incomplete/
-    assert sorted(os.listdir(tmp_path / "out")) == ["a_small_cage.obj", "c_small_cage.obj"]
+    assert out_files(tmp_path / "out") == ["a_small_cage.obj", "c_small_cage.obj"]
     for f in (a, c):
         assert f["faces_in"] == 80 and f["faces_out"] == 20
         assert core.read_obj(f["outputs"][0])[1].shape == (20, 3)
