@@ -70,7 +70,7 @@ def ply_header(path):
     head = _header_bytes(path)
     end = _header_end(head)
     if not head.startswith(b"ply"):
-        return None                  # (Blender's importer says "Invalid PLY header")
+        return None                  # (check names it: Blender's importer could crash on it)
     if end < 0:
         where = (f"in its first {len(head):,} bytes" if len(head) >= _HEADER_LIMIT else
                  "(found glued to the end of another line)" if b"end_header" in head else "")
@@ -263,4 +263,22 @@ def check(path):
     if problem:
         raise InputFileError(problem)
     header = ply_header(path)
-    return FileCheck({e: n for e, n, _ in header[2]}.get("face") if header else None)
+    if header is None:
+        raise InputFileError(_not_ply(path))
+    return FileCheck({e: n for e, n, _ in header[2]}.get("face"))
+
+
+def _not_ply(path):
+    """Why a ``.ply`` file without PLY's first word is none: its first bytes
+    said (a file of zero bytes, a copy cut short on a file system that
+    reserves its space, crashed Blender's importer: the worker died, SIGABRT,
+    and the batch could only say so)."""
+    with open(path, "rb") as fh:
+        first = fh.read(64)
+    name = os.path.basename(path)
+    if not first:
+        return f"{name}: the file is empty"
+    if not first.strip(b"\0"):
+        return (f"{name}: not a PLY file: its first bytes are zeros (a copy cut short, or a "
+                f"file never written)")
+    return f"{name}: not a PLY file: it does not begin with 'ply'"

@@ -243,3 +243,20 @@ def test_a_ply_header_without_its_end_header_line_is_refused_before_blender(tmp_
         check(str(tmp_path / "none.ply"))
     (tmp_path / "tail.ply").write_bytes(data.replace(b"end_header\n", b"end_header \r\n"))
     assert check(str(tmp_path / "tail.ply")).expected_faces == 80
+
+
+def test_a_ply_of_zero_bytes_or_without_its_first_word_is_named_before_blender(tmp_path):
+    """A ``.ply`` of zero bytes (a copy cut short where the file system had
+    reserved its space) crashed Blender's importer: the worker died
+    (SIGABRT) and the batch could only say so. Named before Blender reads it,
+    as is a file that does not begin with 'ply'."""
+    (tmp_path / "zeros.ply").write_bytes(bytes(100_000))
+    (tmp_path / "text.ply").write_text("not a ply file\n")
+    write_ply(tmp_path / "whole.ply", *icosphere(2))
+    errors = errors_beside_a_whole_file(tmp_path, ["zeros.ply", "text.ply"], "whole.ply")
+    assert errors["zeros.ply"].endswith("zeros.ply: not a PLY file: its first bytes are zeros (a "
+                                        "copy cut short, or a file never written)")
+    assert errors["text.ply"].endswith("text.ply: not a PLY file: it does not begin with 'ply'")
+    for name in ("zeros.ply", "text.ply"):
+        with pytest.raises(InputFileError, match="not a PLY file"):
+            check(tmp_path / name)
