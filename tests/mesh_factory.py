@@ -563,3 +563,9 @@ def with_pebbles(V, F, k=100, size=0.02, seed=8):
     pebbles = P[None] * size * d * rng.uniform(0.6, 1.0, (k, 1, 3)) + centre[:, None]
     faces = Q[None] + V.shape[0] + P.shape[0] * np.arange(k)[:, None, None]
     return np.vstack([V, pebbles.reshape(-1, 3)]), np.vstack([F, faces.reshape(-1, 3)])
+
+
+def out_files(folder):
+    """The names in an output ``folder``, sorted, but the batch's own hidden
+    record of each output's input (``cli.outputs.SOURCES_FILE``)."""
+    return sorted(n for n in os.listdir(folder) if not n.startswith("."))

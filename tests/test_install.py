@@ -84,7 +84,7 @@ def test_the_package_installs_with_numpy_only(bare_venv):
 def test_the_console_script_converts_obj_and_smf_without_blender(bare_venv, tmp_path):
     sys.path.insert(0, ROOT)
     import core
-    from tests.mesh_factory import icosphere
+    from tests.mesh_factory import icosphere, out_files
     V, F = icosphere(3)
     core.write_obj(tmp_path / "ball.obj", V, F)
     core.write_smf(tmp_path / "ball2.smf", V * 2, F)
@@ -97,7 +97,7 @@ def test_the_console_script_converts_obj_and_smf_without_blender(bare_venv, tmp_
                           timeout=300)
     assert proc.returncode == 0, proc.stdout + proc.stderr
     assert "2 converted, 0 failed" in proc.stdout
-    assert sorted(os.listdir(tmp_path / "out")) == ["ball2_cage.smf", "ball_cage.obj"]
+    assert out_files(tmp_path / "out") == ["ball2_cage.smf", "ball_cage.obj"]
     proc = subprocess.run([exe, "ball.obj", "--faces", "100", "--format", "ply", "--out", "o2"],
                           capture_output=True, text=True, cwd=tmp_path, timeout=300)
     assert proc.returncode == 2 and "--format ply needs Blender (the bpy module" in proc.stderr
@@ -113,7 +113,7 @@ def test_the_dask_extra_runs_a_batch_on_a_local_cluster(bare_venv, tmp_path):
     assert proc.returncode == 0, proc.stdout + proc.stderr
     sys.path.insert(0, ROOT)
     import core
-    from tests.mesh_factory import icosphere
+    from tests.mesh_factory import icosphere, out_files
     V, F = icosphere(3)
     core.write_smf(tmp_path / "ball.smf", V, F)
     (tmp_path / "bad.obj").write_text("v 0 0 0\nf 1 2 3\n")
@@ -122,4 +122,4 @@ def test_the_dask_extra_runs_a_batch_on_a_local_cluster(bare_venv, tmp_path):
                           capture_output=True, text=True, cwd=tmp_path, timeout=300)
     assert proc.returncode == 1, proc.stdout + proc.stderr
     assert "1 converted, 1 failed" in proc.stdout and "refers to a missing vertex" in proc.stdout
-    assert os.listdir(tmp_path / "out") == ["ball_cage.smf"]
+    assert out_files(tmp_path / "out") == ["ball_cage.smf"]

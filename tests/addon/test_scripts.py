@@ -7,7 +7,7 @@ import sys
 
 import numpy as np
 
-from tests.mesh_factory import icosphere, shared_mesh_path
+from tests.mesh_factory import icosphere, out_files, shared_mesh_path
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
@@ -54,7 +54,7 @@ def test_batch_parallel_jobs_and_ply_output(tmp_path):
                        str(tmp_path / "s1.obj"), "--ratio", "0.05", "--format", "ply",
                        "--jobs", "2", "--out", str(out)], tmp_path)
     assert proc.returncode == 0, proc.stdout + proc.stderr
-    assert sorted(os.listdir(out)) == ["s0_cage.ply", "s1_cage.ply"]
+    assert out_files(out) == ["s0_cage.ply", "s1_cage.ply"]
     assert "2 converted, 0 failed" in proc.stdout
 
 
@@ -85,7 +85,7 @@ def test_batch_ply_input_with_refine_writes_both_meshes(tmp_path):
     proc = run_script(["scripts/meshadjust_batch.py", str(tmp_path / "a.ply"), "--faces", "50",
                        "--refine", "1", "--out", str(out)], tmp_path)
     assert proc.returncode == 0, proc.stdout + proc.stderr
-    assert sorted(os.listdir(out)) == ["a_cage.ply", "a_refined.ply"]
+    assert out_files(out) == ["a_cage.ply", "a_refined.ply"]
     assert "1 converted, 0 failed" in proc.stdout
     text = (out / "a_refined.ply").read_bytes()
     assert b"element face 200" in text[:400]          # 50 faces, one level: 4 x 50
@@ -128,7 +128,7 @@ def test_batch_names_bad_files_and_keeps_blenders_log_out_of_stdout(tmp_path):
             "finite number (NaN or infinity; Blender's importer would read them as 0) |") in proc.stdout
     assert "PLY import of" not in proc.stdout + proc.stderr
     assert "PLY import of 'good.ply'" in log.read_text()
-    assert sorted(os.listdir(out)) == ["dropped_cage.ply", "good_cage.ply"]
+    assert out_files(out) == ["dropped_cage.ply", "good_cage.ply"]
     import json
     files = json.loads((tmp_path / "r.json").read_text())["files"]
     assert [f["status"] for f in files] == ["ok", "failed", "warn", "failed", "failed"]

@@ -14,7 +14,8 @@ import pytest
 import core
 from cli.blender_io import grouped_warnings
 from cli.ply_file import ply_size_problem
-from tests.mesh_factory import (cad_cylinder, icosphere, octahedron, shared_mesh_path, tetrahedron,
+from tests.mesh_factory import (cad_cylinder, icosphere, octahedron, out_files, shared_mesh_path,
+                                tetrahedron,
                                 write_binary_stl, write_ply)
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
@@ -39,11 +40,6 @@ def scattered(builder, k, spacing=4.0):
     F = np.concatenate([F0 + len(V0) * i for i in range(k)])
     return V, F
 
-
-def out_files(folder):
-    """The names in an output ``folder``, sorted, but the batch's own hidden
-    record of each output's input (``cli.outputs.SOURCES_FILE``)."""
-    return sorted(n for n in os.listdir(folder) if not n.startswith("."))
 
 
 def rows(stdout):

@@ -8,9 +8,9 @@ import struct
 
 import numpy as np
 
-from tests.cli.test_batch import out_files, rows, run_batch
+from tests.cli.test_batch import rows, run_batch
 from tests.cli.gltf_writer import write_gltf
-from tests.mesh_factory import icosphere, write_ply
+from tests.mesh_factory import icosphere, out_files, write_ply
 
 
 def write_ascii_stl(path, V, F, *, name="ball"):

@@ -4,9 +4,9 @@
 import json
 
 from cli.file_check import InputFileError
-from tests.cli.test_batch import out_files, run_batch
+from tests.cli.test_batch import run_batch
 from tests.cli.test_real_world_files import write_gltf_nodes
-from tests.mesh_factory import icosphere
+from tests.mesh_factory import icosphere, out_files
 
 
 def test_a_triangle_primitive_whose_indices_make_no_whole_triangles_is_named(tmp_path):

@@ -10,8 +10,8 @@ import pytest
 
 from cli.file_check import InputFileError
 from cli.ply_file import check, ply_size_problem
-from tests.cli.test_batch import errors_beside_a_whole_file, out_files, run_batch
-from tests.mesh_factory import icosphere, write_ply
+from tests.cli.test_batch import errors_beside_a_whole_file, run_batch
+from tests.mesh_factory import icosphere, out_files, write_ply
 
 
 def _ascii_ply(path, V, F, *, replace=None):

@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 
 import core
-from tests.cli.test_batch import bumpy_sphere, out_files, ROOT, rows, run_batch, run_broken
-from tests.mesh_factory import icosphere
+from tests.cli.test_batch import bumpy_sphere, ROOT, rows, run_batch, run_broken
+from tests.mesh_factory import icosphere, out_files
 
 
 def test_skip_existing_runs_again_a_file_whose_fit_failed(tmp_path):

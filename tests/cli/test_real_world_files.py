@@ -7,9 +7,9 @@ import json
 
 import numpy as np
 
-from tests.cli.test_batch import out_files, rows, run_batch
+from tests.cli.test_batch import rows, run_batch
 from tests.cli.test_file_checks import write_ascii_stl
-from tests.mesh_factory import icosphere, write_binary_stl
+from tests.mesh_factory import icosphere, out_files, write_binary_stl
 
 
 def test_stl_in_capitals_or_with_bytes_after_its_triangles_is_read(tmp_path):

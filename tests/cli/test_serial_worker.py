@@ -18,8 +18,8 @@ import pytest
 
 import core
 from cli.runners import CRASH_TEST_VARIABLE, RESULT_MARK
-from tests.cli.test_batch import out_files, ROOT, rows, SCRIPT
-from tests.mesh_factory import icosphere, shared_mesh_path, write_binary_stl, write_ply
+from tests.cli.test_batch import ROOT, rows, SCRIPT
+from tests.mesh_factory import icosphere, out_files, shared_mesh_path, write_binary_stl, write_ply
 
 
 def _batch(args, tmp_path, **env):

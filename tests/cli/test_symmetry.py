@@ -7,7 +7,8 @@ import numpy as np
 
 import core
 from core.mirror import mirror_partners
-from tests.cli.test_batch import bumpy_sphere, out_files, run_batch
+from tests.cli.test_batch import bumpy_sphere, run_batch
+from tests.mesh_factory import out_files
 
 
 def test_symmetry_option_writes_a_mirror_symmetric_fitted_cage(tmp_path):

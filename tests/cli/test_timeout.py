@@ -13,8 +13,8 @@ import pytest
 
 import core
 from cli import runners
-from tests.cli.test_batch import out_files, rows, run_batch
-from tests.mesh_factory import icosphere
+from tests.cli.test_batch import rows, run_batch
+from tests.mesh_factory import icosphere, out_files
 
 LIMIT = "1.5"
 #: the steps of a file converted without --fit or --refine, in order
