@@ -1257,14 +1257,19 @@ def _unfold(binding, D, Vc, hit=None, last=None, DT=None):
     (``hit`` None), those around the dense vertices the cage
     vertices moved from rest influence (the others are where they were at
     rest, bit for bit), or every face (over ``DT``, ``D`` transposed) when
-    more than ``_REPAIR_ALL_SHARE`` of the cage moved."""
+    more than ``_REPAIR_ALL_SHARE`` of the cage moved or the cage reads as
+    mirrored (:func:`_handedness`: every row changed)."""
     state = _repair_state(binding)
     if state is None:
         return Repair.none()
     FT, rest = state["F_t"], state["normals"]
+    handed = binding._cache.get("handed", 1.0)
     if hit is None:
         moved = np.flatnonzero((Vc != binding.V_cage_rest).any(axis=1))
-        if moved.shape[0] > _REPAIR_ALL_SHARE * binding.n_cage:
+        if moved.shape[0] > _REPAIR_ALL_SHARE * binding.n_cage or handed < 0:
+            # (a mirrored cage changes every row: one cage vertex of the cow's pushed 2
+            # diagonals through it made the cage read as mirrored, and the faces away from
+            # rest elsewhere went untested, unlike the incremental updates that followed)
             away = away_t(DT, FT, rest)
         elif moved.size:
             away = _away_around(binding, state, D, _influenced_dense(binding, moved))
@@ -1275,7 +1280,7 @@ def _unfold(binding, D, Vc, hit=None, last=None, DT=None):
         if last.rows.size or last.away.size:
             around = np.union1d(_stars(binding, state).around(last.rows), last.away)
             away = np.union1d(away, away_rows(D, FT, around, rest))
-    rotate, transform = _rotation(binding, Vc, binding._cache.get("handed", 1.0))
+    rotate, transform = _rotation(binding, Vc, handed)
     folded = turned_over(D, FT, away, rest, rotate)
     if not folded.size:
         return repair(D, state["V_rest"], binding.F_dense, FT, None, folded, rest, rotate, away)
