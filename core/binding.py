@@ -54,6 +54,7 @@ an incremental deform equals the full one bit for bit.
 
 import threading
 import weakref
+from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
 from typing import NamedTuple
 
@@ -350,6 +351,10 @@ class Binding:
         TopologyMismatchError
             The stored fingerprint does not match the rebuilt operator's.
         """
+        if not isinstance(arrays, Mapping):
+            raise InvalidArgumentError(
+                f"Binding.from_arrays: arrays must be a mapping of names to arrays (what "
+                f"Binding.to_arrays gives, or an np.load of it), got {type(arrays).__name__}")
         missing = [k for k in _ARRAY_KEYS if k not in arrays]
         if missing:
             raise InvalidArgumentError(f"Binding.from_arrays: missing keys {missing}")

@@ -194,6 +194,22 @@ def test_to_arrays_from_arrays_round_trip(sphere_binding):
     assert b2.fingerprint == b.fingerprint and b2.creases is None
 
 
+@pytest.mark.parametrize("arrays", [None, [("fine_face", [0])], "binding.npz", 3])
+def test_from_arrays_of_something_not_a_mapping_is_named(arrays):
+    """None, a list, a file name: a raw TypeError (``in`` on None) or a missing
+    key named as the list's first pair, before."""
+    with pytest.raises(InvalidArgumentError, match="arrays must be a mapping of names to arrays"):
+        Binding.from_arrays(arrays)
+
+
+def test_from_arrays_takes_an_npz_file(sphere_binding, tmp_path):
+    Vd, Fd, Vc, Fc, b = sphere_binding
+    np.savez(tmp_path / "b.npz", **b.to_arrays())
+    with np.load(tmp_path / "b.npz") as stored:
+        b2 = Binding.from_arrays(stored)
+    assert np.array_equal(deform(b2, Vc * 1.1), deform(b, Vc * 1.1))
+
+
 def test_from_arrays_without_the_repair_keys_binds_without_repair(sphere_binding):
     # a binding stored before the fold repair (or without the dense faces) still
     # loads and deforms, the same as long as nothing turns over
