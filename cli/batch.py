@@ -54,6 +54,8 @@ if __name__ == "__main__" and __package__ == "cli":
 from . import blender_io  # noqa: E402
 from . import convert as _convert  # noqa: E402
 from . import dask_runner, outputs, report, runners  # noqa: E402
+from ..core.errors import InvalidArgumentError  # noqa: E402
+from ..core.subdivide import check_subdivision_args  # noqa: E402
 
 PROG = "meshadjust-batch"
 #: how a worker process is started from an installed package
@@ -164,6 +166,11 @@ def _check(p, args):
         p.error(f"--timeout must be a positive number of seconds, got {args.timeout:g}")
     if args.refine < 0 or args.jobs < 1:
         p.error("--refine must be >= 0 and --jobs >= 1")
+    try:     # (levels no cage of --faces faces, or of 4, takes: --refine 99 failed after the
+        #      simplify, its cage kept in incomplete/)
+        check_subdivision_args(args.refine, args.scheme, "--refine", args.faces or 4)
+    except InvalidArgumentError as exc:
+        p.error(str(exc))
 
 
 def options(args):

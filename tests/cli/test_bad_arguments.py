@@ -27,6 +27,9 @@ from tests.mesh_factory import icosphere
     (["--faces", "40", "--timeout", "inf"],
      "--timeout must be a positive number of seconds, got inf"),
     (["--faces", "40", "--timeout", "30s"], "argument --timeout: invalid float value: '30s'"),
+    (["--faces", "1000", "--refine", "99"], "--refine: levels=99 would make 4.02e+62 faces of "
+                                            "1,000 (each level multiplies them by 4)"),
+    (["--ratio", "0.5", "--refine", "15"], "--refine: levels=15 would make 4.29e+09 faces of 4"),
 ])
 def test_a_number_the_batch_cannot_use_is_a_bad_argument(tmp_path, args, said):
     core.write_obj(tmp_path / "ball.obj", *icosphere(2))
