@@ -320,29 +320,6 @@ def _half_inputs(half, clean, weights, locked, neg_to_half):
     return w, lk
 
 
-def _locks_off_seam(half, clean, k, locked, neg_to_half, seam):
-    """``neg_to_half`` with each locked vertex of the negative side that it
-    puts on a ``seam`` vertex (never locked: it must stay on the plane) put
-    on the corner off the seam with the largest barycentric weight of the
-    half face closest to its mirror image instead, which the lock then holds
-    (a lock on the cow's side 0.1 from its plane, mirrored onto the seam,
-    had let that vertex move 8.6% of the diagonal); kept where every corner
-    is on the seam."""
-    lc = per_clean_vertex(locked, clean)
-    lost = np.flatnonzero(lc & (neg_to_half >= 0))
-    lost = lost[seam[neg_to_half[lost]]]
-    if lost.size == 0:
-        return neg_to_half
-    hit = TriangleIndex(half.V, half.F).closest(mirror(clean.V[lost], k))
-    corners = half.F[hit.face]
-    bary = np.where(seam[corners], -1.0, hit.bary)
-    best = np.argmax(bary, axis=1)
-    off = bary[np.arange(lost.size), best] >= 0
-    out = neg_to_half.copy()
-    out[lost[off]] = corners[np.arange(lost.size), best][off]
-    return out
-
-
 def _symmetrised(half, Vs, F, s, k, keep=None):
     """The half's positions moved halfway to the mirrored other side: each
     vertex averaged with its closest point on the negative half, mirrored
@@ -369,18 +346,28 @@ def _symmetrised(half, Vs, F, s, k, keep=None):
     return W, float(hit.distance.max(initial=0.0))
 
 
-def _negative_to_half(clean, half, k):
+def _negative_to_half(clean, half, k, held=None, seam=None):
     """For each clean vertex not in the half, the half vertex nearest to its
     mirrored position (the corner of the closest half face with the largest
     barycentric weight); -1 for clean vertices in the half. And the largest
-    distance of such a mirrored position from the half."""
+    distance of such a mirrored position from the half. A vertex of ``held``
+    ((n_clean,) bool, the locked ones) takes the corner off the ``seam``
+    ((n_half,) bool, never locked: it must stay on the plane) with the
+    largest weight instead, which its lock then holds, where the face has
+    one (a lock on the cow's side 0.1 from its plane, mirrored onto the
+    seam, had let that vertex move 8.6% of the diagonal)."""
     out = np.full(clean.V.shape[0], -1, dtype=np.int64)
     miss = np.flatnonzero(half.of_clean < 0)
     if miss.size == 0 or half.F.shape[0] == 0:
         return out, 0.0
     hit = TriangleIndex(half.V, half.F).closest(mirror(clean.V[miss], k))
-    corner = np.argmax(hit.bary, axis=1)
-    out[miss] = half.F[hit.face, corner]
+    corners = half.F[hit.face]
+    bary = hit.bary
+    if held is not None:
+        on_seam = seam[corners]
+        bary = np.where(held[miss, None] & on_seam & ~on_seam.all(axis=1, keepdims=True),
+                        -1.0, bary)
+    out[miss] = corners[np.arange(miss.size), np.argmax(bary, axis=1)]
     return out, float(hit.distance.max())
 
 
@@ -630,9 +617,8 @@ def _half_set_up(clean, s, k, weights, lk):
     half = _cut_half(Vs, clean.F, s, k)
     seam = np.zeros(half.V.shape[0], dtype=bool)
     seam[_seam_edges(half.F, half.V.shape[0], half.on_plane).ravel()] = True
-    neg_to_half, beyond = _negative_to_half(clean, half, k)
-    if lk is not None:
-        neg_to_half = _locks_off_seam(half, clean, k, lk, neg_to_half, seam)
+    neg_to_half, beyond = _negative_to_half(
+        clean, half, k, None if lk is None else per_clean_vertex(lk, clean), seam)
     w_half, lk_half = _half_inputs(half, clean, weights, lk, neg_to_half)
     if lk_half is not None:
         lk_half &= ~seam
