@@ -143,7 +143,7 @@ def _run_arguments(p):
                    help="skip a file whose outputs all exist already, made from it as it is "
                         "now (to resume a batch; outputs are written only when every step "
                         "succeeded; a failed file keeps its cage in OUT/incomplete/ and runs "
-                        "again; OUT/.meshadjust-sources.json records each output's input)")
+                        "again; OUT/.meshadjust-sources.jsonl records each output's input)")
     p.add_argument("--strict", action="store_true",
                    help="exit 1 when a file only warned (missed target, unchanged cage)")
 
@@ -497,15 +497,20 @@ def _skipped(tasks, skip_existing, out):
     todo = []
     for i, task in enumerate(tasks):
         outs = [p for p in (task["cage"], task["refined"]) if p]
-        stamp = outputs.source_stamp(task["input"])
         if skip_existing and all(os.path.isfile(p) for p in outs) and \
                 not os.path.exists(outputs.incomplete_path(task["cage"])) and \
-                stamp is not None and all(sources.get(os.path.basename(p)) == stamp
-                                          for p in outs):
+                _made_from(task["input"], outs, sources):
             results[i] = dict(runners.cancelled_report(task), status="skipped", outputs=outs)
         else:
             todo.append(i)
     return results, todo
+
+
+def _made_from(path, outs, sources):
+    """Whether the record ``sources`` (:func:`~.outputs.read_sources`) says
+    each of the outputs ``outs`` was made from the input ``path`` as it is now."""
+    stamp = outputs.source_stamp(path)
+    return stamp is not None and all(sources.get(os.path.basename(p)) == stamp for p in outs)
 
 
 def may_leave_parts(result):

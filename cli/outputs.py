@@ -31,9 +31,11 @@ CORE_FORMATS = {".obj", ".smf"}
 INCOMPLETE_FOLDER = "incomplete"
 
 
-#: in the output folder: per output file written there, the input it was made from (its
-#: real path, size and modification time), which ``--skip-existing`` compares
-SOURCES_FILE = ".meshadjust-sources.json"
+#: in the output folder: a line per output file written there, naming the input it was
+#: made from (its real path, size and modification time), which ``--skip-existing``
+#: compares; appended to (a whole JSON file rewritten after each of a batch's n files is
+#: O(n^2) bytes: some 15 GB over 10,000 files, by estimate), an output's last line counting
+SOURCES_FILE = ".meshadjust-sources.jsonl"
 
 
 def source_stamp(path):
@@ -48,30 +50,32 @@ def source_stamp(path):
 
 def read_sources(folder):
     """The :data:`SOURCES_FILE` of ``folder``: output file name -> its input's
-    :func:`source_stamp` (empty when there is none or it cannot be read)."""
+    :func:`source_stamp`, from its last line (empty when there is none or it
+    cannot be read; a line cut short is passed over: its output runs again)."""
+    found = {}
     try:
         with open(os.path.join(folder, SOURCES_FILE), encoding="utf-8") as fh:
-            found = json.load(fh)
-    except (OSError, ValueError):
+            for line in fh:
+                with contextlib.suppress(ValueError, TypeError, KeyError, AttributeError):
+                    entry = json.loads(line)
+                    found[entry.pop("output")] = entry
+    except OSError:
         return {}
-    return found if isinstance(found, dict) else {}
+    return found
 
 
 def record_sources(folder, written):
-    """Add ``written`` (output file name -> :func:`source_stamp` of its input)
-    to ``folder``'s :data:`SOURCES_FILE` (written to a temporary name and
-    renamed). Returns False when it could not be written: a later
-    ``--skip-existing`` then converts those inputs again, nothing worse."""
-    sources = read_sources(folder)
-    sources.update(written)
-    tmp = os.path.join(folder, f"{SOURCES_FILE}.part-{os.getpid()}")
+    """Append ``written`` (output file name -> :func:`source_stamp` of its
+    input) to ``folder``'s :data:`SOURCES_FILE`, a line each (the newline
+    first: a line an interrupted batch cut short leaves the next one whole).
+    Returns False when it could not be written: a later ``--skip-existing``
+    then converts those inputs again, nothing worse."""
+    lines = "".join("\n" + json.dumps({"output": name, **(stamp or {})}, sort_keys=True)
+                    for name, stamp in written.items())
     try:
-        with open(tmp, "w", encoding="utf-8") as fh:
-            json.dump(sources, fh, indent=0, sort_keys=True)
-        os.replace(tmp, os.path.join(folder, SOURCES_FILE))
+        with open(os.path.join(folder, SOURCES_FILE), "a", encoding="utf-8") as fh:
+            fh.write(lines)
     except OSError:
-        with contextlib.suppress(OSError):
-            os.remove(tmp)
         return False
     return True
 

@@ -345,12 +345,17 @@ def test_skip_existing_skips_only_outputs_made_from_the_same_input(tmp_path):
     proc = run_batch(["s2", "s3", *args], tmp_path)
     assert proc.returncode == 0, proc.stdout + proc.stderr
     assert [r.split(" | ")[-1] for r in rows(proc.stdout)] == ["ok |", "ok |"]   # both renumbered
+    record, = (tmp_path / "out").glob(".meshadjust-sources*")
+    with open(record, "a") as fh:
+        fh.write('\n{"output": "scan_obj_cage.obj", "inp')             # a line cut short
     proc = run_batch(["s2", "s3", *args], tmp_path)
     assert "0 converted, 0 failed, 2 skipped" in proc.stdout
     core.write_obj(tmp_path / "s3" / "scan.obj", *bumpy_sphere(4))        # exported again
     proc = run_batch(["s2", "s3", *args], tmp_path)
     assert "1 converted, 0 failed, 1 skipped" in proc.stdout and "| s3/scan.obj | 5,120 |" \
         in proc.stdout.replace("  ", " "), proc.stdout
+    proc = run_batch(["s2", "s3", *args], tmp_path)        # (its line after the cut one is whole)
+    assert "0 converted, 0 failed, 2 skipped" in proc.stdout
 
 
 def test_the_fit_takes_at_most_two_levels_the_refined_mesh_all_asked_for(tmp_path):
