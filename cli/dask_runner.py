@@ -10,13 +10,13 @@ are cancelled by the client.
 import contextlib
 import json
 import logging
-import signal
 import sys
 import time
 import uuid
 
 from . import runners
-from .runners import POLL_S, STOP_GRACE_S, WorkerProcess, cancelled_report, failed_report
+from .runners import (POLL_S, STOP_GRACE_S, WorkerProcess, cancelled_report, failed_report,
+                      stops_ignored)
 
 #: seconds between a Dask task's looks at the batch's cancel event (a round trip each)
 _EVENT_POLL_S = 0.5
@@ -111,8 +111,7 @@ def run_dask(tasks, payload, entry, address, jobs, on_done, *, timeout=None):
                 collect(fut)
             return False
         except KeyboardInterrupt:
-            old = {s: signal.signal(s, signal.SIG_IGN) for s in (signal.SIGINT, signal.SIGTERM)}
-            try:
+            with stops_ignored():
                 Event(cancel_event, client=client).set()
                 running = {k for keys in client.processing().values() for k in keys}
                 waiting = [f for f in futures if index[f.key] not in done]
@@ -126,9 +125,6 @@ def run_dask(tasks, payload, entry, address, jobs, on_done, *, timeout=None):
                         time.sleep(POLL_S)
                     if f.status == "finished":
                         collect(f)
-            finally:
-                for s, handler in old.items():
-                    signal.signal(s, handler)
             return True
     finally:
         with quiet_logs("distributed"):

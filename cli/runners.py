@@ -31,6 +31,7 @@ The Dask runner (:mod:`.dask_runner`) starts such a worker on the Dask
 worker machines.
 """
 
+import contextlib
 import json
 import os
 import queue
@@ -89,13 +90,22 @@ def _stop_all(running, tasks, on_done):
     worker}) at once, then each stopped in turn (:meth:`_Worker.stop`) and
     its file reported (cancelled, unless it finished in between). A second
     Ctrl-C or SIGTERM is ignored meanwhile: it must not cut this short."""
-    old = {s: signal.signal(s, signal.SIG_IGN) for s in (signal.SIGINT, signal.SIGTERM)}
-    try:
+    with stops_ignored():
         for w in running.values():
             w.terminate()
         for i, w in running.items():
             w.stop()
             on_done(i, w.report(tasks[i], stopped=True))
+
+
+@contextlib.contextmanager
+def stops_ignored():
+    """Ctrl-C and SIGTERM ignored inside (a batch stopping its workers after
+    one of them: a second must not cut that short), their handlers put back
+    after."""
+    old = {s: signal.signal(s, signal.SIG_IGN) for s in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        yield
     finally:
         for s, handler in old.items():
             signal.signal(s, handler)
