@@ -462,8 +462,7 @@ def _inputs_overwritten(tasks):
     found = [f"{t['name']}: its output {path} is the input {inputs[os.path.realpath(path)]}; "
              f"choose another --out folder" for t in tasks for path in (t["cage"], t["refined"])
              if path and os.path.realpath(path) in inputs]
-    more = [f"... and {len(found) - 5:,} more outputs that are inputs"]
-    return found[:5] + (more if len(found) > 5 else [])
+    return _first_five(found, "outputs that are inputs")
 
 
 def _unwritable(tasks):
@@ -477,8 +476,12 @@ def _unwritable(tasks):
             if why:
                 found.append(f"{t['name']}: cannot write its output {path} ({why})")
                 break
-    more = [f"... and {len(found) - 5:,} more inputs whose outputs cannot be written"]
-    return found[:5] + (more if len(found) > 5 else [])
+    return _first_five(found, "inputs whose outputs cannot be written")
+
+
+def _first_five(found, what):
+    """The messages ``found``, at most five, then how many more ``what``."""
+    return found[:5] + ([f"... and {len(found) - 5:,} more {what}"] if len(found) > 5 else [])
 
 
 def _skipped(tasks, skip_existing, out):
