@@ -188,16 +188,24 @@ def _is_output(name):
 
 
 def collect_inputs(paths, out=None):
-    """Files to convert, in the order given (folders: their mesh files,
-    sorted; in the output folder itself, not the cages and refined meshes a
-    run wrote there); the same file named twice is converted once."""
-    files, seen = [], set()
+    """``(files, problems)``: the files to convert, in the order given
+    (folders: their mesh files, sorted; in the output folder itself, not the
+    cages and refined meshes a run wrote there; the same file named twice is
+    converted once), and a message for each folder whose files cannot be
+    listed (no read permission: the batch had ended in a raw PermissionError,
+    exit 1, the other inputs not converted)."""
+    files, seen, problems = [], set(), []
     out = os.path.realpath(out) if out is not None else None
     for path in paths:
         if os.path.isdir(path):
             own = os.path.realpath(path) == out
+            try:
+                names = os.listdir(path)
+            except OSError as exc:
+                problems.append(f"{path}: cannot list the folder's files ({exc.strerror})")
+                continue
             found = _without_links_to_others(sorted(
-                os.path.join(path, f) for f in os.listdir(path)
+                os.path.join(path, f) for f in names
                 if os.path.splitext(f)[1].lower() in _convert.INPUT_EXTENSIONS
                 and not (own and _is_output(f))))
         else:
@@ -207,21 +215,7 @@ def collect_inputs(paths, out=None):
             if key not in seen:
                 seen.add(key)
                 files.append(f)
-    return files
-
-
-def _unlistable(paths):
-    """Messages for the input folders of ``paths`` whose files cannot be
-    listed (no read permission: the batch had ended in a raw PermissionError,
-    exit 1, the other inputs not converted)."""
-    found = []
-    for path in paths:
-        if os.path.isdir(path):
-            try:
-                os.listdir(path)
-            except OSError as exc:
-                found.append(f"{path}: cannot list the folder's files ({exc.strerror})")
-    return found
+    return files, problems
 
 
 def _without_links_to_others(found):
@@ -439,10 +433,10 @@ def _planned(args):
     """(options, tasks, problems) of the batch: ``problems`` the messages of
     why it cannot run (paths missing, no input, an output path that is a
     folder or cannot be written), empty when it can."""
-    problems = check_paths(args) + _unlistable(args.inputs)
-    if problems:
-        return None, None, problems
-    files = collect_inputs(args.inputs, args.out)
+    problems = check_paths(args)
+    files, unlisted = collect_inputs(args.inputs, args.out)
+    if problems or unlisted:
+        return None, None, problems + unlisted
     if not files:
         return None, None, ["no input files found"]
     opts = options(args)
