@@ -257,6 +257,34 @@ def torus(n_major=24, n_minor=12, R=1.0, r=0.35, bump=0.0, bump_waves=(40, 12)):
     return V, F
 
 
+def lens(n=12, height=3e-4, rings=1):
+    """A closed lens of radius 1: two flat cones, apexes at ``+-height``, on a
+    rim of ``n`` vertices in the plane z = 0, each cone with ``rings``
+    circles of vertices (the last the rim, shared). At the rim the faces above
+    and below are within ``2 height`` radians of back to back: a fin.
+    Vertices: the two apexes, then the top cone's circles inward-out (the
+    rim last), then the bottom cone's others."""
+    a = 2 * np.pi * np.arange(n) / n
+    t = np.arange(1, rings + 1) / rings
+    circle = np.stack([np.cos(a), np.sin(a), np.zeros(n)], axis=1)
+    top = [circle * [r, r, 0] + [0, 0, height * (1 - r)] for r in t]
+    bottom = [c * [1, 1, -1] for c in top[:-1]]
+    V = np.vstack([[[0, 0, height], [0, 0, -height]], *top, *bottom])
+    ids = 2 + np.arange(rings * n).reshape(rings, n)
+    sides = (ids, np.vstack([2 + rings * n + np.arange((rings - 1) * n).reshape(-1, n),
+                             ids[-1:]]))
+    j, k = np.arange(n), (np.arange(n) + 1) % n
+    F = []
+    for apex, c in zip((0, 1), sides):
+        side = [np.stack([np.full(n, apex), c[0][j], c[0][k]], 1)]
+        for inner, outer in zip(c[:-1], c[1:]):
+            side += [np.stack([inner[j], outer[j], outer[k]], 1),
+                     np.stack([inner[j], outer[k], inner[k]], 1)]
+        side = np.concatenate(side)
+        F.append(side if apex == 0 else side[:, ::-1])
+    return V, np.concatenate(F).astype(np.int64)
+
+
 def mobius_strip(n_around=120, n_across=12, width=0.3, bump=0.0):
     """A one-sided (non-orientable) strip of ``2 n_around (n_across - 1)``
     faces: the ring's last column is joined to its first turned over (row
