@@ -38,7 +38,7 @@ from .clean import clean_mesh
 from .errors import InvalidArgumentError, InvalidMeshError
 from .mesh import (barycentric_gather, barycentric_scatter, bbox_diagonal, bounding_box,
                    check_mesh, check_number, check_seed, check_units, cross_rows, face_areas,
-                   mean_edge_length, stops, vertex_normals)
+                   mean_edge_length, shown, stops, vertex_normals)
 from .metrics import MAX_SAMPLES, sample_surface
 from .mirror import axis_index, mirror_partners, symmetrize
 from ._parallel import run_each
@@ -263,7 +263,7 @@ def _check_weights(iterations, smoothness, point_to_point, laplacian):
     returned the cage unfitted, a string one a TypeError deep inside)."""
     if laplacian not in _LAPLACIANS:
         raise InvalidArgumentError(
-            f"fit_cage: laplacian must be one of {_LAPLACIANS}, got {laplacian!r}")
+            f"fit_cage: laplacian must be one of {_LAPLACIANS}, got {shown(laplacian)}")
     return (check_number(iterations, where="fit_cage", name="iterations", lo=0,
                          hi=MAX_ITERATIONS, integer=True),
             check_number(smoothness, where="fit_cage", name="smoothness", lo=0),

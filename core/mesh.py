@@ -224,11 +224,25 @@ def check_faces(F, n_vertices, *, where, allow_empty=True, copy=True, name="F"):
     return F_out
 
 
+def shown(value, limit=60):
+    """``value`` as an error message shows what was given: its ``repr``, or
+    for an array or a long sequence its kind and shape (a face array given
+    as a count had printed all of its rows into the message)."""
+    if isinstance(value, np.ndarray) and value.ndim:
+        return f"an array of shape {value.shape} ({value.dtype})"
+    text = repr(value)
+    if len(text) <= limit:
+        return text
+    if isinstance(value, (list, tuple)):
+        return f"a {type(value).__name__} of {len(value)} items"
+    return text[:limit - 4] + " ..."
+
+
 def check_count(value, *, where, name):
     """``value`` as an int, or :class:`InvalidArgumentError` naming ``name``
     when it is not an integer >= 0 (a bool is not one)."""
     if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)) or value < 0:
-        raise InvalidArgumentError(f"{where}: {name} must be an integer >= 0, got {value!r}")
+        raise InvalidArgumentError(f"{where}: {name} must be an integer >= 0, got {shown(value)}")
     return int(value)
 
 
@@ -259,7 +273,7 @@ def check_number(value, *, where, name, lo=None, hi=None, open_lo=False, open_hi
     if ok and hi is not None:
         ok = value < hi if open_hi else value <= hi
     if not ok:
-        raise InvalidArgumentError(f"{where}: {name} must be {takes}, got {value!r}")
+        raise InvalidArgumentError(f"{where}: {name} must be {takes}, got {shown(value)}")
     return int(value) if integer else float(value)
 
 
@@ -277,7 +291,7 @@ def check_flag(value, *, where, name):
     when it is not True or False (NumPy's booleans too; 0, 1, "no" and None
     are not flags)."""
     if not isinstance(value, (bool, np.bool_)):
-        raise InvalidArgumentError(f"{where}: {name} must be True or False, got {value!r}")
+        raise InvalidArgumentError(f"{where}: {name} must be True or False, got {shown(value)}")
     return bool(value)
 
 

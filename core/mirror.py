@@ -12,7 +12,7 @@ The mirror plane passes through the origin, normal to an axis given as
 import numpy as np
 
 from .errors import InvalidArgumentError
-from .mesh import bbox_diagonal, check_number, check_vertex_indices, check_vertices
+from .mesh import bbox_diagonal, check_number, check_vertex_indices, check_vertices, shown
 
 AXES = {"X": 0, "Y": 1, "Z": 2}
 #: a mirror partner is accepted this close (share of the diagonal; ``mirror_partners``)
@@ -29,7 +29,8 @@ def axis_index(axis, where="simplify", name="symmetry"):
     if isinstance(axis, (int, np.integer)) and not isinstance(axis, (bool, np.bool_)) \
             and 0 <= axis < len(AXES):
         return int(axis)
-    raise InvalidArgumentError(f"{where}: {name} must be 'X', 'Y' or 'Z' (or 0, 1, 2), got {axis!r}")
+    raise InvalidArgumentError(
+        f"{where}: {name} must be 'X', 'Y' or 'Z' (or 0, 1, 2), got {shown(axis)}")
 
 
 def mirror(V, axis):

@@ -62,7 +62,7 @@ import numpy as np
 from numpy.lib.stride_tricks import sliding_window_view
 
 from .errors import InvalidArgumentError
-from .mesh import check_finite_rows
+from .mesh import check_finite_rows, shown
 from .spatial import (CROWDED_CELL, PRUNE_SLACK, BestPairs, TriangleIndex, closest_pairs,
                       closest_result)
 from .pages import plain_pages
@@ -218,7 +218,7 @@ class NearQuery:
     def __init__(self, V, F, *, reach=None):
         if reach is not None and not (isinstance(reach, (int, float)) and 0 <= reach < np.inf):
             raise InvalidArgumentError(
-                f"NearQuery: reach must be a finite number >= 0 or None, got {reach!r}")
+                f"NearQuery: reach must be a finite number >= 0 or None, got {shown(reach)}")
         self.index = TriangleIndex(V, F, cell_factor=_CELL_FACTOR, min_cell=cell_for_reach(reach))
         self._t = _build_tables(self.index.tables)
         self._index_cell = _INDEX_CELL * self.index.cell_growth ** 2

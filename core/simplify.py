@@ -63,7 +63,7 @@ from .clean import MIN_COMPONENT_AREA, CleanReport, bulk_box, check_span, clean_
 from .errors import InvalidArgumentError, InvalidMeshError, MeshAdjustError
 from .mesh import (UNITS, all_in_rows, area_normals_rows, bbox_diagonal, bounding_box, check_flag,
                    check_mesh, check_number, check_vertex_mask, diagonal_length, dot_columns,
-                   face_normals, has_area, power_of_two_scale, squared_edges)
+                   face_normals, has_area, power_of_two_scale, shown, squared_edges)
 from .metrics import DistanceFrom, surface_distance
 from .topology import (border_vertex_count, boundary_loops_count, collapsible_edges, edge_map,
                        face_components, soup_pieces)
@@ -514,7 +514,7 @@ def check_arguments(n, target_faces, ratio, max_error, feature_angle_deg, vertex
     if target_faces is not None:
         if isinstance(target_faces, bool) or not isinstance(target_faces, (int, np.integer)):
             raise InvalidArgumentError(
-                f"{_WHERE}: target_faces must be an integer >= 0, got {target_faces!r}")
+                f"{_WHERE}: target_faces must be an integer >= 0, got {shown(target_faces)}")
         if target_faces < 0:
             raise InvalidArgumentError(f"{_WHERE}: target_faces must be >= 0, got {target_faces}")
     # (each a real number: '3', [1], 1j and True were TypeErrors deep inside, or taken)

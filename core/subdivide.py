@@ -155,7 +155,7 @@ import numpy as np
 from . import _refine as _rf
 from . import _stencils as _st
 from .errors import InvalidArgumentError, InvalidMeshError
-from .mesh import check_count, check_faces, check_finite_rows, check_mesh
+from .mesh import check_count, check_faces, check_finite_rows, check_mesh, shown
 from .pages import plain_pages
 
 SCHEMES = ("butterfly", "loop")
@@ -464,7 +464,7 @@ def check_subdivision_args(levels, scheme, where, n_faces=None):
     memory), or more than ``MAX_LEVELS`` when there are no faces."""
     if scheme not in SCHEMES:
         raise InvalidArgumentError(
-            f"{where}: scheme must be one of {', '.join(map(repr, SCHEMES))}, got {scheme!r}")
+            f"{where}: scheme must be one of {', '.join(map(repr, SCHEMES))}, got {shown(scheme)}")
     levels = check_count(levels, where=where, name="levels")
     if n_faces == 0 and levels > MAX_LEVELS:     # (no faces: no level makes one, each costs)
         raise InvalidArgumentError(

@@ -16,7 +16,7 @@ from typing import NamedTuple
 import numpy as np
 
 from .errors import InvalidArgumentError, InvalidMeshError
-from .mesh import check_count, check_faces
+from .mesh import check_count, check_faces, shown
 
 #: most vertices a mesh's topology is built for (its per-vertex arrays: 2^32)
 MAX_VERTICES = 2 ** 32
@@ -72,7 +72,7 @@ def _checked(where, F, n_vertices):
     n = check_count(n_vertices, where=where, name="n_vertices")
     if n > MAX_VERTICES:   # (10**12 asked for 7 TiB; 10**30 overflowed the edge keys)
         raise InvalidArgumentError(
-            f"{where}: n_vertices must be at most {MAX_VERTICES:,} (2^32), got {n_vertices!r}")
+            f"{where}: n_vertices must be at most {MAX_VERTICES:,} (2^32), got {shown(n_vertices)}")
     return check_faces(F, n, where=where, copy=False), n
 
 

@@ -208,3 +208,19 @@ def test_bind_names_a_ragged_crease_list():
         core.bind(V, F, Vc, Fc, creases=[[0, 1], [1]])
     with pytest.raises(InvalidArgumentError, match=r"bind: creases must be a \(k,2\) integer array"):
         core.bind(V, F, Vc, Fc, creases=[[0.0, 1.0]])
+
+
+@pytest.mark.parametrize("call, shown", [
+    (lambda V, F: core.topology_summary(F, F), r"got an array of shape \(320, 3\) \(int64\)$"),
+    (lambda V, F: core.simplify(V, F, target_faces=F), r"got an array of shape \(320, 3\)"),
+    (lambda V, F: core.subdivide(V, F, levels=[1] * 500), r"got a list of 500 items$"),
+    (lambda V, F: core.subdivide(V, F, scheme="b" * 500), r"got 'bbbb.* \.\.\.$"),
+])
+def test_a_message_shows_a_large_wrong_value_by_its_kind_and_shape(sphere, call, shown):
+    """A face array given where a count goes had printed all of its rows into
+    the message (a 24-face cage: 26 lines): now its kind and shape, and a long
+    value's start."""
+    V, F = sphere
+    with pytest.raises(InvalidArgumentError, match=shown) as raised:
+        call(V, F)
+    assert len(str(raised.value)) < 200 and "\n" not in str(raised.value)
