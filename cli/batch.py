@@ -190,7 +190,11 @@ def _is_output(name):
 def collect_inputs(paths, out=None):
     """``(files, problems)``: the files to convert, in the order given
     (folders: their mesh files, sorted; in the output folder itself, not the
-    cages and refined meshes a run wrote there; the same file named twice is
+    cages and refined meshes a run wrote there, as its record of sources
+    (:func:`~.outputs.read_sources`) lists them: a file of the user's own
+    named like one, ``scan_cage.obj``, had been left out without a word and
+    then overwritten by ``scan.obj``'s cage, where it is now an input, which
+    :func:`_inputs_overwritten` names; the same file named twice is
     converted once), and a message for each folder whose files cannot be
     listed (no read permission: the batch had ended in a raw PermissionError,
     exit 1, the other inputs not converted)."""
@@ -198,7 +202,7 @@ def collect_inputs(paths, out=None):
     out = os.path.realpath(out) if out is not None else None
     for path in paths:
         if os.path.isdir(path):
-            own = os.path.realpath(path) == out
+            ours = outputs.read_sources(path) if os.path.realpath(path) == out else {}
             try:
                 names = os.listdir(path)
             except OSError as exc:
@@ -207,7 +211,7 @@ def collect_inputs(paths, out=None):
             found = _without_links_to_others(sorted(
                 os.path.join(path, f) for f in names
                 if os.path.splitext(f)[1].lower() in _convert.INPUT_EXTENSIONS
-                and not (own and _is_output(f))))
+                and not (_is_output(f) and f in ours)))
         else:
             found = [path]
         for f in found:
@@ -454,7 +458,8 @@ def _inputs_overwritten(tasks):
     that input), at most 5, then how many more."""
     inputs = {os.path.realpath(t["input"]): t["name"] for t in tasks}
     found = [f"{t['name']}: its output {path} is the input {inputs[os.path.realpath(path)]}; "
-             f"choose another --out folder" for t in tasks for path in (t["cage"], t["refined"])
+             f"choose another --out folder (or rename that input)"
+             for t in tasks for path in (t["cage"], t["refined"])
              if path and os.path.realpath(path) in inputs]
     return _first_five(found, "outputs that are inputs")
 

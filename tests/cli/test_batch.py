@@ -174,9 +174,32 @@ def test_an_output_that_is_an_input_is_refused_before_any_compute(tmp_path):
                       "scans"], tmp_path)
     assert proc.returncode == 2 and proc.stdout == ""
     assert (f"scan.obj: its output {mine} is the input scan_cage.obj; choose "
-            f"another --out folder") in proc.stderr
+            f"another --out folder (or rename that input)") in proc.stderr
     assert mine.read_bytes() == before and sorted(os.listdir(tmp_path / "scans")) == [
         "scan.obj", "scan_cage.obj"]
+
+
+def test_a_file_of_the_users_named_like_an_output_is_an_input_not_overwritten(tmp_path):
+    """``scans --out scans`` with a ``scan_cage.obj`` of the user's own: it
+    had been left out without a word and replaced by scan.obj's cage. It is
+    an input now (the folder's record does not list it as an output), so the
+    run is refused naming both; the cages a run wrote there are still left
+    out of the next run's inputs."""
+    (tmp_path / "scans").mkdir()
+    core.write_obj(tmp_path / "scans" / "scan.obj", *bumpy_sphere(3))
+    mine = tmp_path / "scans" / "scan_cage.obj"
+    core.write_obj(mine, *icosphere(2))
+    before = mine.read_bytes()
+    proc = run_batch(["scans", "--faces", "100", "--out", "scans"], tmp_path)
+    assert proc.returncode == 2 and proc.stdout == ""
+    assert f"scan.obj: its output {mine} is the input scan_cage.obj" in proc.stderr
+    assert mine.read_bytes() == before
+    mine.rename(tmp_path / "scans" / "mine.obj")
+    for _ in range(2):                       # the second run: scan_cage.obj is the first's
+        proc = run_batch(["scans", "--faces", "100", "--out", "scans"], tmp_path)
+        assert proc.returncode == 0 and "2 converted, 0 failed" in proc.stdout, proc.stdout
+    assert out_files(tmp_path / "scans") == ["mine.obj", "mine_cage.obj", "scan.obj",
+                                             "scan_cage.obj"]
 
 
 def test_one_row_per_file_whatever_the_error_text(tmp_path):
