@@ -64,9 +64,10 @@ from ._clean import (BOUNDARY, NON_MANIFOLD, coincident_pairs, corner_fans, face
                      twin_table)
 from ._groups import ragged_entries
 from ._parallel import blocks, run_blocks, run_each
-from .errors import InvalidArgumentError, InvalidMeshError
-from .mesh import (any_in_rows, bounding_box, check_count, check_mesh, check_vertex_mask,
-                   cross_rows, diagonal_length, face_normals, flat_faces, row_sums, shown)
+from .errors import InvalidMeshError
+from .mesh import (any_in_rows, bounding_box, check_count, check_mesh, check_number,
+                   check_vertex_mask, cross_rows, diagonal_length, face_normals, flat_faces,
+                   row_sums)
 from .topology import connected_labels, edge_keys, face_components
 from .copies import coincident_copies, doubled_quads, pillow_layers, stacked_copies
 from .pages import plain_pages
@@ -305,9 +306,7 @@ def _checked_options(weld_distance, min_component_area, face_budget, protected, 
     as it takes them (``n`` vertices)."""
     for name, value in (("weld_distance", WELD_DISTANCE if weld_distance is None else weld_distance),
                         ("min_component_area", min_component_area)):
-        if not (isinstance(value, (int, float, np.number)) and np.isfinite(value) and value >= 0):
-            raise InvalidArgumentError(
-                f"{_WHERE}: {name} must be a finite number >= 0, got {shown(value)}")
+        check_number(value, where=_WHERE, name=name, lo=0)   # (2**64 was a raw TypeError)
     if face_budget is not None:
         face_budget = check_count(face_budget, where=_WHERE, name="face_budget")
     if protected is not None:

@@ -50,6 +50,11 @@ from .pages import plain_pages
 
 _LAPLACIANS = ("uniform", "cotangent")
 
+#: a ``smoothness`` above this is taken as this: the smoothness term then outweighs the data
+#: terms (weights summing to about 1) by more than float64's precision, so the cage stays
+#: where it is to rounding, as for any larger value (at 1e200 the solver's sums overflowed)
+_SMOOTHNESS_CAP = 1e16
+
 #: most levels a fit is worth evaluating its cage at (the add-on's and the batch's fits
 #: take at most these, whatever levels the binding or the refined mesh has): the fit
 #: undoes the shrinkage of simplification, which two levels already show. The bunny to
@@ -253,7 +258,8 @@ def _set_up(V_dense, F_dense, V_cage, F_cage, *, levels, scheme, creases, smooth
     return _Problem(op, V_dense, dense.F, N_dense, index,
                     np.asarray(sampled.points, dtype=np.float64),
                     _interpolate(N_dense, dense.F, sampled.face, sampled.bary), V_cage,
-                    _laplacian(V_cage, F_cage, laplacian), float(smoothness) / V_cage.shape[0],
+                    _laplacian(V_cage, F_cage, laplacian),
+                    min(float(smoothness), _SMOOTHNESS_CAP) / V_cage.shape[0],
                     float(point_to_point), sym, centre, start)
 
 

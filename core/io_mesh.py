@@ -94,7 +94,13 @@ def _line_error(fn, path, lineno, problem):
 def _parsed(fn, path, rows, lines, dtype, problem, too_large=None):
     """The strings ``rows`` as one ``dtype`` array; the first line whose
     strings do not parse is named with ``problem``, or ``too_large`` when a
-    number does not fit ``dtype`` (an integer beyond 64 bits)."""
+    number does not fit ``dtype`` (an integer beyond 64 bits). Digits are
+    ASCII ones: Python's numbers take any script's (``v ١ ٢ ٣`` had read as
+    1, 2, 3)."""
+    if not "".join(map("".join, rows)).isascii():
+        for row, lineno in zip(rows, lines):
+            if not "".join(row).isascii():
+                raise _line_error(fn, path, lineno, problem)
     try:
         return np.array(rows, dtype=dtype)
     except (ValueError, OverflowError):
@@ -515,13 +521,17 @@ def read_smf(path):
         A bad line, named with its number: a coordinate that is not a finite
         number, fewer than 3 coordinates or vertices, an index outside the
         file's vertices.
+    InvalidArgumentError
+        ``path`` is not a file name (:func:`file_name`).
+    OSError
+        The file cannot be read (Python's own: ``FileNotFoundError``, ...).
 
     Examples
     --------
     >>> core.write_smf("tet.smf", V, F)
     >>> V2, F2 = core.read_smf("tet.smf")     # V2 == V bit for bit
     """
-    m = _read(os.fspath(path), "read_smf", obj=False)
+    m = _read(file_name(path, "read_smf"), "read_smf", obj=False)
     return m.V, m.F
 
 
@@ -541,14 +551,27 @@ def read_obj(path):
     InvalidMeshError
         A bad line, named with its number (see :func:`read_smf`).
     """
-    m = _read(os.fspath(path), "read_obj", obj=True)
+    m = _read(file_name(path, "read_obj"), "read_obj", obj=True)
     return m.V, m.F
 
 
+def file_name(path, fn):
+    """``path`` (a str, bytes or os.PathLike) as a str, or
+    :class:`InvalidArgumentError` naming ``fn`` (None or a number had been
+    Python's TypeError). A file that cannot be opened stays Python's own
+    ``OSError`` (``FileNotFoundError``, ``IsADirectoryError``, ...), which
+    names it."""
+    try:
+        return os.fsdecode(path)
+    except TypeError:
+        raise InvalidArgumentError(f"{fn}: path must be a file name (str or os.PathLike), got "
+                                   f"{type(path).__name__}") from None
+
+
 def _extension(fn, path):
-    ext = os.path.splitext(os.fspath(path))[1].lower()
+    ext = os.path.splitext(path)[1].lower()
     if ext not in MESH_EXTENSIONS:
-        raise InvalidArgumentError(f"{fn}: {os.fspath(path)}: unsupported extension "
+        raise InvalidArgumentError(f"{fn}: {path}: unsupported extension "
                                    f"'{ext or '(none)'}' (use {' or '.join(MESH_EXTENSIONS)})")
     return ext
 
@@ -575,7 +598,7 @@ def read_mesh(path):
     >>> m = core.read_mesh("scan.smf")
     >>> m.V.shape, m.F.shape, m.skipped            # ((n, 3), (m, 3), {'c': 120})
     """
-    path = os.fspath(path)
+    path = file_name(path, "read_mesh")
     ext = _extension("read_mesh", path)
     return _read(path, "read_obj" if ext == ".obj" else "read_smf", obj=ext == ".obj")
 
@@ -618,13 +641,13 @@ def write_smf(path, V, F):
     InvalidMeshError
         Wrong shapes or indices outside ``V``.
     """
-    _write(os.fspath(path), V, F, "write_smf")
+    _write(file_name(path, "write_smf"), V, F, "write_smf")
 
 
 def write_obj(path, V, F):
     """Write positions and triangles to an OBJ file, exactly (see
     :func:`write_smf`; the text is the same)."""
-    _write(os.fspath(path), V, F, "write_obj")
+    _write(file_name(path, "write_obj"), V, F, "write_obj")
 
 
 @plain_pages
@@ -638,6 +661,6 @@ def write_mesh(path, V, F):
     InvalidMeshError
         Wrong shapes or indices outside ``V``.
     """
-    path = os.fspath(path)
+    path = file_name(path, "write_mesh")
     ext = _extension("write_mesh", path)
     _write(path, V, F, "write_obj" if ext == ".obj" else "write_smf")

@@ -141,6 +141,28 @@ UNITS = (1e-15, 1e15)
 SEARCH_REACH = 1e60
 
 
+def check_points(P, *, where, name="P", what="query points"):
+    """Query points ``P`` as a (q,3) float64 array, or
+    :class:`InvalidArgumentError` naming ``name``: not (q,3) real numbers
+    (strings, complex numbers and ragged lists had gone through to NumPy's
+    own errors or lost their imaginary part), NaN or infinite values
+    (:func:`check_finite_rows`, ``what``), or coordinates beyond
+    :data:`SEARCH_REACH` (at 1e154 a search answered with the wrong face
+    and an infinite distance)."""
+    P_in = _as_array(P, name, "(q,3) floats", where, InvalidArgumentError)
+    if P_in.ndim != 2 or P_in.shape[1] != 3 or P_in.dtype.kind not in "fiu":
+        raise InvalidArgumentError(
+            f"{where}: {name} must be (q,3) floats, got {P_in.shape} {P_in.dtype}")
+    P_out = np.ascontiguousarray(P_in, dtype=np.float64)
+    check_finite_rows(P_out, where=where, what=what)
+    reach = float(np.abs(P_out).max()) if P_out.size else 0.0
+    if reach > SEARCH_REACH:
+        raise InvalidArgumentError(
+            f"{where}: {name} reaches {reach:.3g} in its coordinates; the closest-point "
+            f"searches take coordinates up to {SEARCH_REACH:g}")
+    return P_out
+
+
 def check_reach(V, *, where, name):
     """Raise :class:`InvalidMeshError` when the finite positions ``V`` reach
     beyond :data:`SEARCH_REACH`."""
@@ -241,7 +263,8 @@ def shown(value, limit=60):
 def check_count(value, *, where, name):
     """``value`` as an int, or :class:`InvalidArgumentError` naming ``name``
     when it is not an integer >= 0 (a bool is not one)."""
-    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)) or value < 0:
+    if isinstance(value, (bool, np.bool_, np.timedelta64)) \
+            or not isinstance(value, (int, np.integer)) or value < 0:
         raise InvalidArgumentError(f"{where}: {name} must be an integer >= 0, got {shown(value)}")
     return int(value)
 
@@ -264,7 +287,8 @@ def check_number(value, *, where, name, lo=None, hi=None, open_lo=False, open_hi
         takes = f"a finite {kind[2:]}"
     # integers are taken as they are (a float of 2**63 - 1 is 2**63, and np.isfinite
     # refused Python integers from 2**64 with a TypeError)
-    whole = isinstance(value, (int, np.integer)) and not isinstance(value, (bool, np.bool_))
+    whole = isinstance(value, (int, np.integer)) and not isinstance(
+        value, (bool, np.bool_, np.timedelta64))          # (NumPy counts a timedelta64 as one)
     ok = whole or (isinstance(value, (float, np.floating)) and bool(np.isfinite(value)))
     if ok and integer and not whole:
         ok = float(value).is_integer()
@@ -407,6 +431,20 @@ def row_norms(X):
     reduction does) without its reduction along rows of three (see
     :func:`row_sums`)."""
     return np.sqrt(X[:, 0] * X[:, 0] + X[:, 1] * X[:, 1] + X[:, 2] * X[:, 2])
+
+
+def lengths(X):
+    """:func:`row_norms` of ``X`` (k,3) at any scale: its rows divided by the
+    power of two above their largest coordinate first when that is beyond
+    ``2**SAFE_EXPONENT`` (or below its inverse), and the lengths multiplied
+    back (exact: the same bits where the squares neither overflow nor
+    underflow; at 1e200 they were infinite, with NumPy's overflow warning)."""
+    largest = float(np.abs(X).max()) if X.size else 0.0
+    exponent = int(np.frexp(largest)[1])
+    if largest == 0 or abs(exponent) < SAFE_EXPONENT:
+        return row_norms(X)
+    scale = float(np.ldexp(1.0, exponent))
+    return row_norms(X / scale) * scale
 
 
 def any_in_rows(B):
@@ -579,6 +617,7 @@ def face_normals(V, F, *, normalize=True):
     Inside ``core``, on checked arrays, :func:`area_normals_rows` of ``F.T``
     is the same without the check."""
     V, F = check_mesh(V, F, where="face_normals", copy=False)
+    normalize = check_flag(normalize, where="face_normals", name="normalize")
     N, s = scaled_area_normals(V, F)
     if normalize:
         return unit_rows(N)
@@ -608,8 +647,12 @@ def turned_faces(V_rest, V_new, F):
     if V_new.shape != V_rest.shape:
         raise InvalidMeshError(f"{where}: V_new must have the shape of V_rest {V_rest.shape}, "
                                f"got {V_new.shape}")
-    rest = area_normals_rows(V_rest, F.T)
-    return np.flatnonzero(normal_dots(V_new, F.T, rest.T) < 0)
+    # each in its own power-of-two units (exact: the same signs; beyond 1e154 the products
+    # overflowed, inf - inf was NaN and a folded face went uncounted)
+    rest, _ = scaled_area_normals(V_rest, F)
+    scale = power_of_two_scale(V_new, F)
+    return np.flatnonzero(normal_dots(V_new / scale if scale != 1.0 else V_new, F.T,
+                                      rest.T) < 0)
 
 
 def squared_edges(V, F):

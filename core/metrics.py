@@ -27,7 +27,7 @@ import numpy as np
 
 from .errors import InvalidArgumentError
 from .mesh import (bbox_diagonal, check_mask, check_mesh, check_number, check_seed, check_units,
-                   face_areas, used_vertices)
+                   row_norms, scaled_area_normals, used_vertices)
 from .near_query import search_for, search_kind
 from .pages import plain_pages
 
@@ -95,7 +95,9 @@ def _pct(value, diagonal):
 
 def _sample(V, F, n, rng):
     """Area-weighted uniform samples on a checked mesh (faces uniformly if zero area)."""
-    area = face_areas(V, F)
+    # (areas in power-of-two units: the same draws; beyond 1e154 they overflowed and every
+    # sample fell on one face, below 1e-160 they were all zero)
+    area = row_norms(scaled_area_normals(V, F)[0])
     cum = np.cumsum(area)
     total = float(cum[-1])
     if total > 0:

@@ -37,7 +37,7 @@ import numpy as np
 
 from ._clean import BOUNDARY, half_edge_ends, interior_edges, twin_table
 from .mesh import (area_normals_rows, bounding_box, diagonal_length, face_areas, flat_faces,
-                   row_norms, unit_rows)
+                   lengths, row_norms, unit_rows)
 from .topology import connected_labels, edge_keys, vertex_labels
 
 __all__ = ["PINHOLE_FACES", "PINHOLE_SURFACE", "MAX_PINHOLE_EDGES", "Pinholes", "cap_pinholes",
@@ -270,7 +270,7 @@ def _slit_loops(V, loops, distance):
     """The loops of zero width (see :func:`zip_slits`), as their longest
     border half-edge's position, and that position for every border half-edge's loop."""
     u, w = loops.u, loops.u[loops.succ]
-    length = np.linalg.norm(V[w] - V[u], axis=1)
+    length = lengths(V[w] - V[u])
     order = np.lexsort((length, loops.label))
     lab = loops.label[order]
     last = np.r_[lab[1:] != lab[:-1], True]
@@ -330,7 +330,7 @@ def _border_loops(V, F, twin):
         return None
     pos = np.arange(h.shape[0], dtype=np.int64)
     label = connected_labels(h.shape[0], np.stack([pos, succ], axis=1))
-    length = np.linalg.norm(V[w] - V[u], axis=1)
+    length = lengths(V[w] - V[u])
     count = np.bincount(label, minlength=h.shape[0])
     perimeter = np.bincount(label, weights=length, minlength=h.shape[0])
     return _Loops(h, u, succ, label, count, perimeter)

@@ -82,8 +82,8 @@ from typing import NamedTuple
 import numpy as np
 
 from .errors import InvalidArgumentError
-from .mesh import (check_finite_rows, check_mesh, check_number, check_reach, cross_rows,
-                   row_norms, scaled_area_normals, unit_rows)
+from .mesh import (check_finite_rows, check_mesh, check_number, check_points, check_reach,
+                   cross_rows, row_norms, scaled_area_normals, unit_rows)
 from ._groups import group_argmin, ragged_ranges
 from ._parallel import blocks, run_blocks, run_each
 from .pages import plain_pages
@@ -1267,11 +1267,10 @@ class TriangleIndex:
         InvalidArgumentError
             P not (q,3) or not finite.
         """
-        P = np.asarray(P, dtype=np.float64)
-        if P.ndim != 2 or P.shape[1] != 3:
-            raise InvalidArgumentError(
-                f"TriangleIndex.closest: P must be (q,3) floats, got {P.shape} {P.dtype}")
-        check_finite_rows(P, where="TriangleIndex.closest", what="query points")
+        P = check_points(P, where="TriangleIndex.closest")
+        if crowded_cell is not None:
+            crowded_cell = check_number(crowded_cell, where="TriangleIndex.closest",
+                                        name="crowded_cell", lo=0)
         nq = P.shape[0]
         best = BestPairs(nq)
         if nq:

@@ -224,3 +224,69 @@ def test_a_message_shows_a_large_wrong_value_by_its_kind_and_shape(sphere, call,
     with pytest.raises(InvalidArgumentError, match=shown) as raised:
         call(V, F)
     assert len(str(raised.value)) < 200 and "\n" not in str(raised.value)
+
+
+def _quiet(call):
+    """``call()`` with every warning an error (NumPy's overflow warnings
+    included)."""
+    import warnings
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        return call()
+
+
+@pytest.mark.parametrize("scale", [1e-200, 1e-160, 1e160, 1e200])
+def test_turned_faces_and_samples_at_any_scale(scale):
+    """Beyond 1e154 the area normals overflowed: a folded face went uncounted
+    by turned_faces (inf - inf), every sample fell on one face; below 1e-160
+    the areas were zero and the samples uniform per face. Now the same
+    answers as at unit scale, without a warning."""
+    V = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0], [0.1, 0.1, 0]])
+    F = np.array([[0, 1, 4], [1, 2, 4], [2, 3, 4], [3, 0, 4]])
+    mirrored = V * [-1, 1, 1]
+    assert _quiet(lambda: core.turned_faces(V * scale, mirrored * scale, F)).tolist() == \
+        [0, 1, 2, 3]
+    assert _quiet(lambda: core.turned_faces(V * scale, V * scale, F)).size == 0
+    at_one = core.sample_surface(V, F, 2000, seed=3)
+    scaled = _quiet(lambda: core.sample_surface(V * scale, F, 2000, seed=3))
+    assert np.array_equal(scaled.face, at_one.face) and np.array_equal(scaled.bary, at_one.bary)
+
+
+def test_simplify_and_fit_without_overflow_warnings(sphere, cage):
+    """A holed mesh at 1e200 (its border loops' lengths overflowed) and a
+    fit_cage smoothness of 1e200 (the solver's sums): NumPy's overflow
+    warnings, errors under -W error; the same results as before."""
+    V, F = sphere
+    holed = F[np.arange(F.shape[0]) % 37 != 0]
+    at_one = core.simplify(V, holed, target_faces=60)
+    far = _quiet(lambda: core.simplify(V * 1e200, holed, target_faces=60))
+    assert np.array_equal(far.F, at_one.F) and np.allclose(far.V / 1e200, at_one.V, atol=1e-15)
+    fitted = _quiet(lambda: core.fit_cage(V, F, *cage, levels=1, iterations=2, smoothness=1e200))
+    assert np.abs(fitted.V - cage[0]).max() <= 1e-12
+
+
+def test_closest_point_queries_and_flags_are_checked(sphere):
+    """Query points of strings or complex numbers (NumPy's errors, or the
+    imaginary part dropped), beyond the searches' reach (wrong face, infinite
+    distance at 1e154), a crowded_cell that is no number, a normalize flag
+    that is no flag, and NumPy's timedelta64 as a number: each named."""
+    V, F = sphere
+    index = core.TriangleIndex(V, F)
+    P = np.array([[0.2, 0.1, 1.5]])
+    for bad, shown in (("abc", r"\(\) <U3"), (P.astype(complex), r"\(1, 3\) complex128"),
+                       ([["0.2", "0.1", "1.5"]], r"\(1, 3\) <U3")):
+        with pytest.raises(InvalidArgumentError, match=rf"^TriangleIndex\.closest: P must be "
+                                                        rf"\(q,3\) floats, got {shown}$"):
+            index.closest(bad)
+    with pytest.raises(InvalidArgumentError, match=r"P reaches 1.5e\+155 .* up to 1e\+60"):
+        core.closest_points(V, F, P * 1e155)
+    with pytest.raises(InvalidArgumentError, match=r"crowded_cell must be a number >= 0, got '5'"):
+        index.closest(P, crowded_cell="5")
+    assert index.closest(P, crowded_cell=0).face.tolist() == index.closest(P).face.tolist()
+    with pytest.raises(InvalidArgumentError, match=r"normalize must be True or False, got 'no'"):
+        core.face_normals(V, F, normalize="no")
+    with pytest.raises(InvalidArgumentError, match=r"levels must be an integer >= 0, got "
+                                                   r"np\.timedelta64\(1\)"):
+        core.subdivide(V, F, levels=np.timedelta64(1))
+    with pytest.raises(InvalidArgumentError, match=r"ratio must be a number in \(0, 1\]"):
+        core.simplify(V, F, ratio=np.timedelta64(1))

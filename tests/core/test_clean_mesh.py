@@ -460,9 +460,12 @@ def test_inputs_are_not_modified():
 
 
 @pytest.mark.parametrize("kwargs, match", [
-    (dict(weld_distance=-1.0), "weld_distance must be a finite number >= 0"),
+    (dict(weld_distance=-1.0), "weld_distance must be a number >= 0, got -1.0"),
     (dict(weld_distance=float("nan")), "weld_distance"),
     (dict(min_component_area=-0.1), "min_component_area must be"),
+    (dict(weld_distance=2**64), None),                       # (a raw TypeError: none)
+    (dict(min_component_area=np.complex128(1.0)), "min_component_area must be a number >= 0"),
+    (dict(weld_distance=True), "weld_distance must be a number >= 0, got True"),
     (dict(face_budget=-1), r"^clean_mesh: face_budget must be an integer >= 0, got -1"),
     (dict(face_budget=2.5), r"^clean_mesh: face_budget must be an integer >= 0, got 2\.5"),
     (dict(protected=np.ones(3, dtype=bool)),
@@ -470,6 +473,10 @@ def test_inputs_are_not_modified():
     (dict(protected=np.ones(42)), r"^clean_mesh: protected must be \(42,\) booleans"),
 ])
 def test_bad_tolerances_raise(kwargs, match):
+    if match is None:                      # a huge tolerance is one (a closed mesh: no seam)
+        r = clean_mesh(*icosphere(1), **kwargs)
+        assert r.report.weld_distance == 2.0**64 and r.F.shape[0] == 80
+        return
     with pytest.raises(InvalidArgumentError, match=match):
         clean_mesh(*icosphere(1), **kwargs)
 

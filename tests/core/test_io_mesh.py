@@ -97,14 +97,19 @@ def test_obj_slashes_negative_indices_and_extra_coordinates(tmp_path):
      r"'f 1 2 99999999999999999999999' refers to a missing vertex \(the file has 3\)"),
     ("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 -99999999999999999999 3 2\n", 4,
      r"'f 1 -99999999999999999999 3 2' refers to a missing vertex \(the file has 3\)"),
+    # digits of other scripts, which Python's numbers take (read as 1, 2, 3 before)
+    ("v 0 0 0\nv \u0661 \u0662 \u0663\nv 0 1 0\nf 1 2 3\n", 2,
+     r"'v \u0661 \u0662 \u0663' is not a number"),
+    ("v 0 0 0\nv 1 0 0\nv 0 1 0\nf \uff11 2 3\n", 4,
+     r"'f \uff11 2 3' has an index that is not an integer"),
 ])
 def test_bad_lines_are_named(tmp_path, text, lineno, problem):
     path = tmp_path / "scan.smf"
-    path.write_text(text)
+    path.write_text(text, encoding="utf-8")
     with pytest.raises(InvalidMeshError, match=rf"^read_smf: .*scan\.smf line {lineno}: {problem}"):
         core.read_smf(path)
     obj = tmp_path / "scan.obj"
-    obj.write_text(text)
+    obj.write_text(text, encoding="utf-8")
     with pytest.raises(InvalidMeshError, match=rf"^read_obj: .*scan\.obj line {lineno}: "):
         core.read_mesh(obj)
 
@@ -145,6 +150,23 @@ def test_unsupported_extension_and_bad_arrays(tmp_path):
         core.write_smf(tmp_path / "x.smf", V, F.astype(float))
     with pytest.raises(InvalidMeshError, match="write_smf: 3 faces index vertices outside \\[0, 4\\), e.g. face 1"):
         core.write_smf(tmp_path / "x.smf", V, F + 1)
+
+
+def test_a_path_is_a_file_name_of_any_kind_python_takes(tmp_path):
+    """A bytes path was refused by read_mesh and write_mesh ("unsupported
+    extension 'b'.obj''") where read_obj took it; None or a number was
+    Python's TypeError. A file that cannot be opened is Python's own OSError."""
+    V, F = tetrahedron()
+    path = bytes(tmp_path / "tet.obj")
+    core.write_mesh(path, V, F)
+    assert np.array_equal(core.read_mesh(path).V, V) and np.array_equal(core.read_obj(path)[1], F)
+    for call in (lambda: core.read_mesh(None), lambda: core.write_obj(3, V, F),
+                 lambda: core.read_smf(["tet.smf"])):
+        with pytest.raises(InvalidArgumentError, match=r"^(read_mesh|write_obj|read_smf): "
+                           r"path must be a file name \(str or os\.PathLike\)"):
+            call()
+    with pytest.raises(FileNotFoundError):
+        core.read_mesh(tmp_path / "missing.obj")
 
 
 def test_empty_file(tmp_path):
