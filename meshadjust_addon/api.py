@@ -58,6 +58,14 @@ def subdivide_object(obj, *, levels=1, scheme="butterfly", in_place=False):
             f"'{obj.name}' has modifiers or shape keys: in place, what they show would become "
             f"its mesh while they stay on it (a modifier applied twice, the keys lost); turn In "
             f"place off for a new object of what it shows, or apply them first")
+    others = sorted(o.name for o in bpy.data.objects if o.data == obj.data and o != obj) \
+        if in_place else []
+    if others:          # (the active one alone had been given the new mesh, unlinked in silence)
+        who = f"'{others[0]}'" + (f" and {len(others) - 1:,} more" if len(others) > 1 else "")
+        raise core.MeshAdjustError(
+            f"'{obj.name}' shares its mesh with {who}: in place would leave them the old one, "
+            f"no longer linked; make it single-user first (Object > Relations > Make Single "
+            f"User > Object & Data), or turn In place off for a new object")
     arrays = mesh_io.read_object(obj)
     # sharp edges index the mesh data: they only apply when it was used as is
     creases = (np.zeros((0, 2), np.int64) if arrays.evaluated

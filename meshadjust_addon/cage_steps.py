@@ -257,6 +257,8 @@ class CageJob:
     note: str = ""               #: what the commit re-made, for the report
     symmetry: str = None         #: the cage's mirror axis ('X', 'Y', 'Z'), kept by a fit
     faces_key: str = ""          #: ``mesh_io.polygon_key`` of the source's mesh read ("": unknown)
+    #: the edited original's :func:`~.store.binding_stamp` when read (the commit refuses another)
+    bound: object = None
 
     @property
     def n_moved(self):
@@ -341,7 +343,8 @@ def prepare_cage_job(cage, *, levels=None, scheme=None, from_rest=False, keep_ed
                    levels, scheme, V_rest is not None, V_now=V_now, source_fingerprint=fp,
                    old_levels=cs.levels if bound else 0, old_scheme=cs.scheme if bound else "",
                    symmetry=None if cs.symmetry == 'NONE' else cs.symmetry,
-                   faces_key=src.faces_key, refine_levels=finer if finer != levels else 0)
+                   faces_key=src.faces_key, refine_levels=finer if finer != levels else 0,
+                   bound=store.binding_stamp(cs.edited))
 
 
 def check_current(cage, job):
@@ -363,6 +366,8 @@ def check_current(cage, job):
                 (job.source_fingerprint, staleness.source_fingerprint(cs.source)))
     if F_now.shape != job.F_cage.shape or not np.array_equal(F_now, job.F_cage):
         what = f"'{cage.name}' changed topology"
+    elif store.binding_stamp(cs.edited) != job.bound:
+        what = f"'{cage.name}' was bound again"
     elif was and now and was._replace(keys="") != now._replace(keys=""):
         what = f"'{cs.source.name}' changed"
     else:

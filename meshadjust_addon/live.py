@@ -148,12 +148,27 @@ def on_depsgraph_update(scene, depsgraph):
         obj = obj.original
         if obj.type != 'MESH' or obj.meshadjust.role != 'CAGE' or not obj.meshadjust.live:
             continue
-        if obj.name in _pending:
-            continue
-        _pending.add(obj.name)
-        wait = max(0.0, _interval() - (time.monotonic() - _last_run.get(obj.name, 0.0)))
-        if not bpy.app.timers.is_registered(refine_pending):
-            bpy.app.timers.register(refine_pending, first_interval=wait)
+        schedule(obj.name)
+
+
+def schedule(name):
+    """Schedule a throttled live refine of the cage named ``name`` (once
+    while one is pending)."""
+    if name in _pending:
+        return
+    _pending.add(name)
+    wait = max(0.0, _interval() - (time.monotonic() - _last_run.get(name, 0.0)))
+    if not bpy.app.timers.is_registered(refine_pending):
+        bpy.app.timers.register(refine_pending, first_interval=wait)
+
+
+def live_toggled(state, _context):
+    """The ``live`` property's update: a cage put live is brought up to date
+    at once (an edit made while live was off had stayed unapplied until the
+    next one)."""
+    cage = state.id_data
+    if state.live and isinstance(cage, bpy.types.Object) and state.role == 'CAGE':
+        schedule(cage.name)
 
 
 @bpy.app.handlers.persistent

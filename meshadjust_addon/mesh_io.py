@@ -183,6 +183,11 @@ def read_object(obj, *, depsgraph=None, evaluated=None):
     if use_eval:
         depsgraph = depsgraph or bpy.context.evaluated_depsgraph_get()
         ob_eval = obj.evaluated_get(depsgraph)
+        if not obj.users_collection and not obj.users_scene:
+            raise core.InvalidMeshError(   # (it was "disabled in the viewport: enable it")
+                f"'{obj.name}' was deleted from the scene (Blender keeps it while MeshAdjust "
+                f"points to it), so its modifiers and shape keys are not evaluated: undo the "
+                f"delete, or link it back into a collection")
         if not ob_eval.is_evaluated or disabled_in_viewport(obj):
             # (its base mesh would come back: the modifiers silently left out; an object a
             # cage points to is in the depsgraph, evaluated without them)

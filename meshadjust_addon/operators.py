@@ -54,7 +54,8 @@ def simplify_unavailable(context):
     if obj is None:
         return "Select a mesh object"
     if obj.type != 'MESH':
-        return f"'{obj.name}' is a {obj.type.lower()}, not a mesh"
+        kind = obj.type.lower().replace("_", " ")
+        return f"'{obj.name}' is {'an' if kind[0] in 'aeiou' else 'a'} {kind}, not a mesh"
     if obj.mode == 'EDIT':
         return "Leave Edit Mode to simplify"
     if obj.meshadjust.role == 'CAGE':

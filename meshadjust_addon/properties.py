@@ -29,6 +29,12 @@ def _poll_mesh(self, obj):
     return obj.type == 'MESH'
 
 
+def _live_toggled(state, context):
+    """:func:`.live.live_toggled` (imported when called: live imports this module)."""
+    from .live import live_toggled
+    live_toggled(state, context)
+
+
 class MeshAdjustObjectState(bpy.types.PropertyGroup):
     """What an object is in the MeshAdjust workflow and what it is linked to."""
 
@@ -100,7 +106,7 @@ class MeshAdjustObjectState(bpy.types.PropertyGroup):
                                 description="On a cage: a checksum of the shape key it last "
                                             "wrote on its source (a key sculpted since is kept "
                                             "aside, not overwritten)")
-    live: BoolProperty(name="Live", default=False,
+    live: BoolProperty(name="Live", default=False, update=_live_toggled,
                        description="Update the results (the Output chosen under Refine) while "
                                    "the cage is edited: only what the moved cage vertices "
                                    "reach is recomputed")

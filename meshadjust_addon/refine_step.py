@@ -35,6 +35,8 @@ class RefineJob:
     V_cage: np.ndarray           #: the cage as edited, in the source's space
     F_cage: np.ndarray           #: its faces when read (the commit refuses other ones)
     edited_uid: int              #: the edited original's ``session_uid``
+    #: its :func:`~.store.binding_stamp` when read (the commit refuses another)
+    bound: object
     dense_faces: int             #: the source's face count when bound (0: not known)
     #: the refined mesh's binding: the edit's, a kept finer one, or (after compute) one
     #: made at ``finer_levels``
@@ -80,7 +82,8 @@ def prepare_refine(cage, *, output='EDITED', levels=None, scheme=None):
         binding = store.load_binding(edited, cage)   # (of the cage's topology as it is now)
         n_dense, F_cage = binding.n_dense, binding.F_cage
     rj = RefineJob(cage.name, output, binding, job, cage_in_source_space(cage, source),
-                   F_cage, edited.session_uid, edited.meshadjust.dense_faces, started=started)
+                   F_cage, edited.session_uid, store.binding_stamp(edited),
+                   edited.meshadjust.dense_faces, started=started)
     _check_outputs(cage, rj, n_dense)
     if output in ('REFINED', 'BOTH') and not levels and job is None:
         _plan_finer(cage, rj)
@@ -177,6 +180,9 @@ def _check_unchanged(cage, rj):
     if cs.edited is None or cs.edited.session_uid != rj.edited_uid:
         raise core.MeshAdjustError(f"'{cage.name}' lost its binding while Refine ran: "
                                    f"nothing was changed")
+    if store.binding_stamp(cs.edited) != rj.bound:
+        raise core.MeshAdjustError(f"'{cs.edited.name}' was bound again while Refine ran: "
+                                   f"nothing was changed; run Refine again")
     F_now = store.cage_topology(cage)[0]
     if F_now.shape != rj.F_cage.shape or not np.array_equal(F_now, rj.F_cage):
         raise core.MeshAdjustError(f"'{cage.name}' changed topology while the step ran: nothing "
@@ -231,6 +237,8 @@ def commit_refine(cage, rj):
     _write(cage, rj)
     cs = cage.meshadjust
     source, edited = cs.source, cs.edited
+    miss = results.key_miss(source, rj.V_edited) if rj.output == 'SHAPE_KEY' else None
+    warnings += [miss] if miss else []
     stale = staleness.source_change(source, edited.meshadjust.source_fingerprint, fresh=True)
     if stale:
         warnings.append(f"{stale}: the result uses the mesh that was bound; re-bind to use the "

@@ -38,6 +38,11 @@ LIVE = "live"
 live_written = {}
 
 
+#: a shape key shows the edit when the source's evaluated mesh is within this share of
+#: its size of the edited original (a key is float32: 1e-7 of its coordinates)
+KEY_TOLERANCE = 1e-5
+
+
 def _checksum(buf):
     """``"n:crc"`` of a flat float32 position buffer."""
     return f"{buf.size // 3}:{zlib.crc32(memoryview(np.ascontiguousarray(buf)).cast('B'))}"
@@ -516,6 +521,32 @@ def write_shape_key(source, cage, V_edited, V_bound, notes=None):
     cage.meshadjust.key_written = _checksum(co)
     source.data.update()
     return key
+
+
+def key_miss(source, V_edited):
+    """A warning when the source with its shape keys and modifiers as they
+    are now does not show the edit ``V_edited`` (n,3, its local space): a
+    key is applied before the modifiers, so where they turn the vertices
+    (an Armature's pose, a Simple Deform) the key's offsets, measured on the
+    shape they make, are turned too (a posed arm lifted up moved sideways,
+    reported as done); None when it shows it (to a ``KEY_TOLERANCE`` share
+    of its size) or has no modifiers."""
+    if not source.modifiers:
+        return None
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    depsgraph.update()
+    shown = mesh_io.read_object(source, depsgraph=depsgraph, evaluated=True).V
+    if shown.shape != V_edited.shape:
+        return None                       # (refused before a key is written)
+    size = core.bbox_diagonal(V_edited) if V_edited.shape[0] else 0.0
+    off = float(np.linalg.norm(shown - V_edited, axis=1).max()) if V_edited.shape[0] else 0.0
+    if not off > KEY_TOLERANCE * size:
+        return None
+    kinds = ", ".join(sorted({m.type.replace("_", " ").title() for m in source.modifiers}))
+    return (f"'{source.name}' shows its shape key through its modifiers ({kinds}), which "
+            f"Blender applies after it: where they turn the mesh the edit is turned too, up to "
+            f"{off:.3g} ({100 * off / size:.2g}% of its size) off the edited original; use the "
+            f"edited original, or apply the modifiers first")
 
 
 def _key_shape(keys, key, V_edited, V_bound):

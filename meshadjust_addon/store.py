@@ -33,6 +33,21 @@ CREASE = "meshadjust_crease"
 REST = "meshadjust_rest"
 
 _cache = {}
+#: edited original's session_uid -> bindings written on it (or taken back) this session
+_bindings_written = {}
+
+
+def binding_stamp(edited):
+    """What changes whenever a binding is written on the edited original
+    ``edited`` (or taken back by a failed step's rollback) in this session:
+    a step that read its binding compares it at its commit (a Bind made while
+    a Refine ran in the background had been overwritten by the Refine's
+    result from the binding before). None for no edited original."""
+    return None if edited is None else _bindings_written.get(edited.session_uid, 0)
+
+
+def _written(uid):
+    _bindings_written[uid] = _bindings_written.get(uid, 0) + 1
 
 
 def _set_point_attr(mesh, name, kind, values):
@@ -160,7 +175,8 @@ def save_binding(edited, binding):
     state.levels = binding.levels
     state.scheme = binding.scheme
     _cache[edited.session_uid] = binding
-    rollback.on_undo(lambda uid=edited.session_uid: _cache.pop(uid, None))
+    _written(edited.session_uid)
+    rollback.on_undo(lambda uid=edited.session_uid: (_cache.pop(uid, None), _written(uid)))
 
 
 def _take_name(detail, name):

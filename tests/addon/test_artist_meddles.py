@@ -16,7 +16,7 @@ import pytest
 
 from tests.addon.conftest import make_object
 from tests.addon.test_nothing_lost import (assert_all_unchanged, bound_sphere, full_snapshot,
-                                           lift_top, mod)
+                                           lift_top, mod, pos)
 from tests.addon.test_object_states import activate
 from tests.addon.test_operators import bumpy_sphere, simplify
 
@@ -400,3 +400,128 @@ def test_a_bind_refused_for_its_shape_key_says_how_to_bind_not_to_re_bind(bound)
         text = str(caught.value)        # ("... or re-bind", from inside a refused bind, before)
         assert "to bind, delete that shape key or those modifiers first" in text
         assert "re-bind" not in text and "were bound" not in text
+
+
+def test_a_bind_made_while_a_refine_ran_is_kept_and_the_refine_refused(scene):
+    """The artist sculpts the source and binds again while a Refine runs in the
+    background: the Refine had written its result from the binding before
+    over the new one (the sculpt gone, reported as done). Now refused, the
+    new bind's result kept; with source vertices deleted it had failed with
+    an internal count mismatch."""
+    dense = make_object("dense", *bumpy_sphere(3))
+    assert simplify(60, fit=False) == {'FINISHED'}
+    cage = dense.meshadjust.cage
+    lift_top(cage)
+    edited = cage.meshadjust.edited
+    kept = []
+
+    def sculpt_and_bind():
+        V = pos(dense) + [0.0, 0.0, 0.5]
+        mod("mesh_io").write_positions(dense.data, V)
+        dense.data.update()
+        activate(cage)
+        assert bpy.ops.meshadjust.bind(keep_edit=True) == {'FINISHED'}
+        kept.append(full_snapshot())
+
+    result, reports = _background("refine", cage, sculpt_and_bind, output='EDITED', levels=0,
+                                  scheme='BOUND')
+    assert result == {'CANCELLED'}
+    assert reports[0][1] == ("'dense_edited' was bound again while Refine ran: nothing was "
+                             "changed; run Refine again")
+    assert_all_unchanged(kept[0])
+    assert pos(edited)[:, 2].mean() > 0.4           # the sculpt, carried by the new binding
+
+
+def test_live_turned_on_follows_the_edit_made_while_it_was_off(bound):
+    """An edit made with Live off stayed unapplied when Live was turned on,
+    until the next edit: turning it on schedules an update."""
+    dense, cage = bound
+    live = mod("live")
+    edited = cage.meshadjust.edited
+    lift_top(cage, 0.3)
+    cage.data.update()
+    before = pos(edited).copy()
+    cage.meshadjust.live = True
+    assert cage.name in live._pending
+    live.refine_pending()
+    after = pos(edited).copy()
+    activate(cage)
+    assert bpy.ops.meshadjust.refine(output='EDITED') == {'FINISHED'}
+    assert np.abs(after - before).max() > 0.05 and np.abs(pos(edited) - after).max() < 1e-6
+    cage.meshadjust.live = False
+
+
+def test_subdivide_in_place_refuses_a_mesh_shared_by_linked_duplicates(scene):
+    """Only the active object got the new mesh: its Alt+D copy kept the old
+    one, no longer linked, in silence."""
+    rock = make_object("Rock", *bumpy_sphere(2))
+    twin = bpy.data.objects.new("Rock.001", rock.data)
+    bpy.context.scene.collection.objects.link(twin)
+    activate(rock)
+    before = full_snapshot()
+    with pytest.raises(RuntimeError, match=r"'Rock' shares its mesh with 'Rock\.001': in place "
+                                           r"would leave them the old one, no longer linked; "
+                                           r"make it single-user first"):
+        bpy.ops.meshadjust.subdivide(levels=1, in_place=True)
+    assert_all_unchanged(before)
+    assert bpy.ops.meshadjust.subdivide(levels=1, in_place=False) == {'FINISHED'}
+    assert twin.data == rock.data
+
+
+def _rigged(name, angle_deg):
+    """A bumpy sphere ``name`` deformed by an Armature whose one bone is
+    turned by ``angle_deg`` about x, simplified to a bound 60-face cage with
+    its top lifted: the cage."""
+    from math import radians
+    body = make_object(name, *bumpy_sphere(3))
+    rig = bpy.data.objects.new(name + "_rig", bpy.data.armatures.new(name + "_rig"))
+    bpy.context.scene.collection.objects.link(rig)
+    activate(rig)
+    bpy.ops.object.mode_set(mode='EDIT')
+    bone = rig.data.edit_bones.new("bone")
+    bone.head, bone.tail = (0, 0, -1), (0, 0, 1)
+    bpy.ops.object.mode_set(mode='OBJECT')
+    body.vertex_groups.new(name="bone").add(list(range(len(body.data.vertices))), 1.0,
+                                            'REPLACE')
+    body.modifiers.new("Armature", 'ARMATURE').object = rig
+    pose = rig.pose.bones["bone"]
+    pose.rotation_mode = 'XYZ'
+    pose.rotation_euler = (radians(angle_deg), 0, 0)
+    activate(body)
+    assert simplify(60, fit=False) == {'FINISHED'}
+    cage = body.meshadjust.cage
+    lift_top(cage)
+    activate(cage)
+    return cage
+
+
+def test_a_shape_key_through_a_posed_armature_says_it_misses_the_edit(scene):
+    """A key is applied before the modifiers, so on a posed rig the edit of
+    the cage, lifted up, showed sideways in the source with the key, reported
+    as done. Now a warning naming the Armature and how far off it is; at the
+    rest pose the key shows the edit, and nothing is said."""
+    report = mod("api").refine_object(_rigged("rest", 0.0), output='SHAPE_KEY')
+    assert report.level == 'INFO', report.message
+    report = mod("api").refine_object(_rigged("posed", 90.0), output='SHAPE_KEY')
+    assert report.level == 'WARNING'
+    assert "'posed' shows its shape key through its modifiers (Armature), which Blender " \
+           "applies after it" in report.message
+
+
+def test_messages_for_a_deleted_source_and_an_empty(bound):
+    """A source deleted with X (Blender keeps it while a cage points to it)
+    with a modifier was "disabled in the viewport: enable it", which the
+    artist cannot; an Empty was "a empty"."""
+    dense, cage = bound
+    dense.modifiers.new("Smooth", 'SMOOTH')
+    activate(dense)
+    bpy.ops.object.delete()
+    activate(cage)
+    with pytest.raises(RuntimeError, match=r"'dense' was deleted from the scene \(Blender keeps "
+                                           r"it while MeshAdjust points to it\)"):
+        bpy.ops.meshadjust.bind()
+    empty = bpy.data.objects.new("Empty", None)
+    bpy.context.scene.collection.objects.link(empty)
+    activate(empty)
+    assert mod("operators").simplify_unavailable(bpy.context) == \
+        "'Empty' is an empty, not a mesh"
