@@ -206,7 +206,8 @@ def cage_in_source_space(cage, source):
         cage.update_from_editmode()
     V = mesh_io.read_positions(cage.data)
     M = source_space(cage, source)
-    V_source = V @ M[:3, :3].T + M[:3, 3]
+    with np.errstate(invalid="ignore", over="ignore"):     # (named below)
+        V_source = V @ M[:3, :3].T + M[:3, 3]
     bad = ~np.isfinite(V_source).all(axis=1)
     if bad.any():
         # (Refine, Bind and Fit had named the core's inner functions: 'turned_faces: 1
