@@ -164,6 +164,11 @@ SCHEMES = ("butterfly", "loop")
 MAX_FINE_FACES = 2 ** 28
 #: most levels any mesh may take (one triangle makes MAX_FINE_FACES faces at 14)
 MAX_LEVELS = int(round(np.log(MAX_FINE_FACES) / np.log(4.0)))
+#: most entries the butterfly's ring stencils may take a level: each edge at a vertex of
+#: valence k reads its k ring vertices, k^2 entries for the vertex (a CAD cap fan of 10k
+#: triangles held 5.5 GB, 40k ran out of memory; a fan of 5k, 25M entries, 1.4 GB at its
+#: peak)
+MAX_RING_ENTRIES = 2 ** 25
 
 #: coarse values whose reach times the operator's ``gain`` stay below this are applied
 #: as they are: no partial sum can overflow (half the largest float, for rounding)
@@ -478,6 +483,22 @@ def check_subdivision_args(levels, scheme, where, n_faces=None):
     return levels
 
 
+def _check_ring_entries(E, n, where):
+    """:class:`InvalidMeshError` naming the vertex of largest valence when
+    the butterfly's ring stencils over the edges ``E`` (e,2) of ``n``
+    vertices would take more than :data:`MAX_RING_ENTRIES` (Loop's do not
+    grow so: each of its rows reads at most the edge's four vertices)."""
+    valence = np.bincount(E.ravel(), minlength=n)
+    entries = int((valence.astype(np.int64) * (valence + 1)).sum())
+    if entries > MAX_RING_ENTRIES:
+        v = int(np.argmax(valence))
+        raise InvalidMeshError(
+            f"{where}: butterfly subdivision reads a vertex's whole ring for each of its "
+            f"edges, and vertex {v} has {int(valence[v]):,} edges ({entries:,} stencil entries "
+            f"a level, at most {MAX_RING_ENTRIES:,}: a fan of that many triangles, as a CAD "
+            f"export caps a cylinder); use scheme='loop', or split the fan first")
+
+
 def _fingerprint(F, n, levels, scheme, creases):
     h = hashlib.sha1()
     h.update(f"meshadjust-subdivision-v1|{n}|{levels}|{scheme}|{F.shape[0]}|".encode())
@@ -489,6 +510,8 @@ def _fingerprint(F, n, levels, scheme, creases):
 
 def _build(F, n, levels, scheme, creases, where):
     T = _rf.topology(F, n, np.zeros(0, dtype=np.int64), where, check=True)
+    if scheme == "butterfly" and levels:
+        _check_ring_entries(T.E, n, where)
     cids = _rf.crease_edge_ids(creases, T.E, n, where)
     crease_pairs = T.E[cids].copy()
     level_fn = _st.butterfly_level if scheme == "butterfly" else _st.loop_level

@@ -111,3 +111,22 @@ def test_support_names_an_unsigned_id_past_int64_as_given():
     with pytest.raises(InvalidArgumentError, match=r"must be in \[0, 3\), got 9223372036854775809"):
         op.support(np.array([2 ** 63 + 1], dtype=np.uint64))
     assert op.support(np.array([1], dtype=np.uint64)).sum() == 4
+
+
+def test_a_fan_beyond_the_butterflys_ring_stencils_is_named_and_loop_takes_it():
+    """Each edge at a vertex of valence k reads its k ring vertices: a CAD cap
+    fan of 10k triangles held 5.5 GB and 40k ran out of memory. Beyond
+    MAX_RING_ENTRIES a level, named with the vertex; Loop takes the fan (its
+    rows read at most four vertices), and a fan within the bound subdivides."""
+    from core.errors import InvalidMeshError
+    from core.subdivide import MAX_RING_ENTRIES
+    from tests.mesh_factory import cad_cylinder
+    V, F = cad_cylinder(n_around=5000)                # two cap fans of valence 5,000
+    assert 2 * 5000 * 5001 > MAX_RING_ENTRIES
+    with pytest.raises(InvalidMeshError, match=r"^subdivide: butterfly subdivision reads a "
+                                               r"vertex's whole ring .* vertex 10000 has 5,000 "
+                                               r"edges \(50,\d{3},\d{3} stencil entries a level"):
+        subdivide(V, F, levels=1)
+    assert subdivide(V, F, levels=1, scheme="loop").F.shape[0] == 4 * F.shape[0]
+    V, F = cad_cylinder(n_around=1000)
+    assert subdivide(V, F, levels=1).F.shape[0] == 4 * F.shape[0]
