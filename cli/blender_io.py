@@ -24,6 +24,7 @@ output holds the numbers of its input's frame.
 
 import contextlib
 import ctypes
+import logging
 import os
 import re
 import sys
@@ -151,6 +152,28 @@ def _failure_of(op, log):
     return None
 
 
+#: what Blender's glTF importer logs for a Draco-compressed primitive it cannot decode (it
+#: skips it: the file had failed with "no mesh with faces" alone)
+_DRACO_FAILED = "Draco Decoder: Unable to decode"
+
+
+@contextlib.contextmanager
+def _no_handlers_left():
+    """Remove the logging handlers added inside the block (Blender's glTF
+    importer leaves its own attached when it raises: after 12 failed glTF
+    files, each line of a good file's log came 13 times)."""
+    loggers = [logging.getLogger()] + [x for x in logging.Logger.manager.loggerDict.values()
+                                       if isinstance(x, logging.Logger)]
+    before = {id(x): list(x.handlers) for x in loggers}
+    try:
+        yield
+    finally:
+        for x in [logging.getLogger()] + [x for x in logging.Logger.manager.loggerDict.values()
+                                          if isinstance(x, logging.Logger)]:
+            for handler in [h for h in x.handlers if h not in before.get(id(x), [])]:
+                x.removeHandler(handler)
+
+
 def import_mesh(path, log=None):
     """Import ``path`` with Blender's importer into the current scene and
     return one mesh object (several meshes in the file are joined).
@@ -171,7 +194,7 @@ def import_mesh(path, log=None):
     before = set(bpy.data.objects)
     read = stl_file.for_blender(path) if ext == ".stl" else contextlib.nullcontext(path)
     trace = []
-    with read as source, captured_output(log) as cap:
+    with read as source, captured_output(log) as cap, _no_handlers_left():
         failure = _failure_of(lambda: ops[ext](filepath=source), trace)
     log.extend(trace)
     if failure is not None:                 # a traceback's own lines are no cause to quote
@@ -184,7 +207,10 @@ def import_mesh(path, log=None):
     if not meshes:
         outside = (f" ({len(made):,} outside the scene it shows: glTF nodes in no scene or in "
                    f"another)" if made else "")
-        raise BlenderIOError(f"{name}: no mesh with faces in the file{outside}")
+        draco = [ln for ln in cap.causes("") if "Draco" in ln and "rror" in ln]
+        raise BlenderIOError(f"{name}: no mesh with faces in the file{outside}" + (
+            f": Blender's glTF importer could not decode its Draco-compressed meshes (its log: "
+            f"\"{'; '.join(draco)[:300]}\")" if _DRACO_FAILED in cap.text else ""))
     _unmirror_windings(meshes)
     for o in bpy.context.view_layer.objects:
         o.select_set(False)

@@ -27,7 +27,7 @@ import urllib.parse
 import numpy as np
 
 from .file_check import FileCheck, InputFileError
-from .gltf_positions import nonfinite_positions
+from .gltf_positions import indices_past_positions, nonfinite_positions
 
 #: a file's ``(x, y, z)`` from Blender's: ``V_file = V_blender @ FROM_BLENDER``
 FROM_BLENDER = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])
@@ -132,23 +132,88 @@ def _check_buffers(doc, path, name, bin_length):
 
 
 def _check_accessors(doc, name):
-    """Each accessor's elements lie in its buffer view."""
+    """Each accessor's elements lie in its buffer view, apart (a byteStride
+    at least their size: 4 bytes for VEC3 floats had overlapping positions
+    read, "ok"), and so do its ``sparse`` indices and values (a count past
+    their views was Blender's "ValueError: buffer is smaller than requested
+    size")."""
     views = _entries(doc, "bufferViews", name)
     for i, a in enumerate(_entries(doc, "accessors", name)):
-        if "bufferView" not in a:
-            continue                              # all zeros, or sparse only: nothing to read
-        j, off, count = _number(a, "bufferView", None), _number(a, "byteOffset"), \
-            _number(a, "count", None)
         width = _COMPONENT_BYTES.get(_key(a.get("componentType")), 0) * \
             _TYPE_COMPONENTS.get(_key(a.get("type")), 0)
-        if None in (j, off, count) or j >= len(views) or not width:
-            raise InputFileError(f"{name}: accessor {i} names no valid bufferView, count or type")
-        stride = _number(views[j], "byteStride") or width
-        need = off + (stride * (count - 1) + width if count else 0)
-        if need > views[j]["byteLength"]:
-            raise InputFileError(f"{name}: accessor {i} reads {need:,} bytes of bufferView {j}, "
-                                 f"which holds {views[j]['byteLength']:,} (a wrong count or "
-                                 f"offset)")
+        count = _number(a, "count", None)
+        if "bufferView" in a:                     # (else all zeros, or sparse only)
+            _check_reach(views, a, count, width, f"accessor {i}", name, strided=True)
+        sparse = a.get("sparse")
+        if sparse is None:
+            continue
+        n = _number(sparse, "count", None) if isinstance(sparse, dict) else None
+        at, values = (sparse.get(k) if isinstance(sparse, dict) else None
+                      for k in ("indices", "values"))
+        if n is None or not isinstance(at, dict) or not isinstance(values, dict) \
+                or _key(at.get("componentType")) not in (5121, 5123, 5125) \
+                or (count is not None and n > count):
+            raise InputFileError(f"{name}: accessor {i}'s sparse substitution names no valid "
+                                 f"count, indices or values")
+        _check_reach(views, at, n, _COMPONENT_BYTES[at["componentType"]],
+                     f"accessor {i}'s sparse indices", name)
+        _check_reach(views, values, n, width, f"accessor {i}'s sparse values", name)
+
+
+def _check_reach(views, a, count, width, what, name, strided=False):
+    """The ``count`` elements of ``width`` bytes that ``a`` (an accessor,
+    or its sparse indices or values: tightly packed) reads from its view lie
+    inside it, and apart."""
+    j, off = _number(a, "bufferView", None), _number(a, "byteOffset")
+    if None in (j, off, count) or j >= len(views) or not width:
+        raise InputFileError(f"{name}: {what} names no valid bufferView, count or type")
+    stride = (_number(views[j], "byteStride") or width) if strided else width
+    if stride < width:
+        raise InputFileError(f"{name}: bufferView {j} has a byteStride of {stride} bytes, less "
+                             f"than the {width} of each element of {what}: they would overlap "
+                             f"(glTF needs at least their size)")
+    need = off + (stride * (count - 1) + width if count else 0)
+    if need > views[j]["byteLength"]:
+        raise InputFileError(f"{name}: {what} reads {need:,} bytes of bufferView {j}, which "
+                             f"holds {views[j]['byteLength']:,} (a wrong count or offset)")
+
+
+def _check_nodes(doc, name):
+    """The node hierarchy is a forest (no node its own ancestor, none the
+    child of two: Blender's importer failed with a RecursionError or an
+    AssertionError), and the default scene and the scenes' nodes exist
+    (an IndexError)."""
+    nodes = _entries(doc, "nodes", name)
+    parent = np.full(len(nodes), -1, dtype=np.int64)
+    for i, node in enumerate(nodes):
+        children = node.get("children", [])
+        if not isinstance(children, list) or not all(
+                isinstance(c, int) and not isinstance(c, bool) and 0 <= c < len(nodes)
+                for c in children):
+            raise InputFileError(f"{name}: node {i}'s children are not node indices")
+        for c in children:
+            if parent[c] >= 0 or c == i:
+                raise InputFileError(f"{name}: node {c} is the child of "
+                                     f"{'itself' if c == i else 'two nodes'}: a node hierarchy "
+                                     f"must be a tree")
+            parent[c] = i
+    up = parent.copy()                      # each node's ancestor 2^k steps up, k = 0, 1, ...
+    for _ in range(len(nodes).bit_length()):
+        up = np.where(up >= 0, up[up], -1)
+    if (up >= 0).any():                     # (more steps up than there are nodes: a cycle)
+        raise InputFileError(f"{name}: node {int(np.flatnonzero(up >= 0)[0])} is its own "
+                             f"ancestor: a node hierarchy must be a tree")
+    scenes = _entries(doc, "scenes", name)
+    if "scene" in doc and not (_number(doc, "scene", None) is not None
+                               and doc["scene"] < len(scenes)):
+        raise InputFileError(f"{name}: its default scene {doc['scene']!r} is not one of its "
+                             f"{len(scenes)} scenes")
+    for k, scene in enumerate(scenes):
+        roots = scene.get("nodes", [])
+        if not isinstance(roots, list) or not all(
+                isinstance(c, int) and not isinstance(c, bool) and 0 <= c < len(nodes)
+                for c in roots):
+            raise InputFileError(f"{name}: scene {k}'s nodes are not node indices")
 
 
 #: per primitive mode, its name and whether a count of corners makes whole triangles
@@ -171,6 +236,10 @@ def _check_primitives(doc, name):
             if mode not in _MODES or not isinstance(which, int) or isinstance(which, bool) \
                     or not 0 <= which < len(accessors):
                 continue
+            if "indices" in prim and _key(accessors[which].get("componentType")) not in \
+                    (5121, 5123, 5125):
+                raise InputFileError(f"{name}: mesh {i} primitive {j}'s indices are not unsigned "
+                                     f"integers (glTF's UNSIGNED_BYTE, SHORT or INT)")
             n = _number(accessors[which], "count", None)
             what, whole = _MODES[mode]
             if n is not None and not whole(n):
@@ -256,8 +325,14 @@ def check(path):
             doc, glb_bin = _json(fh.read(), name), None
     _check_buffers(doc, path, name, None if glb_bin is None else len(glb_bin))
     _check_accessors(doc, name)
+    _check_nodes(doc, name)
     _check_primitives(doc, name)
     _check_node_matrices(doc, name)
+    past = indices_past_positions(doc, path, glb_bin)
+    if past:
+        mesh, prim, index, n = past
+        raise InputFileError(f"{name}: mesh {mesh} primitive {prim} has an index {index:,}, past "
+                             f"its {n:,} vertices (a damaged file)")
     bad = nonfinite_positions(doc, path, glb_bin)
     if bad:
         mesh, prim, n = bad

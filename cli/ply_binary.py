@@ -109,16 +109,22 @@ def element_records(path, order, props, pos, count, size, n_vertices, element):
     c0 = int(np.frombuffer(data, dtype=order + PLY_TYPES[ct], count=1, offset=at - itemsize[ct])[0])
     first = np.frombuffer(data, dtype=order + PLY_TYPES[it], offset=at,
                           count=max(0, min(c0, (size - at) // itemsize[it])))
+    rec = before + itemsize[ct] + c0 * itemsize[it] + after
+    fits = min(count, (size - pos) // rec) if rec > 0 else 0
+    counts = np.frombuffer(data, offset=pos, count=fits, dtype=np.dtype(
+        {"names": ["c"], "formats": [order + PLY_TYPES[ct]], "offsets": [before],
+         "itemsize": rec}))["c"] if fits else np.zeros(0, dtype=np.int64)
+    same = counts == c0
     if not _valid_first(element, c0, first, n_vertices):
         many = element == "face" and c0 > 255 and first.size == c0 \
             and _valid_first(element, 3, first, n_vertices)
-        return 0, pos, "too many corners" if many else True
-    rec = before + itemsize[ct] + c0 * itemsize[it] + after
-    fits = min(count, (size - pos) // rec)
-    counts = np.frombuffer(data, offset=pos, count=fits, dtype=np.dtype(
-        {"names": ["c"], "formats": [order + PLY_TYPES[ct]], "offsets": [before],
-         "itemsize": rec}))["c"]
-    same = counts == c0
+        # (records all of its length, ending where the file's data ends: the layout holds and
+        # the first face has only a bad index, which Blender drops with a warning, as a later
+        # one; it had been read as a wrong count)
+        whole = 1 <= c0 <= (255 if element == "face" else c0) and fits == count \
+            and same.all() and not np.isin(data[pos + count * rec:], PADDING, invert=True).any()
+        if not whole:
+            return 0, pos, "too many corners" if many else True
     run = fits if same.all() else int(np.argmin(same))   # records of the first one's length
     if run == count:
         return count, pos + count * rec, False

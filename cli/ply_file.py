@@ -202,12 +202,16 @@ def _known_type(t):
 
 
 def count_nonfinite(path):
-    """Vertices with a coordinate that is NaN or infinite, read from the file
-    itself (Blender's importer turns those into 0); None when the layout is
-    not one read here (list properties on the vertices, a file cut short).
-    The vertex element may come after others (a file whose faces come first
-    had its NaN read as 0, status ok): ASCII, after their lines; binary,
-    after their bytes (:func:`.ply_binary.element_records`)."""
+    """Vertices with a coordinate that is NaN or infinite, or beyond a
+    float's range in a ``float`` property (1e39: Blender's importer stores
+    those as 0), read from the file itself; None when the layout is not one
+    read here (a binary file with list properties on the vertices, x, y or
+    z after such a list, a file cut short). The vertex element may come
+    after others (a file whose faces come first had its NaN read as 0,
+    status ok): ASCII, after their lines; binary, after their bytes
+    (:func:`.ply_binary.element_records`). An ASCII vertex with a list (a
+    scanner's per-vertex extras) is read up to the list (it had not been
+    read at all: its NaN came back "ok")."""
     header = ply_header(path)
     if not header:
         return None
@@ -217,21 +221,24 @@ def count_nonfinite(path):
         return None
     _, n, props = elements[at]
     names = [p for _, p in props]
-    if any(t not in PLY_TYPES for t, _ in props) or not {"x", "y", "z"} <= set(names) \
-            or len(set(names)) < len(names):
+    if not {"x", "y", "z"} <= set(names) or len(set(names)) < len(names):
+        return None                    # (check names a coordinate declared twice)
+    scalars = next((k for k, (t, _) in enumerate(props) if t not in PLY_TYPES), len(props))
+    cols = [k for k, (_, name) in enumerate(props) if name in ("x", "y", "z")]
+    if max(cols) >= scalars:
         return None
     if fmt == "ascii":
-        with open(path, "rb") as fh:
-            fh.seek(length)
-            text = fh.read()
-        skip = sum(count for _, count, _ in elements[:at])   # the lines of the elements before
-        try:
-            lines = text.split(b"\n", skip + n)[skip:skip + n]
-            table = np.array(b" ".join(lines).split(), dtype=np.float64).reshape(n, len(props))
-        except ValueError:
+        table = _ascii_columns(path, length, sum(count for _, count, _ in elements[:at]), n,
+                               scalars, len(props))
+        if table is None:
             return None
-        cols = [k for k, (_, name) in enumerate(props) if name in ("x", "y", "z")]
-        return int((~np.isfinite(table[:, cols]).all(axis=1)).sum())
+        xyz = table[:, cols]
+        single = np.array([PLY_TYPES[props[k][0]] == "f4" for k in cols])
+        with np.errstate(invalid="ignore"):
+            beyond = single & (np.abs(xyz) > np.finfo(np.float32).max)
+        return int((~np.isfinite(xyz).all(axis=1) | beyond.any(axis=1)).sum())
+    if scalars < len(props):
+        return None
     order = {"binary_little_endian": "<", "binary_big_endian": ">"}.get(fmt)
     if order is None:
         return None
@@ -249,23 +256,60 @@ def count_nonfinite(path):
     return int((~np.isfinite(xyz).all(axis=1)).sum())
 
 
+def _ascii_columns(path, length, skip, n, scalars, width):
+    """The first ``scalars`` numbers of each of the ``n`` vertex lines of an
+    ASCII PLY file (header ``length`` bytes, ``skip`` lines of other
+    elements before them; ``width`` properties, all scalars when ``scalars``
+    is ``width``), (n, scalars) float64, or None when they cannot be read."""
+    with open(path, "rb") as fh:
+        fh.seek(length)
+        text = fh.read()
+    lines = text.split(b"\n", skip + n)[skip:skip + n]
+    try:
+        if scalars == width:
+            return np.array(b" ".join(lines).split(), dtype=np.float64).reshape(n, width)
+        words = rb"^[ \t\r]*" + rb"[ \t]+".join([rb"(\S+)"] * scalars)
+        first = re.findall(words, b"\n".join(lines), re.M)     # (a word per scalar, each line)
+        return np.array(first, dtype=np.float64).reshape(n, scalars)
+    except ValueError:
+        return None
+
+
+def _twice(path):
+    """A message for a vertex coordinate (x, y or z) the header declares
+    twice (which one Blender's importer takes is not said), or None."""
+    header = ply_header(path)
+    vertex = next((props for e, _, props in header[2] if e == "vertex"), []) if header else []
+    names = [name for _, name in vertex]
+    twice = [c for c in ("x", "y", "z") if names.count(c) > 1]
+    return (f"{os.path.basename(path)}: its header declares the vertices' property "
+            f"'{twice[0]}' {names.count(twice[0])} times: which one is the coordinate is not "
+            f"clear (a damaged header)") if twice else None
+
+
 def check(path):
     """What a PLY file's own structure says (:class:`FileCheck`: the faces
     its header declares); raises :class:`InputFileError` for a file Blender
     would read wrong (:func:`count_nonfinite`, :func:`ply_size_problem`)."""
+    twice = _twice(path)
+    if twice:
+        raise InputFileError(twice)
     bad = count_nonfinite(path)
     if bad:
         raise InputFileError(f"{os.path.basename(path)}: {bad:,} "
                              f"{'vertex' if bad == 1 else 'vertices'} with a coordinate that is "
-                             f"not a finite number (NaN or infinity; Blender's importer would "
-                             f"read them as 0)")
+                             f"not a finite number (NaN or infinity, or beyond a float's range; "
+                             f"Blender's importer would read them as 0)")
     problem = ply_size_problem(path)
     if problem:
         raise InputFileError(problem)
     header = ply_header(path)
     if header is None:
         raise InputFileError(_not_ply(path))
-    return FileCheck({e: n for e, n, _ in header[2]}.get("face"))
+    counts = {e: n for e, n, _ in header[2]}
+    # (a file's triangle strips are faces too, how many only their records say: with a face
+    # element beside them, the faces read had been compared with the face records alone)
+    return FileCheck(None if "tristrips" in counts else counts.get("face"))
 
 
 def _not_ply(path):

@@ -18,7 +18,6 @@ was left blank (0), or with bytes appended after its triangles, and an
 ASCII file written in capitals (``VERTEX``: Blender found no face in it).
 """
 
-import codecs
 import contextlib
 import os
 import re
@@ -38,18 +37,17 @@ STL_HEAD, STL_TRIANGLE = 84, 50
 _CONTROL = frozenset(range(32)) - {9, 10, 12, 13}
 #: the keywords that open and close a facet and a solid, as whole words
 _KEYWORDS = re.compile(rb"(?<!\S)(facet|endfacet|endsolid)(?!\S)")
+#: a ``solid`` or ``endsolid`` line's name, left out of the keywords' count (``endsolid scan
+#: facet model`` had opened a facet never closed, ``endsolid vertex colours`` held a corner)
+_SOLID_NAMES = re.compile(rb"^([ \t]*(?:end)?solid)(?![^ \t\r\n])[^\n]*", re.M)
 
 
 def is_ascii(head):
-    """Whether the first bytes of a file, ``head``, are text (UTF-8: an ASCII
-    STL's ``solid`` name may hold any character, ``solid Kugel_größe``)."""
-    if not head or _CONTROL & set(head):
-        return False
-    try:
-        codecs.getincrementaldecoder("utf-8")().decode(head, final=False)
-    except UnicodeDecodeError:
-        return False
-    return True
+    """Whether the first bytes of a file, ``head``, are text: no control
+    bytes, in any 8-bit encoding (an ASCII STL's ``solid`` name may hold any
+    character: ``solid Kugel_größe`` in UTF-8, or in Latin-1, which Blender
+    reads too and which had been taken for a damaged binary file)."""
+    return bool(head) and not _CONTROL & set(head)
 
 
 def triangle_counts(path):
@@ -99,12 +97,17 @@ def _trailing_bytes(path, counts):
     return os.path.getsize(path) - STL_HEAD - STL_TRIANGLE * counts[1]
 
 
-def _upper_case_vertex(path):
-    """Whether an ASCII STL file writes its ``vertex`` keyword other than in
-    lower case (``VERTEX``: Blender's importer then finds no corner, and no face)."""
+def _ascii_as_meant(path):
+    """An ASCII STL file's bytes as Blender's importer should read them, or
+    None when it reads the file itself as meant: its ``vertex`` keyword in
+    lower case (``VERTEX``: the importer found no corner, and no face) and
+    its solids' names without the keywords (``endsolid vertex colours``: it
+    read a corner there, one face too many)."""
     with open(path, "rb") as fh:
         data = fh.read()
-    return data.count(b"vertex") != data.lower().count(b"vertex")
+    clean = _SOLID_NAMES.sub(rb"\1", data.lower())
+    same = all(data.count(word) == clean.count(word) for word in (b"vertex", b"facet"))
+    return None if same else clean
 
 
 @contextlib.contextmanager
@@ -112,12 +115,12 @@ def for_blender(path):
     """``path``, or a temporary copy of the same name that Blender's importer
     reads as the file means it (the file itself is never changed): a binary
     file with its blank triangle count written in and the bytes after its
-    triangles left out (:func:`triangle_counts`); an ASCII file with its
-    ``vertex`` keyword in capitals (``VERTEX``, as some exporters write STL)
-    in lower case, all of it."""
+    triangles left out (:func:`triangle_counts`); an ASCII file in lower case
+    and its solids' names left out (:func:`_ascii_as_meant`)."""
     counts = triangle_counts(path)
     binary_fix = counts is not None and (counts[0] != counts[1] or _trailing_bytes(path, counts))
-    if not binary_fix and not (counts is None and _upper_case_vertex(path)):
+    text = _ascii_as_meant(path) if counts is None else None
+    if not binary_fix and text is None:
         yield path
         return
     with tempfile.TemporaryDirectory(prefix="meshadjust-stl-") as folder:
@@ -129,16 +132,16 @@ def for_blender(path):
                 fh.write(struct.pack("<I", counts[1]))
                 fh.truncate(STL_HEAD + STL_TRIANGLE * counts[1])
         else:
-            with open(path, "rb") as src, open(copy, "wb") as dst:
-                dst.write(src.read().lower())
+            with open(copy, "wb") as dst:
+                dst.write(text)
         yield copy
 
 
 def _nonfinite_error(path, bad):
     what = "facet" if bad == 1 else "facets"
     return InputFileError(f"{os.path.basename(path)}: {bad:,} {what} with a coordinate that is "
-                          f"not a finite number (NaN or infinity; Blender's importer would read "
-                          f"them as 0)")
+                          f"not a finite number (NaN or infinity, or beyond a float's range; "
+                          f"Blender's importer would read them as 0)")
 
 
 def _check_binary(path, counts):
@@ -184,7 +187,7 @@ def _check_ascii(path):
     fewer than 3 corners and a NaN or infinite corner are errors naming the
     line (:func:`_corners`)."""
     with open(path, "rb") as fh:
-        data = fh.read().lower()
+        data = _SOLID_NAMES.sub(rb"\1", fh.read().lower())
     starts, ends, closed = _ascii_keywords(data)
     name = os.path.basename(path)
     if starts > ends:
@@ -194,7 +197,8 @@ def _check_ascii(path):
         f"{name}: ends after facet {ends:,} without 'endsolid' (file truncated?): read the "
         f"{ends:,} whole facets",)
     V, facet = _corners(path, data)
-    finite = np.isfinite(V).all(axis=1)
+    with np.errstate(invalid="ignore"):       # (Blender reads float32: 1e39 became 0)
+        finite = (np.abs(V) <= np.finfo(np.float32).max).all(axis=1)
     if not finite.all():
         raise _nonfinite_error(path, np.unique(facet[~finite]).size)
     return FileCheck(ends, (), warnings)
@@ -218,8 +222,9 @@ def _corners(path, data):
     :class:`InputFileError` naming the line of a ``vertex`` not followed by
     three numbers (Blender's importer read '1.0 abc 2.0' and '1.0 2.0' on,
     as 0 or the next line's word: the file came back "ok") and the facet of
-    fewer than 3 corners (dropped as degenerate, with a warning that did not
-    say why)."""
+    other than 3 corners (fewer: dropped as degenerate, with a warning that
+    did not say why; more: read as a face too many, "read 321 faces from the
+    file's 320")."""
     b = np.frombuffer(data, dtype=np.uint8)
     first_line = data.find(b"\n") + 1 if b"\n" in data else len(data)
     at = _keyword_at(b, b"vertex")
@@ -234,15 +239,16 @@ def _corners(path, data):
         _raise_bad_vertex(path, data, at, stop)
     facet = np.searchsorted(_keyword_at(b, b"endfacet"), at)
     corners = np.bincount(facet)
-    few = np.flatnonzero(corners[:facet.max() + 1 if facet.size else 0] < 3)
-    if few.size:
-        k = int(few[0])
+    odd = np.flatnonzero(corners[:facet.max() + 1 if facet.size else 0] != 3)
+    if odd.size:
+        k = int(odd[0])
         line = data.count(b"\n", 0, int(at[facet == k][0])) + 1 if corners[k] else None
         where = f" (line {line:,})" if line else ""
         raise InputFileError(
             f"{os.path.basename(path)}: facet {k + 1:,}{where} has {corners[k]} "
             f"{'vertex' if corners[k] == 1 else 'vertices'}, not 3: a damaged file (Blender's "
-            f"importer would drop it as a degenerate triangle)")
+            f"importer would " + ("drop it as a degenerate triangle)" if corners[k] < 3 else
+                                  "read it as more than one face)"))
     return V, facet
 
 

@@ -52,7 +52,8 @@ def test_an_ascii_ply_record_that_is_not_what_its_properties_say_is_named(tmp_pa
                          "properties give: a wrong count in the header, or a damaged file",
             "long.ply": "vertex record on line 60 ('0.5 0.5 0.5 0.5') holds 4 values, not the 3",
             "index.ply": "face record on line 210 ('3 0 1.5 2') holds '1.5' in its "
-                         "vertex_indices list, whose items are whole numbers (int)",
+                         "vertex_indices list, whose items are 32-bit integers (int) written "
+                         "in digits",
             "count.ply": "face record on line 210 ('4 0 1 2') holds 4 values, not the 5 its "
                          "properties give",
             "comma.ply": "vertex record on line 10 ("}

@@ -43,7 +43,8 @@ def test_an_ascii_stl_corner_that_is_not_three_numbers_is_named_by_its_line(tmp_
                       "not 3: a damaged file (Blender's importer would drop it as a degenerate "
                       "triangle)",
         "caps.stl": "caps.stl: read failed: caps.stl: 1 facet with a coordinate that is not a "
-                    "finite number (NaN or infinity; Blender's importer would read them as 0)"}
+                    "finite number (NaN or infinity, or beyond a float's range; Blender's "
+                    "importer would read them as 0)"}
 
 
 def test_the_weld_blenders_stl_importer_does_is_reported(tmp_path):
@@ -66,11 +67,13 @@ def test_the_weld_blenders_stl_importer_does_is_reported(tmp_path):
     assert stl["faces_out"] == ply["faces_out"] == 100
 
 
-def test_more_faces_than_the_file_holds_is_a_warning(tmp_path):
+def test_a_facet_of_four_corners_is_named_by_its_line(tmp_path):
     """An ASCII STL facet with a fourth corner (a line of the next facet
     copied into it) made Blender read 321 faces from 320 facets, a face
-    the file does not hold, and the file came back "ok"; now a warning
-    says so, as one with fewer faces. (STL's facets are triangles.)"""
+    the file does not hold: the file came back "ok", then with a warning
+    that said only "read 321 faces from the file's 320". Now refused as a
+    facet of fewer corners is, naming the facet and its line. (STL's facets
+    are triangles.)"""
     V, F = icosphere(2)
     write_ascii_stl(tmp_path / "whole.stl", V, F)
     lines = (tmp_path / "whole.stl").read_text().split("\n")
@@ -78,10 +81,9 @@ def test_more_faces_than_the_file_holds_is_a_warning(tmp_path):
     (tmp_path / "twice.stl").write_text("\n".join(lines[:104] + [lines[108]] + lines[104:]))
     proc = run_batch(["twice.stl", "whole.stl", "--faces", "100", "--format", "obj", "--out",
                       "out", "--report", "r.json"], tmp_path)
-    assert proc.returncode == 0, proc.stdout + proc.stderr
+    assert proc.returncode == 1, proc.stdout + proc.stderr
     twice, whole = json.loads((tmp_path / "r.json").read_text())["files"]
     assert whole["status"] == "ok" and whole["warnings"] == []
-    assert twice["status"] == "warn" and twice["faces_in"] == 321
-    assert twice["warnings"] == ["Blender's STL importer read 321 faces from the file's 320: it "
-                                 "holds something else than the faces it declares (a damaged "
-                                 "file?)"]
+    assert twice["status"] == "failed" and twice["error"] == (
+        "twice.stl: read failed: twice.stl: facet 15 (line 102) has 4 vertices, not 3: a "
+        "damaged file (Blender's importer would read it as more than one face)")
