@@ -125,7 +125,8 @@ def test_batch_names_bad_files_and_keeps_blenders_log_out_of_stdout(tmp_path):
     dropped = next(ln for ln in lines if ln.startswith("| dropped.ply"))
     assert "| warn: Blender's PLY importer kept 1,280 of the file's 1,281 faces" in dropped
     assert ("| FAILED: nan.ply: read failed: nan.ply: 2 vertices with a coordinate that is not a "
-            "finite number (NaN or infinity; Blender's importer would read them as 0) |") in proc.stdout
+            "finite number (NaN or infinity, or beyond a float's range; Blender's importer would "
+            "read them as 0) |") in proc.stdout
     assert "PLY import of" not in proc.stdout + proc.stderr
     assert "PLY import of 'good.ply'" in log.read_text()
     assert out_files(out) == ["dropped_cage.ply", "good_cage.ply"]
