@@ -27,6 +27,9 @@ from . import api, app_handlers, live_update, results
 from .properties import preferences
 
 _pending = set()
+#: the session_uid of each pending cage, by the name it was scheduled under (a cage renamed
+#: before its update ran had been skipped: its edit followed only at the next one)
+_pending_uid = {}
 _last_run = {}
 #: cage name -> (worker thread making its refined mesh's finer binding, {"error": exception},
 #: the timer that looks for it)
@@ -45,14 +48,19 @@ def refine_pending():
     directly, e.g. in tests). Returns None so the timer does not repeat."""
     names = list(_pending)
     _pending.clear()
+    uids = dict(_pending_uid)
+    _pending_uid.clear()
     output = 'EDITED'
     scene = bpy.context.scene
     if scene is not None and hasattr(scene, "meshadjust"):
         output = scene.meshadjust.output
     for name in names:
-        cage = bpy.data.objects.get(name)
+        cage, uid = bpy.data.objects.get(name), uids.get(name)
+        if uid is not None and (cage is None or cage.session_uid != uid):     # renamed
+            cage = next((o for o in bpy.data.objects if o.session_uid == uid), None) or cage
         if cage is None or not cage.meshadjust.live or cage.meshadjust.edited is None:
             continue
+        name = cage.name
         try:
             if output in ('EDITED', 'BOTH'):
                 report = live_update.update_edited(cage).summary()
@@ -148,12 +156,14 @@ def on_depsgraph_update(scene, depsgraph):
         obj = obj.original
         if obj.type != 'MESH' or obj.meshadjust.role != 'CAGE' or not obj.meshadjust.live:
             continue
-        schedule(obj.name)
+        schedule(obj)
 
 
-def schedule(name):
-    """Schedule a throttled live refine of the cage named ``name`` (once
-    while one is pending)."""
+def schedule(cage):
+    """Schedule a throttled live refine of the object ``cage`` (once while
+    one is pending; found again by its session_uid if renamed meanwhile)."""
+    name = cage.name
+    _pending_uid[name] = cage.session_uid
     if name in _pending:
         return
     _pending.add(name)
@@ -168,7 +178,7 @@ def live_toggled(state, _context):
     next one)."""
     cage = state.id_data
     if state.live and isinstance(cage, bpy.types.Object) and state.role == 'CAGE':
-        schedule(cage.name)
+        schedule(cage)
 
 
 @bpy.app.handlers.persistent
@@ -192,5 +202,6 @@ def unregister():
         if bpy.app.timers.is_registered(look):
             bpy.app.timers.unregister(look)
     _pending.clear()
+    _pending_uid.clear()
     _finer.clear()
     live_update.forget()

@@ -525,3 +525,24 @@ def test_messages_for_a_deleted_source_and_an_empty(bound):
     activate(empty)
     assert mod("operators").simplify_unavailable(bpy.context) == \
         "'Empty' is an empty, not a mesh"
+
+
+def test_a_live_update_pending_when_the_cage_is_renamed_still_runs(bound):
+    """The pending update was found by the cage's name: renamed before the
+    timer ran, the edit followed only at the next one."""
+    dense, cage = bound
+    live = mod("live")
+    edited = cage.meshadjust.edited
+    cage.meshadjust.live = True
+    live.refine_pending()
+    before = pos(edited).copy()
+    lift_top(cage, 0.3)
+    cage.data.update()
+    live.schedule(cage)
+    cage.name = "Renamed cage"
+    live.refine_pending()
+    after = pos(edited).copy()
+    activate(cage)
+    assert bpy.ops.meshadjust.refine(output='EDITED') == {'FINISHED'}
+    assert np.abs(after - before).max() > 0.05 and np.abs(pos(edited) - after).max() < 1e-6
+    cage.meshadjust.live = False
