@@ -68,7 +68,8 @@ def parse_args(argv, prog=PROG):
         description="Simplify meshes into cages with MeshAdjust (QEM), optionally fit the "
                     "cages to the originals and refine them back with the detail.",
         epilog="Exit status: 0 all files converted (warnings allowed unless --strict), 1 a file "
-               "failed or timed out, 2 bad arguments or output paths, 130 interrupted. Inside "
+               "failed or timed out, 2 bad arguments or output paths, 130 interrupted (Ctrl-C), "
+               "143 stopped (SIGTERM). Inside "
                "Blender put the options after '--': blender -b -P scripts/meshadjust_batch.py -- "
                "IN... --faces N.")
     p.add_argument("inputs", nargs="+", help="mesh files or folders (.obj .smf: NumPy only; "
