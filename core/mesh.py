@@ -439,12 +439,8 @@ def lengths(X):
     ``2**SAFE_EXPONENT`` (or below its inverse), and the lengths multiplied
     back (exact: the same bits where the squares neither overflow nor
     underflow; at 1e200 they were infinite, with NumPy's overflow warning)."""
-    largest = float(np.abs(X).max()) if X.size else 0.0
-    exponent = int(np.frexp(largest)[1])
-    if largest == 0 or abs(exponent) < SAFE_EXPONENT:
-        return row_norms(X)
-    scale = float(np.ldexp(1.0, exponent))
-    return row_norms(X / scale) * scale
+    scale = safe_scale(float(np.abs(X).max()) if X.size else 0.0)
+    return row_norms(X) if scale == 1.0 else row_norms(X / scale) * scale
 
 
 def any_in_rows(B):
@@ -594,7 +590,14 @@ def power_of_two_scale(V, F):
     if F.size == 0:
         return 1.0
     A = np.abs(V)
-    largest = float(np.maximum(np.maximum(A[:, 0], A[:, 1]), A[:, 2])[F].max())
+    return safe_scale(float(np.maximum(np.maximum(A[:, 0], A[:, 1]), A[:, 2])[F].max()))
+
+
+def safe_scale(largest):
+    """The power of two just above ``largest`` (a magnitude >= 0), or 1.0
+    when it lies within ``2**-SAFE_EXPONENT .. 2**SAFE_EXPONENT`` or is 0:
+    what to divide numbers of that magnitude by, exactly, before
+    multiplying them."""
     exponent = int(np.frexp(largest)[1])
     if largest == 0 or abs(exponent) < SAFE_EXPONENT:
         return 1.0
