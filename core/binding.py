@@ -640,8 +640,7 @@ def bind(V_dense, F_dense, V_cage, F_cage, *, levels=2, scheme="butterfly", crea
     shifted = bool(origin.any())
     Vf = op.apply(V_cage - origin)
     VfT = np.ascontiguousarray(Vf.T)
-    folds = _folds_of(VfT, op.F_fine)
-    NfT = _vertex_normals_t(VfT, op.F_fine, _normal_floor(step), folds)
+    NfT, folds = _normals_and_folds(VfT, op.F_fine, _normal_floor(step))
     F_own, degree = aside.result()
     reach = typical.result() if typical is not None else None
     # the fine faces at each fine edge and vertex and the fine vertices' frames (one thread;
@@ -763,7 +762,7 @@ def bind_refined(binding, V_dense, levels, *, V_cage=None, detail_search="auto",
     op = cage_operator(binding.F_cage, binding.n_cage, where="bind_refined", levels=levels,
                        scheme=binding.scheme, creases=binding.creases)
     VfT = np.ascontiguousarray(op.apply(V_cage - origin).T)
-    NfT = _vertex_normals_t(VfT, op.F_fine, _normal_floor(step), _folds_of(VfT, op.F_fine))
+    NfT, folds = _normals_and_folds(VfT, op.F_fine, _normal_floor(step))
     vfr = _fine_frames(VfT, NfT, op.F_fine, *_vertex_corners(op.F_fine, op.n_fine))
     if progress is not None:                 # (a point cloud has no search to cancel in)
         _reporter(progress, 0.0, 0.05)(1.0)
@@ -782,10 +781,12 @@ def bind_refined(binding, V_dense, levels, *, V_cage=None, detail_search="auto",
                                index=index, surface=surface, nearest=nearest,
                                report=_reporter(progress, 0.45, 0.95))
     none = np.zeros((0, 3))
-    return Binding(fine_face=np.zeros(0, dtype=np.int64), bary=none, offset=none,
-                   fine_detail=fine_detail, F_cage=binding.F_cage, n_cage=binding.n_cage,
-                   levels=int(levels), scheme=binding.scheme, creases=binding.creases,
-                   fingerprint=op.fingerprint, V_cage_rest=V_cage, _operator=op)
+    refined = Binding(fine_face=np.zeros(0, dtype=np.int64), bary=none, offset=none,
+                      fine_detail=fine_detail, F_cage=binding.F_cage, n_cage=binding.n_cage,
+                      levels=int(levels), scheme=binding.scheme, creases=binding.creases,
+                      fingerprint=op.fingerprint, V_cage_rest=V_cage, _operator=op)
+    refined._cache["folds"] = folds       # (what _rest_folds would find again, subdividing)
+    return refined
 
 
 def _without_dense(binding):
@@ -1952,11 +1953,16 @@ def _vertex_normals_t(PT, F, floor=0.0, folds=None):
     operations in the same order (face normals as ``np.cross`` forms them,
     summed corner 0, 1, 2 with ``bincount``), so bit-identical to it above
     ``floor``, about 3x faster."""
-    fn, out = _area_sums_t(PT, F)
-    _unit_columns(out, floor)
-    if folds is not None:
-        out[:, folds] = 0.0
-    return out
+    return _unit_columns(_area_sums_t(PT, F)[1], floor, folds)
+
+
+def _normals_and_folds(PT, F, floor):
+    """``(normals, folds)``: :func:`_vertex_normals_t` of a rest surface
+    (positions ``PT`` (3, n), triangles ``F``) with its own
+    :func:`_folds_of`, from one pass of area normals (a bind's)."""
+    fn, summed = _area_sums_t(PT, F)
+    folds = _fold_mask(fn, summed, F)
+    return _unit_columns(summed, floor, folds), folds
 
 
 def _area_sums_t(PT, F):
@@ -1978,8 +1984,13 @@ def _folds_of(PT, F):
     ``PT`` (3, n) whose faces fold back onto each other: the sum of their
     area normals at most ``_NORMAL_CANCEL`` of the sum of those normals'
     lengths (and that sum not zero); None when there is none."""
-    fn, summed = _area_sums_t(PT, F)
-    total = np.bincount(F.ravel(), np.repeat(_length_t(fn), 3), PT.shape[1])
+    return _fold_mask(*_area_sums_t(PT, F), F)
+
+
+def _fold_mask(fn, summed, F):
+    """:func:`_folds_of` from the area normals ``fn`` (3, m) of ``F`` and
+    their sums ``summed`` (3, n) at the vertices (:func:`_area_sums_t`)."""
+    total = np.bincount(F.ravel(), np.repeat(_length_t(fn), 3), summed.shape[1])
     folds = (_length_t(summed) <= _NORMAL_CANCEL * total) & (total > 0)
     return folds if folds.any() else None
 
@@ -1998,11 +2009,14 @@ def _rest_folds(binding):
     return c["folds"]
 
 
-def _unit_columns(out, floor=0.0):
+def _unit_columns(out, floor=0.0, none=None):
     """``out`` (3, k) with every column scaled to unit length, in place;
-    columns not longer than ``floor`` (zero ones too) become zero."""
+    columns not longer than ``floor`` (zero ones too), and those ``none``
+    (k,) bool marks (None: no other), become zero."""
     length = _length_t(out)
     ok = length > floor
+    if none is not None:
+        ok &= ~none
     np.divide(out, length, out=out, where=ok)
     out[:, ~ok] = 0.0
     return out
@@ -2172,10 +2186,8 @@ def _normals_at(idx, PT, vertices, floor, folds=None):
     for d in range(3):
         out[d] = np.bincount(at[0], fn[d], k + 1) + np.bincount(at[1], fn[d], k + 1) \
             + np.bincount(at[2], fn[d], k + 1)
-    out = _unit_columns(out[:, :k], floor)  # (a view: the spare slot left off)
-    if folds is not None:
-        out[:, folds[vertices]] = 0.0
-    return out
+    return _unit_columns(out[:, :k], floor,   # (a view: the spare slot left off)
+                         None if folds is None else folds[vertices])
 
 
 class _Rows(NamedTuple):
