@@ -162,14 +162,14 @@ def _no_handlers_left():
     """Remove the logging handlers added inside the block (Blender's glTF
     importer leaves its own attached when it raises: after 12 failed glTF
     files, each line of a good file's log came 13 times)."""
-    loggers = [logging.getLogger()] + [x for x in logging.Logger.manager.loggerDict.values()
-                                       if isinstance(x, logging.Logger)]
-    before = {id(x): list(x.handlers) for x in loggers}
+    def loggers():         # (the root and every named one; placeholders hold no handlers)
+        return [logging.getLogger()] + [x for x in logging.Logger.manager.loggerDict.values()
+                                        if isinstance(x, logging.Logger)]
+    before = {id(x): list(x.handlers) for x in loggers()}
     try:
         yield
     finally:
-        for x in [logging.getLogger()] + [x for x in logging.Logger.manager.loggerDict.values()
-                                          if isinstance(x, logging.Logger)]:
+        for x in loggers():
             for handler in [h for h in x.handlers if h not in before.get(id(x), [])]:
                 x.removeHandler(handler)
 

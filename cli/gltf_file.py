@@ -27,7 +27,7 @@ import urllib.parse
 import numpy as np
 
 from .file_check import FileCheck, InputFileError
-from .gltf_positions import indices_past_positions, nonfinite_positions
+from .gltf_positions import INDEX_TYPES, indices_past_positions, nonfinite_positions
 
 #: a file's ``(x, y, z)`` from Blender's: ``V_file = V_blender @ FROM_BLENDER``
 FROM_BLENDER = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])
@@ -151,7 +151,7 @@ def _check_accessors(doc, name):
         at, values = (sparse.get(k) if isinstance(sparse, dict) else None
                       for k in ("indices", "values"))
         if n is None or not isinstance(at, dict) or not isinstance(values, dict) \
-                or _key(at.get("componentType")) not in (5121, 5123, 5125) \
+                or _key(at.get("componentType")) not in INDEX_TYPES \
                 or (count is not None and n > count):
             raise InputFileError(f"{name}: accessor {i}'s sparse substitution names no valid "
                                  f"count, indices or values")
@@ -187,9 +187,7 @@ def _check_nodes(doc, name):
     parent = np.full(len(nodes), -1, dtype=np.int64)
     for i, node in enumerate(nodes):
         children = node.get("children", [])
-        if not isinstance(children, list) or not all(
-                isinstance(c, int) and not isinstance(c, bool) and 0 <= c < len(nodes)
-                for c in children):
+        if not _node_indices(children, len(nodes)):
             raise InputFileError(f"{name}: node {i}'s children are not node indices")
         for c in children:
             if parent[c] >= 0 or c == i:
@@ -209,11 +207,14 @@ def _check_nodes(doc, name):
         raise InputFileError(f"{name}: its default scene {doc['scene']!r} is not one of its "
                              f"{len(scenes)} scenes")
     for k, scene in enumerate(scenes):
-        roots = scene.get("nodes", [])
-        if not isinstance(roots, list) or not all(
-                isinstance(c, int) and not isinstance(c, bool) and 0 <= c < len(nodes)
-                for c in roots):
+        if not _node_indices(scene.get("nodes", []), len(nodes)):
             raise InputFileError(f"{name}: scene {k}'s nodes are not node indices")
+
+
+def _node_indices(value, n):
+    """Whether ``value`` is a list of indices of the ``n`` nodes."""
+    return isinstance(value, list) and all(
+        isinstance(c, int) and not isinstance(c, bool) and 0 <= c < n for c in value)
 
 
 #: per primitive mode, its name and whether a count of corners makes whole triangles
@@ -236,8 +237,8 @@ def _check_primitives(doc, name):
             if mode not in _MODES or not isinstance(which, int) or isinstance(which, bool) \
                     or not 0 <= which < len(accessors):
                 continue
-            if "indices" in prim and _key(accessors[which].get("componentType")) not in \
-                    (5121, 5123, 5125):
+            if "indices" in prim and \
+                    _key(accessors[which].get("componentType")) not in INDEX_TYPES:
                 raise InputFileError(f"{name}: mesh {i} primitive {j}'s indices are not unsigned "
                                      f"integers (glTF's UNSIGNED_BYTE, SHORT or INT)")
             n = _number(accessors[which], "count", None)

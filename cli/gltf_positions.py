@@ -40,14 +40,16 @@ def _count(v):
     return v if isinstance(v, int) and not isinstance(v, bool) and v >= 0 else None
 
 
-#: the NumPy type of each glTF component type an index may have
-_INDEX_TYPES = {5121: "<u1", 5123: "<u2", 5125: "<u4"}
+#: the NumPy type of each glTF component type an index may have (UNSIGNED_BYTE, _SHORT, _INT)
+INDEX_TYPES = {5121: "<u1", 5123: "<u2", 5125: "<u4"}
 
 
-def _view_items(doc, j, off, count, dtype, width, path, glb_bin, cache):
-    """(count, width) of ``dtype`` from bufferView ``j`` at ``off`` (its
-    byteStride, or tightly packed), or None when a field is not what glTF
-    says or the bytes are not there."""
+def _view_items(doc, a, count, dtype, width, path, glb_bin, cache):
+    """(count, width) of ``dtype`` that ``a`` (an accessor, or its sparse
+    indices or values) reads from its bufferView at its byteOffset (the
+    view's byteStride, or tightly packed), or None when a field is not what
+    glTF says or the bytes are not there."""
+    j, off = _count(a.get("bufferView")), _count(a.get("byteOffset", 0))
     views = doc.get("bufferViews")
     if None in (j, count, off) or not isinstance(views, list) or j >= len(views) \
             or not isinstance(views[j], dict):
@@ -82,20 +84,17 @@ def _positions(doc, k, path, glb_bin, cache):
     if a.get("bufferView") is None:
         V = np.zeros((count, 3), dtype="<f4")
     else:
-        V = _view_items(doc, _count(a.get("bufferView")), _count(a.get("byteOffset", 0)), count,
-                        "<f4", 3, path, glb_bin, cache)
+        V = _view_items(doc, a, count, "<f4", 3, path, glb_bin, cache)
     sparse = a.get("sparse")
     if V is None or not isinstance(sparse, dict):
         return V
     n = _count(sparse.get("count"))
     at, values = sparse.get("indices"), sparse.get("values")
     if n is None or not isinstance(at, dict) or not isinstance(values, dict) \
-            or at.get("componentType") not in _INDEX_TYPES:
+            or at.get("componentType") not in INDEX_TYPES:
         return V
-    at = _view_items(doc, _count(at.get("bufferView")), _count(at.get("byteOffset", 0)), n,
-                     _INDEX_TYPES[at["componentType"]], 1, path, glb_bin, cache)
-    values = _view_items(doc, _count(values.get("bufferView")),
-                         _count(values.get("byteOffset", 0)), n, "<f4", 3, path, glb_bin, cache)
+    at = _view_items(doc, at, n, INDEX_TYPES[at["componentType"]], 1, path, glb_bin, cache)
+    values = _view_items(doc, values, n, "<f4", 3, path, glb_bin, cache)
     if at is None or values is None or (n and int(at.max()) >= count):
         return V
     V = V.copy()
@@ -136,12 +135,11 @@ def indices_past_positions(doc, path, glb_bin):
             if None in (k, q) or not isinstance(accessors, list) or max(k, q) >= len(accessors):
                 continue
             a, n = accessors[q], _count(accessors[k].get("count"))
-            if not isinstance(a, dict) or a.get("componentType") not in _INDEX_TYPES or \
+            if not isinstance(a, dict) or a.get("componentType") not in INDEX_TYPES or \
                     a.get("bufferView") is None or n is None:
                 continue
-            index = _view_items(doc, _count(a.get("bufferView")), _count(a.get("byteOffset", 0)),
-                                _count(a.get("count")), _INDEX_TYPES[a["componentType"]], 1,
-                                path, glb_bin, cache)
+            index = _view_items(doc, a, _count(a.get("count")), INDEX_TYPES[a["componentType"]],
+                                1, path, glb_bin, cache)
             if index is not None and index.size and int(index.max()) >= n:
                 return i, j, int(index.max()), n
     return None

@@ -109,7 +109,7 @@ def _header_error(path, lineno, line, problem):
     return InputFileError(f"{os.path.basename(path)}: header line {lineno}, '{line}', {problem}")
 
 
-def ply_size_problem(path):
+def ply_size_problem(path, header=None):
     """Why a PLY file does not hold what its header declares, in words that
     name the file and the counts (a file cut short, a count too large or too
     small), or None.
@@ -128,8 +128,9 @@ def ply_size_problem(path):
     importer reads no others, skipping those of 1 or 2), the first record a
     face (a count of 1-255, indices of declared vertices) or a triangle strip
     (indices of declared vertices or -1, which ends a strip);
-    after the last element, nothing but padding (zero bytes, blanks)."""
-    header = ply_header(path)
+    after the last element, nothing but padding (zero bytes, blanks).
+    ``header``: the file's :func:`ply_header` when the caller has read it."""
+    header = header or ply_header(path)
     if not header or not header[2]:
         return None
     fmt, length, elements = header
@@ -201,7 +202,7 @@ def _known_type(t):
     return t in PLY_TYPES or (isinstance(t, tuple) and t[1] in PLY_TYPES and t[2] in PLY_TYPES)
 
 
-def count_nonfinite(path):
+def count_nonfinite(path, header=None):
     """Vertices with a coordinate that is NaN or infinite, or beyond a
     float's range in a ``float`` property (1e39: Blender's importer stores
     those as 0), read from the file itself; None when the layout is not one
@@ -211,8 +212,9 @@ def count_nonfinite(path):
     status ok): ASCII, after their lines; binary, after their bytes
     (:func:`.ply_binary.element_records`). An ASCII vertex with a list (a
     scanner's per-vertex extras) is read up to the list (it had not been
-    read at all: its NaN came back "ok")."""
-    header = ply_header(path)
+    read at all: its NaN came back "ok"). ``header``: as for
+    :func:`ply_size_problem`."""
+    header = header or ply_header(path)
     if not header:
         return None
     fmt, length, elements = header
@@ -275,10 +277,10 @@ def _ascii_columns(path, length, skip, n, scalars, width):
         return None
 
 
-def _twice(path):
-    """A message for a vertex coordinate (x, y or z) the header declares
-    twice (which one Blender's importer takes is not said), or None."""
-    header = ply_header(path)
+def _twice(path, header):
+    """A message for a vertex coordinate (x, y or z) the file's
+    :func:`ply_header` declares twice (which one Blender's importer takes is
+    not said), or None."""
     vertex = next((props for e, _, props in header[2] if e == "vertex"), []) if header else []
     names = [name for _, name in vertex]
     twice = [c for c in ("x", "y", "z") if names.count(c) > 1]
@@ -290,20 +292,21 @@ def _twice(path):
 def check(path):
     """What a PLY file's own structure says (:class:`FileCheck`: the faces
     its header declares); raises :class:`InputFileError` for a file Blender
-    would read wrong (:func:`count_nonfinite`, :func:`ply_size_problem`)."""
-    twice = _twice(path)
+    would read wrong (:func:`count_nonfinite`, :func:`ply_size_problem`);
+    the header read once for them all."""
+    header = ply_header(path)
+    twice = _twice(path, header)
     if twice:
         raise InputFileError(twice)
-    bad = count_nonfinite(path)
+    bad = count_nonfinite(path, header)
     if bad:
         raise InputFileError(f"{os.path.basename(path)}: {bad:,} "
                              f"{'vertex' if bad == 1 else 'vertices'} with a coordinate that is "
                              f"not a finite number (NaN or infinity, or beyond a float's range; "
                              f"Blender's importer would read them as 0)")
-    problem = ply_size_problem(path)
+    problem = ply_size_problem(path, header)
     if problem:
         raise InputFileError(problem)
-    header = ply_header(path)
     if header is None:
         raise InputFileError(_not_ply(path))
     counts = {e: n for e, n, _ in header[2]}

@@ -432,6 +432,16 @@ def test_a_bind_made_while_a_refine_ran_is_kept_and_the_refine_refused(scene):
     assert pos(edited)[:, 2].mean() > 0.4           # the sculpt, carried by the new binding
 
 
+def _assert_live_followed(cage, edited, before):
+    """The live update just run moved ``edited`` from ``before`` to what a
+    Refine of ``cage`` gives; live turned off again."""
+    after = pos(edited).copy()
+    activate(cage)
+    assert bpy.ops.meshadjust.refine(output='EDITED') == {'FINISHED'}
+    assert np.abs(after - before).max() > 0.05 and np.abs(pos(edited) - after).max() < 1e-6
+    cage.meshadjust.live = False
+
+
 def test_live_turned_on_follows_the_edit_made_while_it_was_off(bound):
     """An edit made with Live off stayed unapplied when Live was turned on,
     until the next edit: turning it on schedules an update."""
@@ -444,11 +454,7 @@ def test_live_turned_on_follows_the_edit_made_while_it_was_off(bound):
     cage.meshadjust.live = True
     assert cage.name in live._pending
     live.refine_pending()
-    after = pos(edited).copy()
-    activate(cage)
-    assert bpy.ops.meshadjust.refine(output='EDITED') == {'FINISHED'}
-    assert np.abs(after - before).max() > 0.05 and np.abs(pos(edited) - after).max() < 1e-6
-    cage.meshadjust.live = False
+    _assert_live_followed(cage, edited, before)
 
 
 def test_subdivide_in_place_refuses_a_mesh_shared_by_linked_duplicates(scene):
@@ -541,8 +547,4 @@ def test_a_live_update_pending_when_the_cage_is_renamed_still_runs(bound):
     live.schedule(cage)
     cage.name = "Renamed cage"
     live.refine_pending()
-    after = pos(edited).copy()
-    activate(cage)
-    assert bpy.ops.meshadjust.refine(output='EDITED') == {'FINISHED'}
-    assert np.abs(after - before).max() > 0.05 and np.abs(pos(edited) - after).max() < 1e-6
-    cage.meshadjust.live = False
+    _assert_live_followed(cage, edited, before)
