@@ -55,6 +55,8 @@ from .spatial import closest_on_triangles, triangle_rows
 _BIG = np.iinfo(np.int64).max
 DEAD = -3  #: twin of a half-edge of a removed face (before compaction)
 _SQRT3x2 = 2.0 * np.sqrt(3.0)
+#: relative margin of a refusal made on a sample (rounding can only spare a collapse)
+_SLACK = 1e-9
 
 
 def _take(a, idx, axis=None):
@@ -579,23 +581,24 @@ def _check_rounds(st, pool, passes, haus, dihedral_cos, tun):
     active = np.arange(P, dtype=np.int64)
     faces = owned = ahead = None
     scratch = _scratch(n, P)
-    active = _drop_quick_refusals(st, pool, active, passes, tun)
+    faces_at = np.bincount(st.F[st.alive].ravel(), minlength=n)
+    big = (_take(faces_at, pool.A) + _take(faces_at, pool.B)) >= tun.hold_star
+    active = _drop_quick_refusals(st, pool, active, passes, tun, big)
     for _ in range(tun.max_rounds):
         active = active[~touched[pool.A[active]] & ~touched[pool.B[active]]]
         if active.size == 0:
             break
         if ahead is None and active.size <= tun.check_ahead:
-            ahead = _CheckedAhead.of(st, pool, active, faces, tun, haus, dihedral_cos)
-            active = _drop_invalid(st, pool, ahead, active, passes)
-            if active.size == 0:
-                break
-        sel, active, star, kf, faces = _pick_independent(st, pool, active, faces, tun, scratch,
-                                                         stars=ahead is None)
-        if ahead is None:
-            c = _check(st, pool.A[sel], pool.B[sel], pool.XT[:, sel], pool.interior[sel], star, kf, tun, haus,
-                       dihedral_cos, quick=False)    # (_drop_quick_refusals sampled the big stars)
-        else:
-            c = ahead.results(sel)
+            first = _ahead_of(active, pool, faces_at, big, tun)
+            if first.size:
+                ahead = _CheckedAhead.of(st, pool, first, faces, tun, haus, dihedral_cos,
+                                         partial=first.size < active.size)
+                active = _drop_invalid(st, pool, ahead, active, passes)
+                if active.size == 0:
+                    break
+        sel, active, star, kf, faces = _pick_independent(
+            st, pool, active, faces, tun, scratch, stars=ahead is None or ahead.partial)
+        c = _checked(st, pool, sel, star, kf, ahead, tun, haus, dihedral_cos)
         rows = c.rows
         acc = _judge(st, pool, sel, c, passes, tun)
         if dihedral_cos is not None and acc.any():   # each bend was judged against still faces
@@ -615,20 +618,70 @@ def _check_rounds(st, pool, passes, haus, dihedral_cos, tun):
     return _Accepted(np.concatenate(acc_edges), rows, np.concatenate(acc_wit)), touched
 
 
-def _drop_quick_refusals(st, pool, active, passes, tun):
+def _ahead_of(active, pool, faces_at, big, tun):
+    """The ``active`` pool edges to check ahead (:class:`_CheckedAhead`): all
+    of them, or when their stars hold more than ``Tuning.check_ahead_rows``
+    faces, those whose star is not ``big`` (those wait for their picks: a
+    hub's spokes are picked one a round, and checking them all ahead read
+    the hub's faces for each: a 10k-face cylinder's caps, 780 spokes, 1.1M
+    rows)."""
+    rows = int(_take(faces_at, pool.A[active]).sum() + _take(faces_at, pool.B[active]).sum())
+    return active if rows <= tun.check_ahead_rows else active[~_take(big, active)]
+
+
+def _checked(st, pool, sel, star, kf, ahead, tun, haus, dihedral_cos):
+    """The :class:`_Checked` results of the picked pool edges ``sel`` (their
+    star rows ``star``, ``kf``): from ``ahead`` (a :class:`_CheckedAhead`)
+    for those it checked, the others checked now."""
+    now = np.ones(sel.size, dtype=bool) if ahead is None else _take(ahead.at, sel) < 0
+    if not now.any():
+        return ahead.results(sel)
+    i = np.flatnonzero(now)
+    if i.size < sel.size:
+        r = np.flatnonzero(_take(now, kf))
+        star, kf = _take(star, r), _take(np.cumsum(now) - 1, _take(kf, r))
+    e = sel[i]
+    c = _check(st, pool.A[e], pool.B[e], pool.XT[:, e], pool.interior[e], star, kf, tun, haus,
+               dihedral_cos, quick=False)    # (_drop_quick_refusals sampled the big stars)
+    if i.size == sel.size:
+        return c
+    return _merged(ahead.results(sel[~now]), np.flatnonzero(~now), c, i, sel.size)
+
+
+def _merged(c1, i1, c2, i2, k):
+    """The :class:`_Checked` of ``k`` collapses from ``c1`` (of collapses
+    ``i1``) and ``c2`` (of ``i2``), star rows by collapse."""
+    ok, pen, bent = np.zeros(k, dtype=bool), np.zeros(k), np.zeros(k, dtype=bool)
+    wit, flip = np.zeros((k, 3)), np.zeros((k, 3), dtype=np.int64)
+    for c, i in ((c1, i1), (c2, i2)):
+        ok[i], pen[i], bent[i], wit[i], flip[i] = c.ok, c.pen, c.bent, c.wit, c.flip
+    kf = np.concatenate([_take(i1, c1.rows[1]), _take(i2, c2.rows[1])])
+    o = np.argsort(kf, kind="stable")
+    star, coll, cA, cB = (_take(np.concatenate([a, b]), o)
+                          for a, b in zip(_take_rows(c1, (0, 2, 3, 4)), _take_rows(c2, (0, 2, 3, 4))))
+    return _Checked(ok, pen, (star, _take(kf, o), coll, cA, cB), wit, bent, flip)
+
+
+def _take_rows(c, cols):
+    """The star-row columns ``cols`` of a :class:`_Checked`."""
+    return [c.rows[j] for j in cols]
+
+
+def _drop_quick_refusals(st, pool, active, passes, tun, big):
     """The ``active`` pool edges but those with a big star (at least
-    ``Tuning.hold_star`` faces around the ends) that :func:`_quick_refusals`
-    refuses, remembered as :func:`_judge` remembers them, before any pick:
-    a fan's spoke picked would keep the whole fan waiting a round, and a
-    pass has few rounds."""
-    faces_at = np.bincount(st.F[st.alive].ravel(), minlength=st.V.shape[0])
-    big = np.flatnonzero(_take(faces_at, pool.A[active]) + _take(faces_at, pool.B[active]) >= tun.hold_star)
+    ``Tuning.hold_star`` faces around the ends) refused on a sample of it
+    (:func:`_flips_on`: a face turned over or made a sliver), remembered as :func:`_judge` remembers them,
+    before any pick: a fan's spoke picked would keep the whole fan waiting
+    a round (every face of the hub is in its star), and a pass has few
+    rounds."""
+    big = np.flatnonzero(_take(big, active))
     if big.size == 0:
         return active
     e = active[big]
     A, B = pool.A[e], pool.B[e]
-    star, kf = _sampled_stars(st, A, B, tun.hold_sample)
-    refused, flip = _flips_on(st, A, B, pool.XT[:, e], star, kf, tun)
+    least = _least_compact_around(st, A, B, tun.hold_sample // 4)
+    star, kf, even = _sampled_stars(st, A, B, tun.hold_sample, pool.h[e], least)
+    refused, flip = _flips_on(st, A, B, pool.XT[:, e], star, kf, tun, least.least, even)
     if not refused.any():
         return active
     st.bent[pool.h[e[refused]]] = False
@@ -725,11 +778,13 @@ class _CheckedAhead(NamedTuple):
     at: np.ndarray       #: (P,) row of each pool edge in the results (-1: not checked)
     found: "_Checked"
     start: np.ndarray    #: (k+1,) the star rows of result i are ``start[i]:start[i + 1]``
+    partial: bool        #: whether some pool edges in play were left to be checked when picked
 
     @classmethod
-    def of(cls, st, pool, active, faces, tun, haus, dihedral_cos):
+    def of(cls, st, pool, active, faces, tun, haus, dihedral_cos, partial=False):
         """Check every ``active`` pool edge on its whole star; ``faces`` are
-        the faces in play (None: all live faces)."""
+        the faces in play (None: all live faces); ``partial``: others in
+        play are not among ``active``."""
         A, B = pool.A[active], pool.B[active]
         ends = np.zeros(st.V.shape[0], dtype=bool)
         ends[A] = True
@@ -745,7 +800,7 @@ class _CheckedAhead(NamedTuple):
         at[active] = np.arange(active.size)
         # (the rows come by collapse: a round's results are runs of them, not a mask of all)
         start = np.searchsorted(found.rows[1], np.arange(active.size + 1, dtype=np.int64))
-        return cls(at, found, start)
+        return cls(at, found, start, partial)
 
     def results(self, sel):
         """The results of the pool edges ``sel`` (ascending), as :func:`_check`
@@ -762,13 +817,13 @@ class _CheckedAhead(NamedTuple):
 
 def _drop_invalid(st, pool, ahead, active, passes):
     """The ``active`` pool edges that their checked-ahead results
-    (:class:`_CheckedAhead`) find valid. The others are rejected at once, and
+    (:class:`_CheckedAhead`) find valid, or that it did not check. The others are rejected at once, and
     remembered as :func:`_judge` remembers them (:func:`_remember_refused`), instead of each taking a
     round of the pass: picked alone (its key the smallest around), refused,
     and meanwhile keeping every valid collapse near it waiting (the tail of
     a flat mesh took 16 rounds a pass that way, one refusal per round)."""
     i = _take(ahead.at, active)
-    ok = _take(ahead.found.ok, i)
+    ok = (i < 0) | _take(ahead.found.ok, np.maximum(i, 0))
     bad = np.flatnonzero(~ok)
     hr = pool.h[_take(active, bad)]
     st.bent[hr] = _take(ahead.found.bent, _take(i, bad))
@@ -908,21 +963,76 @@ def _quick_refusals(st, A, B, XT, star, kf, tun):
     return _flips_on(st, A, B, XT, _take(star, r), _take(kf, r), tun)
 
 
-def _flips_on(st, A, B, XT, star, kf, tun):
+def _flips_on(st, A, B, XT, star, kf, tun, least=None, even=None):
     """Which collapses turn over one of the faces ``star`` (rows: ``kf``
-    gives each one's collapse), and three of those faces (:func:`_witnesses`)."""
+    gives each one's collapse), and three of those faces (:func:`_witnesses`).
+    With ``least`` ((2k,): the least compact face around each of ``A`` and
+    then ``B`` as they are, :func:`_least_compact_around`) also those that
+    make one of them a sliver (less compact than ``Tuning.gamma_hard`` and
+    than half of ``least``). On a sample of the stars both are refusals the
+    whole star's check makes (its new faces include the sample's, and its
+    old ones are no less compact than ``least``): a CAD cap's hub, its
+    spokes each refused for the sliver it makes beside the rim vertex it
+    merges into, waited for one spoke a round (a 10k-face cylinder to 200
+    faces took 197 passes). Only the first ``even`` rows (all when None) are
+    tested for turned faces (more of them held more collapses back until
+    those faces change: a flat grid to 4 faces took 59 passes, not 54)."""
     k = A.size
     s = _star_of(st.F, A, B, star, kf)
     g = _moved_faces(st, s, XT)
-    turned = np.flatnonzero(_turned_faces(st, s, g, A, B, tun))
+    turned = np.flatnonzero(_turned_faces(st, s, g, A, B, tun)
+                            & (s.mv < (star.size if even is None else even)))
     refused = np.zeros(k, dtype=bool)
     refused[s.mk[turned]] = True
+    if least is not None:
+        _, gmin_new = _min_compactness(s, g)
+        old = np.minimum(least[:k], least[k:])
+        refused |= (gmin_new < tun.gamma_hard) & (gmin_new < 0.5 * (1.0 - _SLACK) * old)
     return refused, _witnesses(s, turned, np.ones(k, dtype=bool))
 
 
-def _sampled_stars(st, A, B, per):
+class _LeastCompact(NamedTuple):
+    """The least compact faces around the ends of some collapses (as
+    :func:`_min_compactness` measures them, on the mesh as it is)."""
+
+    least: np.ndarray   #: (2k,) the smallest compactness around each of A, then B (1: none)
+    faces: np.ndarray   #: up to ``per`` faces of smallest compactness around each end ...
+    k: np.ndarray       #: ... and the collapse of each
+
+
+def _least_compact_around(st, A, B, per):
+    """The :class:`_LeastCompact` of the collapses ``B[k] -> A[k]``: their
+    ``per`` least compact faces around each end are the ones a move of it
+    most likely makes slivers."""
+    ends = np.concatenate([A, B])
+    near = np.zeros(st.V.shape[0], dtype=bool)
+    near[ends] = True
+    f = np.flatnonzero(st.alive & (near[st.F[:, 0]] | near[st.F[:, 1]] | near[st.F[:, 2]]))
+    FT = np.ascontiguousarray(_take(st.F, f, axis=0).T)
+    P0, P1, P2 = (_take(st.VT, FT[c], axis=1) for c in range(3))
+    N = cross_columns(P1 - P0, P2 - P0)
+    sq = [dot_columns(D, D) for D in (P1 - P0, P2 - P1, P0 - P2)]
+    g = np.tile(compactness(np.sqrt(dot_columns(N, N)), sq[0] + sq[1] + sq[2]), 3)
+    v, fv = FT.ravel(), np.tile(f, 3)
+    o = np.lexsort((g, v))                        # by vertex, then compactness
+    v, fv, g = _take(v, o), _take(fv, o), _take(g, o)
+    start = np.searchsorted(v, ends)
+    count = np.searchsorted(v, ends, side="right") - start
+    least = np.where(count > 0, _take(g, np.minimum(start, max(g.size - 1, 0))), 1.0)
+    take = np.minimum(count, per)
+    i = np.repeat(np.arange(ends.size, dtype=np.int64), take)
+    j = np.arange(i.size, dtype=np.int64) - np.repeat(np.cumsum(take) - take, take)
+    return _LeastCompact(least, _take(fv, _take(start, i) + j), i % A.size)
+
+
+def _sampled_stars(st, A, B, per, h, least):
     """About ``per`` of the live faces around each of ``A[k]`` and ``B[k]``,
-    evenly spread (every one up to ``per``), as star rows ``(star, kf)``."""
+    evenly spread (every one up to ``per``), as star rows ``(star, kf)``,
+    then the faces near the edge ``h[k]`` (``per // 2`` each way around each
+    end, :func:`_fans_near`) and the least compact ones (``least``, a
+    :class:`_LeastCompact`) not among them; returns ``(star, kf, even)``,
+    the first ``even`` rows the evenly spread ones (a face around both ends
+    comes twice there)."""
     ends = np.concatenate([A, B])
     fs, start, count = _faces_at(st.F, np.flatnonzero(st.alive), ends)
     step = np.maximum(count // per, 1)
@@ -930,7 +1040,32 @@ def _sampled_stars(st, A, B, per):
     g = np.repeat(np.arange(ends.size, dtype=np.int64), take)
     j = np.arange(g.size, dtype=np.int64) - np.repeat(np.cumsum(take) - take, take)
     star = _take(fs, _take(start, g) + j * _take(step, g))
-    return star, g % A.size
+    kf = g % A.size
+    near, nk = _fans_near(st, h, A, B, per // 2)
+    m = np.int64(st.F.shape[0])
+    extra = np.setdiff1d(np.concatenate([nk, least.k]) * m + np.concatenate([near, least.faces]),
+                         kf * m + star)
+    return np.concatenate([star, extra % m]), np.concatenate([kf, extra // m]), star.size
+
+
+def _fans_near(st, h, A, B, steps):
+    """The faces met walking around each end of the edge ``h[k]`` (``A[k]``,
+    ``B[k]``) from the face of ``h``, ``steps`` faces each way (past the
+    faces the collapse removes; a border or a non-manifold edge ends a
+    walk): where the merged fan's new faces are thinnest. Rows ``(faces, k)``."""
+    k = np.arange(h.size, dtype=np.int64)
+    v0, f0, k0 = np.concatenate([A, B]), np.tile(h // 3, 2), np.tile(k, 2)
+    faces, ks = [], []
+    for turn in (_PREV, _NEXT):     # (crossing the edge after v, or before it, turns one way)
+        v, f, kk = v0, f0, k0
+        for _ in range(steps + 1):
+            c = _corner(_take(st.F, f, axis=0), v)
+            t = _take(st.twin, 3 * f + _take(turn, np.maximum(c, 0)))
+            on = np.flatnonzero((c >= 0) & (t >= 0))
+            v, f, kk = _take(v, on), _take(t, on) // 3, _take(kk, on)
+            faces.append(f)
+            ks.append(kk)
+    return np.concatenate(faces), np.concatenate(ks)
 
 
 def _witnesses(s, turned, hold):

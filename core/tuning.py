@@ -54,6 +54,10 @@ class Tuning:
     #: cage, depend on this value: flat grid 100x100 -> 2,000 faces gives four different
     #: cages for 0, 1,024, 4,096 and unbounded)
     check_ahead: int = 1024
+    #: ... unless their stars hold more faces than this: then those with big stars (see
+    #: hold_star) are checked when picked (a 10k-face cylinder's fan caps: 780 spokes of
+    #: 1,400 faces each, checked ahead pass after pass)
+    check_ahead_rows: int = 1 << 16
     #: a collapse refused for flipping faces, with at least this many faces around its
     #: ends (a fan's hub), stays refused while one of three of those faces and the ends
     #: are unchanged, instead of being checked again after any change around it (12

@@ -14,7 +14,8 @@ from core.errors import InvalidArgumentError, InvalidMeshError
 from core.near_query import NearQuery
 from core.spatial import closest_pairs, triangle_rows
 from core.subdivide import subdivision_operator
-from tests.mesh_factory import cad_cylinder, cube, icosphere, regular_grid, torus
+from tests.mesh_factory import (cad_cylinder, cube, icosphere, load_shared, regular_grid,
+                                shared_mesh_names, torus)
 
 
 def _brute(V, F, P, faces=None):
@@ -174,6 +175,7 @@ def test_needles_are_pruned_by_their_capsules(monkeypatch):
     evaluated: 15,496 exact pairs here instead of 1,205,779 (every cell
     answered by the tiles), and the same distances."""
     monkeypatch.setattr(near_query, "_INDEX_CELL", 10**6)  # (every cell answered here, none by the index)
+    monkeypatch.setattr(near_query, "_NEEDLES_PER_FACE", np.inf)   # (the tiles, not the needles' index)
     V, F = cad_cylinder(400)
     rng = np.random.default_rng(13)
     P = V[rng.integers(0, V.shape[0], 1500)] + 0.02 * rng.standard_normal((1500, 3))
@@ -400,6 +402,7 @@ def test_points_in_crowded_cells_are_answered_by_the_index(monkeypatch):
     the hierarchy: 20,000 points near a 4,000-face cylinder 5.4 s and 2.6 GB),
     so the points beside the sides go through the tiles; the distances are
     the brute-force minimum, bit for bit (the faces too, but for exact ties)."""
+    monkeypatch.setattr(near_query, "_NEEDLES_PER_FACE", np.inf)   # (the tiles, not the needles' index)
     V, F = cad_cylinder(1200)
     P = _near_points(V, F, np.random.default_rng(8), n=400)
     query = NearQuery(V, F)
@@ -432,6 +435,8 @@ def test_a_cage_of_slivers_is_answered_by_the_index(monkeypatch):
     the cells raises the limit with their area."""
     V, F = cad_cylinder(120)
     P = _near_points(V, F, np.random.default_rng(4), n=400)
+    assert NearQuery(V, F)._t is None               # (a mesh of needles: the index answers all)
+    monkeypatch.setattr(near_query, "_NEEDLES_PER_FACE", np.inf)   # the tiles, as they would
     query = NearQuery(V, F)
     assert np.diff(query.index.tables.cell_start).max() < F.shape[0] // 2
     r, tiled = _closest_counting_tiled(monkeypatch, query, P)
@@ -440,6 +445,26 @@ def test_a_cage_of_slivers_is_answered_by_the_index(monkeypatch):
     wide = NearQuery(V, F, reach=5.0)
     growth = wide.index.cell_growth
     assert growth > 1.0 and wide._index_cell == near_query._INDEX_CELL * growth ** 2
+
+
+def test_a_mesh_of_needles_is_answered_by_an_index_of_the_default_cells():
+    """A CAD cylinder as tall as it is wide, its caps fans of needles: its
+    grid references each face 13 times and a cell 104 faces on average (253
+    in a NearQuery's wider cells), and its needles pass the tiles' bounds:
+    11k points near a 10k-face one took 1.01 s against the index's 0.31 (a
+    simplify's touch-up, surface_distance). It is answered by an index of
+    the default cells, exactly; the shared meshes and built smooth ones
+    (references 1.9-2.1 a face, 21-28 a cell) keep the tiles."""
+    V, F = cad_cylinder(500, height=1.0)
+    query = NearQuery(V, F)
+    assert query._t is None
+    assert query.index.tables.cell_size == spatial.TriangleIndex(V, F).tables.cell_size
+    P = _near_points(V, F, np.random.default_rng(9), n=400)
+    np.testing.assert_array_equal(query.closest(P).distance, np.sqrt(_brute(V, F, P)[3]))
+    for V, F in (icosphere(3), torus(60, 24), cube(6), regular_grid(30, 30)):
+        assert NearQuery(V, F)._t is not None
+    for name in shared_mesh_names():
+        assert NearQuery(*load_shared(name)[:2])._t is not None
 
 
 def test_a_far_outlier_does_not_make_the_bulk_one_window():

@@ -1067,6 +1067,22 @@ def test_star_glyphs_whose_cheapest_edges_are_folding_fan_spokes_take_few_passes
     assert slow.F.shape[0] == 120 and slow.n_passes > 2 * res.n_passes
 
 
+def test_a_cylinder_whose_cheapest_edges_are_spokes_making_slivers_takes_few_passes():
+    # a CAD cylinder as tall as it is wide, caps fans of 2,500 needles: every spoke
+    # costs nothing (the caps are flat) and makes a sliver beside the rim vertex it
+    # merges into. Each was picked alone (all of the hub's faces are in its star) and
+    # refused, one a round: 197 passes and 44 s to 200 faces. Refused on a sample of
+    # the fan before the picks: 35 passes.
+    V, F = cad_cylinder(2500, height=1.0)
+    for target in (1000, 200):
+        res = simplify(V, F, target_faces=target)
+        assert res.F.shape[0] == target and res.stopped_because == "target"
+        assert res.n_passes <= 50
+        assert_clean(res, V, F)
+        t = topology_summary(res.F, res.V.shape[0])
+        assert (t.components, t.euler, t.boundary_edges) == (1, 2, 0)
+
+
 def test_max_error_halves_the_gap_to_the_first_step_over_it():
     # the cow at 2%: the first step (0.3 of the bound) is over it, half of that
     # gives 936 faces, 0.74%, and it stopped there; halving the gap between the
@@ -1119,8 +1135,10 @@ def test_max_error_runs_afresh_lower_when_the_full_measure_refuses_every_quick_s
     # fandisk with 10 far-apart vertex pairs pinched (model-long slivers), each step's
     # cage quickly measured on its vertices alone: every step the quick measure passed
     # is over the bound by the full one, and the cleaned input itself came back as the
-    # "cage" (0 passes); the engine now runs afresh at lower shares, fully measured
-    V, F = pinched(*load_shared("fandisk.obj"), k=10, seed=10)
+    # "cage" (0 passes); the engine now runs afresh at lower shares, fully measured.
+    # (Seed 10, this test's first, now gets a cage at once, 402 faces: the slivers'
+    # collapses refused on a sample of their fans before the picks, 2026-12-07.)
+    V, F = pinched(*load_shared("fandisk.obj"), k=10, seed=13)
     bound = 0.003 * bbox_diagonal(V)
     clean = clean_mesh(V, F)
     quick = Tuning(max_error_quick_samples=0)
