@@ -657,8 +657,9 @@ def _merged(c1, i1, c2, i2, k):
         ok[i], pen[i], bent[i], wit[i], flip[i] = c.ok, c.pen, c.bent, c.wit, c.flip
     kf = np.concatenate([_take(i1, c1.rows[1]), _take(i2, c2.rows[1])])
     o = np.argsort(kf, kind="stable")
+    cols = (0, 2, 3, 4)
     star, coll, cA, cB = (_take(np.concatenate([a, b]), o)
-                          for a, b in zip(_take_rows(c1, (0, 2, 3, 4)), _take_rows(c2, (0, 2, 3, 4))))
+                          for a, b in zip(_take_rows(c1, cols), _take_rows(c2, cols)))
     return _Checked(ok, pen, (star, _take(kf, o), coll, cA, cB), wit, bent, flip)
 
 
@@ -668,12 +669,12 @@ def _take_rows(c, cols):
 
 
 def _drop_quick_refusals(st, pool, active, passes, tun, big):
-    """The ``active`` pool edges but those with a big star (at least
+    """The ``active`` pool edges but those with a big star (``big``: at least
     ``Tuning.hold_star`` faces around the ends) refused on a sample of it
-    (:func:`_flips_on`: a face turned over or made a sliver), remembered as :func:`_judge` remembers them,
-    before any pick: a fan's spoke picked would keep the whole fan waiting
-    a round (every face of the hub is in its star), and a pass has few
-    rounds."""
+    (:func:`_flips_on`: a face turned over or made a sliver), remembered as
+    :func:`_judge` remembers them, before any pick: a fan's spoke picked
+    would keep the whole fan waiting a round (every face of the hub is in
+    its star), and a pass has few rounds."""
     big = np.flatnonzero(_take(big, active))
     if big.size == 0:
         return active
@@ -817,7 +818,8 @@ class _CheckedAhead(NamedTuple):
 
 def _drop_invalid(st, pool, ahead, active, passes):
     """The ``active`` pool edges that their checked-ahead results
-    (:class:`_CheckedAhead`) find valid, or that it did not check. The others are rejected at once, and
+    (:class:`_CheckedAhead`) find valid, or that it did not check. The others
+    are rejected at once, and
     remembered as :func:`_judge` remembers them (:func:`_remember_refused`), instead of each taking a
     round of the pass: picked alone (its key the smallest around), refused,
     and meanwhile keeping every valid collapse near it waiting (the tail of

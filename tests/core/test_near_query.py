@@ -175,7 +175,7 @@ def test_needles_are_pruned_by_their_capsules(monkeypatch):
     evaluated: 15,496 exact pairs here instead of 1,205,779 (every cell
     answered by the tiles), and the same distances."""
     monkeypatch.setattr(near_query, "_INDEX_CELL", 10**6)  # (every cell answered here, none by the index)
-    monkeypatch.setattr(near_query, "_NEEDLES_PER_FACE", np.inf)   # (the tiles, not the needles' index)
+    monkeypatch.setattr(near_query, "_NEEDLES_PER_FACE", np.inf)   # (tiles, not the needles' index)
     V, F = cad_cylinder(400)
     rng = np.random.default_rng(13)
     P = V[rng.integers(0, V.shape[0], 1500)] + 0.02 * rng.standard_normal((1500, 3))
@@ -402,7 +402,7 @@ def test_points_in_crowded_cells_are_answered_by_the_index(monkeypatch):
     the hierarchy: 20,000 points near a 4,000-face cylinder 5.4 s and 2.6 GB),
     so the points beside the sides go through the tiles; the distances are
     the brute-force minimum, bit for bit (the faces too, but for exact ties)."""
-    monkeypatch.setattr(near_query, "_NEEDLES_PER_FACE", np.inf)   # (the tiles, not the needles' index)
+    monkeypatch.setattr(near_query, "_NEEDLES_PER_FACE", np.inf)   # (tiles, not the needles' index)
     V, F = cad_cylinder(1200)
     P = _near_points(V, F, np.random.default_rng(8), n=400)
     query = NearQuery(V, F)
