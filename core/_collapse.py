@@ -1032,9 +1032,8 @@ def _sampled_stars(st, A, B, per, h, least):
     evenly spread (every one up to ``per``), as star rows ``(star, kf)``,
     then the faces near the edge ``h[k]`` (``per // 2`` each way around each
     end, :func:`_fans_near`) and the least compact ones (``least``, a
-    :class:`_LeastCompact`) not among them; returns ``(star, kf, even)``,
-    the first ``even`` rows the evenly spread ones (a face around both ends
-    comes twice there)."""
+    :class:`_LeastCompact`); returns ``(star, kf, even)``, the first
+    ``even`` rows the evenly spread ones (a face may come more than once)."""
     ends = np.concatenate([A, B])
     fs, start, count = _faces_at(st.F, np.flatnonzero(st.alive), ends)
     step = np.maximum(count // per, 1)
@@ -1044,10 +1043,9 @@ def _sampled_stars(st, A, B, per, h, least):
     star = _take(fs, _take(start, g) + j * _take(step, g))
     kf = g % A.size
     near, nk = _fans_near(st, h, A, B, per // 2)
-    m = np.int64(st.F.shape[0])
-    extra = np.setdiff1d(np.concatenate([nk, least.k]) * m + np.concatenate([near, least.faces]),
-                         kf * m + star)
-    return np.concatenate([star, extra % m]), np.concatenate([kf, extra // m]), star.size
+    # (a face may come twice: the sliver test takes the smallest, the flip test the even rows)
+    return (np.concatenate([star, near, least.faces]), np.concatenate([kf, nk, least.k]),
+            star.size)
 
 
 def _fans_near(st, h, A, B, steps):
