@@ -111,10 +111,13 @@ _INDEX_CELL = CROWDED_CELL
 #: a mesh whose grid references each face more than this many times on average, and
 #: holds more than ``_NEEDLES_CELL`` references in a non-empty cell on average, is
 #: answered by the index alone: its faces are needles (a CAD fan, a fillet's strips),
-#: which pass the tiles' bounds and are evaluated by the hundred a point (a 20k-face
-#: cylinder of fans: 11 references a face, 357 a cell, 20k points on its 200-face cage
-#: 1.70 s against the index's 0.41; a flat fan of 40k needles 1.77 and 1.78; the shared
-#: meshes 1.9-2.1 and 21-28, where the tiles take 0.4-1x the index's time)
+#: which pass the tiles' bounds and are evaluated by the hundred a point. Answered by an
+#: index of the default cells: surface_distance of a CAD cylinder as tall as wide (caps
+#: fans of 2,500 needles; 11 references a face, 253 a cell) and its 200-face cage 1.52
+#: -> 0.33 s, of 5,000 3.30 -> 1.00, a CAD cylinder 10 tall 1.79 -> 1.53; a flat fan of
+#: 10k needles 1.02 -> 1.69, of 40k 13.1 -> 12.3 (the NearQuery's own wider cells: 1.07,
+#: 1.84, 1.78, 0.86, 11.7). The shared meshes: 1.9-2.1 and 21-28, the tiles' own
+#: ground (0.4-1x the index's time)
 _NEEDLES_PER_FACE = 3.0
 _NEEDLES_CELL = 64
 
@@ -196,10 +199,11 @@ class NearQuery:
 
     Builds a :class:`~.spatial.TriangleIndex` (cells of ``_CELL_FACTOR``
     mean triangle extents) and answers with the tiled search of the module
-    docstring; far queries go to the index. The index answers every query
-    near a mesh of needles (its grid references each face more than
-    ``_NEEDLES_PER_FACE`` times, and a cell more than ``_NEEDLES_CELL``
-    faces, on average: a CAD part's fans and strips).
+    docstring; far queries go to the index. A mesh of needles (its grid
+    references each face more than ``_NEEDLES_PER_FACE`` times, and a cell
+    more than ``_NEEDLES_CELL`` faces, on average: a CAD part's fans and
+    strips) gets an index of the default cells instead, which answers every
+    query.
 
     Parameters
     ----------
@@ -235,7 +239,11 @@ class NearQuery:
             raise InvalidArgumentError(
                 f"NearQuery: reach must be a finite number >= 0 or None, got {shown(reach)}")
         self.index = TriangleIndex(V, F, cell_factor=_CELL_FACTOR, min_cell=cell_for_reach(reach))
-        self._t = None if _needles(self.index.tables) else _build_tables(self.index.tables)
+        self._t = None
+        if _needles(self.index.tables):     # (the index's default cells suit it better)
+            self.index = TriangleIndex(V, F, min_cell=cell_for_reach(reach))
+        else:
+            self._t = _build_tables(self.index.tables)
         self._index_cell = _INDEX_CELL * self.index.cell_growth ** 2
 
     def closest(self, P):
@@ -262,7 +270,7 @@ class NearQuery:
         P = _check_points(P)
         T = self._t
         if T is None:                           # (a mesh of needles: _needles)
-            return self.index.closest(P, crowded_cell=self._index_cell)
+            return self.index.closest(P)
         q = P.shape[0]
         cell3 = np.clip(np.floor((P - T.lo) / T.h), 0, T.dims - 1).astype(np.int64)
         key = cell3[:, 0] + T.dims[0] * (cell3[:, 1] + T.dims[1] * cell3[:, 2])
