@@ -189,6 +189,20 @@ def cad_cylinder(n_around=1000, height=10.0, radius=1.0):
     return V, F.astype(np.int64)
 
 
+def needle_cone(n_around=1000, height=1.0, radius=1.0):
+    """A closed cone as CAD programs export it: its side a fan of
+    ``n_around`` needles from the apex, its base a flat fan of as many from
+    its centre (two hubs of valence ``n_around``)."""
+    t = np.linspace(0, 2 * np.pi, n_around, endpoint=False)
+    V = np.vstack([np.c_[radius * np.cos(t), radius * np.sin(t), np.zeros(n_around)],
+                   [[0.0, 0.0, height], [0.0, 0.0, 0.0]]])
+    i = np.arange(n_around)
+    j = (i + 1) % n_around
+    F = np.vstack([np.c_[np.full(n_around, n_around), i, j],
+                   np.c_[np.full(n_around, n_around + 1), j, i]])
+    return V, F.astype(np.int64)
+
+
 def fillet_cap(n_arc=1000, size=100.0, radius=5.0):
     """A box's corner region as CAD exports a filleted edge: the end cap a
     fan of ``n_arc + 2`` needles from one box corner to a quarter arc of

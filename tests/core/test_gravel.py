@@ -101,9 +101,9 @@ def _spy_groups(monkeypatch):
         seen["sizes"].append(out[1])
         return out
 
-    def spy_bvh(self, PT, far, best):
+    def spy_bvh(self, PT, far, best, crowded=0):
         seen["bvh"] += far.size
-        return bvh(self, PT, far, best)
+        return bvh(self, PT, far, best, crowded)
     monkeypatch.setattr(TriangleIndex, "_query_groups", spy_groups)
     monkeypatch.setattr(TriangleIndex, "_bvh_query", spy_bvh)
     return seen
