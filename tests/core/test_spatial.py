@@ -633,8 +633,8 @@ def test_queries_in_crowded_cells_probe_from_their_own_small_groups():
     P = np.c_[r * np.cos(a), r * np.sin(a), np.full(300, 1e-4)]
     index = TriangleIndex(V, F)
     cell = np.clip(np.floor((P - index._lo) / index._h), 0, index._dims - 1).astype(np.int64)
-    crowded, _, _ = index.split_crowded(cell[:, 0] + index._dims[0] * (cell[:, 1]
-                                                                      + index._dims[1] * cell[:, 2]))
+    dims = index._dims
+    crowded, _, _ = index.split_crowded(cell[:, 0] + dims[0] * (cell[:, 1] + dims[1] * cell[:, 2]))
     assert crowded.size > 100                  # (about half: the cells near the hub)
     _check_result(V, F, P, index.closest(P))
     PT, q = np.ascontiguousarray(P[crowded].T), np.arange(crowded.size)
