@@ -583,7 +583,7 @@ def _check_rounds(st, pool, passes, haus, dihedral_cos, tun):
     scratch = _scratch(n, P)
     faces_at = np.bincount(st.F[st.alive].ravel(), minlength=n)
     big = (_take(faces_at, pool.A) + _take(faces_at, pool.B)) >= tun.hold_star
-    active = _drop_quick_refusals(st, pool, active, passes, tun, big)
+    active = _drop_quick_refusals(st, pool, active, passes, tun, big, faces_at)
     for _ in range(tun.max_rounds):
         active = active[~touched[pool.A[active]] & ~touched[pool.B[active]]]
         if active.size == 0:
@@ -668,21 +668,28 @@ def _take_rows(c, cols):
     return [c.rows[j] for j in cols]
 
 
-def _drop_quick_refusals(st, pool, active, passes, tun, big):
+def _drop_quick_refusals(st, pool, active, passes, tun, big, faces_at):
     """The ``active`` pool edges but those with a big star (``big``: at least
-    ``Tuning.hold_star`` faces around the ends) refused on a sample of it
-    (:func:`_flips_on`: a face turned over or made a sliver), remembered as
-    :func:`_judge` remembers them, before any pick: a fan's spoke picked
-    would keep the whole fan waiting a round (every face of the hub is in
-    its star), and a pass has few rounds."""
+    ``Tuning.hold_star`` faces around the ends; ``faces_at``: the live faces
+    around each vertex) refused on a sample of it (:func:`_flips_on`: a
+    face turned over, or from ``Tuning.sliver_star`` faces on, made a
+    sliver, :func:`_sliver_samples`), remembered as :func:`_judge`
+    remembers them, before any pick: a fan's spoke picked would keep the
+    whole fan waiting a round (every face of the hub is in its star), and a
+    pass has few rounds."""
     big = np.flatnonzero(_take(big, active))
     if big.size == 0:
         return active
     e = active[big]
     A, B = pool.A[e], pool.B[e]
-    least = _least_compact_around(st, A, B, tun.hold_sample // 4)
-    star, kf, even = _sampled_stars(st, A, B, tun.hold_sample, pool.h[e], least)
-    refused, flip = _flips_on(st, A, B, pool.XT[:, e], star, kf, tun, least.least, even)
+    star, kf = _sampled_stars(st, A, B, tun.hold_sample)
+    even, least = star.size, np.zeros(2 * e.size)
+    huge = np.flatnonzero(_take(faces_at, A) + _take(faces_at, B) >= tun.sliver_star)
+    if huge.size:
+        more, mk, low = _sliver_samples(st, pool.h[e[huge]], A[huge], B[huge], tun.hold_sample)
+        star, kf = np.concatenate([star, more]), np.concatenate([kf, _take(huge, mk)])
+        least[huge], least[e.size + huge] = low[:huge.size], low[huge.size:]
+    refused, flip = _flips_on(st, A, B, pool.XT[:, e], star, kf, tun, least, even)
     if not refused.any():
         return active
     st.bent[pool.h[e[refused]]] = False
@@ -969,16 +976,17 @@ def _flips_on(st, A, B, XT, star, kf, tun, least=None, even=None):
     """Which collapses turn over one of the faces ``star`` (rows: ``kf``
     gives each one's collapse), and three of those faces (:func:`_witnesses`).
     With ``least`` ((2k,): the least compact face around each of ``A`` and
-    then ``B`` as they are, :func:`_least_compact_around`) also those that
-    make one of them a sliver (less compact than ``Tuning.gamma_hard`` and
-    than half of ``least``). On a sample of the stars both are refusals the
-    whole star's check makes (its new faces include the sample's, and its
-    old ones are no less compact than ``least``): a CAD cap's hub, its
-    spokes each refused for the sliver it makes beside the rim vertex it
-    merges into, waited for one spoke a round (a 10k-face cylinder to 200
-    faces took 197 passes). Only the first ``even`` rows (all when None) are
-    tested for turned faces (more of them held more collapses back until
-    those faces change: a flat grid to 4 faces took 59 passes, not 54)."""
+    then ``B`` as they are, :func:`_least_compact_around`; 0 for none) also
+    those that make one of them a sliver (less compact than
+    ``Tuning.gamma_hard`` and than half of ``least``). On a sample of the
+    stars both are refusals the whole star's check makes (its new faces
+    include the sample's, and its old ones are no less compact than
+    ``least``): a CAD cap's hub, its spokes each refused for the sliver it
+    makes beside the rim vertex it merges into, waited for one spoke a
+    round (a 10k-face cylinder to 200 faces took 197 passes). Only the
+    first ``even`` rows (all when None) are tested for turned faces (more
+    of them held more collapses back until those faces change: a flat grid
+    to 4 faces took 59 passes, not 54)."""
     k = A.size
     s = _star_of(st.F, A, B, star, kf)
     g = _moved_faces(st, s, XT)
@@ -1027,13 +1035,9 @@ def _least_compact_around(st, A, B, per):
     return _LeastCompact(least, _take(fv, _take(start, i) + j), i % A.size)
 
 
-def _sampled_stars(st, A, B, per, h, least):
+def _sampled_stars(st, A, B, per):
     """About ``per`` of the live faces around each of ``A[k]`` and ``B[k]``,
-    evenly spread (every one up to ``per``), as star rows ``(star, kf)``,
-    then the faces near the edge ``h[k]`` (``per // 2`` each way around each
-    end, :func:`_fans_near`) and the least compact ones (``least``, a
-    :class:`_LeastCompact`); returns ``(star, kf, even)``, the first
-    ``even`` rows the evenly spread ones (a face may come more than once)."""
+    evenly spread (every one up to ``per``), as star rows ``(star, kf)``."""
     ends = np.concatenate([A, B])
     fs, start, count = _faces_at(st.F, np.flatnonzero(st.alive), ends)
     step = np.maximum(count // per, 1)
@@ -1041,11 +1045,18 @@ def _sampled_stars(st, A, B, per, h, least):
     g = np.repeat(np.arange(ends.size, dtype=np.int64), take)
     j = np.arange(g.size, dtype=np.int64) - np.repeat(np.cumsum(take) - take, take)
     star = _take(fs, _take(start, g) + j * _take(step, g))
-    kf = g % A.size
+    return star, g % A.size
+
+
+def _sliver_samples(st, h, A, B, per):
+    """For the slivers the collapses of the edges ``h[k]`` (``B[k] -> A[k]``)
+    would make: the faces near each edge (``per // 2`` each way around each
+    end, :func:`_fans_near`) and the ``per // 4`` least compact ones around
+    each end, as star rows ``(star, kf)``, and the least compactness around
+    each of A and then B (a :class:`_LeastCompact`'s ``least``)."""
+    least = _least_compact_around(st, A, B, per // 4)
     near, nk = _fans_near(st, h, A, B, per // 2)
-    # (a face may come twice: the sliver test takes the smallest, the flip test the even rows)
-    return (np.concatenate([star, near, least.faces]), np.concatenate([kf, nk, least.k]),
-            star.size)
+    return np.concatenate([near, least.faces]), np.concatenate([nk, least.k]), least.least
 
 
 def _fans_near(st, h, A, B, steps):

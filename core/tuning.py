@@ -66,6 +66,13 @@ class Tuning:
     #: ... and such a collapse is first checked on about this many faces around each end
     #: (evenly spread): one turned over refuses it (12 glyphs: 165 -> 100 passes)
     hold_sample: int = 16
+    #: ... and from this many faces around its ends a collapse is also refused when it
+    #: makes one of the sample's faces a sliver, the sample then holding the faces near the
+    #: edge and the least compact ones too (a CAD cap's spokes, each refused for the sliver
+    #: it makes beside the rim vertex it merges into: a 10k-face cylinder as tall as wide
+    #: took 197 passes to 200 faces, now 35; below, the extra faces cost more than they
+    #: save: fandisk's careful passes 7% slower at 24)
+    sliver_star: int = 96
     face_cache_share: float = 0.75   #: a round re-packs the faces in play below this share
     bands: int = 8                   #: cost bands of the pool (then length bands, then random)
     length_bands: int = 16           #: length bands inside a cost band (shorter edges first)

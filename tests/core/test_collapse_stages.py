@@ -456,25 +456,36 @@ def compactness_of(V, F):
     return engine.compactness(np.linalg.norm(N, axis=1), sq)
 
 
-def test_sampled_stars_are_evenly_spread_then_near_the_edge_and_the_least_compact():
+def test_sampled_stars_are_faces_around_the_ends_evenly_spread_and_all_of_a_small_one():
+    V, F = star_glyphs(count=1, spikes=50)              # hubs of 100 faces
+    st = engine_state(V, F)
+    hub, rim = 2 * 100, np.array([0, 1, 7])
+    A, B = np.full(3, hub), rim
+    star, kf = engine._sampled_stars(st, A, B, 16)
+    for k in range(3):
+        mine = star[kf == k]
+        around = (st.F[mine] == A[k]).any(axis=1) | (st.F[mine] == B[k]).any(axis=1)
+        assert around.all()
+        of_hub = np.flatnonzero((st.F == hub).any(axis=1))
+        hub_rows = mine[(st.F[mine] == hub).any(axis=1)]
+        assert 16 <= np.unique(hub_rows).size <= 19 and np.ptp(hub_rows) > 0.8 * np.ptp(of_hub)   # (+ the rim's)
+        of_rim = np.flatnonzero((st.F == B[k]).any(axis=1))
+        assert set(of_rim) <= set(mine)                  # the rim vertex's few faces: every one
+
+
+def test_sliver_samples_are_near_the_edge_and_the_least_compact_around_the_ends():
     V, F = star_glyphs(count=1, spikes=50)              # hubs of 100 faces
     st = engine_state(V, F)
     hub, rim = 2 * 100, np.array([0, 1, 7])
     A, B = np.full(3, hub), rim
     h = np.array([half_edge_of(st.F, hub, r) for r in rim])
-    least = engine._least_compact_around(st, A, B, 4)
-    star, kf, even = engine._sampled_stars(st, A, B, 16, h, least)
+    star, kf, least = engine._sliver_samples(st, h, A, B, 16)
     g = compactness_of(V, F)
     of_hub = np.flatnonzero((st.F == hub).any(axis=1))
     for k in range(3):
         mine = star[kf == k]
         around = (st.F[mine] == A[k]).any(axis=1) | (st.F[mine] == B[k]).any(axis=1)
         assert around.all()
-        spread = star[:even][kf[:even] == k]
-        hub_rows = spread[(st.F[spread] == hub).any(axis=1)]
-        assert 16 <= np.unique(hub_rows).size <= 19 and np.ptp(hub_rows) > 0.8 * np.ptp(of_hub)   # (+ the rim's)
-        of_rim = np.flatnonzero((st.F == B[k]).any(axis=1))
-        assert set(of_rim) <= set(spread)                # the rim vertex's few faces: every one
         # the hub's faces within 8 steps of the edge's either way (the fan's order is
         # its faces' order: face i of the cap holds rim vertices i and i + 1)
         c = int(np.flatnonzero(of_hub == h[k] // 3)[0])
@@ -484,7 +495,7 @@ def test_sampled_stars_are_evenly_spread_then_near_the_edge_and_the_least_compac
             assert set(at[np.argsort(g[at], kind="stable")[:4]]) <= set(mine)
     # the least compactness around each end, as the whole check measures it
     for i, v in enumerate(np.concatenate([A, B])):
-        assert least.least[i] == g[(st.F == v).any(axis=1)].min()
+        assert least[i] == g[(st.F == v).any(axis=1)].min()
 
 
 def test_sliver_refusals_on_a_sample_are_refusals_of_the_whole_check():
@@ -496,9 +507,9 @@ def test_sliver_refusals_on_a_sample_are_refusals_of_the_whole_check():
     st = engine_state(V, F)
     pool = pool_of(st)
     active = np.arange(pool.key.size)
-    big = np.bincount(st.F.ravel(), minlength=st.V.shape[0])
-    big = (big[pool.A] + big[pool.B]) >= TUNING.hold_star
-    kept = engine._drop_quick_refusals(st, pool, active, 1, TUNING, big)
+    faces_at = np.bincount(st.F.ravel(), minlength=st.V.shape[0])
+    big = (faces_at[pool.A] + faces_at[pool.B]) >= TUNING.hold_star
+    kept = engine._drop_quick_refusals(st, pool, active, 1, TUNING, big, faces_at)
     gone = np.setdiff1d(active, kept)
     spokes = np.flatnonzero(np.isin(pool.A, [1000, 1001]) | np.isin(pool.B, [1000, 1001]))
     assert set(spokes) <= set(gone)                      # every spoke of both caps
@@ -516,9 +527,10 @@ def test_quick_refusals_are_refusals_of_the_whole_check():
     st = engine_state(V, F)
     pool = pool_of(st)
     active = np.arange(pool.key.size)
-    big = np.bincount(st.F.ravel(), minlength=st.V.shape[0])
+    faces_at = np.bincount(st.F.ravel(), minlength=st.V.shape[0])
     kept = engine._drop_quick_refusals(st, pool, active, 1, TUNING,
-                                       (big[pool.A] + big[pool.B]) >= TUNING.hold_star)
+                                       (faces_at[pool.A] + faces_at[pool.B]) >= TUNING.hold_star,
+                                       faces_at)
     gone = np.setdiff1d(active, kept)
     assert gone.size > 300                               # most of the 400 spokes
     star, kf = engine._whole_stars(st.F, np.arange(st.F.shape[0]), pool.A[gone], pool.B[gone])
