@@ -1055,13 +1055,7 @@ def test_star_glyphs_whose_cheapest_edges_are_folding_fan_spokes_take_few_passes
     # 1,446 for twelve glyphs to 500. Refused on a sample of the fan before the picks
     # and held while the faces they flip stay: 99 (and 100).
     V, F = star_glyphs(count=3, spikes=200)
-    for target in (1200, 120):
-        res = simplify(V, F, target_faces=target)
-        assert res.F.shape[0] == target and res.stopped_because == "target"
-        assert res.n_passes <= 110
-        assert_clean(res, V, F)
-        t = topology_summary(res.F, res.V.shape[0])
-        assert (t.components, t.euler, t.boundary_edges) == (3, 6, 0)
+    res = _clean_in_few_passes(V, F, (1200, 120), 110, (3, 6, 0))
     # the same with the hold off (hold_star above any star): the passes it saves
     slow = simplify(V, F, target_faces=120, tuning=replace(TUNING, hold_star=10**9))
     assert slow.F.shape[0] == 120 and slow.n_passes > 2 * res.n_passes
@@ -1073,14 +1067,21 @@ def test_a_cylinder_whose_cheapest_edges_are_spokes_making_slivers_takes_few_pas
     # merges into. Each was picked alone (all of the hub's faces are in its star) and
     # refused, one a round: 197 passes and 44 s to 200 faces. Refused on a sample of
     # the fan before the picks: 35 passes.
-    V, F = cad_cylinder(2500, height=1.0)
-    for target in (1000, 200):
+    _clean_in_few_passes(*cad_cylinder(2500, height=1.0), (1000, 200), 50, (1, 2, 0))
+
+
+def _clean_in_few_passes(V, F, targets, passes, topology):
+    """Simplify ``(V, F)`` to each of ``targets``: each met, in at most
+    ``passes``, clean, with the ``topology`` (components, Euler
+    characteristic, border edges); returns the last result."""
+    for target in targets:
         res = simplify(V, F, target_faces=target)
         assert res.F.shape[0] == target and res.stopped_because == "target"
-        assert res.n_passes <= 50
+        assert res.n_passes <= passes
         assert_clean(res, V, F)
         t = topology_summary(res.F, res.V.shape[0])
-        assert (t.components, t.euler, t.boundary_edges) == (1, 2, 0)
+        assert (t.components, t.euler, t.boundary_edges) == topology
+    return res
 
 
 def test_max_error_halves_the_gap_to_the_first_step_over_it():
