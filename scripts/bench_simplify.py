@@ -6,6 +6,7 @@ Run with the bpy venv's Python (Blender as a module, NumPy 1.26)::
     python scripts/bench_simplify.py --quick    # a few small cases
     python scripts/bench_simplify.py --big      # also 4M -> 40k
     python scripts/bench_simplify.py --messy-only   # only the messy section
+    python scripts/bench_simplify.py --small-only   # only the small-mesh section
 
 For every case Decimate runs first; ``core.simplify`` then gets Decimate's
 output face count as ``target_faces`` so both end at the same size. Where
@@ -21,10 +22,11 @@ boundary edges and Euler characteristic (input -> output), flipped faces
 memory of our run (peak RSS above the RSS before it). The table goes to bench_results/simplify.md
 (bench_results/simplify-partial.md for a run with any option that leaves a section out).
 
-The small-mesh section takes a flat grid, a cube (both 20,000 faces), fandisk
-and the bunny to 2,000, 200 and 4 faces (times: the best of three runs): the
-fixed cost per pass that small meshes feel, and a 4-face target against a
-2,000-face one.
+The small-mesh section takes a flat grid, a cube (both 20,000 faces), a CAD
+cylinder as tall as it is wide (caps fans of 2,500 needles, 10,000 faces),
+fandisk and the bunny to 2,000, 200 and 4 faces (times: the best of three
+runs): the fixed cost per pass that small meshes feel, CAD fans, and a
+4-face target against a 2,000-face one.
 
 The messy section runs every shared mesh as real scans arrive (an exact soup,
 a soup jittered by 1e-7 of the diagonal, 300 specks of debris, 3 pinched
@@ -212,16 +214,19 @@ MESSY = ("soup", "jittered soup", "debris", "bowties", "sheets", "pinholes", "co
          "holed copy in place", "speck far off")
 
 #: the small-mesh section's meshes (each to 2,000, 200 and 4 faces)
-SMALL = ("flat grid 100x100", "cube 40x40 per side", "fandisk", "stanford-bunny")
+SMALL = ("flat grid 100x100", "cube 40x40 per side", "CAD cylinder, fans of 2,500 needles",
+         "fandisk", "stanford-bunny")
 
 
 def small_mesh(label):
     """A mesh of the small-mesh section, or None when its file is absent."""
-    from tests.mesh_factory import cube, regular_grid
+    from tests.mesh_factory import cad_cylinder, cube, regular_grid
     if label.startswith("flat grid"):
         return regular_grid(100, 100)
     if label.startswith("cube"):
         return cube(40)
+    if label.startswith("CAD cylinder"):        # as tall as wide: its caps' spokes cost nothing
+        return cad_cylinder(2500, height=1.0)
     path = os.path.join(MESHES, label + ".obj")
     return read_obj(path)[:2] if os.path.exists(path) else None
 
@@ -370,6 +375,7 @@ def main():
     ap.add_argument("--no-messy", action="store_true", help="skip the messy section")
     ap.add_argument("--messy-only", action="store_true", help="only the messy section")
     ap.add_argument("--no-small", action="store_true", help="skip the small-mesh section")
+    ap.add_argument("--small-only", action="store_true", help="only the small-mesh section")
     args = ap.parse_args()
     blender = not args.no_blender
     if blender:
@@ -381,14 +387,14 @@ def main():
         names = [n for n in names if n in ("fandisk.obj", "cow.obj", "beetle.obj")]
     rows = []
     messy = []
-    if not args.no_messy:
+    if not args.no_messy and not args.small_only:
         for name in names:
             V, F = read_obj(os.path.join(MESHES, name))
             target = min(1000, int(round(0.1 * F.shape[0])))
             messy += run_messy(name[:-4], V, F, target, blender)
             print(fmt_messy(messy[-len(MESSY):], blender), flush=True)
     small = [] if args.no_small or args.quick or args.messy_only or args.meshes else run_small(blender)
-    if args.messy_only:
+    if args.messy_only or args.small_only:
         names = []
     for name in names:
         V, F = read_obj(os.path.join(MESHES, name))
@@ -402,7 +408,7 @@ def main():
             rows.append(row)
             print(fmt_table([row], blender).splitlines()[-1], flush=True)
     real = list(rows)
-    if not args.quick and not args.no_synthetic:
+    if not args.quick and not args.no_synthetic and not args.small_only:
         big = [(2, 10_000, "bunny x16 (1M)", "stanford-bunny.obj"),
                (3, 10_000, "rocker-arm x64 (1.3M, held-out style)", "rocker-arm.obj")]
         if args.big:
@@ -447,7 +453,7 @@ def main():
     out = os.path.join(ROOT, "bench_results")
     os.makedirs(out, exist_ok=True)
     full = not (args.quick or args.meshes or args.messy_only or args.no_blender or args.no_synthetic
-                or args.no_messy or args.no_small)
+                or args.no_messy or args.no_small or args.small_only)
     name = "simplify.md" if full else "simplify-partial.md"   # a partial run keeps the full table
     with open(os.path.join(out, name), "w", encoding="utf-8") as fh:
         fh.write("# core.simplify vs Blender Decimate (COLLAPSE)\n\n" + text + "\n")
