@@ -657,15 +657,8 @@ def _merged(c1, i1, c2, i2, k):
         ok[i], pen[i], bent[i], wit[i], flip[i] = c.ok, c.pen, c.bent, c.wit, c.flip
     kf = np.concatenate([_take(i1, c1.rows[1]), _take(i2, c2.rows[1])])
     o = np.argsort(kf, kind="stable")
-    cols = (0, 2, 3, 4)
-    star, coll, cA, cB = (_take(np.concatenate([a, b]), o)
-                          for a, b in zip(_take_rows(c1, cols), _take_rows(c2, cols)))
+    star, coll, cA, cB = (_take(np.concatenate([c1.rows[j], c2.rows[j]]), o) for j in (0, 2, 3, 4))
     return _Checked(ok, pen, (star, _take(kf, o), coll, cA, cB), wit, bent, flip)
-
-
-def _take_rows(c, cols):
-    """The star-row columns ``cols`` of a :class:`_Checked`."""
-    return [c.rows[j] for j in cols]
 
 
 def _drop_quick_refusals(st, pool, active, passes, tun, big, faces_at):
@@ -1021,8 +1014,7 @@ def _least_compact_around(st, A, B, per):
     FT = np.ascontiguousarray(_take(st.F, f, axis=0).T)
     P0, P1, P2 = (_take(st.VT, FT[c], axis=1) for c in range(3))
     N = cross_columns(P1 - P0, P2 - P0)
-    sq = [dot_columns(D, D) for D in (P1 - P0, P2 - P1, P0 - P2)]
-    g = np.tile(compactness(np.sqrt(dot_columns(N, N)), sq[0] + sq[1] + sq[2]), 3)
+    g = np.tile(compactness(np.sqrt(dot_columns(N, N)), _edge_squares(P0, P1, P2)), 3)
     v, fv = FT.ravel(), np.tile(f, 3)
     o = np.lexsort((g, v))                        # by vertex, then compactness
     v, fv, g = _take(v, o), _take(fv, o), _take(g, o)
@@ -1292,15 +1284,21 @@ def _turned_faces(st, s, g, A, B, tun):
 
 def _min_compactness(s, g):
     """Smallest compactness around each collapse, (before, after), (k,) each."""
-    (P0, P1, P2), (Q0, Q1, Q2) = g.P, g.Q
-    sq = [dot_columns(D, D) for D in (P1 - P0, P2 - P1, P0 - P2, Q1 - Q0, Q2 - Q1, Q0 - Q2)]
-    g_old = compactness(g.l0, sq[0] + sq[1] + sq[2])
-    g_new = compactness(g.l1, sq[3] + sq[4] + sq[5])
+    g_old = compactness(g.l0, _edge_squares(*g.P))
+    g_new = compactness(g.l1, _edge_squares(*g.Q))
     gmin_old = np.ones(s.k)
     np.minimum.at(gmin_old, s.mk, g_old)
     gmin_new = np.ones(s.k)
     np.minimum.at(gmin_new, s.mk, g_new)
     return gmin_old, gmin_new
+
+
+def _edge_squares(P0, P1, P2):
+    """The sums of the squared edge lengths of the triangles of corners
+    ``P0``, ``P1``, ``P2`` (3, k) each (compactness's denominator; one
+    formula for :func:`_min_compactness` and :func:`_least_compact_around`,
+    whose refusals on a sample hold only while they measure alike)."""
+    return sum(dot_columns(D, D) for D in (P1 - P0, P2 - P1, P0 - P2))
 
 
 def _compactness_penalty(st, s, g, A, B, gmin_old, gmin_new, tun):
