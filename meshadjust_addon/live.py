@@ -26,10 +26,10 @@ from .. import core
 from . import api, app_handlers, live_update, results
 from .properties import preferences
 
-_pending = set()
-#: the session_uid of each pending cage, by the name it was scheduled under (a cage renamed
-#: before its update ran had been skipped: its edit followed only at the next one)
-_pending_uid = {}
+#: the pending cages: the name each was scheduled under -> its session_uid (None: found by
+#: the name alone); a cage renamed before its update ran had been skipped (its edit followed
+#: only at the next one)
+_pending = {}
 _last_run = {}
 #: cage name -> (worker thread making its refined mesh's finer binding, {"error": exception},
 #: the timer that looks for it)
@@ -46,16 +46,14 @@ def _interval():
 def refine_pending():
     """Run the scheduled live refines (the timer callback; also callable
     directly, e.g. in tests). Returns None so the timer does not repeat."""
-    names = list(_pending)
+    uids = dict(_pending)
     _pending.clear()
-    uids = dict(_pending_uid)
-    _pending_uid.clear()
     output = 'EDITED'
     scene = bpy.context.scene
     if scene is not None and hasattr(scene, "meshadjust"):
         output = scene.meshadjust.output
-    for name in names:
-        cage, uid = bpy.data.objects.get(name), uids.get(name)
+    for name, uid in uids.items():
+        cage = bpy.data.objects.get(name)
         if uid is not None and (cage is None or cage.session_uid != uid):     # renamed
             cage = next((o for o in bpy.data.objects if o.session_uid == uid), None) or cage
         if cage is None or not cage.meshadjust.live or cage.meshadjust.edited is None:
@@ -138,7 +136,7 @@ def finer_done(name):
                                        f"({type(error).__name__}: {error}); please report it")
         raise error
     else:
-        _pending.add(name)
+        _pending.setdefault(name, None)
         refine_pending()
     return None
 
@@ -163,10 +161,10 @@ def schedule(cage):
     """Schedule a throttled live refine of the object ``cage`` (once while
     one is pending; found again by its session_uid if renamed meanwhile)."""
     name = cage.name
-    _pending_uid[name] = cage.session_uid
-    if name in _pending:
+    waiting = name in _pending
+    _pending[name] = cage.session_uid
+    if waiting:
         return
-    _pending.add(name)
     wait = max(0.0, _interval() - (time.monotonic() - _last_run.get(name, 0.0)))
     if not bpy.app.timers.is_registered(refine_pending):
         bpy.app.timers.register(refine_pending, first_interval=wait)
@@ -202,6 +200,5 @@ def unregister():
         if bpy.app.timers.is_registered(look):
             bpy.app.timers.unregister(look)
     _pending.clear()
-    _pending_uid.clear()
     _finer.clear()
     live_update.forget()

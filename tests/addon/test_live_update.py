@@ -153,7 +153,7 @@ def test_live_stops_on_an_internal_error_and_says_so_once(bound_cage, monkeypatc
     live = _mod("live")
     cage = bound_cage
     cage.meshadjust.live = True
-    live._pending.add(cage.name)
+    live._pending[cage.name] = None
 
     def bug(_cage):
         raise ValueError("a bug")
@@ -185,7 +185,7 @@ def test_a_failed_live_update_keeps_nothing_aside(bound_cage):
     mio.write_positions(cage.data, bad)
     objects, meshes = sorted(bpy.data.objects.keys()), sorted(bpy.data.meshes.keys())
     cage.meshadjust.live = True
-    live._pending.add(cage.name)
+    live._pending[cage.name] = None
     live.refine_pending()
     assert not cage.meshadjust.live
     assert "reaches 1e+30" in cage.meshadjust.last_report
@@ -215,7 +215,7 @@ def test_a_cage_vertex_that_is_not_a_number_is_named_on_the_cage(bound_cage, ste
     edited = mio.read_positions(cage.meshadjust.edited.data)
     if step == "live":
         cage.meshadjust.live = True
-        live._pending.add(cage.name)
+        live._pending[cage.name] = None
         live.refine_pending()
         assert not cage.meshadjust.live
         assert cage.meshadjust.last_report.startswith("live refine stopped: " + want)
@@ -245,7 +245,7 @@ def test_live_makes_the_refined_mesh_s_first_finer_binding_in_the_background(sce
     Vc = mio.read_positions(cage.data)
     Vc[:4] *= 1.05
     mio.write_positions(cage.data, Vc)
-    live._pending.add(cage.name)
+    live._pending[cage.name] = None
     live.refine_pending()
     assert "binding the refined mesh at 3 levels in the background" in \
         cage.meshadjust.last_report
@@ -263,7 +263,7 @@ def test_live_makes_the_refined_mesh_s_first_finer_binding_in_the_background(sce
     # the next ticks refine at once with the kept binding
     Vc[:4] *= 1.05
     mio.write_positions(cage.data, Vc)
-    live._pending.add(cage.name)
+    live._pending[cage.name] = None
     live.refine_pending()
     # (incremental: the kept finer binding's refine of the 4 moved cage vertices only)
     assert cage.name not in live._finer and \
@@ -277,7 +277,7 @@ def _live_tick(cage, output):
     live = _mod("live")
     bpy.context.scene.meshadjust.output = output
     cage.meshadjust.live = True
-    live._pending.add(cage.name)
+    live._pending[cage.name] = None
     live.refine_pending()
     return cage.meshadjust.last_report
 

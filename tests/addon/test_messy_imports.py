@@ -137,7 +137,7 @@ def test_a_cage_with_a_preview_modifier_refines_and_goes_live_from_edit_mode(sce
     assert bpy.ops.meshadjust.bind() == {'FINISHED'}
     cage.meshadjust.live = True
     live = mod("live")
-    live._pending.add(cage.name)
+    live._pending[cage.name] = None
     live.refine_pending()
     assert cage.meshadjust.live, cage.meshadjust.last_report
     assert cage.meshadjust.last_report.startswith("live: ")
@@ -352,7 +352,7 @@ def test_live_mode_shades_the_edited_original_with_its_new_normals(scene):
     lift_in_edit_mode(cage, above=0.3, dz=0.4)
     cage.meshadjust.live = True
     live = mod("live")
-    live._pending.add(cage.name)
+    live._pending[cage.name] = None
     live.refine_pending()
     assert cage.meshadjust.last_report.startswith("live: ")
     shown = evaluated_normals(edited)

@@ -42,7 +42,7 @@ def test_a_zero_scale_is_refused_by_name_everywhere_and_stops_live(bound):
         assert_unchanged(before)
     cage.meshadjust.live = True
     live = mod("live")
-    live._pending.add(cage.name)
+    live._pending[cage.name] = None
     live.refine_pending()                                 # (no traceback out of the timer)
     assert not cage.meshadjust.live
     assert cage.meshadjust.last_report.startswith("live refine stopped: 'dense' has a zero scale")
@@ -194,7 +194,7 @@ def test_a_deleted_edited_original_is_linked_back_by_refine_and_stops_live(bound
         col.objects.unlink(edited)                          # deleted in the outliner
     cage.meshadjust.live = True
     live = mod("live")
-    live._pending.add(cage.name)
+    live._pending[cage.name] = None
     live.refine_pending()
     assert not cage.meshadjust.live
     assert "'dense_edited' was deleted" in cage.meshadjust.last_report
