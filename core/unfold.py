@@ -12,10 +12,10 @@ The repair, on the dense mesh itself:
 
     detect   a face is *turned over* when its normal turned by more than 90
              degrees from its rest normal ("away", the cheap test, on the
-             faces the deform may have changed: :func:`away_t`,
-             :func:`away_rows`, :class:`FineFaceGroups`), and by more than
-             ``TURNED_DEG`` (60) from its rest normal turned by the cage's
-             rotation at its first corner (:func:`ring_rotations`: so a face
+             faces the deform may have changed: :func:`away_rows`,
+             :class:`FineFaceGroups`), and by more than ``TURNED_DEG`` (60)
+             from its rest normal turned by the cage's rotation at its first
+             corner (:func:`ring_rotations`: so a face
              that only follows a large rotation of the edit, e.g. an arm bent
              a half turn, is left alone, and one turned by 100 degrees where
              the cage turned by 20 is not)
@@ -45,13 +45,13 @@ from typing import NamedTuple
 import numpy as np
 
 from ._groups import distinct, ragged_entries, ragged_ranges
-from ._parallel import WORKERS, blocks, run_blocks, run_each
+from ._parallel import WORKERS, blocks, run_each
 from .mesh import (DOTS_BLOCK, NORMALS_BLOCK, area_normals_rows, area_normals_t, dot_columns,
                    normal_dots, squared_edges, unit_rows)
 from .topology import edge_map
 
 __all__ = ["CageRings", "Copies", "FaceBatch", "FaceStars", "FineFaceGroups", "Neighbours",
-           "Repair", "away_rows", "away_t", "nearest_rotations", "repair", "rest_normals",
+           "Repair", "away_rows", "nearest_rotations", "repair", "rest_normals",
            "ring_linear_maps", "ring_rotations", "turned_over"]
 
 #: Jacobi sweeps per round of the repair
@@ -72,9 +72,6 @@ FLAT_AT_REST = 1e-6
 #: that long (a zero-length edge of an unwelded scan's welded copies, or of a degenerate
 #: face, would weigh infinitely)
 EDGE_FLOOR = 1e-3
-
-#: faces per block of :func:`away_t`
-_AWAY_BLOCK = 1 << 16
 
 #: :func:`away_rows` and :class:`FaceBatch` split their faces over the worker
 #: threads from this many on (below, the hand-offs cost more than they save)
@@ -402,27 +399,20 @@ def rest_normals(PT, FT):
     return out
 
 
-def away_t(PT, FT, rest_normals):
-    """Every face (ascending) whose area normal over ``PT`` (3,n) points away
-    from its rest normal (negative dot product), the faces ``FT`` (3,m)
-    taken ``_AWAY_BLOCK`` at a time (temporaries that stay in cache) on the
-    worker threads."""
-    def block(s, e):
-        n = area_normals_t(PT, FT[:, s:e])
-        return np.flatnonzero(dot_columns(n, rest_normals[:, s:e]) < 0) + s
-    out = run_blocks(block, blocks(FT.shape[1], _AWAY_BLOCK))
-    return np.concatenate(out) if out else np.zeros(0, dtype=np.int64)
-
-
 def away_rows(X, FT, faces, rest_normals):
-    """:func:`away_t` over positions ``X`` (n,3), among the columns ``faces``
-    of the triangles ``FT`` (3,k) and their ``rest_normals`` (3,k) (in their
-    order: ascending stays ascending): :func:`~.mesh.normal_dots` below 0,
-    in a part per worker thread from ``_AWAY_THREADS_MIN`` columns on (the
-    gathers are most of it: 48k faces around 5 moved cage vertices' rows,
-    1.66 -> 1.28 ms on two), each part ``DOTS_BLOCK`` columns at a time
-    (their corners and rest normals gathered for the block: 0.15 of 1.7 ms
-    against the part's at once)."""
+    """The faces whose area normal over positions ``X`` (n,3) points away
+    from their rest normal (negative dot product), among the columns
+    ``faces`` (None: every one, ascending) of the triangles ``FT`` (3,k) and
+    their ``rest_normals`` (3,k) (in their order: ascending stays
+    ascending): :func:`~.mesh.normal_dots` below 0, in a part per worker
+    thread from ``_AWAY_THREADS_MIN`` columns on (the gathers are most of
+    it: 48k faces around 5 moved cage vertices' rows, 1.66 -> 1.28 ms on
+    two), each part ``DOTS_BLOCK`` columns at a time (their corners and rest
+    normals gathered for the block: 0.15 of 1.7 ms against the part's at
+    once; every face: the blocks are slices)."""
+    if faces is None:
+        return _below_zero(FT.shape[1],
+                           lambda s, e: normal_dots(X, FT[:, s:e], rest_normals[:, s:e]))
     at = _below_zero(faces.shape[0],
                      lambda s, e: normal_dots(X, *_gathered(FT, rest_normals, faces[s:e])))
     return faces[at]
@@ -448,7 +438,7 @@ def _below_zero(n, dots):
 
 
 def turned_over(X, FT, away, rest_normals, rotate):
-    """The faces among ``away`` (faces :func:`away_t` gives, ascending) turned
+    """The faces among ``away`` (faces :func:`away_rows` gives, ascending) turned
     over on ``X`` (n,3): their normal is also more than ``TURNED_DEG`` from
     their rest normal turned by ``rotate(vertices, vectors)`` (the frame
     rotation at their first corner). (With 90 degrees, faces of the bunny

@@ -24,7 +24,6 @@ from core.mesh import bbox_diagonal, face_normals, turned_faces, vertex_normals
 from core.simplify import simplify
 from core import unfold
 from core.unfold import (FLAT_AT_REST, CageRings, FaceBatch, FaceStars, FineFaceGroups, away_rows,
-                         away_t,
                          nearest_rotations, repair, rest_normals, ring_rotations, turned_over,
                          TURNED_DEG)
 from tests.mesh_factory import load_shared, regular_grid, torus
@@ -95,7 +94,7 @@ def test_repair_puts_a_pushed_vertex_back_and_writes_only_its_region():
     FT = np.ascontiguousarray(F.T)
     rest = _rest_normals(V, F)
     stars = FaceStars.of(F, V.shape[0])
-    away = away_t(np.ascontiguousarray(X.T), FT, rest)
+    away = away_rows(X, FT, None, rest)
     folded = turned_over(X, FT, away, rest, _identity)
     assert folded.size > 0 and np.isin(centre, F[folded]).all()
     Y = X.copy()
@@ -125,7 +124,7 @@ def test_turned_over_means_away_from_rest_and_far_from_the_cage_rotation():
         return np.array([[1, 0, 0], [0, np.cos(t), -np.sin(t)], [0, np.sin(t), np.cos(t)]])
 
     X = V @ about_x(100).T
-    away = away_t(np.ascontiguousarray(X.T), FT, rest)
+    away = away_rows(X, FT, None, rest)
     assert away.tolist() == [0]
     for deg in (0, 20, 50):
         expected = [0] if 100 - deg > TURNED_DEG else []
@@ -163,6 +162,9 @@ def test_faces_pointing_away_are_the_same_found_in_parts_on_the_threads():
     assert 0 < expected.size < faces.size
     assert np.array_equal(away_rows(X, FT, faces, rest), expected)
     assert away_rows(X, FT, faces[:0], rest).size == 0
+    # every face (None: the blocks are slices, not gathers), against the same test
+    every = np.flatnonzero(np.einsum("ij,ji->i", face_normals(X, F, normalize=False), rest) < 0)
+    assert np.array_equal(away_rows(X, FT, None, rest), every) and every.size > expected.size
     # the same faces gathered once as they are tested (a FaceBatch, kept over a drag), in
     # any order, some twice: the same faces found then and from the batch
     again = np.concatenate([faces[::-1], faces[:500]])
