@@ -257,3 +257,42 @@ def test_the_parts_of_a_stopped_file_are_looked_for():
     unstarted = runners.cancelled_report(task)
     assert [batch.may_leave_parts(r) for r in (died, slow, cancelled, converted, unstarted)] \
         == [True, True, True, False, False]
+
+
+_FAULTS = r"""
+import resource, sys
+import numpy as np
+sys.path.insert(0, sys.argv[1])
+from meshadjust_batch import checkout_package
+checkout_package()
+from meshadjust.cli.batch import reuse_freed_memory
+try:                                  # (4 KB pages: each fresh one a fault to count)
+    from numpy._core.multiarray import _set_madvise_hugepage
+except ImportError:
+    from numpy.core.multiarray import _set_madvise_hugepage
+_set_madvise_hugepage(False)
+
+
+def faults():
+    np.ones(8_000_000)                # 64 MB made and dropped, then again 5 times
+    before = resource.getrusage(resource.RUSAGE_SELF).ru_minflt
+    for _ in range(5):
+        np.ones(8_000_000)
+    return resource.getrusage(resource.RUSAGE_SELF).ru_minflt - before
+
+
+print(faults(), reuse_freed_memory(), faults())
+"""
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="glibc's malloc (Linux)")
+def test_a_worker_reuses_the_memory_it_freed():
+    # a worker process (reuse_freed_memory, from _as_worker) keeps large blocks it frees
+    # for the next ones: a 64 MB array made again and again pages in once, not each time
+    # (each fresh page a fault; 16k of them per 64 MB)
+    proc = subprocess.run([sys.executable, "-c", _FAULTS, os.path.join(ROOT, "scripts")],
+                          capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 0, proc.stderr
+    fresh, applied, reused = proc.stdout.split()
+    assert applied == "True"
+    assert int(fresh) >= 5 * 15_000 and int(reused) < 1_000, proc.stdout
