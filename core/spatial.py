@@ -52,7 +52,8 @@ The index (:class:`TriangleIndex`) answers "nearest triangle" exactly:
    with the smallest disk bound wins (the index's rule since its first
    version, kept so that results do not change).
 4. Queries with no triangle nearby, whose ball spans more than
-   ``_MAX_PHASE2_CELLS`` cells (far from the surface, outside the grid), or whose
+   ``_MAX_PHASE2_CELLS`` cells (far from the surface, outside the grid) or cells
+   referencing more than ``_MAX_PHASE2_REFS`` triangles (fans of needles), or whose
    cell is crowded (more than ``crowded_cell`` references: long thin triangles,
    as a CAD cylinder's sides, cross and crowd every cell) go to a
    bounding-volume hierarchy over the same Morton order (a balanced binary tree
@@ -112,6 +113,11 @@ _THIN_HEIGHT = 0.01
 _NEEDLE_HEIGHT = 0.25
 _LINE_CELLS = 27
 _MAX_PHASE2_CELLS = 64     # queries whose ball spans more cells go to the BVH
+#: ... or whose cells within it reference more triangles than this (fans of needles, each
+#: in many cells: the Loop surface of a filleted box corner's 500-face cage, its fine
+#: vertices up to a tenth of the size inside the corners, scanned 16k references each
+#: there, 2 ms a point, where the BVH takes about 550 pairs)
+_MAX_PHASE2_REFS = 1024
 CROWDED_CELL = 256         # ... and queries in a cell referencing more triangles than this
 #: (on a 1M-face scan a BVH query costs about what scanning 800 references does, 20 against
 #: 2.8 us for 113; but slivers pass the bounds, so a crowded cell's references are mostly
@@ -168,6 +174,13 @@ _PROBE_BEAM = 4            # BVH nodes per query per level of the probe for a fi
 _ODD_PROBE = 4.0
 _ODD_PROBE_SHARE = 0.01
 _WIDE_BEAM = 16
+#: a query's leaves in the BVH: its nearest one by its bound, then, where more than
+#: the second of these are left within the distance found, nearest first in rounds up to
+#: these ranks, each round those still within it: where the nearest leaf by its bound is
+#: not the one holding the answer (the strips of a CAD fillet, within 6-9% of the
+#: answer's distance), one round took every leaf within its distance: 114 leaves a
+#: query, 4,002 points 2.15 -> 1.06 s
+_LEAF_ROUNDS = (1, 4, 16, 64, np.inf)
 #: a scan's query with more pairs than this left within the centroid probe's bound
 #: evaluates the one of smallest lower bound first (:meth:`TriangleIndex._eval_lowest_first`)
 _LOWEST_FIRST = 8
@@ -1631,7 +1644,12 @@ class TriangleIndex:
             dd2 = np.einsum("ij,ij->i", dd, dd)
             keep = (g != c0[sel][own]) & (g != done[sel][own])
             keep &= dd2 <= u2[sel][own] * (1 + 4 * PRUNE_SLACK)
-            keep &= start[g + 1] > start[g]
+            refs = start[g + 1] - start[g]
+            keep &= refs > 0
+            heavy = np.bincount(own[keep], refs[keep], sel.size) > _MAX_PHASE2_REFS
+            if heavy.any():
+                far[sel[heavy]] = True
+                keep &= ~heavy[own]
             self._scan(PT, *self._cell_pairs(qi[sel][own[keep]], g[keep]), best, probe=False)
         return qi[far]
 
@@ -1762,7 +1780,9 @@ class TriangleIndex:
     def _scan_group_leaves(self, PT, q_all, starts, counts, g, leaf, best):
         """The leaves ``leaf`` the groups ``g`` reached, for each of their
         members (``q_all[starts[g] : starts[g] + counts[g]]``) with its own
-        bounds: its nearest leaf first, then those within the distance found."""
+        bounds: its nearest leaf first, then those within the distance found
+        (a member with more than ``_LEAF_ROUNDS[1]`` of them: nearest first,
+        in rounds, :meth:`_scan_in_rounds`)."""
         member, own = ragged_ranges(starts[g], counts[g])
         q = q_all[member]
         order = np.argsort(q, kind="stable")                  # grouped by query
@@ -1772,7 +1792,27 @@ class TriangleIndex:
         self._scan_leaves(PT, q[first], leaf[first], best)
         rest = near2 <= best.d2[q] * (1 + 4 * PRUNE_SLACK)
         rest[first] = False
-        self._scan_leaves(PT, q[rest], leaf[rest], best, probe=False)
+        rest = np.flatnonzero(rest)
+        many = np.bincount(q[rest], minlength=best.d2.shape[0])[q[rest]] > _LEAF_ROUNDS[1]
+        self._scan_leaves(PT, q[rest[~many]], leaf[rest[~many]], best, probe=False)
+        if many.any():
+            self._scan_in_rounds(PT, q[rest[many]], leaf[rest[many]], near2[rest[many]], best)
+
+    def _scan_in_rounds(self, PT, q, leaf, near2, best):
+        """Scan the leaves ``leaf`` (bounds ``near2``) of the queries ``q``
+        nearest first, in rounds up to each query's ``_LEAF_ROUNDS[k]``-th
+        nearest, each round those still within the distance found (the
+        answers are the same in any order: ties go to the lowest face)."""
+        order = np.lexsort((near2, q))
+        q, leaf, near2 = q[order], leaf[order], near2[order]
+        runs = _run_lengths(q)
+        rank = np.arange(q.size) - np.repeat(np.cumsum(runs) - runs, runs)
+        left = np.ones(q.size, dtype=bool)
+        for upto in _LEAF_ROUNDS[1:]:
+            left &= near2 <= best.d2[q] * (1 + 4 * PRUNE_SLACK)
+            now = np.flatnonzero(left & (rank < upto))
+            self._scan_leaves(PT, q[now], leaf[now], best, probe=False)
+            left[now] = False
 
     def _query_groups(self, PT, q, size):
         """The queries ``q`` grouped by cell, each query's cell of an edge of

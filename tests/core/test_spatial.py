@@ -752,3 +752,34 @@ def test_far_queries_spread_around_a_mesh_keep_their_memory_bounded():
     assert (hit.distance[some] <= np.sqrt(d2.min(axis=1)) + 1e-12).all()  # the mesh
     one = [TriangleIndex(V, F).closest(P[[i]]).distance[0] for i in some[:5]]   # (scans all)
     np.testing.assert_array_equal(hit.distance[some[:5]], one)
+
+
+def test_points_inside_a_filleted_corner_go_to_the_hierarchy_and_scan_few_leaves(monkeypatch):
+    # a CAD filleted box corner (end caps fans of needles, the fillet strips) and points a
+    # few percent of its size inside it, where the Loop surface of its cage lies: the grid's
+    # cells within their distance reference thousands of triangles (each needle crosses
+    # many), so they go to the hierarchy, which scans their leaves nearest first in rounds;
+    # exact against brute force, and a bound on the pairs scanned (16k a point in the grid,
+    # about 1,150 in one round of the hierarchy's leaves, as measured on 2026-12-07)
+    V, F = fillet_cap(400)
+    rng = np.random.default_rng(11)
+    P = np.vstack([rng.uniform(3.0, 40.0, (300, 3)),                  # inside, near the caps
+                   [95.0, 90.0, 90.0] + rng.normal(scale=2.0, size=(100, 3))])  # the fillet
+    pairs = []
+    scan = spatial.TriangleIndex._scan
+
+    def counting(self, PT, q, t, best, *args, **kw):
+        pairs.append(q.size)
+        return scan(self, PT, q, t, best, *args, **kw)
+    monkeypatch.setattr(spatial.TriangleIndex, "_scan", counting)
+    index = TriangleIndex(V, F, min_cell=8.0)
+    r = index.closest(P)
+    _check_result(V, F, P, r)
+    assert sum(pairs) < 0.25 * P.shape[0] * F.shape[0]
+    # the same answers with the grid scanning every reference (no routing by references)
+    # and with a single round of leaves (every leaf within the first leaf's distance)
+    monkeypatch.setattr(spatial, "_MAX_PHASE2_REFS", np.inf)
+    monkeypatch.setattr(spatial, "_LEAF_ROUNDS", (1, np.inf))
+    monkeypatch.setattr(spatial.TriangleIndex, "_scan", scan)
+    again = TriangleIndex(V, F, min_cell=8.0).closest(P)
+    assert np.array_equal(again.distance, r.distance)
