@@ -53,7 +53,8 @@ The index (:class:`TriangleIndex`) answers "nearest triangle" exactly:
    version, kept so that results do not change).
 4. Queries with no triangle nearby, whose ball spans more than
    ``_MAX_PHASE2_CELLS`` cells (far from the surface, outside the grid) or cells
-   referencing more than ``_MAX_PHASE2_REFS`` triangles (fans of needles), or whose
+   referencing more than ``_PHASE2_CROWDED`` crowded cells' worth of triangles
+   (fans of needles), or whose
    cell is crowded (more than ``crowded_cell`` references: long thin triangles,
    as a CAD cylinder's sides, cross and crowd every cell) go to a
    bounding-volume hierarchy over the same Morton order (a balanced binary tree
@@ -113,11 +114,13 @@ _THIN_HEIGHT = 0.01
 _NEEDLE_HEIGHT = 0.25
 _LINE_CELLS = 27
 _MAX_PHASE2_CELLS = 64     # queries whose ball spans more cells go to the BVH
-#: ... or whose cells within it reference more triangles than this (fans of needles, each
-#: in many cells: the Loop surface of a filleted box corner's 500-face cage, its fine
-#: vertices up to a tenth of the size inside the corners, scanned 16k references each
-#: there, 2 ms a point, where the BVH takes about 550 pairs)
-_MAX_PHASE2_REFS = 1024
+#: ... or whose cells within it reference more than this many times ``crowded_cell``
+#: triangles (fans of needles, each in many cells: the Loop surface of a filleted box
+#: corner's 500-face cage, its fine vertices up to a tenth of the size inside the
+#: corners, scanned 16k references each there, 2 ms a point, where the BVH takes about
+#: 550 pairs; relative to ``crowded_cell``, which grows with cells made wide on purpose:
+#: a fit's index of a 2M-face scan, its cells a few fine edges wide, keeps its queries)
+_PHASE2_CROWDED = 4.0
 CROWDED_CELL = 256         # ... and queries in a cell referencing more triangles than this
 #: (on a 1M-face scan a BVH query costs about what scanning 800 references does, 20 against
 #: 2.8 us for 113; but slivers pass the bounds, so a crowded cell's references are mostly
@@ -1646,7 +1649,8 @@ class TriangleIndex:
             keep &= dd2 <= u2[sel][own] * (1 + 4 * PRUNE_SLACK)
             refs = start[g + 1] - start[g]
             keep &= refs > 0
-            heavy = np.bincount(own[keep], refs[keep], sel.size) > _MAX_PHASE2_REFS
+            heavy = np.bincount(own[keep], refs[keep], sel.size) \
+                > _PHASE2_CROWDED * self.crowded_cell
             if heavy.any():
                 far[sel[heavy]] = True
                 keep &= ~heavy[own]

@@ -778,7 +778,7 @@ def test_points_inside_a_filleted_corner_go_to_the_hierarchy_and_scan_few_leaves
     assert sum(pairs) < 0.25 * P.shape[0] * F.shape[0]
     # the same answers with the grid scanning every reference (no routing by references)
     # and with a single round of leaves (every leaf within the first leaf's distance)
-    monkeypatch.setattr(spatial, "_MAX_PHASE2_REFS", np.inf)
+    monkeypatch.setattr(spatial, "_PHASE2_CROWDED", np.inf)
     monkeypatch.setattr(spatial, "_LEAF_ROUNDS", (1, np.inf))
     monkeypatch.setattr(spatial.TriangleIndex, "_scan", scan)
     again = TriangleIndex(V, F, min_cell=8.0).closest(P)
