@@ -295,4 +295,6 @@ def test_a_worker_reuses_the_memory_it_freed():
     assert proc.returncode == 0, proc.stderr
     fresh, applied, reused = proc.stdout.split()
     assert applied == "True"
-    assert int(fresh) >= 5 * 15_000 and int(reused) < 1_000, proc.stdout
+    # (4 KB pages here: 78k faults fresh; where the kernel backs them with huge pages
+    # anyway, far fewer, so the test asks for a tenth, not a count)
+    assert int(reused) < 1_000 and 10 * int(reused) < int(fresh), proc.stdout
