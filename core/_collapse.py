@@ -582,14 +582,14 @@ def _check_rounds(st, pool, passes, haus, dihedral_cos, tun):
     faces = owned = ahead = None
     scratch = _scratch(n, P)
     faces_at = np.bincount(st.F[st.alive].ravel(), minlength=n)
-    big = (_take(faces_at, pool.A) + _take(faces_at, pool.B)) >= tun.hold_star
-    active = _drop_quick_refusals(st, pool, active, passes, tun, big, faces_at)
+    around = _take(faces_at, pool.A) + _take(faces_at, pool.B)    # faces around each edge's ends
+    active = _drop_quick_refusals(st, pool, active, passes, tun, around)
     for _ in range(tun.max_rounds):
         active = active[~touched[pool.A[active]] & ~touched[pool.B[active]]]
         if active.size == 0:
             break
         if ahead is None and active.size <= tun.check_ahead:
-            first = _ahead_of(active, pool, faces_at, big, tun)
+            first = _ahead_of(active, around, tun)
             if first.size:
                 ahead = _CheckedAhead.of(st, pool, first, faces, tun, haus, dihedral_cos,
                                          partial=first.size < active.size)
@@ -618,15 +618,16 @@ def _check_rounds(st, pool, passes, haus, dihedral_cos, tun):
     return _Accepted(np.concatenate(acc_edges), rows, np.concatenate(acc_wit)), touched
 
 
-def _ahead_of(active, pool, faces_at, big, tun):
+def _ahead_of(active, around, tun):
     """The ``active`` pool edges to check ahead (:class:`_CheckedAhead`): all
-    of them, or when their stars hold more than ``Tuning.check_ahead_rows``
-    faces, those whose star is not ``big`` (those wait for their picks: a
-    hub's spokes are picked one a round, and checking them all ahead read
-    the hub's faces for each: a 10k-face cylinder's caps, 780 spokes, 1.1M
-    rows)."""
-    rows = int(_take(faces_at, pool.A[active]).sum() + _take(faces_at, pool.B[active]).sum())
-    return active if rows <= tun.check_ahead_rows else active[~_take(big, active)]
+    of them, or when their stars (``around``: the faces around each pool
+    edge's ends) hold more than ``Tuning.check_ahead_rows`` faces, those
+    whose star is not big (below ``Tuning.hold_star`` faces; the big ones
+    wait for their picks: a hub's spokes are picked one a round, and
+    checking them all ahead read the hub's faces for each: a 10k-face
+    cylinder's caps, 780 spokes, 1.1M rows)."""
+    mine = _take(around, active)
+    return active if int(mine.sum()) <= tun.check_ahead_rows else active[mine < tun.hold_star]
 
 
 def _checked(st, pool, sel, star, kf, ahead, tun, haus, dihedral_cos):
@@ -661,23 +662,23 @@ def _merged(c1, i1, c2, i2, k):
     return _Checked(ok, pen, (star, _take(kf, o), coll, cA, cB), wit, bent, flip)
 
 
-def _drop_quick_refusals(st, pool, active, passes, tun, big, faces_at):
-    """The ``active`` pool edges but those with a big star (``big``: at least
-    ``Tuning.hold_star`` faces around the ends; ``faces_at``: the live faces
-    around each vertex) refused on a sample of it (:func:`_flips_on`: a
+def _drop_quick_refusals(st, pool, active, passes, tun, around):
+    """The ``active`` pool edges but those with a big star (at least
+    ``Tuning.hold_star`` faces around the ends; ``around``: the live faces
+    around each pool edge's ends) refused on a sample of it (:func:`_flips_on`: a
     face turned over, or from ``Tuning.sliver_star`` faces on, made a
     sliver, :func:`_sliver_samples`), remembered as :func:`_judge`
     remembers them, before any pick: a fan's spoke picked would keep the
     whole fan waiting a round (every face of the hub is in its star), and a
     pass has few rounds."""
-    big = np.flatnonzero(_take(big, active))
+    big = np.flatnonzero(_take(around, active) >= tun.hold_star)
     if big.size == 0:
         return active
     e = active[big]
     A, B = pool.A[e], pool.B[e]
     star, kf = _sampled_stars(st, A, B, tun.hold_sample)
     even, least = star.size, np.zeros(2 * e.size)
-    huge = np.flatnonzero(_take(faces_at, A) + _take(faces_at, B) >= tun.sliver_star)
+    huge = np.flatnonzero(_take(around, e) >= tun.sliver_star)
     if huge.size:
         more, mk, low = _sliver_samples(st, pool.h[e[huge]], A[huge], B[huge], tun.hold_sample)
         star, kf = np.concatenate([star, more]), np.concatenate([kf, _take(huge, mk)])

@@ -184,12 +184,13 @@ def test_a_partial_check_ahead_gives_the_same_bits_as_checking_each_round():
     pool = pool_of(st)
     active = np.arange(pool.key.size)
     faces_at = np.bincount(st.F.ravel(), minlength=st.V.shape[0])
-    big = (faces_at[pool.A] + faces_at[pool.B]) >= TUNING.hold_star
+    around = faces_at[pool.A] + faces_at[pool.B]
+    big = around >= TUNING.hold_star
     assert big.any() and not big.all()
     tun = replace(TUNING, check_ahead_rows=0)
-    first = engine._ahead_of(active, pool, faces_at, big, tun)
+    first = engine._ahead_of(active, around, tun)
     assert np.array_equal(first, active[~big])
-    assert np.array_equal(engine._ahead_of(active, pool, faces_at, big, TUNING), active)
+    assert np.array_equal(engine._ahead_of(active, around, TUNING), active)
     ahead = engine._CheckedAhead.of(st, pool, first, None, tun, True, None, partial=True)
     scratch = engine._scratch(st.V.shape[0], pool.key.size)
     sel, _, star, kf, _ = engine._pick_independent(st, pool, active, None, tun, scratch)
@@ -508,8 +509,8 @@ def test_sliver_refusals_on_a_sample_are_refusals_of_the_whole_check():
     pool = pool_of(st)
     active = np.arange(pool.key.size)
     faces_at = np.bincount(st.F.ravel(), minlength=st.V.shape[0])
-    big = (faces_at[pool.A] + faces_at[pool.B]) >= TUNING.hold_star
-    kept = engine._drop_quick_refusals(st, pool, active, 1, TUNING, big, faces_at)
+    kept = engine._drop_quick_refusals(st, pool, active, 1, TUNING,
+                                       faces_at[pool.A] + faces_at[pool.B])
     gone = np.setdiff1d(active, kept)
     spokes = np.flatnonzero(np.isin(pool.A, [1000, 1001]) | np.isin(pool.B, [1000, 1001]))
     assert set(spokes) <= set(gone)                      # every spoke of both caps
@@ -529,8 +530,7 @@ def test_quick_refusals_are_refusals_of_the_whole_check():
     active = np.arange(pool.key.size)
     faces_at = np.bincount(st.F.ravel(), minlength=st.V.shape[0])
     kept = engine._drop_quick_refusals(st, pool, active, 1, TUNING,
-                                       (faces_at[pool.A] + faces_at[pool.B]) >= TUNING.hold_star,
-                                       faces_at)
+                                       faces_at[pool.A] + faces_at[pool.B])
     gone = np.setdiff1d(active, kept)
     assert gone.size > 300                               # most of the 400 spokes
     star, kf = engine._whole_stars(st.F, np.arange(st.F.shape[0]), pool.A[gone], pool.B[gone])
