@@ -47,6 +47,7 @@ from typing import NamedTuple
 import numpy as np
 
 from ._clean import BOUNDARY, NON_MANIFOLD, edge_representatives, half_edge_ends, renumber_twins
+from ._groups import ragged_ranges
 from ._parallel import blocks, run_blocks, run_each
 from .mesh import cross_columns, dot_columns, stops
 from .quadrics import place_columns, quadric_at, rms_distance
@@ -1022,10 +1023,8 @@ def _least_compact_around(st, A, B, per):
     start = np.searchsorted(v, ends)
     count = np.searchsorted(v, ends, side="right") - start
     least = np.where(count > 0, _take(g, np.minimum(start, max(g.size - 1, 0))), 1.0)
-    take = np.minimum(count, per)
-    i = np.repeat(np.arange(ends.size, dtype=np.int64), take)
-    j = np.arange(i.size, dtype=np.int64) - np.repeat(np.cumsum(take) - take, take)
-    return _LeastCompact(least, _take(fv, _take(start, i) + j), i % A.size)
+    k, i = ragged_ranges(start, np.minimum(count, per))
+    return _LeastCompact(least, _take(fv, k), i % A.size)
 
 
 def _sampled_stars(st, A, B, per):
@@ -1034,9 +1033,7 @@ def _sampled_stars(st, A, B, per):
     ends = np.concatenate([A, B])
     fs, start, count = _faces_at(st.F, np.flatnonzero(st.alive), ends)
     step = np.maximum(count // per, 1)
-    take = (count + step - 1) // step
-    g = np.repeat(np.arange(ends.size, dtype=np.int64), take)
-    j = np.arange(g.size, dtype=np.int64) - np.repeat(np.cumsum(take) - take, take)
+    j, g = ragged_ranges(np.zeros(ends.size, dtype=np.int64), (count + step - 1) // step)
     star = _take(fs, _take(start, g) + j * _take(step, g))
     return star, g % A.size
 

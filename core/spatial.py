@@ -86,7 +86,7 @@ import numpy as np
 from .errors import InvalidArgumentError
 from .mesh import (check_finite_rows, check_mesh, check_number, check_points, check_reach,
                    cross_rows, row_norms, scaled_area_normals, unit_rows)
-from ._groups import group_argmin, ragged_ranges
+from ._groups import group_argmin, ragged_entries, ragged_ranges
 from ._parallel import blocks, run_blocks, run_each
 from .pages import plain_pages
 
@@ -1810,7 +1810,7 @@ class TriangleIndex:
         order = np.lexsort((near2, q))
         q, leaf, near2 = q[order], leaf[order], near2[order]
         runs = _run_lengths(q)
-        rank = np.arange(q.size) - np.repeat(np.cumsum(runs) - runs, runs)
+        rank = ragged_entries(np.zeros(runs.size, dtype=np.int64), runs)   # (each in its query)
         left = np.ones(q.size, dtype=bool)
         for upto in _LEAF_ROUNDS[1:]:
             left &= near2 <= best.d2[q] * (1 + 4 * PRUNE_SLACK)
