@@ -1797,7 +1797,8 @@ class TriangleIndex:
         rest = near2 <= best.d2[q] * (1 + 4 * PRUNE_SLACK)
         rest[first] = False
         rest = np.flatnonzero(rest)
-        many = np.bincount(q[rest], minlength=best.d2.shape[0])[q[rest]] > _LEAF_ROUNDS[1]
+        runs = _run_lengths(q[rest])                          # (still grouped by query)
+        many = np.repeat(runs > _LEAF_ROUNDS[1], runs)
         self._scan_leaves(PT, q[rest[~many]], leaf[rest[~many]], best, probe=False)
         if many.any():
             self._scan_in_rounds(PT, q[rest[many]], leaf[rest[many]], near2[rest[many]], best)
