@@ -119,6 +119,11 @@ class State:
     #: (3, 3m) faces the remembered rejection flips (-1: none): while one of them and the
     #: ends stay as they are, so does the refusal (see _still_flips)
     blk_face: np.ndarray = _array("half_edge_t", np.int32(-1), values="face", lazy=True)
+    #: a face the remembered rejection makes a sliver of (-1: none) and its compactness
+    #: then: while it and the ends stay as they are, and the faces around the ends no
+    #: thinner, so does the refusal (see _still_slivers)
+    blk_sliver: np.ndarray = _array("half_edge", np.int32(-1), values="face", lazy=True)
+    blk_sliver_c: np.ndarray = _array("half_edge", "unset", lazy=True)
     c_cost: np.ndarray = _array("half_edge", 0.0)
     c_stale: np.ndarray = _array("half_edge", True)
     #: (3, 3m) cached collapse positions (read only where the cost is fresh, so new rows
@@ -311,6 +316,8 @@ def _candidate_edges(st):
     blocked[mem] = since > np.maximum(_take(st.vver, U[mem]), _take(st.vver, W[mem]))
     if st.blk_face is not None:
         blocked[mem] |= _still_flips(st, rep[mem], U[mem], W[mem], since)
+    if st.blk_sliver is not None:
+        blocked[mem] |= _still_slivers(st, rep[mem], U[mem], W[mem], since, blocked[mem])
     cost = np.where(blocked, np.maximum(cost, bv), cost)
     return _Edges(rep, U, W, cost, stale, blocked, bv)
 
@@ -334,6 +341,33 @@ def _still_flips(st, h, U, W, since):
         r, f = r[live], f[live]
         moved = _take(st.vmov, _take(st.F, f, axis=0).ravel()).reshape(-1, 3).max(axis=1)
         out[r[_take(since, r) > np.maximum(_take(ends, r), moved)]] = True
+    return out
+
+
+def _still_slivers(st, h, U, W, since, held):
+    """Refusals (representative half-edges ``h``, ends ``U``, ``W``, made in
+    pass ``since``; ``held``: those already held otherwise) whose remembered
+    sliver face is alive, neither it nor the ends have moved since, and
+    still less compact than half the least compact face around the ends as
+    they are now: the collapse would make the same sliver, and the whole
+    check (:func:`_check_block`) would refuse it again (a cap's fan: the
+    hub's spokes, each refused for the sliver it makes beside its rim
+    vertex, are not sampled again after every collapse elsewhere on the
+    rim). (k,) bool."""
+    out = np.zeros(h.size, dtype=bool)
+    f = _take(st.blk_sliver, h)
+    r = np.flatnonzero((f >= 0) & ~held)
+    f = _take(f, r)
+    live = np.flatnonzero(_take(st.alive, f))
+    r, f = r[live], f[live]
+    moved = _take(st.vmov, _take(st.F, f, axis=0).ravel()).reshape(-1, 3).max(axis=1)
+    ends = np.maximum(_take(st.vmov, _take(U, r)), _take(st.vmov, _take(W, r)))
+    keep = np.flatnonzero(_take(since, r) > np.maximum(ends, moved))
+    r = r[keep]
+    if r.size:
+        least = _least_compact_around(st, _take(U, r), _take(W, r), 0).least
+        old = np.minimum(least[:r.size], least[r.size:])
+        out[r[_take(st.blk_sliver_c, _take(h, r)) < 0.5 * (1.0 - _SLACK) * old]] = True
     return out
 
 
@@ -684,11 +718,11 @@ def _drop_quick_refusals(st, pool, active, passes, tun, around):
         more, mk, low = _sliver_samples(st, pool.h[e[huge]], A[huge], B[huge], tun.hold_sample)
         star, kf = np.concatenate([star, more]), np.concatenate([kf, _take(huge, mk)])
         least[huge], least[e.size + huge] = low[:huge.size], low[huge.size:]
-    refused, flip = _flips_on(st, A, B, pool.XT[:, e], star, kf, tun, least, even)
+    refused, flip, sliver = _flips_on(st, A, B, pool.XT[:, e], star, kf, tun, least, even)
     if not refused.any():
         return active
     st.bent[pool.h[e[refused]]] = False
-    _remember_refused(st, pool.h[e[refused]], np.inf, passes, flip[refused])
+    _remember_refused(st, pool.h[e[refused]], np.inf, passes, flip[refused], sliver.of(refused))
     keep = np.ones(active.size, dtype=bool)
     keep[big[refused]] = False
     return active[keep]
@@ -707,16 +741,24 @@ def _judge(st, pool, sel, c, passes, tun):
     return acc
 
 
-def _remember_refused(st, h, total, passes, flip):
+def _remember_refused(st, h, total, passes, flip, sliver=None):
     """Remember the refused collapses of the representative half-edges ``h``
     with their ``total`` (cost + penalties; inf when invalid) until their
     neighbourhood changes, or, for those that flip faces (``flip`` (k,3):
     up to three of their ids, -1 for none), while one of those faces and the
-    collapse's ends stay as they are (:func:`_still_flips`)."""
+    collapse's ends stay as they are (:func:`_still_flips`), or, for those
+    that make a sliver (``sliver``, a :class:`_Slivers`; None: none), while it
+    stays one the whole check refuses (:func:`_still_slivers`). Every
+    refusal overwrites what was remembered of the half-edge before."""
     st.c_blk[h] = total
     st.blk_pass[h] = passes
     if st.blk_face is not None or (flip >= 0).any():
         _rows_of(st, "blk_face")[:, h] = flip.T
+    if sliver is not None and (st.blk_sliver is not None or (sliver.face >= 0).any()):
+        _rows_of(st, "blk_sliver")[h] = sliver.face
+        _rows_of(st, "blk_sliver_c")[h] = sliver.after
+    elif st.blk_sliver is not None:
+        st.blk_sliver[h] = -1
 
 
 def _bold_rounds(st, pool, passes, haus, dihedral_cos, tun, target):
@@ -964,7 +1006,7 @@ def _quick_refusals(st, A, B, XT, star, kf, tun):
     step = np.maximum(_take(count, kr) // tun.hold_sample, 1)
     first = np.searchsorted(kr, kr)
     r = r[(np.arange(r.size) - first) % step == 0]
-    return _flips_on(st, A, B, XT, _take(star, r), _take(kf, r), tun)
+    return _flips_on(st, A, B, XT, _take(star, r), _take(kf, r), tun)[:2]
 
 
 def _flips_on(st, A, B, XT, star, kf, tun, least=None, even=None):
@@ -984,16 +1026,42 @@ def _flips_on(st, A, B, XT, star, kf, tun, least=None, even=None):
     to 4 faces took 59 passes, not 54)."""
     k = A.size
     s = _star_of(st.F, A, B, star, kf)
-    g = _moved_faces(st, s, XT)
-    turned = np.flatnonzero(_turned_faces(st, s, g, A, B, tun)
-                            & (s.mv < (star.size if even is None else even)))
+    p = s.mv.size if even is None else int(np.searchsorted(s.mv, even))
+    g = _moved_faces(st, s, XT, p)
+    turned = np.flatnonzero(_turned_faces(st, *_first_moved(s, g, p), A, B, tun))
     refused = np.zeros(k, dtype=bool)
     refused[s.mk[turned]] = True
+    sliver = _Slivers(np.full(k, -1, dtype=np.int64), np.ones(k))
     if least is not None:
-        _, gmin_new = _min_compactness(s, g)
+        after = compactness(g.l1, _edge_squares(*g.Q))
+        gmin_new = _least_of(k, s.mk, after)
         old = np.minimum(least[:k], least[k:])
-        refused |= (gmin_new < tun.gamma_hard) & (gmin_new < 0.5 * (1.0 - _SLACK) * old)
-    return refused, _witnesses(s, turned, np.ones(k, dtype=bool))
+        thin = (gmin_new < tun.gamma_hard) & (gmin_new < 0.5 * (1.0 - _SLACK) * old)
+        refused |= thin
+        sliver = _sliver_witnesses(s, after, gmin_new, thin)
+    return refused, _witnesses(s, turned, np.ones(k, dtype=bool)), sliver
+
+
+class _Slivers(NamedTuple):
+    """The sliver each of k collapses makes (from :func:`_flips_on`)."""
+
+    face: np.ndarray     #: (k,) the face it makes least compact (-1: no sliver refusal)
+    after: np.ndarray    #: (k,) ... and that face's compactness after
+
+    def of(self, k):
+        """Those of the collapses ``k`` (an index or a mask)."""
+        return _Slivers(self.face[k], self.after[k])
+
+
+def _sliver_witnesses(s, after, least, thin):
+    """The :class:`_Slivers` of the collapses ``thin`` (k,) bool of the star
+    rows ``s``: for each, its first face that stays whose compactness
+    ``after`` (one per face that stays) is its ``least``."""
+    face = np.full(s.k, -1, dtype=np.int64)
+    rows = np.flatnonzero((after == _take(least, s.mk)) & _take(thin, s.mk))
+    k, first = np.unique(_take(s.mk, rows), return_index=True)
+    face[k] = _take(s.star, _take(s.mv, rows[first]))
+    return _Slivers(face, least)
 
 
 class _LeastCompact(NamedTuple):
@@ -1240,14 +1308,16 @@ def _squared_lengths(VT, a, b):
     return dot_columns(D, D)
 
 
-def _moved_faces(st, s, XT):
-    """Geometry of the faces that stay, one corner moved to its collapse's X."""
+def _moved_faces(st, s, XT, before=None):
+    """Geometry of the faces that stay, one corner moved to its collapse's X
+    (their normals before for the first ``before`` of them only, when given)."""
     FmT = np.ascontiguousarray(_take(s.Fs, s.mv, axis=0).T)   # (contiguous index rows gather much faster)
     r = FmT.shape[1]
     P = _take(st.VT, FmT.ravel(), axis=1).reshape(3, 3, r).transpose(1, 0, 2)
     Xm = _take(XT, s.mk, axis=1)
     Q = tuple(np.where(s.cm == c, Xm, P[c]) for c in range(3))
-    N0 = cross_columns(P[1] - P[0], P[2] - P[0])
+    b = slice(0, r if before is None else before)
+    N0 = cross_columns(P[1, :, b] - P[0, :, b], P[2, :, b] - P[0, :, b])
     N1 = cross_columns(Q[1] - Q[0], Q[2] - Q[0])
     return _Moved(FmT, P, Q, N0, N1, np.sqrt(dot_columns(N0, N0)), np.sqrt(dot_columns(N1, N1)))
 
@@ -1282,13 +1352,26 @@ def _turned_faces(st, s, g, A, B, tun):
 
 def _min_compactness(s, g):
     """Smallest compactness around each collapse, (before, after), (k,) each."""
-    g_old = compactness(g.l0, _edge_squares(*g.P))
-    g_new = compactness(g.l1, _edge_squares(*g.Q))
-    gmin_old = np.ones(s.k)
-    np.minimum.at(gmin_old, s.mk, g_old)
-    gmin_new = np.ones(s.k)
-    np.minimum.at(gmin_new, s.mk, g_new)
-    return gmin_old, gmin_new
+    return (_least_of(s.k, s.mk, compactness(g.l0, _edge_squares(*g.P))),
+            _least_of(s.k, s.mk, compactness(g.l1, _edge_squares(*g.Q))))
+
+
+def _least_of(k, mk, values):
+    """The smallest of ``values`` of each of ``k`` collapses (1 for none):
+    ``mk`` the collapse of each value."""
+    least = np.ones(k)
+    np.minimum.at(least, mk, values)
+    return least
+
+
+def _first_moved(s, g, p):
+    """The star rows ``s`` (a :class:`_Star`) and their geometry ``g`` (a
+    :class:`_Moved` whose normals before are the first ``p`` faces' only) of
+    the first ``p`` faces that stay only (views)."""
+    cut = slice(0, p)
+    return (s._replace(mv=s.mv[cut], mk=s.mk[cut], cm=s.cm[cut], onA=s.onA[cut]),
+            _Moved(g.FT[:, cut], g.P[:, :, cut], tuple(q[:, cut] for q in g.Q), g.N0,
+                   g.N1[:, cut], g.l0, g.l1[cut]))
 
 
 def _edge_squares(P0, P1, P2):
