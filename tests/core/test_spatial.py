@@ -725,6 +725,55 @@ def test_the_grid_references_are_the_same_a_run_of_triangles_at_a_time(monkeypat
         assert np.array_equal(whole.cell_tri, runs.cell_tri)
 
 
+def _needle_soup(n, seed):
+    """``n`` separate needles (height 1e-4 of their length) in every direction,
+    a fifth of them along an axis."""
+    rng = np.random.default_rng(seed)
+    A = rng.uniform(-1, 1, (n, 3))
+    D = rng.normal(size=(n, 3))
+    D[: n // 5, 1:] = 0.0
+    D[n // 5: n // 5 + 3] = [[0, 1, 0], [0, 0, 1], [0, 0, -1]]
+    D /= np.linalg.norm(D, axis=1)[:, None]
+    L = rng.uniform(0.2, 1.5, n)[:, None]
+    C = A + 0.5 * L * D + 1e-4 * L * np.cross(D, rng.normal(size=(n, 3)))
+    return np.concatenate([A, A + L * D, C]), np.arange(3 * n).reshape(3, n).T.copy()
+
+
+@pytest.mark.parametrize("mesh", ["cone", "soup", "far rotated cylinder"])
+def test_a_needles_columns_hold_every_cell_the_box_would_give_it(monkeypatch, mesh):
+    """A needle's columns are enumerated along its longest edge only
+    (_line_columns), not over its whole box: the same grid, bit for bit, as
+    the whole box's columns give, from far fewer candidates (the cells
+    _near_needle keeps lie within its reach of the edge, and so do their
+    columns' centres, seen along the column)."""
+    if mesh == "cone":
+        V, F = needle_cone(3000)
+    elif mesh == "soup":
+        V, F = _needle_soup(2000, 4)
+    else:
+        V, F = cad_cylinder(1500)
+        Q, _ = np.linalg.qr(np.random.default_rng(2).normal(size=(3, 3)))
+        V = V @ Q.T + 1e3
+    seen = []
+    slab = spatial._slab_cells
+
+    def counted(*args):
+        out = slab(*args)
+        seen.append(out[0].size)
+        return out
+
+    monkeypatch.setattr(spatial, "_slab_cells", counted)
+    lines = TriangleIndex(V, F).tables
+    n_lines = sum(seen)
+    seen.clear()
+    monkeypatch.setattr(spatial, "_needle_reach", lambda needles, *a: spatial._NeedleReach(
+        np.zeros_like(needles.is_needle), needles.P, needles.U, needles.height))
+    boxes = TriangleIndex(V, F).tables
+    assert np.array_equal(lines.cell_start, boxes.cell_start)
+    assert np.array_equal(lines.cell_tri, boxes.cell_tri)
+    assert n_lines < 0.8 * sum(seen)
+
+
 def test_far_queries_spread_around_a_mesh_keep_their_memory_bounded():
     """5,000 points spread over twice the box of a 40k-face torus (nearly all on
     the far path: the BVH, searched by groups of nearby queries). A group's
