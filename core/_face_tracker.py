@@ -201,18 +201,29 @@ class FaceTracker:
         """Best face among those around ``verts``, ``counts[i]`` of them for
         query ``q[i]`` (in order): ``face, v, w, d2`` per query."""
         per = np.repeat(np.arange(q.size), counts)
-        h2 = np.zeros(verts.size)
-        if self._fans is not None:   # around a hub: the faces nearer than the best in each point's sector
-            hub = np.flatnonzero(self._fans.hub_of[verts] >= 0)
-            t, own = self._faces_around(verts[hub], QT, q[per[hub]], h2[hub])
-            best = np.full(hub.size, np.inf)
-            np.minimum.at(best, own, self._pairs(QT, q[per[hub[own]]], t)[2])
-            h2[hub] = best
+        h2 = None if self._fans is None else self._sector_bound(QT, verts, q[per],
+                                                                np.full(verts.size, np.inf))
         t, own = self._faces_around(verts, QT, q[per], h2)
         group = per[own]
         v, w, d2 = self._pairs(QT, q[group], t)
         best = group_argmin(d2, np.bincount(group, minlength=q.size))
         return t[best], v[best], w[best], d2[best]
+
+    def _sector_bound(self, QT, verts, q, h2):
+        """``h2`` (squared distances, one per vertex ``verts[i]`` and point
+        ``QT[:, q[i]]``) lowered, where the vertex is a fan's hub, to the
+        point's squared distance to the nearest face around it whose sector
+        holds the point's angle: the faces around the hub that may be nearer
+        are then few (a point in a CAD cap whose ball reached the hub tried
+        hundreds of its spokes)."""
+        h2 = h2.copy()
+        hub = np.flatnonzero(self._fans.hub_of[verts] >= 0)
+        if hub.size:
+            t, own = self._faces_around(verts[hub], QT, q[hub], np.zeros(hub.size))
+            best = np.full(hub.size, np.inf)
+            np.minimum.at(best, own, self._pairs(QT, q[hub[own]], t)[2])
+            h2[hub] = np.minimum(h2[hub], best)
+        return h2
 
     def _faces_around(self, vert, QT, q, h2):
         """The faces around each vertex ``vert[i]`` and the ``i`` of each,
@@ -289,7 +300,8 @@ class FaceTracker:
             ik = np.flatnonzero(c)
             vert = self._FT[k].take(f[ik])
             a = active[ik]
-            faces, own = self._faces_around(vert, QT, a, d2[a] if self._fans is not None else None)
+            h2 = None if self._fans is None else self._sector_bound(QT, vert, a, d2[a])
+            faces, own = self._faces_around(vert, QT, a, h2)
             i.append(ik[own])
             t.append(faces)
         i, t = np.concatenate(i), np.concatenate(t)
