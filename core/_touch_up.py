@@ -165,7 +165,8 @@ def touch_up(V, F, Vin, Fin, fixed, keep_edges, tun, N_keep=None):
         Cage edges that must not be flipped besides the border (creases).
     tun : Tuning
         ``touch_rounds``, ``touch_candidates``, ``touch_share``, ``touch_gain``,
-        ``relocate_min_cos``, ``gamma_hard``.
+        ``touch_floor`` (the share of the diagonal: ``V`` and ``Vin`` are in
+        simplify's unit-free coordinates), ``relocate_min_cos``, ``gamma_hard``.
     N_keep : (n,3) float64 or None
         Per cage vertex, the summed normals of the input it stands for: a
         face whose normal ends more than 90 degrees from the sum of its
@@ -185,6 +186,8 @@ def touch_up(V, F, Vin, Fin, fixed, keep_edges, tun, N_keep=None):
     P = Vin[used_vertices(Fin, Vin.shape[0])]
     keep = _edge_keys(keep_edges, V.shape[0])
     gaps = measure_gaps(V, F, inputs, P)
+    if gaps.worst <= tun.touch_floor:
+        return V, F, moved
     for _ in range(tun.touch_rounds):
         taken = np.zeros(F.shape[0], dtype=bool)
         made = set()                   # the edges this round's flips made

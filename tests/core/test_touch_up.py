@@ -342,3 +342,27 @@ def test_changes_hopeless_by_corners_and_centroids_leave_their_other_samples(mon
     simplify(*load_shared("fandisk.obj")[:2], target_faces=1000)
     assert len(calls) >= 3 and all(asked <= every for asked, every, _ in calls)
     assert sum(asked for asked, _, _ in calls) < 0.8 * sum(every for _, every, _ in calls)
+
+
+def test_a_cage_within_the_floor_of_the_input_is_left_as_it_is(monkeypatch):
+    # a flat square (unit diagonal, simplify's working units) and a coarse grid of it
+    # with one vertex lifted: by half the floor, nothing is tried; by 100 floors, the
+    # largest distance is more than halved
+    s = 1.0 / np.sqrt(2.0)
+    Vin, Fin = regular_grid(20, 20)
+    V, F = regular_grid(4, 4)
+    Vin, V = Vin * s, V * s
+    k = int(np.argmin(np.linalg.norm(V[:, :2] - 0.5 * s, axis=1)))      # an inner vertex
+    fixed, none = np.zeros(V.shape[0], dtype=bool), np.zeros((0, 2), dtype=np.int64)
+    tried = []
+    real = stages._candidates
+    monkeypatch.setattr(stages, "_candidates", lambda *a: tried.append(1) or real(*a))
+    for lift, kept in ((0.5, True), (100.0, False)):
+        up = V.copy()
+        up[k, 2] += lift * TUNING.touch_floor
+        V2, F2, moved = touch_up(up, F, Vin, Fin, fixed, none, TUNING)
+        assert (not tried) == kept
+        if kept:
+            assert np.array_equal(V2, up) and np.array_equal(F2, F) and not moved.any()
+        else:
+            assert _largest(V2, F2, Vin, Fin) < 0.5 * _largest(up, F, Vin, Fin)
