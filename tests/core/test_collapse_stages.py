@@ -459,17 +459,24 @@ def test_a_held_sliver_refusal_would_be_refused_again_and_a_caps_spokes_are_held
     assert len(held) > 5 and max(held) > 100
 
 
-def test_a_sliver_witness_is_a_face_the_collapse_makes_that_thin():
-    # the face remembered with a sliver refusal, its corner moved to the collapse's
-    # place, has exactly the compactness remembered, below the sliver bound
-    V, F = cad_cylinder(500, height=1.0)
+def dropped_before_the_picks(V, F):
+    """A fresh engine state of ``(V, F)``, its first pool, and the pool
+    edges :func:`_drop_quick_refusals` refuses on their samples (every pool
+    edge active, in pass 1)."""
     st = engine_state(V, F)
     pool = pool_of(st)
     active = np.arange(pool.key.size)
     faces_at = np.bincount(st.F.ravel(), minlength=st.V.shape[0])
     kept = engine._drop_quick_refusals(st, pool, active, 1, TUNING,
                                        faces_at[pool.A] + faces_at[pool.B])
-    gone = np.setdiff1d(active, kept)
+    return st, pool, np.setdiff1d(active, kept)
+
+
+def test_a_sliver_witness_is_a_face_the_collapse_makes_that_thin():
+    # the face remembered with a sliver refusal, its corner moved to the collapse's
+    # place, has exactly the compactness remembered, below the sliver bound
+    V, F = cad_cylinder(500, height=1.0)
+    st, pool, gone = dropped_before_the_picks(V, F)
     h = pool.h[gone]
     face = st.blk_sliver[h]
     assert (face >= 0).sum() >= 1000                     # the caps' spokes
@@ -558,13 +565,7 @@ def test_sliver_refusals_on_a_sample_are_refusals_of_the_whole_check():
     # before the picks, they are refused by the whole check too (the run took 197
     # passes to 200 faces, one spoke a round; 35 now)
     V, F = cad_cylinder(500, height=1.0)
-    st = engine_state(V, F)
-    pool = pool_of(st)
-    active = np.arange(pool.key.size)
-    faces_at = np.bincount(st.F.ravel(), minlength=st.V.shape[0])
-    kept = engine._drop_quick_refusals(st, pool, active, 1, TUNING,
-                                       faces_at[pool.A] + faces_at[pool.B])
-    gone = np.setdiff1d(active, kept)
+    st, pool, gone = dropped_before_the_picks(V, F)
     spokes = np.flatnonzero(np.isin(pool.A, [1000, 1001]) | np.isin(pool.B, [1000, 1001]))
     assert set(spokes) <= set(gone)                      # every spoke of both caps
     star, kf = engine._whole_stars(st.F, np.arange(st.F.shape[0]), pool.A[gone], pool.B[gone])
@@ -578,13 +579,7 @@ def test_sliver_refusals_on_a_sample_are_refusals_of_the_whole_check():
 def test_quick_refusals_are_refusals_of_the_whole_check():
     # a fan's spokes refused on a sample of the fan are refused by the whole check
     V, F = star_glyphs(count=1, spikes=100)
-    st = engine_state(V, F)
-    pool = pool_of(st)
-    active = np.arange(pool.key.size)
-    faces_at = np.bincount(st.F.ravel(), minlength=st.V.shape[0])
-    kept = engine._drop_quick_refusals(st, pool, active, 1, TUNING,
-                                       faces_at[pool.A] + faces_at[pool.B])
-    gone = np.setdiff1d(active, kept)
+    st, pool, gone = dropped_before_the_picks(V, F)
     assert gone.size > 300                               # most of the 400 spokes
     star, kf = engine._whole_stars(st.F, np.arange(st.F.shape[0]), pool.A[gone], pool.B[gone])
     c = engine._check_blocks(st, pool.A[gone], pool.B[gone], pool.XT[:, gone], pool.interior[gone], star, kf,
