@@ -404,6 +404,18 @@ def test_a_stuck_rocker_arm_with_sheets_and_pinholes_takes_fewer_passes(grace):
     assert (r.n_passes < 100) == (grace == 2)
 
 
+def checked_whole_invalid(st, hs):
+    """Check the collapses of the remembered edges ``hs`` (representative
+    half-edges) whole on the mesh as it is, at their cached places, assert
+    that none is valid, and return the collapse of each star row."""
+    u, w = half_edge_ends(st.F, hs)
+    A, B = np.where(st.swap[hs], w, u), np.where(st.swap[hs], u, w)
+    star, kf = engine._whole_stars(st.F, np.flatnonzero(st.alive), A, B)
+    c = engine._check(st, A, B, st.c_x[:, hs], st.twin[hs] >= 0, star, kf, TUNING)
+    assert not c.ok.any()
+    return kf
+
+
 def test_a_held_refusal_would_be_refused_again_and_a_fans_spokes_are_held(monkeypatch):
     # _still_flips keeps a big star's refusal while one of the faces it flipped and
     # its ends are unchanged: checked again on the mesh as it is, every held
@@ -416,11 +428,7 @@ def test_a_held_refusal_would_be_refused_again_and_a_fans_spokes_are_held(monkey
         out = real(st, h, U, W, since)
         hs = h[out]
         if hs.size:
-            u, w = half_edge_ends(st.F, hs)
-            A, B = np.where(st.swap[hs], w, u), np.where(st.swap[hs], u, w)
-            star, kf = engine._whole_stars(st.F, np.flatnonzero(st.alive), A, B)
-            c = engine._check(st, A, B, st.c_x[:, hs], st.twin[hs] >= 0, star, kf, TUNING)
-            assert not c.ok.any()
+            kf = checked_whole_invalid(st, hs)
             held.append(int(np.median(np.bincount(kf, minlength=hs.size))))
         return out
 
@@ -443,11 +451,7 @@ def test_a_held_sliver_refusal_would_be_refused_again_and_a_caps_spokes_are_held
         out = real(st, h, U, W, since, already)
         hs = h[out]
         if hs.size:
-            u, w = half_edge_ends(st.F, hs)
-            A, B = np.where(st.swap[hs], w, u), np.where(st.swap[hs], u, w)
-            star, kf = engine._whole_stars(st.F, np.flatnonzero(st.alive), A, B)
-            c = engine._check(st, A, B, st.c_x[:, hs], st.twin[hs] >= 0, star, kf, TUNING)
-            assert not c.ok.any()
+            checked_whole_invalid(st, hs)
             held.append(hs.size)
         return out
 
