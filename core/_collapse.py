@@ -1023,7 +1023,9 @@ def _flips_on(st, A, B, XT, star, kf, tun, least=None, even=None):
     round (a 10k-face cylinder to 200 faces took 197 passes). Only the
     first ``even`` rows (all when None) are tested for turned faces (more
     of them held more collapses back until those faces change: a flat grid
-    to 4 faces took 59 passes, not 54)."""
+    to 4 faces took 59 passes, not 54). Returns the (k,) bool refusals, the
+    witnesses (k,3) and the :class:`_Slivers` of the sliver refusals (none
+    without ``least``)."""
     k = A.size
     s = _star_of(st.F, A, B, star, kf)
     p = s.mv.size if even is None else int(np.searchsorted(s.mv, even))
