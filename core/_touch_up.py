@@ -301,8 +301,10 @@ def _candidates(V, F, gaps, fixed, keep, tun, inputs):
     def moves(pulls):
         for v, pull in pulls:
             star = corner[start[v]:start[v + 1]] // 3
+            least = _least_move(gaps.face_far[star].max(), tun.touch_gain)
             for t in (1.0, 0.5):
-                yield _Region(star, F[star], int(v), V[v] + t * pull)
+                if t * np.linalg.norm(pull) > least:
+                    yield _Region(star, F[star], int(v), V[v] + t * pull)
 
     yield from moves((v, gaps.vertex_near[v] - V[v]) for v in worst)
     far = np.argsort(-gaps.point_far, kind="stable")[:k]
@@ -317,6 +319,17 @@ def _candidates(V, F, gaps, fixed, keep, tun, inputs):
     # a face that cuts across the input (its corners near it): a corner moved so that
     # its farthest sample would land on the input, after the flips (which may do better)
     yield from moves((c, pull) for c, pull in _corner_pulls(V, F, off, inputs) if not fixed[c])
+
+
+def _least_move(far, gain):
+    """The shortest move of a cage vertex that may be kept when the largest
+    distance of its faces' samples to the input is ``far``: a move of ``d``
+    moves every sample of its faces, and the faces themselves, by at most
+    ``d``, so the largest distance around it (at least ``far``) falls by at
+    most ``d``, and a change is kept only where it falls below ``gain`` of
+    what it was (half of that, a margin for rounding; a flat fan's cage
+    weighed moves of its hub by 1e-14, each rewriting its 200 faces)."""
+    return 0.5 * (1.0 - gain) * far
 
 
 def _corner_pulls(V, F, faces, inputs):

@@ -366,3 +366,43 @@ def test_a_cage_within_the_floor_of_the_input_is_left_as_it_is(monkeypatch):
             assert np.array_equal(V2, up) and np.array_equal(F2, F) and not moved.any()
         else:
             assert _largest(V2, F2, Vin, Fin) < 0.5 * _largest(up, F, Vin, Fin)
+
+
+def test_a_move_shorter_than_the_least_move_is_never_kept():
+    # _least_move: a cage vertex moved by less than (1 - gain) of the largest distance
+    # of its faces' samples cannot bring the largest distance around it below gain of
+    # what it was; every vertex of a sphere's cage moved by a hair less than that, in
+    # a random direction, and measured as the touch-up measures: none would be kept
+    Vin, Fin = icosphere(4)
+    cage = simplify(Vin, Fin, target_faces=150, tuning=dataclasses.replace(TUNING, touch_rounds=0))
+    V, F = cage.V, cage.F
+    inputs = TriangleIndex(Vin, Fin)
+    gaps = measure_gaps(V, F, inputs, Vin)
+    rng = np.random.default_rng(2)
+    changes = []
+    for v in range(V.shape[0]):
+        star = np.flatnonzero((F == v).any(axis=1))
+        d = rng.normal(size=3)
+        d *= 0.999 * 2 * stages._least_move(gaps.face_far[star].max(), TUNING.touch_gain) \
+            / np.linalg.norm(d)
+        changes.append(stages._Region(star, F[star], v, V[v] + d))
+    tris = [stages._points_after(V, c, c.rows) for c in changes]
+    # (a gain of 2: none left unmeasured as hopeless, every one measured whole)
+    after = stages._regions_after(V, changes, tris, inputs, Vin, gaps, 2.0)
+    assert all(a is not None for a in after) and len(after) > 50
+    for c, a in zip(changes, after):
+        assert a.far >= TUNING.touch_gain * stages._region_was(c.faces, a.points, gaps)
+
+
+def test_a_flat_fans_cage_weighs_no_move_of_its_hub(monkeypatch):
+    # the cage of a flat fan of 2,000 needles lies on it: its hub's pulls onto the input
+    # are rounding (1e-14), each would rewrite the hub's hundreds of faces, and none is tried
+    t = np.linspace(0, 2 * np.pi, 2000, endpoint=False)
+    Vin = np.vstack([np.c_[np.cos(t), np.sin(t), np.zeros(2000)], [[0.0, 0.0, 0.0]]]) / 2.0
+    Fin = np.c_[np.full(2000, 2000), np.arange(2000), (np.arange(2000) + 1) % 2000]
+    sizes = []
+    real = stages._regions_after
+    monkeypatch.setattr(stages, "_regions_after", lambda V, changes, *a: sizes.extend(
+        len(c.faces) for c in changes) or real(V, changes, *a))
+    res = simplify(Vin, Fin, target_faces=200)
+    assert res.F.shape[0] == 200 and sizes and max(sizes) <= 4
