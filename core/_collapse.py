@@ -336,12 +336,19 @@ def _still_flips(st, h, U, W, since):
         r = np.flatnonzero((f >= 0) & ~out)
         if r.size == 0:
             continue
-        f = f[r]
-        live = np.flatnonzero(_take(st.alive, f))
-        r, f = r[live], f[live]
-        moved = _take(st.vmov, _take(st.F, f, axis=0).ravel()).reshape(-1, 3).max(axis=1)
-        out[r[_take(since, r) > np.maximum(_take(ends, r), moved)]] = True
+        out[_as_they_were(st, r, f[r], ends, since)] = True
     return out
+
+
+def _as_they_were(st, r, f, ends, since):
+    """The refusals among ``r`` whose remembered face ``f`` (one per ``r``) is
+    alive and neither it nor the collapse's ends (``ends``: the pass either
+    end last moved in, per refusal) have moved since the refusal's pass
+    ``since``."""
+    live = np.flatnonzero(_take(st.alive, f))
+    r, f = r[live], f[live]
+    moved = _take(st.vmov, _take(st.F, f, axis=0).ravel()).reshape(-1, 3).max(axis=1)
+    return r[_take(since, r) > np.maximum(_take(ends, r), moved)]
 
 
 def _still_slivers(st, h, U, W, since, held):
@@ -357,13 +364,7 @@ def _still_slivers(st, h, U, W, since, held):
     out = np.zeros(h.size, dtype=bool)
     f = _take(st.blk_sliver, h)
     r = np.flatnonzero((f >= 0) & ~held)
-    f = _take(f, r)
-    live = np.flatnonzero(_take(st.alive, f))
-    r, f = r[live], f[live]
-    moved = _take(st.vmov, _take(st.F, f, axis=0).ravel()).reshape(-1, 3).max(axis=1)
-    ends = np.maximum(_take(st.vmov, _take(U, r)), _take(st.vmov, _take(W, r)))
-    keep = np.flatnonzero(_take(since, r) > np.maximum(ends, moved))
-    r = r[keep]
+    r = _as_they_were(st, r, _take(f, r), np.maximum(_take(st.vmov, U), _take(st.vmov, W)), since)
     if r.size:
         least = _least_compact_around(st, _take(U, r), _take(W, r), 0).least
         old = np.minimum(least[:r.size], least[r.size:])

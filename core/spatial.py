@@ -913,14 +913,13 @@ def _slab_cells(nrm, off, reach, c0, nr, lo, h, lines=None):
     nu, nv, nw = nr[rows, u], nr[rows, v], nr[rows, w]
     span = np.where(flat, nw, 1)                          # cells per column taken whole
     boxed = nu * nv * span
-    if lines is not None:
-        boxed[lines.is_line & ~flat] = 0
+    line = np.zeros(w.size, dtype=bool) if lines is None else lines.is_line & ~flat
+    boxed[line] = 0
     local, tri = ragged_ranges(np.zeros(w.size, dtype=np.int64), boxed)
     cu = c0[tri, u[tri]] + local % nu[tri]
     cv = c0[tri, v[tri]] + (local // nu[tri]) % nv[tri]
-    if lines is not None and (lines.is_line & ~flat).any():
-        lt, lu, lv = _line_columns(lines, np.flatnonzero(lines.is_line & ~flat), u, v, c0, nu, nv,
-                                   lo, h)
+    if line.any():
+        lt, lu, lv = _line_columns(lines, np.flatnonzero(line), u, v, c0, nu, nv, lo, h)
         order = np.argsort(np.concatenate([tri, lt]), kind="stable")   # (in triangle order)
         tri, cu, cv = (np.concatenate(x)[order] for x in ((tri, lt), (cu, lu), (cv, lv)))
         local = np.concatenate([local, np.zeros(lt.size, dtype=np.int64)])[order]
@@ -967,8 +966,8 @@ def _needle_reach(needles, c0, nr, lo, h, ext):
     :func:`_near_needle`'s reach with its rounding slack doubled, from the
     largest coordinate of any cell centre in the box."""
     far = np.maximum(np.abs(lo + h * (c0 + 0.5)), np.abs(lo + h * (c0 + nr - 0.5))).max(axis=1)
-    reach = needles.height + 0.5 * np.sqrt(3.0) * h + 2 * PRUNE_SLACK * (far + ext + 2 * h)
-    return _NeedleReach(needles.is_needle, needles.P, needles.U, reach)
+    return _NeedleReach(needles.is_needle, needles.P, needles.U,
+                        _needle_test_reach(needles.height, h, far, ext, 2 * PRUNE_SLACK))
 
 
 def _line_columns(lines, rows, u, v, c0, nu, nv, lo, h):
@@ -1054,10 +1053,17 @@ def _near_needle(needles, tri, X, h, ext):
     u2 = np.einsum("ij,ij->i", U, U)
     s = np.clip(np.einsum("ij,ij->i", D, U) / np.where(u2 > 0, u2, 1.0), 0.0, 1.0)
     D -= s[:, None] * U
-    reach = needles.height[t] + 0.5 * np.sqrt(3.0) * h
-    reach += PRUNE_SLACK * (np.abs(X[k]).max(axis=1) + ext[t] + 2 * h)
+    reach = _needle_test_reach(needles.height[t], h, np.abs(X[k]).max(axis=1), ext[t])
     ok[k] = np.einsum("ij,ij->i", D, D) <= reach * reach
     return ok
+
+
+def _needle_test_reach(height, h, far, ext, slack=PRUNE_SLACK):
+    """How far from a needle's longest edge :func:`_near_needle` keeps a cell
+    centre: the needle's ``height`` plus half a cell's diagonal (cells of
+    side ``h``), plus ``slack`` of the centre's largest coordinate ``far``
+    (or a bound of it), the needle's box side ``ext`` and two cells."""
+    return height + 0.5 * np.sqrt(3.0) * h + slack * (far + ext + 2 * h)
 
 
 class TriangleIndex:
