@@ -366,7 +366,7 @@ def _still_slivers(st, h, U, W, since, held):
     r = np.flatnonzero((f >= 0) & ~held)
     r = _as_they_were(st, r, _take(f, r), np.maximum(_take(st.vmov, U), _take(st.vmov, W)), since)
     if r.size:
-        least = _least_compact_around(st, _take(U, r), _take(W, r), 0).least
+        least = _least_compactness(st, _take(U, r), _take(W, r))
         old = np.minimum(least[:r.size], least[r.size:])
         out[r[_take(st.blk_sliver_c, _take(h, r)) < 0.5 * (1.0 - _SLACK) * old]] = True
     return out
@@ -1076,18 +1076,39 @@ class _LeastCompact(NamedTuple):
     k: np.ndarray       #: ... and the collapse of each
 
 
-def _least_compact_around(st, A, B, per):
-    """The :class:`_LeastCompact` of the collapses ``B[k] -> A[k]``: their
-    ``per`` least compact faces around each end are the ones a move of it
-    most likely makes slivers."""
-    ends = np.concatenate([A, B])
+def _compactness_near(st, ends):
+    """The live faces with a corner among ``ends``: ``(f, FT, g)``, their ids
+    (ascending), corners (3,r) and compactness (:func:`_min_compactness`'s
+    measure, on the mesh as it is)."""
     near = np.zeros(st.V.shape[0], dtype=bool)
     near[ends] = True
     f = np.flatnonzero(st.alive & (near[st.F[:, 0]] | near[st.F[:, 1]] | near[st.F[:, 2]]))
     FT = np.ascontiguousarray(_take(st.F, f, axis=0).T)
     P0, P1, P2 = (_take(st.VT, FT[c], axis=1) for c in range(3))
     N = cross_columns(P1 - P0, P2 - P0)
-    g = np.tile(compactness(np.sqrt(dot_columns(N, N)), _edge_squares(P0, P1, P2)), 3)
+    return f, FT, compactness(np.sqrt(dot_columns(N, N)), _edge_squares(P0, P1, P2))
+
+
+def _least_compactness(st, A, B):
+    """(2k,) the smallest compactness of the live faces around each of ``A``,
+    then ``B`` (1 where there are none): :class:`_LeastCompact`'s ``least``
+    without the sort that lists the faces."""
+    ends = np.concatenate([A, B])
+    _, FT, g = _compactness_near(st, ends)
+    least = np.full(st.V.shape[0], np.inf)
+    for c in range(3):
+        np.minimum.at(least, FT[c], g)
+    least = _take(least, ends)
+    return np.where(np.isfinite(least), least, 1.0)
+
+
+def _least_compact_around(st, A, B, per):
+    """The :class:`_LeastCompact` of the collapses ``B[k] -> A[k]``: their
+    ``per`` least compact faces around each end are the ones a move of it
+    most likely makes slivers."""
+    ends = np.concatenate([A, B])
+    f, FT, g = _compactness_near(st, ends)
+    g = np.tile(g, 3)
     v, fv = FT.ravel(), np.tile(f, 3)
     o = np.lexsort((g, v))                        # by vertex, then compactness
     v, fv, g = _take(v, o), _take(fv, o), _take(g, o)

@@ -563,6 +563,26 @@ def test_sliver_samples_are_near_the_edge_and_the_least_compact_around_the_ends(
         assert least[i] == g[(st.F == v).any(axis=1)].min()
 
 
+def test_least_compactness_is_the_sorted_listings_least_with_no_sort():
+    # the remembered sliver refusals ask only for the least compact face around each
+    # end: the same values, bit for bit, as the sorted listing's, 1 around a vertex
+    # with no live face (a collapsed one's), and for ends given twice
+    V, F = star_glyphs(count=2, spikes=30)
+    st = engine_state(V, F)
+    rng = np.random.default_rng(3)
+    st.alive[rng.choice(F.shape[0], 20, replace=False)] = False
+    lonely = 5
+    st.alive[(st.F == lonely).any(axis=1)] = False
+    A = np.concatenate([rng.integers(0, V.shape[0], 40), [lonely, 60, 60]])
+    B = np.concatenate([rng.integers(0, V.shape[0], 40), [60, lonely, 60]])
+    least = engine._least_compactness(st, A, B)
+    assert least.tobytes() == engine._least_compact_around(st, A, B, 0).least.tobytes()
+    g = compactness_of(V, F)
+    for i, v in enumerate(np.concatenate([A, B])):
+        at = st.alive & (st.F == v).any(axis=1)
+        assert least[i] == (g[at].min() if at.any() else 1.0)
+
+
 def test_sliver_refusals_on_a_sample_are_refusals_of_the_whole_check():
     # a CAD cylinder as tall as it is wide: its spokes cost nothing (the caps are flat)
     # and each makes a sliver beside the rim vertex it merges into. Refused on a sample
