@@ -35,7 +35,7 @@ from typing import NamedTuple
 import numpy as np
 
 from ._fan_index import FAN_FACES, FanIndex
-from ._groups import group_argmin, ragged_ranges
+from ._groups import group_argmin, ragged_ranges, stable_argsort
 from .spatial import KERNEL_BLOCK, TriangleIndex, closest_pairs, triangle_rows
 
 #: a barycentric coordinate this small puts the closest point on the edge
@@ -45,17 +45,6 @@ _ON_EDGE = 1e-12
 #: to its 25-face floor: relocation 23-24 -> 19 ms, medians of 7; an index per call,
 #: as queries with no guess get, took 37 ms)
 _EVERY_FACE = 64
-
-
-def stable_argsort(x):
-    """``np.argsort(x, kind="stable")`` for non-negative integers ``x``
-    (k,), about 3x faster: the keys are made distinct with their position
-    and sorted with the default sort (plain stable sort where they would
-    overflow)."""
-    k = x.size
-    if k == 0 or int(x.max()) >= (1 << 62) // k:
-        return np.argsort(x, kind="stable")
-    return np.argsort(x * k + np.arange(k))
 
 
 def faces_across(F, n):

@@ -40,8 +40,8 @@ on a local minimum instead.
 import numpy as np
 
 from ._collapse import compactness
-from ._face_tracker import FaceTracker, stable_argsort
-from ._groups import group_argmin, ragged_ranges
+from ._face_tracker import FaceTracker
+from ._groups import group_argmin, ragged_ranges, stable_argsort
 from .cg import conjugate_gradient
 from .mesh import (area_normals_rows, barycentric_gather, barycentric_scatter, mean_edge_length,
                    squared_edges)

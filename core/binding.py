@@ -76,7 +76,7 @@ from .topology import check_not_soup
 from .unfold import (CageRings, Copies, FaceBatch, FaceStars, FineFaceGroups, Repair, away_rows,
                      nearest_rotations, repair, rest_normals, ring_linear_maps, ring_rotations,
                      turned_over)
-from ._groups import distinct, ragged_entries
+from ._groups import distinct, ragged_entries, stable_argsort
 from ._parallel import WORKERS, blocks, each_in_order, in_background, run_blocks, run_each
 from .pages import plain_pages
 
@@ -1524,13 +1524,13 @@ def _incremental_index(binding):
         d_count = np.bincount(binding.fine_face, minlength=m_fine)
         flat = op.F_fine.ravel()
         v_count = np.bincount(flat, minlength=op.n_fine)
-        faces_by_vertex = np.argsort(flat, kind="stable") // 3
+        faces_by_vertex = stable_argsort(flat) // 3
         # the same, for the faces with bound dense vertices only (fewer than the
         # fine faces when the fine mesh is denser than the dense one)
         has_rows = d_count > 0
         row_faces = faces_by_vertex[has_rows[faces_by_vertex]]
         r_count = np.bincount(flat[np.repeat(has_rows, 3)], minlength=op.n_fine)
-        by_face = np.argsort(binding.fine_face, kind="stable")
+        by_face = stable_argsort(binding.fine_face)
         c["incremental"] = {
             "dense_by_face": by_face,
             # the rows' barycentric coordinates and offsets in that order: the rows of
@@ -1561,7 +1561,7 @@ def _transposed(S):
     rows, cols = S.rows(), S.cols
     keep = S.weights != 0
     rows, cols = rows[keep], cols[keep]
-    order = np.argsort(cols, kind="stable")
+    order = stable_argsort(cols)
     indptr = np.zeros(S.n_in + 1, dtype=np.int64)
     np.cumsum(np.bincount(cols, minlength=S.n_in), out=indptr[1:])
     return _Rows(indptr, rows[order], np.zeros(0), S.n_out)

@@ -115,10 +115,11 @@ def test_a_mesh_of_few_faces_is_searched_whole_whatever_the_guess():
 
 
 def test_stable_argsort_is_numpys_stable_argsort():
-    from core._face_tracker import stable_argsort
+    from core._groups import stable_argsort
     rng = np.random.default_rng(6)
     for x in (rng.integers(0, 50, 1000), rng.integers(0, 1 << 40, 1000),
-              np.array([2 ** 62, 3, 2 ** 62, 0]), np.zeros(0, dtype=np.int64)):
+              np.array([2 ** 62, 3, 2 ** 62, 0]), np.zeros(0, dtype=np.int64),
+              rng.integers(0, 3000, 100_000).astype(np.int32)):   # (int32 keys times k)
         np.testing.assert_array_equal(stable_argsort(x), np.argsort(x, kind="stable"))
 
 

@@ -20,7 +20,7 @@ import pytest
 
 from core.binding import bind, deform
 from core.fit import fit_cage
-from core.mesh import bbox_diagonal, face_normals, turned_faces, vertex_normals
+from core.mesh import NORMALS_BLOCK, bbox_diagonal, face_normals, turned_faces, vertex_normals
 from core.simplify import simplify
 from core import unfold
 from core.unfold import (FLAT_AT_REST, CageRings, FaceBatch, FaceStars, FineFaceGroups, away_rows,
@@ -469,6 +469,29 @@ def test_faces_flat_at_rest_have_no_normal_to_turn():
     np.testing.assert_array_equal(n[:, 0], 0.0)
     assert FLAT_AT_REST < 2e-6 and np.abs(n[:, 1]).max() > 0
     np.testing.assert_allclose(n[:, 1], _rest_normals(PT.T, FT.T)[:, 1], rtol=1e-6)
+
+
+def test_rest_normals_are_np_cross_in_float32_zero_exactly_where_flat_at_rest():
+    # blocks on the worker threads (three blocks and a part), the corners gathered
+    # once for the normals and the edge lengths: the normals of np.cross on rows,
+    # rounded to float32, and zero exactly where the float32 normal is shorter than
+    # FLAT_AT_REST times the longest edge squared
+    rng = np.random.default_rng(8)
+    n, m = 5000, 3 * NORMALS_BLOCK + 77
+    V = rng.standard_normal((n, 3))
+    F = rng.integers(0, n, (m, 3))
+    F[:300, 2] = F[:300, 1]                                        # two corners at one place
+    mid = np.arange(300, 900)
+    V[F[mid, 2]] = 0.5 * (V[F[mid, 0]] + V[F[mid, 1]])             # collinear corners
+    got = rest_normals(np.ascontiguousarray(V.T), np.ascontiguousarray(F.T))
+    normal = np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]]).astype(np.float32)
+    longest = np.max([((V[F[:, (k + 1) % 3]] - V[F[:, k]]) ** 2).sum(axis=1) for k in range(3)],
+                     axis=0)
+    n64 = normal.astype(np.float64)
+    flat = (n64 * n64).sum(axis=1) <= FLAT_AT_REST ** 2 * longest * longest
+    assert got.dtype == np.float32 and 300 <= flat.sum() < 1000
+    np.testing.assert_array_equal(got.T[flat], 0.0)
+    np.testing.assert_array_equal(got.T[~flat], normal[~flat])
 
 
 @pytest.mark.parametrize("source", ["icosphere", "homer.obj"])
