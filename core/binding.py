@@ -302,11 +302,12 @@ class Binding:
             # everything deform / refine need that does not depend on positions,
             # transposed to (3, q) so every operation runs on contiguous rows
             d_face, d_bary = _vertex_corners(op.F_fine, op.n_fine)
+            FfT = np.ascontiguousarray(op.F_fine.T)   # (F_fine[face].T made contiguous: 30x)
             object.__setattr__(self, "_cache", {
-                "corners_t": np.ascontiguousarray(op.F_fine[self.fine_face].T),
+                "corners_t": np.take(FfT, self.fine_face, axis=1),
                 "bary_t": np.ascontiguousarray(self.bary.T),
                 "offset_t": np.ascontiguousarray(self.offset.T),
-                "detail_corners_t": np.ascontiguousarray(op.F_fine[d_face].T),
+                "detail_corners_t": np.take(FfT, d_face, axis=1),
                 "detail_bary_t": np.ascontiguousarray(d_bary.T),
                 "detail_offset_t": np.ascontiguousarray(self.fine_detail.T),
             })
@@ -840,11 +841,12 @@ def _seeded_nearest(binding, V_dense, origin, F_fine, levels, near, report):
     ``origin`` (None: as they are)."""
     n = V_dense.shape[0]
     face = parametric_faces(binding.fine_face, binding.bary, levels - binding.levels)
+    FfT = np.ascontiguousarray(F_fine.T)
 
     def block(span):
         start, stop = span
         P = V_dense[start:stop] if origin is None else V_dense[start:stop] - origin
-        corners = np.ascontiguousarray(F_fine[face[start:stop]].T)
+        corners = np.take(FfT, face[start:stop], axis=1)
         return _nearest_parts(near, P, start, corners, face[start:stop], n), stop
 
     parts = []
@@ -973,7 +975,7 @@ def _binding_cache(dense, F_fine, d_face, d_bary, fine_detail, folds):
     vertices' corners and the rest cage's folds (:func:`_folds_of`): what
     ``Binding.__post_init__`` and :func:`_rest_folds` would build."""
     return {"corners_t": dense.corners_t, "bary_t": dense.bary_t, "offset_t": dense.offset_t,
-            "detail_corners_t": np.ascontiguousarray(F_fine[d_face].T),
+            "detail_corners_t": np.take(np.ascontiguousarray(F_fine.T), d_face, axis=1),
             "detail_bary_t": np.ascontiguousarray(d_bary.T),
             "detail_offset_t": np.ascontiguousarray(fine_detail.T), "folds": folds}
 
@@ -1787,9 +1789,10 @@ def _fine_frames(VfT, NfT, F_fine, face, bary):
     frames of a five-level bind: 266 ms on one thread with the transposed
     copies of the whole arrays, 130 ms so)."""
     out = Frames(*(np.empty((face.shape[0], 3)) for _ in range(4)))
+    FfT = np.ascontiguousarray(F_fine.T)
 
     def block(s, e):
-        parts = _frames_t(VfT, NfT, np.ascontiguousarray(F_fine[face[s:e]].T),
+        parts = _frames_t(VfT, NfT, np.take(FfT, face[s:e], axis=1),
                           np.ascontiguousarray(bary[s:e].T))
         for whole, part in zip(out, parts):
             whole[s:e] = part.T
@@ -2271,13 +2274,14 @@ def _bind_dense(query, V_dense, VfT, NfT, F_fine, ties, report=None, near=None, 
     out = _DenseBound(np.empty(n, dtype=np.int64), np.empty((3, n), dtype=np.int64),
                       np.empty((3, n)), np.empty((3, n)), None)
     parts = []
+    FfT = np.ascontiguousarray(F_fine.T)
 
     def block(start, stop):
         P = V_dense[start:stop] if origin is None else V_dense[start:stop] - origin
         hit = query.closest(P)
         face, bary = ties.canonical(hit.face, hit.bary)
         out.face[start:stop] = face
-        corners = np.ascontiguousarray(F_fine[face].T)
+        corners = np.take(FfT, face, axis=1)
         bary = np.ascontiguousarray(bary.T)
         out.corners_t[:, start:stop] = corners
         out.bary_t[:, start:stop] = bary
