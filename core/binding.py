@@ -1133,10 +1133,9 @@ def _repair_index(binding):
     """Build the fold repair's state and the indices its incremental test
     and repair use (see :func:`_away_around`) now, if the binding can repair."""
     state = _repair_state(binding)
-    if state is not None:
-        _stars(binding, state)
-        if _by_groups(binding):
-            _groups(binding, state)
+    if state is not None:          # (the two indices side by side on the worker threads)
+        run_each(lambda build: build(binding, state),
+                 [_stars, _groups] if _by_groups(binding) else [_stars])
 
 
 def _by_groups(binding):
