@@ -168,7 +168,8 @@ def _ascii_problem(data, length, elements, said):
                 f"blank{more}: Blender's importer would take it for a record and misread the "
                 f"rest; delete the blank lines")
     if values.any():
-        more = np.unique(np.cumsum(rest == 10)[values]).size     # lines holding a value
+        lines = np.cumsum(rest == 10)[values]                    # (ascending: no np.unique,
+        more = int(np.count_nonzero(np.diff(lines))) + 1           # a hash on NumPy 2.3+)
         return (f"{said}, a line each ({need:,}), but {more:,} more lines with values follow "
                 f"them: the file holds more than its header declares (a wrong count; Blender's "
                 f"importer would drop them or misread them)")

@@ -200,7 +200,8 @@ def _check_ascii(path):
     with np.errstate(invalid="ignore"):       # (Blender reads float32: 1e39 became 0)
         finite = (np.abs(V) <= np.finfo(np.float32).max).all(axis=1)
     if not finite.all():
-        raise _nonfinite_error(path, np.unique(facet[~finite]).size)
+        bad = np.sort(facet[~finite])          # (not np.unique: a hash table on NumPy 2.3+)
+        raise _nonfinite_error(path, int(np.count_nonzero(np.diff(bad))) + 1)
     return FileCheck(ends, (), warnings)
 
 

@@ -71,7 +71,7 @@ def distinct(values, seen, stamp=None):
         seen[out] = False
         return out
     if stamp is None:
-        return np.unique(values).astype(np.int64, copy=False)
+        return sorted_unique(values).astype(np.int64, copy=False)
     pos = np.arange(values.shape[0], dtype=np.int64)
     stamp[values] = pos
     return np.sort(values[stamp[values] == pos]).astype(np.int64, copy=False)
@@ -112,3 +112,50 @@ def stable_argsort(x):
         return np.argsort(x, kind="stable")
     # (in int64: int32 keys times k overflowed in their own type)
     return np.argsort(x.astype(np.int64) * k + np.arange(k))
+
+
+def sorted_unique(x):
+    """``np.unique(x)`` (the distinct values of ``x`` flattened, ascending;
+    the same array) for integer and bool arrays by one sort, as NumPy 1.x
+    finds them: NumPy 2.3+ finds them with a hash table, 2M int64 of
+    many distinct values 1.36 s against 0.018 (a five-level refined bind
+    spent 1.5 of its 3.9 s there). Other dtypes go to ``np.unique``.
+
+    Examples
+    --------
+    >>> sorted_unique(np.array([[3, 1], [3, 2]])).tolist()
+    [1, 2, 3]
+    """
+    x = np.asarray(x)
+    if x.dtype.kind not in "biu":
+        return np.unique(x)
+    a = np.sort(x, axis=None)
+    if a.size < 2:
+        return a
+    keep = np.empty(a.size, dtype=bool)
+    keep[0] = True
+    np.not_equal(a[1:], a[:-1], out=keep[1:])
+    return a[keep]
+
+
+def member_of(values, among):
+    """``np.isin(values, among)`` for integer arrays: a bool array shaped as
+    ``values``, True where the value is one of ``among``'s, by a sort of
+    ``among`` (:func:`sorted_unique`) and a binary search: NumPy 2.3+'s
+    ``np.isin`` of keys over a wide range finds ``among``'s values with a
+    hash table (1M against 1M edge keys: 679 ms against 58 on NumPy 1.26;
+    ``np.union1d`` 1.5 s against 21 ms, which :func:`sorted_unique` of the
+    two arrays replaces).
+
+    Examples
+    --------
+    >>> member_of(np.array([3, 9, 4]), np.array([[4, 5], [3, 3]])).tolist()
+    [True, False, True]
+    """
+    values = np.asarray(values)
+    known = sorted_unique(among)
+    if known.size == 0 or values.size == 0:
+        return np.zeros(values.shape, dtype=bool)
+    at = np.searchsorted(known, values)
+    np.minimum(at, known.size - 1, out=at)
+    return known[at] == values

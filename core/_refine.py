@@ -21,6 +21,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from ._groups import sorted_unique
 from .errors import InvalidArgumentError, InvalidMeshError
 from .topology import edge_keys
 
@@ -86,7 +87,7 @@ def crease_edge_ids(creases, E, n, where):
         i = int(np.flatnonzero(~ok)[0])
         raise InvalidArgumentError(
             f"{where}: creases must be edges of F, e.g. pair {i} = {C_in[i].tolist()} is not an edge")
-    return np.unique(pos)
+    return sorted_unique(pos)
 
 
 def fan_ranks(F, opp, corner_ids, where=None, rank=True):

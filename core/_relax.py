@@ -15,6 +15,7 @@ They work on a compact :class:`core._collapse.State` and leave it compact.
 
 import numpy as np
 
+from ._groups import sorted_unique
 from ._clean import BOUNDARY, edge_representatives, face_keys, half_edge_ends
 from ._collapse import append_faces, compact, survivors
 from .mesh import flat_faces
@@ -143,7 +144,8 @@ def close_smallest_hole(st, tun):
         succ[succ == 0] = -1                      # cut the loop before its first member
         ring = members[_list_order(succ)]         # rim half-edges in order: v_i -> v_{i+1}
         k = ring.size
-        for shift in np.unique(np.linspace(0, k, tun.cap_apex_tries, endpoint=False).astype(np.int64)):
+        shifts = np.linspace(0, k, tun.cap_apex_tries, endpoint=False).astype(np.int64)
+        for shift in sorted_unique(shifts):
             r = np.roll(ring, -shift)
             v = u[r]                              # v_0 (the apex) .. v_{k-1}
             q = edge_keys(v[0], v[2:k - 1], n)

@@ -41,7 +41,7 @@ import numpy as np
 
 from ._collapse import compactness
 from ._face_tracker import FaceTracker
-from ._groups import group_argmin, ragged_ranges, stable_argsort
+from ._groups import group_argmin, ragged_ranges, sorted_unique, stable_argsort
 from .cg import conjugate_gradient
 from .mesh import (area_normals_rows, barycentric_gather, barycentric_scatter, mean_edge_length,
                    squared_edges)
@@ -348,10 +348,10 @@ def _undo_bad_moves(V, F, D, N_ref, g0, N_keep, min_cos, min_compact):
         bad &= np.any(D[Fs] != 0.0, axis=(1, 2))
         if not bad.any():
             break
-        stopped = np.unique(Fs[bad])
+        stopped = sorted_unique(Fs[bad])
         D[stopped] = 0.0
         if ring is None:
             ring = stable_argsort(F.ravel()) // 3, np.bincount(F.ravel(), minlength=V.shape[0])
         at, _ = ragged_ranges((np.cumsum(ring[1]) - ring[1])[stopped], ring[1][stopped])
-        faces = np.unique(ring[0][at])
+        faces = sorted_unique(ring[0][at])
     return D

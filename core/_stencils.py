@@ -14,7 +14,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from ._groups import ragged_entries
+from ._groups import ragged_entries, sorted_unique
 from ._parallel import blocks as blocks_of, run_each
 from ._refine import NEXT_CORNER, fan_ranks, next_corner
 
@@ -425,7 +425,7 @@ def _butterfly_extraordinary(T, smooth_x, xa, xb):
     tables = []
     for v, u, y, is_x in ((a, b, ya, xa[kx]), (b, a, yb, xb[kx])):
         val = T.valence[v]
-        for k in np.unique(val[is_x]):
+        for k in sorted_unique(val[is_x]):
             sel = np.flatnonzero(is_x & (val == k))
             f = np.where(both[sel], 0.5, 1.0)
             vs = v[sel]
@@ -478,7 +478,7 @@ def _loop_even(T):
     if sv.size:
         start, nbr = _neighbours(T)
         val = T.valence
-        for k in np.unique(val[sv]):
+        for k in sorted_unique(val[sv]):
             vs = sv[val[sv] == k]
             beta = float(loop_beta(k))
             base = start[vs]

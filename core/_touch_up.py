@@ -58,6 +58,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from ._groups import member_of, sorted_unique
 from ._collapse import compactness
 from ._face_tracker import faces_across
 from .mesh import cross_rows, flat_faces, used_vertices
@@ -308,7 +309,7 @@ def _candidates(V, F, gaps, fixed, keep, tun, inputs):
 
     yield from moves((v, gaps.vertex_near[v] - V[v]) for v in worst)
     far = np.argsort(-gaps.point_far, kind="stable")[:k]
-    faces = np.unique(np.concatenate([gaps.point_face[far[gaps.point_far[far] >= bar]], off]))
+    faces = sorted_unique(np.concatenate([gaps.point_face[far[gaps.point_far[far] >= bar]], off]))
     if faces.size:
         across, edges = _across(F, n)
     for f in faces:
@@ -368,7 +369,7 @@ def _across(F, n):
     """(m,3) the face across the edge opposite each corner (-1 at a border,
     :func:`~._face_tracker.faces_across`), and the cage's edge keys
     (:func:`_edge_keys`)."""
-    return faces_across(F, n), np.unique(edge_keys(F.ravel(), F[:, [1, 2, 0]].ravel(), n))
+    return faces_across(F, n), sorted_unique(edge_keys(F.ravel(), F[:, [1, 2, 0]].ravel(), n))
 
 
 def _flipped(F, f, j, across, edges, keep, n):
@@ -473,7 +474,7 @@ def _regions_after(V, changes, tris, inputs, P, gaps, gain):
     pass of the point-triangle kernel for all of them."""
     if not changes:
         return []
-    corners = [np.unique(c.rows) for c in changes]
+    corners = [sorted_unique(c.rows) for c in changes]
     samples = [np.einsum("sk,rkd->rsd", _SAMPLES, T) for T in tris]       # (r, s, 3) each
     ends = [_points_after(V, c, k) for c, k in zip(changes, corners)]
     first = inputs.closest(np.concatenate([x[:, _CENTROID] for x in samples] + ends))
@@ -617,7 +618,7 @@ def _flat_flips(V, F, faces, flat):
     faces, c, a, b, g = faces[inside], c[inside], a[inside], b[inside], g[inside]
     d = F[g].sum(axis=1) - a - b
     ok = ~flat[g] & (c != d)
-    ok &= ~np.isin(edge_keys(c, d, n), edges)
+    ok &= ~member_of(edge_keys(c, d, n), edges)
     new = np.stack([np.stack([c, a, d], axis=1), np.stack([c, d, b], axis=1)], axis=1)  # (k,2,3)
     ok &= ~flat_faces(V, new.reshape(-1, 3)).reshape(-1, 2).any(axis=1)
     Ng = cross_rows(V[F[g, 1]] - V[F[g, 0]], V[F[g, 2]] - V[F[g, 0]])
@@ -629,7 +630,7 @@ def _flat_flips(V, F, faces, flat):
     # edges whose faces across share d both make (c, d): an edge of four faces)
     sel = np.flatnonzero(ok)[np.unique(g[ok], return_index=True)[1]]
     first = np.unique(edge_keys(c[sel], d[sel], n), return_index=True)[1]
-    sel = sel[np.isin(np.arange(sel.size), first)]
+    sel = sel[member_of(np.arange(sel.size), first)]
     if not sel.size:
         return None
     return _Flips(np.concatenate([faces[sel], g[sel]]), np.concatenate([new[sel, 0], new[sel, 1]]),
@@ -640,11 +641,11 @@ def _creases_after(creases, flips, n):
     """``creases`` (k,2) with each flipped one ``(a, b)`` replaced by
     ``(a, c)`` and ``(c, b)`` (each crease once)."""
     key = edge_keys(creases[:, 0], creases[:, 1], n)
-    hit = np.isin(edge_keys(flips.ab[:, 0], flips.ab[:, 1], n), key)
+    hit = member_of(edge_keys(flips.ab[:, 0], flips.ab[:, 1], n), key)
     if not hit.any():
         return creases
     a, b, c = flips.ab[hit, 0], flips.ab[hit, 1], flips.c[hit]
-    gone = np.isin(key, edge_keys(a, b, n))
+    gone = member_of(key, edge_keys(a, b, n))
     E = np.concatenate([creases[~gone], np.stack([a, c], axis=1), np.stack([c, b], axis=1)])
     _, first = np.unique(edge_keys(E[:, 0], E[:, 1], n), return_index=True)
     return E[np.sort(first)]

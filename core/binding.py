@@ -76,7 +76,7 @@ from .topology import check_not_soup
 from .unfold import (CageRings, Copies, FaceBatch, FaceStars, FineFaceGroups, Repair, away_rows,
                      nearest_rotations, repair, rest_normals, ring_linear_maps, ring_rotations,
                      turned_over)
-from ._groups import distinct, ragged_entries, stable_argsort
+from ._groups import distinct, ragged_entries, sorted_unique, stable_argsort
 from ._parallel import WORKERS, blocks, each_in_order, in_background, run_blocks, run_each
 from .pages import plain_pages
 
@@ -1242,7 +1242,7 @@ def _rotation(binding, Vc, handed=1.0):
     def corners_of(vertices, kind, table, of):
         faces, at = np.unique(binding.fine_face[vertices] // per_face, return_inverse=True)
         corners = binding.F_cage[faces]
-        new = np.unique(corners)
+        new = sorted_unique(corners)
         new = new[~known[kind, new]]
         if new.size:
             table[new] = of(V_rest, Vc, rings, new)
@@ -1296,8 +1296,9 @@ def _unfold(binding, D, Vc, hit=None, last=None):
     else:
         away = _away_around(binding, state, D, hit, incremental=True)
         if last.rows.size or last.away.size:
-            around = np.union1d(_stars(binding, state).around(last.rows), last.away)
-            away = np.union1d(away, away_rows(D, FT, around, rest))
+            around = sorted_unique(np.concatenate([_stars(binding, state).around(last.rows),
+                                                   last.away]))
+            away = sorted_unique(np.concatenate([away, away_rows(D, FT, around, rest)]))
     rotate, transform = _rotation(binding, Vc, handed)
     folded = turned_over(D, FT, away, rest, rotate)
     if not folded.size:
@@ -1356,7 +1357,7 @@ def _check_moved(binding, moved, where="deform"):
         raise InvalidArgumentError(
             f"{where}: moved index {int(ids[bad][0])} is out of range [0, {binding.n_cage}) "
             f"({int(bad.sum())} such)")
-    return np.unique(ids)
+    return sorted_unique(ids)
 
 
 class _Influenced(NamedTuple):
@@ -1401,7 +1402,7 @@ def _deform_rows(binding, P, N, hit, out, origin, handed=1.0):
     # rows at least one per worker thread
     threads = int(end[-1]) >= _THREADED_ROWS
     size = min(_ROW_BLOCK, -(-int(end[-1]) // WORKERS)) if threads else _ROW_BLOCK
-    cuts = np.unique(np.concatenate([[0], np.searchsorted(
+    cuts = sorted_unique(np.concatenate([[0], np.searchsorted(
         end, np.arange(size, int(end[-1]), size)) + 1, [Fh.shape[1]]]))
     at = 3 * hit.rows                 # row starts in the flat (C-contiguous) out
     flat = out.reshape(-1)

@@ -62,7 +62,7 @@ import numpy as np
 from ._clean import (BOUNDARY, NON_MANIFOLD, coincident_pairs, corner_fans, face_keys,
                      half_edge_ends, interior_edges, non_manifold_vertices, renumber_twins,
                      twin_table)
-from ._groups import ragged_entries
+from ._groups import member_of, ragged_entries, sorted_unique
 from ._parallel import blocks, run_blocks, run_each
 from .errors import InvalidMeshError
 from .mesh import (any_in_rows, bounding_box, check_count, check_mesh, check_number,
@@ -578,7 +578,7 @@ def _stacked(shape, F, weld, protected):
     drop = stacked_copies(shape.V, F, shape.area, weld.distance, protected)
     if drop is None:
         return None, found
-    found["n_copies"] = int(np.unique(face_components(F, shape.V.shape[0])[0][drop]).shape[0])
+    found["n_copies"] = int(sorted_unique(face_components(F, shape.V.shape[0])[0][drop]).shape[0])
     found["n_copy_faces"] = int(np.count_nonzero(drop))
     return drop, found
 
@@ -603,7 +603,7 @@ def _automatic_weld(shape, F, twin, faces):
         wider = _weld(shape, F, twin, faces, distance)
         # closed by joining: open half-edges of faces the wider weld keeps (by input face)
         # that it leaves no longer open; at least half of all the open ones
-        kept_open = np.count_nonzero(open_best.reshape(-1, 3)[np.isin(best.faces, wider.faces)])
+        kept_open = np.count_nonzero(open_best.reshape(-1, 3)[member_of(best.faces, wider.faces)])
         joined = kept_open - np.count_nonzero(_open_half_edges(wider))
         if joined >= 0.5 * np.count_nonzero(open_best) and \
                 wider.n_degenerate - best.n_degenerate <= WIDER_WELD_LOSS * F.shape[0]:
@@ -693,7 +693,7 @@ def _weld_map(shape, F, twin, weld_distance):
     flat = np.flatnonzero(shape.height <= min(tol, FLAT_SHARE * shape.tallest))
     if h.size == 0 and flat.size == 0:
         return rep
-    cand = np.unique(np.concatenate([*half_edge_ends(F, h), F[flat].ravel()]))
+    cand = sorted_unique(np.concatenate([*half_edge_ends(F, h), F[flat].ravel()]))
     pairs = coincident_pairs(V[cand], tol)     # (rows of cand)
     if pairs.shape[0] == 0:
         return rep
@@ -899,7 +899,7 @@ def _split_fans(V, F, twin, to_input, corners=None):
     F[nodes] = new_id[fan_of.ravel()]
     from_vertex = np.r_[np.arange(n), fan_owner[extra]]
     return (V[from_vertex], F.reshape(-1, 3), to_input[from_vertex],
-            int(np.unique(fan_owner[extra]).size), int(extra.size))
+            int(sorted_unique(fan_owner[extra]).size), int(extra.size))
 
 
 def _make_manifold(V, F, twin, corners=None):
@@ -933,7 +933,7 @@ def _make_manifold(V, F, twin, corners=None):
     V, F = V2, F2
     n_detached = 0
     if left.size:
-        faces = np.unique(left // 3)
+        faces = sorted_unique(left // 3)
         n = V.shape[0]
         corners = (3 * faces[:, None] + np.arange(3)).ravel()
         Fr = F.ravel().copy()
@@ -993,7 +993,7 @@ def _orient(V, F, twin, inner):
     if not orientable.all():
         one_sided = ~orientable
         # (a one-sided component's smallest node is 2 f for its lowest face f)
-        roots = np.unique(comp[one_sided]) // 2
+        roots = sorted_unique(comp[one_sided]) // 2
         flip |= one_sided & _tree_flips(m, fh, ft, agree, one_sided, roots)
         seam = np.flatnonzero(one_sided[fh] & (agree != (flip[fh] == flip[ft])))
         found["n_non_orientable_components"] = int(roots.size)
@@ -1152,7 +1152,7 @@ def _copies(V, F, twin, labels, area, box, distance, protected, pillows, turned)
         drop = layers if drop is None else drop | layers
     if drop is None:
         return None, found
-    found["n_copies"] = int(np.unique(labels[drop]).shape[0])
+    found["n_copies"] = int(sorted_unique(labels[drop]).shape[0])
     found["n_copy_faces"] = int(np.count_nonzero(drop))
     return drop, found
 

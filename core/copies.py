@@ -40,7 +40,7 @@ pieces, a lid on a rim) keep vertices of their own and stay.
 import numpy as np
 
 from ._clean import BOUNDARY, NON_MANIFOLD, coincident_pairs, half_edge_ends
-from ._groups import ragged_ranges
+from ._groups import ragged_ranges, sorted_unique
 from .mesh import face_areas, row_sums
 from .topology import connected_labels, face_components, numbered, vertex_labels
 
@@ -90,7 +90,7 @@ def coincident_copies(V, F, labels, area, distance, protected=None):
     gone = np.zeros(k, dtype=bool)
     gone[a[copy]] = True
     if protected is not None:
-        gone[np.unique(vc[np.flatnonzero(protected & (vc >= 0))])] = False
+        gone[sorted_unique(vc[np.flatnonzero(protected & (vc >= 0))])] = False
     return gone[lab] if gone.any() else None
 
 
@@ -292,7 +292,7 @@ def pillow_layers(V, F, labels, twin, distance, turned=None):
     faces = np.flatnonzero(flat[lab])
     if faces.size == 0:
         return None
-    points = np.unique(F[faces])
+    points = sorted_unique(F[faces])
     pairs = coincident_pairs(V[points], distance)
     if pairs.shape[0] == 0:
         return None

@@ -45,6 +45,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from ._groups import member_of
 from .errors import InvalidArgumentError, InvalidMeshError
 from .mesh import check_mesh
 from .pages import plain_pages
@@ -134,7 +135,7 @@ def _check_finite(fn, path, V, lines, F):
     if np.isfinite(V).all():              # (15x faster than the test along rows)
         return
     bad = np.flatnonzero(~np.isfinite(V).all(axis=1))
-    used = np.isin(bad, F)
+    used = member_of(bad, F)
     k = bad[np.argmax(used)] if used.any() else bad[0]
     some = f"one of {bad.size:,} such vertices, " if bad.size > 1 else ""
     if not used.any():

@@ -8,6 +8,7 @@ or raises :class:`~.errors.InvalidMeshError` naming the problem and an example.
 
 import numpy as np
 
+from ._groups import member_of
 from ._parallel import blocks, run_blocks
 from .errors import InvalidArgumentError, InvalidMeshError
 
@@ -200,7 +201,7 @@ def _used_by_faces(rows, faces):
     F = faces if isinstance(faces, np.ndarray) else None
     if F is None or F.ndim != 2 or F.shape[1] != 3 or not np.issubdtype(F.dtype, np.integer):
         return ""
-    used = int(np.count_nonzero(np.isin(rows, F)))
+    used = int(np.count_nonzero(member_of(rows, F)))
     if used == 0:
         return (", none of them used by a face (a scan's leftover points: keep only the "
                 "vertices the faces use)")

@@ -63,6 +63,7 @@ from typing import NamedTuple
 import numpy as np
 from numpy.lib.stride_tricks import sliding_window_view
 
+from ._groups import sorted_unique
 from .errors import InvalidArgumentError
 from .mesh import check_finite_rows, shown
 from .spatial import (CROWDED_CELL, PRUNE_SLACK, BestPairs, TriangleIndex, closest_pairs,
@@ -641,7 +642,7 @@ def _tiles(T, A, point, cell, once=False):
     Arows = A[point[rows]]
     cuts = np.flatnonzero(np.concatenate([[True], np.diff(cls) != 0, [True]]))
     # at most _TILE_SLOTS (row, reference) pairs per set: its arrays stay in cache
-    cuts = np.unique(np.concatenate([cuts] + [np.arange(a, b, max(1, _TILE_SLOTS // (
+    cuts = sorted_unique(np.concatenate([cuts] + [np.arange(a, b, max(1, _TILE_SLOTS // (
         _TILE * int(T.widths[cls[a]])))) for a, b in zip(cuts[:-1], cuts[1:])]))
     sets = _tile_sets(T, Arows, cls, start, cuts)
     return _Tiles(rows, lane < length[:, None], sets if once else list(sets))

@@ -35,6 +35,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from ._groups import member_of, sorted_unique
 from ._clean import BOUNDARY, half_edge_ends, interior_edges, twin_table
 from .mesh import (area_normals_rows, bounding_box, diagonal_length, face_areas, flat_faces,
                    lengths, row_norms, unit_rows)
@@ -144,7 +145,7 @@ def close_pinholes(V, F, twin, face_area, face_budget, bend_cos=None):
                 return None
             F2 = np.concatenate([F, caps])
             twin2 = twin_table(F2, V.shape[0])
-    n_holes = int(np.unique(beside[:, 1]).shape[0])
+    n_holes = int(sorted_unique(beside[:, 1]).shape[0])
     return Pinholes(F2, twin2, beside[:, 0], n_holes)
 
 
@@ -159,7 +160,7 @@ def _caps_within(V, F2, twin, m, hole, bend_cos):
     beside = unit_rows(area_normals_rows(V, F2[np.maximum(across, 0).ravel()].T))
     cos = np.einsum("kij,kj->ki", beside.reshape(-1, 3, 3), unit_rows(cap))
     bent = ((cos < bend_cos) & (across >= 0)).any(axis=1) | (row_norms(cap) == 0)
-    return ~np.isin(hole, hole[bent])
+    return ~member_of(hole, hole[bent])
 
 
 def face_floor(V, F, twin):
@@ -310,7 +311,7 @@ def _zippable(F, n, loops, heads, longest):
     on_chain[m] = True
     keep &= ~on_chain[x]
     # an edge x - m already there
-    clash = np.isin(edge_keys(x[k], m, n), _edges_among(F, n, np.concatenate([x, m])))
+    clash = member_of(edge_keys(x[k], m, n), _edges_among(F, n, np.concatenate([x, m])))
     keep &= np.bincount(k[clash], minlength=heads.shape[0]) == 0
     return heads[keep], x[keep]
 
@@ -389,7 +390,7 @@ def _fans(V, F, rim, count, loops):
         p = np.take_along_axis(rim[todo], at, axis=1)
         diag = (cols[None, 2:] <= kk - 2)                       # diagonals r_0 - r_j, 2 <= j <= k-2
         keys = edge_keys(r[:, :1], r[:, 2:], n)
-        clash = (diag & np.isin(keys, existing)).any(axis=1)
+        clash = (diag & member_of(keys, existing)).any(axis=1)
         row, col = np.nonzero(cols[None, 1:-1] <= kk - 2)       # triangles 1 <= i <= k-2
         tri = np.stack([r[row, 0], r[row, col + 2], r[row, col + 1]], axis=1)
         clash[row[flat_faces(V, tri)]] = True
@@ -410,4 +411,4 @@ def _edges_among(F, n, vertices):
     near = np.flatnonzero(np.count_nonzero(mark[F], axis=1) >= 2)     # (the faces with such an edge)
     a, b = half_edge_ends(F[near])
     both = mark[a] & mark[b]
-    return np.unique(edge_keys(a[both], b[both], n))
+    return sorted_unique(edge_keys(a[both], b[both], n))

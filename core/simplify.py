@@ -52,6 +52,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from ._groups import member_of, sorted_unique
 from ._clean import (BOUNDARY, NON_MANIFOLD, edge_representatives, face_keys, half_edge_ends,
                      spatial_order, twin_table)
 from ._collapse import State, compactness, run
@@ -681,7 +682,7 @@ def _relocate_cage(mesh, Vn, creases, Eb_in, surface, tun):
     if Eb_in.shape[0]:
         hb = np.flatnonzero(mesh.twin == BOUNDARY)
         Eb = np.stack(half_edge_ends(Fm, hb), axis=1)
-        ends = np.unique(Eb_in)[::step]
+        ends = sorted_unique(Eb_in)[::step]
         border = (Vn[ends], Eb, (Vn, segment_triangles(Eb_in)), tun.relocate_border_weight)
     Nkeep = mesh.Nref[Fm].sum(axis=1) if tun.ref_cos > -1.0 else None
     back = dict(surface=(Vn, surface), back=tun.relocate_back,
@@ -761,7 +762,7 @@ def _set_up(clean, opts):
     # for the final relocation: the input's border edges and crease vertices, and its
     # faces when small enough for the backward pull (the engine rewrites Fc)
     Eb_in = np.stack(half_edge_ends(Fc, np.flatnonzero(twin == BOUNDARY)), axis=1)
-    creases = np.unique(np.concatenate(half_edge_ends(Fc, np.flatnonzero(feat))))
+    creases = sorted_unique(np.concatenate(half_edge_ends(Fc, np.flatnonzero(feat))))
     Fin = Fc.copy() if m0 <= tun.relocate_back_max_faces else None
     if opts["weights"] is not None:
         Q *= opts["weights"][order][:, None]
@@ -1412,7 +1413,7 @@ def represented_faces(F, clean):
     if rest.size:
         keys = face_keys(np.concatenate([K[kept], K[rest]]), clean.V.shape[0])
         n_kept = int(np.count_nonzero(kept))
-        out[rest] = np.isin(keys[n_kept:], keys[:n_kept])
+        out[rest] = member_of(keys[n_kept:], keys[:n_kept])
     return out
 
 

@@ -86,7 +86,7 @@ import numpy as np
 from .errors import InvalidArgumentError
 from .mesh import (check_finite_rows, check_mesh, check_number, check_points, check_reach,
                    cross_rows, row_norms, scaled_area_normals, unit_rows)
-from ._groups import group_argmin, ragged_entries, ragged_ranges
+from ._groups import group_argmin, ragged_entries, ragged_ranges, sorted_unique
 from ._parallel import blocks, run_blocks, run_each
 from .pages import plain_pages
 
@@ -871,7 +871,7 @@ def _plane_cells(A, B, C, sides, ext, c0, nr, lo, h, dims, first, dtype):
     if box.sum() > _CANDIDATE_CELLS and box.size > 1:
         ends = np.searchsorted(np.cumsum(box), np.arange(1, box.sum() // _CANDIDATE_CELLS + 1)
                                * _CANDIDATE_CELLS, side="right")
-        cuts = np.unique(np.concatenate([[0], np.maximum(ends, 1), [box.size]]))
+        cuts = sorted_unique(np.concatenate([[0], np.maximum(ends, 1), [box.size]]))
         parts = [_plane_cells(A[a:b], B[a:b], C[a:b], sides[a:b], ext[a:b], c0[a:b], nr[a:b], lo,
                               h, dims, first + a, dtype) for a, b in zip(cuts[:-1], cuts[1:])]
         return tuple(np.concatenate(col) for col in zip(*parts))
@@ -1382,7 +1382,8 @@ class TriangleIndex:
                 cuts = np.searchsorted(csum, np.arange(1, int(csum[-1]) // _PAIR_CHUNK + 1)
                                        * _PAIR_CHUNK)
                 nk = order.size
-                bounds = np.unique(np.concatenate([[0, nk], cuts, np.arange(0, nk, _QUERY_CHUNK)]))
+                bounds = sorted_unique(
+                    np.concatenate([[0, nk], cuts, np.arange(0, nk, _QUERY_CHUNK)]))
                 # (on the worker threads: each chunk writes its own queries' rows of best)
                 far += run_each(lambda span: self._grid_chunk(PT, order[span[0]:span[1]], cc,
                                                               cid, best),
@@ -1814,7 +1815,7 @@ class TriangleIndex:
         ub = np.maximum.reduceat(best.d2[q_all], starts)
         # chunks of groups holding at most _QUERY_CHUNK // 4 queries (a group larger than
         # that is a chunk of its own)
-        cuts = np.unique(np.concatenate([[0, counts.size], np.searchsorted(
+        cuts = sorted_unique(np.concatenate([[0, counts.size], np.searchsorted(
             np.cumsum(counts), np.arange(1, far.size // (_QUERY_CHUNK // 4) + 1)
             * (_QUERY_CHUNK // 4), side="right")]))
         cuts = cuts[cuts <= counts.size]
@@ -1933,7 +1934,7 @@ class TriangleIndex:
         q, counts, centre, _ = self._query_groups(PT, far, cells * self._h)
         beam = self._beam(centre, width)[np.repeat(np.arange(counts.size), counts)]
         n_leaves = 1 << self._depth
-        pair = np.unique(beam + n_leaves * np.arange(q.size)[:, None])  # grouped by query
+        pair = sorted_unique(beam + n_leaves * np.arange(q.size)[:, None])  # grouped by query
         self._scan_leaves(PT, q[pair // n_leaves], pair % n_leaves, best)
         if width is not None:
             return

@@ -42,6 +42,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from ._groups import member_of, sorted_unique
 from .clean import MIN_COMPONENT_AREA
 from .errors import InvalidArgumentError
 from .mesh import area_normals_rows, bbox_diagonal, check_mesh, check_reach
@@ -232,7 +233,7 @@ def _flip_ok(V, F, weld, a, b, c, d):
     """Which chords ``a-b`` (faces ``(a,b,c)``, ``(b,a,d)``) can flip to ``c-d``."""
     n = np.int64(max(V.shape[0], 1))
     h = np.sort(F[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
-    edges = np.unique(h[:, 0] * n + h[:, 1])
+    edges = sorted_unique(h[:, 0] * n + h[:, 1])
     key = np.minimum(c, d) * n + np.maximum(c, d)
     pos = np.minimum(np.searchsorted(edges, key), edges.size - 1)
     _, inv, count = np.unique(key, return_inverse=True, return_counts=True)
@@ -341,7 +342,7 @@ def _symmetrised(half, Vs, F, s, k, keep=None):
         turned = np.einsum("ij,ij->i", area_normals_rows(W, half.F.T), N0) <= 0
         if not turned.any():
             break
-        back = np.unique(half.F[turned])
+        back = sorted_unique(half.F[turned])
         W[back] = half.V[back]
     return W, float(hit.distance.max(initial=0.0))
 
@@ -580,7 +581,7 @@ def _check_crosses(clean, s, k, axis):
     """Raise :class:`~.errors.InvalidArgumentError` unless the cleaned mesh has
     vertices on both sides of the plane (``s``: its snapped coordinates on
     axis ``k``), naming the side it lies on and its extent."""
-    used = np.unique(clean.F)
+    used = sorted_unique(clean.F)
     if used.size == 0:
         raise InvalidArgumentError(
             f"{_WHERE}: symmetry {axis!r} needs a mesh with faces to mirror, and none is "
@@ -754,7 +755,7 @@ def _whole_maps(clean, hs, r, cage, s, k):
     # on a fuzzed mesh, which the fit then refused as creases)
     n = cage.V.shape[0]
     E = edge_map(cage.F, n)[0]
-    fe = fe[np.isin(edge_keys(fe[:, 0], fe[:, 1], n), edge_keys(E[:, 0], E[:, 1], n))]
+    fe = fe[member_of(edge_keys(fe[:, 0], fe[:, 1], n), edge_keys(E[:, 0], E[:, 1], n))]
     return vertex_map, face_from, fe
 
 

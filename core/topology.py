@@ -15,6 +15,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from ._groups import sorted_unique
 from .errors import InvalidArgumentError, InvalidMeshError
 from .mesh import check_count, check_faces, shown
 
@@ -284,16 +285,16 @@ def boundary_loops_count(F, n_vertices, em=None):
     B = em.E[em.edge_face_count == 1]
     if B.shape[0] == 0:
         return 0
-    used = np.unique(B)
+    used = sorted_unique(B)
     relabel = np.searchsorted(used, B)
     labels = connected_labels(used.shape[0], relabel)
-    return int(np.unique(labels).shape[0])
+    return int(sorted_unique(labels).shape[0])
 
 
 def border_vertex_count(F, n_vertices, em=None):
     """Number of vertices on boundary edges (edges of one face)."""
     em = _edge_map(np.asarray(F, dtype=np.int64), n_vertices) if em is None else em
-    return int(np.unique(em.E[em.edge_face_count == 1]).shape[0])
+    return int(sorted_unique(em.E[em.edge_face_count == 1]).shape[0])
 
 
 class ManifoldReport(NamedTuple):
@@ -380,7 +381,7 @@ def _manifold_report(F, n_vertices):
     keep = valid
     vk = vert_of_corner[keep]
     lk = labels[keep]
-    key = np.unique(vk * np.int64(3 * m) + lk)
+    key = sorted_unique(vk * np.int64(3 * m) + lk)
     fans_per_vertex = np.bincount(key // np.int64(3 * m), minlength=n_vertices)
     nm_vertices = np.flatnonzero(fans_per_vertex > 1)
     # vertices on a non-manifold edge are reported there, not here twice
@@ -492,5 +493,5 @@ def collapsible_edges(F, n_vertices, em=None):
     comp, k = face_components(F, n_vertices)
     faces_per_comp = np.bincount(comp, minlength=k)
     tetra = faces_per_comp[comp] <= 4
-    ok[np.unique(em.face_edge[tetra].ravel())] = False
+    ok[sorted_unique(em.face_edge[tetra].ravel())] = False
     return em, ok

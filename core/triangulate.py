@@ -49,6 +49,8 @@ scored than its neighbours): it always gives ``k - 2`` triangles.
 
 import numpy as np
 
+from ._groups import member_of, sorted_unique
+
 #: polygons times corners times vertices :func:`_ear_scores` tests at once (its memory)
 _EAR_BLOCK = 1 << 20
 #: an area below this fraction of a polygon's squared size is flat (rounding: a rotated
@@ -114,7 +116,7 @@ def triangulate_polygons(V, fans, sizes):
         at = np.repeat(first[large] - (np.cumsum(k_of[large] - 2) - (k_of[large] - 2)),
                        k_of[large] - 2) + np.arange((k_of[large] - 2).sum())
         F[at] = _clip_in_rounds(V, _loops(F, first[large], k_of[large]), k_of[large])
-    for k in np.unique(k_of[~large]):
+    for k in sorted_unique(k_of[~large]):
         at = first[~large][k_of[~large] == k, None] + np.arange(k - 2)
         loops = np.concatenate([F[at[:, :1], 0], F[at[:, :1], 1], F[at, 2]], axis=1)
         F[at] = _clip_one_at_a_time(V, loops)
@@ -263,7 +265,7 @@ def _clip_in_rounds(V, L, k):
         T, dead = _round_of_clips(P, tol, size, pid, start, act, left)
         out.append(T)
         key.append(r * n + T[:, 1])
-        live = live[np.isin(live, dead, assume_unique=True, invert=True)]
+        live = live[~member_of(live, dead)]
         clipped = np.bincount(pid[dead], minlength=p)
         slow = np.where((left > 3) & (clipped < _STALL) & (left - clipped > _SMALL), slow + 1, 0)
         stalled |= slow >= 3
@@ -277,7 +279,7 @@ def _clip_in_rounds(V, L, k):
     if rest.size:
         m = np.bincount(pid[rest], minlength=p)[pid[rest]]
         flat = np.c_[P, np.zeros(n)]                             # (in the plane: z = 0)
-        for c in np.unique(m):
+        for c in sorted_unique(m):
             loops = rest[m == c].reshape(-1, c)
             out.append(_clip_one_at_a_time(flat, loops).reshape(-1, 3))
             key.append(int(k.max()) * n + np.tile(np.arange(c - 2), loops.shape[0]))
@@ -530,7 +532,7 @@ class _Blockers:
         cell = np.clip(cell, 0, np.maximum(self.dims[poly[t]] - 1, 0))
         key = self.base[poly[t]] + cell[:, 1] * self.dims[poly[t], 0] + cell[:, 0]
         n = self.count.size
-        key = np.unique(t * n + key)                                   # (a cell once a triangle)
+        key = sorted_unique(t * n + key)                                 # (a cell once a triangle)
         box, X = self._in_cells(key // n, key % n)
         held[box[_inside(P, tol, pid, tri[box], X)]] = True
         rest = np.flatnonzero(~held)

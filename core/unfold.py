@@ -44,7 +44,8 @@ from typing import NamedTuple
 
 import numpy as np
 
-from ._groups import distinct, ragged_entries, ragged_ranges, stable_argsort
+from ._groups import (distinct, member_of, ragged_entries, ragged_ranges, sorted_unique,
+                      stable_argsort)
 from ._parallel import WORKERS, blocks, run_blocks, run_each
 from .mesh import (DOTS_BLOCK, NORMALS_BLOCK, area_normals_rows, cross_columns, dot_columns,
                    normal_dots, unit_rows)
@@ -240,7 +241,7 @@ class FaceBatch(NamedTuple):
 def _faces_of(columns, faces):
     """The distinct faces (ascending int64) of ``columns`` (``faces[columns]``, or
     the columns themselves for ``faces`` None)."""
-    return np.unique(columns if faces is None else faces[columns]).astype(np.int64, copy=False)
+    return sorted_unique(columns if faces is None else faces[columns]).astype(np.int64, copy=False)
 
 
 class CageRings(NamedTuple):
@@ -502,7 +503,7 @@ class Copies(NamedTuple):
 
 def ring(stars, F, faces):
     """The vertices of ``faces`` and their one-ring (ascending)."""
-    return np.unique(F[stars.around(np.unique(F[faces]))])
+    return sorted_unique(F[stars.around(sorted_unique(F[faces]))])
 
 
 class Neighbours(NamedTuple):
@@ -589,8 +590,8 @@ def repair(X, V_rest, F, FT, stars, folded, rest_normals, rotate, away, transfor
     region = np.zeros(0, dtype=np.int64)
     rows, raw = [], []
     for _ in range(ROUNDS):
-        grown = np.union1d(region, ring(stars, F, folded))
-        new = np.setdiff1d(grown, region, assume_unique=True)
+        grown = sorted_unique(np.concatenate([region, ring(stars, F, folded)]))
+        new = grown[~member_of(grown, region)]
         if copies is not None:
             new = copies.of_vertices(new)
         rows.append(new)

@@ -114,15 +114,6 @@ def test_a_mesh_of_few_faces_is_searched_whole_whatever_the_guess():
         V = V + 0.05 * rng.standard_normal(V.shape)
 
 
-def test_stable_argsort_is_numpys_stable_argsort():
-    from core._groups import stable_argsort
-    rng = np.random.default_rng(6)
-    for x in (rng.integers(0, 50, 1000), rng.integers(0, 1 << 40, 1000),
-              np.array([2 ** 62, 3, 2 ** 62, 0]), np.zeros(0, dtype=np.int64),
-              rng.integers(0, 3000, 100_000).astype(np.int32)):   # (int32 keys times k)
-        np.testing.assert_array_equal(stable_argsort(x), np.argsort(x, kind="stable"))
-
-
 def test_around_a_fans_hub_only_the_faces_near_each_point_are_tried_and_the_answers_are_the_same():
     # a CAD cone and a fillet-like cap: hubs of 2,000 and 1,500 needles (and a
     # few wide faces around the fillet's corner); points near the surface, each
