@@ -358,7 +358,10 @@ def _shared_positions(V, F):
     tie = np.flatnonzero(P[order[1:], 0] == P[order[:-1], 0])
     if not tie.size:
         return 0
-    Q = P[order[np.union1d(tie, tie + 1)]]
+    both = np.zeros(P.shape[0], dtype=bool)     # (not np.union1d: NumPy 2.3+ hashes it)
+    both[tie] = True
+    both[tie + 1] = True
+    Q = P[order[np.flatnonzero(both)]]
     S = Q[np.lexsort(Q.T[::-1])]
     return int(np.count_nonzero((S[1:] == S[:-1]).all(axis=1)))
 
