@@ -357,3 +357,20 @@ def test_surface_diagonal_names_a_bad_face():
     for bad in (F - 1, F + V.shape[0]):
         with pytest.raises(InvalidMeshError, match="surface_diagonal: .*faces index vertices"):
             core.surface_diagonal(V, bad)
+
+
+def test_the_reverse_side_takes_cells_for_its_distances_and_measures_the_same():
+    # few samples on a large mesh: its index's cells are sized for the other side's mean
+    # distance when that is a few of its edges (the cage's samples are then answered in
+    # the grid, not in a hierarchy built for them), the default otherwise; the
+    # distances are the same bits either way
+    V, F = torus(400, 100, bump=0.01)                       # 80k faces
+    for target, wider in ((500, True), (8000, False)):
+        cage = core.simplify(V, F, target_faces=target)
+        sized = DistanceFrom(V, F)
+        plain = DistanceFrom(V, F)
+        plain._searches[TriangleIndex] = TriangleIndex(V, F)
+        got, want = sized.to(cage.V, cage.F, samples=5000), plain.to(cage.V, cage.F, samples=5000)
+        assert tuple(got) == tuple(want)
+        h, h0 = sized._searches[TriangleIndex]._h, plain._searches[TriangleIndex]._h
+        assert (h > 1.2 * h0) if wider else (h == h0)
