@@ -42,7 +42,7 @@ MAX_SAMPLES = 50_000_000
 _DEFAULT_SAMPLES = (10_000, 200_000)
 #: the reverse side's index (few queries on a large mesh) takes cells sized for the other
 #: side's mean distance when they are at most this many of its mean edges wide: the 2M-face
-#: torus against its 2,000-face cage, 60k samples, 3.2 -> 1.6 s (cells 2x the default, the
+#: torus against its 2,000-face cage, 60k samples, 3.4 -> 1.8-2.3 s (cells 1.4-2x the default, the
 #: queries answered in the grid, not in a hierarchy built for them); wider, the default
 #: (the bunny against a 50-face cage: cells of 32 edges, 1.2 -> 4.5 s)
 _REACH_CELL_EDGES = 6.0
