@@ -25,6 +25,7 @@ faces are left unseen; all walks advance in lock-step.
 
 import numpy as np
 
+from ._groups import sort_keys
 from ._parallel import blocks, run_blocks, run_each
 from .mesh import bounding_box
 from .spatial import morton_codes
@@ -264,66 +265,6 @@ def _pair_runs(ks, order, twin, a, b):
     if multi.size:
         twin[o[multi]] = NON_MANIFOLD
         twin[o[multi + 1]] = NON_MANIFOLD
-
-
-def sort_keys(key, bound):
-    """``order = np.argsort(key, kind="stable")`` and ``key[order]`` for keys
-    in ``[0, bound)``, from plain sorts of ``key << bits | index`` (unique
-    values: far faster than a stable argsort, and the same result).
-
-    Keys too wide to pack with their index are sorted range by range: the
-    ranges of ``2**(63 - bits)`` keys, each packed relative to its start.
-    ``key`` (int64) is overwritten.
-    """
-    size = key.size
-    bits = max(int(size - 1).bit_length(), 1)
-    if bound <= 1 << (63 - bits):
-        return _packed_sort(key, bits)
-    width = 63 - bits
-    n_ranges = int((bound - 1) >> width) + 1
-    if n_ranges > _MAX_RANGES:
-        order = np.argsort(key, kind="stable")
-        return order, key[order]
-    spans = blocks(size, _PAIR_BLOCK)
-    in_range = np.empty(size, dtype=np.uint16)
-
-    def label(a, b):
-        np.right_shift(key[a:b], width, out=in_range[a:b], casting="unsafe")
-
-    run_blocks(label, spans)
-    starts = np.concatenate([[0], np.cumsum(np.bincount(in_range, minlength=n_ranges))])
-    order = np.empty(size, dtype=np.int64)
-    ks = np.empty(size, dtype=np.int64)
-
-    def one(r):
-        sel = np.flatnonzero(in_range == r)
-        k = key.take(sel)
-        k -= np.int64(r << width)
-        k <<= bits
-        k |= sel
-        k.sort()
-        a, b = starts[r], starts[r + 1]
-        np.bitwise_and(k, np.int64((1 << bits) - 1), out=order[a:b])
-        np.right_shift(k, bits, out=ks[a:b])
-        ks[a:b] += np.int64(r << width)
-
-    for r in range(n_ranges):      # in this thread: a worker's arena would keep their memory
-        one(r)
-    return order, ks
-
-
-#: key ranges beyond which :func:`sort_keys` falls back on a stable argsort
-_MAX_RANGES = 64
-
-
-def _packed_sort(key, bits):
-    """:func:`sort_keys` when ``key << bits`` fits in 63 bits (in place)."""
-    key <<= bits
-    key |= np.arange(key.size, dtype=np.int64)
-    key.sort()
-    order = key & np.int64((1 << bits) - 1)
-    key >>= bits
-    return order, key
 
 
 def corner_fans(F, twin, U, W, vertices, n_vertices):

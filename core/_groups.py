@@ -10,6 +10,12 @@ hash table, 10-75x slower on large arrays of keys.
 
 import numpy as np
 
+from ._parallel import blocks, run_blocks
+
+#: key ranges beyond which :func:`sort_keys` falls back on a stable argsort
+_MAX_RANGES = 64
+#: keys per block of :func:`sort_keys`' range labels on the worker threads
+_LABEL_BLOCK = 1 << 16
 #: :func:`member_of` takes a bool table over ``among``'s range when it is at most this
 #: many times the two arrays' sizes (``np.isin``'s rule)
 TABLE_SPAN = 6
@@ -105,21 +111,75 @@ def group_argmin(values, counts):
 
 def stable_argsort(x):
     """``np.argsort(x, kind="stable")`` for non-negative integers ``x``
-    (k,), about 3x faster: the keys are made distinct with their position
-    and sorted with the default sort (plain stable sort where they would
-    overflow). The faces around the vertices of a 1.1M-face scan: 190 ->
-    77 ms.
+    (k,): the order of :func:`sort_keys` (the keys packed with their
+    position and sorted by value, 3-4x faster: the faces around the
+    vertices of a 1.1M-face scan, 3.3M keys, 22 against 97 ms).
 
     Examples
     --------
     >>> stable_argsort(np.array([2, 0, 2, 1, 0])).tolist()
     [1, 4, 3, 0, 2]
     """
-    k = x.size
-    if k == 0 or int(x.max()) >= (1 << 62) // k:
-        return np.argsort(x, kind="stable")
-    # (in int64: int32 keys times k overflowed in their own type)
-    return np.argsort(x.astype(np.int64) * k + np.arange(k))
+    x = np.asarray(x)
+    if x.size == 0:
+        return np.zeros(0, dtype=np.int64)
+    return sort_keys(x.astype(np.int64), int(x.max()) + 1)[0]
+
+
+def sort_keys(key, bound):
+    """``order = np.argsort(key, kind="stable")`` and ``key[order]`` for keys
+    in ``[0, bound)``, from plain sorts of ``key << bits | index`` (unique
+    values: far faster than a stable argsort, and the same result).
+
+    Keys too wide to pack with their index are sorted range by range: the
+    ranges of ``2**(63 - bits)`` keys, each packed relative to its start.
+    ``key`` (int64) is overwritten.
+    """
+    size = key.size
+    bits = max(int(size - 1).bit_length(), 1)
+    if bound <= 1 << (63 - bits):
+        return _packed_sort(key, bits)
+    width = 63 - bits
+    n_ranges = int((bound - 1) >> width) + 1
+    if n_ranges > _MAX_RANGES:
+        order = np.argsort(key, kind="stable")
+        return order, key[order]
+    spans = blocks(size, _LABEL_BLOCK)
+    in_range = np.empty(size, dtype=np.uint16)
+
+    def label(a, b):
+        np.right_shift(key[a:b], width, out=in_range[a:b], casting="unsafe")
+
+    run_blocks(label, spans)
+    starts = np.concatenate([[0], np.cumsum(np.bincount(in_range, minlength=n_ranges))])
+    order = np.empty(size, dtype=np.int64)
+    ks = np.empty(size, dtype=np.int64)
+
+    def one(r):
+        sel = np.flatnonzero(in_range == r)
+        k = key.take(sel)
+        k -= np.int64(r << width)
+        k <<= bits
+        k |= sel
+        k.sort()
+        a, b = starts[r], starts[r + 1]
+        np.bitwise_and(k, np.int64((1 << bits) - 1), out=order[a:b])
+        np.right_shift(k, bits, out=ks[a:b])
+        ks[a:b] += np.int64(r << width)
+
+    for r in range(n_ranges):      # in this thread: a worker's arena would keep their memory
+        one(r)
+    return order, ks
+
+
+def _packed_sort(key, bits):
+    """:func:`sort_keys` when ``key << bits`` fits in 63 bits (in place)."""
+    key <<= bits
+    key |= np.arange(key.size, dtype=np.int64)
+    key.sort()
+    order = key & np.int64((1 << bits) - 1)
+    key >>= bits
+    return order, key
 
 
 def sorted_unique(x):

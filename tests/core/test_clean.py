@@ -251,7 +251,7 @@ def test_edge_representatives_are_one_half_edge_per_edge_in_any_slicing(step):
                                          (7, 2 ** 62), (3000, 2 ** 55), (40000, 2 ** 50),  # ranges
                                          (40000, 2 ** 62)])                 # too many: argsort
 def test_sort_keys_is_the_stable_argsort_packed_or_split_into_key_ranges(size, bound):
-    from core._clean import sort_keys
+    from core._groups import sort_keys
     rng = np.random.default_rng(size)
     key = rng.integers(0, bound, size, dtype=np.int64)
     key[::3] = key[0]                                  # long runs of one key: ties by index
