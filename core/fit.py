@@ -117,7 +117,9 @@ def fit_cage(V_dense, F_dense, V_cage, F_cage, *, levels=2, scheme="butterfly", 
         slide, e.g. an open patch drifting off the scan) is undone and the
         fit stops there, so ``k <= iterations`` steps are kept and the
         distance record never rises: the cage returned is never farther
-        than the one given.
+        than the one given. A fit that reaches its fixed point (a solve
+        gives the cage back unchanged) stops there, its records filled in as
+        the remaining iterations would have repeated them.
     smoothness : float
         Weight (>= 0, unit-free) of the Laplacian of the cage's displacement,
         relative to the mean-squared-distance data terms.
@@ -172,17 +174,23 @@ def fit_cage(V_dense, F_dense, V_cage, F_cage, *, levels=2, scheme="butterfly", 
                  samples=samples, seed=seed, symmetry=symmetry, iterations=iterations)
     X, m = pb.X0, _match(pb, pb.X0)
     f2d, d2f, cg_its = [m.fine_to_dense], [m.dense_to_fine], []
-    cancelled = False
+    cancelled, matched_at = False, None     # (the reach m was matched with)
     for it in range(int(iterations)):
         X_new, n_cg = _solve(pb, m, X, cg_rtol, cg_max_iterations)
         if progress is not None and stops(progress((it + 1) / (int(iterations) + 1))):
             X, cancelled = X_new, True
             cg_its.append(n_cg)
             break
+        if _fixed_point(X, X_new, matched_at, m):
+            left = int(iterations) - it      # (each would repeat this one, bit for bit)
+            f2d += [m.fine_to_dense] * left
+            d2f += [m.dense_to_fine] * left
+            cg_its += [n_cg] * left
+            break
         m_new = _match(pb, X_new, reach=m.reach)
         if not m_new.mean <= m.mean:   # a step away from the surface (or NaN): undone, and
             break                      # the next would be the same (same correspondences)
-        X, m = X_new, m_new
+        X, m, matched_at = X_new, m_new, m.reach
         f2d.append(m.fine_to_dense)
         d2f.append(m.dense_to_fine)
         cg_its.append(n_cg)
@@ -192,6 +200,19 @@ def fit_cage(V_dense, F_dense, V_cage, F_cage, *, levels=2, scheme="butterfly", 
     V = pb.start if X is pb.X0 else X + pb.centre
     return FitResult(V, 0.5 * (f2d + d2f), f2d, d2f, np.array(cg_its, dtype=np.int64),
                      bbox_diagonal(pb.V_dense), cancelled)
+
+
+def _fixed_point(X, X_new, matched_at, m):
+    """Whether the fit has reached a fixed point: the solve gave ``X`` back
+    bit for bit (``X_new``; a fit that has converged, as on a CAD part whose
+    faces the cage's subdivision already lies on: its solves take no
+    conjugate-gradient step), and the correspondences ``m`` of ``X`` were
+    matched with the reach they give the next match (``matched_at``): that
+    match would then find ``m`` again, and every later iteration repeat this
+    one (the same solve, the same cage). A 10k-face CAD cylinder's fit to a
+    2,000-face cage took 9 matches of 0.5 s each, the last 7 of them
+    repeats."""
+    return matched_at is not None and matched_at == m.reach and X_new.tobytes() == X.tobytes()
 
 
 class _Problem(NamedTuple):

@@ -119,6 +119,43 @@ def test_the_dense_index_cells_change_no_fit(monkeypatch):
     np.testing.assert_allclose(wide.mean_distance, plain.mean_distance, rtol=1e-12)
 
 
+@pytest.mark.parametrize("shape, faces, scheme", [("cube", 100, "loop"),
+                                                   ("cylinder", 800, "butterfly")])
+def test_a_fit_at_its_fixed_point_stops_with_the_result_of_every_iteration(monkeypatch, shape,
+                                                                          faces, scheme):
+    """Once a solve gives the cage back bit for bit and its correspondences
+    were matched with the reach they give the next match, every later
+    iteration repeats that one: the fit stops there, with the cage and the
+    records (distances and CG iterations, one per iteration asked for) of
+    the whole loop, bit for bit, in fewer matches (a CAD cylinder's fit
+    converges in a few steps; a cube's cage is already on the cube)."""
+    import core.fit as fit_module
+    from core.simplify import simplify
+    from tests.mesh_factory import cad_cylinder, cube
+    V, F = cube(8) if shape == "cube" else cad_cylinder(1000, height=1.0)
+    cage = simplify(V, F, target_faces=faces)
+    calls = []
+    match = fit_module._match
+
+    def counted(*args, **kwargs):
+        calls.append(1)
+        return match(*args, **kwargs)
+    monkeypatch.setattr(fit_module, "_match", counted)
+
+    def fit():
+        calls.clear()
+        return fit_cage(V, F, cage.V, cage.F, levels=2, scheme=scheme, iterations=8,
+                        creases=cage.feature_edges)
+    short = fit()
+    n_short = len(calls)
+    monkeypatch.setattr(fit_module, "_fixed_point", lambda *args: False)
+    whole = fit()
+    assert len(calls) == 9 and n_short <= 6
+    assert short.cg_iterations.shape == (8,) and short.cg_iterations[-1] == 0
+    for a, b in zip(short, whole):
+        np.testing.assert_array_equal(a, b)
+
+
 def test_fit_recovers_a_cage_whose_subdivision_is_the_dense_mesh():
     Vc, Fc = torus(10, 6)
     op = subdivision_operator(Fc, Vc.shape[0], levels=2)
