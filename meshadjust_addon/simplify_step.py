@@ -16,7 +16,7 @@ from .. import core
 from . import cage_steps, mesh_io, names, results, settings, store
 from .cage_steps import (CageJob, auto_levels, edit_levels, fit_levels, read_source,
                          transform_problem)
-from .report import Report, user_cause
+from .report import Report, percent, user_cause
 from .rollback import all_or_nothing
 
 CREASE = store.CREASE
@@ -392,7 +392,8 @@ def _summary(job):
     if job.distance is not None:
         size = max(job.distance.diagonal, 1e-300)      # (of what the cage stands for)
         dev = 100.0 * job.distance.hausdorff / size
-        msg += f", max deviation {dev:.2f}% of size (mean {100.0 * job.distance.mean / size:.3f}%)"
+        msg += (f", max deviation {percent(job.distance.hausdorff / size)} of size "
+                f"(mean {percent(job.distance.mean / size)})")
     if p.symmetry:
         msg += f", mirror-symmetric in {p.symmetry}"
     msg += f", {job.seconds:.1f} s"
@@ -405,7 +406,7 @@ def _summary(job):
     if job.fit is not None:
         d = job.fit.mean_distance
         msg += (f"; fitted: mean distance of the refined cage "
-                f"{100 * d[0] / job.fit.diagonal:.3f}% -> {100 * d[-1] / job.fit.diagonal:.3f}%")
+                f"{percent(d[0] / job.fit.diagonal)} -> {percent(d[-1] / job.fit.diagonal)}")
         if fit_levels(job.levels) < job.levels:
             msg += f" (at {fit_levels(job.levels)} levels)"
     if job.fit_error:
