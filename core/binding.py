@@ -1387,15 +1387,7 @@ def _deform_rows(binding, P, N, hit, out, origin, handed=1.0):
     operations of :func:`_frames_t` in the same order, so it is bit for bit
     what a full deform gives on the same fine positions and normals."""
     idx = binding._cache["incremental"]
-    # per face: its first corner, edges, their size and corner normals, as _frames_t takes them
-    Fh = np.take(idx["corners_t"], hit.faces, axis=1)
-    A = np.take(P, Fh[0], axis=1)
-    E1 = np.take(P, Fh[1], axis=1)
-    E1 -= A
-    E2 = np.take(P, Fh[2], axis=1)
-    E2 -= A
-    size_f = _edges_size(E1, E2)
-    Nk = [np.take(N, Fh[k], axis=1) for k in range(3)]
+    per_face = _face_rows(idx, P, N, hit.faces)
     count = idx["dense_count"][hit.faces]
     end = np.cumsum(count)
     # blocks of whole faces, about _ROW_BLOCK rows each, and from _THREADED_ROWS
@@ -1403,7 +1395,7 @@ def _deform_rows(binding, P, N, hit, out, origin, handed=1.0):
     threads = int(end[-1]) >= _THREADED_ROWS
     size = min(_ROW_BLOCK, -(-int(end[-1]) // WORKERS)) if threads else _ROW_BLOCK
     cuts = sorted_unique(np.concatenate([[0], np.searchsorted(
-        end, np.arange(size, int(end[-1]), size)) + 1, [Fh.shape[1]]]))
+        end, np.arange(size, int(end[-1]), size)) + 1, [per_face.shape[1]]]))
     at = 3 * hit.rows                 # row starts in the flat (C-contiguous) out
     flat = out.reshape(-1)
     moved_origin = bool(origin.any())
@@ -1421,26 +1413,41 @@ def _deform_rows(binding, P, N, hit, out, origin, handed=1.0):
             offsets = np.take(idx["offset_by_face"], runs, axis=1, mode="wrap")
             if kept.keep:
                 kept[f0] = b0, b1, b2, offsets
-        point = np.repeat(A[:, f0:f1], c, axis=1)
-        e1 = np.repeat(E1[:, f0:f1], c, axis=1)
-        e2 = np.repeat(E2[:, f0:f1], c, axis=1)
+        # each face's rows repeated over its dense rows: one gather (np.repeat holds the
+        # GIL, and seven of them a block kept the two worker threads waiting on each other)
+        G = np.take(per_face, np.repeat(np.arange(f0, f1), c), axis=1, mode="wrap")
+        point, e1, e2, normal = G[0:3], G[3:6], G[6:9], G[9:12]
         tmp = np.multiply(b1, e1)     # from here the operations of _frames_t
         point += tmp
         np.multiply(b2, e2, out=tmp)
         point += tmp
-        normal = np.repeat(Nk[0][:, f0:f1], c, axis=1)
         normal *= b0
-        np.multiply(np.repeat(Nk[1][:, f0:f1], c, axis=1), b1, out=tmp)
+        np.multiply(G[12:15], b1, out=tmp)
         normal += tmp
-        np.multiply(np.repeat(Nk[2][:, f0:f1], c, axis=1), b2, out=tmp)
+        np.multiply(G[15:18], b2, out=tmp)
         normal += tmp
-        X = _compose_t(offsets, *_frames_finish(point, e1, e2, normal, tmp,
-                                                np.repeat(size_f[f0:f1], c)), handed)
+        X = _compose_t(offsets, *_frames_finish(point, e1, e2, normal, tmp, G[18]), handed)
         if moved_origin:
             X += origin[:, None]
         for d in range(3):            # a coordinate at a time: no (r,3) copy to scatter (indexed
             flat[d:][at[s:e]] = X[d]  # assignment to an offset view: half np.put's time)
     run_each(block, list(zip(cuts[:-1].tolist(), cuts[1:].tolist())), threads=threads)
+
+
+def _face_rows(idx, P, N, faces):
+    """Per fine face of ``faces``, as :func:`_frames_t` takes them, the rows
+    (19, f) of :func:`_deform_rows`: its first corner (0:3), edges (3:6, 6:9)
+    and corner normals (9:12, 12:15, 15:18) from the fine positions and
+    normals ``P``, ``N`` (3, n_fine), and the longer edge's length (18)."""
+    Fh = np.take(idx["corners_t"], faces, axis=1)
+    rows = np.empty((19, faces.shape[0]))
+    A = np.take(P, Fh[0], axis=1, out=rows[0:3])
+    np.subtract(np.take(P, Fh[1], axis=1), A, out=rows[3:6])
+    np.subtract(np.take(P, Fh[2], axis=1), A, out=rows[6:9])
+    for k in range(3):
+        np.take(N, Fh[k], axis=1, out=rows[9 + 3 * k:12 + 3 * k])
+    rows[18] = _edges_size(rows[3:6], rows[6:9])
+    return rows
 
 
 class _KeptRows(dict):
