@@ -11,7 +11,7 @@ from hypothesis import HealthCheck, given, settings, strategies as st
 import core.near_query as near_query
 import core.spatial as spatial
 from core.errors import InvalidArgumentError, InvalidMeshError
-from core.near_query import NearQuery
+from core.near_query import NearQuery, search_for
 from core.spatial import closest_pairs, triangle_rows
 from core.subdivide import subdivision_operator
 from tests.mesh_factory import (cad_cylinder, cube, icosphere, load_shared, regular_grid,
@@ -464,6 +464,33 @@ def test_a_mesh_of_needles_is_answered_by_an_index_of_the_default_cells():
         assert NearQuery(V, F)._t is not None
     for name in shared_mesh_names():
         assert NearQuery(*load_shared(name)[:2])._t is not None
+
+
+def test_a_mesh_of_needles_to_answer_many_queries_gets_cells_a_third_as_wide():
+    """Told it is to answer at least 3 queries a face (``search_for`` tells
+    it), a mesh of needles' index takes cells of a third of the default
+    extents: each query bounds about a third of the pairs. The distances
+    are the same, exact; fewer queries keep the default cells; ``queries``
+    is checked."""
+    V, F = cad_cylinder(500, height=1.0)
+    P = _near_points(V, F, np.random.default_rng(11), n=3 * F.shape[0])
+    few = NearQuery(V, F, queries=3 * F.shape[0] - 1)
+    many = NearQuery(V, F, queries=3 * F.shape[0])
+    assert few._t is None and many._t is None
+    assert few.index.tables.cell_size == spatial.TriangleIndex(V, F).tables.cell_size
+    assert many.index.tables.cell_size == spatial.TriangleIndex(
+        V, F, cell_factor=spatial.CELL_FACTOR / 3).tables.cell_size
+    assert many.index.tables.cell_size < 0.5 * few.index.tables.cell_size
+    assert search_for(V, F, P.shape[0]).index.tables.cell_size == many.index.tables.cell_size
+    assert search_for(V, F, F.shape[0]).index.tables.cell_size == few.index.tables.cell_size
+    exact = np.sqrt(_brute(V, F, P)[3])
+    np.testing.assert_array_equal(many.closest(P).distance, exact)
+    np.testing.assert_array_equal(few.closest(P).distance, exact)
+    V, F = icosphere(3)                    # (no needles: the tiles, whatever the count)
+    assert NearQuery(V, F, queries=10 ** 6)._t is not None
+    for bad in (-1, 2.5, "many", float("nan")):
+        with pytest.raises(InvalidArgumentError, match="queries"):
+            NearQuery(V, F, queries=bad)
 
 
 def test_a_far_outlier_does_not_make_the_bulk_one_window():
