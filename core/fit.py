@@ -42,7 +42,7 @@ from .mesh import (barycentric_gather, barycentric_scatter, bbox_diagonal, bound
 from .metrics import MAX_SAMPLES, sample_surface
 from .mirror import axis_index, mirror_partners, symmetrize
 from ._parallel import run_each
-from .near_query import search_for
+from .near_query import NEEDLE_CELL_FACTOR, needle_grid, search_for
 from .spatial import TriangleIndex
 from .subdivide import cage_operator, check_subdivision_args
 from .topology import check_not_soup, edge_map
@@ -202,6 +202,23 @@ def fit_cage(V_dense, F_dense, V_cage, F_cage, *, levels=2, scheme="butterfly", 
                      bbox_diagonal(pb.V_dense), cancelled)
 
 
+def _dense_index(V, F, fine_edge):
+    """The index of the dense surface ``(V, F)`` the fine vertices (mean edge
+    ``fine_edge``) are matched on, every iteration: cells at least
+    ``_DENSE_CELL_EDGES`` fine edges wide (at most ``_DENSE_CELL_MAX_SHARE`` of
+    the diagonal), or for a mesh of needles (a CAD part's fans and strips,
+    :func:`~.near_query.needle_grid`) cells of
+    :data:`~.near_query.NEEDLE_CELL_FACTOR` of its triangles' extents: wide
+    cells there hold hundreds of needles each, all bounded for every query
+    (a 10k-face CAD cylinder's fine vertices 0.27 -> 0.07 s a match, a 40k-face
+    one's 0.63 -> 0.19, for a second build of 0.18 and 0.36 s)."""
+    index = TriangleIndex(V, F, min_cell=min(_DENSE_CELL_EDGES * fine_edge,
+                                             _DENSE_CELL_MAX_SHARE * bbox_diagonal(V)))
+    if needle_grid(index.tables):
+        index = TriangleIndex(V, F, cell_factor=NEEDLE_CELL_FACTOR)
+    return index
+
+
 def _fixed_point(X, X_new, matched_at, m):
     """Whether the fit has reached a fixed point: the solve gave ``X`` back
     bit for bit (``X_new``; a fit that has converged, as on a CAD part whose
@@ -272,9 +289,7 @@ def _set_up(V_dense, F_dense, V_cage, F_cage, *, levels, scheme, creases, smooth
     samples = check_number(samples, where="fit_cage", name="samples", lo=1, hi=MAX_SAMPLES,
                            integer=True)
     sampled = sample_surface(V_dense, dense.F, samples, seed=check_seed(seed, where="fit_cage"))
-    cell = min(_DENSE_CELL_EDGES * _mean_edge(op.apply(V_cage), op.F_fine),
-               _DENSE_CELL_MAX_SHARE * bbox_diagonal(V_dense))
-    index = TriangleIndex(V_dense, dense.F, min_cell=cell)
+    index = _dense_index(V_dense, dense.F, _mean_edge(op.apply(V_cage), op.F_fine))
     N_dense = vertex_normals(V_dense, dense.F)
     return _Problem(op, V_dense, dense.F, N_dense, index,
                     np.asarray(sampled.points, dtype=np.float64),

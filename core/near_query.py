@@ -53,7 +53,7 @@ order or the thread), so the answer is the same for any block size and
 thread count. Points whose ball around the probe leaves the 3x3x3 block of
 cells around their own cell (far from the surface), or that have no
 non-empty cell in that block, are answered by ``TriangleIndex.closest``, and
-so is every point near a mesh of needles (``_needles``: a CAD part's fans and
+so is every point near a mesh of needles (:func:`needle_grid`: a CAD part's fans and
 strips pass the tiles' bounds and are evaluated exactly by the hundred).
 """
 
@@ -71,7 +71,8 @@ from .spatial import (CELL_FACTOR, CROWDED_CELL, PRUNE_SLACK, BestPairs, Triangl
 from .pages import plain_pages
 from ._parallel import run_each
 
-__all__ = ["NearQuery", "cell_for_reach", "search_for", "search_kind"]
+__all__ = ["NEEDLE_CELL_FACTOR", "NearQuery", "cell_for_reach", "needle_grid", "search_for",
+           "search_kind"]
 
 #: points per block (float32 temporaries of a few MiB; large blocks mean fewer NumPy
 #: calls, each a GIL hand-over when two threads query at once: the bind's 1M-point
@@ -123,7 +124,7 @@ _NEEDLES_PER_FACE = 3.0
 _NEEDLES_CELL = 64
 
 #: ... and when it is to answer at least this many queries a face, its index's cells are
-#: ``_NEEDLE_CELL_FACTOR`` mean triangle extents (a third of the default): a needle crosses
+#: ``NEEDLE_CELL_FACTOR`` mean triangle extents (a third of the default): a needle crosses
 #: three times the cells, a cell holds a third of the needles, and each query bounds a
 #: third of the pairs. 60k points near a 10k-face CAD cylinder (a fan of 2,500 needles
 #: each cap) 0.72 -> 0.46 s with the build, near its 2,000-face cage 0.38 -> 0.17; a
@@ -131,7 +132,7 @@ _NEEDLES_CELL = 64
 #: not pay (5,000 points near the 40k faces 0.38 -> 0.49 s). The distances are the same,
 #: exact; among exactly equidistant faces (a query at a vertex) another may be named
 _NEEDLE_QUERIES = 3
-_NEEDLE_CELL_FACTOR = CELL_FACTOR / 3
+NEEDLE_CELL_FACTOR = CELL_FACTOR / 3
 
 #: a point with more pairs than this left within its bound after its first one
 #: evaluates the one with the nearest centroid next (:func:`_crowded_next`)
@@ -259,10 +260,10 @@ class NearQuery:
                                    integer=True)
         self.index = TriangleIndex(V, F, cell_factor=_CELL_FACTOR, min_cell=cell_for_reach(reach))
         self._t = None
-        if _needles(self.index.tables):     # (the index's default cells suit it better)
+        if needle_grid(self.index.tables):  # (the index's default cells suit it better)
             many = queries is not None and queries >= _NEEDLE_QUERIES * self.index.F.shape[0]
             self.index = TriangleIndex(V, F, min_cell=cell_for_reach(reach),
-                                       cell_factor=_NEEDLE_CELL_FACTOR if many else CELL_FACTOR)
+                                       cell_factor=NEEDLE_CELL_FACTOR if many else CELL_FACTOR)
         else:
             self._t = _build_tables(self.index.tables)
         self._index_cell = _INDEX_CELL * self.index.cell_growth ** 2
@@ -290,7 +291,7 @@ class NearQuery:
         """
         P = _check_points(P)
         T = self._t
-        if T is None:                           # (a mesh of needles: _needles)
+        if T is None:                           # (a mesh of needles: needle_grid)
             return self.index.closest(P)
         q = P.shape[0]
         cell3 = np.clip(np.floor((P - T.lo) / T.h), 0, T.dims - 1).astype(np.int64)
@@ -312,7 +313,7 @@ class NearQuery:
         return result
 
 
-def _needles(tables):
+def needle_grid(tables):
     """Whether the index's grid ``tables`` are those of a mesh of needles
     (``_NEEDLES_PER_FACE``, ``_NEEDLES_CELL``)."""
     count = np.diff(tables.cell_start)

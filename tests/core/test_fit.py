@@ -156,6 +156,39 @@ def test_a_fit_at_its_fixed_point_stops_with_the_result_of_every_iteration(monke
         np.testing.assert_array_equal(a, b)
 
 
+def test_a_dense_mesh_of_needles_is_matched_on_cells_a_third_as_wide(monkeypatch):
+    """A CAD cylinder (caps fans of needles, sides strips): its index with
+    the fit's cells (a fine edge wide) is a grid of needles, hundreds in a
+    cell; the fit matches on cells of NEEDLE_CELL_FACTOR extents instead.
+    The answers are exact either way: the same fit to rounding."""
+    import core.fit as fit_module
+    from core.near_query import NEEDLE_CELL_FACTOR, needle_grid
+    from core.simplify import simplify
+    from core.spatial import TriangleIndex
+    from tests.mesh_factory import cad_cylinder
+    V, F = cad_cylinder(1000, height=1.0)
+    cage = simplify(V, F, target_faces=400)
+    built = []
+
+    def recording(V, F, **kw):
+        index = TriangleIndex(V, F, **kw)
+        built.append((kw, index))
+        return index
+    monkeypatch.setattr(fit_module, "TriangleIndex", recording)
+    fine = fit_cage(V, F, cage.V, cage.F, levels=2, iterations=3, creases=cage.feature_edges)
+    (first, wide), (second, narrow) = built
+    assert needle_grid(wide.tables) and "min_cell" in first
+    assert second == {"cell_factor": NEEDLE_CELL_FACTOR}
+    assert narrow.tables.cell_size < 0.5 * wide.tables.cell_size
+    monkeypatch.setattr(fit_module, "needle_grid", lambda tables: False)
+    plain = fit_cage(V, F, cage.V, cage.F, levels=2, iterations=3, creases=cage.feature_edges)
+    assert len(built) == 3
+    np.testing.assert_allclose(fine.V, plain.V, rtol=0, atol=1e-12 * fine.diagonal)
+    np.testing.assert_allclose(fine.mean_distance, plain.mean_distance, rtol=1e-12)
+    Vb, Fb = torus(48, 24, bump=0.01)                 # (a smooth mesh: no needles)
+    assert not needle_grid(TriangleIndex(Vb, Fb).tables)
+
+
 def test_fit_recovers_a_cage_whose_subdivision_is_the_dense_mesh():
     Vc, Fc = torus(10, 6)
     op = subdivision_operator(Fc, Vc.shape[0], levels=2)
