@@ -72,8 +72,8 @@ from core.metrics import surface_distance  # noqa: E402
 from core.simplify import simplify  # noqa: E402
 from core.spatial import closest_points  # noqa: E402
 from core.subdivide import subdivision_operator  # noqa: E402
-from tests.mesh_factory import (BUMP, analytic_bend as bend, bumpy_tube, midpoint_split,  # noqa: E402
-                                 torus)
+from tests.mesh_factory import (BUMP, analytic_bend as bend, bumpy_tube, cad_cylinder,  # noqa: E402
+                                 midpoint_split, torus)
 from _bench import (blas_line, blender_object, empty_scene, evaluated_positions,  # noqa: E402
                     mesh_io)
 
@@ -267,14 +267,14 @@ def run_typical_binds(quick):
     return rows
 
 
-def run_fit(names):
-    """QEM cage of 2,000 faces, two butterfly levels: distance and volume before/after fit_cage."""
+def run_fit(names, built=()):
+    """QEM cage of 2,000 faces, two butterfly levels: distance and volume
+    before/after fit_cage, for the shared meshes ``names`` and the ``built``
+    (name, V, F) cases."""
     rows = []
-    for name in names:
-        path = os.path.join(SHARED, name)
-        if not os.path.exists(path):
-            continue
-        V, F = read_obj(path)
+    cases = [(name, *read_obj(os.path.join(SHARED, name))[:2]) for name in names
+             if os.path.exists(os.path.join(SHARED, name))]
+    for name, V, F in cases + list(built):
         cage = simplify(V, F, target_faces=2000)
         creases = cage.feature_edges if len(cage.feature_edges) else None
         t = time.perf_counter()
@@ -770,7 +770,10 @@ def _fit_section(quick):
     lines = []
     names = ["stanford-bunny.obj"] if quick else [
         "stanford-bunny.obj", "homer.obj", "rocker-arm.obj", "spot.obj"]
-    rows = run_fit(names)
+    # CAD parts: cylinders whose caps are fans of needles and sides strips of them
+    built = [] if quick else [(f"CAD cylinder, {4 * n // 1000}k faces",
+                               *cad_cylinder(n, height=1.0)) for n in (2500, 10000)]
+    rows = run_fit(names, built)
     if rows:
         lines += ["## fit_cage (QEM cage of 2,000 faces, two butterfly levels)", "",
                   "distances two-sided (Metro), % of the bounding-box diagonal; volume of the "
