@@ -66,8 +66,8 @@ from ._groups import member_of, ragged_entries, sorted_unique
 from ._parallel import blocks, run_blocks, run_each
 from .errors import InvalidMeshError
 from .mesh import (any_in_rows, bounding_box, check_count, check_mesh, check_number,
-                   check_vertex_mask, cross_rows, diagonal_length, face_normals, flat_faces,
-                   row_sums)
+                   check_vertex_mask, cross_rows, diagonal_length, face_areas, face_normals,
+                   flat_faces, row_sums)
 from .topology import connected_labels, edge_keys, face_components
 from .copies import coincident_copies, doubled_quads, pillow_layers, stacked_copies
 from .pages import plain_pages
@@ -388,7 +388,7 @@ def _drop_repeated_faces(w):
     """Of faces on the same three vertices keep one, or none (a
     double-sided sheet): :func:`_unique_faces`; of a quad triangulated both
     ways keep one way (:func:`~.copies.doubled_quads`)."""
-    keep, found = _unique_faces(w.F, w.twin, w.V.shape[0])
+    keep, found = _unique_faces(w.F, w.twin, w.V)
     w.counts.update(found)
     if not keep.all():
         w.keep(keep)
@@ -721,15 +721,17 @@ def _orientation_sign(F):
     return after_lo == mid
 
 
-def _unique_faces(F, twin, n):
-    """Faces to keep among those on the same three vertices: one of a set
-    with one orientation, none of a set with both (a double-sided sheet),
-    unless one side mends the surface (see :func:`_one_side_mends`) or
-    removing them would leave no face at all.
+def _unique_faces(F, twin, V):
+    """Faces to keep among those on the same three vertices (of the positions
+    ``V``): one of a set with one orientation, none of a set with both (a
+    double-sided sheet), unless one side mends the surface (see
+    :func:`_one_side_mends`) or removing them would leave less surface than
+    one side of them holds (:func:`_sheets_are_the_surface`).
 
     Such faces share all three edges, so they meet the same face across two
     edges or sit on a non-manifold edge: only those are compared by key.
     """
+    n = V.shape[0]
     keep = np.ones(F.shape[0], dtype=bool)
     found = {"n_duplicate_faces": 0, "n_double_sided_sheets": 0, "n_double_sided_faces": 0}
     if F.shape[0] == 0:
@@ -747,14 +749,26 @@ def _unique_faces(F, twin, n):
     sheet[sheet] = ~_one_side_mends(F, twin, n, ci[first[sheet]], size[sheet])
     drop = ci[size[group] > 1]
     keep[drop] = False
-    if sheet.any() and not keep.any():
-        sheet[:] = False                           # only sheets: keep one side of each
     keep[ci[first[~sheet & (size > 1)]]] = True
+    if sheet.any() and _sheets_are_the_surface(V, F, keep, ci[first[sheet]]):
+        keep[ci[first[sheet]]] = True
+        sheet[:] = False                           # keep one side of each
     found["n_double_sided_sheets"] = int(np.count_nonzero(sheet))
     found["n_double_sided_faces"] = int(size[sheet].sum())
     found["n_duplicate_faces"] = int(drop.size - found["n_double_sided_faces"]
                                      - np.count_nonzero(~sheet & (size > 1)))
     return keep, found
+
+
+def _sheets_are_the_surface(V, F, kept, sides):
+    """Whether the double-sided sheets of one side ``sides`` (faces) hold
+    more area than the faces ``kept`` (the rest, one face of each other
+    repeated set included): then they are the model (a thin flat part made
+    double-sided, its rim pinched, beside a speck: removing them left the
+    speck as the whole cage), not a fold on top of it, and keep one side."""
+    rest = np.flatnonzero(kept)
+    return rest.size == 0 or float(face_areas(V, F[sides]).sum()) > float(
+        face_areas(V, F[rest]).sum())
 
 
 def _may_repeat(twin, out):

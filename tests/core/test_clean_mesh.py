@@ -20,7 +20,7 @@ from core.clean import (BUDGET_DEBRIS_SHARE, DEBRIS_MAX_FACE_SHARE, DEBRIS_MAX_F
 from core.errors import InvalidArgumentError, InvalidMeshError
 from core.topology import manifold_report, topology_summary
 from tests.mesh_factory import (cyclic_rows, duplicated, icosphere, klein_bottle, load_shared,
-                                mobius_strip, pinched, random_winding, regular_grid, shared_mesh_names, torus, unwelded,
+                                mobius_strip, needle_cone, pinched, random_winding, regular_grid, shared_mesh_names, torus, unwelded,
                                 with_debris, with_far_speck, with_fins, with_pinholes, with_sheets)
 
 
@@ -262,6 +262,31 @@ def test_a_mesh_that_is_only_a_double_sided_sheet_keeps_one_side():
     r = clean_mesh(V, F)
     assert r.F.shape[0] == 2 and r.report.n_duplicate_faces == 2
     assert_manifold(r.V, r.F)
+
+
+def test_a_double_sided_part_beside_a_speck_keeps_one_side_not_the_speck():
+    """A flat disc modelled double-sided (a cone of height 0: its side lies
+    on its base), a few of its vertices pinched, and a speck far off: the
+    pinched sheets' sides no longer mend each other, and removing both left
+    the speck as the whole cage (6,001 faces -> 1). Sheets holding more area
+    than everything else are the model: one side stays, the speck goes."""
+    Vp, Fp = pinched(*needle_cone(500, height=0.0), k=3, seed=1)
+    Vs, Fs = with_far_speck(Vp, Fp, far=1e3)
+    r = clean_mesh(Vs, Fs)
+    assert r.report.n_double_sided_sheets == 0 and r.report.n_debris_components == 1
+    assert r.F.shape[0] == Fp.shape[0] // 2
+    area = core.face_areas(r.V, r.F).sum()
+    assert abs(area - core.face_areas(Vp, Fp).sum() / 2) < 1e-9 * area
+    assert_manifold(r.V, r.F)
+    c = core.simplify(Vs, Fs, target_faces=100)
+    assert c.F.shape[0] == 100 and np.ptp(c.V[:, :2], axis=0).min() > 1.9
+    # a double-sided pair folded onto a closed surface still goes (its area is the lesser)
+    V, F = icosphere(2)
+    a, b, c = F[0]
+    beside = F[np.any(F == b, axis=1) & np.any(F == c, axis=1)].ravel()
+    d = [v for v in beside if v not in (a, b, c)][0]
+    r = clean_mesh(V, np.concatenate([F, [[a, b, d], [a, d, b]]]))
+    assert r.report.n_double_sided_sheets == 1 and r.F.shape == F.shape
 
 
 def test_inconsistent_orientation_is_fixed_by_the_majority():
