@@ -20,8 +20,9 @@ from core.clean import (BUDGET_DEBRIS_SHARE, DEBRIS_MAX_FACE_SHARE, DEBRIS_MAX_F
 from core.errors import InvalidArgumentError, InvalidMeshError
 from core.topology import manifold_report, topology_summary
 from tests.mesh_factory import (cyclic_rows, duplicated, icosphere, klein_bottle, load_shared,
-                                mobius_strip, needle_cone, pinched, random_winding, regular_grid, shared_mesh_names, torus, unwelded,
-                                with_debris, with_far_speck, with_fins, with_pinholes, with_sheets)
+                                mobius_strip, needle_cone, pinched, random_winding, regular_grid,
+                                shared_mesh_names, torus, unwelded, with_debris, with_far_speck,
+                                with_fins, with_pinholes, with_sheets)
 
 
 def assert_manifold(V, F):
