@@ -31,7 +31,7 @@ from .mesh import (bbox_diagonal, check_mesh, enclosed_volume, face_areas, face_
 from .topology import EdgeMap, edge_map, euler_characteristic, manifold_report, topology_summary
 from .io_mesh import MeshFile, read_mesh, read_obj, read_smf, write_mesh, write_obj, write_smf
 from .spatial import ClosestPoints, TriangleIndex, closest_points
-from .metrics import DistanceFrom, SurfaceDistance, sample_surface, surface_distance
+from .metrics import DistanceFrom, SurfaceDistance, percent, sample_surface, surface_distance
 from .subdivide import SubdivisionOperator, SubdivisionResult, subdivide, subdivision_operator
 from .clean import CleanReport, CleanResult, clean_mesh
 from .simplify import SimplifyResult, simplify
@@ -48,7 +48,7 @@ __all__ = [
     "euler_characteristic", "read_obj", "write_obj", "read_smf", "write_smf", "read_mesh",
     "write_mesh", "MeshFile",
     "TriangleIndex", "ClosestPoints", "closest_points",
-    "surface_distance", "DistanceFrom", "SurfaceDistance", "sample_surface",
+    "surface_distance", "DistanceFrom", "SurfaceDistance", "sample_surface", "percent",
     "subdivide", "subdivision_operator", "SubdivisionOperator", "SubdivisionResult",
     "clean_mesh", "CleanResult", "CleanReport", "simplify", "SimplifyResult",
     "simplify_symmetric", "mirror_partners", "symmetrize", "fit_cage", "FitResult",

@@ -23,6 +23,8 @@ coordinates ``(1 - s, s (1 - r2), s r2)`` are uniform over the triangle.
 
 from typing import NamedTuple
 
+import math
+
 import numpy as np
 
 from .errors import InvalidArgumentError
@@ -32,7 +34,8 @@ from .near_query import cell_for_reach, search_for, search_kind
 from .spatial import TriangleIndex
 from .pages import plain_pages
 
-__all__ = ["DistanceFrom", "SurfaceSamples", "SurfaceDistance", "sample_surface", "surface_distance"]
+__all__ = ["DistanceFrom", "SurfaceSamples", "SurfaceDistance", "percent", "sample_surface",
+           "surface_distance"]
 
 #: most samples drawn on a surface (1.2 GB of points and their faces; more was a MemoryError
 #: of 74.5 GiB, or minutes of work, for a mistyped count)
@@ -92,6 +95,30 @@ class SurfaceDistance(NamedTuple):
     def rms_pct(self):
         """Two-sided RMS distance in % of A's bounding-box diagonal."""
         return _pct(self.rms, self.diagonal)
+
+
+#: :func:`percent` writes at most this many decimals (below, "under 0.000001%")
+_PERCENT_DECIMALS = 6
+
+
+def percent(share):
+    """``share`` (a fraction of a size, e.g. a distance over the diagonal) as
+    a percentage a reader can use: two decimals, or two significant digits
+    below 0.1% ("0.30%", "0.035%", "0.00080%": a CAD part's cage 8e-6 of its
+    size off read "0.00%"), "0%" for none, "under 0.000001%" below that.
+
+    >>> percent(0.0065), percent(3.5e-4), percent(8e-6)
+    ('0.65%', '0.035%', '0.00080%')
+    """
+    value = 100.0 * share
+    if value == 0:
+        return "0%"
+    if not math.isfinite(value):
+        return f"{value}%"
+    decimals = max(2, 1 - math.floor(math.log10(abs(value))))
+    if decimals > _PERCENT_DECIMALS:
+        return f"under {10.0 ** -_PERCENT_DECIMALS:.{_PERCENT_DECIMALS}f}%"
+    return f"{value:.{decimals}f}%"
 
 
 def _pct(value, diagonal):

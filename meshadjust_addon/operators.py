@@ -16,7 +16,6 @@ import bpy
 
 from .. import core
 from . import api, basis, results, settings, staleness, store
-from .report import percent
 
 USER_ERRORS = (core.MeshAdjustError,)
 
@@ -447,8 +446,8 @@ class MESHADJUST_OT_fit_cage(FitProps, _CageJobStep, bpy.types.Operator):
         fit = api.commit_fit(cage, self._job)
         self.give_back()
         d = fit.mean_distance
-        msg = (f"fitted '{cage.name}': mean distance {percent(d[0] / fit.diagonal)} -> "
-               f"{percent(d[-1] / fit.diagonal)} of size")
+        before, after = (core.percent(x / fit.diagonal) for x in (d[0], d[-1]))
+        msg = f"fitted '{cage.name}': mean distance {before} -> {after} of size"
         if self._job.binding is not None:
             msg += f"; re-bound '{cage.meshadjust.edited.name}'"
         elif cage.meshadjust.edited is not None:

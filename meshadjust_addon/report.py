@@ -1,8 +1,7 @@
 """What a step says: the :class:`Report` every step returns, and the
-sentences for a failure (:func:`user_cause`), a face count (:func:`about`)
-and a share of the object's size (:func:`percent`)."""
+sentences for a failure (:func:`user_cause`) and a face count (:func:`about`)
+(a share of the size: ``core.percent``)."""
 
-import math
 from dataclasses import dataclass, field
 
 from .. import core
@@ -51,23 +50,3 @@ def about(n):
     if n >= 999_500:
         return f"{n / 1e6:.1f}".removesuffix(".0") + "M"
     return f"{n / 1000:.0f}k" if n >= 10_000 else f"{n:,}"
-
-
-#: :func:`percent` writes at most this many decimals (below, "under 0.000001%")
-_PERCENT_DECIMALS = 6
-
-
-def percent(share):
-    """``share`` (a fraction of a size) as a percentage a reader can use: two
-    decimals, or two significant digits below 0.1% ("0.30%", "0.035%",
-    "0.00080%": a CAD part's cage 8e-6 of the size off read "0.00%"), "0%"
-    for none, "under 0.000001%" below that."""
-    value = 100.0 * share
-    if value == 0:
-        return "0%"
-    if not math.isfinite(value):
-        return f"{value}%"
-    decimals = max(2, 1 - math.floor(math.log10(abs(value))))
-    if decimals > _PERCENT_DECIMALS:
-        return f"under {10.0 ** -_PERCENT_DECIMALS:.{_PERCENT_DECIMALS}f}%"
-    return f"{value:.{decimals}f}%"

@@ -16,7 +16,7 @@ from .. import core
 from . import cage_steps, mesh_io, names, results, settings, store
 from .cage_steps import (CageJob, auto_levels, edit_levels, fit_levels, read_source,
                          transform_problem)
-from .report import Report, percent, user_cause
+from .report import Report, user_cause
 from .rollback import all_or_nothing
 
 CREASE = store.CREASE
@@ -392,8 +392,8 @@ def _summary(job):
     if job.distance is not None:
         size = max(job.distance.diagonal, 1e-300)      # (of what the cage stands for)
         dev = 100.0 * job.distance.hausdorff / size
-        msg += (f", max deviation {percent(job.distance.hausdorff / size)} of size "
-                f"(mean {percent(job.distance.mean / size)})")
+        msg += (f", max deviation {core.percent(job.distance.hausdorff / size)} of size "
+                f"(mean {core.percent(job.distance.mean / size)})")
     if p.symmetry:
         msg += f", mirror-symmetric in {p.symmetry}"
     msg += f", {job.seconds:.1f} s"
@@ -405,8 +405,8 @@ def _summary(job):
             warnings.append(target_note)
     if job.fit is not None:
         d = job.fit.mean_distance
-        msg += (f"; fitted: mean distance of the refined cage "
-                f"{percent(d[0] / job.fit.diagonal)} -> {percent(d[-1] / job.fit.diagonal)}")
+        before, after = (core.percent(x / job.fit.diagonal) for x in (d[0], d[-1]))
+        msg += f"; fitted: mean distance of the refined cage {before} -> {after}"
         if fit_levels(job.levels) < job.levels:
             msg += f" (at {fit_levels(job.levels)} levels)"
     if job.fit_error:

@@ -59,3 +59,24 @@ def test_a_missing_input_given_with_a_trailing_slash_keeps_its_name(tmp_path):
         f"scans: read failed: no such file: {tmp_path / 'scans'}")
     assert ball["name"] == "ball.obj" and ball["status"] == "ok"
     assert ball["outputs"] == [str(tmp_path / "out" / "ball_cage.obj")]
+
+
+def test_the_summary_table_says_a_small_deviation_with_its_digits():
+    """The table's deviation is said as the add-on says it (``core.percent``):
+    a CAD cage 8e-6 of the size off had read 0.000 in the column."""
+    import os
+    import sys
+    sys.path.insert(0, os.path.join(os.path.dirname(os.path.dirname(os.path.dirname(
+        os.path.abspath(__file__)))), "scripts"))
+    import meshadjust_batch
+    meshadjust_batch.checkout_package()
+    from meshadjust.cli import report
+    rows = report.summary_table([
+        {"name": "cad.stl", "status": "ok", "faces_in": 10_000, "faces_out": 2_000,
+         "deviation_pct": 0.00079, "seconds": 1.0},
+        {"name": "scan.ply", "status": "ok", "faces_in": 252_000, "faces_out": 1_500,
+         "deviation_pct": 0.65, "seconds": 2.0},
+        {"name": "soup.stl", "status": "warn", "warnings": ["a soup"], "deviation_pct": None}])
+    cells = [[c.strip() for c in line.split("|")[1:-1]] for line in rows.splitlines()[2:]]
+    assert [c[4] for c in cells] == ["0.00079%", "0.65%", ""]
+    assert rows.splitlines()[0].split("|")[5].strip() == "max deviation"

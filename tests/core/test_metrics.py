@@ -374,3 +374,14 @@ def test_the_reverse_side_takes_cells_for_its_distances_and_measures_the_same():
         assert tuple(got) == tuple(want)
         h, h0 = sized._searches[TriangleIndex]._h, plain._searches[TriangleIndex]._h
         assert (h > 1.2 * h0) if wider else (h == h0)
+
+
+def test_shares_of_the_size_keep_two_significant_digits():
+    """A CAD part's cage 8e-6 of its size off read "max deviation 0.00% of
+    size": small shares keep two significant digits, larger ones two
+    decimals (the add-on's and the batch CLI's reports)."""
+    from core import percent
+    assert [percent(x) for x in (0.0, 0.0065, 0.003, 3.5e-4, 8e-6, 1e-3, 0.12, 1.0)] == \
+        ["0%", "0.65%", "0.30%", "0.035%", "0.00080%", "0.10%", "12.00%", "100.00%"]
+    assert percent(-2.5e-5) == "-0.0025%" and percent(float("nan")) == "nan%"
+    assert percent(1e-12) == "under 0.000001%"
