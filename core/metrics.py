@@ -30,7 +30,7 @@ import numpy as np
 from .errors import InvalidArgumentError
 from .mesh import (bbox_diagonal, check_mask, check_mesh, check_number, check_seed, check_units,
                    mean_edge_length, row_norms, scaled_area_normals, used_vertices)
-from .near_query import cell_for_reach, search_for, search_kind
+from .near_query import NearQuery, cell_for_reach, search_for, search_kind
 from .spatial import TriangleIndex
 from .pages import plain_pages
 
@@ -360,15 +360,18 @@ class DistanceFrom:
 
     def _search(self, n_queries, reach):
         """``A``'s closest-point search for ``n_queries`` points (kept per
-        kind); a :class:`~.spatial.TriangleIndex` (fewer queries than faces)
-        with cells for queries ``reach`` away (the other side's mean distance)
-        when that is within ``_REACH_CELL_EDGES`` of ``A``'s mean edges (the
-        same distances either way)."""
+        kind, as :func:`~.near_query.search_for` makes it: a
+        :class:`~.near_query.NearQuery` told the first call's count, which
+        sizes a mesh of needles' cells); a :class:`~.spatial.TriangleIndex`
+        (fewer queries than faces) with cells for queries ``reach`` away (the
+        other side's mean distance) when that is within ``_REACH_CELL_EDGES``
+        of ``A``'s mean edges (the same distances either way)."""
         kind = search_kind(self.F.shape[0], n_queries)
-        if kind not in self._searches:
-            cell = cell_for_reach(reach) if kind is TriangleIndex else None
+        if kind is NearQuery and kind not in self._searches:
+            self._searches[kind] = NearQuery(self.V, self.F, queries=n_queries)
+        elif kind not in self._searches:
+            cell = cell_for_reach(reach)
             if cell and cell > _REACH_CELL_EDGES * mean_edge_length(self.V, self.F, 65536):
                 cell = None
-            self._searches[kind] = kind(self.V, self.F) if cell is None else \
-                TriangleIndex(self.V, self.F, min_cell=cell)
+            self._searches[kind] = TriangleIndex(self.V, self.F, min_cell=cell)
         return self._searches[kind]

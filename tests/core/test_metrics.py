@@ -376,6 +376,25 @@ def test_the_reverse_side_takes_cells_for_its_distances_and_measures_the_same():
         assert (h > 1.2 * h0) if wider else (h == h0)
 
 
+def test_both_sides_of_a_mesh_of_needles_say_how_many_queries_they_answer():
+    """A CAD cylinder's caps are fans of needles: the search of either side
+    answering at least 3 queries a face takes the needles' finer cells
+    (``NearQuery(queries=...)``); the reverse side, kept by the
+    DistanceFrom, had been made without its count. The same distances."""
+    from core.near_query import NEEDLE_CELL_FACTOR
+    from tests.mesh_factory import cad_cylinder
+    V, F = cad_cylinder(500, height=1.0)
+    cage = core.simplify(V, F, target_faces=200)
+    source = DistanceFrom(V, F)
+    got = source.to(cage.V, cage.F, samples=4 * F.shape[0])
+    reverse = source._searches[NearQuery]
+    assert reverse._t is None and reverse.index.tables.cell_size == TriangleIndex(
+        V, F, cell_factor=NEEDLE_CELL_FACTOR).tables.cell_size
+    plain = DistanceFrom(V, F)
+    plain._searches[NearQuery] = NearQuery(V, F)
+    assert tuple(got) == tuple(plain.to(cage.V, cage.F, samples=4 * F.shape[0]))
+
+
 def test_shares_of_the_size_keep_two_significant_digits():
     """A CAD part's cage 8e-6 of its size off read "max deviation 0.00% of
     size": small shares keep two significant digits, larger ones two
