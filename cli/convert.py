@@ -241,13 +241,14 @@ def _check_symmetry(res, opts):
             f"out --symmetry")
 
 
-def _fitted(run, V, F, res, opts, creases):
-    """The cage's positions: fitted with ``--fit`` (the fit reported)."""
+def _fitted(run, res, opts, creases):
+    """The cage's positions: fitted with ``--fit`` to the input as simplify
+    cleaned it (the fit reported)."""
     if not opts.fit:
         return res.V
     levels = min(opts.levels, core.MAX_FIT_LEVELS)        # (more cost, gain nothing)
-    fit = run.step("fit", core.fit_cage, V, F, res.V, res.F, levels=levels,
-                   scheme=opts.scheme, creases=creases, symmetry=opts.symmetry)
+    fit = run.step("fit", core.fit_cage, *res.cleaned, res.V, res.F, levels=levels,
+                   scheme=opts.scheme, creases=creases, symmetry=opts.symmetry, clean=False)
     d = fit.mean_distance
     run.r["fit"] = {"mean_before_pct": 100 * d[0] / fit.diagonal,
                     "mean_after_pct": 100 * d[-1] / fit.diagonal, "levels": levels}
@@ -311,7 +312,7 @@ def _results(run, V, F, res, opts):
     try:
         if opts.symmetry:
             run.step("symmetry", _check_symmetry, res, opts)
-        V_cage = _fitted(run, V, F, res, opts, creases)
+        V_cage = _fitted(run, res, opts, creases)
     except StepFailed as exc:
         return [(task["cage"], V_cage, res.F)], exc
     if res.n_input_pieces is None:

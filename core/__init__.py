@@ -33,7 +33,7 @@ from .io_mesh import MeshFile, read_mesh, read_obj, read_smf, write_mesh, write_
 from .spatial import ClosestPoints, TriangleIndex, closest_points
 from .metrics import DistanceFrom, SurfaceDistance, percent, sample_surface, surface_distance
 from .subdivide import SubdivisionOperator, SubdivisionResult, subdivide, subdivision_operator
-from .clean import CleanReport, CleanResult, clean_mesh
+from .clean import CleanedInput, CleanReport, CleanResult, clean_mesh
 from .simplify import SimplifyResult, simplify
 from .mirror import mirror_partners, symmetrize
 from .symmetry import simplify_symmetric
@@ -50,7 +50,7 @@ __all__ = [
     "TriangleIndex", "ClosestPoints", "closest_points",
     "surface_distance", "DistanceFrom", "SurfaceDistance", "sample_surface", "percent",
     "subdivide", "subdivision_operator", "SubdivisionOperator", "SubdivisionResult",
-    "clean_mesh", "CleanResult", "CleanReport", "simplify", "SimplifyResult",
+    "clean_mesh", "CleanResult", "CleanReport", "simplify", "SimplifyResult", "CleanedInput",
     "simplify_symmetric", "mirror_partners", "symmetrize", "fit_cage", "FitResult",
     "MAX_FIT_LEVELS",
     "bind", "bind_refined", "deform", "refine", "Binding", "RefineResult", "SEED_LEVELS",

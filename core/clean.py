@@ -201,6 +201,15 @@ class CleanResult(NamedTuple):
     report: CleanReport
 
 
+class CleanedInput(NamedTuple):
+    """A mesh as a cleaning left it: ``simplify``'s input
+    (:attr:`~.simplify.SimplifyResult.cleaned`), which ``fit_cage`` takes
+    with ``clean=False``."""
+
+    V: np.ndarray   #: (n,3) float64, in the input's units
+    F: np.ndarray   #: (m,3) int64
+
+
 @plain_pages
 def clean_mesh(V, F, *, weld_distance=None, min_component_area=MIN_COMPONENT_AREA,
                face_budget=None, protected=None):

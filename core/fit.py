@@ -34,7 +34,7 @@ from typing import NamedTuple
 import numpy as np
 
 from .cg import conjugate_gradient
-from .clean import clean_mesh
+from .clean import CleanedInput, clean_mesh
 from .errors import InvalidArgumentError, InvalidMeshError
 from .mesh import (barycentric_gather, barycentric_scatter, bbox_diagonal, bounding_box,
                    check_mesh, check_number, check_seed, check_units, cross_rows, face_areas,
@@ -98,7 +98,7 @@ class FitResult(NamedTuple):
 def fit_cage(V_dense, F_dense, V_cage, F_cage, *, levels=2, scheme="butterfly", creases=None,
              iterations=8, smoothness=0.05, point_to_point=0.1, laplacian="uniform",
              samples=None, seed=0, symmetry=None,
-             cg_rtol=1e-6, cg_max_iterations=300, progress=None):
+             cg_rtol=1e-6, cg_max_iterations=300, progress=None, clean=True):
     """Cage positions whose subdivision surface best matches a dense surface.
 
     Parameters
@@ -148,6 +148,13 @@ def fit_cage(V_dense, F_dense, V_cage, F_cage, *, levels=2, scheme="butterfly", 
         Called with the fraction done (0..1) after each iteration; returning
         False stops the fit (``FitResult.cancelled``; the distance records
         then end at the last completed iteration).
+    clean : bool
+        Clean the dense mesh first (the default). False takes it as it is:
+        for a mesh already clean, such as ``simplify``'s
+        :attr:`~.simplify.SimplifyResult.cleaned` (``fit_cage(*r.cleaned,
+        r.V, r.F, clean=False)``: the surface the collapse saw, not cleaned
+        twice). Seams left unwelded then split the normals, and double-sided
+        sheets cancel theirs.
 
     Returns
     -------
@@ -171,7 +178,8 @@ def fit_cage(V_dense, F_dense, V_cage, F_cage, *, levels=2, scheme="butterfly", 
     check_subdivision_args(levels, scheme, "fit_cage")
     pb = _set_up(V_dense, F_dense, V_cage, F_cage, levels=levels, scheme=scheme, creases=creases,
                  smoothness=smoothness, point_to_point=point_to_point, laplacian=laplacian,
-                 samples=samples, seed=seed, symmetry=symmetry, iterations=iterations)
+                 samples=samples, seed=seed, symmetry=symmetry, iterations=iterations,
+                 clean=clean)
     X, m = pb.X0, _match(pb, pb.X0)
     f2d, d2f, cg_its = [m.fine_to_dense], [m.dense_to_fine], []
     cancelled, matched_at = False, None     # (the reach m was matched with)
@@ -253,10 +261,11 @@ class _Problem(NamedTuple):
 
 
 def _set_up(V_dense, F_dense, V_cage, F_cage, *, levels, scheme, creases, smoothness,
-            point_to_point, laplacian, samples, seed, symmetry, iterations):
+            point_to_point, laplacian, samples, seed, symmetry, iterations, clean=True):
     """Check the arguments and build the :class:`_Problem`: the dense surface
     cleaned as ``simplify`` saw it (welded, so vertex normals cross seams;
-    without double-sided sheets, whose normals cancel, or debris), everything
+    without double-sided sheets, whose normals cancel, or debris; with
+    ``clean`` False, as given), everything
     moved to the dense bounding-box centre (the result then does not depend
     on where the mesh sits; the CG stopping rule is relative), its samples
     and index, and the cage's operator and Laplacian."""
@@ -267,8 +276,10 @@ def _set_up(V_dense, F_dense, V_cage, F_cage, *, levels, scheme, creases, smooth
     check_subdivision_args(levels, scheme, "fit_cage", F_cage.shape[0])
     check_units(V_dense, where="fit_cage", name="V_dense")
     check_units(V_cage, where="fit_cage", name="V_cage")
-    dense = clean_mesh(V_dense, F_dense)
-    if dense.F.shape[0] == 0:
+    if not isinstance(clean, (bool, np.bool_)):
+        raise InvalidArgumentError(f"fit_cage: clean must be True or False, not {clean!r}")
+    dense = clean_mesh(V_dense, F_dense) if clean else CleanedInput(V_dense, F_dense)
+    if clean and dense.F.shape[0] == 0:       # (check_mesh refused a mesh without faces)
         raise InvalidMeshError(f"fit_cage: nothing of the dense mesh is left after cleaning "
                                f"({dense.report.summary()})")
     check_not_soup(F_cage, V_cage.shape[0], dense.F, dense.V.shape[0], "fit_cage")

@@ -60,7 +60,8 @@ from ._parallel import blocks, run_blocks, run_each
 from ._relax import close_smallest_hole, close_triangular_holes, drop_stuck_components
 from ._relocate import relocate, segment_triangles
 from ._touch_up import flip_flat_faces, touch_up
-from .clean import MIN_COMPONENT_AREA, CleanReport, bulk_box, check_span, clean_mesh
+from .clean import (MIN_COMPONENT_AREA, CleanedInput, CleanReport, bulk_box, check_span,
+                    clean_mesh)
 from .errors import InvalidArgumentError, InvalidMeshError, MeshAdjustError
 from .mesh import (UNITS, all_in_rows, area_normals_rows, bbox_diagonal, bounding_box, check_flag,
                    check_mesh, check_number, check_vertex_mask, diagonal_length, dot_columns,
@@ -197,6 +198,13 @@ class SimplifyResult:
         mirrored negative side, from the vertices of each to the other); the
         cage lies between the two sides, so above
         :data:`ASYMMETRY_NOTE` the message says so (:attr:`asymmetry_note`).
+    cleaned : CleanedInput or None, the input as the cleaning left it (before
+        any pinhole caps): the surface the cage stands for, in the input's
+        units. ``fit_cage(*r.cleaned, r.V, r.F, clean=False)`` fits the cage
+        to it without cleaning the input again (0.4 s of a 1M-face scan's
+        fit), and to the same surface the collapse saw (the debris dropped for
+        the target too). It holds the cleaned arrays (about the input's size)
+        while the result lives.
     locked : (n_cage,) bool or None, with ``locked``: the cage vertices that
         stand for a locked input vertex, each where that vertex is (with
         ``symmetry``: those its half locked and their mirror copies, where
@@ -230,6 +238,7 @@ class SimplifyResult:
     float32_step: float = None
     bound: float = None
     locked: np.ndarray = None
+    cleaned: "CleanedInput" = None
 
     def represented(self, F):
         """(m_in,) bool per face of ``F`` (the faces given to ``simplify``):
@@ -1228,6 +1237,7 @@ def simplify(V, F, *, target_faces=None, ratio=None, max_error=None, preserve_bo
     clean = cleaned_input(V, F, weld_distance, min_component_area,
                           debris_budget(target_faces, ratio, max_error, F.shape[0]), lk)
     t_clean = time.perf_counter() - t0
+    cleaned = CleanedInput(clean.V, clean.F)      # (before any pinhole caps)
     m_in = F.shape[0]
     stood_for = represented_faces(F, clean)
     del V, F                     # check_mesh's copies: the clean mesh is all that is needed now
@@ -1261,7 +1271,7 @@ def simplify(V, F, *, target_faces=None, ratio=None, max_error=None, preserve_bo
     cage = cage._replace(seconds={"clean": t_clean, **cage.seconds})
     return replace(
         _result(cage, clean, m_in, n_in, target, hausdorff, t0, preserve_boundary, stood_for, step),
-        bound=None if max_error is None else float(max_error),
+        bound=None if max_error is None else float(max_error), cleaned=cleaned,
         locked=None if lk is None else _cage_locks(cage.of_clean, opts["locked"], cage.V.shape[0]))
 
 

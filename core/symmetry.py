@@ -48,10 +48,10 @@ from .errors import InvalidArgumentError
 from .mesh import area_normals_rows, bbox_diagonal, check_mesh, check_reach
 from .metrics import surface_distance
 from .mirror import PARTNER_TOLERANCE, axis_index, mirror, mirror_partners  # noqa: F401 (example)
-from .simplify import (UNDER_SHARE, UNDER_SLACK, SimplifyResult, check_arguments, check_flags,
-                       cleaned_input, debris_budget, dihedral_cos, float32_step, input_vertex_map,
-                       measuring_frame, per_clean_vertex, represented_faces, simplify,
-                       target_count)
+from .simplify import (UNDER_SHARE, UNDER_SLACK, CleanedInput, SimplifyResult, check_arguments,
+                       check_flags, cleaned_input, debris_budget, dihedral_cos, float32_step,
+                       input_vertex_map, measuring_frame, per_clean_vertex, represented_faces,
+                       simplify, target_count)
 from .spatial import TriangleIndex
 from .topology import (border_vertex_count, boundary_loops_count, edge_keys, edge_map,
                        face_components, soup_pieces)
@@ -474,7 +474,8 @@ def simplify_symmetric(V, F, *, axis="X", target_faces=None, ratio=None, max_err
     whole = _Whole(clean, k, axis, weights, lk, target, max_error, n_in, F.shape[0])
     r = replace(_symmetric(whole, options), represented_faces=represented_faces(F, clean),
                 float32_step=float32_step(V),
-                bound=None if max_error is None else float(max_error))
+                bound=None if max_error is None else float(max_error),
+                cleaned=CleanedInput(clean.V, clean.F))
     if (close_pinholes and max_error is None and preserve_topology and target is not None
             and r.F.shape[0] > target and r.stopped_because in ("no_valid_collapse",
                                                                  "topology_floor")):
@@ -484,7 +485,7 @@ def simplify_symmetric(V, F, *, axis="X", target_faces=None, ratio=None, max_err
             again = _symmetric(whole._replace(clean=capped), options)
             if again.stopped_because != "cancelled" and again.F.shape[0] < r.F.shape[0]:
                 r = replace(again, represented_faces=r.represented_faces,
-                            float32_step=r.float32_step, bound=r.bound)
+                            float32_step=r.float32_step, bound=r.bound, cleaned=r.cleaned)
     return replace(r, seconds=_seconds(r.seconds, t_clean, time.perf_counter() - t0))
 
 

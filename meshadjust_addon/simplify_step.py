@@ -256,10 +256,11 @@ def _fit_cage(job, res, creases, progress):
     record the core's error in ``job.fit_error``; False when cancelled."""
     p = job.params
     try:
-        fit = core.fit_cage(job.V, job.F, res.V, res.F, levels=fit_levels(job.levels),
+        # (to the surface the collapse saw, as simplify cleaned it: not cleaned again)
+        fit = core.fit_cage(*res.cleaned, res.V, res.F, levels=fit_levels(job.levels),
                             scheme=p.scheme, creases=creases, symmetry=p.symmetry,
                             progress=None if progress is None
-                            else (lambda f: progress(0.8 + 0.12 * f)))
+                            else (lambda f: progress(0.8 + 0.12 * f)), clean=False)
     except core.MeshAdjustError as exc:
         job.fit_error = user_cause(exc, "fitting", f"{job.source_name}_cage")
         return True

@@ -383,3 +383,55 @@ def test_the_preconditioner_blocks_are_the_normal_matrix_block_row_sums(scheme):
     flat[0] = np.diag([1.0, 1.0, 0.0])
     inv = fit_module._inverse_blocks(flat, np.zeros(2))
     assert np.isfinite(inv).all() and (np.linalg.eigvalsh(inv) > 0).all()
+
+
+# ------------------------------------------------------------------ simplify's cleaned input
+def test_simplify_keeps_its_cleaned_input_and_a_fit_to_it_is_the_fit_that_cleans():
+    # an unwelded, jittered-free icosphere: simplify's cleaning and the fit's own weld
+    # the same seams, so fitting the kept surface without cleaning it again gives the
+    # fit of the messy input bit for bit
+    from core.clean import clean_mesh
+    from core.simplify import simplify
+    from tests.mesh_factory import unwelded
+    V, F = unwelded(*icosphere(4))
+    r = simplify(V, F, target_faces=200)
+    own = clean_mesh(V, F)
+    assert np.array_equal(r.cleaned.V, own.V) and np.array_equal(r.cleaned.F, own.F)
+    assert r.cleaned.F.shape[0] == F.shape[0] and r.cleaned.V.shape[0] < V.shape[0]
+    a = fit_cage(V, F, r.V, r.F, levels=1)
+    b = fit_cage(*r.cleaned, r.V, r.F, levels=1, clean=False)
+    assert np.array_equal(a.V, b.V) and np.array_equal(a.mean_distance, b.mean_distance)
+
+
+def test_the_cleaned_input_is_without_the_debris_the_target_dropped_and_without_caps():
+    # specks too small for one face of the target go (the fit then no longer reaches
+    # for them); pinholes capped for the collapse are not part of the scan
+    from core.clean import clean_mesh
+    from core.simplify import simplify
+    from tests.mesh_factory import with_debris, with_pinholes
+    V0, F0 = icosphere(4)
+    V, F = with_debris(*with_pinholes(V0, F0, share=0.02), k=40, size=2e-2)
+    r = simplify(V, F, target_faces=40)
+    own = clean_mesh(V, F)
+    assert r.cleaning.n_debris_components == 40 > own.report.n_debris_components
+    holes = F0.shape[0] - (F.shape[0] - 4 * 40)
+    assert holes > 0 and r.cleaned.F.shape[0] == F0.shape[0] - holes < r.n_clean_faces
+    from core.topology import manifold_report
+    assert manifold_report(r.cleaned.F, r.cleaned.V.shape[0]).is_oriented_manifold
+    fit = fit_cage(*r.cleaned, r.V, r.F, levels=1, clean=False)
+    assert fit.mean_distance[-1] < fit.mean_distance[0]
+
+
+def test_a_symmetric_simplify_keeps_its_cleaned_input_too():
+    from core.clean import clean_mesh
+    from core.simplify import simplify
+    V, F = icosphere(3)
+    r = simplify(V, F, target_faces=100, symmetry="X")
+    own = clean_mesh(V, F)
+    assert np.array_equal(r.cleaned.V, own.V) and np.array_equal(r.cleaned.F, own.F)
+
+
+def test_clean_must_be_a_bool(sphere_case):
+    Vd, Fd, Vc, Fc = sphere_case
+    with pytest.raises(InvalidArgumentError, match="fit_cage: clean must be True or False"):
+        fit_cage(Vd, Fd, Vc, Fc, clean="no")
