@@ -7,7 +7,7 @@ surfaces", 2000, and Hoppe et al., "Piecewise smooth surface reconstruction",
 1994)::
 
     X = V_cage
-    repeat `iterations` times:
+    repeat `iterations` times (each step Anderson-accelerated, below):
         Vf = S X
         q_i      = closest point of fine vertex i on the dense surface    (fine -> dense)
         (f_s, b_s) = closest point of dense sample s on the fine surface  (dense -> fine, so
@@ -21,6 +21,13 @@ surfaces", 2000, and Hoppe et al., "Piecewise smooth surface reconstruction",
                    tangential drift)
         by conjugate gradients on the normal equations, the matrix applied with
         S.apply / S.apply_transpose (never formed).
+
+The alternation converges linearly (the point-to-point term holds each step's
+tangential slide), so each step is *Anderson-accelerated* (Walker & Ni, 2011;
+for ICP, Pavlov et al., 2018): of the last ``ANDERSON_DEPTH + 1`` cages ``X_k``
+and their solves ``G_k``, the combination of the solves whose residuals
+``G_k - X_k`` combine to the least residual; taken when its correspondences are
+closer than the last ones, else the plain solve (and the history restarts).
 
 Both data terms are mean squared distances and the Laplacian is normalised
 (``L X = X - weighted mean of neighbours``), so ``smoothness`` is unit-free.
@@ -63,6 +70,12 @@ _SMOOTHNESS_CAP = 1e16
 #: distance than fitted at two, in 3.6x the time (6.31 against 1.75 s; 2026-12-06)
 MAX_FIT_LEVELS = 2
 
+#: solves an accelerated step of the fit combines besides the last (Anderson's depth;
+#: 0: plain alternation). Six steps at depth 3 fit closer than eight plain ones on 14 of
+#: 16 fits (the shared meshes to 2,000-face cages, both schemes; the other two 0.03% and
+#: 0.08% farther) in 73-78% of the time; depth 5 gave the same distances to 0.1%
+ANDERSON_DEPTH = 3
+
 #: most fitting iterations (and a hundred times that, conjugate-gradient steps) taken:
 #: more is a mistake (iterations=10**12 ran on and on)
 MAX_ITERATIONS = 10_000
@@ -96,7 +109,7 @@ class FitResult(NamedTuple):
 
 @plain_pages
 def fit_cage(V_dense, F_dense, V_cage, F_cage, *, levels=2, scheme="butterfly", creases=None,
-             iterations=8, smoothness=0.05, point_to_point=0.1, laplacian="uniform",
+             iterations=6, smoothness=0.05, point_to_point=0.1, laplacian="uniform",
              samples=None, seed=0, symmetry=None,
              cg_rtol=1e-6, cg_max_iterations=300, progress=None, clean=True):
     """Cage positions whose subdivision surface best matches a dense surface.
@@ -112,7 +125,9 @@ def fit_cage(V_dense, F_dense, V_cage, F_cage, *, levels=2, scheme="butterfly", 
     levels, scheme, creases
         Subdivision used to evaluate the cage (as in :func:`~.binding.bind`).
     iterations : int
-        Correspondence / solve alternations (>= 0; 0 returns the input). A
+        Correspondence / solve alternations (>= 0; 0 returns the input),
+        each Anderson-accelerated (the module's docstring: six fit closer
+        than eight plain ones did, in three quarters of their time). A
         step that would increase the mean distance (its correspondences
         slide, e.g. an open patch drifting off the scan) is undone and the
         fit stops there, so ``k <= iterations`` steps are kept and the
@@ -183,6 +198,7 @@ def fit_cage(V_dense, F_dense, V_cage, F_cage, *, levels=2, scheme="butterfly", 
     X, m = pb.X0, _match(pb, pb.X0)
     f2d, d2f, cg_its = [m.fine_to_dense], [m.dense_to_fine], []
     cancelled, matched_at = False, None     # (the reach m was matched with)
+    anderson = _Anderson(ANDERSON_DEPTH, pb.sym)
     for it in range(int(iterations)):
         X_new, n_cg = _solve(pb, m, X, cg_rtol, cg_max_iterations)
         if progress is not None and stops(progress((it + 1) / (int(iterations) + 1))):
@@ -195,7 +211,7 @@ def fit_cage(V_dense, F_dense, V_cage, F_cage, *, levels=2, scheme="butterfly", 
             d2f += [m.dense_to_fine] * left
             cg_its += [n_cg] * left
             break
-        m_new = _match(pb, X_new, reach=m.reach)
+        X_new, m_new = anderson.step(pb, X, X_new, m)
         if not m_new.mean <= m.mean:   # a step away from the surface (or NaN): undone, and
             break                      # the next would be the same (same correspondences)
         X, m, matched_at = X_new, m_new, m.reach
@@ -225,6 +241,44 @@ def _dense_index(V, F, fine_edge):
     if needle_grid(index.tables):
         index = TriangleIndex(V, F, cell_factor=NEEDLE_CELL_FACTOR)
     return index
+
+
+class _Anderson:
+    """The fit's Anderson acceleration (module docstring): the last cages and
+    their solves, flat, at most ``depth + 1`` of each; ``sym`` the fit's
+    symmetric projection (None: none), which an accelerated cage goes
+    through again (a combination of mirror-symmetric cages is one, but not
+    to the last bit)."""
+
+    def __init__(self, depth, sym=None):
+        self.depth, self.sym, self.cages, self.solves = int(depth), sym, [], []
+
+    def step(self, pb, X, G, m):
+        """``(X_next, its matches)`` after the solve ``G`` of the cage ``X``
+        (matched as ``m``): the accelerated cage when its matches are closer
+        than ``m``, else the plain solve ``G`` and its matches (the history
+        then restarts from this step)."""
+        if self.depth <= 0:
+            return G, _match(pb, G, reach=m.reach)
+        self.cages = (self.cages + [X.ravel()])[-(self.depth + 1):]
+        self.solves = (self.solves + [G.ravel()])[-(self.depth + 1):]
+        if len(self.cages) > 1:
+            X_acc = self._combined().reshape(X.shape)
+            X_acc = X_acc if self.sym is None else self.sym(X_acc)
+            m_acc = _match(pb, X_acc, reach=m.reach)
+            if m_acc.mean <= m.mean:
+                return X_acc, m_acc
+            self.cages, self.solves = self.cages[-1:], self.solves[-1:]
+        return G, _match(pb, G, reach=m.reach)
+
+    def _combined(self):
+        """The solves' combination ``G_k - dG gamma``, ``gamma`` the least
+        squares fit of the last residual ``G_k - X_k`` by the residuals'
+        differences ``dF`` (flat (3 n_c,))."""
+        F = np.stack([g - x for g, x in zip(self.solves, self.cages)], axis=1)
+        G = np.stack(self.solves, axis=1)
+        gamma = np.linalg.lstsq(np.diff(F, axis=1), F[:, -1], rcond=None)[0]
+        return G[:, -1] - np.diff(G, axis=1) @ gamma
 
 
 def _fixed_point(X, X_new, matched_at, m):

@@ -435,3 +435,41 @@ def test_clean_must_be_a_bool(sphere_case):
     Vd, Fd, Vc, Fc = sphere_case
     with pytest.raises(InvalidArgumentError, match="fit_cage: clean must be True or False"):
         fit_cage(Vd, Fd, Vc, Fc, clean="no")
+
+
+# ------------------------------------------------------------------ Anderson acceleration
+def test_the_anderson_step_finds_an_affine_maps_fixed_point_from_its_iterates():
+    # for G(x) = A x + b on n unknowns, the residuals of n + 1 plain iterates span the
+    # space: their combination is the fixed point, exactly up to rounding
+    import core.fit as fit_module
+    rng = np.random.default_rng(3)
+    A = 0.4 * rng.standard_normal((3, 3))
+    b = rng.standard_normal(3)
+    acc = fit_module._Anderson(3)
+    x = np.zeros(3)
+    for _ in range(4):
+        g = A @ x + b
+        acc.cages.append(x.copy())
+        acc.solves.append(g)
+        x = g
+    fixed = np.linalg.solve(np.eye(3) - A, b)
+    np.testing.assert_allclose(acc._combined(), fixed, rtol=0, atol=1e-12)
+
+
+def test_accelerated_steps_fit_closer_than_as_many_plain_ones(monkeypatch):
+    # a bumpy sphere's QEM cage: the records never rise (a step farther is undone),
+    # and eight or six accelerated steps end closer than eight plain ones
+    import core.fit as fit_module
+    from core.simplify import simplify
+    Vd, Fd = icosphere(5)
+    Vd = Vd * (1 + 0.05 * np.sin(7 * Vd[:, [0]]) * np.cos(5 * Vd[:, [1]]))
+    cage = simplify(Vd, Fd, target_faces=300)
+    fast = fit_cage(Vd, Fd, cage.V, cage.F, levels=2, iterations=8)
+    six = fit_cage(Vd, Fd, cage.V, cage.F, levels=2)
+    monkeypatch.setattr(fit_module, "ANDERSON_DEPTH", 0)
+    plain = fit_cage(Vd, Fd, cage.V, cage.F, levels=2, iterations=8)
+    assert fast.mean_distance.shape == plain.mean_distance.shape == (9,)
+    for r in (fast, plain):
+        assert (np.diff(r.mean_distance) <= 0).all()
+    assert fast.mean_distance[-1] < plain.mean_distance[-1]
+    assert six.mean_distance.shape == (7,) and six.mean_distance[-1] < plain.mean_distance[-1]
