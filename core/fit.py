@@ -262,7 +262,7 @@ class _Anderson:
             return G, _match(pb, G, reach=m.reach)
         self.cages = (self.cages + [X.ravel()])[-(self.depth + 1):]
         self.solves = (self.solves + [G.ravel()])[-(self.depth + 1):]
-        if len(self.cages) > 1:
+        if len(self.cages) > 1 and np.isfinite(self.solves[-1]).all():   # (NaN: plain, undone)
             X_acc = self._combined().reshape(X.shape)
             X_acc = X_acc if self.sym is None else self.sym(X_acc)
             m_acc = _match(pb, X_acc, reach=m.reach)

@@ -473,3 +473,19 @@ def test_accelerated_steps_fit_closer_than_as_many_plain_ones(monkeypatch):
         assert (np.diff(r.mean_distance) <= 0).all()
     assert fast.mean_distance[-1] < plain.mean_distance[-1]
     assert six.mean_distance.shape == (7,) and six.mean_distance[-1] < plain.mean_distance[-1]
+
+
+def test_a_solve_that_is_not_finite_is_taken_plain_not_combined(monkeypatch):
+    # (the loop then undoes it: its distance is NaN) no least squares over NaN
+    import core.fit as fit_module
+    matched = []
+    monkeypatch.setattr(fit_module, "_match", lambda pb, X, reach=None: matched.append(X) or X)
+
+    class Last:
+        mean, reach = 1.0, None
+    acc = fit_module._Anderson(3)
+    X = np.zeros((2, 3))
+    acc.step(None, X, X + 1.0, Last())
+    G = np.full((2, 3), np.nan)
+    out, m = acc.step(None, X + 1.0, G, Last())
+    assert out is G and len(matched) == 2 and matched[-1] is G
