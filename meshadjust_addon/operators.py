@@ -16,6 +16,7 @@ import bpy
 
 from .. import core
 from . import api, basis, results, settings, staleness, store
+from .report import fit_change
 
 USER_ERRORS = (core.MeshAdjustError,)
 
@@ -445,9 +446,7 @@ class MESHADJUST_OT_fit_cage(FitProps, _CageJobStep, bpy.types.Operator):
         _object_mode(cage)          # (the artist may have entered it while the fit ran)
         fit = api.commit_fit(cage, self._job)
         self.give_back()
-        d = fit.mean_distance
-        before, after = (core.percent(x / fit.diagonal) for x in (d[0], d[-1]))
-        msg = f"fitted '{cage.name}': mean distance {before} -> {after} of size"
+        msg = f"fitted '{cage.name}': mean distance {fit_change(fit)} of size"
         if self._job.binding is not None:
             msg += f"; re-bound '{cage.meshadjust.edited.name}'"
         elif cage.meshadjust.edited is not None:

@@ -16,7 +16,7 @@ from .. import core
 from . import cage_steps, mesh_io, names, results, settings, store
 from .cage_steps import (CageJob, auto_levels, edit_levels, fit_levels, read_source,
                          transform_problem)
-from .report import Report, user_cause
+from .report import Report, fit_change, user_cause
 from .rollback import all_or_nothing
 
 CREASE = store.CREASE
@@ -405,9 +405,7 @@ def _summary(job):
         if missed:
             warnings.append(target_note)
     if job.fit is not None:
-        d = job.fit.mean_distance
-        before, after = (core.percent(x / job.fit.diagonal) for x in (d[0], d[-1]))
-        msg += f"; fitted: mean distance of the refined cage {before} -> {after}"
+        msg += f"; fitted: mean distance of the refined cage {fit_change(job.fit)}"
         if fit_levels(job.levels) < job.levels:
             msg += f" (at {fit_levels(job.levels)} levels)"
     if job.fit_error:
