@@ -117,8 +117,11 @@ def fit_cage(V_dense, F_dense, V_cage, F_cage, *, levels=2, scheme="butterfly", 
     Parameters
     ----------
     V_dense, F_dense : (n,3) float, (m,3) int
-        The dense surface to match, cleaned first as ``simplify`` does
-        (:func:`core.clean.clean_mesh`: any mesh as scans arrive).
+        The dense surface to match, cleaned first as ``simplify`` to the
+        cage's face count cleans it (:func:`core.clean.clean_mesh` with that
+        ``face_budget``: any mesh as scans arrive; the specks too small for
+        one face of the cage are debris, as a simplify to it drops them, and
+        do not pull the fit).
     V_cage, F_cage : (n_c,3) float, (m_c,3) int
         Starting cage (e.g. :func:`~.simplify.simplify`'s output); its
         topology is kept, only positions change.
@@ -317,9 +320,9 @@ class _Problem(NamedTuple):
 def _set_up(V_dense, F_dense, V_cage, F_cage, *, levels, scheme, creases, smoothness,
             point_to_point, laplacian, samples, seed, symmetry, iterations, clean=True):
     """Check the arguments and build the :class:`_Problem`: the dense surface
-    cleaned as ``simplify`` saw it (welded, so vertex normals cross seams;
-    without double-sided sheets, whose normals cancel, or debris; with
-    ``clean`` False, as given), everything
+    cleaned as ``simplify`` to the cage's face count saw it (welded, so vertex
+    normals cross seams; without double-sided sheets, whose normals cancel,
+    or debris; with ``clean`` False, as given), everything
     moved to the dense bounding-box centre (the result then does not depend
     on where the mesh sits; the CG stopping rule is relative), its samples
     and index, and the cage's operator and Laplacian."""
@@ -332,7 +335,8 @@ def _set_up(V_dense, F_dense, V_cage, F_cage, *, levels, scheme, creases, smooth
     check_units(V_cage, where="fit_cage", name="V_cage")
     if not isinstance(clean, (bool, np.bool_)):
         raise InvalidArgumentError(f"fit_cage: clean must be True or False, not {clean!r}")
-    dense = clean_mesh(V_dense, F_dense) if clean else CleanedInput(V_dense, F_dense)
+    dense = clean_mesh(V_dense, F_dense, face_budget=F_cage.shape[0]) if clean \
+        else CleanedInput(V_dense, F_dense)
     if clean and dense.F.shape[0] == 0:       # (check_mesh refused a mesh without faces)
         raise InvalidMeshError(f"fit_cage: nothing of the dense mesh is left after cleaning "
                                f"({dense.report.summary()})")

@@ -498,10 +498,11 @@ def compute_fit(job, *, progress=None):
     fit_progress = progress
     if job.rebind and progress is not None:
         fit_progress = lambda f: progress(0.8 * f)   # noqa: E731
-    V, F, clean = _fit_surface(job.V, job.F, job.F_cage.shape[0])
-    job.fit = core.fit_cage(V, F, job.V_cage, job.F_cage, levels=fit_levels(job.levels),
+    # (cleaned as a simplify to the cage's face count cleans it: the Simplify's own fit's
+    # surface, without the specks too small for one face of the cage)
+    job.fit = core.fit_cage(job.V, job.F, job.V_cage, job.F_cage, levels=fit_levels(job.levels),
                             scheme=job.scheme, creases=job.creases, symmetry=job.symmetry,
-                            progress=fit_progress, clean=clean)
+                            progress=fit_progress)
     job.cancelled = job.fit.cancelled
     if job.cancelled:
         return job
@@ -511,16 +512,6 @@ def compute_fit(job, *, progress=None):
     if job.rebind:
         compute_bind(job, progress=None if progress is None else (lambda f: progress(0.8 + 0.2 * f)))
     return job
-
-
-def _fit_surface(V, F, cage_faces):
-    """``(V, F, clean)`` for ``core.fit_cage``: the source cleaned as a
-    simplify to ``cage_faces`` faces cleans it (the specks too small for one
-    face of the cage dropped, as the Simplify's own fit does not see them),
-    or, when nothing is left of it, the source as it is for the fit to clean
-    and name what it found."""
-    dense = core.clean_mesh(V, F, face_budget=max(int(cage_faces), 1))
-    return (dense.V, dense.F, False) if dense.F.shape[0] else (V, F, True)
 
 
 def commit_fit(cage, job):

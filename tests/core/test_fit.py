@@ -422,6 +422,25 @@ def test_the_cleaned_input_is_without_the_debris_the_target_dropped_and_without_
     assert fit.mean_distance[-1] < fit.mean_distance[0]
 
 
+def test_a_fit_cleans_as_a_simplify_to_the_cages_face_count_cleans():
+    # the specks too small for one face of the cage are debris for the fit too: the
+    # default fit of the messy scan is the fit of simplify's cleaned input, bit for bit,
+    # and not the fit of the scan cleaned without a face budget (its specks pull it)
+    from core.clean import clean_mesh
+    from core.simplify import simplify
+    from tests.mesh_factory import with_debris
+    V, F = with_debris(*icosphere(4), k=30, size=2e-2)
+    r = simplify(V, F, target_faces=60)
+    assert r.F.shape[0] == 60 and r.cleaning.n_debris_components == 30
+    a = fit_cage(V, F, r.V, r.F, levels=1)
+    b = fit_cage(*r.cleaned, r.V, r.F, levels=1, clean=False)
+    assert np.array_equal(a.V, b.V) and np.array_equal(a.mean_distance, b.mean_distance)
+    kept = clean_mesh(V, F)
+    assert kept.report.n_debris_components < 30
+    c = fit_cage(kept.V, kept.F, r.V, r.F, levels=1, clean=False)
+    assert not np.array_equal(a.V, c.V)
+
+
 def test_a_symmetric_simplify_keeps_its_cleaned_input_too():
     from core.clean import clean_mesh
     from core.simplify import simplify
