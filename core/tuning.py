@@ -73,6 +73,10 @@ class Tuning:
     #: took 197 passes to 200 faces, now 35; below, the extra faces cost more than they
     #: save: fandisk's careful passes 7% slower at 24)
     sliver_star: int = 96
+    #: ... and from this many such collapses in a pass, each is first tested on the four
+    #: faces next to its edge alone (a fan's spokes: most are refused there, for a
+    #: fraction of the sample's cost)
+    fan_slivers_min: int = 64
     face_cache_share: float = 0.75   #: a round re-packs the faces in play below this share
     bands: int = 8                   #: cost bands of the pool (then length bands, then random)
     length_bands: int = 16           #: length bands inside a cost band (shorter edges first)

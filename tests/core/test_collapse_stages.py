@@ -600,6 +600,33 @@ def test_sliver_refusals_on_a_sample_are_refusals_of_the_whole_check():
     assert res.F.shape[0] == 200 and res.n_passes <= 50
 
 
+def test_fan_slivers_are_found_next_to_the_edge_and_refused_by_the_whole_check_too():
+    # the spokes of a CAD cylinder's caps (each end of one has more than sliver_star
+    # faces around it) are refused on the four faces next to each spoke alone: every
+    # spoke of both caps, each refusal one the whole check makes, its sliver face
+    # remembered; the other pool edges are left to the sampled and whole checks
+    V, F = cad_cylinder(500, height=1.0)
+    st = engine_state(V, F)
+    pool = pool_of(st)
+    active = np.arange(pool.key.size)
+    faces_at = np.bincount(st.F.ravel(), minlength=st.V.shape[0])
+    around = faces_at[pool.A] + faces_at[pool.B]
+    kept = engine._drop_fan_slivers(st, pool, active, 1, TUNING, around)
+    gone = np.setdiff1d(active, kept)
+    spokes = np.flatnonzero(np.isin(pool.A, [1000, 1001]) | np.isin(pool.B, [1000, 1001]))
+    assert set(spokes) == set(gone) and spokes.size >= TUNING.fan_slivers_min
+    assert set(kept) == set(np.flatnonzero(around < TUNING.sliver_star))
+    star, kf = engine._whole_stars(st.F, np.arange(st.F.shape[0]), pool.A[gone], pool.B[gone])
+    c = engine._check_blocks(st, pool.A[gone], pool.B[gone], pool.XT[:, gone],
+                             pool.interior[gone], star, kf, TUNING, True, None)
+    assert not c.ok.any()
+    assert np.isinf(st.c_blk[pool.h[gone]]).all() and (st.blk_sliver[pool.h[gone]] >= 0).all()
+    # fewer such collapses than fan_slivers_min: left to the sample
+    few = replace(TUNING, fan_slivers_min=spokes.size + 1)
+    st = engine_state(V, F)
+    assert engine._drop_fan_slivers(st, pool_of(st), active, 1, few, around).size == active.size
+
+
 def test_quick_refusals_are_refusals_of_the_whole_check():
     # a fan's spokes refused on a sample of the fan are refused by the whole check
     V, F = star_glyphs(count=1, spikes=100)
