@@ -63,8 +63,7 @@ from ._collapse import compactness
 from ._face_tracker import faces_across
 from .mesh import cross_rows, flat_faces, used_vertices
 from .near_query import NearQuery
-from .spatial import (TriangleIndex, closest_pairs, closest_result, point_triangle_closest,
-                      triangle_rows)
+from .spatial import TriangleIndex, closest_pairs, closest_result, triangle_rows
 from .topology import edge_keys, edge_map
 
 __all__ = ["Gaps", "flip_flat_faces", "measure_gaps", "touch_up"]
@@ -536,13 +535,20 @@ def _with_points(found, changes, P):
 
 def _new_face_distances(live, P):
     """The distances of each ``live`` change's input vertices to each of its
-    new faces, one pass of the point-triangle kernel for all (flat: a
-    change's ``(m, r)`` block after another's)."""
+    new faces, one pass of the point-triangle kernel over the pairs for all
+    (flat: a change's ``(m, r)`` block after another's; the faces' kernel
+    rows made once, not a copy of the corners per pair: a CAD cylinder's
+    cage at 200 faces, whose caps are fans of 51 faces, measured 888 input
+    vertices against each of a move's 51 new faces)."""
     if not live:
         return np.zeros(0)
-    X = np.concatenate([np.repeat(P[m], T.shape[0], axis=0) for *_, m, T in live])
-    T = np.concatenate([np.tile(T, (m.size, 1, 1)) for *_, m, T in live]).reshape(-1, 3, 3)
-    return point_triangle_closest(X, T[:, 0], T[:, 1], T[:, 2]).distance
+    T = np.concatenate([T for *_, T in live])
+    first = np.cumsum([0] + [T.shape[0] for *_, T in live])
+    q = np.concatenate([np.repeat(m, T.shape[0]) for *_, m, T in live])
+    t = np.concatenate([f + np.tile(np.arange(T.shape[0]), m.size)
+                        for (*_, m, T), f in zip(live, first)])
+    d2 = closest_pairs(np.ascontiguousarray(P.T), q, triangle_rows(*T.transpose(1, 0, 2)), t)[2]
+    return np.sqrt(d2)
 
 
 def _nearest_new_faces(X, T):

@@ -16,7 +16,7 @@ import numpy as np
 from core.mesh import face_areas, flat_faces
 from core.metrics import surface_distance
 from core.simplify import simplify
-from core.spatial import TriangleIndex
+from core.spatial import TriangleIndex, point_triangle_closest
 from core.topology import edge_map, manifold_report
 from core.tuning import TUNING
 from core import _touch_up as stages
@@ -280,8 +280,13 @@ def test_a_change_of_many_pairs_measures_its_input_vertices_with_an_index(monkey
             continue
         np.testing.assert_allclose(a.point_far, b.point_far, rtol=1e-12, atol=1e-15)
         T = f[4][b.point_face - 100]
-        own = stages.point_triangle_closest(P[f[3]], T[:, 0], T[:, 1], T[:, 2]).distance
+        own = point_triangle_closest(P[f[3]], T[:, 0], T[:, 1], T[:, 2]).distance
         np.testing.assert_allclose(own, b.point_far, rtol=1e-12, atol=1e-15)   # a nearest face
+        # (and by pairs, each vertex against every new face: the nearest, to rounding)
+        every = point_triangle_closest(np.repeat(P[f[3]], f[4].shape[0], axis=0),
+                                       *np.tile(f[4], (f[3].size, 1, 1)).transpose(1, 0, 2))
+        np.testing.assert_allclose(every.distance.reshape(f[3].size, -1).min(axis=1),
+                                   a.point_far, rtol=1e-12, atol=1e-15)
         assert (a.point_face == b.point_face).mean() > 0.99
 
 
