@@ -77,6 +77,8 @@ class Tuning:
     #: faces next to its edge alone (a fan's spokes: most are refused there, for a
     #: fraction of the sample's cost)
     fan_slivers_min: int = 64
+    #: ... while that test refuses at least this share of those it tests
+    fan_slivers_share: float = 0.25
     face_cache_share: float = 0.75   #: a round re-packs the faces in play below this share
     bands: int = 8                   #: cost bands of the pool (then length bands, then random)
     length_bands: int = 16           #: length bands inside a cost band (shorter edges first)

@@ -627,6 +627,33 @@ def test_fan_slivers_are_found_next_to_the_edge_and_refused_by_the_whole_check_t
     assert engine._drop_fan_slivers(st, pool_of(st), active, 1, few, around).size == active.size
 
 
+def test_the_fan_sliver_test_stops_where_it_refuses_too_few(monkeypatch):
+    # a star glyph's spokes fold faces away from their edge and make no sliver next to
+    # it: the test refuses fewer than fan_slivers_share of them, and the run stops
+    # making it (the next call tests nothing); a cylinder's caps keep it on
+    V, F = star_glyphs(count=3, spikes=200)
+    st = engine_state(V, F)
+    pool = pool_of(st)
+    active = np.arange(pool.key.size)
+    faces_at = np.bincount(st.F.ravel(), minlength=st.V.shape[0])
+    around = faces_at[pool.A] + faces_at[pool.B]
+    assert (around >= TUNING.sliver_star).sum() >= TUNING.fan_slivers_min
+    kept = engine._drop_fan_slivers(st, pool, active, 1, TUNING, around)
+    assert kept.size > (1 - TUNING.fan_slivers_share) * active.size and not st.fan_slivers
+    calls = []
+    real = engine._fans_near
+    monkeypatch.setattr(engine, "_fans_near", lambda *a: calls.append(1) or real(*a))
+    assert engine._drop_fan_slivers(st, pool, kept, 2, TUNING, around[kept]).size == kept.size
+    assert not calls
+    V, F = cad_cylinder(500, height=1.0)
+    st = engine_state(V, F)
+    pool = pool_of(st)
+    faces_at = np.bincount(st.F.ravel(), minlength=st.V.shape[0])
+    engine._drop_fan_slivers(st, pool, np.arange(pool.key.size), 1, TUNING,
+                             faces_at[pool.A] + faces_at[pool.B])
+    assert st.fan_slivers
+
+
 def test_quick_refusals_are_refusals_of_the_whole_check():
     # a fan's spokes refused on a sample of the fan are refused by the whole check
     V, F = star_glyphs(count=1, spikes=100)
