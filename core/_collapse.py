@@ -725,13 +725,7 @@ def _drop_quick_refusals(st, pool, active, passes, tun, around):
         star, kf = np.concatenate([star, more]), np.concatenate([kf, _take(huge, mk)])
         least[huge], least[e.size + huge] = low[:huge.size], low[huge.size:]
     refused, flip, sliver = _flips_on(st, A, B, pool.XT[:, e], star, kf, tun, least, even)
-    if not refused.any():
-        return active
-    st.bent[pool.h[e[refused]]] = False
-    _remember_refused(st, pool.h[e[refused]], np.inf, passes, flip[refused], sliver.of(refused))
-    keep = np.ones(active.size, dtype=bool)
-    keep[big[refused]] = False
-    return active[keep]
+    return _without_refused(st, pool, active, big, refused, flip, sliver, passes)
 
 
 def _drop_fan_slivers(st, pool, active, passes, tun, around):
@@ -756,12 +750,22 @@ def _drop_fan_slivers(st, pool, active, passes, tun, around):
     least = _least_compactness(st, A, B)
     refused, flip, sliver = _flips_on(st, A, B, pool.XT[:, e], star, kf, tun, least, 0)
     st.fan_slivers = np.count_nonzero(refused) >= tun.fan_slivers_share * e.size
+    return _without_refused(st, pool, active, huge, refused, flip, sliver, passes)
+
+
+def _without_refused(st, pool, active, tested, refused, flip, sliver, passes):
+    """The ``active`` pool edges but those of its rows ``tested`` that a
+    check before the picks ``refused`` ((t,) bool; their flipped faces
+    ``flip`` and :class:`_Slivers` ``sliver``), remembered as :func:`_judge`
+    remembers them."""
     if not refused.any():
         return active
-    st.bent[pool.h[e[refused]]] = False
-    _remember_refused(st, pool.h[e[refused]], np.inf, passes, flip[refused], sliver.of(refused))
+    gone = tested[refused]
+    h = pool.h[active[gone]]
+    st.bent[h] = False
+    _remember_refused(st, h, np.inf, passes, flip[refused], sliver.of(refused))
     keep = np.ones(active.size, dtype=bool)
-    keep[huge[refused]] = False
+    keep[gone] = False
     return active[keep]
 
 
