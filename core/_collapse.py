@@ -710,7 +710,8 @@ def _drop_quick_refusals(st, pool, active, passes, tun, around):
     sliver, :func:`_sliver_samples`), remembered as :func:`_judge`
     remembers them, before any pick: a fan's spoke picked would keep the
     whole fan waiting a round (every face of the hub is in its star), and a
-    pass has few rounds."""
+    pass has few rounds. The slivers next to a huge star's edge are looked
+    for first (:func:`_drop_fan_slivers`), the sample only where they are not."""
     active = _drop_fan_slivers(st, pool, active, passes, tun, around)
     big = np.flatnonzero(_take(around, active) >= tun.hold_star)
     if big.size == 0:

@@ -542,13 +542,13 @@ def _new_face_distances(live, P):
     vertices against each of a move's 51 new faces)."""
     if not live:
         return np.zeros(0)
-    T = np.concatenate([T for *_, T in live])
+    faces = np.concatenate([T for *_, T in live])                  # (every change's, in turn)
     first = np.cumsum([0] + [T.shape[0] for *_, T in live])
     q = np.concatenate([np.repeat(m, T.shape[0]) for *_, m, T in live])
     t = np.concatenate([f + np.tile(np.arange(T.shape[0]), m.size)
                         for (*_, m, T), f in zip(live, first)])
-    d2 = closest_pairs(np.ascontiguousarray(P.T), q, triangle_rows(*T.transpose(1, 0, 2)), t)[2]
-    return np.sqrt(d2)
+    rows = triangle_rows(*faces.transpose(1, 0, 2))
+    return np.sqrt(closest_pairs(np.ascontiguousarray(P.T), q, rows, t)[2])
 
 
 def _nearest_new_faces(X, T):
