@@ -81,17 +81,43 @@ def blas_kernels():
     return None
 
 
-def blas_line():
-    """One line for a benchmark's header: NumPy's version, the BLAS kernels it
-    runs and, when they are older than the CPU's widest vectors, the
-    ``OPENBLAS_CORETYPE`` that gives the CPU's own."""
-    import numpy
-    kernels = blas_kernels()
-    line = f"NumPy {numpy.__version__}, OpenBLAS kernels {kernels or 'unknown'}"
+def cpu_fields():
+    """The first processor's fields of /proc/cpuinfo (name -> value; empty
+    where there is none)."""
+    fields = {}
     try:
         with open("/proc/cpuinfo") as fh:
-            flags = set(next(r for r in fh if r.startswith("flags")).split(":")[1].split())
-    except (OSError, StopIteration):
+            for row in fh:
+                if not row.strip():
+                    break
+                name, _, value = row.partition(":")
+                fields[name.strip()] = value.strip()
+    except OSError:
+        pass
+    return fields
+
+
+def cpu_name(fields):
+    """The CPU as a benchmark's header names it: its model name, family and
+    model numbers (a model name such as "AMD EPYC" says nothing of the
+    generation: family 25 model 17 is a Zen 4), or "unknown CPU"."""
+    if not fields.get("model name"):
+        return "unknown CPU"
+    return (f"{fields['model name']} (family {fields.get('cpu family', '?')}, "
+            f"model {fields.get('model', '?')})")
+
+
+def blas_line():
+    """One line for a benchmark's header: the CPU (:func:`cpu_name`), NumPy's
+    version, the BLAS kernels it runs and, when they are older than the
+    CPU's widest vectors, the ``OPENBLAS_CORETYPE`` that gives the CPU's own."""
+    import numpy
+    kernels = blas_kernels()
+    fields = cpu_fields()
+    line = (f"{cpu_name(fields)}; NumPy {numpy.__version__}, OpenBLAS kernels "
+            f"{kernels or 'unknown'}")
+    flags = set(fields.get("flags", "").split())
+    if not flags:
         return line
     best = next((name for name, need in BLAS_KERNELS if need <= flags), None)
     if best and kernels and kernels not in WIDE_KERNELS:
