@@ -976,6 +976,8 @@ def _trim_to_target(pool, acc, m, target):
     if target is None:
         return acc
     removed = np.where(pool.interior[acc.idx], 2, 1)
+    if int(removed.sum()) <= m - target:       # (all kept: no sort)
+        return acc
     order = np.argsort(pool.cost[acc.idx], kind="stable")
     before = np.empty(acc.idx.size, dtype=np.int64)
     before[order] = np.cumsum(removed[order]) - removed[order]
@@ -1224,7 +1226,8 @@ def _check_blocks(st, A, B, XT, interior, star, kf, tun, haus, dihedral_cos):
         return _check_block(st, A, B, XT, interior, star, kf, tun, haus, dihedral_cos)
     starts = np.array([i for i, _ in spans], dtype=np.int64)
     blk = np.searchsorted(starts, kf, side="right") - 1
-    order = np.argsort(blk, kind="stable")
+    # (16-bit block numbers take NumPy's radix sort: 10x a stable sort of int64)
+    order = np.argsort(blk.astype(np.uint16) if len(spans) <= 1 << 16 else blk, kind="stable")
     cut = np.concatenate([[0], np.cumsum(np.bincount(blk, minlength=len(spans)))])
     star, kf = star[order], kf[order]
 

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from core._groups import member_of, sorted_unique, stable_argsort
+from core._groups import member_of, sort_keys, sorted_unique, stable_argsort
 
 
 def test_stable_argsort_is_numpys_stable_argsort():
@@ -12,6 +12,19 @@ def test_stable_argsort_is_numpys_stable_argsort():
               np.array([2 ** 62, 3, 2 ** 62, 0]), np.zeros(0, dtype=np.int64),
               rng.integers(0, 3000, 100_000).astype(np.int32)):   # (int32 keys times k)
         np.testing.assert_array_equal(stable_argsort(x), np.argsort(x, kind="stable"))
+
+
+@pytest.mark.parametrize("bound", [1, 2, 1 << 16, (1 << 16) + 1, 1 << 30, 1 << 45])
+def test_sort_keys_is_the_stable_order_and_the_sorted_keys_at_every_width(bound):
+    # 16-bit keys go to NumPy's radix sort, wider ones to the packed sort (the edges)
+    rng = np.random.default_rng(bound % 1000)
+    key = rng.integers(0, bound, 5000)
+    key[:3] = [bound - 1, 0, bound - 1]
+    want = np.argsort(key, kind="stable")
+    order, ks = sort_keys(key.copy(), bound)
+    np.testing.assert_array_equal(order, want)
+    np.testing.assert_array_equal(ks, key[want])
+    assert order.dtype == ks.dtype == np.int64
 
 
 @pytest.mark.parametrize("dtype", [np.int64, np.int32, np.uint16, np.bool_, np.float64])
