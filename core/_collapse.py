@@ -49,7 +49,7 @@ from typing import NamedTuple
 import numpy as np
 
 from ._clean import BOUNDARY, NON_MANIFOLD, edge_representatives, half_edge_ends, renumber_twins
-from ._groups import ragged_ranges
+from ._groups import ragged_ranges, stable_argsort
 from ._parallel import blocks, run_blocks, run_each
 from .mesh import cross_columns, dot_columns, stops
 from .quadrics import place_columns, quadric_at, rms_distance
@@ -1226,8 +1226,7 @@ def _check_blocks(st, A, B, XT, interior, star, kf, tun, haus, dihedral_cos):
         return _check_block(st, A, B, XT, interior, star, kf, tun, haus, dihedral_cos)
     starts = np.array([i for i, _ in spans], dtype=np.int64)
     blk = np.searchsorted(starts, kf, side="right") - 1
-    # (16-bit block numbers take NumPy's radix sort: 10x a stable sort of int64)
-    order = np.argsort(blk.astype(np.uint16) if len(spans) <= 1 << 16 else blk, kind="stable")
+    order = stable_argsort(blk)
     cut = np.concatenate([[0], np.cumsum(np.bincount(blk, minlength=len(spans)))])
     star, kf = star[order], kf[order]
 
