@@ -938,28 +938,72 @@ def _within_max_error(su, clean, target, max_error, opts, progress):
     """
 
     t0 = time.perf_counter()
-    measured = [0.0]                              # seconds in the measures
-    centre, scale = measuring_frame(clean.V)
-    source = DistanceFrom((clean.V - centre) / scale, clean.F)   # (its index and samples made once)
+    measure = _HausdorffMeasure(clean)
 
-    def measure(cage, samples=None):
-        if _is_input(cage, clean):
+    def timed(cage, d):
+        return _with_step_seconds(cage, time.perf_counter() - t0, measure.seconds), d
+
+    good = _error_steps(su, target, max_error, opts, progress, measure)
+    if good is None:
+        return timed(_unchanged(clean), 0.0)
+    for mesh, st, passes, _ in reversed(good):
+        found = _measured_cage(su, mesh, st, passes, opts, measure, max_error)
+        if found is not None:
+            return timed(*found)
+    share = min((g[3] for g in good), default=0.0)     # (no step within: nothing to retry)
+    for _ in range(opts["tuning"].max_error_retries if good else 0):
+        share /= 2
+        trial = copy.deepcopy(su.mesh)
+        st, passes = _run_all(trial, target, share * max_error / su.scale, opts, progress, su.m0)
+        if st == "cancelled":
+            return timed(_unchanged(clean), 0.0)
+        found = _measured_cage(su, trial, st, passes, opts, measure, max_error)
+        if found is not None:
+            return timed(*found)
+    found = _by_face_count(su, target, max_error, opts, progress, measure)
+    if found is not None:
+        return timed(*found)
+    return timed(_unchanged(clean)._replace(stopped="max_error"), 0.0)
+
+
+class _HausdorffMeasure:
+    """The two-sided Hausdorff distance of a cage to the cleaned input
+    ``clean``, as ``surface_distance`` measures it (``samples``: the quick
+    measure's count), in the input's units; the input's index and samples
+    made once, and ``seconds`` spent measuring."""
+
+    def __init__(self, clean):
+        self.clean = clean
+        self.centre, self.scale = measuring_frame(clean.V)
+        self.source = DistanceFrom((clean.V - self.centre) / self.scale, clean.F)
+        self.seconds = 0.0
+
+    def __call__(self, cage, samples=None):
+        if _is_input(cage, self.clean):
             # nothing collapsed or moved: the input's own surface (a soup of 30k separate
             # triangles, which the bound stopped at once, was measured against itself six
             # times: 95-105 s)
             return 0.0
         t = time.perf_counter()
-        d = scale * source.to((cage.V - centre) / scale, cage.F, samples=samples,
-                              shared=_shared_faces(cage, clean)).hausdorff
-        measured[0] += time.perf_counter() - t
+        d = self.scale * self.source.to((cage.V - self.centre) / self.scale, cage.F,
+                                        samples=samples,
+                                        shared=_shared_faces(cage, self.clean)).hausdorff
+        self.seconds += time.perf_counter() - t
         return d
 
-    def timed(cage, d):
-        return _with_step_seconds(cage, time.perf_counter() - t0, measured[0]), d
 
+def _error_steps(su, target, max_error, opts, progress, measure):
+    """The steps of :func:`_within_max_error`'s raised bound: the engine run
+    on from the last step within ``max_error`` (a copy of its state) at each
+    share of ``Tuning.max_error_steps``, each cage measured quickly
+    (``measure``, a :class:`_HausdorffMeasure`, on
+    ``Tuning.max_error_quick_samples``); a step over the bound is dropped and
+    the gap to it halved ``Tuning.max_error_halvings`` times (smaller first
+    steps when the first is over). Returns the steps within, in order, each
+    ``(engine state, stop reason, passes, share)``, or None when cancelled."""
     tun = opts["tuning"]
     steps = list(tun.max_error_steps)
-    good = []                                     # (engine state, stop reason, passes, share) per step
+    good = []
     bad, halvings = None, 0                       # the smallest share found over the bound
     while steps:
         share = steps.pop(0)
@@ -967,7 +1011,7 @@ def _within_max_error(su, clean, target, max_error, opts, progress):
         trial = copy.deepcopy(mesh)
         st, more = _run_all(trial, target, share * max_error / su.scale, opts, progress, su.m0)
         if st == "cancelled":
-            return timed(_unchanged(clean), 0.0)
+            return None
         quick = measure(_cage_of(su, trial, st, passes + more, opts, relocate=False),
                         tun.max_error_quick_samples)
         if quick > max_error:
@@ -984,24 +1028,7 @@ def _within_max_error(su, clean, target, max_error, opts, progress):
                 break
             halvings += 1
             steps = [0.5 * (good[-1][3] + bad)]
-    for mesh, st, passes, _ in reversed(good):
-        found = _measured_cage(su, mesh, st, passes, opts, measure, max_error)
-        if found is not None:
-            return timed(*found)
-    share = min((g[3] for g in good), default=0.0)     # (no step within: nothing to retry)
-    for _ in range(tun.max_error_retries if good else 0):
-        share /= 2
-        trial = copy.deepcopy(su.mesh)
-        st, passes = _run_all(trial, target, share * max_error / su.scale, opts, progress, su.m0)
-        if st == "cancelled":
-            return timed(_unchanged(clean), 0.0)
-        found = _measured_cage(su, trial, st, passes, opts, measure, max_error)
-        if found is not None:
-            return timed(*found)
-    found = _by_face_count(su, target, max_error, opts, progress, measure)
-    if found is not None:
-        return timed(*found)
-    return timed(_unchanged(clean)._replace(stopped="max_error"), 0.0)
+    return good
 
 
 def _shared_faces(cage, clean):
