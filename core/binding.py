@@ -648,27 +648,10 @@ def bind(V_dense, F_dense, V_cage, F_cage, *, levels=2, scheme="butterfly", crea
     # 1.1 s at five levels), made beside the fine surface's index, which leaves a core idle
     # part of the time
     fine = in_background(lambda: _fine_vertex_parts(op, VfT, NfT, detail is not None))
-    dense_index = None
-    if detail == "exact":
-        # the dense mesh's index (on one thread: 0.4 of a 0.6 s bind of a 100k-vertex scan)
-        # is not needed before the dense vertices are bound: built beside that work
-        dense_index = in_background(
-            lambda: exact_detail_index(V_dense - origin if shifted else V_dense, F_dense,
-                                       op.n_fine))
-        query = NearQuery(Vf, op.F_fine, reach=reach)
-    elif detail == "local" and _cleans_local(F_dense, V_dense.shape[0], degree):
-        # made beside the index
-        query, surface = run_each(lambda build: build(), [
-            lambda: NearQuery(Vf, op.F_fine, reach=reach),
-            lambda: _local_surface(V_dense, F_dense, origin if shifted else None, True)])
-    elif detail == "local":
-        # the index built on both threads
-        query = NearQuery(Vf, op.F_fine, reach=reach)
-        surface = _local_surface(V_dense, F_dense, origin if shifted else None, False)
-    else:
-        query = NearQuery(Vf, op.F_fine, reach=reach)      # halves on the threads
+    query, surface, dense_index = _searches(V_dense, F_dense, Vf, op, detail, degree, reach,
+                                            origin if shifted else None)
     ties, d_face, d_bary, vfr = fine.result()
-    near = _near_search(surface, degree, vfr.point) if detail == "local" else None
+    near = _near_search(surface, degree, vfr.point) if surface is not None else None
     try:
         dense = _bind_dense(query, V_dense, VfT, NfT, op.F_fine, ties,
                             _reporter(progress, 0.05, 0.6), near, origin if shifted else None)
@@ -677,14 +660,42 @@ def bind(V_dense, F_dense, V_cage, F_cage, *, levels=2, scheme="butterfly", crea
             dense_index.cancel()            # (not started yet: dropped; else it finishes unread)
         raise
     fine_detail = _fine_detail(detail, op, vfr, reach, index=dense_index,
-                               surface=surface if detail == "local" else None,
-                               nearest=dense.nearest, report=_reporter(progress, 0.65, 0.95))
+                               surface=surface, nearest=dense.nearest, report=_reporter(progress, 0.65, 0.95))
     return Binding(fine_face=dense.face, bary=dense.bary_t.T, offset=dense.offset_t.T,
                    fine_detail=fine_detail, F_cage=F_cage, n_cage=int(V_cage.shape[0]),
                    levels=int(levels), scheme=str(scheme), creases=creases,
                    fingerprint=op.fingerprint, F_dense=F_own, V_cage_rest=V_cage,
                    _operator=op,
                    _cache=_binding_cache(dense, op.F_fine, d_face, d_bary, fine_detail, folds))
+
+
+def _searches(V_dense, F_dense, Vf, op, detail, degree, reach, origin):
+    """The searches :func:`bind` makes: ``(query, surface, dense_index)``,
+    the fine surface's :class:`~.near_query.NearQuery` (``Vf``, ``op.F_fine``;
+    queries at about ``reach``), and for the ``detail`` search the dense
+    mesh's cleaned surface (``"local"``: :func:`_local_surface`, else None)
+    or its index (``"exact"``: started on a worker thread, else None).
+    ``origin``: the fine surface's, or None (at the origin already)."""
+    surface = dense_index = None
+    if detail == "exact":
+        # the dense mesh's index (on one thread: 0.4 of a 0.6 s bind of a 100k-vertex scan)
+        # is not needed before the dense vertices are bound: built beside that work
+        dense_index = in_background(
+            lambda: exact_detail_index(V_dense - origin if origin is not None else V_dense,
+                                       F_dense, op.n_fine))
+        query = NearQuery(Vf, op.F_fine, reach=reach)
+    elif detail == "local" and _cleans_local(F_dense, V_dense.shape[0], degree):
+        # made beside the index
+        query, surface = run_each(lambda build: build(), [
+            lambda: NearQuery(Vf, op.F_fine, reach=reach),
+            lambda: _local_surface(V_dense, F_dense, origin, True)])
+    elif detail == "local":
+        # the index built on both threads
+        query = NearQuery(Vf, op.F_fine, reach=reach)
+        surface = _local_surface(V_dense, F_dense, origin, False)
+    else:
+        query = NearQuery(Vf, op.F_fine, reach=reach)      # halves on the threads
+    return query, surface, dense_index
 
 
 def bind_refined(binding, V_dense, levels, *, V_cage=None, detail_search="auto",
