@@ -71,6 +71,39 @@ def test_a_halo_of_specks_does_not_widen_the_weld():
     assert c.report.n_debris_components + c.report.n_degenerate_faces >= k - 10
 
 
+def test_a_drifted_soup_among_thousands_of_open_specks_is_still_welded():
+    """A soup whose copies drifted by 1e-6 of its size, beside 3,000 open
+    two-face specks 1e-3 across: the specks' 12,000 border half-edges, which
+    no weld closes, were counted among those a wider weld should close half
+    of, so the 1e-5 weld (closing 11,886 of 24,109 on the bunny) was refused:
+    2,048 border loops, 149 of the scan's own pieces dropped as debris, and
+    simplify stopped at 963 faces of 50. Now the weld widens, the scan comes
+    back whole (closed, its own faces) and every speck is dropped."""
+    from core.clean import clean_mesh
+    from core.topology import topology_summary
+    from tests.mesh_factory import unwelded
+    V0, F0 = torus(200, 40)                            # 16,000 faces, closed
+    S, FS = unwelded(V0, F0, jitter=1e-6, seed=3)
+    rng = np.random.default_rng(5)
+    d = float(np.linalg.norm(V0.max(axis=0) - V0.min(axis=0)))
+    k = 3000
+    centre = V0[rng.integers(0, V0.shape[0], k)] + rng.normal(scale=0.05 * d, size=(k, 3))
+    quads = centre[:, None, :] + rng.normal(scale=1e-3 * d, size=(k, 4, 3))
+    two = (np.array([[0, 1, 2], [0, 2, 3]])[None] + 4 * np.arange(k)[:, None, None]).reshape(-1, 3)
+    V = np.vstack([S, quads.reshape(-1, 3)])
+    F = np.vstack([FS, S.shape[0] + two])
+    c = clean_mesh(V, F)
+    assert c.report.weld_widened and c.report.weld_distance == 1e-5
+    top = topology_summary(c.F, c.V.shape[0])
+    assert top.boundary_loops == 0 and top.components == 1
+    assert np.array_equal(np.sort(c.face_to_input), np.arange(F0.shape[0]))
+    assert c.report.n_debris_components == k
+    r = simplify(V, F, target_faces=200)
+    assert r.F.shape[0] == 200 and r.stopped_because == "target"
+    assert manifold_report(r.F, r.V.shape[0]).is_oriented_manifold
+    assert r.n_boundary_loops == 0
+
+
 def test_a_scan_rounded_by_float32_far_from_the_origin_says_so():
     """An icosphere 1 unit across at (5e6, 4e6, 300) stored in float32 (steps
     of 0.5 in x, 0.25 in y there): its faces fold onto a few planes, the
