@@ -244,7 +244,9 @@ def clean_mesh(V, F, *, weld_distance=None, min_component_area=MIN_COMPONENT_ARE
         with more than ``DEBRIS_MAX_FACES`` faces and ``DEBRIS_MAX_FACE_SHARE``
         of them is never debris (the bulk of a mesh beside a stray huge face).
     protected : (n,) bool, optional
-        Components with a protected vertex (e.g. a locked one) are never debris.
+        Components with a protected vertex (e.g. a locked one) are never
+        debris, and a vertex welded with a protected one sits where the
+        first protected one of its weld group is (its ``clean_to_input``).
 
     Returns
     -------
@@ -279,6 +281,7 @@ def clean_mesh(V, F, *, weld_distance=None, min_component_area=MIN_COMPONENT_ARE
     _drop_repeated_faces(w)
     to_input, inner, turned = _manifold_stage(w)
     inner, turned = _drop_flat_ears(w, inner, turned)
+    protected_in = protected
     if protected is not None:
         # a weld group is protected when any of its vertices is (to_input: the groups' reps)
         grouped = np.zeros_like(protected)
@@ -291,6 +294,8 @@ def clean_mesh(V, F, *, weld_distance=None, min_component_area=MIN_COMPONENT_ARE
     _copies_stage(w, labels, area, box, weld.distance, protected, turned)
     _slits_stage(w, weld.distance * diagonal_length(*box))
     V, F, input_to_clean, clean_to_input = _compact(w.V, w.F, to_input, weld.rep)
+    if protected_in is not None:
+        V, clean_to_input = _on_protected(V, clean_to_input, w.V, weld.rep, protected_in)
     return CleanResult(V, F, input_to_clean, clean_to_input, w.faces, w.twin, w.area,
                        CleanReport(**w.counts))
 
@@ -1218,6 +1223,28 @@ def _keep_twins(twin, keep):
     new_f = np.cumsum(keep) - 1
     t = twin.reshape(-1, 3)[keep].ravel()
     return renumber_twins(t, new_f)
+
+
+def _on_protected(V, clean_to_input, V_in, rep, protected):
+    """The clean positions ``V`` and ``clean_to_input`` (new arrays where
+    changed) with every clean vertex of a weld group (``rep``, the weld's
+    representative of each input vertex) that holds a ``protected`` input
+    vertex moved onto the first of those (``V_in``: the input positions).
+    The weld puts a group where its first vertex is: a lock on another copy
+    of an unwelded, drifted input's vertex left the cage vertex up to the
+    drift away from the locked one (a cow soup drifted by 1e-6 of its size,
+    1% of its vertices locked: 108 of 142 off)."""
+    marked = np.flatnonzero(protected)[::-1]
+    first = np.full(rep.shape[0], -1, dtype=np.int64)
+    first[rep[marked]] = marked                          # (the smallest of each group wins)
+    to = first[clean_to_input]
+    move = np.flatnonzero((to >= 0) & (to != clean_to_input))
+    if move.size == 0:
+        return V, clean_to_input
+    V, clean_to_input = V.copy(), clean_to_input.copy()
+    V[move] = V_in[to[move]]
+    clean_to_input[move] = to[move]
+    return V, clean_to_input
 
 
 def _compact(V, F, to_input, rep):
