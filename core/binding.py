@@ -69,8 +69,8 @@ from .mesh import (area_normals_t, bounding_box, check_faces, check_mesh, check_
 from .near_query import NearQuery
 from .spatial import TriangleIndex
 from ._refine import crease_pairs
-from .subdivide import (cage_operator, check_subdivision_args, parametric_faces,
-                        subdivision_operator)
+from .subdivide import (MAX_BOUND_FINE_FACES, cage_operator, check_subdivision_args,
+                        parametric_faces, subdivision_operator)
 from ._face_tracker import faces_across
 from .topology import check_not_soup
 from .unfold import (CageRings, Copies, FaceBatch, FaceStars, FineFaceGroups, Repair, away_rows,
@@ -572,7 +572,8 @@ def bind(V_dense, F_dense, V_cage, F_cage, *, levels=2, scheme="butterfly", crea
     V_cage, F_cage : (n_c,3) float, (m_c,3) int
         The cage (usually :func:`fit_cage`'s positions).
     levels : int
-        Subdivision levels (>= 0).
+        Subdivision levels (>= 0; at most ``core.subdivide.MAX_BOUND_FINE_FACES``
+        fine faces, about 1 KB of memory each).
     scheme : str
         ``"butterfly"`` or ``"loop"`` (whatever ``subdivision_operator`` accepts).
     creases : None or (k,2) int
@@ -626,7 +627,7 @@ def bind(V_dense, F_dense, V_cage, F_cage, *, levels=2, scheme="butterfly", crea
             f"bind: detail_search must be one of {_DETAIL_SEARCHES}, got {shown(detail_search)}")
     if progress is not None and not callable(progress):
         raise InvalidArgumentError(f"bind: progress must be callable or None, got {type(progress)}")
-    check_subdivision_args(levels, scheme, "bind", F_cage.shape[0])
+    check_subdivision_args(levels, scheme, "bind", F_cage.shape[0], max_faces=MAX_BOUND_FINE_FACES)
     detail = _detail_mode(detail_search, F_dense)
     # everything relative to the origin deform takes for this cage (_working_origin)
     origin, step = _origin_and_step(V_cage)
@@ -660,7 +661,8 @@ def bind(V_dense, F_dense, V_cage, F_cage, *, levels=2, scheme="butterfly", crea
             dense_index.cancel()            # (not started yet: dropped; else it finishes unread)
         raise
     fine_detail = _fine_detail(detail, op, vfr, reach, index=dense_index,
-                               surface=surface, nearest=dense.nearest, report=_reporter(progress, 0.65, 0.95))
+                               surface=surface, nearest=dense.nearest,
+                               report=_reporter(progress, 0.65, 0.95))
     return Binding(fine_face=dense.face, bary=dense.bary_t.T, offset=dense.offset_t.T,
                    fine_detail=fine_detail, F_cage=F_cage, n_cage=int(V_cage.shape[0]),
                    levels=int(levels), scheme=str(scheme), creases=creases,
@@ -734,7 +736,7 @@ def bind_refined(binding, V_dense, levels, *, V_cage=None, detail_search="auto",
         binding.V_cage_rest)``: the mesh as bound).
     levels : int
         Subdivision levels of the result (>= 0; usually more than
-        ``binding.levels``).
+        ``binding.levels``; at most ``subdivide.MAX_BOUND_FINE_FACES`` fine faces).
     V_cage : (n_cage,3) float, optional
         The cage to bind to; the binding's rest cage by default (the one its
         faces and barycentric coordinates are on: another cage makes worse
@@ -829,7 +831,8 @@ def _refined_args(binding, V_dense, levels, V_cage, detail_search, progress):
     if progress is not None and not callable(progress):
         raise InvalidArgumentError(f"{where}: progress must be callable or None, got "
                                    f"{type(progress)}")
-    check_subdivision_args(levels, binding.scheme, where, binding.F_cage.shape[0])
+    check_subdivision_args(levels, binding.scheme, where, binding.F_cage.shape[0],
+                           max_faces=MAX_BOUND_FINE_FACES)
     return V_dense, V_cage
 
 

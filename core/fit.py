@@ -51,7 +51,7 @@ from .mirror import axis_index, mirror_partners, symmetrize
 from ._parallel import run_each
 from .near_query import NEEDLE_CELL_FACTOR, needle_grid, search_for
 from .spatial import TriangleIndex
-from .subdivide import cage_operator, check_subdivision_args
+from .subdivide import MAX_BOUND_FINE_FACES, cage_operator, check_subdivision_args
 from .topology import check_not_soup, edge_map
 from .pages import plain_pages
 
@@ -330,7 +330,8 @@ def _set_up(V_dense, F_dense, V_cage, F_cage, *, levels, scheme, creases, smooth
                                   names=("V_dense", "F_dense"), allow_empty=False)
     V_cage, F_cage = check_mesh(V_cage, F_cage, where="fit_cage", names=("V_cage", "F_cage"),
                                 allow_empty=False)
-    check_subdivision_args(levels, scheme, "fit_cage", F_cage.shape[0])
+    check_subdivision_args(levels, scheme, "fit_cage", F_cage.shape[0],
+                           max_faces=MAX_BOUND_FINE_FACES)
     check_units(V_dense, where="fit_cage", name="V_dense")
     check_units(V_cage, where="fit_cage", name="V_cage")
     if not isinstance(clean, (bool, np.bool_)):

@@ -162,6 +162,12 @@ SCHEMES = ("butterfly", "loop")
 
 #: most faces a subdivision may make (2^28, 268M: about 20 GB of operator and positions)
 MAX_FINE_FACES = 2 ** 28
+#: most fine faces a fit or a bind works on (``fit_cage``, ``bind``, ``bind_refined``): each
+#: costs about 0.8 KB in a bind and 1.1 KB in a fit (a 100-face cage bound at 8 levels,
+#: 6.6M fine faces: 5.2 GB, 36 s; fitted at 7, 1.6M: 1.8 GB, 50 s), so 2^24 (16.8M: a
+#: 10k-face cage at the five levels Auto takes at most) is about 13-18 GB; at 9 levels
+#: a 100-face cage's fit ran out of memory in NumPy instead of being refused
+MAX_BOUND_FINE_FACES = 2 ** 24
 #: most levels any mesh may take (one triangle makes MAX_FINE_FACES faces at 14)
 MAX_LEVELS = int(round(np.log(MAX_FINE_FACES) / np.log(4.0)))
 #: most entries the butterfly's ring stencils may take a level: each edge at a vertex of
@@ -460,11 +466,11 @@ def parametric_faces(face, bary, depth):
     return face
 
 
-def check_subdivision_args(levels, scheme, where, n_faces=None):
+def check_subdivision_args(levels, scheme, where, n_faces=None, max_faces=MAX_FINE_FACES):
     """``levels`` as an int, checked with ``scheme`` for ``where`` (the public
     function the caller called, so a message names what the user called):
     :class:`InvalidArgumentError` for an unknown scheme, levels that are not
-    an integer >= 0, or levels that would make more than ``MAX_FINE_FACES``
+    an integer >= 0, or levels that would make more than ``max_faces``
     faces of ``n_faces`` (``levels=40`` allocated for 20 s and ran out of
     memory), or more than ``MAX_LEVELS`` when there are no faces."""
     if scheme not in SCHEMES:
@@ -475,11 +481,13 @@ def check_subdivision_args(levels, scheme, where, n_faces=None):
         raise InvalidArgumentError(
             f"{where}: levels={levels} is more than any mesh takes (at most {MAX_LEVELS}: one "
             f"triangle makes {4 ** MAX_LEVELS:,} faces)")
-    if n_faces and levels > np.log(MAX_FINE_FACES / n_faces) / np.log(4.0):
+    if n_faces and levels > np.log(max_faces / n_faces) / np.log(4.0):
         made = f"{n_faces * 4.0 ** levels:.3g}" if levels < 500 else "more than 1e300"
+        fits = int(np.floor(np.log(max_faces / n_faces) / np.log(4.0) + 1e-9))
         raise InvalidArgumentError(
             f"{where}: levels={levels} would make {made} faces of {n_faces:,} (each level "
-            f"multiplies them by 4); at most {MAX_FINE_FACES:,}")
+            f"multiplies them by 4); at most {max_faces:,}"
+            + (f" (levels={fits} at most for this cage)" if fits >= 0 else ""))
     return levels
 
 

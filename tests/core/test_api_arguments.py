@@ -69,6 +69,25 @@ def test_the_other_functions_refuse_them_too(sphere, cage, call, match):
         call(V, F, cage)
 
 
+@pytest.mark.parametrize("call", [
+    lambda V, F, C: core.fit_cage(V, F, *C, levels=10, iterations=1),
+    lambda V, F, C: core.bind(V, F, *C, levels=10),
+    lambda V, F, C: core.bind_refined(core.bind(V, F, *C, levels=1), V, 10),
+])
+def test_fit_and_bind_refuse_more_fine_faces_than_memory_holds(sphere, cage, call):
+    """A fit or a bind costs about 1 KB a fine face: at 9 levels a 100-face
+    cage's fit ran for minutes and then out of memory inside NumPy (the
+    subdivision's own cap, 268M faces, is for positions alone). The 40-face
+    cage at 10 levels (42M fine faces) is refused, naming the levels it
+    can take; at 9 (10.5M) it would be bound."""
+    from core.subdivide import MAX_BOUND_FINE_FACES
+    V, F = sphere
+    assert cage[1].shape[0] * 4 ** 9 <= MAX_BOUND_FINE_FACES < cage[1].shape[0] * 4 ** 10
+    with pytest.raises(InvalidArgumentError,
+                       match=r"levels=10 would make 4\.19e\+07 faces of 40 .*levels=9 at most"):
+        call(V, F, cage)
+
+
 def test_a_huge_min_cell_is_one_cell_and_the_answers_stay_exact(sphere):
     V, F = sphere
     P = np.random.default_rng(0).normal(size=(50, 3))
