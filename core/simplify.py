@@ -804,6 +804,9 @@ def _cage_of(su, mesh, stopped, passes, opts, relocate=True):
     Vout = mesh.V * su.scale + su.centre
     still = ~mesh.moved
     Vout[still] = su.V_clean[su.order[mesh.orig[still]]]
+    # and the faces flat there (the working positions are snapped: a flat input face kept
+    # was not flat in them, and came out flat in a cage at or above the input's face count)
+    F_out, features = flip_flat_faces(Vout, F_out, features)
     # back to the clean mesh's order: cage vertices in the order of the clean vertices
     # they keep, faces in the order of the clean faces they descend from
     vorder = np.argsort(su.order[mesh.orig])  # (distinct keys)

@@ -104,6 +104,28 @@ def test_a_drifted_soup_among_thousands_of_open_specks_is_still_welded():
     assert r.n_boundary_loops == 0
 
 
+def test_a_flat_input_face_is_flipped_away_at_or_above_the_input_count():
+    """A face whose corner lies on its opposite edge (no area, three distinct
+    corners) is no degenerate face for the cleaning, and the cage flips it
+    away (the edge under the corner with the face across it); the flatness
+    was tested on the engine's snapped positions, where the corner was off
+    the line, so a cage at or above the input's face count (nothing
+    collapsed) kept the face exactly flat, and called it a sliver. The flips
+    keep the surface: every cage vertex is where its input vertex is."""
+    V, F = icosphere(2)
+    V = V.copy()
+    a, b, c = F[0]
+    V[c] = 0.5 * (V[a] + V[b])
+    assert np.flatnonzero(flat_faces(V, F)).tolist() == [0]
+    for kwargs in (dict(ratio=1.0), dict(target_faces=1000)):
+        r = simplify(V, F, **kwargs)
+        assert r.F.shape[0] == F.shape[0] and r.stopped_because == "target"
+        assert not flat_faces(r.V, r.F).any()
+        assert manifold_report(r.F, r.V.shape[0]).is_oriented_manifold
+        np.testing.assert_array_equal(r.V[r.vertex_map], V)
+        assert "sliver" not in r.message
+
+
 def test_a_scan_rounded_by_float32_far_from_the_origin_says_so():
     """An icosphere 1 unit across at (5e6, 4e6, 300) stored in float32 (steps
     of 0.5 in x, 0.25 in y there): its faces fold onto a few planes, the
