@@ -348,6 +348,13 @@ class SimplifyResult:
         triangles."""
         if self.n_input_pieces is None:
             return ""
+        c = self.cleaning
+        if c.n_welded_vertices == 0 and (c.n_split_vertices or c.n_non_manifold_edges):
+            # (welded as it came: its faces met only where the cleaning cut them apart)
+            return (f"the input's faces meet only at bow-tie vertices or edges of more than "
+                    f"two faces, which the cleaning split: {self.n_input_pieces:,} separate "
+                    f"pieces that no weld joins (preserve_topology=False drops pieces to "
+                    f"reach the target)")
         return (f"the input is in {self.n_input_pieces:,} separate pieces: weld it first (Merge "
                 f"by Distance in Blender, or a larger weld_distance)")
 

@@ -254,8 +254,9 @@ def check_not_soup(F_cage, n_cage, F_dense, n_dense, where):
     m = np.asarray(F_cage).shape[0]
     raise InvalidMeshError(
         f"{where}: the cage is {pieces:,} separate pieces for its {m:,} faces, a triangle "
-        f"soup: its source was not welded, and a soup has no surface to subdivide; weld "
-        f"the source first (Merge by Distance in Blender, or simplify with a larger "
+        f"soup: its source's faces are not joined by their edges (not welded, or meeting "
+        f"only at bow-tie vertices), and a soup has no surface to subdivide; weld the "
+        f"source first (Merge by Distance in Blender, or simplify with a larger "
         f"weld_distance) and make the cage again")
 
 

@@ -668,6 +668,30 @@ def test_a_soup_is_welded_or_named_never_thrown_away_as_debris():
                                 f"separate pieces: weld it first")
 
 
+def test_triangles_meeting_at_one_vertex_are_named_as_split_not_unwelded():
+    """200 triangles whose only shared vertex is one bow-tie: the input is
+    welded, and the cleaning's split makes it 200 pieces. The message said
+    "weld it first", which does nothing here; it now says where the pieces
+    come from, and fit's refusal of the soup cage names both causes."""
+    from core import InvalidMeshError, fit_cage
+    rng = np.random.default_rng(3)
+    k = 200
+    d = rng.normal(size=(k, 3))
+    d /= np.linalg.norm(d, axis=1)[:, None]
+    e = np.cross(d, rng.normal(size=(k, 3)))
+    e /= np.linalg.norm(e, axis=1)[:, None]
+    V = np.vstack([[0.0, 0.0, 0.0], d, d + 0.1 * e])
+    F = np.stack([np.zeros(k, dtype=np.int64), 1 + np.arange(k), 1 + k + np.arange(k)], axis=1)
+    r = simplify(V, F, target_faces=50)
+    assert r.stopped_because == "topology_floor" and r.F.shape[0] == r.n_components == k
+    assert r.cleaning.n_welded_vertices == 0 and r.cleaning.n_split_vertices == 1
+    assert "weld it first" not in r.message
+    assert (f"meet only at bow-tie vertices or edges of more than two faces, which the "
+            f"cleaning split: {k:,} separate pieces") in r.message
+    with pytest.raises(InvalidMeshError, match="not welded, or meeting only at bow-tie"):
+        fit_cage(V, F, r.V, r.F, iterations=1)
+
+
 def test_a_real_scan_as_a_soup_drifted_past_the_first_wider_weld_is_welded_by_the_next():
     # homer's copies of each vertex drifted by 3e-5 of its size: the 1e-5 weld closes a
     # few percent of its open edges (a pair welds only when every axis is within it),
