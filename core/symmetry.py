@@ -66,6 +66,8 @@ SNAP = 1e-6
 #: ``max_error``: the half's bound is lowered in these steps while the whole cage's
 #: measured distance to the whole input is over it (the input's own asymmetry)
 MAX_ERROR_SHARES = (1.0, 0.7, 0.5)
+#: ... and then halved at most this many times while the mirrored cage has no face
+_EMPTY_HALVINGS = 8
 #: a cage vertex off the seam that reaches the plane is lifted this far off it (share of
 #: the diagonal): apart from its own mirror copy, well inside ``PARTNER_TOLERANCE``
 LIFT = PARTNER_TOLERANCE / 8
@@ -639,7 +641,10 @@ def _simplify_half(run, clean, target, max_error, most):
     within it. Returns (result, cage, Hausdorff distance or None)."""
     hausdorff = None
     shares = MAX_ERROR_SHARES if max_error is not None else (None,)
-    for i, share in enumerate(shares):
+    i = -1
+    while i + 1 < len(shares):
+        i += 1
+        share = shares[i]
         bound = None if share is None else share * float(max_error)
         half_target = None if target is None else target // 2
         best, tried = None, set()
@@ -659,6 +664,14 @@ def _simplify_half(run, clean, target, max_error, most):
         r, cage = best
         if max_error is None:
             break
+        if cage.F.shape[0] == 0:
+            # the bound took the whole half to lone seam triangles, which mirroring drops (an
+            # icosphere at 33% of its size: "surface_distance (mesh b): the mesh has no
+            # faces"): a lower share, and lower ones past the last while it stays empty
+            hausdorff = np.inf
+            if i + 1 == len(shares) and len(shares) < len(MAX_ERROR_SHARES) + _EMPTY_HALVINGS:
+                shares = shares + (shares[-1] / 2,)
+            continue
         centre, scale = measuring_frame(clean.V)
         hausdorff = scale * surface_distance((clean.V - centre) / scale, clean.F,
                                              (cage.V - centre) / scale, cage.F).hausdorff

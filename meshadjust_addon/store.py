@@ -98,10 +98,26 @@ def _readable_cage_mesh(cage):
 
 def cage_topology(cage):
     """(F_cage, n_cage, creases) of a cage object, read from its mesh (an
-    Edit Mode cage is synced first)."""
+    Edit Mode cage is synced first).
+
+    Raises :class:`core.MeshAdjustError` when the cage has faces of more
+    than three corners (Edit Mode's Subdivide or Grid Fill makes them):
+    Blender splits a quad along the diagonal its shape favours, which
+    changes as its corners move, so the cage's triangles changed under
+    an edit (Refine refused a moved corner as a new topology, every Fit was
+    rolled back as "changed topology while the step ran") or were folded (a
+    quad with a straight corner split through it: a face of no area and an
+    edge of three faces, which Bind named as such)."""
     with _readable_cage_mesh(cage) as mesh:
         creases = mesh_io.get_edge_flags(mesh, CREASE)
-    F, _ = mesh_io.read_triangles(cage.data)
+    F, split = mesh_io.read_triangles(cage.data)
+    if split:
+        k = mesh_io.split_polygons(cage.data)
+        raise core.MeshAdjustError(
+            f"'{cage.name}' has {k:,} face{'s' if k != 1 else ''} of more than three corners "
+            f"(a cage is triangles: Blender splits a quad along the diagonal its shape favours, "
+            f"and that changes as its corners move); triangulate {'them' if k != 1 else 'it'} "
+            f"(Edit Mode: Face > Triangulate Faces, Ctrl+T) and Bind again")
     return F, len(cage.data.vertices), (creases if creases.shape[0] else None)
 
 

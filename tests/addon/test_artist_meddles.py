@@ -548,3 +548,44 @@ def test_a_live_update_pending_when_the_cage_is_renamed_still_runs(bound):
     cage.name = "Renamed cage"
     live.refine_pending()
     _assert_live_followed(cage, edited, before)
+
+
+def test_a_cage_given_quads_in_edit_mode_is_refused_by_name_until_triangulated(bound):
+    """Subdivide on one cage edge (or a Grid Fill) leaves faces of four
+    corners, which Blender splits along the diagonal their shape favours:
+    a quad with a straight corner split through it had a face of no area and
+    an edge of three faces ('bind: the cage (F_cage): 1 non-manifold edges'),
+    Fit was rolled back every time as 'changed topology while the step ran',
+    and Refine called a moved corner a new topology. Every step now names
+    the quads and says to triangulate them, leaving the scene as it was;
+    triangulated, the cage binds and refines."""
+    dense, cage = bound
+    bm = bmesh.new()
+    bm.from_mesh(cage.data)
+    bm.edges.ensure_lookup_table()
+    bmesh.ops.subdivide_edges(bm, edges=[bm.edges[0]], cuts=1, use_grid_fill=False)
+    assert sorted({len(f.verts) for f in bm.faces}) == [3, 4]
+    bm.to_mesh(cage.data)
+    bm.free()
+    cage.data.update()
+    before = full_snapshot()
+    activate(cage)
+    for op, props in ((bpy.ops.meshadjust.bind, dict(keep_edit=False)),
+                      (bpy.ops.meshadjust.bind, dict(keep_edit=True)),
+                      (bpy.ops.meshadjust.fit_cage, {})):
+        with pytest.raises(RuntimeError, match=r"'dense_cage' has 2 faces of more than three "
+                                               r"corners .* Triangulate Faces, Ctrl\+T"):
+            op(**props)
+        assert_all_unchanged(before)
+    with pytest.raises(RuntimeError, match="'dense_cage' changed topology since it was bound"):
+        bpy.ops.meshadjust.refine()                      # (its poll: then Bind says why)
+    bm = bmesh.new()
+    bm.from_mesh(cage.data)
+    bmesh.ops.triangulate(bm, faces=bm.faces[:], quad_method='BEAUTY')
+    bm.to_mesh(cage.data)
+    bm.free()
+    cage.data.update()
+    assert bpy.ops.meshadjust.bind(keep_edit=False) == {'FINISHED'}
+    lift_top(cage)
+    assert bpy.ops.meshadjust.refine() == {'FINISHED'}
+    np.testing.assert_allclose(pos(cage.meshadjust.edited).shape, pos(dense).shape)
