@@ -62,10 +62,21 @@ def _set_point_attr(mesh, name, kind, values):
         attr.data.foreach_set("vector", np.ascontiguousarray(values, dtype=np.float32).ravel())
 
 
+def _is_ours(attr, kind):
+    """Whether the attribute ``attr`` is per vertex and of the ``kind``
+    MeshAdjust writes (Convert Attribute in the Attributes panel changes
+    both: a FLOAT one had no vectors to read, a Python traceback)."""
+    return attr.domain == 'POINT' and attr.data_type == kind
+
+
 def _get_point_attr(mesh, name, kind):
     attr = mesh.attributes.get(name)
     if attr is None:
         raise core.MeshAdjustError(f"'{mesh.name}' has no binding attribute '{name}': bind it again")
+    if not _is_ours(attr, kind):
+        raise core.MeshAdjustError(
+            f"'{mesh.name}': its attribute '{name}' is {attr.data_type} on {attr.domain}, not "
+            f"the {kind} per vertex MeshAdjust wrote (converted?): bind it again")
     n = len(mesh.vertices)
     if kind == 'INT':
         buf = np.empty(n, dtype=np.int32)
@@ -146,7 +157,8 @@ def save_rest(cage, V_rest):
 def load_rest(cage):
     """The cage's rest positions (source space) saved at bind time."""
     with _readable_cage_mesh(cage) as mesh:
-        if mesh.attributes.get(REST) is None:
+        attr = mesh.attributes.get(REST)
+        if attr is None or not _is_ours(attr, 'FLOAT_VECTOR'):     # (converted: as none)
             raise core.MeshAdjustError(f"'{cage.name}' has no rest shape: bind it first")
         return _get_point_attr(mesh, REST, 'FLOAT_VECTOR')
 

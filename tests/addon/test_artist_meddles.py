@@ -589,3 +589,34 @@ def test_a_cage_given_quads_in_edit_mode_is_refused_by_name_until_triangulated(b
     lift_top(cage)
     assert bpy.ops.meshadjust.refine() == {'FINISHED'}
     np.testing.assert_allclose(pos(cage.meshadjust.edited).shape, pos(dense).shape)
+
+
+@pytest.mark.parametrize("kind, domain", [('FLOAT', 'POINT'), ('FLOAT_VECTOR', 'FACE')])
+def test_a_converted_rest_shape_is_no_rest_shape_and_a_converted_binding_is_named(bound, kind,
+                                                                                   domain):
+    """Convert Attribute (the Attributes panel) on the cage's rest shape made
+    Fit and Bind fail with a Python traceback (a FLOAT attribute has no
+    vectors to read; on faces, 'internal error setting the array'). It is
+    read as no rest shape, as a removed one is: the steps bind the cage as it
+    is. The edited original's binding attributes converted are named, with
+    what to do."""
+    dense, cage = bound
+    me = cage.data
+    me.attributes.remove(me.attributes["meshadjust_rest"])
+    me.attributes.new("meshadjust_rest", kind, domain)
+    activate(cage)
+    assert bpy.ops.meshadjust.fit_cage() == {'FINISHED'}
+    rest = me.attributes["meshadjust_rest"]
+    assert rest.domain == 'POINT' and rest.data_type == 'FLOAT_VECTOR'
+    edited = cage.meshadjust.edited
+    offset = edited.data.attributes["meshadjust_offset"]
+    edited.data.attributes.remove(offset)
+    edited.data.attributes.new("meshadjust_offset", kind, domain)
+    mod("store")._cache.clear()                          # (as after a reload)
+    before = full_snapshot()
+    with pytest.raises(RuntimeError, match="its attribute 'meshadjust_offset' is .* not the "
+                                           "FLOAT_VECTOR per vertex MeshAdjust wrote"):
+        bpy.ops.meshadjust.refine()
+    assert_all_unchanged(before)
+    assert bpy.ops.meshadjust.bind() == {'FINISHED'}
+    assert bpy.ops.meshadjust.refine() == {'FINISHED'}
