@@ -67,6 +67,9 @@ def subdivide_object(obj, *, levels=1, scheme="butterfly", in_place=False):
             f"no longer linked; make it single-user first (Object > Relations > Make Single "
             f"User > Object & Data), or turn In place off for a new object")
     arrays = mesh_io.read_object(obj)
+    if arrays.F.shape[0] == 0:     # (a Mask modifier on an empty group: "0 -> 0 faces")
+        raise core.InvalidMeshError(f"'{obj.name}' shows no faces"
+                                    + (" (its modifiers leave none)" if arrays.evaluated else ""))
     # sharp edges index the mesh data: they only apply when it was used as is
     creases = (np.zeros((0, 2), np.int64) if arrays.evaluated
                else mesh_io.get_edge_flags(obj.data, "sharp_edge"))

@@ -61,7 +61,7 @@ def simplify_unavailable(context):
         return "Leave Edit Mode to simplify"
     if obj.meshadjust.role == 'CAGE':
         return f"'{obj.name}' is already a cage"
-    if len(obj.data.polygons) == 0:
+    if len(obj.data.polygons) == 0 and not obj.modifiers:    # (a Screw modifier makes faces)
         return f"'{obj.name}' has no faces"
     return api.source_problem(obj)
 
@@ -533,7 +533,8 @@ class MESHADJUST_OT_subdivide(SubdivideProps, bpy.types.Operator):
         act = context.active_object
         if act is not None and act.type == 'MESH' and act not in objs:
             objs.insert(0, act)
-        empty = [o.name for o in objs if len(o.data.polygons) == 0]
+        # (what they show is read: one with modifiers may make faces, or leave none)
+        empty = [o.name for o in objs if len(o.data.polygons) == 0 and not o.modifiers]
         if empty:
             self.report({'ERROR'}, f"{empty[0]}: the mesh has no faces")
             return {'CANCELLED'}

@@ -620,3 +620,33 @@ def test_a_converted_rest_shape_is_no_rest_shape_and_a_converted_binding_is_name
     assert_all_unchanged(before)
     assert bpy.ops.meshadjust.bind() == {'FINISHED'}
     assert bpy.ops.meshadjust.refine() == {'FINISHED'}
+
+
+def test_faces_are_counted_on_what_the_object_shows(scene):
+    """A Mask modifier on an empty vertex group shows no face: Subdivide said
+    '0 -> 0 faces' and made an empty object; an edge profile with a Screw
+    modifier shows a lathed surface: Subdivide and Simplify's poll said it
+    had no faces. Both are read as shown."""
+    from tests.mesh_factory import icosphere
+    V, F = icosphere(2)
+    masked = make_object("masked", V, F)
+    masked.vertex_groups.new(name="nothing")
+    mask = masked.modifiers.new("mask", 'MASK')
+    mask.vertex_group = "nothing"
+    before = full_snapshot()
+    with pytest.raises(RuntimeError, match="'masked' shows no faces \\(its modifiers leave none\\)"):
+        bpy.ops.meshadjust.subdivide(levels=1)
+    assert_all_unchanged(before)
+    mesh = bpy.data.meshes.new("profile")
+    mesh.from_pydata([(0.5, 0, -0.5), (0.8, 0, 0), (0.5, 0, 0.5)], [(0, 1), (1, 2)], [])
+    lathe = bpy.data.objects.new("lathe", mesh)
+    scene.collection.objects.link(lathe)
+    lathe.modifiers.new("screw", 'SCREW').steps = 32
+    activate(lathe)
+    assert bpy.ops.meshadjust.simplify.poll()
+    assert bpy.ops.meshadjust.subdivide(levels=1) == {'FINISHED'}
+    made = bpy.data.objects["lathe_butterfly1"]
+    assert len(made.data.polygons) == 4 * 2 * 2 * 32        # the 64 quads split, times 4
+    activate(lathe)
+    assert bpy.ops.meshadjust.simplify(target_faces=40, fit=False, bind=False) == {'FINISHED'}
+    assert len(lathe.meshadjust.cage.data.polygons) <= 40
