@@ -237,7 +237,9 @@ def commit_refine(cage, rj):
     _write(cage, rj)
     cs = cage.meshadjust
     source, edited = cs.source, cs.edited
-    miss = results.key_miss(source, rj.V_edited) if rj.output == 'SHAPE_KEY' else None
+    own = results.shape_key_of(source, cage)
+    miss = results.key_miss(source, rj.V_edited, own.name if own is not None else None) \
+        if rj.output == 'SHAPE_KEY' else None
     warnings += [miss] if miss else []
     stale = staleness.source_change(source, edited.meshadjust.source_fingerprint, fresh=True)
     if stale:

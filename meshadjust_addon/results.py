@@ -523,15 +523,19 @@ def write_shape_key(source, cage, V_edited, V_bound, notes=None):
     return key
 
 
-def key_miss(source, V_edited):
+def key_miss(source, V_edited, own_key=None):
     """A warning when the source with its shape keys and modifiers as they
     are now does not show the edit ``V_edited`` (n,3, its local space): a
     key is applied before the modifiers, so where they turn the vertices
     (an Armature's pose, a Simple Deform) the key's offsets, measured on the
     shape they make, are turned too (a posed arm lifted up moved sideways,
-    reported as done); None when it shows it (to a ``KEY_TOLERANCE`` share
-    of its size) or has no modifiers."""
-    if not source.modifiers:
+    reported as done); other keys shown with it (``own_key``: the name of
+    the one written) add theirs (an artist's key relative to MeshAdjust's at
+    0.5 took half the edit back, reported as updated). None when it shows
+    it (to a ``KEY_TOLERANCE`` share of its size), or has no modifiers and
+    no other key shown."""
+    others = _other_keys_shown(source, own_key)
+    if not source.modifiers and not others:
         return None
     depsgraph = bpy.context.evaluated_depsgraph_get()
     depsgraph.update()
@@ -542,11 +546,27 @@ def key_miss(source, V_edited):
     off = float(np.linalg.norm(shown - V_edited, axis=1).max()) if V_edited.shape[0] else 0.0
     if not off > KEY_TOLERANCE * size:
         return None
+    far = f"up to {off:.3g} ({100 * off / size:.2g}% of its size) off the edited original"
+    if not source.modifiers:
+        listed = ", ".join(f"'{name}'" for name in others[:3]) + (", ..." if len(others) > 3 else "")
+        return (f"'{source.name}' shows other shape keys with the edit ({listed}): {far}; set "
+                f"them to 0 to see the edit alone")
     kinds = ", ".join(sorted({m.type.replace("_", " ").title() for m in source.modifiers}))
     return (f"'{source.name}' shows its shape key through its modifiers ({kinds}), which "
-            f"Blender applies after it: where they turn the mesh the edit is turned too, up to "
-            f"{off:.3g} ({100 * off / size:.2g}% of its size) off the edited original; use the "
-            f"edited original, or apply the modifiers first")
+            f"Blender applies after it: where they turn the mesh the edit is turned too, {far}; "
+            f"use the edited original, or apply the modifiers first")
+
+
+def _other_keys_shown(source, own_key):
+    """The names of the shape keys of ``source`` other than its reference
+    key and ``own_key`` that change what it shows (not muted, a value other
+    than 0; every one when a key is pinned to show alone: the check then
+    compares what is shown)."""
+    keys = source.data.shape_keys
+    if keys is None:
+        return []
+    return [kb.name for kb in keys.key_blocks
+            if kb != keys.reference_key and kb.name != own_key and not kb.mute and kb.value != 0.0]
 
 
 def _key_shape(keys, key, V_edited, V_bound):

@@ -650,3 +650,27 @@ def test_faces_are_counted_on_what_the_object_shows(scene):
     activate(lathe)
     assert bpy.ops.meshadjust.simplify(target_faces=40, fit=False, bind=False) == {'FINISHED'}
     assert len(lathe.meshadjust.cage.data.polygons) <= 40
+
+
+def test_other_shape_keys_shown_with_the_edit_are_said(bound):
+    """The artist's own key made relative to MeshAdjust's, at 0.5, took half
+    of the edit back in what the source shows, and Refine's shape key said
+    it was updated: a warning names the key and how far off the source is;
+    at 0 nothing is said."""
+    dense, cage = bound
+    api = mod("api")
+    assert api.refine_object(cage, output='SHAPE_KEY').level == 'INFO'
+    keys = dense.data.shape_keys
+    smile = dense.shape_key_add(name="Smile", from_mix=False)
+    smile.relative_key = keys.key_blocks[cage.meshadjust.key_name]
+    smile.value = 0.0
+    activate(cage)
+    assert bpy.ops.meshadjust.bind() == {'FINISHED'}      # (a new key: the source changed)
+    lift_top(cage)
+    report = api.refine_object(cage, output='SHAPE_KEY')
+    assert report.level == 'INFO', report.message
+    smile.value = 0.5
+    lift_top(cage)
+    report = api.refine_object(cage, output='SHAPE_KEY')
+    assert report.level == 'WARNING'
+    assert "'dense' shows other shape keys with the edit ('Smile'): up to" in report.message
