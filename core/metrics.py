@@ -307,8 +307,10 @@ class DistanceFrom:
 
     def __init__(self, V_a, F_a):
         self.V, self.F = check_mesh(V_a, F_a, where="surface_distance (mesh a)", allow_empty=False)
-        check_units(self.V, where="surface_distance", name="mesh a")
         self._used = used_vertices(self.F, self.V.shape[0])
+        # (the faces' vertices: a loose vertex at 1e20 beside a scan refused the add-on's
+        # report of its simplify, which left it out)
+        check_units(self.V[self._used], where="surface_distance", name="mesh a")
         self.diagonal = bbox_diagonal(self.V[self._used])
         self._samples = {}                  # (count, seed) -> SurfaceSamples
         self._searches = {}                 # kind -> search
@@ -328,13 +330,13 @@ class DistanceFrom:
         step of it), the means and RMS to rounding. The masks are the
         caller's word: a face called shared that is not is measured as 0."""
         V_b, F_b = check_mesh(V_b, F_b, where="surface_distance (mesh b)", allow_empty=False)
-        check_units(V_b, where="surface_distance", name="mesh b")
+        used_b = used_vertices(F_b, V_b.shape[0])
+        check_units(V_b[used_b], where="surface_distance", name="mesh b")
         if samples is None:
             n = int(np.clip(2 * max(self.F.shape[0], F_b.shape[0]), *_DEFAULT_SAMPLES))
         else:
             n = check_number(samples, where="surface_distance", name="samples", lo=0,
                              hi=MAX_SAMPLES, integer=True)
-        used_b = used_vertices(F_b, V_b.shape[0])
         seed = check_seed(seed, where="surface_distance")
         s_a = self._sampled(n, seed)
         s_b = _sample(V_b, F_b, n, np.random.default_rng(seed))

@@ -404,3 +404,22 @@ def test_shares_of_the_size_keep_two_significant_digits():
         ["0%", "0.65%", "0.30%", "0.035%", "0.00080%", "0.10%", "12.00%", "100.00%"]
     assert percent(-2.5e-5) == "-0.0025%" and percent(float("nan")) == "nan%"
     assert percent(1e-12) == "under 0.000001%"
+
+
+def test_a_loose_vertex_far_away_is_not_measured_nor_refused():
+    """A vertex in no face at 1e20 beside a sphere (a stray point of a scan):
+    the units check read every vertex and refused the measure ('mesh a
+    reaches 1e+20'), which failed the add-on's report of a simplify that had
+    left the vertex out. Only the faces' vertices are measured and checked;
+    a face's vertex that far is still refused."""
+    from core import InvalidMeshError, simplify, surface_distance
+    from tests.mesh_factory import icosphere
+    V, F = icosphere(3)
+    far = np.vstack([V, [[1e20, 0.0, 0.0]]])
+    cage = simplify(far, F, target_faces=100)
+    for a, b in (((far, F), (cage.V, cage.F)), ((cage.V, cage.F), (far, F))):
+        d = surface_distance(*a, *b)
+        assert d == surface_distance(*(x if x is not far else V for x in a),
+                                     *(x if x is not far else V for x in b))
+    with pytest.raises(InvalidMeshError, match="mesh a reaches 1e\\+20"):
+        surface_distance(far, np.vstack([F, [[0, 1, V.shape[0]]]]), cage.V, cage.F)
