@@ -312,6 +312,8 @@ class SimplifyResult:
             return ""
         why = ": a mirrored cage comes in steps of its seam's faces" \
             if self.asymmetry is not None else ""
+        if self.n_clean_faces and m >= self.n_clean_faces:
+            why = ": the input has no more, nothing to collapse"
         return f" (of {self.target:,} asked{why})"
 
     @property

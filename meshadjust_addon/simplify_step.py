@@ -311,6 +311,11 @@ def _target_note(job):
             target = max(target or 0, int(round(p.ratio * job.F.shape[0])))
     missed = target is not None and m > target * (1.0 + TARGET_TOLERANCE)
     short = res.stopped_because in ("topology_floor", "no_valid_collapse", "max_dihedral")
+    under = getattr(res, "under_note", "")
+    if under and not short and not missed:
+        # fewer than asked: a mirrored cage's step, or an input smaller than the target (a
+        # 320-face mesh asked for 1,000 came back "320 -> 320 faces" as done)
+        return f"{m:,} faces{under}", m >= getattr(res, "n_clean_faces", m + 1)
     if not short and not missed:
         return "", False
     message = getattr(res, "message", "")

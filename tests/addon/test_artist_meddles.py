@@ -674,3 +674,14 @@ def test_other_shape_keys_shown_with_the_edit_are_said(bound):
     report = api.refine_object(cage, output='SHAPE_KEY')
     assert report.level == 'WARNING'
     assert "'dense' shows other shape keys with the edit ('Smile'): up to" in report.message
+
+
+def test_a_target_above_the_input_count_is_a_warning_not_done(scene):
+    """A 320-face sphere asked for 1,000 faces came back '320 -> 320 faces'
+    as done: the cage is the input, and the report says so as a warning."""
+    from tests.mesh_factory import icosphere
+    sphere = make_object("sphere", *icosphere(2))
+    cage, report = mod("api").simplify_object(sphere, target_faces=1000, fit=False, bind=False)
+    assert len(cage.data.polygons) == 320 and report.level == 'WARNING'
+    assert "320 faces (of 1,000 asked: the input has no more, nothing to collapse)" in \
+        report.message

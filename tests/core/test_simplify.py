@@ -692,6 +692,13 @@ def test_triangles_meeting_at_one_vertex_are_named_as_split_not_unwelded():
         fit_cage(V, F, r.V, r.F, iterations=1)
 
 
+def test_a_target_above_the_input_count_says_there_is_nothing_to_collapse():
+    V, F = icosphere(2)
+    r = simplify(V, F, target_faces=1000)
+    assert r.F.shape[0] == 320 and r.stopped_because == "target"
+    assert r.message == "320 → 320 faces (of 1,000 asked: the input has no more, nothing to collapse)"
+
+
 def test_a_real_scan_as_a_soup_drifted_past_the_first_wider_weld_is_welded_by_the_next():
     # homer's copies of each vertex drifted by 3e-5 of its size: the 1e-5 weld closes a
     # few percent of its open edges (a pair welds only when every axis is within it),
