@@ -275,6 +275,7 @@ class SimplifyResult:
         ``"stopped at 216 faces of 205 asked: the topology floor (23 border
         loops, 1 component kept)"``, with the cleaning's summary after it."""
         m = self.F.shape[0]
+        faces = f"{m:,} face{'s' * (m != 1)}"
         asked = f" of {self.target:,} asked" if self.target is not None else ""
         kept = (f"{self.n_boundary_loops:,} border loop{'s' * (self.n_boundary_loops != 1)}, "
                 f"{self.n_components:,} component{'s' * (self.n_components != 1)} kept")
@@ -283,15 +284,15 @@ class SimplifyResult:
         floor = (f"every edge left would change the topology or join two locked vertices "
                  f"({locks}, {kept})" if locks else f"the topology floor ({kept})")
         text = {
-            "target": f"{self.n_input_faces:,} → {m:,} faces{self.under_note}",
-            "max_error": f"{self.n_input_faces:,} → {m:,} faces, where the error bound stopped it",
-            "max_dihedral": f"stopped at {m:,} faces{asked}: every collapse left would bend two "
+            "target": f"{self.n_input_faces:,} → {faces}{self.under_note}",
+            "max_error": f"{self.n_input_faces:,} → {faces}, where the error bound stopped it",
+            "max_dihedral": f"stopped at {faces}{asked}: every collapse left would bend two "
                             f"faces beyond the dihedral bound{held}",
-            "topology_floor": f"stopped at {m:,} faces{asked}: {floor}",
-            "no_valid_collapse": f"stopped at {m:,} faces{asked}: every collapse left would fold "
+            "topology_floor": f"stopped at {faces}{asked}: {floor}",
+            "no_valid_collapse": f"stopped at {faces}{asked}: every collapse left would fold "
                                  f"or squash a face"
                                  + (f" ({kept})" if self.n_boundary_loops else "") + held,
-            "cancelled": f"cancelled: the cleaned input returned unchanged ({m:,} faces)",
+            "cancelled": f"cancelled: the cleaned input returned unchanged ({faces})",
         }[self.stopped_because]
         for note in (self.bound_note, self.soup_note, self.floor_note, self.border_note,
                      self.sliver_note, self.asymmetry_note, self.pieces_note, self.float32_note):

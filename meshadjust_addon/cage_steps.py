@@ -286,6 +286,33 @@ def _rest_of(cage, n):
     return V_rest if A is None else V_rest @ A[:3, :3].T + A[:3, 3]
 
 
+def _check_cage_surface(cage, F_cage, n_cage):
+    """Raise :class:`core.MeshAdjustError` naming what an edit made of the
+    cage that no step can bind: no face left, edges of more than two faces,
+    vertices where separate fans meet, faces with a repeated corner or on
+    the same corners as another (the core's own check named its arguments:
+    'fit_cage: F_cage has no faces', 'bind: the cage (F_cage): 3
+    non-manifold edges')."""
+    if F_cage.shape[0] == 0:
+        raise core.MeshAdjustError(f"'{cage.name}' has no faces left: undo the edit that removed "
+                                   f"them, or make a new cage with Simplify")
+    rep = core.manifold_report(F_cage, n_cage)
+    found = [f"{k:,} {what[k != 1]}" for k, what in (
+        (rep.non_manifold_edges.shape[0], ("edge of more than two faces",
+                                           "edges of more than two faces")),
+        (rep.non_manifold_vertices.shape[0], ("vertex where separate fans of faces meet",
+                                              "vertices where separate fans of faces meet")),
+        (rep.degenerate_faces.shape[0], ("face with a repeated corner",
+                                         "faces with a repeated corner")),
+        (rep.duplicate_faces.shape[0], ("face on the same corners as another",
+                                        "faces on the same corners as others"))) if k]
+    if found:
+        raise core.MeshAdjustError(
+            f"'{cage.name}' has {', '.join(found)} (made in Edit Mode): a cage must be a clean "
+            f"surface; undo that edit (or Merge by Distance, Delete Loose), or make a new cage "
+            f"with Simplify")
+
+
 def _check_rest(cage, V_rest, V_now, F_cage):
     """Refuse a rest shape that cannot be bound: faces made in Edit Mode after
     the bind (an extrusion, a fill) get their vertices' rest positions from
@@ -324,6 +351,7 @@ def prepare_cage_job(cage, *, levels=None, scheme=None, from_rest=False, keep_ed
     V_now = cage_in_source_space(cage, source)
     V_rest = _rest_of(cage, V_now.shape[0]) if (keep_edit or from_rest) else None
     F_cage, _, creases = store.cage_topology(cage)
+    _check_cage_surface(cage, F_cage, V_now.shape[0])
     if V_rest is not None:
         _check_rest(cage, V_rest, V_now, F_cage)
     results.follow_renamed_keys(source)      # (a renamed key is muted for the read, as its name was)

@@ -685,3 +685,36 @@ def test_a_target_above_the_input_count_is_a_warning_not_done(scene):
     assert len(cage.data.polygons) == 320 and report.level == 'WARNING'
     assert "320 faces (of 1,000 asked: the input has no more, nothing to collapse)" in \
         report.message
+
+
+def test_a_cage_edited_into_no_surface_is_named_by_the_add_on_not_the_core(bound):
+    """Every cage face deleted, or a fin added on a cage edge: Fit and Bind
+    said 'fit_cage: F_cage has no faces' and 'bind: the cage (F_cage): 1
+    non-manifold edges', the core's argument names. They name the cage and
+    what is wrong with it, and leave the scene as it was."""
+    dense, cage = bound
+    bm = bmesh.new()
+    bm.from_mesh(cage.data)
+    bm.edges.ensure_lookup_table()
+    edge = bm.edges[0]
+    tip = bm.verts.new((edge.verts[0].co + edge.verts[1].co) / 2 + edge.link_faces[0].normal)
+    bm.faces.new((edge.verts[0], edge.verts[1], tip))
+    bm.to_mesh(cage.data)
+    bm.free()
+    activate(cage)
+    before = full_snapshot()
+    for op in (bpy.ops.meshadjust.bind, bpy.ops.meshadjust.fit_cage):
+        with pytest.raises(RuntimeError, match="'dense_cage' has 1 edge of more than two faces, "
+                                               "2 vertices where separate fans of faces meet "
+                                               r"\(made in Edit Mode\): a cage must be a clean"):
+            op(keep_edit=False) if op == bpy.ops.meshadjust.bind else op()
+        assert_all_unchanged(before)
+    bm = bmesh.new()
+    bm.from_mesh(cage.data)
+    bmesh.ops.delete(bm, geom=bm.faces[:], context='FACES_ONLY')
+    bm.to_mesh(cage.data)
+    bm.free()
+    before = full_snapshot()
+    with pytest.raises(RuntimeError, match="'dense_cage' has no faces left: undo the edit"):
+        bpy.ops.meshadjust.bind(keep_edit=False)
+    assert_all_unchanged(before)
