@@ -1508,6 +1508,8 @@ def target_count(target_faces, ratio, m0):
     target = None if target_faces is None else int(target_faces)
     if ratio is not None:
         t = int(round(float(ratio) * m0))
+        if ratio > 0 and m0 > 0:
+            t = max(t, 1)              # (a ratio of 1e-9 had asked for 0 faces)
         target = t if target is None else max(target, t)
     return target
 

@@ -697,6 +697,10 @@ def test_a_target_above_the_input_count_says_there_is_nothing_to_collapse():
     r = simplify(V, F, target_faces=1000)
     assert r.F.shape[0] == 320 and r.stopped_because == "target"
     assert r.message == "320 → 320 faces (of 1,000 asked: the input has no more, nothing to collapse)"
+    r = simplify(V, F, ratio=1e-9)                  # (it asked for 0 faces: "of 0 asked")
+    assert r.target == 1 and r.message.startswith("stopped at 4 faces of 1 asked: the topology")
+    r = simplify(V[F[0]], [[0, 1, 2]], target_faces=1)
+    assert r.message == "1 → 1 face"
 
 
 def test_a_real_scan_as_a_soup_drifted_past_the_first_wider_weld_is_welded_by_the_next():
