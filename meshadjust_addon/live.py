@@ -56,7 +56,14 @@ def refine_pending():
         cage = bpy.data.objects.get(name)
         if uid is not None and (cage is None or cage.session_uid != uid):     # renamed
             cage = next((o for o in bpy.data.objects if o.session_uid == uid), None) or cage
-        if cage is None or not cage.meshadjust.live or cage.meshadjust.edited is None:
+        if cage is None or not cage.meshadjust.live:
+            continue
+        if cage.meshadjust.edited is None:
+            # (removed for good, bpy.data.objects.remove: live stayed on, did nothing and
+            # kept its last "... updated" line)
+            cage.meshadjust.live = False
+            cage.meshadjust.last_report = (f"live refine stopped: '{cage.name}' has no edited "
+                                           f"original any more (deleted): Bind makes it again")
             continue
         name = cage.name
         try:

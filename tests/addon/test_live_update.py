@@ -444,3 +444,24 @@ def test_a_cage_mirrored_or_turned_as_a_whole_is_not_said_to_fold(bound_cage):
     Vc[top] = [0.0, 0.0, -0.5]
     mio.write_positions(cage.data, Vc)
     assert "WARNING: the edit turns " in _live_tick(cage, 'REFINED')
+
+
+def test_live_stops_and_says_so_when_its_results_are_removed(bound_cage):
+    """The edited original and the refined mesh removed for good
+    (``bpy.data.objects.remove``): live stayed on, did nothing at each edit
+    and kept its old '... updated' line."""
+    cage, live = bound_cage, _mod("live")
+    cage.meshadjust.live = True
+    live._pending[cage.name] = None
+    live.refine_pending()
+    assert cage.meshadjust.live and "updated" in cage.meshadjust.last_report
+    for obj in (cage.meshadjust.edited, cage.meshadjust.refined):
+        if obj is not None:
+            bpy.data.objects.remove(obj)
+    assert cage.meshadjust.edited is None
+    live._pending[cage.name] = None
+    live.refine_pending()
+    assert not cage.meshadjust.live
+    assert cage.meshadjust.last_report == ("live refine stopped: 'dense_cage' has no edited "
+                                           "original any more (deleted): Bind makes it again")
+    assert bpy.ops.meshadjust.bind() == {'FINISHED'} and cage.meshadjust.edited is not None
