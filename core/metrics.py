@@ -310,8 +310,9 @@ class DistanceFrom:
         self._used = used_vertices(self.F, self.V.shape[0])
         # (the faces' vertices: a loose vertex at 1e20 beside a scan refused the add-on's
         # report of its simplify, which left it out)
-        check_units(self.V[self._used], where="surface_distance", name="mesh a")
-        self.diagonal = bbox_diagonal(self.V[self._used])
+        on_faces = self.V[self._used]
+        check_units(on_faces, where="surface_distance", name="mesh a")
+        self.diagonal = bbox_diagonal(on_faces)
         self._samples = {}                  # (count, seed) -> SurfaceSamples
         self._searches = {}                 # kind -> search
 

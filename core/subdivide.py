@@ -481,9 +481,10 @@ def check_subdivision_args(levels, scheme, where, n_faces=None, max_faces=MAX_FI
         raise InvalidArgumentError(
             f"{where}: levels={levels} is more than any mesh takes (at most {MAX_LEVELS}: one "
             f"triangle makes {4 ** MAX_LEVELS:,} faces)")
-    if n_faces and levels > np.log(max_faces / n_faces) / np.log(4.0):
+    room = np.log(max_faces / n_faces) / np.log(4.0) if n_faces else None   # (levels that fit)
+    if room is not None and levels > room:
         made = f"{n_faces * 4.0 ** levels:.3g}" if levels < 500 else "more than 1e300"
-        fits = int(np.floor(np.log(max_faces / n_faces) / np.log(4.0) + 1e-9))
+        fits = int(np.floor(room + 1e-9))
         raise InvalidArgumentError(
             f"{where}: levels={levels} would make {made} faces of {n_faces:,} (each level "
             f"multiplies them by 4); at most {max_faces:,}"

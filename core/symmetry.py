@@ -640,11 +640,8 @@ def _simplify_half(run, clean, target, max_error, most):
     ``MAX_ERROR_SHARES`` steps until the whole cage's Hausdorff distance is
     within it. Returns (result, cage, Hausdorff distance or None)."""
     hausdorff = None
-    shares = MAX_ERROR_SHARES if max_error is not None else (None,)
-    i = -1
-    while i + 1 < len(shares):
-        i += 1
-        share = shares[i]
+    shares = list(MAX_ERROR_SHARES if max_error is not None else (None,))
+    for i, share in enumerate(shares):          # (shares appended below are taken in turn)
         bound = None if share is None else share * float(max_error)
         half_target = None if target is None else target // 2
         best, tried = None, set()
@@ -670,7 +667,7 @@ def _simplify_half(run, clean, target, max_error, most):
             # faces"): a lower share, and lower ones past the last while it stays empty
             hausdorff = np.inf
             if i + 1 == len(shares) and len(shares) < len(MAX_ERROR_SHARES) + _EMPTY_HALVINGS:
-                shares = shares + (shares[-1] / 2,)
+                shares.append(shares[-1] / 2)
             continue
         centre, scale = measuring_frame(clean.V)
         hausdorff = scale * surface_distance((clean.V - centre) / scale, clean.F,
