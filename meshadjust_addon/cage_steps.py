@@ -15,7 +15,7 @@ import bpy
 import numpy as np
 
 from .. import core
-from . import mesh_io, results, settings, staleness, store
+from . import mesh_io, results, rollback, settings, staleness, store
 from .rollback import all_or_nothing
 
 #: most levels the automatic choice picks
@@ -260,6 +260,8 @@ class CageJob:
     faces_key: str = ""          #: ``mesh_io.polygon_key`` of the source's mesh read ("": unknown)
     #: the edited original's :func:`~.store.binding_stamp` when read (the commit refuses another)
     bound: object = None
+    #: faces of more than three corners the commit triangulates (:func:`_cage_topology`)
+    triangulated: int = 0
 
     @property
     def n_moved(self):
@@ -350,7 +352,7 @@ def prepare_cage_job(cage, *, levels=None, scheme=None, from_rest=False, keep_ed
         raise core.MeshAdjustError(why)
     V_now = cage_in_source_space(cage, source)
     V_rest = _rest_of(cage, V_now.shape[0]) if (keep_edit or from_rest) else None
-    F_cage, _, creases = store.cage_topology(cage)
+    F_cage, creases, split = _cage_topology(cage)
     _check_cage_surface(cage, F_cage, V_now.shape[0])
     if V_rest is not None:
         _check_rest(cage, V_rest, V_now, F_cage)
@@ -373,7 +375,48 @@ def prepare_cage_job(cage, *, levels=None, scheme=None, from_rest=False, keep_ed
                    old_levels=cs.levels if bound else 0, old_scheme=cs.scheme if bound else "",
                    symmetry=None if cs.symmetry == 'NONE' else cs.symmetry,
                    faces_key=src.faces_key, refine_levels=finer if finer != levels else 0,
-                   bound=store.binding_stamp(cs.edited))
+                   bound=store.binding_stamp(cs.edited), triangulated=split)
+
+
+def _cage_topology(cage):
+    """(F_cage, creases, split): the triangles and creases a bind or a fit
+    of ``cage`` takes. A cage with faces of more than three corners in
+    Object Mode is taken as the commit will triangulate it
+    (:func:`_write_triangles`; ``split``: how many faces, else 0); in Edit
+    Mode :func:`.store.cage_topology` names them."""
+    split = 0 if cage.mode == 'EDIT' else mesh_io.split_polygons(cage.data)
+    if not split:
+        F, _, creases = store.cage_topology(cage)
+        return F, creases, 0
+    mesh = store.triangulated_copy(cage.data)
+    try:
+        F = mesh_io.read_triangles(mesh)[0]
+        creases = mesh_io.get_edge_flags(mesh, store.CREASE)
+    finally:
+        bpy.data.meshes.remove(mesh)
+    return F, (creases if creases.shape[0] else None), split
+
+
+def _write_triangles(cage, job):
+    """Give ``cage`` the triangles ``job`` was computed on when it has faces
+    of more than three corners (:func:`_cage_topology`), inside the open
+    rollback block: its mesh is swapped for :func:`.store.triangulated_copy`
+    (the old one removed when the block succeeds, given back when it fails)."""
+    if not mesh_io.split_polygons(cage.data):
+        return
+    old = cage.data
+    cage.data = store.triangulated_copy(old)
+    rollback.retire(old, successor=cage.data)
+    if not np.array_equal(mesh_io.read_triangles(cage.data)[0], job.F_cage):
+        raise core.MeshAdjustError(f"'{cage.name}' changed topology while the step ran: nothing "
+                                   f"was changed; run it again")
+
+
+def _triangulated_note(job):
+    """The report's words for the faces :func:`_write_triangles` split ("" for none)."""
+    k = job.triangulated
+    return (f"triangulated {k:,} face{'s' if k != 1 else ''} of more than three corners of "
+            f"'{job.cage_name}' (a cage is triangles)") if k else ""
 
 
 def check_current(cage, job):
@@ -390,7 +433,7 @@ def check_current(cage, job):
     why = results.edit_mode_problem(cs.edited, cs.refined)
     if why:
         raise core.MeshAdjustError(why)
-    F_now = store.cage_topology(cage)[0]
+    F_now = _cage_topology(cage)[0]
     was, now = (staleness.fingerprint_fields(fp or "") for fp in
                 (job.source_fingerprint, staleness.source_fingerprint(cs.source)))
     if F_now.shape != job.F_cage.shape or not np.array_equal(F_now, job.F_cage):
@@ -448,7 +491,8 @@ def commit_bind(cage, job):
     cs = cage.meshadjust
     source = cs.source
     with all_or_nothing() as rb:
-        notes = []
+        _write_triangles(cage, job)
+        notes = [_triangulated_note(job)] if job.triangulated else []
         owner = results.copied_from(cage)
         if owner is not None:          # a copy of another cage: results of its own from now on
             cs.edited, cs.refined, cs.key_name, cs.key_written = None, None, "", ""
@@ -550,10 +594,13 @@ def commit_fit(cage, job):
         raise core.MeshAdjustError(f"leave Edit Mode on '{cage.name}' to fit it")
     check_current(cage, job)
     with all_or_nothing() as rb:
+        _write_triangles(cage, job)
         rb.keep(cage.data)
         mesh_io.write_positions(cage.data, _source_to_cage(cage, source, job.V_now))
         if job.binding is not None:
             commit_bind(cage, job)
+        else:
+            job.note = _triangulated_note(job)
         staleness.touched(cage)
     return job.fit
 

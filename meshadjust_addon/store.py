@@ -112,24 +112,46 @@ def cage_topology(cage):
     Edit Mode cage is synced first).
 
     Raises :class:`core.MeshAdjustError` when the cage has faces of more
-    than three corners (Edit Mode's Subdivide or Grid Fill makes them):
-    Blender splits a quad along the diagonal its shape favours, which
-    changes as its corners move, so the cage's triangles changed under
-    an edit (Refine refused a moved corner as a new topology, every Fit was
-    rolled back as "changed topology while the step ran") or were folded (a
-    quad with a straight corner split through it: a face of no area and an
-    edge of three faces, which Bind named as such)."""
+    than three corners (Edit Mode's Subdivide, Grid Fill or Knife makes
+    them; Bind and Fit triangulate them in Object Mode,
+    :func:`triangulated_copy`): Blender splits a quad along the diagonal its
+    shape favours, which changes as its corners move, so the cage's
+    triangles changed under an edit (Refine refused a moved corner as a new
+    topology, every Fit was rolled back as "changed topology while the step
+    ran") or were folded (a quad with a straight corner split through it: a
+    face of no area and an edge of three faces, which Bind named as such)."""
     with _readable_cage_mesh(cage) as mesh:
         creases = mesh_io.get_edge_flags(mesh, CREASE)
     F, split = mesh_io.read_triangles(cage.data)
     if split:
         k = mesh_io.split_polygons(cage.data)
+        them = "them" if k != 1 else "it"
+        where = "leave Edit Mode and Bind" if cage.mode == 'EDIT' else "Bind"
         raise core.MeshAdjustError(
             f"'{cage.name}' has {k:,} face{'s' if k != 1 else ''} of more than three corners "
             f"(a cage is triangles: Blender splits a quad along the diagonal its shape favours, "
-            f"and that changes as its corners move); triangulate {'them' if k != 1 else 'it'} "
-            f"(Edit Mode: Face > Triangulate Faces, Ctrl+T) and Bind again")
+            f"and that changes as its corners move); {where} again, which triangulates {them}, "
+            f"or triangulate {them} yourself (Edit Mode: Face > Triangulate Faces, Ctrl+T)")
     return F, len(cage.data.vertices), (creases if creases.shape[0] else None)
+
+
+def triangulated_copy(mesh):
+    """A new mesh: ``mesh`` (not in Edit Mode) with its faces of more than
+    three corners split into triangles as Face > Triangulate Faces does
+    (Beauty, for quads and n-gons alike). Its vertices (their order), its
+    triangles (their order: a split face's first triangle takes its place,
+    the others come last), attributes, shape keys and materials are those of
+    ``mesh``; the diagonals are new edges, not creased."""
+    bm = bmesh.new()
+    try:
+        bm.from_mesh(mesh)
+        bmesh.ops.triangulate(bm, faces=bm.faces[:], quad_method='BEAUTY',
+                              ngon_method='BEAUTY')
+        copy = mesh.copy()
+        bm.to_mesh(copy)
+    finally:
+        bm.free()
+    return copy
 
 
 def save_rest(cage, V_rest):

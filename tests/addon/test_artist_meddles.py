@@ -550,45 +550,78 @@ def test_a_live_update_pending_when_the_cage_is_renamed_still_runs(bound):
     _assert_live_followed(cage, edited, before)
 
 
-def test_a_cage_given_quads_in_edit_mode_is_refused_by_name_until_triangulated(bound):
-    """Subdivide on one cage edge (or a Grid Fill) leaves faces of four
-    corners, which Blender splits along the diagonal their shape favours:
-    a quad with a straight corner split through it had a face of no area and
-    an edge of three faces ('bind: the cage (F_cage): 1 non-manifold edges'),
-    Fit was rolled back every time as 'changed topology while the step ran',
-    and Refine called a moved corner a new topology. Every step now names
-    the quads and says to triangulate them, leaving the scene as it was;
-    triangulated, the cage binds and refines."""
-    dense, cage = bound
+def _split_edges(cage, edges, cuts):
+    """Subdivide ``edges`` (indices) of the cage's mesh with ``cuts`` each, as
+    Edit Mode's Subdivide does: the faces beside them get more corners."""
     bm = bmesh.new()
     bm.from_mesh(cage.data)
     bm.edges.ensure_lookup_table()
-    bmesh.ops.subdivide_edges(bm, edges=[bm.edges[0]], cuts=1, use_grid_fill=False)
-    assert sorted({len(f.verts) for f in bm.faces}) == [3, 4]
+    bmesh.ops.subdivide_edges(bm, edges=[bm.edges[i] for i in edges], cuts=cuts,
+                              use_grid_fill=False)
     bm.to_mesh(cage.data)
     bm.free()
     cage.data.update()
+
+
+def _corners(mesh):
+    return sorted({len(p.vertices) for p in mesh.polygons})
+
+
+def test_a_cage_given_quads_is_triangulated_by_bind_and_fit(bound, monkeypatch):
+    """Subdivide on cage edges (or a Grid Fill, a Knife cut) leaves faces of
+    four or more corners, which Blender splits along the diagonal their shape
+    favours: a quad with a straight corner split through it had a face of no
+    area and an edge of three faces, Fit was rolled back every time as
+    'changed topology while the step ran', Refine called a moved corner a new
+    topology; then each step refused them, asking for Ctrl+T. Bind and Fit
+    now triangulate them (Face > Triangulate Faces, Beauty) and say so; the
+    cage keeps its vertices, their order, its rest shape and its mesh's name;
+    a failed bind gives the faces back as they were; in Edit Mode (the mesh
+    cannot be swapped there) and for Refine they are named with what to do."""
+    dense, cage = bound
+    name = cage.data.name
+    _split_edges(cage, [0, 40], cuts=2)             # two pentagons, two more beside them
+    assert _corners(cage.data) == [3, 5]
+    n_v, V0 = len(cage.data.vertices), pos(cage)
     before = full_snapshot()
     activate(cage)
-    for op, props in ((bpy.ops.meshadjust.bind, dict(keep_edit=False)),
-                      (bpy.ops.meshadjust.bind, dict(keep_edit=True)),
-                      (bpy.ops.meshadjust.fit_cage, {})):
-        with pytest.raises(RuntimeError, match=r"'dense_cage' has 2 faces of more than three "
-                                               r"corners .* Triangulate Faces, Ctrl\+T"):
-            op(**props)
-        assert_all_unchanged(before)
+    bpy.ops.object.mode_set(mode='EDIT')
+    with pytest.raises(RuntimeError, match=r"'dense_cage' has 4 faces of more than three corners "
+                                           r".*; leave Edit Mode and Bind again, which "
+                                           r"triangulates them, or .* Ctrl\+T"):
+        bpy.ops.meshadjust.bind(keep_edit=False)
+    bpy.ops.object.mode_set(mode='OBJECT')
+    assert_all_unchanged(before)
     with pytest.raises(RuntimeError, match="'dense_cage' changed topology since it was bound"):
         bpy.ops.meshadjust.refine()                      # (its poll: then Bind says why)
-    bm = bmesh.new()
-    bm.from_mesh(cage.data)
-    bmesh.ops.triangulate(bm, faces=bm.faces[:], quad_method='BEAUTY')
-    bm.to_mesh(cage.data)
-    bm.free()
-    cage.data.update()
+    monkeypatch.setattr(mod("api").core, "bind", _fail)
+    with pytest.raises(RuntimeError, match="no bind today"):
+        bpy.ops.meshadjust.bind(keep_edit=False)
+    assert_all_unchanged(before)                    # its pentagons given back
+    assert _corners(cage.data) == [3, 5]
+    monkeypatch.undo()
     assert bpy.ops.meshadjust.bind(keep_edit=False) == {'FINISHED'}
+    assert ("triangulated 4 faces of more than three corners of 'dense_cage' (a cage is "
+            "triangles)") in cage.meshadjust.last_report
+    assert _corners(cage.data) == [3] and cage.data.name == name
+    assert len(cage.data.vertices) == n_v and np.array_equal(pos(cage), V0)
+    assert name + ".001" not in bpy.data.meshes
+    F = mod("mesh_io").read_triangles(cage.data)[0]
+    binding = mod("store").load_binding(cage.meshadjust.edited, cage)
+    assert np.array_equal(binding.F_cage, F)
+    np.testing.assert_allclose(mod("store").load_rest(cage), V0, atol=1e-6)  # (both at identity)
     lift_top(cage)
     assert bpy.ops.meshadjust.refine() == {'FINISHED'}
-    np.testing.assert_allclose(pos(cage.meshadjust.edited).shape, pos(dense).shape)
+    _split_edges(cage, [7], cuts=1)                 # two quads, on an edited cage
+    assert _corners(cage.data) == [3, 4]
+    assert bpy.ops.meshadjust.fit_cage() == {'FINISHED'}
+    assert "triangulated 2 faces of more than three corners" in cage.meshadjust.last_report
+    assert _corners(cage.data) == [3]
+    assert bpy.ops.meshadjust.refine() == {'FINISHED'}
+
+
+def _fail(*args, **kwargs):
+    raise RuntimeError("no bind today")
 
 
 @pytest.mark.parametrize("kind, domain", [('FLOAT', 'POINT'), ('FLOAT_VECTOR', 'FACE')])
