@@ -40,7 +40,7 @@ from typing import NamedTuple
 import numpy as np
 
 from .. import core
-from . import mesh_io, results, store
+from . import mesh_io, results, staleness, store
 from .cage_steps import cage_in_source_space, check_source_in_place, turned_cage_note
 from .refine_step import commit_refine, compute_refine
 from .report import vertices
@@ -64,7 +64,9 @@ class LiveTiming(NamedTuple):
     convert: float     #: float64 -> float32 of the recomputed rows
     write: float       #: foreach_set of the position attribute and the update tag
     total: float
-    warning: str = ""  #: the edit turns cage faces over (:func:`~.cage_steps.turned_cage_note`)
+    #: the edit turns cage faces over (:func:`~.cage_steps.turned_cage_note`), the source
+    #: changed since the bind (:func:`~.staleness.bound_mesh_warning`)
+    warning: str = ""
     note: str = ""     #: what else happened (a changed version of the edited original kept aside)
 
     def summary(self):
@@ -150,9 +152,18 @@ def update_edited(cage):
     timing = LiveTiming(moved=V.shape[0] if full else int(moved.size), rows=int(rows),
                         full=full, read_cage=t1 - t0, compare=t2 - t1 + t_aside,
                         deform=t3 - t2, convert=t4 - t3 - t_aside, write=t5 - t4, total=t5 - t0,
-                        warning=turned_cage_note(cage, binding, V), note="; ".join(notes))
+                        warning=_warning(cage, edited, binding, V), note="; ".join(notes))
     cage.meshadjust.last_report = timing.summary()
     return timing
+
+
+def _warning(cage, edited, binding, V):
+    """A live update's warning ("": none): the cage faces the edit turns
+    over, the source changed since the bind (as Refine's; memoised, the
+    source is not what a live edit changes)."""
+    said = [turned_cage_note(cage, binding, V),
+            staleness.bound_mesh_warning(cage.meshadjust.source, edited)]
+    return "; ".join(w for w in said if w)
 
 
 def _live_inputs(cage):
@@ -251,7 +262,7 @@ def update_refined(cage, rj):
         _write(refined, state.buf)
     _states[refined.session_uid] = state._replace(V_cage=V)
     t2 = time.perf_counter()
-    warning = turned_cage_note(cage, rj.binding, V)
+    warning = _warning(cage, cage.meshadjust.edited, rj.binding, V)
     notes += [f"WARNING: {warning}"] if warning else []
     return RefinedTiming(int(moved.size), int(rows.shape[0]), False, t1 - t0, t2 - t1,
                          t2 - t0, "; ".join(notes))

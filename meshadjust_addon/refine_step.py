@@ -241,10 +241,8 @@ def commit_refine(cage, rj):
     miss = results.key_miss(source, rj.V_edited, own.name if own is not None else None) \
         if rj.output == 'SHAPE_KEY' else None
     warnings += [miss] if miss else []
-    stale = staleness.source_change(source, edited.meshadjust.source_fingerprint, fresh=True)
-    if stale:
-        warnings.append(f"{stale}: the result uses the mesh that was bound; re-bind to use the "
-                        f"new one")
+    stale = staleness.bound_mesh_warning(source, edited, fresh=True)
+    warnings += [stale] if stale else []
     data = staleness.source_data_change(source, edited, fresh=True) \
         if rj.output in ('EDITED', 'BOTH') and not stale else None
     if data:

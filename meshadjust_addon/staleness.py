@@ -210,6 +210,16 @@ def source_data_key(source):
         ob_eval.to_mesh_clear()
 
 
+def bound_mesh_warning(source, edited, *, fresh=False):
+    """The warning a result of ``edited`` gets when ``source`` changed since
+    it was bound (:func:`source_change`: the result is of the mesh that was
+    bound), or None. ``fresh`` recomputes instead of using the memo (a live
+    update uses it: the source is not what a live edit changes)."""
+    stale = source_change(source, edited.meshadjust.source_fingerprint, fresh=fresh)
+    return f"{stale}: the result uses the mesh that was bound; re-bind to use the new one" \
+        if stale else None
+
+
 def source_data_change(source, edited, *, fresh=False):
     """A sentence when the UV maps, attributes or materials of ``source``
     changed since ``edited`` was made from it (its ``data_written``), or

@@ -465,3 +465,41 @@ def test_live_stops_and_says_so_when_its_results_are_removed(bound_cage):
     assert cage.meshadjust.last_report == ("live refine stopped: 'dense_cage' has no edited "
                                            "original any more (deleted): Bind makes it again")
     assert bpy.ops.meshadjust.bind() == {'FINISHED'} and cage.meshadjust.edited is not None
+
+
+def test_live_warns_when_the_source_changed_since_the_bind(bound_cage):
+    """Refine warned that its result used the mesh that was bound when the
+    source was edited since; live's line said only 'updated'. Both the
+    edited original's and the refined mesh's live lines now say it."""
+    cage, live = bound_cage, _mod("live")
+    source = cage.meshadjust.source
+    cage.meshadjust.live = True
+    live._pending[cage.name] = None
+    live.refine_pending()
+    assert "updated" in cage.meshadjust.last_report
+    assert "WARNING" not in cage.meshadjust.last_report
+    V = _mod("mesh_io").read_positions(source.data)
+    V[0] += 0.01
+    _mod("mesh_io").write_positions(source.data, V)
+    source.data.update()
+    bpy.context.view_layer.update()
+    cage.data.vertices[0].co.z += 0.01
+    cage.data.update()
+    bpy.context.view_layer.update()
+    bpy.context.scene.meshadjust.output = 'BOTH'
+    live._pending[cage.name] = None
+    live.refine_pending()
+    report = cage.meshadjust.last_report
+    said = ("WARNING: 'dense' changed since it was bound: its mesh was edited (vertices moved): "
+            "the result uses the mesh that was bound; re-bind to use the new one")
+    assert "updated" in report and said in report, report
+    for _ in range(2):                  # (the refined mesh's first update binds it, then follows)
+        if cage.name in live._finer:
+            live.finer_done(cage.name)
+        cage.data.vertices[0].co.z += 0.01
+        cage.data.update()
+        live._pending[cage.name] = None
+        live.refine_pending()
+    report = cage.meshadjust.last_report
+    assert "refined mesh: 1 cage vertex moved" in report and report.count(said) == 2, report
+    assert cage.meshadjust.live
