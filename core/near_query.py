@@ -289,10 +289,14 @@ class NearQuery:
         InvalidArgumentError
             P not (q,3) or not finite.
         """
-        P = _check_points(P)
+        return self.index.with_outliers(_check_points(P), self._closest)
+
+    def _closest(self, P):
+        """:meth:`closest` among the faces of the index's grid (every face
+        but a scan's spike's, ``spatial._OUTLIER_*``)."""
         T = self._t
         if T is None:                           # (a mesh of needles: needle_grid)
-            return self.index.closest(P)
+            return self.index.grid_closest(P)
         q = P.shape[0]
         cell3 = np.clip(np.floor((P - T.lo) / T.h), 0, T.dims - 1).astype(np.int64)
         key = cell3[:, 0] + T.dims[0] * (cell3[:, 1] + T.dims[1] * cell3[:, 2])
@@ -307,7 +311,7 @@ class NearQuery:
         far = np.concatenate(far)
         result = closest_result(T.tables.rows, T.tables.face, best.t, best.v, best.w, best.d2)
         if far.size:
-            hit = self.index.closest(P[far], crowded_cell=self._index_cell)
+            hit = self.index.grid_closest(P[far], crowded_cell=self._index_cell)
             for out, value in zip(result, hit):
                 out[far] = value
         return result

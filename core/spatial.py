@@ -71,6 +71,12 @@ The index (:class:`TriangleIndex`) answers "nearest triangle" exactly:
    at the leaves each member takes its group's leaves with its own bounds.
    Large frontiers are split and processed depth first, so memory stays
    bounded.
+5. A few triangles far out of the rest's box (a scan's spike, a speck of
+   debris far off: ``_OUTLIER_*``) are kept out of the grid, which the rest
+   alone sizes, and measured apart (:class:`_Outliers`): a query outside the
+   grid's box that one of them comes nearer than the box is answered by them
+   alone; every other query's answer from the grid is compared with theirs
+   (bounded by their boxes and planes, the one of smallest bound first).
 
 Every (query, candidate) set is a ragged expansion (``np.repeat`` + ``cumsum``)
 evaluated in vectorised kernel calls; the per-query minimum comes from
@@ -85,7 +91,7 @@ import numpy as np
 
 from .errors import InvalidArgumentError
 from .mesh import (check_finite_rows, check_mesh, check_number, check_points, check_reach,
-                   cross_rows, row_norms, scaled_area_normals, unit_rows)
+                   cross_rows, row_norms, row_sums, scaled_area_normals, unit_rows)
 from ._groups import group_argmin, ragged_entries, ragged_ranges, sorted_unique
 from ._parallel import blocks, run_blocks, run_each
 from .pages import plain_pages
@@ -199,6 +205,32 @@ PRUNE_SLACK = 1e-9         # relative slack on pruning tests (keeps rounding con
 _THREADED_BUILD = 1 << 15  # from this many faces the build runs its two halves on two threads
 _BUILD_BLOCK = 1 << 15     # triangles per block of the build's kernel rows and bounds
 _CANDIDATE_CELLS = 1 << 20  # box cells a run of a block's triangles tests for grid references
+#: a few faces far out of the rest's box (a scan's spike: one vertex 1,000 diagonals
+#: off, its five or six faces crossing the whole box) are kept out of the grid, which
+#: covers the rest, and measured against every query apart (:class:`_Outliers`): with
+#: them the grid's cells grew to fit the box and the cap on references, the bunny's
+#: 69k faces sat in cells of up to 279 and a fit of its cage took 195 s. The rest's box
+#: is that of a sample of ``_OUTLIER_SAMPLE`` face centres without its
+#: ``_OUTLIER_TAIL`` share at each end, grown by ``_OUTLIER_MARGIN`` of its largest
+#: side; faces whose boxes leave it are the outliers when the whole box is more than
+#: ``_OUTLIER_GROWTH`` times as large and they are at most ``_OUTLIER_SHARE`` of the faces
+#: (a butterfly surface's spike over its neighbours too: a fit of that bunny's cage
+#: 182 s, the fine surface's 424 long faces in its grid)
+_OUTLIER_SAMPLE = 4096
+_OUTLIER_TAIL = 0.2
+_OUTLIER_MARGIN = 1.0
+_OUTLIER_GROWTH = 4.0
+_OUTLIER_SHARE = 0.2
+#: ... and at most this many (the butterfly surface of a spiked cage spreads the spike
+#: over its neighbours' fine faces: 424 of the bunny cage's 32k)
+_OUTLIER_MAX = 512
+#: (point, outlier) bound tests per block, of at least this many points (a block is
+#: first bounded as a whole: a bind's dense vertices come in the mesh's order)
+_OUTLIER_PAIRS = 1 << 16
+_OUTLIER_MIN_BLOCK = 256
+#: the height of a point over an outlier's plane is within this many ulps of the largest
+#: coordinate (point or outlier) of its value
+_HEIGHT_ULPS = 16
 
 
 class ClosestPoints(NamedTuple):
@@ -1066,6 +1098,155 @@ def _needle_test_reach(height, h, far, ext, slack=PRUNE_SLACK):
     return height + 0.5 * np.sqrt(3.0) * h + slack * (far + ext + 2 * h)
 
 
+def _box_gap2(X, lo, hi):
+    """Squared distances of the points ``X`` to the boxes ``lo``-``hi``
+    (broadcast over the leading axes; the last is x, y, z)."""
+    gap = np.maximum(lo - X, 0) + np.maximum(X - hi, 0)
+    gap *= gap
+    return gap[..., 0] + gap[..., 1] + gap[..., 2]
+
+
+def _box_corners(X):
+    """The 8 corners (8,3) of the box of the points ``X`` (k,3)."""
+    lo, hi = X.min(axis=0), X.max(axis=0)
+    pick = np.array([[i >> k & 1 for k in range(3)] for i in range(8)], dtype=bool)
+    return np.where(pick, hi, lo)
+
+
+class _Outliers(NamedTuple):
+    """The few faces far out of the rest's box that an index keeps out of its
+    grid (``_OUTLIER_*``), measured against every query apart."""
+
+    inliers: np.ndarray   #: (k,) int64 faces of F in the grid
+    face: np.ndarray      #: (r,) int64 faces of F kept out
+    rows: np.ndarray      #: (16, r) their kernel rows (:func:`triangle_rows`)
+    lo: np.ndarray        #: (r,3) their boxes' lower corners
+    hi: np.ndarray        #: (r,3) ... and upper corners
+    normal: np.ndarray    #: (3, r) their unit normals (zero for a face without one)
+    offset: np.ndarray    #: (r,) ``normal . A`` (a height over the plane: ``p . n - offset``)
+    size: float           #: their largest coordinate (in absolute value)
+
+    @classmethod
+    def of(cls, V, F, lo, hi):
+        """The outliers of the mesh ``(V, F)`` (its faces' box ``lo``-``hi``),
+        or None (none, or too many to be outliers)."""
+        m = F.shape[0]
+        step = max(1, m // _OUTLIER_SAMPLE)
+        tlo, thi = triangle_boxes(V, F[::step])
+        centre = 0.5 * (tlo + thi)
+        bulk_lo, bulk_hi = np.quantile(centre, [_OUTLIER_TAIL, 1 - _OUTLIER_TAIL], axis=0)
+        grow = _OUTLIER_MARGIN * float((bulk_hi - bulk_lo).max())
+        if not float((hi - lo).max()) > _OUTLIER_GROWTH * (float((bulk_hi - bulk_lo).max())
+                                                           + 2 * grow):
+            return None
+        tlo, thi = triangle_boxes(V, F)
+        out = ((tlo < bulk_lo - grow) | (thi > bulk_hi + grow)).any(axis=1)
+        face = np.flatnonzero(out)
+        if face.size == 0 or face.size > min(_OUTLIER_SHARE * m, _OUTLIER_MAX):
+            return None
+        A, B, C = _corners(V, F[face])
+        n = unit_rows(cross_rows(B - A, C - A))
+        return cls(np.flatnonzero(~out), face, triangle_rows(A, B, C), tlo[face], thi[face],
+                   np.ascontiguousarray(n.T), np.einsum("ij,ij->i", n, A),
+                   float(max(np.abs(tlo[face]).max(), np.abs(thi[face]).max())))
+
+    def combined(self, P, lo, hi, search):
+        """The closest points of ``P`` among every face: ``search(X)`` gives
+        them among the others, all inside the box ``lo``-``hi``. Points
+        outside that box and nearer some outlier than the box (a fit's
+        samples along a scan's spike, whose search among the others is a
+        far query, 3 ms each) are answered by the outliers alone."""
+        gap2 = _box_gap2(P, lo, hi)
+        out = np.flatnonzero(gap2 > 0)
+        q, t, v, w, e2 = self._nearest(P[out], gap2[out])
+        near = e2 < gap2[out[q]]
+        apart = out[q[near]]
+        rest = np.ones(P.shape[0], dtype=bool)
+        rest[apart] = False
+        rest = np.flatnonzero(rest)
+        hit = self.closer(P[rest], search(P[rest]))
+        if apart.size == 0:
+            return hit
+        alone = closest_result(self.rows, self.face, t[near], v[near], w[near], e2[near])
+        result = ClosestPoints(*(np.empty((P.shape[0],) + a.shape[1:], dtype=a.dtype)
+                                 for a in hit))
+        for whole, part_rest, part_apart in zip(result, hit, alone):
+            whole[rest] = part_rest
+            whole[apart] = part_apart
+        return result
+
+    def closer(self, P, hit):
+        """``hit`` (:class:`ClosestPoints` of the points ``P`` among the other
+        faces) where an outlier is closer (exactly as close: the lower face)."""
+        d2 = hit.distance ** 2
+        q, t, v, w, e2 = self._nearest(P, d2)
+        take = (e2 < d2[q]) | ((e2 == d2[q]) & (self.face[t] < hit.face[q]))
+        if not take.any():
+            return hit
+        q, near = q[take], closest_result(self.rows, self.face, t[take], v[take], w[take], e2[take])
+        out = ClosestPoints(*(np.array(a) for a in hit))
+        for a, b in zip(out, near):
+            a[q] = b
+        return out
+
+    def _nearest(self, P, bound2):
+        """Each point of ``P``'s closest outlier among those whose boxes come
+        within its squared distance ``bound2`` (the lowest face among exactly
+        equal ones), for the points with any: ``(q, t, v, w, d2)``, the
+        points' rows, the outliers' rows and the kernel's results."""
+        parts = [tuple(np.zeros(0, dtype=dt) for dt in (np.int64,) * 2 + (float,) * 3)]
+        PT = np.ascontiguousarray(P.T)
+        step = max(_OUTLIER_MIN_BLOCK, _OUTLIER_PAIRS // self.face.size)
+        for s in range(0, P.shape[0], step):
+            X, cap = P[s:s + step], bound2[s:s + step]
+            # the outliers that can come within the block's largest bound of its box
+            sub = np.flatnonzero(self._lower_bounds(_box_corners(X), mode="box")
+                                 <= cap.max() * (1 + PRUNE_SLACK))
+            if sub.size == 0:
+                continue
+            lb = self._lower_bounds(X, sub)
+            # the outlier of smallest bound first: its distance bounds the others
+            t0 = sub[np.argmin(lb, axis=1)]
+            q0 = np.arange(t0.size)
+            bound = np.minimum(cap, closest_pairs(PT[:, s:s + step], q0, self.rows, t0)[2])
+            qi, ti = np.nonzero(lb <= bound[:, None] * (1 + PRUNE_SLACK))
+            qi = np.concatenate([q0, qi])
+            ti = np.concatenate([t0, sub[ti]])
+            v, w, d2 = closest_pairs(PT[:, s:s + step], qi, self.rows, ti)
+            order = np.lexsort((self.face[ti], d2, qi))
+            first = order[np.flatnonzero(np.diff(qi[order], prepend=-1))]
+            keep = first[d2[first] <= cap[qi[first]] * (1 + PRUNE_SLACK)]
+            parts.append((qi[keep] + s, ti[keep], v[keep], w[keep], d2[keep]))
+        return tuple(np.concatenate(c) for c in zip(*parts))
+
+    def _lower_bounds(self, X, sub=None, mode="points"):
+        """Lower bounds of the squared distances of the points ``X`` (b,3) to
+        the outliers ``sub`` (None: all), (b, r): the larger of the squared
+        distance to each one's box and to its plane (less a rounding slack of
+        a few ulps of the largest coordinate, ``_HEIGHT_ULPS``). With ``mode``
+        ``"box"``, ``X`` are the 8 corners of a box (:func:`_box_corners`) and
+        the bounds (r,) are those of the whole box: its box distance, and its
+        distance to the plane when all its corners are on one side."""
+        sub = slice(None) if sub is None else sub
+        slack = _HEIGHT_ULPS * np.finfo(float).eps * (np.abs(X).max() + self.size)
+        height = X @ self.normal[:, sub]
+        height -= self.offset[sub]
+        if mode == "box":
+            side = np.where((height > 0).all(axis=0), height.min(axis=0),
+                            np.where((height < 0).all(axis=0), -height.max(axis=0), 0.0))
+            height = side[None]
+            X = np.stack([X.min(axis=0), X.max(axis=0)])
+        np.abs(height, out=height)
+        height -= slack
+        np.maximum(height, 0, out=height)
+        height *= height
+        if mode == "box":
+            lo, hi = X
+            gap = np.maximum(self.lo[sub] - hi, 0) + np.maximum(lo - self.hi[sub], 0)
+            return np.maximum(row_sums(gap * gap), height[0])
+        return np.maximum(_box_gap2(X[:, None], self.lo[sub][None], self.hi[sub][None]), height)
+
+
 class TriangleIndex:
     """Exact nearest-triangle queries on a triangle mesh (pure NumPy).
 
@@ -1125,8 +1306,15 @@ class TriangleIndex:
         self.V = V
         self.F = F
         self._lo, self._hi = _used_box(V, F)
+        self._outliers = _Outliers.of(V, F, self._lo, self._hi)
+        inliers = None if self._outliers is None else self._outliers.inliers
+        F_in = F if inliers is None else F[inliers]
+        if inliers is not None:
+            self._lo, self._hi = _used_box(V, F_in)
         extent = self._hi - self._lo
-        order = _morton_order(V, F, self._lo, extent)
+        order = _morton_order(V, F_in, self._lo, extent)
+        if inliers is not None:
+            order = inliers[order]
         self._order = order                       # internal id -> face id
         m = order.shape[0]                        # internal triangles (duplicates dropped)
         Fo = F[order]
@@ -1367,6 +1555,21 @@ class TriangleIndex:
         if crowded_cell is not None:
             crowded_cell = check_number(crowded_cell, where="TriangleIndex.closest",
                                         name="crowded_cell", lo=0)
+        return self.with_outliers(P, lambda X: self.grid_closest(X, crowded_cell=crowded_cell))
+
+    def with_outliers(self, P, search):
+        """The closest points of ``P`` (checked) on the mesh, from
+        ``search(X)``'s among the faces of the grid (:meth:`grid_closest`,
+        or another search of them): the faces kept out of it (a scan's
+        spike, ``_OUTLIER_*``) taken into account, when there are any."""
+        if self._outliers is None:
+            return search(P)
+        return self._outliers.combined(P, self._lo, self._hi, search)
+
+    def grid_closest(self, P, *, crowded_cell=None):
+        """:meth:`closest` among the faces of the grid only (every face but
+        those kept out of it, ``_OUTLIER_*``): ``P`` checked, ``crowded_cell``
+        as there."""
         nq = P.shape[0]
         best = BestPairs(nq)
         if nq:

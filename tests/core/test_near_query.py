@@ -299,18 +299,19 @@ def test_property_random_soups(seed, m, scale):
 
 
 def _fallback_rows(query, P):
-    """Rows NearQuery hands to TriangleIndex.closest (their ties follow its rule)."""
+    """Rows NearQuery hands to its index (``TriangleIndex.grid_closest``: their
+    ties follow its rule)."""
     rows = []
-    original = query.index.closest
+    original = query.index.grid_closest
 
     def spy(Q, **kw):
         rows.append(Q)
         return original(Q, **kw)
-    query.index.closest = spy
+    query.index.grid_closest = spy
     try:
         query.closest(P)
     finally:
-        query.index.closest = original
+        query.index.grid_closest = original
     if not rows:
         return np.zeros(0, dtype=np.int64)
     Q = np.concatenate(rows)
@@ -494,27 +495,23 @@ def test_a_mesh_of_needles_to_answer_many_queries_gets_cells_a_third_as_wide():
 
 
 def test_a_far_outlier_does_not_make_the_bulk_one_window():
-    # one triangle 1,000 diagonals off: the grid's box is mostly empty, its cells grow
-    # to fit _MAX_CELLS, and the whole sphere lands in a few cells. Those cells are
-    # crowded (answered by the hierarchy), not windows of thousands of triangles: the
-    # bunny with such a speck took 24 GB in surface_distance (killed), a 5k-face sphere
-    # 1.8-3.6 s instead of 0.2. The answers stay exact
+    # one triangle 1,000 diagonals off: the grid's box was mostly empty, its cells grew
+    # to fit _MAX_CELLS, and the whole sphere landed in a few cells (the bunny with such
+    # a speck took 24 GB in surface_distance, killed; a 5k-face sphere 1.8-3.6 s instead
+    # of 0.2; then those cells were crowded, answered by the hierarchy). The speck is
+    # kept out of the grid now (spatial._Outliers): the sphere's grid is its own. The
+    # answers stay exact
     from tests.mesh_factory import with_far_speck
     V, F = with_far_speck(*icosphere(4))
     q = NearQuery(V, F)
     index = q.index
-    per_cell = np.diff(index.tables.cell_start)
-    assert per_cell.max() > 1000                            # the sphere in a few cells ...
-    growth = near_query._CELL_FACTOR / spatial.CELL_FACTOR
-    assert index.crowded_cell <= spatial.CROWDED_CELL * growth ** 2 + 1e-9
+    assert index._outliers.face.tolist() == [F.shape[0] - 1]
+    plain = NearQuery(*icosphere(4)).index
+    assert np.array_equal(index.tables.dims, plain.tables.dims)
+    assert np.diff(index.tables.cell_start).max() == np.diff(plain.tables.cell_start).max()
     rng = np.random.default_rng(3)
     P = _near_points(V[:-3], F[:-1], rng, n=300)
-    T = index.tables
-    cell3 = np.clip(np.floor((P - T.lo) / T.cell_size), 0, T.dims - 1).astype(np.int64)
-    key = cell3[:, 0] + T.dims[0] * (cell3[:, 1] + T.dims[1] * cell3[:, 2])
-    crowded, _, _ = index.split_crowded(key)
-    assert crowded.size == P.shape[0]                       # ... which the hierarchy answers
-    # the exact distances (among exactly equidistant faces the hierarchy's pick: the
-    # points' own vertices and edges are shared)
+    # the exact distances (among exactly equidistant faces any one: the points' own
+    # vertices and edges are shared)
     r, (_, _, _, d2) = q.closest(P), _brute(V, F, P)
     np.testing.assert_array_equal(r.distance, np.sqrt(d2))
