@@ -19,7 +19,8 @@ subdivided bent cage (what the edit gives without the detail).
 Part 2, scale: a bumpy torus of 1M vertices bound to a 10k-face cage at two
 levels (targets: bind <= 15 s, re-deform <= 0.3 s, bind <= 0.5x Surface
 Deform's); Surface Deform on the same pair, binds alternating, best of 3, wall
-and CPU time. Then binds at an artist's sizes (the bunny, bumpy tori of 100k,
+and CPU time. Then binds at an artist's sizes (the bunny, the bunny with one
+vertex 1,000 diagonals off (a scan's spike, kept by its cage), bumpy tori of 100k,
 250k and 1M vertices, 2,000-face cages, Loop x2: the add-on's Auto levels for
 the edit; and the 1M one also at five, Auto's levels for the refined mesh,
 which a Refine binds at when asked for it) against Surface Deform's.
@@ -223,11 +224,20 @@ def run_scale(quick):
     return info, rows
 
 
+def spiked(V, F, far=1e3):
+    """``(V, F)`` with vertex 5 moved ``far`` bounding-box diagonals along x
+    (a scan's bad depth sample: its faces a spike across the box)."""
+    V = np.array(V, dtype=float)
+    V[5, 0] += far * float(np.linalg.norm(V.max(axis=0) - V.min(axis=0)))
+    return V, F
+
+
 def run_typical_binds(quick):
-    """Binds at an artist's sizes (a scan of 36k-250k vertices, a 2,000-face
-    cage, two levels, the add-on's Loop; and, without ``quick``, a 1M-vertex
-    scan at two levels and at the levels closest to its face count, the
-    add-on's Auto for the refined mesh), ours and Surface Deform's
+    """Binds at an artist's sizes (a scan of 36k-250k vertices, the bunny also
+    with a spike, a 2,000-face cage, two levels, the add-on's Loop; and,
+    without ``quick``, a 1M-vertex scan at two levels and at the levels
+    closest to its face count, the add-on's Auto for the refined mesh), ours
+    and Surface Deform's
     alternating, best of 3 (of 1 with ``quick``): rows (case, dense
     vertices, levels label, ours s, Surface Deform s)."""
     cases = [("bumpy torus 100k", *bumpy_torus(400, 250))]
@@ -237,6 +247,8 @@ def run_typical_binds(quick):
     bunny = os.path.join(SHARED, "stanford-bunny.obj")
     if os.path.exists(bunny):
         cases.insert(0, ("stanford-bunny", *read_obj(bunny)))
+        cases.insert(1, ("stanford-bunny, one vertex 1,000 diagonals off (a spike)",
+                         *spiked(*read_obj(bunny)[:2])))
     from meshadjust_batch import load_package
     steps = load_package().meshadjust_addon.cage_steps
     rows = []
