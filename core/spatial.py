@@ -1190,10 +1190,11 @@ class _Outliers(NamedTuple):
         return out
 
     def _nearest(self, P, bound2):
-        """Each point of ``P``'s closest outlier among those whose boxes come
-        within its squared distance ``bound2`` (the lowest face among exactly
-        equal ones), for the points with any: ``(q, t, v, w, d2)``, the
-        points' rows, the outliers' rows and the kernel's results."""
+        """Each point of ``P``'s closest outlier among those within its
+        squared distance ``bound2`` (the lowest face among exactly equal
+        ones), for the points with any: ``(q, t, v, w, d2)``, the points'
+        rows, the outliers' rows and the kernel's results. Blocks of points
+        are bounded as a whole first (:meth:`_lower_bounds`), then each point."""
         parts = [tuple(np.zeros(0, dtype=dt) for dt in (np.int64,) * 2 + (float,) * 3)]
         PT = np.ascontiguousarray(P.T)
         step = max(_OUTLIER_MIN_BLOCK, _OUTLIER_PAIRS // self.face.size)
@@ -1276,9 +1277,11 @@ class TriangleIndex:
         How many times wider than ``cell_factor`` mean extents ``min_cell``
         made the cells (1: not at all).
     n_faces : int
-        Triangles indexed: the faces of F, less repeated copies of one
+        Triangles in the grid: the faces of F, less repeated copies of one
         triangle's geometry where more than ``_MAX_SAME_CODE`` share a cell
-        of the Morton order (a degenerate cluster).
+        of the Morton order (a degenerate cluster), and less the few far out
+        of the rest's box that are measured apart (a scan's spike,
+        ``_OUTLIER_*``).
 
     Raises
     ------
