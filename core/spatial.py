@@ -1107,7 +1107,9 @@ def _box_gap2(X, lo, hi):
 
 
 def _box_corners(X):
-    """The 8 corners (8,3) of the box of the points ``X`` (k,3)."""
+    """The 8 corners (8,3) of the box of the points ``X`` (k,3): corner
+    ``i`` takes the upper side along the axes of its bits (0 the lower
+    corner, 7 the upper)."""
     lo, hi = X.min(axis=0), X.max(axis=0)
     pick = np.array([[i >> k & 1 for k in range(3)] for i in range(8)], dtype=bool)
     return np.where(pick, hi, lo)
@@ -1161,12 +1163,12 @@ class _Outliers(NamedTuple):
         q, t, v, w, e2 = self._nearest(P[out], gap2[out])
         near = e2 < gap2[out[q]]
         apart = out[q[near]]
+        if apart.size == 0:                 # (no copy of the points to search)
+            return self.closer(P, search(P))
         rest = np.ones(P.shape[0], dtype=bool)
         rest[apart] = False
         rest = np.flatnonzero(rest)
         hit = self.closer(P[rest], search(P[rest]))
-        if apart.size == 0:
-            return hit
         alone = closest_result(self.rows, self.face, t[near], v[near], w[near], e2[near])
         result = ClosestPoints(*(np.empty((P.shape[0],) + a.shape[1:], dtype=a.dtype)
                                  for a in hit))
@@ -1194,18 +1196,18 @@ class _Outliers(NamedTuple):
         squared distance ``bound2`` (the lowest face among exactly equal
         ones), for the points with any: ``(q, t, v, w, d2)``, the points'
         rows, the outliers' rows and the kernel's results. Blocks of points
-        are bounded as a whole first (:meth:`_lower_bounds`), then each point."""
+        are bounded as a whole first (:meth:`_block_bounds`), then each point
+        (:meth:`_point_bounds`)."""
         parts = [tuple(np.zeros(0, dtype=dt) for dt in (np.int64,) * 2 + (float,) * 3)]
         PT = np.ascontiguousarray(P.T)
         step = max(_OUTLIER_MIN_BLOCK, _OUTLIER_PAIRS // self.face.size)
         for s in range(0, P.shape[0], step):
             X, cap = P[s:s + step], bound2[s:s + step]
             # the outliers that can come within the block's largest bound of its box
-            sub = np.flatnonzero(self._lower_bounds(_box_corners(X), mode="box")
-                                 <= cap.max() * (1 + PRUNE_SLACK))
+            sub = np.flatnonzero(self._block_bounds(X) <= cap.max() * (1 + PRUNE_SLACK))
             if sub.size == 0:
                 continue
-            lb = self._lower_bounds(X, sub)
+            lb = self._point_bounds(X, sub)
             # the outlier of smallest bound first: its distance bounds the others
             t0 = sub[np.argmin(lb, axis=1)]
             q0 = np.arange(t0.size)
@@ -1220,32 +1222,37 @@ class _Outliers(NamedTuple):
             parts.append((qi[keep] + s, ti[keep], v[keep], w[keep], d2[keep]))
         return tuple(np.concatenate(c) for c in zip(*parts))
 
-    def _lower_bounds(self, X, sub=None, mode="points"):
-        """Lower bounds of the squared distances of the points ``X`` (b,3) to
-        the outliers ``sub`` (None: all), (b, r): the larger of the squared
-        distance to each one's box and to its plane (less a rounding slack of
-        a few ulps of the largest coordinate, ``_HEIGHT_ULPS``). With ``mode``
-        ``"box"``, ``X`` are the 8 corners of a box (:func:`_box_corners`) and
-        the bounds (r,) are those of the whole box: its box distance, and its
-        distance to the plane when all its corners are on one side."""
-        sub = slice(None) if sub is None else sub
-        slack = _HEIGHT_ULPS * np.finfo(float).eps * (np.abs(X).max() + self.size)
+    def _point_bounds(self, X, sub):
+        """(b, r) lower bounds of the squared distances of the points ``X``
+        (b,3) to the outliers ``sub``: the larger of the squared distance to
+        each one's box and to its plane (:meth:`_plane_gap2`)."""
         height = X @ self.normal[:, sub]
         height -= self.offset[sub]
-        if mode == "box":
-            side = np.where((height > 0).all(axis=0), height.min(axis=0),
-                            np.where((height < 0).all(axis=0), -height.max(axis=0), 0.0))
-            height = side[None]
-            X = np.stack([X.min(axis=0), X.max(axis=0)])
-        np.abs(height, out=height)
-        height -= slack
-        np.maximum(height, 0, out=height)
-        height *= height
-        if mode == "box":
-            lo, hi = X
-            gap = np.maximum(self.lo[sub] - hi, 0) + np.maximum(lo - self.hi[sub], 0)
-            return np.maximum(row_sums(gap * gap), height[0])
-        return np.maximum(_box_gap2(X[:, None], self.lo[sub][None], self.hi[sub][None]), height)
+        return np.maximum(_box_gap2(X[:, None], self.lo[sub][None], self.hi[sub][None]),
+                          self._plane_gap2(height, X))
+
+    def _block_bounds(self, X):
+        """(r,) lower bounds of the squared distances of any point in the box
+        of the points ``X`` (b,3) to each outlier: the larger of the squared
+        distance between the two boxes and, when the box's 8 corners are all
+        on one side of the outlier's plane, of the nearest corner's to it."""
+        C = _box_corners(X)
+        height = C @ self.normal
+        height -= self.offset
+        side = np.where((height > 0).all(axis=0), height.min(axis=0),
+                        np.where((height < 0).all(axis=0), -height.max(axis=0), 0.0))
+        lo, hi = C[0], C[7]
+        gap = np.maximum(self.lo - hi, 0) + np.maximum(lo - self.hi, 0)
+        return np.maximum(row_sums(gap * gap), self._plane_gap2(side, C))
+
+    def _plane_gap2(self, height, X):
+        """The squared ``height`` (any shape) of points over planes, less a
+        rounding slack of ``_HEIGHT_ULPS`` ulps of the largest coordinate of
+        the points ``X`` and the outliers (never below 0)."""
+        slack = _HEIGHT_ULPS * np.finfo(float).eps * (np.abs(X).max() + self.size)
+        gap = np.maximum(np.abs(height) - slack, 0)
+        gap *= gap
+        return gap
 
 
 class TriangleIndex:

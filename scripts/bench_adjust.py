@@ -246,9 +246,9 @@ def run_typical_binds(quick):
         cases.append(("bumpy torus 1M", *bumpy_torus(1000, 1000)))
     bunny = os.path.join(SHARED, "stanford-bunny.obj")
     if os.path.exists(bunny):
-        cases.insert(0, ("stanford-bunny", *read_obj(bunny)))
-        cases.insert(1, ("stanford-bunny, one vertex 1,000 diagonals off (a spike)",
-                         *spiked(*read_obj(bunny)[:2])))
+        V, F = read_obj(bunny)[:2]
+        cases[:0] = [("stanford-bunny", V, F),
+                     ("stanford-bunny, one vertex 1,000 diagonals off (a spike)", *spiked(V, F))]
     from meshadjust_batch import load_package
     steps = load_package().meshadjust_addon.cage_steps
     rows = []
